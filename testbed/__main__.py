@@ -1,0 +1,7 @@
+"""``python -m testbed``: the same entry point as the ``testbed`` console script."""
+
+import sys
+
+from testbed.cli import main
+
+sys.exit(main())

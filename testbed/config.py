@@ -1,0 +1,221 @@
+"""Frozen configuration dataclasses built from TOML data, with strict checking.
+
+Every configurable part of the testbed (link presets, vehicle models, thruster layouts and,
+later, whole scenarios) is a frozen dataclass. This module turns a TOML mapping into one:
+unknown keys are rejected, values are checked against the field's annotated type, and range
+checks in a dataclass's ``__post_init__`` (raised as :class:`FieldError`) come back as one-line
+:class:`ConfigError` messages naming the file and the dotted key. ``--set a.b=value`` overrides
+are applied to the mapping before it is built, so they get exactly the same checks.
+
+This module is a leaf: standard library only, importable from every layer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+__all__ = [
+    "ConfigError",
+    "FieldError",
+    "apply_overrides",
+    "build",
+    "check",
+    "load_toml",
+    "parse_override",
+]
+
+
+class ConfigError(ValueError):
+    """A user's configuration mistake. ``str(err)`` is a one-line message naming file and key."""
+
+
+class FieldError(ValueError):
+    """Raised by a config dataclass's ``__post_init__`` for a bad value of one field.
+
+    Args:
+        key: the field name (relative to the dataclass being built).
+        message: what is wrong, e.g. ``"must be > 0, got -3"``.
+    """
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}")
+        self.key = key
+        self.message = message
+
+
+def check(condition: bool, key: str, message: str) -> None:
+    """Raise :class:`FieldError` for ``key`` with ``message`` unless ``condition`` holds."""
+    if not condition:
+        raise FieldError(key, message)
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file into a dict.
+
+    Raises:
+        ConfigError: the file is missing, unreadable or not valid TOML (message names the file).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{path}: cannot read: {err}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: malformed TOML: {err}") from None
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Split ``"a.b=value"`` into ``(["a", "b"], value)``.
+
+    The value is read as a TOML value (``1e-4``, ``true``, ``[1, 2]``, ``"x"``); anything that
+    does not parse as TOML is taken as a bare string, so ``preset=s100`` works unquoted.
+
+    Raises:
+        ConfigError: no ``=`` or an empty key.
+    """
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key or any(not part.strip() for part in key.split(".")):
+        raise ConfigError(f"--set {text!r}: expected KEY=VALUE with a dotted key")
+    raw = raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return [part.strip() for part in key.split(".")], value
+
+
+def apply_overrides(data: Mapping[str, Any], overrides: Iterable[str]) -> dict[str, Any]:
+    """Return a deep copy of ``data`` with each ``KEY=VALUE`` override applied.
+
+    Keys that do not exist yet are created; :func:`build` then rejects those the schema does not
+    know, with the same message as a bad key in the file.
+    """
+    result = _deep_copy(data)
+    for text in overrides:
+        path, value = parse_override(text)
+        node = result
+        for part in path[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = {}
+                node[part] = child
+            node = child
+        node[path[-1]] = value
+    return result
+
+
+def build(cls: type[T], data: Mapping[str, Any], *, source: str = "<config>", prefix: str = "") -> T:
+    """Build the frozen dataclass ``cls`` from ``data``, checking keys, types and ranges.
+
+    Args:
+        cls: a dataclass type whose fields are annotated with supported types: ``bool``, ``int``,
+            ``float``, ``str``, ``Literal[...]``, ``X | None``, ``tuple[X, ...]``, fixed
+            ``tuple[X, Y]``, nested dataclasses, and ``dict[str, X]``.
+        data: the mapping (e.g. from :func:`load_toml`). Missing keys take the field default.
+        source: the file name (or ``--set``) used in error messages.
+        prefix: dotted key prefix of ``data`` within the file, for messages.
+
+    Raises:
+        ConfigError: unknown key, missing required key, wrong type, or a :class:`FieldError`
+            from the dataclass's own checks; the message names ``source`` and the dotted key.
+    """
+    return typing.cast(T, _build_dataclass(cls, data, source, prefix))
+
+
+def _build_dataclass(cls: type[Any], data: Any, source: str, prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: {prefix.rstrip('.') or '<root>'}: expected a table")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = typing.get_type_hints(cls)
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        known = ", ".join(sorted(fields))
+        raise ConfigError(f"{source}: {prefix}{unknown[0]}: unknown key (known: {known})")
+    kwargs: dict[str, Any] = {}
+    for name, field in fields.items():
+        key = f"{prefix}{name}"
+        if name not in data:
+            no_default = field.default is dataclasses.MISSING
+            if no_default and field.default_factory is dataclasses.MISSING:
+                raise ConfigError(f"{source}: {key}: required key missing")
+            continue
+        kwargs[name] = _convert(hints[name], data[name], source, key)
+    try:
+        return cls(**kwargs)
+    except FieldError as err:
+        raise ConfigError(f"{source}: {prefix}{err.key}: {err.message}") from None
+
+
+def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        return _build_dataclass(tp, value, source, f"{key}.")
+    if origin is typing.Literal:
+        if value not in args:
+            choices = ", ".join(repr(a) for a in args)
+            raise ConfigError(f"{source}: {key}: expected one of {choices}, got {value!r}")
+        return value
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _convert(arg, value, source, key)
+            except ConfigError as err:
+                errors.append(err)
+        raise errors[0]
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{source}: {key}: expected an array, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(args[0], v, source, f"{key}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{source}: {key}: expected {len(args)} values, got {len(value)}")
+        return tuple(_convert(a, v, source, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{source}: {key}: expected a table, got {value!r}")
+        return {str(k): _convert(args[1], v, source, f"{key}.{k}") for k, v in value.items()}
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{source}: {key}: expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{source}: {key}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
+        if math.isnan(value):
+            raise ConfigError(f"{source}: {key}: expected a number, got nan")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{source}: {key}: expected a string, got {value!r}")
+        return value
+    if tp is Any:
+        return value
+    raise TypeError(f"config field {key}: unsupported annotation {tp!r}")  # programming error
+
+
+def _deep_copy(data: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: _deep_copy(v) if isinstance(v, Mapping) else v for k, v in data.items()}

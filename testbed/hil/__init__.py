@@ -1,0 +1,1 @@
+"""hil: reserved for a later issue (see DESIGN.md); empty for now."""

@@ -1,0 +1,1 @@
+"""mavlink: reserved for a later issue (see DESIGN.md); empty for now."""

@@ -1,0 +1,1 @@
+"""operator: reserved for a later issue (see DESIGN.md); empty for now."""

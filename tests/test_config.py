@@ -1,0 +1,93 @@
+"""testbed.config: strict TOML → frozen dataclass loading and --set overrides."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import pytest
+
+from testbed.config import ConfigError, FieldError, apply_overrides, build, check, load_toml
+
+
+@dataclass(frozen=True, slots=True)
+class Inner:
+    rate_hz: float = 10.0
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        check(self.rate_hz > 0, "rate_hz", f"must be > 0, got {self.rate_hz}")
+
+
+@dataclass(frozen=True, slots=True)
+class Outer:
+    kind: Literal["a", "b"]
+    count: int = 1
+    enabled: bool = False
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    limit: float | None = None
+    inner: Inner = field(default_factory=Inner)
+
+
+def test_build_converts_and_defaults() -> None:
+    cfg = build(Outer, {"kind": "a", "offset": [1, 2, 3.5], "inner": {"rate_hz": 5}})
+    assert cfg == Outer(kind="a", offset=(1.0, 2.0, 3.5), inner=Inner(rate_hz=5.0))
+    assert isinstance(cfg.offset[0], float)
+
+
+@pytest.mark.parametrize(
+    ("data", "fragment"),
+    [
+        ({"kind": "a", "bogus": 1}, "f.toml: bogus: unknown key"),
+        ({"kind": "c"}, "f.toml: kind: expected one of"),
+        ({}, "f.toml: kind: required key missing"),
+        ({"kind": "a", "count": 1.5}, "f.toml: count: expected an integer"),
+        ({"kind": "a", "count": True}, "f.toml: count: expected an integer"),
+        ({"kind": "a", "enabled": 1}, "f.toml: enabled: expected true or false"),
+        ({"kind": "a", "offset": [1, 2]}, "f.toml: offset: expected 3 values"),
+        ({"kind": "a", "inner": {"rate_hz": -1}}, "f.toml: inner.rate_hz: must be > 0"),
+        ({"kind": "a", "inner": {"rate": 1}}, "f.toml: inner.rate: unknown key"),
+        ({"kind": "a", "limit": "x"}, "f.toml: limit: expected a number"),
+        ({"kind": "a", "inner": 3}, "f.toml: inner: expected a table"),
+    ],
+)
+def test_build_rejects_with_file_and_key(data: dict[str, object], fragment: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        build(Outer, data, source="f.toml")
+    assert fragment in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_overrides_are_typed_toml_values() -> None:
+    data = apply_overrides({"kind": "a"}, ["count=3", "inner.rate_hz=2.5", "kind=b", "limit=1e-3"])
+    assert build(Outer, data) == Outer(kind="b", count=3, limit=1e-3, inner=Inner(rate_hz=2.5))
+
+
+def test_override_bad_value_and_unknown_key_are_errors() -> None:
+    with pytest.raises(ConfigError, match="count: expected an integer"):
+        build(Outer, apply_overrides({"kind": "a"}, ["count=abc"]), source="--set")
+    with pytest.raises(ConfigError, match="inner.nope: unknown key"):
+        build(Outer, apply_overrides({"kind": "a"}, ["inner.nope=1"]), source="--set")
+    with pytest.raises(ConfigError, match="expected KEY=VALUE"):
+        apply_overrides({}, ["novalue"])
+
+
+def test_override_does_not_mutate_input() -> None:
+    data = {"kind": "a", "inner": {"rate_hz": 1.0}}
+    apply_overrides(data, ["inner.rate_hz=2"])
+    assert data["inner"] == {"rate_hz": 1.0}
+
+
+def test_load_toml_errors_name_the_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="missing.toml: file not found"):
+        load_toml(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("a = [1,\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match="bad.toml: malformed TOML"):
+        load_toml(bad)
+
+
+def test_field_error_carries_key() -> None:
+    err = FieldError("x", "bad")
+    assert err.key == "x" and str(err) == "x: bad"
