@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_link_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+def _add_link_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
     """``testbed link``: one-way frame probe through the simulated channel (see channel.probe)."""
     raise NotImplementedError  # written with the channel model (issue 2)
 

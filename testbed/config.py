@@ -118,7 +118,9 @@ def apply_overrides(data: Mapping[str, Any], overrides: Iterable[str]) -> dict[s
     return result
 
 
-def build(cls: type[T], data: Mapping[str, Any], *, source: str = "<config>", prefix: str = "") -> T:
+def build(
+    cls: type[T], data: Mapping[str, Any], *, source: str = "<config>", prefix: str = ""
+) -> T:
     """Build the frozen dataclass ``cls`` from ``data``, checking keys, types and ranges.
 
     Args:
@@ -189,7 +191,10 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
             return tuple(_convert(args[0], v, source, f"{key}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(f"{source}: {key}: expected {len(args)} values, got {len(value)}")
-        return tuple(_convert(a, v, source, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
+        return tuple(
+            _convert(a, v, source, f"{key}[{i}]")
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
     if origin is dict:
         if not isinstance(value, Mapping):
             raise ConfigError(f"{source}: {key}: expected a table, got {value!r}")

@@ -67,7 +67,7 @@ def test_overrides_are_typed_toml_values() -> None:
 def test_override_bad_value_and_unknown_key_are_errors() -> None:
     with pytest.raises(ConfigError, match="count: expected an integer"):
         build(Outer, apply_overrides({"kind": "a"}, ["count=abc"]), source="--set")
-    with pytest.raises(ConfigError, match="inner.nope: unknown key"):
+    with pytest.raises(ConfigError, match=r"inner\.nope: unknown key"):
         build(Outer, apply_overrides({"kind": "a"}, ["inner.nope=1"]), source="--set")
     with pytest.raises(ConfigError, match="expected KEY=VALUE"):
         apply_overrides({}, ["novalue"])
@@ -80,11 +80,11 @@ def test_override_does_not_mutate_input() -> None:
 
 
 def test_load_toml_errors_name_the_file(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="missing.toml: file not found"):
+    with pytest.raises(ConfigError, match=r"missing\.toml: file not found"):
         load_toml(tmp_path / "missing.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("a = [1,\n", encoding="utf-8")
-    with pytest.raises(ConfigError, match="bad.toml: malformed TOML"):
+    with pytest.raises(ConfigError, match=r"bad\.toml: malformed TOML"):
         load_toml(bad)
 
 
