@@ -1,0 +1,41 @@
+"""Our small Entity-Component-System: world, change ticks, three-phase schedule, replication.
+
+Each node (vehicle, operator) owns one :class:`World` ticked by a :class:`Schedule` in three
+phases. Components are frozen dataclasses written with :meth:`World.set`, which records a change
+(tick and :class:`Origin`) only when the value differs; systems ask for what changed since they
+last ran. :mod:`testbed.ecs.registry` says which component types replicate, under which id and
+owned by which side, and lists the local changes a link codec must send.
+
+Standard library only (the layering test allows numpy); no I/O, no clock, no global state.
+"""
+
+from __future__ import annotations
+
+from testbed.ecs.registry import (
+    Change,
+    ChangeKind,
+    ComponentRegistry,
+    Registration,
+    Side,
+    replicated_changes,
+)
+from testbed.ecs.schedule import Phase, Schedule, System
+from testbed.ecs.world import Entity, Origin, Removal, Replicate, World, check_component_type
+
+__all__ = [
+    "Change",
+    "ChangeKind",
+    "ComponentRegistry",
+    "Entity",
+    "Origin",
+    "Phase",
+    "Registration",
+    "Removal",
+    "Replicate",
+    "Schedule",
+    "Side",
+    "System",
+    "World",
+    "check_component_type",
+    "replicated_changes",
+]

@@ -1,0 +1,321 @@
+"""Replication registry: which component types replicate, under which id, owned by which side.
+
+Only registered component types on entities carrying the :class:`Replicate` marker travel to the
+peer, each under a stable numeric id (1–65535) and owned by one :class:`Side`: the operator owns
+intents and settings, the vehicle owns state, and each side may write only what it owns.
+Registered types must be frozen dataclasses whose fields are plain values a codec can write:
+``bool``, ``int``, ``float``, ``str``, ``bytes``, enums, tuples of allowed types (fixed
+``tuple[A, B]`` or variable ``tuple[A, ...]``) and nested frozen dataclasses of allowed types.
+
+:func:`replicated_changes` lists what a node must send since a tick; the change-set codecs (a
+later module) decide how it travels. No wire encoding here, and no pickle, ever.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import types
+import typing
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+from testbed.ecs.world import Entity, Origin, Replicate, World, check_component_type
+
+__all__ = [
+    "Change",
+    "ChangeKind",
+    "ComponentRegistry",
+    "Registration",
+    "Replicate",
+    "Side",
+    "replicated_changes",
+]
+
+TYPE_ID_MIN = 1
+TYPE_ID_MAX = 65535
+_SCALARS: tuple[type[Any], ...] = (bool, int, float, str, bytes)
+
+
+class Side(enum.Enum):
+    """The two nodes of a teleoperation session."""
+
+    VEHICLE = enum.auto()
+    OPERATOR = enum.auto()
+
+
+@dataclass(frozen=True, slots=True)
+class Registration:
+    """One registered component type.
+
+    Attributes:
+        cls: the component type.
+        type_id: its stable wire id, 1–65535.
+        owner: the side that may write it.
+        fields: ``(name, resolved type)`` of each dataclass field, in declaration order.
+    """
+
+    cls: type[Any]
+    type_id: int
+    owner: Side
+    fields: tuple[tuple[str, Any], ...]
+
+
+class ComponentRegistry:
+    """Registered replicated component types, iterated in type-id order."""
+
+    __slots__ = ("_by_cls", "_by_id", "_ordered")
+
+    def __init__(self) -> None:
+        self._by_id: dict[int, Registration] = {}
+        self._by_cls: dict[type[Any], Registration] = {}
+        self._ordered: list[Registration] = []
+
+    def register(self, cls: type[Any], type_id: int, owner: Side) -> Registration:
+        """Register ``cls`` for replication under ``type_id``, written only by ``owner``.
+
+        Raises:
+            TypeError: ``cls`` is not a frozen dataclass, a field has an unsupported type, the id
+                is not an int, or ``owner`` is not a :class:`Side`.
+            ValueError: the id is out of 1–65535, or the id or the type is already registered.
+        """
+        if not isinstance(type_id, int) or isinstance(type_id, bool):
+            raise TypeError(f"type_id must be an int, got {type_id!r}")
+        if not TYPE_ID_MIN <= type_id <= TYPE_ID_MAX:
+            raise ValueError(f"type_id must be in {TYPE_ID_MIN}..{TYPE_ID_MAX}, got {type_id}")
+        if not isinstance(owner, Side):
+            raise TypeError(f"owner must be a Side, got {owner!r}")
+        if cls is Replicate:
+            raise ValueError("Replicate is the replication marker itself; it is not registered")
+        check_component_type(cls)
+        if type_id in self._by_id:
+            other = self._by_id[type_id].cls.__qualname__
+            raise ValueError(f"type_id {type_id} is already registered to {other}")
+        if cls in self._by_cls:
+            raise ValueError(
+                f"{cls.__qualname__} is already registered as {self._by_cls[cls].type_id}"
+            )
+        entry = Registration(cls, type_id, owner, _field_types(cls))
+        self._by_id[type_id] = entry
+        self._by_cls[cls] = entry
+        self._ordered = sorted(self._by_id.values(), key=_registration_id)
+        return entry
+
+    def by_id(self, type_id: int) -> type[Any]:
+        """The component type registered under ``type_id``.
+
+        Raises:
+            KeyError: no type has that id.
+        """
+        return self.entry_by_id(type_id).cls
+
+    def entry_by_id(self, type_id: int) -> Registration:
+        """The registration under ``type_id``.
+
+        Raises:
+            KeyError: no type has that id.
+        """
+        try:
+            return self._by_id[type_id]
+        except KeyError:
+            raise KeyError(f"no component type registered under id {type_id}") from None
+
+    def entry(self, cls: type[Any]) -> Registration:
+        """The registration of ``cls``.
+
+        Raises:
+            KeyError: ``cls`` is not registered.
+        """
+        try:
+            return self._by_cls[cls]
+        except KeyError:
+            raise KeyError(f"{cls.__qualname__} is not a registered component type") from None
+
+    def id_of(self, cls: type[Any]) -> int:
+        """The type id of ``cls`` (KeyError if unregistered)."""
+        return self.entry(cls).type_id
+
+    def owner_of(self, cls: type[Any]) -> Side:
+        """The side that owns ``cls`` (KeyError if unregistered)."""
+        return self.entry(cls).owner
+
+    def is_registered(self, cls: type[Any]) -> bool:
+        """Whether ``cls`` is registered."""
+        return cls in self._by_cls
+
+    def may_write(self, cls: type[Any], side: Side) -> bool:
+        """Whether ``side`` may write ``cls`` through replication (False if unregistered)."""
+        entry = self._by_cls.get(cls)
+        return entry is not None and entry.owner is side
+
+    def __iter__(self) -> Iterator[Registration]:
+        """Registrations in ascending type-id order."""
+        return iter(self._ordered)
+
+    def __len__(self) -> int:
+        return len(self._ordered)
+
+    def __contains__(self, cls: object) -> bool:
+        return cls in self._by_cls
+
+
+def _registration_id(entry: Registration) -> int:
+    return entry.type_id
+
+
+def _field_types(cls: type[Any]) -> tuple[tuple[str, Any], ...]:
+    """Resolved ``(name, type)`` of each field, checking every type is replicable."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except Exception as err:  # NameError and friends from unresolvable string annotations
+        raise TypeError(f"cannot resolve field types of {cls.__qualname__}: {err}") from None
+    result = []
+    for field in dataclasses.fields(cls):
+        annotation = hints[field.name]
+        _check_field_type(annotation, f"{cls.__qualname__}.{field.name}", (cls,))
+        result.append((field.name, annotation))
+    return tuple(result)
+
+
+def _check_field_type(annotation: Any, where: str, outer: tuple[type[Any], ...]) -> None:
+    """Raise TypeError unless ``annotation`` is a replicable field type."""
+    if annotation in _SCALARS:
+        return
+    if isinstance(annotation, type) and issubclass(annotation, enum.Enum):
+        return
+    if isinstance(annotation, type) and dataclasses.is_dataclass(annotation):
+        if annotation in outer:
+            raise TypeError(f"{where}: recursive dataclass {annotation.__qualname__}")
+        check_component_type(annotation)
+        hints = typing.get_type_hints(annotation)
+        for field in dataclasses.fields(annotation):
+            inner = f"{where}.{field.name}"
+            _check_field_type(hints[field.name], inner, (*outer, annotation))
+        return
+    if typing.get_origin(annotation) is tuple:
+        args = typing.get_args(annotation)
+        if len(args) == 2 and args[1] is Ellipsis:
+            args = args[:1]
+        if not args:
+            raise TypeError(f"{where}: empty tuple type {annotation!r}")
+        for arg in args:
+            _check_field_type(arg, f"{where}[]", outer)
+        return
+    shown = annotation.__qualname__ if isinstance(annotation, type) else repr(annotation)
+    kind = " (unions/None are not replicable)" if _is_union(annotation) else ""
+    raise TypeError(
+        f"{where}: unsupported field type {shown}{kind}; allowed: bool, int, float, str, "
+        f"bytes, enums, tuples of those and nested frozen dataclasses"
+    )
+
+
+def _is_union(annotation: Any) -> bool:
+    return typing.get_origin(annotation) in (typing.Union, types.UnionType)
+
+
+class ChangeKind(enum.Enum):
+    """What happened to a replicated component (or entity) since a tick."""
+
+    ADDED = enum.auto()
+    CHANGED = enum.auto()
+    REMOVED = enum.auto()
+    DESPAWNED = enum.auto()
+
+
+@dataclass(frozen=True, slots=True)
+class Change:
+    """One entry of a change set: the net effect on one component (or entity) since a tick.
+
+    Attributes:
+        entity: the entity, in the sending world's ids.
+        kind: added, changed, removed, or (with ``component=None``) the entity despawned.
+        component: the component type, None for a despawn.
+        type_id: its registered id, None for a despawn.
+        value: the current component for ADDED/CHANGED, None otherwise.
+        tick: world tick of the change (the latest write, the removal or the despawn).
+    """
+
+    entity: Entity
+    kind: ChangeKind
+    component: type[Any] | None
+    type_id: int | None
+    value: object | None
+    tick: int
+
+
+def replicated_changes(
+    world: World, since: int, registry: ComponentRegistry, *, side: Side | None = None
+) -> list[Change]:
+    """The LOCAL-origin changes of registered types on replicated entities since ``since``.
+
+    Reports the *net* effect since the tick, at most one entry per (entity, component):
+
+    - a registered component present now whose latest write is LOCAL and newer than ``since``:
+      ADDED if it was added after ``since``, else CHANGED, with its current value;
+    - every registered component of an entity whose :class:`Replicate` marker was added LOCALly
+      after ``since`` (the peer has never seen it): ADDED;
+    - a registered component absent now whose last removal after ``since`` was LOCAL and made
+      while the entity carried ``Replicate``: REMOVED;
+    - an entity despawned LOCALly after ``since`` while carrying ``Replicate``: one DESPAWNED
+      entry and nothing else for it.
+
+    Writes with ``Origin.REMOTE`` (applied from the peer) are never reported, so nothing echoes.
+    Removing ``Replicate`` from a live entity just stops its replication (the peer keeps its copy).
+    ``since=0`` gives a full snapshot of the local state for a new peer.
+
+    Args:
+        world: the sending node's world.
+        since: report what happened at ticks newer than this.
+        registry: the registered component types.
+        side: if given, report only component types this side owns.
+
+    Returns:
+        Changes ordered by entity, then type id (a despawn alone for its entity).
+    """
+    entries = [e for e in registry if side is None or e.owner is side]
+    changes: list[Change] = []
+    fresh: set[Entity] = set()
+    for entity, _ in world.query(Replicate):
+        if (
+            world.added_tick(entity, Replicate) > since
+            and world.origin_of(entity, Replicate) is Origin.LOCAL
+        ):
+            fresh.add(entity)
+    for entry in entries:
+        for entity, (value,) in world.query(entry.cls):
+            if not world.has(entity, Replicate):
+                continue
+            if entity in fresh:
+                kind = ChangeKind.ADDED
+            elif (
+                world.changed_tick(entity, entry.cls) <= since
+                or world.origin_of(entity, entry.cls) is not Origin.LOCAL
+            ):
+                continue
+            elif world.added_tick(entity, entry.cls) > since:
+                kind = ChangeKind.ADDED
+            else:
+                kind = ChangeKind.CHANGED
+            tick = world.changed_tick(entity, entry.cls)
+            changes.append(Change(entity, kind, entry.cls, entry.type_id, value, tick))
+    owned = {e.cls: e.type_id for e in entries}
+    last_removal: dict[tuple[Entity, type[Any] | None], tuple[int, bool]] = {}
+    for removal in world.removals_since(since):
+        if removal.component is None or removal.component in owned:
+            key = (removal.entity, removal.component)
+            local = removal.origin is Origin.LOCAL and removal.replicated
+            last_removal[key] = (removal.tick, local)
+    for (entity, cls), (tick, local) in last_removal.items():
+        if not local:
+            continue
+        if cls is None:
+            changes.append(Change(entity, ChangeKind.DESPAWNED, None, None, None, tick))
+        elif world.is_alive(entity) and not world.has(entity, cls):
+            changes.append(Change(entity, ChangeKind.REMOVED, cls, owned[cls], None, tick))
+    changes.sort(key=_change_order)
+    return changes
+
+
+def _change_order(change: Change) -> tuple[int, int]:
+    return (change.entity, 0 if change.type_id is None else change.type_id)

@@ -1,0 +1,609 @@
+"""The ECS world: entities, frozen components with change ticks, resources, removal log.
+
+A :class:`World` holds entities (plain integers allocated in order from 1, never reused), their
+components (frozen dataclass instances, one per type per entity) and resources (singletons of
+any type: a physics handle, an allocator, an RNG). Change detection follows Bevy: every stored
+component carries the world tick at which it was added and last changed, and the
+:class:`Origin` of that write. :meth:`World.set` records a change only when the new value differs
+(``!=``) from the stored one, so systems may write every frame without waking their readers.
+
+Ticks are plain integers that only grow. The world never advances its own tick; the
+:class:`~testbed.ecs.schedule.Schedule` advances it once after every system it runs (see that
+module for the exact visibility rules). A query "changed" means "changed at a tick newer than
+``since``", where ``since`` defaults to :attr:`World.last_run_tick`, the running system's
+previous run tick.
+
+This module holds storage and queries only: no scheduling, no replication wire format, no I/O,
+no randomness. Standard library only.
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import enum
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any, NewType, TypeVar, overload
+
+__all__ = [
+    "Entity",
+    "Origin",
+    "Removal",
+    "Replicate",
+    "World",
+    "check_component_type",
+]
+
+Entity = NewType("Entity", int)
+"""An entity id: allocated in order from 1 within one world and never reused."""
+
+C = TypeVar("C")
+C1 = TypeVar("C1")
+C2 = TypeVar("C2")
+C3 = TypeVar("C3")
+C4 = TypeVar("C4")
+D = TypeVar("D")
+
+
+class Origin(enum.Enum):
+    """Who made a write: this node (LOCAL) or the peer, through replication (REMOTE).
+
+    Replication applies inbound changes with ``Origin.REMOTE`` and sends only ``LOCAL`` ones, so a
+    change never echoes back to the node that made it.
+    """
+
+    LOCAL = enum.auto()
+    REMOTE = enum.auto()
+
+
+@dataclass(frozen=True, slots=True)
+class Replicate:
+    """Marker component: this entity's registered components are replicated to the peer.
+
+    Defined here because the world notes, in each :class:`Removal`, whether the entity carried
+    the marker; :mod:`testbed.ecs.registry` re-exports it.
+    """
+
+
+@dataclass(frozen=True, slots=True)
+class Removal:
+    """One entry of the removal log.
+
+    Attributes:
+        tick: world tick at which the removal happened.
+        entity: the entity the component was removed from (or that was despawned).
+        component: the removed component's type, or ``None`` for the despawn of the entity itself
+            (logged after the removals of all its components).
+        origin: who made the removal.
+        replicated: whether the entity carried :class:`Replicate` at the time (for a despawn or
+            the removal of ``Replicate`` itself: whether it carried it just before).
+    """
+
+    tick: int
+    entity: Entity
+    component: type[Any] | None
+    origin: Origin
+    replicated: bool
+
+    @property
+    def is_despawn(self) -> bool:
+        """Whether this entry is the despawn of the entity itself."""
+        return self.component is None
+
+
+_CHECKED_TYPES: set[type[Any]] = {Replicate}
+
+
+def check_component_type(cls: type[Any]) -> None:
+    """Check that ``cls`` may be used as a component type: a frozen dataclass.
+
+    Raises:
+        TypeError: ``cls`` is not a class, not a dataclass, or not frozen.
+    """
+    if cls in _CHECKED_TYPES:
+        return
+    if not isinstance(cls, type):
+        raise TypeError(f"component types must be classes, got {cls!r}")
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"component type {cls.__qualname__} must be a frozen dataclass")
+    params = getattr(cls, "__dataclass_params__", None)
+    if params is None or not params.frozen:
+        raise TypeError(
+            f"component type {cls.__qualname__} must be frozen: use @dataclass(frozen=True)"
+        )
+    _CHECKED_TYPES.add(cls)
+
+
+class _Slot:
+    """One stored component and its bookkeeping (mutable; never handed out)."""
+
+    __slots__ = ("added", "changed", "origin", "value")
+
+    def __init__(self, value: object, tick: int, origin: Origin) -> None:
+        self.value = value
+        self.added = tick
+        self.changed = tick
+        self.origin = origin
+
+
+class _Column:
+    """All components of one type, keyed by entity, with a cached ascending entity list."""
+
+    __slots__ = ("_order", "slots")
+
+    def __init__(self) -> None:
+        self.slots: dict[Entity, _Slot] = {}
+        self._order: list[Entity] | None = []
+
+    def order(self) -> list[Entity]:
+        """Entities holding this type, ascending. Never mutated once handed out."""
+        order = self._order
+        if order is None:
+            order = self._order = sorted(self.slots)
+        return order
+
+    def insert(self, entity: Entity, slot: _Slot) -> None:
+        self.slots[entity] = slot
+        self._order = None
+
+    def delete(self, entity: Entity) -> None:
+        del self.slots[entity]
+        self._order = None
+
+
+class World:
+    """Entities, components with change ticks, resources and a removal log.
+
+    Attributes:
+        last_run_tick: the default ``since`` of change-filtered queries. The schedule sets it to
+            the running system's previous run tick (0 before its first run) and restores it
+            afterwards; outside a schedule it is 0 unless the caller sets it.
+    """
+
+    __slots__ = (
+        "_columns",
+        "_entities",
+        "_next_id",
+        "_removals",
+        "_resources",
+        "_tick",
+        "last_run_tick",
+    )
+
+    def __init__(self) -> None:
+        self._tick = 1
+        self._next_id = 1
+        # Alive entities (ascending by construction) → their component types in insertion order.
+        self._entities: dict[Entity, dict[type[Any], None]] = {}
+        self._columns: dict[type[Any], _Column] = {}
+        self._removals: list[Removal] = []
+        self._resources: dict[type[Any], object] = {}
+        self.last_run_tick: int = 0
+
+    # ---------------------------------------------------------------- ticks
+
+    @property
+    def tick(self) -> int:
+        """The current world tick (starts at 1); every write is stamped with it."""
+        return self._tick
+
+    def advance(self) -> int:
+        """Increment the world tick and return the new value."""
+        self._tick += 1
+        return self._tick
+
+    # ------------------------------------------------------------- entities
+
+    def spawn(self, *components: object, origin: Origin = Origin.LOCAL) -> Entity:
+        """Create an entity with the given components (all recorded as added now).
+
+        Args:
+            *components: frozen dataclass instances, at most one per type.
+            origin: who made the spawn.
+
+        Returns:
+            The new entity id (the previous one plus one).
+
+        Raises:
+            TypeError: a component is not a frozen dataclass instance.
+            ValueError: two components of the same type.
+        """
+        types = [type(c) for c in components]
+        for cls in types:
+            check_component_type(cls)
+        if len(set(types)) != len(types):
+            raise ValueError(f"spawn got two components of one type: {[t.__name__ for t in types]}")
+        entity = Entity(self._next_id)
+        self._next_id += 1
+        self._entities[entity] = {}
+        for component in components:
+            self.set(entity, component, origin=origin)
+        return entity
+
+    def despawn(self, entity: Entity, *, origin: Origin = Origin.LOCAL) -> None:
+        """Remove an entity and all its components.
+
+        Logs one :class:`Removal` per component (in the order they were added), then one for the
+        entity itself (``component=None``).
+
+        Raises:
+            LookupError: the entity is not alive.
+        """
+        types = self._alive_types(entity)
+        replicated = Replicate in types
+        tick = self._tick
+        for cls in list(types):
+            self._columns[cls].delete(entity)
+            self._removals.append(Removal(tick, entity, cls, origin, replicated))
+        del self._entities[entity]
+        self._removals.append(Removal(tick, entity, None, origin, replicated))
+
+    def is_alive(self, entity: Entity) -> bool:
+        """Whether ``entity`` has been spawned and not despawned."""
+        return entity in self._entities
+
+    def entities(self) -> list[Entity]:
+        """All alive entities, ascending."""
+        return list(self._entities)
+
+    def components(self, entity: Entity) -> tuple[object, ...]:
+        """All components of an alive entity, in the order their types were first added.
+
+        Raises:
+            LookupError: the entity is not alive.
+        """
+        return tuple(self._columns[cls].slots[entity].value for cls in self._alive_types(entity))
+
+    # ----------------------------------------------------------- components
+
+    def set(self, entity: Entity, component: object, *, origin: Origin = Origin.LOCAL) -> bool:
+        """Store ``component`` under its type on ``entity`` if it differs from the stored one.
+
+        A new type on the entity records both the added and the changed tick; a value that
+        differs (``!=``) from the stored one records the changed tick and origin; an equal value
+        records nothing (and keeps the stored object).
+
+        Args:
+            entity: an alive entity.
+            component: a frozen dataclass instance (stored as is, never copied).
+            origin: who made the write.
+
+        Returns:
+            Whether a change was recorded.
+
+        Raises:
+            TypeError: ``component`` is not a frozen dataclass instance.
+            LookupError: the entity is not alive.
+        """
+        cls = type(component)
+        column = self._columns.get(cls)
+        if column is None:
+            check_component_type(cls)
+            column = self._columns[cls] = _Column()
+        slot = column.slots.get(entity)
+        if slot is not None:
+            old = slot.value
+            if old is component or old == component:  # dataclass != is `not ==`
+                return False
+            slot.value = component
+            slot.changed = self._tick
+            slot.origin = origin
+            return True
+        types = self._alive_types(entity)
+        types[cls] = None
+        column.insert(entity, _Slot(component, self._tick, origin))
+        return True
+
+    def get(self, entity: Entity, cls: type[C]) -> C | None:
+        """The component of type ``cls`` on ``entity``, or None (also for a dead entity)."""
+        column = self._columns.get(cls)
+        if column is None:
+            return None
+        slot = column.slots.get(entity)
+        return None if slot is None else slot.value  # type: ignore[return-value]  # column of cls
+
+    def get_or(self, entity: Entity, cls: type[C], default: D) -> C | D:
+        """The component of type ``cls`` on ``entity``, or ``default``."""
+        value = self.get(entity, cls)
+        return default if value is None else value
+
+    def has(self, entity: Entity, cls: type[Any]) -> bool:
+        """Whether ``entity`` is alive and has a component of type ``cls``."""
+        column = self._columns.get(cls)
+        return column is not None and entity in column.slots
+
+    def remove(self, entity: Entity, cls: type[Any], *, origin: Origin = Origin.LOCAL) -> bool:
+        """Remove the component of type ``cls`` from ``entity``, logging the removal.
+
+        Returns:
+            Whether there was such a component (nothing is logged otherwise).
+
+        Raises:
+            LookupError: the entity is not alive.
+        """
+        types = self._alive_types(entity)
+        if cls not in types:
+            return False
+        replicated = Replicate in types
+        del types[cls]
+        self._columns[cls].delete(entity)
+        self._removals.append(Removal(self._tick, entity, cls, origin, replicated))
+        return True
+
+    def changed_tick(self, entity: Entity, cls: type[Any]) -> int:
+        """Tick of the last recorded change (or addition) of ``cls`` on ``entity``.
+
+        Raises:
+            LookupError: the entity has no such component.
+        """
+        return self._slot(entity, cls).changed
+
+    def added_tick(self, entity: Entity, cls: type[Any]) -> int:
+        """Tick at which ``cls`` was (last) added to ``entity``.
+
+        Raises:
+            LookupError: the entity has no such component.
+        """
+        return self._slot(entity, cls).added
+
+    def origin_of(self, entity: Entity, cls: type[Any]) -> Origin:
+        """Origin of the last recorded change (or addition) of ``cls`` on ``entity``.
+
+        Raises:
+            LookupError: the entity has no such component.
+        """
+        return self._slot(entity, cls).origin
+
+    def removals_since(self, tick: int) -> list[Removal]:
+        """Removal log entries with a tick newer than ``tick``, oldest first."""
+        log = self._removals
+        start = bisect.bisect_right(log, tick, key=_removal_tick)
+        return log[start:]
+
+    def trim_removals(self, through_tick: int) -> None:
+        """Forget removal log entries with a tick ≤ ``through_tick`` (bounds memory)."""
+        log = self._removals
+        del log[: bisect.bisect_right(log, through_tick, key=_removal_tick)]
+
+    # -------------------------------------------------------------- queries
+
+    @overload
+    def query(
+        self,
+        t1: type[C1],
+        /,
+        *,
+        changed: bool = ...,
+        added: bool = ...,
+        since: int | None = ...,
+        origin: Origin | None = ...,
+    ) -> Iterator[tuple[Entity, tuple[C1]]]: ...
+    @overload
+    def query(
+        self,
+        t1: type[C1],
+        t2: type[C2],
+        /,
+        *,
+        changed: bool = ...,
+        added: bool = ...,
+        since: int | None = ...,
+        origin: Origin | None = ...,
+    ) -> Iterator[tuple[Entity, tuple[C1, C2]]]: ...
+    @overload
+    def query(
+        self,
+        t1: type[C1],
+        t2: type[C2],
+        t3: type[C3],
+        /,
+        *,
+        changed: bool = ...,
+        added: bool = ...,
+        since: int | None = ...,
+        origin: Origin | None = ...,
+    ) -> Iterator[tuple[Entity, tuple[C1, C2, C3]]]: ...
+    @overload
+    def query(
+        self,
+        t1: type[C1],
+        t2: type[C2],
+        t3: type[C3],
+        t4: type[C4],
+        /,
+        *,
+        changed: bool = ...,
+        added: bool = ...,
+        since: int | None = ...,
+        origin: Origin | None = ...,
+    ) -> Iterator[tuple[Entity, tuple[C1, C2, C3, C4]]]: ...
+    @overload
+    def query(
+        self,
+        *types: type[Any],
+        changed: bool = ...,
+        added: bool = ...,
+        since: int | None = ...,
+        origin: Origin | None = ...,
+    ) -> Iterator[tuple[Entity, tuple[Any, ...]]]: ...
+    def query(
+        self,
+        *types: type[Any],
+        changed: bool = False,
+        added: bool = False,
+        since: int | None = None,
+        origin: Origin | None = None,
+    ) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
+        """Entities having every one of ``types``, ascending, with those components.
+
+        Filters (all optional):
+
+        - ``changed``: keep an entity if any of the queried components changed (or was added)
+          at a tick newer than ``since``;
+        - ``added``: keep it if any of them was added at a tick newer than ``since``; with both
+          flags an entity passes if any component satisfies either;
+        - ``origin``: with ``changed``/``added``, the qualifying change must have that origin;
+          alone, any queried component's last write must have it.
+
+        Membership is fixed when iteration starts; a component removed during iteration makes
+        its entity skipped, and values are read as each entity is reached.
+
+        Args:
+            *types: one or more component types.
+            changed: filter to changed components.
+            added: filter to added components.
+            since: tick the filters compare against (default: :attr:`last_run_tick`).
+            origin: filter on the origin of the write.
+
+        Returns:
+            An iterator of ``(entity, (component, ...))`` in the order of ``types``.
+
+        Raises:
+            TypeError: no types, or a type that is not a frozen dataclass.
+            ValueError: ``since`` given without ``changed`` or ``added``.
+        """
+        columns: list[_Column] = []
+        for cls in types:
+            column = self._columns.get(cls)
+            if column is None:
+                check_component_type(cls)
+                column = self._columns[cls] = _Column()
+            columns.append(column)
+        if not columns:
+            raise TypeError("query needs at least one component type")
+        if since is not None and not (changed or added):
+            raise ValueError("query: 'since' needs changed=True or added=True")
+        if not (changed or added or origin is not None):
+            if len(columns) == 1:
+                return _iter_one(columns[0])
+            return _iter_all(columns)
+        tick = self.last_run_tick if since is None else since
+        return _iter_filtered(columns, changed, added, tick, origin)
+
+    def query1(
+        self,
+        cls: type[C],
+        *,
+        changed: bool = False,
+        added: bool = False,
+        since: int | None = None,
+        origin: Origin | None = None,
+    ) -> Iterator[tuple[Entity, C]]:
+        """Like :meth:`query` with one type, yielding ``(entity, component)`` unwrapped."""
+        for entity, (value,) in self.query(
+            cls, changed=changed, added=added, since=since, origin=origin
+        ):
+            yield entity, value
+
+    def single(self, cls: type[C]) -> tuple[Entity, C]:
+        """The one entity having ``cls``, with its component.
+
+        Raises:
+            LookupError: no entity, or more than one, has ``cls``.
+        """
+        column = self._columns.get(cls)
+        count = 0 if column is None else len(column.slots)
+        if column is None or count != 1:
+            raise LookupError(f"single({cls.__name__}): expected exactly one entity, found {count}")
+        ((entity, slot),) = column.slots.items()
+        return entity, slot.value  # type: ignore[return-value]  # column of cls
+
+    # ------------------------------------------------------------ resources
+
+    def insert_resource(self, resource: object) -> None:
+        """Store ``resource`` under its type, replacing any previous one of that type."""
+        self._resources[type(resource)] = resource
+
+    def resource(self, cls: type[C]) -> C:
+        """The resource of type ``cls``.
+
+        Raises:
+            KeyError: no resource of that type was inserted.
+        """
+        try:
+            return self._resources[cls]  # type: ignore[return-value]  # keyed by its type
+        except KeyError:
+            raise KeyError(
+                f"no resource of type {cls.__qualname__} in this world; "
+                f"insert it with world.insert_resource(...)"
+            ) from None
+
+    def has_resource(self, cls: type[Any]) -> bool:
+        """Whether a resource of type ``cls`` was inserted."""
+        return cls in self._resources
+
+    def remove_resource(self, cls: type[Any]) -> bool:
+        """Remove the resource of type ``cls``; return whether there was one."""
+        return self._resources.pop(cls, None) is not None
+
+    # -------------------------------------------------------------- helpers
+
+    def _alive_types(self, entity: Entity) -> dict[type[Any], None]:
+        types = self._entities.get(entity)
+        if types is None:
+            raise LookupError(f"entity {entity} is not alive in this world")
+        return types
+
+    def _slot(self, entity: Entity, cls: type[Any]) -> _Slot:
+        column = self._columns.get(cls)
+        slot = None if column is None else column.slots.get(entity)
+        if slot is None:
+            raise LookupError(f"entity {entity} has no {cls.__qualname__} component")
+        return slot
+
+
+def _removal_tick(removal: Removal) -> int:
+    return removal.tick
+
+
+def _iter_one(column: _Column) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
+    slots = column.slots
+    for entity in column.order():
+        slot = slots.get(entity)
+        if slot is not None:
+            yield entity, (slot.value,)
+
+
+def _iter_all(columns: list[_Column]) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
+    driver = min(columns, key=_column_size)
+    all_slots = [c.slots for c in columns]
+    for entity in driver.order():
+        values = []
+        for slots in all_slots:
+            slot = slots.get(entity)
+            if slot is None:
+                break
+            values.append(slot.value)
+        else:
+            yield entity, tuple(values)
+
+
+def _iter_filtered(
+    columns: list[_Column], changed: bool, added: bool, since: int, origin: Origin | None
+) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
+    driver = min(columns, key=_column_size)
+    all_slots = [c.slots for c in columns]
+    for entity in driver.order():
+        values = []
+        keep = False
+        for slots in all_slots:
+            slot = slots.get(entity)
+            if slot is None:
+                break
+            values.append(slot.value)
+            if keep or (origin is not None and slot.origin is not origin):
+                continue
+            if changed:
+                keep = slot.changed > since
+            if added and not keep:
+                keep = slot.added > since
+            if not (changed or added):
+                keep = True  # origin alone, and it matched
+        else:
+            if keep:
+                yield entity, tuple(values)
+
+
+def _column_size(column: _Column) -> int:
+    return len(column.slots)
