@@ -1,0 +1,563 @@
+"""Vehicle control laws: PID, quaternion helpers, attitude and depth hold, pilot shaping, failsafe.
+
+Everything here is pure and framework-free: controllers are small stateful objects fed with
+*sensor* values (never the physics truth) and returning body-frame force/torque intents; the ECS
+systems in :mod:`testbed.vehicle.systems` own them and sum their intents for the allocator.
+
+Frames and conventions: world NED, body FRD; quaternions are ``(w, x, y, z)`` tuples rotating
+body vectors into the world frame; wrenches are ``(X, Y, Z, K, M, N)`` = (surge, sway, heave
+force [N], roll, pitch, yaw torque [N·m]) in the body frame. The laws follow mate-rov-2025
+(REFERENCE §3.6): orientation error ``q_err = q_target·q_current⁻¹`` split per body axis by
+swing–twist, in **degrees** so that mate-rov's published gains apply unchanged; depth error
+``e = target − depth`` (positive down) drives a world-vertical force rotated into the body; the
+pilot's sticks are shaped cubically and scaled by the allocator's axis maxima.
+
+The hot path uses Python floats and tuples, not NumPy: six-element arrays cost more in call
+overhead than the arithmetic they hold. Nothing in this module draws random numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+from testbed.config import check
+
+__all__ = [
+    "PID",
+    "AttitudeController",
+    "AttitudeGains",
+    "DepthController",
+    "FailsafeConfig",
+    "PidGains",
+    "PilotGains",
+    "Quaternion",
+    "Vec3",
+    "Wrench",
+    "attitude_error",
+    "euler_from_quat",
+    "failsafe_level",
+    "pilot_wrench",
+    "quat_conjugate",
+    "quat_from_axis_angle",
+    "quat_from_euler",
+    "quat_multiply",
+    "quat_normalize",
+    "quat_rotate",
+    "quat_rotate_inverse",
+    "shape_stick",
+    "twist_angle",
+    "wrap_angle",
+    "yaw_only",
+]
+
+Quaternion = tuple[float, float, float, float]
+Vec3 = tuple[float, float, float]
+Wrench = tuple[float, float, float, float, float, float]
+
+_TWO_PI = 2.0 * math.pi
+_DEG_PER_RAD = 180.0 / math.pi
+
+# --------------------------------------------------------------------------------------------
+# Quaternions (w, x, y, z), body → world.
+
+
+def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
+    """Hamilton product ``a·b`` (apply ``b`` first, then ``a``)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quat_conjugate(q: Quaternion) -> Quaternion:
+    """The conjugate, which is the inverse of a unit quaternion."""
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+def quat_normalize(q: Sequence[float]) -> Quaternion:
+    """``q`` scaled to unit norm.
+
+    Raises:
+        ValueError: ``q`` is (numerically) zero.
+    """
+    w, x, y, z = (float(v) for v in q)
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if norm < 1e-12:
+        raise ValueError("cannot normalise a zero quaternion")
+    return (w / norm, x / norm, y / norm, z / norm)
+
+
+def quat_rotate(q: Quaternion, v: Sequence[float]) -> Vec3:
+    """Rotate ``v`` by ``q`` (body → world for an attitude quaternion)."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    # t = 2 (q_vec × v); v' = v + w t + q_vec × t
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
+    )
+
+
+def quat_rotate_inverse(q: Quaternion, v: Sequence[float]) -> Vec3:
+    """Rotate ``v`` by ``q⁻¹`` (world → body for an attitude quaternion)."""
+    return quat_rotate((q[0], -q[1], -q[2], -q[3]), v)
+
+
+def quat_from_axis_angle(axis: Sequence[float], angle_rad: float) -> Quaternion:
+    """Rotation by ``angle_rad`` about the unit vector ``axis`` (right-handed)."""
+    half = 0.5 * angle_rad
+    s = math.sin(half)
+    return (math.cos(half), axis[0] * s, axis[1] * s, axis[2] * s)
+
+
+def quat_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quaternion:
+    """Attitude from Z-Y-X (yaw, then pitch, then roll) Euler angles, body → NED."""
+    cr, sr = math.cos(0.5 * roll_rad), math.sin(0.5 * roll_rad)
+    cp, sp = math.cos(0.5 * pitch_rad), math.sin(0.5 * pitch_rad)
+    cy, sy = math.cos(0.5 * yaw_rad), math.sin(0.5 * yaw_rad)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def euler_from_quat(q: Quaternion) -> Vec3:
+    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` [rad] of an attitude quaternion."""
+    w, x, y, z = q
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    sin_pitch = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
+    pitch = math.asin(sin_pitch)
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return (roll, pitch, yaw)
+
+
+def yaw_only(q: Quaternion) -> Quaternion:
+    """The heading part of an attitude: rotation about world down by the Z-Y-X yaw."""
+    w, x, y, z = q
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """``angle_rad`` wrapped into (−π, π]."""
+    wrapped = math.fmod(angle_rad + math.pi, _TWO_PI)
+    if wrapped <= 0.0:
+        wrapped += _TWO_PI
+    return wrapped - math.pi
+
+
+def twist_angle(q: Quaternion, axis: Sequence[float]) -> float:
+    """Signed angle [rad] of the twist of ``q`` about the unit vector ``axis``, in (−π, π].
+
+    Swing–twist decomposition: the twist is ``(w, (v·a)a)`` renormalised, whose angle is
+    ``2·atan2(v·a, w)``; a rotation the long way round (``w < 0``) wraps to the short way.
+    """
+    along = q[1] * axis[0] + q[2] * axis[1] + q[3] * axis[2]
+    return wrap_angle(2.0 * math.atan2(along, q[0]))
+
+
+def attitude_error(target: Quaternion, current: Quaternion) -> Vec3:
+    """Per-body-axis attitude error [rad] of ``current`` against ``target`` (roll, pitch, yaw).
+
+    ``q_err = target·current⁻¹`` (a world-frame rotation) is split by swing–twist about each
+    body axis expressed in the world, ``current·e_i`` (mate-rov's ``instant_twist``). Since
+    ``(current·e_i)·v_err = e_i·(current⁻¹ v_err)``, this equals the twist of
+    ``current⁻¹·target`` about the body axes, which is what is computed (one product).
+
+    Returns:
+        (3,) errors [rad], each in (−π, π]; positive means a positive body torque about that
+        axis (FRD) turns the vehicle towards the target.
+    """
+    cw, cx, cy, cz = current
+    tw, tx, ty, tz = target
+    # current⁻¹ · target
+    w = cw * tw + cx * tx + cy * ty + cz * tz
+    x = cw * tx - cx * tw - cy * tz + cz * ty
+    y = cw * ty + cx * tz - cy * tw - cz * tx
+    z = cw * tz - cx * ty + cy * tx - cz * tw
+    return (
+        wrap_angle(2.0 * math.atan2(x, w)),
+        wrap_angle(2.0 * math.atan2(y, w)),
+        wrap_angle(2.0 * math.atan2(z, w)),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# PID
+
+
+@dataclass(frozen=True, slots=True)
+class PidGains:
+    """Gains and limits of one PID loop (units follow the loop: error unit → output unit).
+
+    Attributes:
+        kp, ki, kd: proportional, integral [1/s] and derivative [s] gains.
+        max_integral: clamp on the integral state (error·s), as mate-rov's ``maxI``.
+        max_output: clamp on the output (``inf`` = none).
+        i_zone: the integral is cleared while ``|error| >= i_zone`` (``inf`` = never).
+        derivative_tau_s: time constant of the first-order low-pass on the derivative (0 = none).
+        anti_windup: ``"clamp"`` (integral clamp only), ``"conditional"`` (stop integrating
+            while the output saturates in the direction of the error) or
+            ``"back_calculation"`` (bleed the integral by the saturation excess).
+        tracking_time_s: back-calculation tracking time constant.
+    """
+
+    kp: float = 0.0
+    ki: float = 0.0
+    kd: float = 0.0
+    max_integral: float = math.inf
+    max_output: float = math.inf
+    i_zone: float = math.inf
+    derivative_tau_s: float = 0.0
+    anti_windup: Literal["clamp", "conditional", "back_calculation"] = "conditional"
+    tracking_time_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("max_integral", "max_output", "i_zone"):
+            value = getattr(self, name)
+            check(value > 0, name, f"must be > 0, got {value}")
+        check(self.derivative_tau_s >= 0, "derivative_tau_s", "must be >= 0")
+        check(self.tracking_time_s > 0, "tracking_time_s", "must be > 0")
+
+
+class PID:
+    """A discrete PID loop with derivative filter, i-zone, output clamp and anti-windup.
+
+    ``update`` takes the error and, optionally, its rate (e.g. from a gyro, which is far less
+    noisy than differencing a measured angle); without it the derivative is the filtered
+    backward difference of the error. The terms of the last update are kept in ``p``, ``i``,
+    ``d`` for telemetry.
+    """
+
+    __slots__ = ("_d_state", "_has_last", "_last_error", "d", "gains", "i", "integral", "p")
+
+    def __init__(self, gains: PidGains) -> None:
+        self.gains = gains
+        self.integral = 0.0
+        self.p = self.i = self.d = 0.0
+        self._last_error = 0.0
+        self._has_last = False
+        self._d_state = 0.0
+
+    def reset(self) -> None:
+        """Forget the integral, the previous error and the derivative filter state."""
+        self.integral = 0.0
+        self.p = self.i = self.d = 0.0
+        self._last_error = 0.0
+        self._has_last = False
+        self._d_state = 0.0
+
+    def update(self, error: float, dt_s: float, error_rate: float | None = None) -> float:
+        """Advance one step and return the (clamped) output.
+
+        Args:
+            error: setpoint minus measurement, in the loop's error unit.
+            dt_s: time since the previous update [s], > 0.
+            error_rate: d(error)/dt if known; otherwise the error is differenced.
+
+        Raises:
+            ValueError: ``dt_s`` is not positive.
+        """
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        g = self.gains
+        if error_rate is None:
+            raw = (error - self._last_error) / dt_s if self._has_last else 0.0
+        else:
+            raw = error_rate
+        if g.derivative_tau_s > 0.0 and self._has_last:
+            self._d_state += (raw - self._d_state) * (dt_s / (g.derivative_tau_s + dt_s))
+        else:
+            self._d_state = raw
+        self._last_error = error
+        self._has_last = True
+
+        p = g.kp * error
+        d = g.kd * self._d_state
+        limit = g.max_output
+        if abs(error) >= g.i_zone:
+            self.integral = 0.0
+        else:
+            candidate = self.integral + error * dt_s
+            candidate = max(-g.max_integral, min(g.max_integral, candidate))
+            if g.anti_windup == "conditional":
+                unsat = p + g.ki * candidate + d
+                if abs(unsat) <= limit or (unsat > 0.0) != (error > 0.0):
+                    self.integral = candidate
+            elif g.anti_windup == "back_calculation" and g.ki != 0.0:
+                # İ = e + (sat(u) − u)/(ki·Tt), u from the integral before this step
+                unsat = p + g.ki * self.integral + d
+                excess = max(-limit, min(limit, unsat)) - unsat
+                candidate += excess * dt_s / (g.tracking_time_s * g.ki)
+                self.integral = max(-g.max_integral, min(g.max_integral, candidate))
+            else:
+                self.integral = candidate
+        i = g.ki * self.integral
+        self.p, self.i, self.d = p, i, d
+        return max(-limit, min(limit, p + i + d))
+
+
+# --------------------------------------------------------------------------------------------
+# Attitude and depth hold
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeGains:
+    """Per-axis attitude PIDs; error in degrees, output in N·m (mate-rov's units)."""
+
+    roll: PidGains = field(default_factory=PidGains)
+    pitch: PidGains = field(default_factory=PidGains)
+    yaw: PidGains = field(default_factory=PidGains)
+
+
+class AttitudeController:
+    """Three per-axis PIDs on the swing–twist attitude error, returning a body torque.
+
+    The derivative is fed the error rate ``target rate − body rate`` from the gyro and the
+    target's own motion, so no measured angle is ever differenced.
+    """
+
+    __slots__ = ("_last_target", "pids")
+
+    def __init__(self, gains: AttitudeGains) -> None:
+        self.pids = (PID(gains.roll), PID(gains.pitch), PID(gains.yaw))
+        self._last_target: Quaternion | None = None
+
+    def reset(self) -> None:
+        """Reset every axis and forget the previous target."""
+        for pid in self.pids:
+            pid.reset()
+        self._last_target = None
+
+    def update(
+        self,
+        target: Quaternion,
+        current: Quaternion,
+        rates_rad_s: Sequence[float],
+        dt_s: float,
+        axes: tuple[bool, bool, bool] = (True, True, True),
+    ) -> Vec3:
+        """One control step.
+
+        Args:
+            target: (4,) target attitude, body → NED.
+            current: (4,) measured attitude, body → NED.
+            rates_rad_s: (3,) measured body rates (p, q, r) [rad/s], FRD.
+            dt_s: time since the previous step [s].
+            axes: which of roll, pitch, yaw to control (e.g. pitch off when the thruster layout
+                cannot produce pitch torque); a disabled axis outputs 0 and is reset.
+
+        Returns:
+            (3,) body torque (K, M, N) [N·m], FRD.
+        """
+        errors = attitude_error(target, current)
+        last = self._last_target
+        if last is None:
+            target_rates: Vec3 = (0.0, 0.0, 0.0)
+        else:
+            # target's increment since last step, expressed on the current body axes
+            step = quat_multiply(target, quat_conjugate(last))
+            inc = attitude_error(quat_multiply(step, current), current)
+            target_rates = (inc[0] / dt_s, inc[1] / dt_s, inc[2] / dt_s)
+        self._last_target = target
+        out = [0.0, 0.0, 0.0]
+        for k in range(3):
+            pid = self.pids[k]
+            if not axes[k]:
+                pid.reset()
+                continue
+            rate_deg_s = (target_rates[k] - rates_rad_s[k]) * _DEG_PER_RAD
+            out[k] = pid.update(errors[k] * _DEG_PER_RAD, dt_s, rate_deg_s)
+        return (out[0], out[1], out[2])
+
+
+class DepthController:
+    """Depth hold: PID on ``e = target − depth`` (m, positive down) → world-down force [N].
+
+    The force acts along world +Z (down) and is rotated into the body frame with the measured
+    attitude, so holding depth does not push the vehicle sideways when it is tilted. A constant
+    ``feedforward_n`` (e.g. minus the net buoyancy) may be added to the world-down force.
+    """
+
+    __slots__ = ("feedforward_n", "pid")
+
+    def __init__(self, gains: PidGains, feedforward_n: float = 0.0) -> None:
+        self.pid = PID(gains)
+        self.feedforward_n = feedforward_n
+
+    def reset(self) -> None:
+        """Reset the PID."""
+        self.pid.reset()
+
+    def update(
+        self, target_depth_m: float, depth_m: float, attitude: Quaternion, dt_s: float
+    ) -> Vec3:
+        """One control step.
+
+        Args:
+            target_depth_m: setpoint [m], positive down.
+            depth_m: measured depth [m], positive down.
+            attitude: (4,) measured attitude, body → NED.
+            dt_s: time since the previous step [s].
+
+        Returns:
+            (3,) body force (X, Y, Z) [N], FRD.
+        """
+        down_n = self.pid.update(target_depth_m - depth_m, dt_s) + self.feedforward_n
+        return quat_rotate_inverse(attitude, (0.0, 0.0, down_n))
+
+
+# --------------------------------------------------------------------------------------------
+# Pilot interface
+
+
+@dataclass(frozen=True, slots=True)
+class PilotGains:
+    """Stick shaping and per-axis gains (mate-rov pilot interface, REFERENCE §3.6).
+
+    Axis order everywhere: surge, sway, heave, roll, pitch, yaw.
+
+    Attributes:
+        normal_scale, precision_scale: ``s`` in ``u = sign(x)|x|³·s``.
+        dead_zone: sticks with ``|x| < dead_zone`` read as 0.
+        translation: force gains in manual/stabilise modes.
+        depth_hold_translation: force gains in depth hold (heave trims the target instead).
+        depth_hold_translation_precision: the same in precision mode.
+        torque: torque gains without attitude hold.
+        attitude_hold_torque: torque gains with attitude hold (the sticks trim the target).
+        depth_trim_m_s: depth-target rate at full heave stick (normal, precision).
+        attitude_trim_rad_s: attitude-target rates at full stick (roll, pitch, yaw), normal.
+        attitude_trim_precision_rad_s: the same in precision mode.
+    """
+
+    normal_scale: float = 0.8
+    precision_scale: float = 0.3
+    dead_zone: float = 0.05
+    translation: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    depth_hold_translation: tuple[float, float, float] = (1.0, 1.0, 0.1)
+    depth_hold_translation_precision: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    torque: tuple[float, float, float] = (1.0, 1.0, 0.5)
+    attitude_hold_torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    depth_trim_m_s: tuple[float, float] = (0.3, 0.2)
+    attitude_trim_rad_s: tuple[float, float, float] = (
+        math.radians(35.0),
+        math.radians(35.0),
+        math.radians(100.0),
+    )
+    attitude_trim_precision_rad_s: tuple[float, float, float] = (
+        math.radians(25.0),
+        math.radians(25.0),
+        math.radians(60.0),
+    )
+
+    def __post_init__(self) -> None:
+        check(0.0 <= self.dead_zone < 1.0, "dead_zone", "must be in [0, 1)")
+        check(self.normal_scale >= 0, "normal_scale", "must be >= 0")
+        check(self.precision_scale >= 0, "precision_scale", "must be >= 0")
+
+
+def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
+    """Cubic stick shaping ``sign(x)·|x|³·scale`` with ``x`` clipped to [−1, 1].
+
+    Inside the dead zone the output is 0; outside it the stick is used as is (mate-rov 2024
+    zeroes small inputs rather than rescaling the rest).
+    """
+    x = max(-1.0, min(1.0, x))
+    if abs(x) < dead_zone:
+        return 0.0
+    return x * x * x * scale  # the cube keeps the sign
+
+
+def pilot_wrench(
+    sticks: Sequence[float],
+    axis_maxima: Sequence[float],
+    attitude: Quaternion,
+    *,
+    gains: PilotGains,
+    precision: bool = False,
+    depth_hold: bool = False,
+    attitude_hold: bool = False,
+) -> Wrench:
+    """The pilot's force/torque intent from stick positions.
+
+    Args:
+        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
+        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m] (0 for an axis the thruster
+            layout cannot produce).
+        attitude: (4,) measured attitude, body → NED; used in depth hold, where translation is
+            commanded in the yaw-only (level) frame and rotated into the body.
+        gains: shaping and gains.
+        precision: precision mode (smaller scale; no heave force in depth hold).
+        depth_hold: depth hold is active.
+        attitude_hold: attitude hold is active.
+
+    Returns:
+        (6,) body wrench (X, Y, Z, K, M, N) [N, N·m], FRD.
+    """
+    scale = gains.precision_scale if precision else gains.normal_scale
+    dz = gains.dead_zone
+    u = [shape_stick(sticks[k], scale, dz) * axis_maxima[k] for k in range(6)]
+    if depth_hold:
+        tg = gains.depth_hold_translation_precision if precision else gains.depth_hold_translation
+    else:
+        tg = gains.translation
+    force: Vec3 = (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2])
+    if depth_hold:
+        level_to_body = quat_multiply(quat_conjugate(attitude), yaw_only(attitude))
+        force = quat_rotate(level_to_body, force)
+    rg = gains.attitude_hold_torque if attitude_hold else gains.torque
+    return (force[0], force[1], force[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
+
+
+# --------------------------------------------------------------------------------------------
+# Failsafe
+
+
+@dataclass(frozen=True, slots=True)
+class FailsafeConfig:
+    """Vehicle-side failsafe on stale operator commands.
+
+    Attributes:
+        hold_after_s: command age at which the vehicle holds depth and heading (sticks zeroed).
+        surface_after_s: command age at which it surfaces (depth target rises) and, once at
+            ``surfaced_depth_m`` or shallower, disarms.
+        ascent_rate_m_s: how fast the depth target rises while surfacing.
+        surfaced_depth_m: depth [m] counted as surfaced.
+    """
+
+    hold_after_s: float = 1.0
+    surface_after_s: float = 5.0
+    ascent_rate_m_s: float = 0.25
+    surfaced_depth_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        check(self.hold_after_s > 0, "hold_after_s", f"must be > 0, got {self.hold_after_s}")
+        check(
+            self.surface_after_s > self.hold_after_s,
+            "surface_after_s",
+            f"must be > hold_after_s ({self.hold_after_s}), got {self.surface_after_s}",
+        )
+        check(self.ascent_rate_m_s > 0, "ascent_rate_m_s", "must be > 0")
+        check(self.surfaced_depth_m >= 0, "surfaced_depth_m", "must be >= 0")
+
+
+def failsafe_level(command_age_s: float, config: FailsafeConfig) -> Literal[0, 1, 2]:
+    """0 nominal, 1 hold, 2 surface, from the age of the last fresh operator command [s]."""
+    if command_age_s >= config.surface_after_s:
+        return 2
+    if command_age_s >= config.hold_after_s:
+        return 1
+    return 0
