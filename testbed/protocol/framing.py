@@ -28,8 +28,9 @@ only local misuse (a bad argument) raises :class:`ValueError`. Decoder rules:
 * **Latency of a bogus length.** A length byte corrupted upwards makes the decoder wait until
   the claimed number of bytes has arrived before it can reject the candidate, so the frames
   behind it are delivered late (but in order). There is no clock here: a node that wants to give
-  up after a silence calls :meth:`FrameDecoder.close`, which reports the pending candidate as
-  ``TRUNCATED`` and leaves the decoder ready for new input.
+  up after a silence calls :meth:`FrameDecoder.flush`, which reports the pending candidate as
+  ``TRUNCATED`` and returns any complete frames already received behind it.
+  :meth:`FrameDecoder.close` (end of stream) only reports what is left as ``TRUNCATED``.
 * **Bounded memory.** The decoder never holds more than ``max_buffer`` bytes; input larger than
   the free space is consumed in slices, so feeding a stream whole, byte by byte or in random
   chunks gives the same events.
@@ -137,7 +138,8 @@ class CorruptReason(enum.Enum):
     OVERSIZE = "oversize"
     """The length byte announced more than the decoder's ``max_payload``."""
     TRUNCATED = "truncated"
-    """The stream ended (:meth:`FrameDecoder.close`) before the claimed frame was complete."""
+    """The stream ended (:meth:`FrameDecoder.close`) or went quiet (:meth:`FrameDecoder.flush`)
+    before the claimed frame was complete."""
     OVERFLOW = "overflow"
     """The claimed frame is longer than the decoder's ``max_buffer`` and could never arrive."""
 
@@ -149,8 +151,9 @@ class CorruptFrame:
     Attributes:
         reason: why it was rejected.
         skipped_bytes: bytes discarded because of this event [B]. 1 for ``BAD_CRC``,
-            ``OVERSIZE`` and ``OVERFLOW`` (only the failed start byte is dropped; the bytes after
-            it are hunted again); everything left in the buffer for ``TRUNCATED``.
+            ``OVERSIZE``, ``OVERFLOW`` and a ``TRUNCATED`` from :meth:`FrameDecoder.flush` (only
+            the failed start byte is dropped; the bytes after it are hunted again); everything
+            left in the buffer for a ``TRUNCATED`` from :meth:`FrameDecoder.close`.
     """
 
     reason: CorruptReason
@@ -258,6 +261,29 @@ class FrameDecoder:
             buf += data[start : start + take]
             start += take
             self._scan(events)
+        return events
+
+    def flush(self) -> list[Frame | CorruptFrame]:
+        """The sender has gone quiet: give up on pending candidates and decode what follows.
+
+        Each pending candidate is reported as ``TRUNCATED`` with ``skipped_bytes=1`` (its start
+        byte) and the hunt resumes after it, as for a failed CRC, so complete frames received
+        behind a corrupted length byte are returned now instead of when more bytes arrive. A
+        leftover partial preamble is counted as garbage. The buffer ends empty and the decoder
+        stays usable.
+
+        Returns:
+            Events in stream order.
+        """
+        events: list[Frame | CorruptFrame] = []
+        buf = self._buf
+        while buf.startswith(self._preamble):
+            events.append(CorruptFrame(CorruptReason.TRUNCATED, 1))
+            self.corrupt += 1
+            del buf[:1]
+            self._scan(events)
+        self.garbage_bytes += len(buf)
+        buf.clear()
         return events
 
     def close(self) -> list[CorruptFrame]:
