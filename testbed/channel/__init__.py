@@ -1,0 +1,1 @@
+"""simpy link models: bitrate, delay, bit errors, bursts, collisions, buffers, presets."""

@@ -1,0 +1,219 @@
+"""Link configuration: the frozen :class:`LinkConfig` and the packaged modem presets.
+
+A link is described by the parameters of the dccomms_ros custom link (REFERENCE §2.1): bitrate,
+intrinsic delay, propagation (fixed part plus distance over speed), half or full duplex, a
+byte-counted transmit FIFO with tail drop, the gap between queued frames, an optional fixed packet
+size (modems such as the Water Linked M64 send 8-byte packets), a maximum range and the bit-error
+models of :mod:`testbed.channel.errors`.
+
+Presets live as TOML files in ``testbed/channel/presets/`` (package data, with their sources in
+comments) and are loaded with :func:`load_link_config`, which applies ``--set KEY=VALUE``
+overrides through :mod:`testbed.config`, so a bad key or value is a one-line
+:class:`~testbed.config.ConfigError` naming it.
+
+Nothing here touches simpy or randomness.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from typing import Literal
+
+from testbed.config import ConfigError, apply_overrides, build, check, load_toml
+
+__all__ = [
+    "GilbertElliott",
+    "LinkConfig",
+    "Propagation",
+    "load_link_config",
+    "preset_names",
+]
+
+_PRESET_PACKAGE = "testbed.channel"
+_PRESET_DIR = "presets"
+
+
+def _probability(value: float, key: str) -> None:
+    check(0.0 <= value <= 1.0, key, f"must be in [0, 1], got {value}")
+
+
+@dataclass(frozen=True, slots=True)
+class Propagation:
+    """Propagation delay ``fixed_s + distance_m / speed_mps`` (dccomms_ros minPropTime + inc·d).
+
+    Attributes:
+        fixed_s: distance-independent part [s], ≥ 0.
+        speed_mps: signal speed [m/s], > 0: ≈ 3e8 for RF, ≈ 1500 for acoustic links.
+    """
+
+    fixed_s: float = 0.0
+    speed_mps: float = 3.0e8
+
+    def __post_init__(self) -> None:
+        check(
+            self.fixed_s >= 0.0 and math.isfinite(self.fixed_s),
+            "fixed_s",
+            f"must be ≥ 0, got {self.fixed_s}",
+        )
+        check(self.speed_mps > 0.0, "speed_mps", f"must be > 0, got {self.speed_mps}")
+
+    def delay_s(self, distance_m: float) -> float:
+        """Propagation delay [s] over ``distance_m`` [m]."""
+        return self.fixed_s + distance_m / self.speed_mps
+
+
+@dataclass(frozen=True, slots=True)
+class GilbertElliott:
+    """Two-state (good/bad) Markov bit-error model, advanced once per received bit.
+
+    After each bit the chain leaves the good state with probability ``p_good_to_bad`` and the
+    bad state with ``p_bad_to_good``; a bit is flipped with probability ``ber_good`` or
+    ``ber_bad`` of the state it was received in. The state persists across frames, per receiver.
+    Off by default (never leaves the good state, which is error-free).
+
+    Attributes:
+        p_good_to_bad: per-bit transition probability good → bad, in [0, 1].
+        p_bad_to_good: per-bit transition probability bad → good, in (0, 1].
+        ber_good: bit error probability in the good state, in [0, 1].
+        ber_bad: bit error probability in the bad state, in [0, 1].
+    """
+
+    p_good_to_bad: float = 0.0
+    p_bad_to_good: float = 1.0
+    ber_good: float = 0.0
+    ber_bad: float = 0.5
+
+    def __post_init__(self) -> None:
+        _probability(self.p_good_to_bad, "p_good_to_bad")
+        _probability(self.p_bad_to_good, "p_bad_to_good")
+        check(self.p_bad_to_good > 0.0, "p_bad_to_good", "must be > 0 (bad state would absorb)")
+        _probability(self.ber_good, "ber_good")
+        _probability(self.ber_bad, "ber_bad")
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the model can flip any bit at all."""
+        return self.ber_good > 0.0 or (self.p_good_to_bad > 0.0 and self.ber_bad > 0.0)
+
+    @property
+    def stationary_bad(self) -> float:
+        """Long-run fraction of bits received in the bad state, p_gb / (p_gb + p_bg)."""
+        return self.p_good_to_bad / (self.p_good_to_bad + self.p_bad_to_good)
+
+    @property
+    def mean_ber(self) -> float:
+        """Long-run bit error rate of the chain."""
+        bad = self.stationary_bad
+        return (1.0 - bad) * self.ber_good + bad * self.ber_bad
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """One link class: timing, buffering, range and bit-error models (REFERENCE §2.1, §2.5).
+
+    Error sources compose by OR of their error masks: a bit is flipped when any source flips it
+    (independent BER ``ber``, range-dependent ``ber_per_m · distance`` and the Gilbert–Elliott
+    chain), so the independent part alone gives a per-bit flip probability of
+    1 − (1 − ber)(1 − min(1, ber_per_m · d)).
+
+    Attributes:
+        bitrate_bps: bitrate on the air [bit/s], > 0; airtime of L bytes is 8·L / bitrate.
+        intrinsic_delay_s: modem latency before the first bit [s]; the device counts as
+            transmitting during it (dccomms_ros intrinsicDelay).
+        propagation: propagation delay model.
+        duplex: ``"half"`` (one channel: a node cannot receive while transmitting and defers its
+            queue while receiving) or ``"full"`` (transmit and receive independent).
+        tx_buffer_bytes: transmit FIFO capacity [B]; a frame that would overflow it is dropped.
+        queue_gap_s: idle gap between consecutive transmissions from the FIFO [s] (dccomms 100 µs).
+        packet_bytes: 0 to send frames whole; > 0 to cut each frame into packets of this many
+            bytes (the last zero-padded), each a separate transmission with its own delay.
+        max_range_m: beyond this distance [m] nothing is received (nor interferes).
+        ber: independent bit error probability, in [0, 1].
+        ber_per_m: range-dependent bit error probability per metre [1/m] (dccomms ``k*m``),
+            capped at 1.
+        burst: Gilbert–Elliott burst error model.
+        name: preset name, for reports.
+    """
+
+    bitrate_bps: float
+    intrinsic_delay_s: float = 0.0
+    propagation: Propagation = field(default_factory=Propagation)
+    duplex: Literal["half", "full"] = "half"
+    tx_buffer_bytes: int = 500
+    queue_gap_s: float = 100e-6
+    packet_bytes: int = 0
+    max_range_m: float = math.inf
+    ber: float = 0.0
+    ber_per_m: float = 0.0
+    burst: GilbertElliott = field(default_factory=GilbertElliott)
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        check(
+            self.bitrate_bps > 0.0 and math.isfinite(self.bitrate_bps),
+            "bitrate_bps",
+            f"must be > 0 and finite, got {self.bitrate_bps}",
+        )
+        check(
+            self.intrinsic_delay_s >= 0.0 and math.isfinite(self.intrinsic_delay_s),
+            "intrinsic_delay_s",
+            f"must be ≥ 0, got {self.intrinsic_delay_s}",
+        )
+        check(
+            self.tx_buffer_bytes >= 1, "tx_buffer_bytes", f"must be ≥ 1, got {self.tx_buffer_bytes}"
+        )
+        check(
+            self.queue_gap_s >= 0.0 and math.isfinite(self.queue_gap_s),
+            "queue_gap_s",
+            f"must be ≥ 0, got {self.queue_gap_s}",
+        )
+        check(self.packet_bytes >= 0, "packet_bytes", f"must be ≥ 0, got {self.packet_bytes}")
+        check(self.max_range_m > 0.0, "max_range_m", f"must be > 0, got {self.max_range_m}")
+        _probability(self.ber, "ber")
+        check(
+            self.ber_per_m >= 0.0 and math.isfinite(self.ber_per_m),
+            "ber_per_m",
+            f"must be ≥ 0, got {self.ber_per_m}",
+        )
+
+    def airtime_s(self, n_bytes: int) -> float:
+        """Time on the air of ``n_bytes`` [s], 8·n / bitrate (one packet or whole frame)."""
+        return 8.0 * n_bytes / self.bitrate_bps
+
+
+def preset_names() -> list[str]:
+    """Names of the packaged link presets, sorted."""
+    folder = resources.files(_PRESET_PACKAGE).joinpath(_PRESET_DIR)
+    return sorted(
+        p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml")
+    )
+
+
+def load_link_config(preset: str, overrides: Sequence[str] = ()) -> LinkConfig:
+    """Load a packaged preset and apply ``KEY=VALUE`` overrides.
+
+    Args:
+        preset: preset name (``s100``, ``m64``, ``s2c``, ``tether``; see :func:`preset_names`).
+        overrides: ``--set`` strings such as ``"ber=1e-4"`` or ``"propagation.speed_mps=1500"``.
+
+    Returns:
+        The checked link configuration.
+
+    Raises:
+        ConfigError: unknown preset (naming it and the known ones), or an override with an
+            unknown key, a wrong type or a value out of range (naming the key).
+    """
+    known = preset_names()
+    if preset not in known:
+        raise ConfigError(f"preset {preset!r}: unknown link preset (known: {', '.join(known)})")
+    resource = resources.files(_PRESET_PACKAGE).joinpath(_PRESET_DIR).joinpath(f"{preset}.toml")
+    with resources.as_file(resource) as path:
+        data = load_toml(path)
+    source = f"preset {preset}"
+    base = build(LinkConfig, data, source=source)  # a broken preset is named as such
+    if not overrides:
+        return base
+    return build(LinkConfig, apply_overrides(data, overrides), source="--set")

@@ -1,0 +1,426 @@
+"""The shared medium and the modems attached to it: timing, FIFOs, collisions, bit errors.
+
+The shape is simpy's ``Cable`` example (a store plus a delay, apart from sender and receiver),
+with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
+
+- ``Modem.send`` puts a frame in a byte-counted transmit FIFO (tail drop when it would overflow
+  ``tx_buffer_bytes``). With ``packet_bytes > 0`` the frame is cut into fixed-size packets, the
+  last zero-padded, each queued and sent as its own transmission.
+- A transmission spends ``intrinsic_delay_s`` (the device counts as transmitting), then the
+  airtime ``8·len / bitrate_bps``. The next queued transmission starts ``queue_gap_s`` after
+  that. In half duplex a modem defers its queue while it is receiving (until ``queue_gap_s``
+  after the reception ends) and loses any reception that overlaps its own transmission.
+- The medium is a broadcast channel: every other attached modem within ``max_range_m`` (distance
+  between the position callables at transmit time) receives its own copy, which arrives after
+  the propagation delay ``fixed_s + distance / speed_mps``: the copy is on the air at the
+  receiver from ``t0 + intrinsic + propagation`` to ``t0 + intrinsic + airtime + propagation``
+  and is handed over at the end. Unloaded latency is therefore exactly
+  intrinsic + airtime + propagation.
+- Any overlap of two receptions at one modem destroys both (no capture); destroyed copies are
+  counted and traced, never delivered. Other copies are delivered with bits flipped by the
+  receiver's :class:`~testbed.channel.errors.BitErrors` — the receiver's decoder must catch them.
+
+Per copy the model schedules one simpy timeout (its delivery); a transmitter schedules a wake-up
+only when its FIFO must wait. There is no process per frame. All of it runs unchanged under
+``simpy.rt.RealtimeEnvironment``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple, cast
+
+import numpy as np
+import simpy
+
+from testbed.channel.config import LinkConfig
+from testbed.channel.errors import BitErrors
+from testbed.channel.trace import BROADCAST, EventKind, Trace
+
+__all__ = ["Delivery", "Medium", "Modem", "ModemCounters", "Position"]
+
+Position = Callable[[], tuple[float, float, float]]
+"""A node's position [m], world NED, read at each transmission."""
+
+_ORIGIN = (0.0, 0.0, 0.0)
+_TIME_EPS_S = 1e-12
+"""Times closer than this are equal (guards float round-off between wake-ups and deadlines)."""
+
+
+class Delivery(NamedTuple):
+    """One received copy of a transmission, as handed to the receiving node (immutable).
+
+    A ``NamedTuple`` rather than a frozen dataclass: one is built per received copy on the hot
+    path and a frozen dataclass costs about five times as much to construct.
+
+    Attributes:
+        data: the bytes as received (bit errors included; packet padding included).
+        t_tx_start_s: when the sender started this transmission (its intrinsic delay) [s].
+        t_delivered_s: when the last bit arrived [s].
+        frame_id: the medium's id of the frame this came from.
+        src: sending modem's name.
+        part: packet index within the frame (0 when frames go out whole).
+        parts: number of packets of the frame (1 when frames go out whole).
+        bit_errors: number of flipped bits. Ground truth for instrumentation only: nodes must
+            detect corruption with their decoder, as on a real modem.
+    """
+
+    data: bytes
+    t_tx_start_s: float
+    t_delivered_s: float
+    frame_id: int
+    src: str
+    part: int = 0
+    parts: int = 1
+    bit_errors: int = 0
+
+
+@dataclass(slots=True)
+class ModemCounters:
+    """Per-modem counters (read them; the modem updates them).
+
+    Transmit side counts frames handed to ``send``; the ``tx_`` and ``rx_`` counts are per
+    transmission (per packet when ``packet_bytes > 0``).
+    """
+
+    frames_offered: int = 0
+    frames_dropped: int = 0
+    tx_transmissions: int = 0
+    tx_bytes: int = 0
+    rx_delivered: int = 0
+    rx_corrupted: int = 0
+    rx_collided: int = 0
+    rx_out_of_range: int = 0
+    rx_bit_errors: int = 0
+
+
+class _Reception:
+    """One copy on the air at one receiver (internal, mutable)."""
+
+    __slots__ = ("collided", "end_s", "entry", "p_independent", "src", "start_s", "t_tx_start_s")
+
+    def __init__(
+        self,
+        src: str,
+        entry: _Queued,
+        t_tx_start_s: float,
+        start_s: float,
+        end_s: float,
+        p_independent: float,
+    ) -> None:
+        self.src = src
+        self.entry = entry
+        self.t_tx_start_s = t_tx_start_s
+        self.start_s = start_s
+        self.end_s = end_s
+        self.p_independent = p_independent
+        self.collided = False
+
+
+_Queued = tuple[int, int, int, bytes]
+"""A transmission waiting in a FIFO: (frame_id, part, parts, data) (internal)."""
+
+
+class Medium:
+    """A broadcast link shared by the modems attached to it.
+
+    Args:
+        env: the simpy environment (plain or real-time).
+        config: link parameters.
+        rng: random generator; each attached modem gets an independent child stream from it
+            (``rng.spawn``), so one receiver's errors do not depend on another's traffic.
+        trace: event sink, or None for speed.
+    """
+
+    def __init__(
+        self,
+        env: simpy.Environment,
+        config: LinkConfig,
+        rng: np.random.Generator,
+        trace: Trace | None = None,
+    ) -> None:
+        self.env = env
+        self.config = config
+        self.trace = trace
+        self._rng = rng
+        self._modems: list[Modem] = []
+        self._next_frame_id = 0
+        # Hot-path copies of the configuration.
+        self._intrinsic_s = config.intrinsic_delay_s
+        self._fixed_s = config.propagation.fixed_s
+        self._speed_mps = config.propagation.speed_mps
+        self._max_range_m = config.max_range_m
+        self._ber = config.ber
+        self._ber_per_m = config.ber_per_m
+
+    @property
+    def modems(self) -> tuple[Modem, ...]:
+        """The attached modems, in attach order."""
+        return tuple(self._modems)
+
+    def attach(self, name: str, position: Position | None = None) -> Modem:
+        """Attach a node's modem.
+
+        Args:
+            name: unique node name (used as ``src``/``dst`` in deliveries and traces).
+            position: callable giving the node's position [m], world NED; None = origin.
+
+        Raises:
+            ValueError: the name is already attached.
+        """
+        if any(m.name == name for m in self._modems):
+            raise ValueError(f"a modem named {name!r} is already attached")
+        modem = Modem(self, name, position, self._rng.spawn(1)[0])
+        self._modems.append(modem)
+        return modem
+
+    def _broadcast(self, sender: Modem, entry: _Queued, t0: float, busy_s: float) -> None:
+        """Hand a transmission that starts at ``t0`` (now) to every other modem in range."""
+        env = self.env
+        trace = self.trace
+        here = sender.position
+        for receiver in self._modems:
+            if receiver is sender:
+                continue
+            there = receiver.position
+            if here is None and there is None:
+                distance_m = 0.0
+            else:
+                distance_m = math.dist(
+                    _ORIGIN if here is None else here(), _ORIGIN if there is None else there()
+                )
+            if distance_m > self._max_range_m:
+                receiver.counters.rx_out_of_range += 1
+                if trace is not None:
+                    frame_id, part, _, data = entry
+                    kind = EventKind.OUT_OF_RANGE
+                    trace.record(t0, kind, sender.name, receiver.name, frame_id, part, len(data))
+                continue
+            prop_s = self._fixed_s + distance_m / self._speed_mps
+            p = self._ber
+            if self._ber_per_m > 0.0:
+                p = 1.0 - (1.0 - p) * (1.0 - min(1.0, self._ber_per_m * distance_m))
+            delay_s = busy_s + prop_s
+            rec = _Reception(
+                sender.name, entry, t0, t0 + (self._intrinsic_s + prop_s), t0 + delay_s, p
+            )
+            receiver._start_reception(rec)
+            simpy.Timeout(env, delay_s, rec).callbacks.append(receiver._finish_reception)
+
+
+class Modem:
+    """A node's interface to a :class:`Medium` (made by :meth:`Medium.attach`).
+
+    Received copies go to :attr:`on_receive` if it is set, otherwise to an inbox read with
+    :meth:`drain`; :meth:`wait` gives an event that fires when the inbox has something.
+
+    Attributes:
+        name: node name.
+        position: position callable [m], NED, or None for the origin.
+        on_receive: callback called with each :class:`Delivery` at its delivery time (the copy
+            then bypasses the inbox), or None.
+        counters: this modem's counters.
+    """
+
+    def __init__(
+        self, medium: Medium, name: str, position: Position | None, rng: np.random.Generator
+    ) -> None:
+        config = medium.config
+        self.name = name
+        self.position = position
+        self.on_receive: Callable[[Delivery], None] | None = None
+        self.counters = ModemCounters()
+        self._medium = medium
+        self._env = medium.env
+        self._half_duplex = config.duplex == "half"
+        self._intrinsic_s = config.intrinsic_delay_s
+        self._s_per_byte = 8.0 / config.bitrate_bps
+        self._gap_s = config.queue_gap_s
+        self._buffer_bytes = config.tx_buffer_bytes
+        self._packet_bytes = config.packet_bytes
+        self._errors = BitErrors(config.burst, rng)
+        self._fifo: deque[_Queued] = deque()
+        self._fifo_bytes = 0
+        self._tx_start_s = -math.inf
+        self._tx_end_s = -math.inf
+        self._free_at_s = -math.inf
+        self._wakeup_pending = False
+        self._receptions: list[_Reception] = []
+        self._inbox: list[Delivery] = []
+        self._waiters: list[simpy.Event] = []
+
+    def __repr__(self) -> str:
+        return f"Modem({self.name!r})"
+
+    # -- sending -------------------------------------------------------------------------------
+
+    @property
+    def queued_bytes(self) -> int:
+        """Bytes waiting in the transmit FIFO (not counting the transmission on the air)."""
+        return self._fifo_bytes
+
+    @property
+    def transmitting(self) -> bool:
+        """Whether the modem is sending now (intrinsic delay or airtime)."""
+        return self._tx_start_s <= self._env.now < self._tx_end_s
+
+    @property
+    def receiving(self) -> bool:
+        """Whether a copy is on the air at this modem now."""
+        now = self._env.now
+        return any(r.start_s <= now < r.end_s for r in self._receptions)
+
+    def send(self, data: bytes) -> bool:
+        """Queue one frame for transmission.
+
+        The frame (with its packet padding) must fit in the free FIFO space, even when the
+        modem is idle and would start sending it at once.
+
+        Args:
+            data: the frame's bytes (non-empty).
+
+        Returns:
+            True if queued, False if tail-dropped because the FIFO had no room.
+
+        Raises:
+            ValueError: ``data`` is empty (local misuse).
+        """
+        if not data:
+            raise ValueError("cannot send an empty frame")
+        data = bytes(data)
+        medium = self._medium
+        frame_id = medium._next_frame_id
+        medium._next_frame_id = frame_id + 1
+        packet = self._packet_bytes
+        if packet:
+            n = -(-len(data) // packet)
+            data = data.ljust(n * packet, b"\x00")
+        size = len(data)
+        self.counters.frames_offered += 1
+        trace = medium.trace
+        if trace is not None:
+            now = self._env.now  # only needed for the trace
+            trace.record(now, EventKind.ENQUEUE, self.name, BROADCAST, frame_id, 0, size)
+        if self._fifo_bytes + size > self._buffer_bytes:
+            self.counters.frames_dropped += 1
+            if trace is not None:
+                trace.record(now, EventKind.DROP, self.name, BROADCAST, frame_id, 0, size)
+            return False
+        if packet:
+            self._fifo.extend(
+                (frame_id, k, n, data[k * packet : (k + 1) * packet]) for k in range(n)
+            )
+        else:
+            self._fifo.append((frame_id, 0, 1, data))
+        self._fifo_bytes += size
+        if not self._wakeup_pending:
+            self._pump()
+        return True
+
+    def _pump(self) -> None:
+        """Start the head of the FIFO now if the modem is free, else schedule a wake-up."""
+        if not self._fifo:
+            return
+        now = self._env.now
+        ready_s = self._free_at_s
+        if self._half_duplex:
+            for r in self._receptions:  # defer while receiving (carrier sense, as dccomms)
+                if r.start_s <= now < r.end_s and r.end_s + self._gap_s > ready_s:
+                    ready_s = r.end_s + self._gap_s
+        if ready_s - now > _TIME_EPS_S:
+            self._wakeup_pending = True
+            simpy.Timeout(self._env, ready_s - now).callbacks.append(self._wake)
+        else:
+            self._transmit(self._fifo.popleft(), now)
+
+    def _wake(self, _event: simpy.Event) -> None:
+        self._wakeup_pending = False
+        self._pump()
+
+    def _transmit(self, entry: _Queued, now: float) -> None:
+        frame_id, part, _, data = entry
+        size = len(data)
+        self._fifo_bytes -= size
+        busy_s = self._intrinsic_s + size * self._s_per_byte
+        end_s = now + busy_s
+        self._tx_start_s = now
+        self._tx_end_s = end_s
+        self._free_at_s = now + (busy_s + self._gap_s)
+        counters = self.counters
+        counters.tx_transmissions += 1
+        counters.tx_bytes += size
+        trace = self._medium.trace
+        if trace is not None:
+            trace.record(now, EventKind.TX_START, self.name, BROADCAST, frame_id, part, size)
+            trace.record(end_s, EventKind.TX_END, self.name, BROADCAST, frame_id, part, size)
+        if self._half_duplex:
+            for r in self._receptions:  # cannot receive while transmitting
+                if r.start_s < end_s and r.end_s > now:
+                    r.collided = True
+        self._medium._broadcast(self, entry, now, busy_s)
+        if self._fifo:
+            self._pump()
+
+    # -- receiving -----------------------------------------------------------------------------
+
+    def _start_reception(self, rec: _Reception) -> None:
+        start_s = rec.start_s
+        end_s = rec.end_s
+        for other in self._receptions:  # any overlap destroys both: no capture
+            if other.start_s < end_s and other.end_s > start_s:
+                other.collided = True
+                rec.collided = True
+        if self._half_duplex and self._tx_start_s < end_s and self._tx_end_s > start_s:
+            rec.collided = True
+        self._receptions.append(rec)
+
+    def _finish_reception(self, event: simpy.Event) -> None:
+        rec = cast(_Reception, event.value)
+        self._receptions.remove(rec)
+        frame_id, part, parts, data = rec.entry
+        trace = self._medium.trace
+        counters = self.counters
+        now = self._env.now
+        if rec.collided:
+            counters.rx_collided += 1
+            if trace is not None:
+                kind = EventKind.COLLIDE
+                trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
+            return
+        data, n_errors = self._errors.corrupt(data, rec.p_independent)
+        if n_errors:
+            counters.rx_corrupted += 1
+            counters.rx_bit_errors += n_errors
+        else:
+            counters.rx_delivered += 1
+        if trace is not None:
+            kind = EventKind.CORRUPT if n_errors else EventKind.DELIVER
+            trace.record(now, kind, rec.src, self.name, frame_id, part, len(data), n_errors)
+        delivery = Delivery(data, rec.t_tx_start_s, now, frame_id, rec.src, part, parts, n_errors)
+        if self.on_receive is not None:
+            self.on_receive(delivery)
+            return
+        self._inbox.append(delivery)
+        if self._waiters:
+            waiters = self._waiters
+            self._waiters = []
+            for waiter in waiters:
+                waiter.succeed()
+
+    def drain(self) -> list[Delivery]:
+        """Everything delivered since the last drain, in delivery order (non-blocking)."""
+        inbox = self._inbox
+        self._inbox = []
+        return inbox
+
+    def wait(self) -> simpy.Event:
+        """An event that fires once the inbox is non-empty (at once if it already is)."""
+        event = self._env.event()
+        if self._inbox:
+            event.succeed()
+        else:
+            self._waiters.append(event)
+        return event
