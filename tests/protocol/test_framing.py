@@ -8,6 +8,7 @@ from the rules in the framing module docstring.
 from __future__ import annotations
 
 import itertools
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -347,6 +348,19 @@ def test_buffer_bound_holds_after_every_feed(data: bytes, max_buffer: int) -> No
         events += decoder.feed(data[k : k + 97])
         assert decoder.pending_bytes < max_buffer
     assert_accounting(decoder, events)
+
+
+def test_one_large_feed_never_holds_more_than_max_buffer() -> None:
+    noise = bytes(range(85)) * 12_000  # ~1 MB without a start byte
+    decoder = FrameDecoder(max_buffer=64)
+    tracemalloc.start()
+    try:
+        events = decoder.feed(noise)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert events == [] and decoder.garbage_bytes == len(noise)
+    assert peak < len(noise) // 10  # consumed in max_buffer slices, never copied whole
 
 
 def test_frame_longer_than_the_buffer_is_overflow_and_does_not_block() -> None:
