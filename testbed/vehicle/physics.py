@@ -1,0 +1,541 @@
+"""The vehicle's plant: Fossen's 6-DOF model stepped by a pybullet rigid body.
+
+pybullet integrates one rigid body (mass m, inertia about the CoG) and resolves contacts; it
+knows nothing of added mass, damping, buoyancy or currents, and its gravity is off. Each step
+reads pybullet's pose and velocity, solves (M_RB + M_A) ν̇ = τ − C(ν)ν − D(ν_r)ν_r − g(η) for
+the acceleration exactly (never a lagged estimate: heave added mass exceeds the vehicle's mass),
+then applies the body force and torque that give pybullet's rigid body exactly that
+acceleration. pybullet integrates linear velocity in the world frame (v += dt·F/m) and angular
+velocity with its own explicit gyroscopic term (ω̇ = I⁻¹(τ − ω×Iω)), so the force carries the
+transport term ω×v_g and the torque puts back ω×I_gω.
+
+pybullet's body frame is placed at the CoG: its base position *is* the centre of mass, so there
+is no inertial-frame offset to get wrong, and the hydrodynamic origin CO sits at −r_g from it.
+M = M_RB + M_A about CO is then general (r_g ≠ 0 couples surge–pitch and sway–roll); its inverse
+is computed once (see :func:`testbed.vehicle.hydrodynamics.make_scalar_dynamics`).
+
+Frames: this module is the only place that knows pybullet is z-up. pybullet's world is NED
+rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
+rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x, y, z) maps to
+(w, x, −y, −z). Nothing outside this module imports pybullet.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet
+from numpy.typing import NDArray
+
+from testbed.config import check
+from testbed.vehicle.hydrodynamics import (
+    CurrentProcess,
+    HydroModel,
+    WaterCurrent,
+    euler_from_quaternion,
+    load_model,
+    make_scalar_dynamics,
+    quaternion_from_euler,
+)
+
+__all__ = [
+    "BodyState",
+    "OpenLoopResult",
+    "Physics",
+    "PoolScene",
+    "ned_to_pybullet",
+    "pybullet_to_ned",
+    "quaternion_ned_to_pybullet",
+    "quaternion_pybullet_to_ned",
+    "simulate_open_loop",
+]
+
+FloatArray = NDArray[np.float64]
+Vec3 = tuple[float, float, float]
+Vec6 = tuple[float, float, float, float, float, float]
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+def ned_to_pybullet(vector: Sequence[float]) -> Vec3:
+    """A vector in NED (or body FRD) → pybullet's world (or body FLU): (x, −y, −z)."""
+    return (float(vector[0]), -float(vector[1]), -float(vector[2]))
+
+
+def pybullet_to_ned(vector: Sequence[float]) -> Vec3:
+    """A vector in pybullet's world (or body FLU) → NED (or body FRD): (x, −y, −z)."""
+    return (float(vector[0]), -float(vector[1]), -float(vector[2]))
+
+
+def quaternion_ned_to_pybullet(q_wxyz: Sequence[float]) -> tuple[float, float, float, float]:
+    """Attitude quaternion (w, x, y, z), FRD → NED, as pybullet's (x, y, z, w), FLU → world."""
+    w, x, y, z = (float(c) for c in q_wxyz)
+    return (x, -y, -z, w)
+
+
+def quaternion_pybullet_to_ned(q_xyzw: Sequence[float]) -> tuple[float, float, float, float]:
+    """pybullet's (x, y, z, w), FLU → world, as the attitude quaternion (w, x, y, z), FRD → NED."""
+    x, y, z, w = (float(c) for c in q_xyzw)
+    return (w, x, -y, -z)
+
+
+@dataclass(frozen=True, slots=True)
+class PoolScene:
+    """A rectangular pool: floor and four walls as static bodies, contact on.
+
+    The origin is the centre of the water surface; the floor's top is at NED z = ``depth_m``,
+    the walls' inner faces at x = ±length/2 and y = ±width/2.
+
+    Attributes:
+        length_m: extent along north [m].
+        width_m: extent along east [m].
+        depth_m: water depth [m].
+        wall_thickness_m: thickness of the floor and walls [m].
+    """
+
+    length_m: float = 10.0
+    width_m: float = 6.0
+    depth_m: float = 3.0
+    wall_thickness_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        for key in ("length_m", "width_m", "depth_m", "wall_thickness_m"):
+            value = getattr(self, key)
+            check(value > 0.0, key, f"must be > 0, got {value}")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BodyState:
+    """The vehicle's state at one instant (arrays are read-only).
+
+    Attributes:
+        time_s: simulated time [s].
+        position_ned: (3,) position of the body origin CO [m], NED.
+        quaternion_wxyz: (4,) attitude, body FRD → NED.
+        euler_rad: (3,) roll, pitch, yaw [rad], ZYX.
+        nu: (6,) body velocity [u v w p q r] at CO [m/s, rad/s], FRD.
+        nu_dot: (6,) body acceleration of the last step's model (contacts not included)
+            [m/s², rad/s²], FRD.
+    """
+
+    time_s: float
+    position_ned: FloatArray
+    quaternion_wxyz: FloatArray
+    euler_rad: FloatArray
+    nu: FloatArray
+    nu_dot: FloatArray
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class OpenLoopResult:
+    """Samples of an open-loop run, one row per step including t = 0.
+
+    Attributes:
+        t: (N,) time [s].
+        position_ned: (N, 3) position of CO [m], NED.
+        euler_rad: (N, 3) roll, pitch, yaw [rad].
+        nu: (N, 6) body velocity [u v w p q r] [m/s, rad/s], FRD.
+    """
+
+    t: FloatArray
+    position_ned: FloatArray
+    euler_rad: FloatArray
+    nu: FloatArray
+
+
+def _frozen(values: Sequence[float]) -> FloatArray:
+    array = np.array(values, dtype=float)
+    array.setflags(write=False)
+    return array
+
+
+class Physics:
+    """One vehicle in its own pybullet DIRECT client, stepped with Fossen's forces.
+
+    Args:
+        model: the vehicle's parameters.
+        dt_s: physics step [s].
+        start_position_ned: (3,) initial position of CO [m], NED.
+        start_euler_rad: (3,) initial roll, pitch, yaw [rad].
+        current: water current (none by default).
+        pool: pool scene (open water by default).
+        rng: generator for the current's variation (needed only if it varies).
+
+    Use as a context manager or call :meth:`close`; the pybullet client is disconnected then.
+    """
+
+    def __init__(
+        self,
+        model: HydroModel,
+        *,
+        dt_s: float = 1.0 / 240.0,
+        start_position_ned: Sequence[float] = (0.0, 0.0, 10.0),
+        start_euler_rad: Sequence[float] = (0.0, 0.0, 0.0),
+        current: WaterCurrent | None = None,
+        pool: PoolScene | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        self.model = model
+        self.dt_s = float(dt_s)
+        self.current = current if current is not None else WaterCurrent()
+        self.pool = pool
+        self._current_process = CurrentProcess(self.current, rng)
+        self._current_ned = self._current_process.velocity_ned
+        self._current_varies = self.current.varies
+        self._current_on = self._current_varies or any(c != 0.0 for c in self._current_ned)
+        self._next_current_update_s = self.current.update_period_s
+        self._start_position = tuple(float(c) for c in start_position_ned)
+        self._start_euler = tuple(float(c) for c in start_euler_rad)
+        self._steps = 0
+        self._nu_dot: Sequence[float] = (0.0,) * 6
+        self._cached: BodyState | None = None
+
+        self._cog = model.cog_m
+
+        self.client_id: int = pybullet.connect(pybullet.DIRECT)
+        self._finalizer = weakref.finalize(self, _disconnect, self.client_id)
+        self.body_id: int = self._build_scene()
+        self._advance = self._make_stepper()
+        self.reset()
+
+    # --- setup -----------------------------------------------------------------------------
+
+    def _build_scene(self) -> int:
+        cid = self.client_id
+        pybullet.setGravity(0.0, 0.0, 0.0, physicsClientId=cid)
+        pybullet.setPhysicsEngineParameter(
+            fixedTimeStep=self.dt_s,
+            numSubSteps=0,
+            deterministicOverlappingPairs=1,
+            physicsClientId=cid,
+        )
+        half = [0.5 * s for s in self.model.hull_size_m]
+        # The hull box is centred on CO, which is at −r_g from the CoG (pybullet's body frame).
+        centre_flu = ned_to_pybullet([-c for c in self._cog])
+        shape = pybullet.createCollisionShape(
+            pybullet.GEOM_BOX,
+            halfExtents=half,
+            collisionFramePosition=centre_flu,
+            physicsClientId=cid,
+        )
+        body: int = pybullet.createMultiBody(
+            baseMass=self.model.mass_kg,
+            baseCollisionShapeIndex=shape,
+            basePosition=[0.0, 0.0, 0.0],
+            physicsClientId=cid,
+        )
+        pybullet.changeDynamics(
+            body,
+            -1,
+            linearDamping=0.0,
+            angularDamping=0.0,
+            localInertiaDiagonal=list(self.model.inertia_kg_m2),  # FRD and FLU share a diagonal
+            activationState=pybullet.ACTIVATION_STATE_DISABLE_SLEEPING,
+            physicsClientId=cid,
+        )
+        if self.pool is not None:
+            self._build_pool(self.pool)
+        return body
+
+    def _build_pool(self, pool: PoolScene) -> None:
+        cid = self.client_id
+        t = pool.wall_thickness_m
+        half_l, half_w, depth = 0.5 * pool.length_m, 0.5 * pool.width_m, pool.depth_m
+        # (centre NED, half extents) of the floor and the four walls.
+        boxes = [
+            ((0.0, 0.0, depth + t / 2), (half_l + t, half_w + t, t / 2)),
+            ((half_l + t / 2, 0.0, depth / 2), (t / 2, half_w + t, depth / 2)),
+            ((-half_l - t / 2, 0.0, depth / 2), (t / 2, half_w + t, depth / 2)),
+            ((0.0, half_w + t / 2, depth / 2), (half_l + t, t / 2, depth / 2)),
+            ((0.0, -half_w - t / 2, depth / 2), (half_l + t, t / 2, depth / 2)),
+        ]
+        for centre, half in boxes:
+            shape = pybullet.createCollisionShape(
+                pybullet.GEOM_BOX, halfExtents=half, physicsClientId=cid
+            )
+            pybullet.createMultiBody(
+                baseMass=0.0,
+                baseCollisionShapeIndex=shape,
+                basePosition=ned_to_pybullet(centre),
+                physicsClientId=cid,
+            )
+
+    # --- public API ------------------------------------------------------------------------
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since the last reset [s]."""
+        return self._steps * self.dt_s
+
+    @property
+    def current_ned(self) -> Vec3:
+        """The water velocity now [m/s], NED."""
+        return self._current_ned
+
+    def reset(
+        self,
+        *,
+        position_ned: Sequence[float] | None = None,
+        euler_rad: Sequence[float] | None = None,
+        nu: Sequence[float] | None = None,
+    ) -> None:
+        """Put the vehicle at a pose and body velocity and restart time at 0.
+
+        Args:
+            position_ned: (3,) position of CO [m], NED (default: the start position).
+            euler_rad: (3,) roll, pitch, yaw [rad] (default: the start attitude).
+            nu: (6,) body velocity [u v w p q r] at CO [m/s, rad/s], FRD (default: rest).
+
+        The water current keeps its state.
+        """
+        self._check_open()
+        px, py, pz = position_ned if position_ned is not None else self._start_position
+        roll, pitch, yaw = euler_rad if euler_rad is not None else self._start_euler
+        u, v, w, p, q, r = nu if nu is not None else (0.0,) * 6
+        quat = quaternion_from_euler(roll, pitch, yaw)
+        rot = _rotation(*quat)
+        xg, yg, zg = self._cog
+        cog_offset = _apply(rot, (xg, yg, zg))
+        cog_ned = (px + cog_offset[0], py + cog_offset[1], pz + cog_offset[2])
+        # CoG velocity in the body: v_g = v_o + ω × r_g; then to NED.
+        vg_body = (u + q * zg - r * yg, v + r * xg - p * zg, w + p * yg - q * xg)
+        cid = self.client_id
+        pybullet.resetBasePositionAndOrientation(
+            self.body_id,
+            ned_to_pybullet(cog_ned),
+            quaternion_ned_to_pybullet(quat),
+            physicsClientId=cid,
+        )
+        pybullet.resetBaseVelocity(
+            self.body_id,
+            ned_to_pybullet(_apply(rot, vg_body)),
+            ned_to_pybullet(_apply(rot, (p, q, r))),
+            physicsClientId=cid,
+        )
+        self._steps = 0
+        self._next_current_update_s = self.current.update_period_s
+        self._nu_dot = (0.0,) * 6
+        self._cached = None
+
+    def step(self, wrench_body: Sequence[float]) -> None:
+        """Advance one ``dt_s`` with the applied wrench held constant.
+
+        Args:
+            wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
+        """
+        self._nu_dot = self._advance(wrench_body, self._current_ned)
+        self._steps += 1
+        self._cached = None
+        if self._current_varies and self._steps * self.dt_s >= self._next_current_update_s:
+            self._next_current_update_s += self.current.update_period_s
+            self._current_ned = self._current_process.advance(self.current.update_period_s)
+
+    def state(self) -> BodyState:
+        """The state now (read from pybullet on first call after a step, then cached)."""
+        if self._cached is None:
+            t, position, quat, euler, nu = self._sample()
+            self._cached = BodyState(
+                time_s=t,
+                position_ned=_frozen(position),
+                quaternion_wxyz=_frozen(quat),
+                euler_rad=_frozen(euler),
+                nu=_frozen(nu),
+                nu_dot=_frozen(self._nu_dot),
+            )
+        return self._cached
+
+    def close(self) -> None:
+        """Disconnect the pybullet client (idempotent)."""
+        self._finalizer()
+
+    def __enter__(self) -> Physics:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # --- internals ---------------------------------------------------------------------------
+
+    def _make_stepper(self) -> Callable[[Sequence[float], Vec3], Vec6]:
+        """The per-step work as one closure over plain floats (attribute lookups cost here)."""
+        get_pose = pybullet.getBasePositionAndOrientation
+        get_velocity = pybullet.getBaseVelocity
+        apply_force = pybullet.applyExternalForce
+        apply_torque = pybullet.applyExternalTorque
+        step_simulation = pybullet.stepSimulation
+        matrix_from_quaternion = pybullet.getMatrixFromQuaternion
+        link_frame = pybullet.LINK_FRAME
+        ndarray = np.ndarray
+        cid, body = self.client_id, self.body_id
+        dynamics = make_scalar_dynamics(self.model, with_current=self._current_on)
+        current_on = self._current_on
+        m = self.model.mass_kg
+        ixx, iyy, izz = self.model.inertia_kg_m2
+        xg, yg, zg = self.model.cog_m
+        dbx, dby, dbz = (b - g for b, g in zip(self.model.cob_m, self.model.cog_m, strict=True))
+        inv_height = 1.0 / self.model.hull_size_m[2]
+
+        def advance(wrench_body: Sequence[float], current_ned: Vec3) -> Vec6:
+            if isinstance(wrench_body, ndarray):  # numpy scalars are slow in float arithmetic
+                wrench_body = wrench_body.tolist()
+            fx, fy, fz, mx, my, mz = wrench_body
+            (_, _, pz), orientation = get_pose(body, cid)
+            (vx, vy, vz), (wx, wy, wz) = get_velocity(body, cid)
+            # R: pybullet body FLU → world (N, −E, −D); R_ned = diag(1, −1, −1)·R·diag(1, −1, −1).
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = matrix_from_quaternion(orientation)
+            # Body FLU velocities Rᵀ·v, then FRD = (x, −y, −z).
+            ug = r00 * vx + r10 * vy + r20 * vz
+            vg = -(r01 * vx + r11 * vy + r21 * vz)
+            wg = -(r02 * vx + r12 * vy + r22 * vz)
+            p = r00 * wx + r10 * wy + r20 * wz
+            q = -(r01 * wx + r11 * wy + r21 * wz)
+            r = -(r02 * wx + r12 * wy + r22 * wz)
+            # NED "down" in the body, the last row of R_ned.
+            gx, gy, gz = -r20, r21, r22
+            if current_on:
+                cn, ce, cd = current_ned
+                uc = r00 * cn - r10 * ce - r20 * cd
+                vc = -(r01 * cn - r11 * ce - r21 * cd)
+                wc = -(r02 * cn - r12 * ce - r22 * cd)
+            else:
+                uc = vc = wc = 0.0
+            # Submerged fraction from the CoB's depth (the CoG's is −pz).
+            scale = 0.5 + (gx * dbx + gy * dby + gz * dbz - pz) * inv_height
+            if scale > 1.0:
+                scale = 1.0
+            elif scale < 0.0:
+                scale = 0.0
+            nu_dot = dynamics(
+                ug - q * zg + r * yg,
+                vg - r * xg + p * zg,
+                wg - p * yg + q * xg,
+                p,
+                q,
+                r,
+                gx,
+                gy,
+                gz,
+                uc,
+                vc,
+                wc,
+                scale,
+                fx,
+                fy,
+                fz,
+                mx,
+                my,
+                mz,
+            )
+            du, dv, dw, dp, dq, dr = nu_dot
+            # Body force for a_g = v̇_o + ω̇×r_g + ω×v_g; torque I_g·ω̇ + ω×I_g·ω, since
+            # pybullet subtracts ω×Iω itself. FRD → FLU: (x, −y, −z).
+            apply_force(
+                body,
+                -1,
+                (
+                    m * (du + dq * zg - dr * yg + q * wg - r * vg),
+                    -m * (dv + dr * xg - dp * zg + r * ug - p * wg),
+                    -m * (dw + dp * yg - dq * xg + p * vg - q * ug),
+                ),
+                _ZERO3,
+                link_frame,
+                cid,
+            )
+            apply_torque(
+                body,
+                -1,
+                (
+                    ixx * dp + (izz - iyy) * q * r,
+                    -iyy * dq - (ixx - izz) * r * p,
+                    -izz * dr - (iyy - ixx) * p * q,
+                ),
+                link_frame,
+                cid,
+            )
+            step_simulation(cid)
+            return nu_dot
+
+        return advance
+
+    def _check_open(self) -> None:
+        if not self._finalizer.alive:
+            raise RuntimeError("Physics is closed")
+
+    def _sample(self) -> tuple[float, Vec3, tuple[float, ...], Vec3, tuple[float, ...]]:
+        """(time, CO position NED, quaternion wxyz, euler, ν at CO) as plain floats."""
+        self._check_open()
+        cid = self.client_id
+        pos, orn = pybullet.getBasePositionAndOrientation(self.body_id, cid)
+        lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
+        quat = quaternion_pybullet_to_ned(orn)
+        rot = _rotation(*quat)
+        rot_t = tuple(zip(*rot, strict=True))
+        xg, yg, zg = self._cog
+        cog_ned = pybullet_to_ned(pos)
+        offset = _apply(rot, self._cog)
+        position = (cog_ned[0] - offset[0], cog_ned[1] - offset[1], cog_ned[2] - offset[2])
+        ug, vg, wg = _apply(rot_t, pybullet_to_ned(lin))
+        p, q, r = _apply(rot_t, pybullet_to_ned(ang))
+        nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
+        return self.time_s, position, quat, euler_from_quaternion(*quat), nu
+
+
+def _disconnect(client_id: int) -> None:
+    if pybullet.isConnected(client_id):
+        pybullet.disconnect(client_id)
+
+
+def _rotation(w: float, x: float, y: float, z: float) -> tuple[Vec3, Vec3, Vec3]:
+    """R (body → world) of the unit quaternion (w, x, y, z), rows as tuples."""
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+    )
+
+
+def _apply(rows: Sequence[Sequence[float]], vector: Sequence[float]) -> Vec3:
+    x, y, z = vector
+    (a, b, c), (d, e, f), (g, h, i) = rows
+    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
+
+
+def simulate_open_loop(
+    model: str,
+    wrench_body: Sequence[float],
+    duration_s: float,
+    dt_s: float = 1.0 / 240.0,
+    start_depth_m: float = 10.0,
+) -> OpenLoopResult:
+    """Apply a constant body wrench in open water (no thrusters, no controller) and record.
+
+    Args:
+        model: a packaged model name (see :func:`testbed.vehicle.hydrodynamics.known_models`).
+        wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
+        duration_s: simulated time [s].
+        dt_s: physics step [s].
+        start_depth_m: initial depth of CO [m]; the vehicle starts level, at rest, heading north.
+
+    Returns:
+        One sample per step, t = 0 included.
+    """
+    wrench = tuple(float(c) for c in wrench_body)
+    if len(wrench) != 6:
+        raise ValueError(f"wrench_body must have 6 values, got {len(wrench)}")
+    n_steps = round(duration_s / dt_s)
+    samples = []
+    with Physics(load_model(model), dt_s=dt_s, start_position_ned=(0.0, 0.0, start_depth_m)) as sim:
+        samples.append(sim._sample())
+        for _ in range(n_steps):
+            sim.step(wrench)
+            samples.append(sim._sample())
+    return OpenLoopResult(
+        t=np.array([s[0] for s in samples]),
+        position_ned=np.array([s[1] for s in samples]),
+        euler_rad=np.array([s[3] for s in samples]),
+        nu=np.array([s[4] for s in samples]),
+    )
