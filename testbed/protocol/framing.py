@@ -73,11 +73,17 @@ PREAMBLE_LENGTHS = (1, 3)
 
 _CRC_LEN = 2
 _PREAMBLES = {n: bytes([START_BYTE]) * n for n in PREAMBLE_LENGTHS}
+_HEADERS = {n: [_PREAMBLES[n] + bytes((k,)) for k in range(256)] for n in PREAMBLE_LENGTHS}
+"""Preamble + length byte, by preamble length and payload length (saves work per frame)."""
+
+
+def _bad_preamble_len(preamble_len: int) -> ValueError:
+    return ValueError(f"preamble_len must be one of {PREAMBLE_LENGTHS}, got {preamble_len!r}")
 
 
 def _check_preamble_len(preamble_len: int) -> None:
     if preamble_len not in PREAMBLE_LENGTHS:
-        raise ValueError(f"preamble_len must be one of {PREAMBLE_LENGTHS}, got {preamble_len!r}")
+        raise _bad_preamble_len(preamble_len)
 
 
 def frame_overhead(preamble_len: int = DEFAULT_PREAMBLE_LEN) -> int:
@@ -111,11 +117,13 @@ def encode_frame(
     Raises:
         ValueError: payload longer than 255 bytes or unsupported ``preamble_len``.
     """
-    _check_preamble_len(preamble_len)
+    headers = _HEADERS.get(preamble_len)
+    if headers is None:
+        raise _bad_preamble_len(preamble_len)
     length = len(payload)
     if length > MAX_PAYLOAD:
         raise ValueError(f"payload is {length} B, the frame carries at most {MAX_PAYLOAD} B")
-    body = _PREAMBLES[preamble_len] + bytes((length,)) + payload
+    body = headers[length] + payload
     return body + binascii.crc_hqx(body, 0).to_bytes(2, "big")
 
 
@@ -255,12 +263,18 @@ class FrameDecoder:
         size = len(data)
         self.bytes_fed += size
         buf = self._buf
+        if not buf and size <= self._max_buffer and not isinstance(data, memoryview):
+            # Nothing pending: scan the input in place and keep only its undecided tail.
+            used = self._scan(data, events)
+            if used < size:
+                buf += data[used:]
+            return events
         start = 0
         while start < size:
             take = self._max_buffer - len(buf)  # > 0: a scan always leaves the buffer non-full
             buf += data[start : start + take]
             start += take
-            self._scan(events)
+            del buf[: self._scan(buf, events)]
         return events
 
     def flush(self) -> list[Frame | CorruptFrame]:
@@ -281,7 +295,7 @@ class FrameDecoder:
             events.append(CorruptFrame(CorruptReason.TRUNCATED, 1))
             self.corrupt += 1
             del buf[:1]
-            self._scan(events)
+            del buf[: self._scan(buf, events)]
         self.garbage_bytes += len(buf)
         buf.clear()
         return events
@@ -306,9 +320,12 @@ class FrameDecoder:
         buf.clear()
         return events
 
-    def _scan(self, events: list[Frame | CorruptFrame]) -> None:
-        """Decode everything decodable in the buffer; keep only the undecided tail."""
-        buf = self._buf
+    def _scan(self, buf: bytes | bytearray, events: list[Frame | CorruptFrame]) -> int:
+        """Decode everything decodable in ``buf``; return how many leading bytes were used.
+
+        The bytes after the returned position are undecided: an incomplete candidate frame or
+        a partial preamble. The caller keeps them.
+        """
         preamble = self._preamble
         plen = self._preamble_len
         max_payload = self._max_payload
@@ -347,5 +364,4 @@ class FrameDecoder:
             events.append(CorruptFrame(reason, 1))
             self.corrupt += 1
             pos = i + 1
-        if pos:
-            del buf[:pos]
+        return pos

@@ -383,6 +383,18 @@ def test_huge_feed_equals_bytewise_feed_with_small_buffer() -> None:
     assert events == reference_decode(stream, max_buffer=64)[0]
 
 
+@given(st.lists(st.binary(max_size=100), max_size=5), st.integers(6, 300))
+def test_bytes_bytearray_and_memoryview_input_decode_alike(
+    items: list[bytes], max_buffer: int
+) -> None:
+    stream = b"U" + b"".join(encode_frame(p) for p in items)
+    results = []
+    for data in (stream, bytearray(stream), memoryview(stream)):
+        decoder = FrameDecoder(max_buffer=max_buffer)
+        results.append((decoder.feed(data) + decoder.flush(), decoder.garbage_bytes))
+    assert results[0] == results[1] == results[2]
+
+
 def test_counters_count() -> None:
     decoder = FrameDecoder()
     bad = bytearray(encode_frame(b"bad"))
