@@ -354,7 +354,8 @@ class Allocator:
         The smaller of :meth:`axis_maxima_signed`'s two rows: what a symmetric stick can be
         scaled to. An uncontrollable axis (pitch on the standard BlueROV2) reports 0.
         """
-        return np.min(self.axis_maxima_signed(), axis=0)
+        both: np.ndarray = np.min(self.axis_maxima_signed(), axis=0)
+        return both
 
     # ----------------------------------------------------------------- internals
 
@@ -429,16 +430,18 @@ class Allocator:
         axis_f, axis_i = self._force_axis, self._current_axis
         if cap_a <= 0.0:
             return 0.0
-        g_hi = current_at_max_a
-        if g_hi is None:
-            g_hi = sum(np.interp(alpha_max * f, axis_f, axis_i).tolist())
+        g_hi: float = (
+            sum(np.interp(alpha_max * f, axis_f, axis_i).tolist())
+            if current_at_max_a is None
+            else current_at_max_a
+        )
         if g_hi <= cap_a:
             return alpha_max
         a_lo, g_lo, a_hi = 0.0, 0.0, alpha_max
-        a = alpha_max * (cap_a / g_hi) ** (2.0 / 3.0)
+        a: float = alpha_max * (cap_a / g_hi) ** (2.0 / 3.0)
         side = 0
         for _ in range(_MAX_ITERATIONS):
-            g = sum(np.interp(a * f, axis_f, axis_i).tolist())
+            g: float = sum(np.interp(a * f, axis_f, axis_i).tolist())
             if g <= cap_a:
                 if cap_a - g <= CURRENT_TOLERANCE_A:
                     return a

@@ -266,7 +266,8 @@ class T200:
             ccw: (n,) bool, True for counter-clockwise propellers.
         """
         pulse = np.where(ccw, 3000.0 - np.asarray(pwms_us, dtype=np.float64), pwms_us)
-        return np.interp(pulse, self._pwm_axis_us, self._pwm_force_n)
+        forces: np.ndarray = np.interp(pulse, self._pwm_axis_us, self._pwm_force_n)
+        return forces
 
     def pwms_for_forces(self, forces_n: np.ndarray, ccw: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`pwm_for_force`: (n,) pulses [µs] for (n,) forces [N].
@@ -276,11 +277,13 @@ class T200:
             ccw: (n,) bool, True for counter-clockwise propellers.
         """
         pulse = np.interp(forces_n, self._inverse_force_n, self._inverse_pwm_us)
-        return np.where(ccw, 3000.0 - pulse, pulse)
+        pwms: np.ndarray = np.where(ccw, 3000.0 - pulse, pulse)
+        return pwms
 
     def currents_for_forces(self, forces_n: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`current_for_force`: (n,) currents [A] for (n,) forces [N]."""
-        return np.interp(forces_n, self._force_axis_n, self._current_axis_a)
+        currents: np.ndarray = np.interp(forces_n, self._force_axis_n, self._current_axis_a)
+        return currents
 
     def __repr__(self) -> str:
         return (
