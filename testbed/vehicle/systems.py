@@ -1,0 +1,503 @@
+"""The vehicle's ECS systems, in the ECS paper's three phases, and the resources they share.
+
+Frame order (each a plain ``verb_noun(world) -> None``):
+
+- PRE_UPDATE: :func:`read_sensors` (truth → sensor readings, at each sensor's rate),
+  :func:`ingest_commands` (operator intents → armed, mode, targets, command status);
+- UPDATE: :func:`supervise_failsafe` (stale commands → hold, then surface and disarm; runs
+  first so every controller sees this frame's targets), :func:`run_pilot_interface`,
+  :func:`control_depth`, :func:`control_attitude` (each writes its :class:`ForceIntent`),
+  :func:`allocate_thrust` (Σ intents → allocator → thruster commands);
+- POST_UPDATE: :func:`actuate_thrusters` (commands → thruster plant, stepped over the interval
+  to the next frame → the wrench the physics applies, ``T @ actual forces``, recorded).
+
+Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading`); the
+physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it.
+Controller objects and the allocator are mutable resources; components stay frozen values.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from testbed.ecs import Entity, Phase, Schedule, World
+from testbed.vehicle.components import (
+    ActiveMode,
+    AppliedWrench,
+    Armed,
+    ArmRequest,
+    AttitudeSetpoint,
+    CommandStatus,
+    ControlMode,
+    ControlTargets,
+    DepthReading,
+    DepthSetpoint,
+    FailsafeLevel,
+    FailsafeStatus,
+    ForceIntent,
+    ImuReading,
+    ModeRequest,
+    MovementCommand,
+    ThrusterOutput,
+)
+from testbed.vehicle.control import (
+    AttitudeController,
+    DepthController,
+    FailsafeConfig,
+    PilotGains,
+    Quaternion,
+    failsafe_level,
+    pilot_wrench,
+    quat_from_axis_angle,
+    quat_multiply,
+    quat_normalize,
+    shape_stick,
+    yaw_only,
+)
+from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
+
+__all__ = [
+    "Actuation",
+    "Controllers",
+    "PlantTruth",
+    "SensorSuite",
+    "SimClock",
+    "actuate_thrusters",
+    "allocate_thrust",
+    "build_schedule",
+    "control_attitude",
+    "control_depth",
+    "ingest_commands",
+    "read_sensors",
+    "run_pilot_interface",
+    "supervise_failsafe",
+    "wrench_of",
+]
+
+Wrench6 = tuple[float, float, float, float, float, float]
+ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
+
+
+# ------------------------------------------------------------------------------ resources
+
+
+@dataclass(slots=True)
+class SimClock:
+    """Vehicle time at this frame and the time since the previous frame [s]."""
+
+    time_s: float = 0.0
+    dt_s: float = 0.01
+
+
+@dataclass(slots=True)
+class PlantTruth:
+    """The physics truth at this frame, for the sensors only.
+
+    Attributes:
+        quaternion_wxyz: (4,) attitude, body → NED.
+        rates_rad_s: (3,) body rates (p, q, r), FRD.
+        position_ned_m: (3,) body-origin position, NED [m] (depth = down component).
+    """
+
+    quaternion_wxyz: Quaternion = LEVEL
+    rates_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(slots=True)
+class SensorSuite:
+    """The vehicle's sensors (``position`` may be absent)."""
+
+    imu: Imu
+    depth: DepthSensor
+    position: PositionFix | None = None
+
+
+@dataclass(slots=True)
+class Controllers:
+    """Controller objects and per-vehicle control settings.
+
+    Attributes:
+        vehicle: the vehicle's own entity (state components live there).
+        attitude, depth: the closed loops.
+        pilot: stick shaping and gains.
+        failsafe: command-staleness failsafe timeouts.
+        axis_maxima: (6,) allocator axis maxima [N, N·m] (stick scaling; 0 disables an axis).
+        intents: the ForceIntent entity of each source (pilot, depth, attitude).
+        sticks: the last accepted stick positions.
+        last_contact_s: vehicle time of the last accepted operator intent [s].
+    """
+
+    vehicle: Entity
+    attitude: AttitudeController
+    depth: DepthController
+    pilot: PilotGains
+    failsafe: FailsafeConfig
+    axis_maxima: tuple[float, ...]
+    intents: dict[str, Entity] = field(default_factory=dict)
+    sticks: tuple[float, ...] = ZERO6
+    last_contact_s: float = 0.0
+
+    @property
+    def attitude_axes(self) -> tuple[bool, bool, bool]:
+        """Which of roll, pitch, yaw the thruster layout can torque (axis maximum > 0)."""
+        m = self.axis_maxima
+        return (m[3] > 0.0, m[4] > 0.0, m[5] > 0.0)
+
+
+@dataclass(slots=True)
+class Actuation:
+    """The allocator, the thruster plant and the wrench handed to the physics.
+
+    Attributes:
+        allocator: an object with ``allocate(wrench, dt_s)`` returning a command with
+            ``forces_n``, ``pwm_us``, ``currents_a`` and ``scale``, and ``reset()``.
+        dynamics: the plant's thrusters: ``step(commanded_forces (n,), dt_s) -> actual (n,)``
+            with a first-order lag of ``time_constant_s`` (plus faults).
+        matrix_columns: per thruster, its (6,) column of the *physical* ``T`` (the plant's
+            geometry, whatever the allocator believes).
+        interval_s: time until the next frame [s] (the plant holds the command that long);
+            set by the vehicle before each frame.
+        commanded_forces_n: (n,) forces commanded this frame (0 when disarmed).
+        commanded_pwm_us: (n,) the matching PWM [µs] (1500 when disarmed).
+        actual_forces_n: (n,) the thrusters' actual forces at the end of the interval.
+        requested: (6,) the summed intents of this frame.
+        plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
+    """
+
+    allocator: Any
+    dynamics: Any
+    matrix_columns: tuple[tuple[float, ...], ...]
+    interval_s: float = 0.01
+    commanded_forces_n: tuple[float, ...] = ()
+    commanded_pwm_us: tuple[float, ...] = ()
+    actual_forces_n: tuple[float, ...] = ()
+    requested: Wrench6 = ZERO6
+    plant_wrench: Wrench6 = ZERO6
+
+    def __post_init__(self) -> None:
+        n = len(self.matrix_columns)
+        if not self.commanded_forces_n:
+            self.commanded_forces_n = (0.0,) * n
+        if not self.commanded_pwm_us:
+            self.commanded_pwm_us = (1500.0,) * n
+        if not self.actual_forces_n:
+            self.actual_forces_n = (0.0,) * n
+
+
+# -------------------------------------------------------------------------------- helpers
+
+
+def _is_armed(world: World, vehicle: Entity) -> bool:
+    armed = world.get(vehicle, Armed)
+    return armed is not None and armed.armed
+
+
+def _holds(world: World, vehicle: Entity) -> tuple[bool, bool, bool, bool]:
+    """(depth hold, attitude hold, precision, failsafe active) in effect this frame."""
+    mode = world.get(vehicle, ActiveMode)
+    status = world.get(vehicle, FailsafeStatus)
+    failsafe = status is not None and status.level is not FailsafeLevel.NOMINAL
+    m = ControlMode.MANUAL if mode is None else mode.mode
+    precision = mode is not None and mode.precision
+    depth_hold = failsafe or m is ControlMode.DEPTH_HOLD
+    attitude_hold = failsafe or m is not ControlMode.MANUAL
+    return depth_hold, attitude_hold, precision, failsafe
+
+
+def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
+    """Targets equal to what the sensors read now (level at the current heading)."""
+    imu = world.get(vehicle, ImuReading)
+    depth = world.get(vehicle, DepthReading)
+    q = LEVEL if imu is None else yaw_only(imu.quaternion_wxyz)
+    return ControlTargets(0.0 if depth is None else depth.depth_m, q)
+
+
+def _set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
+    world.set(controllers.intents[source], ForceIntent(source, wrench))
+
+
+# ------------------------------------------------------------------------------ PRE_UPDATE
+
+
+def read_sensors(world: World) -> None:
+    """Sample each due sensor from the plant truth and store its reading on the vehicle."""
+    clock = world.resource(SimClock)
+    truth = world.resource(PlantTruth)
+    sensors = world.resource(SensorSuite)
+    vehicle = world.resource(Controllers).vehicle
+    t = clock.time_s
+    if sensors.imu.due(t):
+        world.set(vehicle, sensors.imu.sample(t, truth.quaternion_wxyz, truth.rates_rad_s))
+    if sensors.depth.due(t):
+        world.set(vehicle, sensors.depth.sample(t, truth.position_ned_m[2]))
+    if sensors.position is not None and sensors.position.due(t):
+        world.set(vehicle, sensors.position.sample(t, truth.position_ned_m))
+
+
+def ingest_commands(world: World) -> None:
+    """Apply new operator intents: sticks (newer seq only), arm, mode and setpoints."""
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    now = clock.time_s
+    for _, cmd in world.query1(MovementCommand, changed=True):
+        status = world.get(vehicle, CommandStatus)
+        if status is None or cmd.seq > status.seq:
+            world.set(vehicle, CommandStatus(cmd.seq, now, now - cmd.sampled_s))
+            ctl.sticks = cmd.sticks
+            ctl.last_contact_s = now
+    for _, request in world.query1(ArmRequest, changed=True):
+        ctl.last_contact_s = now
+        was_armed = _is_armed(world, vehicle)
+        world.set(vehicle, Armed(request.armed))
+        if request.armed and not was_armed:
+            world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
+            if not world.has(vehicle, ControlTargets):
+                world.set(vehicle, _measured_targets(world, vehicle))
+    for _, mode in world.query1(ModeRequest, changed=True):
+        ctl.last_contact_s = now
+        previous = world.get(vehicle, ActiveMode)
+        world.set(vehicle, ActiveMode(mode.mode, mode.precision))
+        if previous is None or previous.mode is not mode.mode:
+            # entering a hold mode holds the present depth, level at the present heading;
+            # setpoints (applied below) override
+            measured = _measured_targets(world, vehicle)
+            targets = world.get(vehicle, ControlTargets) or measured
+            if mode.mode is ControlMode.DEPTH_HOLD:
+                targets = ControlTargets(measured.depth_m, targets.quaternion_wxyz)
+            if mode.mode is not ControlMode.MANUAL:
+                targets = ControlTargets(targets.depth_m, measured.quaternion_wxyz)
+            world.set(vehicle, targets)
+    for _, depth_sp in world.query1(DepthSetpoint, changed=True):
+        ctl.last_contact_s = now
+        targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
+        world.set(vehicle, ControlTargets(depth_sp.depth_m, targets.quaternion_wxyz))
+    for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
+        ctl.last_contact_s = now
+        targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
+        world.set(vehicle, ControlTargets(targets.depth_m, quat_normalize(att_sp.quaternion_wxyz)))
+
+
+# --------------------------------------------------------------------------------- UPDATE
+
+
+def supervise_failsafe(world: World) -> None:
+    """Stale operator commands: hold depth and heading, then surface and disarm.
+
+    The age is measured from the last accepted operator intent of any kind. HOLD clears when
+    commands resume; SURFACE is latched until the vehicle disarms (at the surface).
+    """
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    now = clock.time_s
+    status = world.get(vehicle, FailsafeStatus) or FailsafeStatus(FailsafeLevel.NOMINAL, now)
+    if not _is_armed(world, vehicle):
+        if status.level is not FailsafeLevel.NOMINAL:
+            world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
+        return
+    level = FailsafeLevel(failsafe_level(now - ctl.last_contact_s, ctl.failsafe))
+    if status.level is FailsafeLevel.SURFACE:
+        level = FailsafeLevel.SURFACE
+    if level is not status.level:
+        if level is not FailsafeLevel.NOMINAL and status.level is FailsafeLevel.NOMINAL:
+            world.set(vehicle, _measured_targets(world, vehicle))
+        status = FailsafeStatus(level, now)
+        world.set(vehicle, status)
+    if level is FailsafeLevel.SURFACE:
+        targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
+        depth = max(0.0, targets.depth_m - ctl.failsafe.ascent_rate_m_s * clock.dt_s)
+        world.set(vehicle, ControlTargets(depth, targets.quaternion_wxyz))
+        reading = world.get(vehicle, DepthReading)
+        if reading is not None and reading.depth_m <= ctl.failsafe.surfaced_depth_m:
+            world.set(vehicle, Armed(False))
+
+
+def run_pilot_interface(world: World) -> None:
+    """Sticks → pilot force intent; in hold modes the sticks also trim the targets."""
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    if not _is_armed(world, vehicle):
+        _set_intent(world, ctl, "pilot", ZERO6)
+        return
+    depth_hold, attitude_hold, precision, failsafe = _holds(world, vehicle)
+    sticks = ZERO6 if failsafe else ctl.sticks
+    imu = world.get(vehicle, ImuReading)
+    attitude = LEVEL if imu is None else imu.quaternion_wxyz
+    wrench = pilot_wrench(
+        sticks,
+        ctl.axis_maxima,
+        attitude,
+        gains=ctl.pilot,
+        precision=precision,
+        depth_hold=depth_hold,
+        attitude_hold=attitude_hold,
+    )
+    _set_intent(world, ctl, "pilot", wrench)
+    if failsafe or not (depth_hold or attitude_hold) or not any(sticks):
+        return
+    targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
+    depth_m, q = targets.depth_m, targets.quaternion_wxyz
+    dt = clock.dt_s
+    dz = ctl.pilot.dead_zone
+    if depth_hold:
+        rate = ctl.pilot.depth_trim_m_s[1 if precision else 0]
+        depth_m = max(0.0, depth_m + shape_stick(sticks[2], 1.0, dz) * rate * dt)
+    if attitude_hold:
+        rates = (
+            ctl.pilot.attitude_trim_precision_rad_s if precision else ctl.pilot.attitude_trim_rad_s
+        )
+        roll = shape_stick(sticks[3], 1.0, dz) * rates[0] * dt
+        pitch = shape_stick(sticks[4], 1.0, dz) * rates[1] * dt
+        yaw = shape_stick(sticks[5], 1.0, dz) * rates[2] * dt
+        if roll or pitch:  # about the target's own body axes
+            angle = math.hypot(roll, pitch)
+            q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
+        if yaw:  # about world down
+            q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
+        q = quat_normalize(q)
+    world.set(vehicle, ControlTargets(depth_m, q))
+
+
+def control_depth(world: World) -> None:
+    """Depth hold → world-vertical force intent rotated into the body frame."""
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    depth_hold = _holds(world, vehicle)[0]
+    reading = world.get(vehicle, DepthReading)
+    imu = world.get(vehicle, ImuReading)
+    targets = world.get(vehicle, ControlTargets)
+    if not (_is_armed(world, vehicle) and depth_hold) or None in (reading, imu, targets):
+        ctl.depth.reset()
+        _set_intent(world, ctl, "depth", ZERO6)
+        return
+    assert reading is not None and imu is not None and targets is not None
+    fx, fy, fz = ctl.depth.update(targets.depth_m, reading.depth_m, imu.quaternion_wxyz, clock.dt_s)
+    _set_intent(world, ctl, "depth", (fx, fy, fz, 0.0, 0.0, 0.0))
+
+
+def control_attitude(world: World) -> None:
+    """Attitude hold → body torque intent (axes the thrusters cannot torque stay off)."""
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    attitude_hold = _holds(world, vehicle)[1]
+    imu = world.get(vehicle, ImuReading)
+    targets = world.get(vehicle, ControlTargets)
+    if not (_is_armed(world, vehicle) and attitude_hold) or imu is None or targets is None:
+        ctl.attitude.reset()
+        _set_intent(world, ctl, "attitude", ZERO6)
+        return
+    tx, ty, tz = ctl.attitude.update(
+        targets.quaternion_wxyz,
+        imu.quaternion_wxyz,
+        imu.rates_rad_s,
+        clock.dt_s,
+        ctl.attitude_axes,
+    )
+    _set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, tx, ty, tz))
+
+
+def allocate_thrust(world: World) -> None:
+    """Σ force intents → allocator → per-thruster commands (all off when disarmed)."""
+    clock = world.resource(SimClock)
+    ctl = world.resource(Controllers)
+    act = world.resource(Actuation)
+    n = len(act.matrix_columns)
+    if not _is_armed(world, ctl.vehicle):
+        act.allocator.reset()  # re-arming slews up from 0 N
+        act.requested = ZERO6
+        act.commanded_forces_n = (0.0,) * n
+        act.commanded_pwm_us = (1500.0,) * n
+        world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
+        return
+    x = y = z = k = m = nn = 0.0
+    for _, intent in world.query1(ForceIntent):
+        w = intent.wrench
+        x += w[0]
+        y += w[1]
+        z += w[2]
+        k += w[3]
+        m += w[4]
+        nn += w[5]
+    act.requested = (x, y, z, k, m, nn)
+    command = act.allocator.allocate(act.requested, clock.dt_s)
+    forces = tuple(_floats(command.forces_n))
+    pwm = tuple(_floats(command.pwm_us))
+    act.commanded_forces_n = forces
+    act.commanded_pwm_us = pwm
+    world.set(
+        ctl.vehicle,
+        ThrusterOutput(forces, pwm, tuple(_floats(command.currents_a)), float(command.scale)),
+    )
+
+
+# ---------------------------------------------------------------------------- POST_UPDATE
+
+
+def actuate_thrusters(world: World) -> None:
+    """Step the thruster plant over the coming interval; hand its wrench to the physics.
+
+    The command is held until the next frame, so the plant's first-order lag is stepped once,
+    exactly, over ``Actuation.interval_s``. The physics applies, at each of its steps in that
+    interval, the wrench of the interval's *mean* thruster forces, which gives exactly the
+    impulse the lagged forces deliver: with ``e = exp(−h/τ)``, a force going from ``F0`` to
+    ``F1`` over ``h`` averages ``F0 + (F1 − F0)·(1/(1 − e) − τ/h)``. Faulty thrusters are
+    whatever the plant makes them; the wrench is ``T @ mean actual forces``, not the request.
+    """
+    ctl = world.resource(Controllers)
+    act = world.resource(Actuation)
+    h = act.interval_s
+    f0 = act.actual_forces_n
+    f1 = _floats(act.dynamics.step(act.commanded_forces_n, h))
+    tau = act.dynamics.time_constant_s
+    e = math.exp(-h / tau) if tau > 0.0 else 0.0
+    c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+    act.actual_forces_n = tuple(f1)
+    mean = [a + (b - a) * c for a, b in zip(f0, f1, strict=True)]
+    act.plant_wrench = wrench_of(mean, act.matrix_columns)
+    world.set(ctl.vehicle, AppliedWrench(act.requested, act.plant_wrench))
+
+
+def wrench_of(forces_n: Sequence[float], columns: Sequence[Sequence[float]]) -> Wrench6:
+    """``T @ forces`` as a (6,) tuple [N, N·m], body FRD (scalar loop: n is small)."""
+    x = y = z = k = m = n = 0.0
+    for f, col in zip(forces_n, columns, strict=True):
+        if f:
+            x += f * col[0]
+            y += f * col[1]
+            z += f * col[2]
+            k += f * col[3]
+            m += f * col[4]
+            n += f * col[5]
+    return (x, y, z, k, m, n)
+
+
+def _floats(values: Any) -> Sequence[float]:
+    tolist: Callable[[], list[float]] | None = getattr(values, "tolist", None)
+    return tolist() if tolist is not None else [float(v) for v in values]
+
+
+# ------------------------------------------------------------------------------ schedule
+
+
+def build_schedule() -> Schedule:
+    """The vehicle frame: sensors and inbound commands; failsafe, pilot, loops, allocation;
+    actuation."""
+    schedule = Schedule()
+    schedule.add(Phase.PRE_UPDATE, read_sensors)
+    schedule.add(Phase.PRE_UPDATE, ingest_commands)
+    schedule.add(Phase.UPDATE, supervise_failsafe)
+    schedule.add(Phase.UPDATE, run_pilot_interface)
+    schedule.add(Phase.UPDATE, control_depth)
+    schedule.add(Phase.UPDATE, control_attitude)
+    schedule.add(Phase.UPDATE, allocate_thrust)
+    schedule.add(Phase.POST_UPDATE, actuate_thrusters)
+    return schedule

@@ -1,0 +1,442 @@
+"""The assembled vehicle: an ECS world and schedule driving allocation, thrusters and physics.
+
+:class:`Vehicle` owns a :class:`~testbed.ecs.World` and the frame :class:`~testbed.ecs.Schedule`
+of :mod:`testbed.vehicle.systems`, the pybullet :class:`~testbed.vehicle.physics.Physics`, the
+:class:`~testbed.vehicle.allocation.Allocator`, the plant-side
+:class:`~testbed.vehicle.thrusters.ThrusterDynamics`, the sensors and the RNGs they draw from.
+It is configured by a frozen :class:`VehicleConfig` (TOML through :mod:`testbed.config`).
+
+Timing. :meth:`Vehicle.advance` steps the physics at ``physics_dt_s`` (1/240 s) and runs one
+ECS frame at ``control_rate_hz`` (100 Hz). 240 and 100 do not divide, so a frame runs at the
+first physics instant at or after each control instant ``k/100`` s: frames land 2 or 3
+physics steps apart (8.3 or 12.5 ms), 100 per simulated second on average, and every frame
+is given the true time since the previous one (``SimClock.dt_s``). The thruster commands are
+held between frames, so the thruster plant's lag is stepped once per frame, exactly, over the
+interval to the next frame, and the physics applies ``T @`` the interval's mean actual forces
+(the exact impulse of the lagged, failed or saturated thrusters; not the allocator's request)
+at each of its steps in that interval (see :func:`~testbed.vehicle.systems.actuate_thrusters`).
+
+Thruster faults at run time (:meth:`Vehicle.fail_thruster`) go to both the plant (which
+produces the faulty force) and, unless ``inform_allocator=False``, the allocator (which drops
+the thruster from ``T`` and re-probes the axis maxima), as a vehicle whose health monitoring
+detected the fault would.
+
+The operator's intents normally arrive by replication; :meth:`Vehicle.command`,
+:meth:`Vehicle.arm` and friends write them directly (as a peer would) for scripted runs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from testbed.config import build, check, load_toml
+from testbed.ecs import Entity, Origin, Replicate, World
+from testbed.vehicle.allocation import Allocator
+from testbed.vehicle.components import (
+    ArmRequest,
+    AttitudeSetpoint,
+    ControlMode,
+    DepthSetpoint,
+    ForceIntent,
+    ModeRequest,
+    MovementCommand,
+    VehicleTag,
+)
+from testbed.vehicle.control import (
+    AttitudeController,
+    AttitudeGains,
+    DepthController,
+    FailsafeConfig,
+    PidGains,
+    PilotGains,
+    Quaternion,
+)
+from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
+from testbed.vehicle.physics import BodyState, Physics
+from testbed.vehicle.sensors import (
+    DepthSensor,
+    DepthSensorConfig,
+    Imu,
+    ImuConfig,
+    PositionFix,
+    PositionFixConfig,
+)
+from testbed.vehicle.systems import (
+    Actuation,
+    Controllers,
+    PlantTruth,
+    SensorSuite,
+    SimClock,
+    build_schedule,
+    wrench_of,
+)
+from testbed.vehicle.thrusters import (
+    SPIN_UP_TIME_CONSTANT_S,
+    T200,
+    FaultMode,
+    ThrusterDynamics,
+    load_thruster_config,
+)
+
+__all__ = ["ControlGains", "SensorsConfig", "Vehicle", "VehicleConfig", "load_vehicle_config"]
+
+
+ROLL_GAINS = PidGains(kp=0.15, ki=0.01, kd=0.05, max_integral=40.0, max_output=5.0, i_zone=5.0)
+"""mate-rov-2025 roll loop (deg → N·m)."""
+PITCH_GAINS = PidGains(kp=0.25, ki=0.015, kd=0.07, max_integral=60.0, max_output=5.0, i_zone=5.0)
+"""mate-rov-2025 pitch loop (deg → N·m)."""
+YAW_GAINS = PidGains(kp=0.3, ki=0.01, kd=0.05, max_integral=10.0, max_output=5.0, i_zone=5.0)
+"""mate-rov-2025 yaw loop (deg → N·m)."""
+DEPTH_GAINS = PidGains(
+    kp=100.0, ki=5.0, kd=40.0, max_integral=10.0, max_output=25.0, i_zone=0.25, derivative_tau_s=0.1
+)
+"""mate-rov-2025 depth loop (m → N) with kd raised from 1.5 to 40 N·s/m and filtered (0.1 s)."""
+
+
+def _default_gains() -> ControlGains:
+    return ControlGains()
+
+
+@dataclass(frozen=True, slots=True)
+class ControlGains:
+    """Closed-loop gains. Attitude loops take the error in degrees and output N·m; depth takes
+    metres and outputs N (mate-rov's units, REFERENCE §3.6).
+
+    Defaults: mate-rov-2025's table, with the depth derivative raised and filtered for the
+    simulated plant (the published kd 1.5 N·s/m leaves the ≈26 kg heave mode almost undamped);
+    tuned values and their reasons are in ``tests/vehicle/test_ecs_experiment.py``.
+    """
+
+    roll: PidGains = ROLL_GAINS
+    pitch: PidGains = PITCH_GAINS
+    yaw: PidGains = YAW_GAINS
+    depth: PidGains = DEPTH_GAINS
+    depth_feedforward_n: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class SensorsConfig:
+    """Sensor models; ``position`` None = no position fix."""
+
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    depth: DepthSensorConfig = field(default_factory=DepthSensorConfig)
+    position: PositionFixConfig | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleConfig:
+    """One simulated vehicle.
+
+    Attributes:
+        model: hydrodynamic model name (``testbed/vehicle/data/models``).
+        thrusters: thruster layout name (``testbed/vehicle/data/thrusters``).
+        control_rate_hz: ECS frame rate [Hz] (mate-rov: 100).
+        physics_dt_s: physics step [s].
+        allocation: ``"pinv"`` (the ECS paper's T⁺) or ``"lsq"`` (bounded least squares).
+        current_limit_a: total current budget [A]; None = the layout's budget.
+        slew_limit_n_per_s: per-thruster force slew limit [N/s]; None = the layout's.
+        supply_voltage_v: thruster supply voltage [V] for the T200 table.
+        thruster_time_constant_s: plant spin-up lag [s].
+        gains: closed-loop gains.
+        pilot: stick shaping and gains.
+        failsafe: stale-command failsafe.
+        sensors: sensor models.
+        current: water current.
+        start_position_ned_m: (3,) initial body-origin position [m], NED.
+        start_euler_rad: (3,) initial roll, pitch, yaw [rad].
+    """
+
+    model: str = "bluerov2"
+    thrusters: str = "bluerov2"
+    control_rate_hz: float = 100.0
+    physics_dt_s: float = 1.0 / 240.0
+    allocation: Literal["pinv", "lsq"] = "pinv"
+    current_limit_a: float | None = None
+    slew_limit_n_per_s: float | None = None
+    supply_voltage_v: float = 12.0
+    thruster_time_constant_s: float = SPIN_UP_TIME_CONSTANT_S
+    gains: ControlGains = field(default_factory=_default_gains)
+    pilot: PilotGains = field(default_factory=PilotGains)
+    failsafe: FailsafeConfig = field(default_factory=FailsafeConfig)
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)
+    current: WaterCurrent = field(default_factory=WaterCurrent)
+    start_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.5)
+    start_euler_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        check(self.control_rate_hz > 0, "control_rate_hz", "must be > 0")
+        check(self.physics_dt_s > 0, "physics_dt_s", "must be > 0")
+        check(
+            self.physics_dt_s <= 1.0 / self.control_rate_hz,
+            "physics_dt_s",
+            "must not exceed the control period",
+        )
+        if self.current_limit_a is not None:
+            check(self.current_limit_a > 0, "current_limit_a", "must be > 0")
+        if self.slew_limit_n_per_s is not None:
+            check(self.slew_limit_n_per_s > 0, "slew_limit_n_per_s", "must be > 0")
+        check(self.thruster_time_constant_s >= 0, "thruster_time_constant_s", "must be >= 0")
+
+
+def load_vehicle_config(
+    source: str | Path | Mapping[str, Any], *, name: str = "<vehicle>"
+) -> VehicleConfig:
+    """Build a :class:`VehicleConfig` from a TOML file or an already-loaded mapping.
+
+    Raises:
+        ConfigError: missing file, unknown key or bad value (message names file and key).
+    """
+    if isinstance(source, str | Path):
+        return build(VehicleConfig, load_toml(source), source=str(source))
+    return build(VehicleConfig, source, source=name)
+
+
+class Vehicle:
+    """A simulated ROV: ECS control stack, thruster plant and pybullet physics.
+
+    Args:
+        config: the vehicle's configuration.
+        rng: the generator this vehicle draws all its randomness from (sensors, current);
+            child generators are spawned from it, so a seed gives identical runs.
+
+    Use as a context manager or call :meth:`close` (pybullet client).
+    """
+
+    def __init__(self, config: VehicleConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        imu_rng, depth_rng, position_rng, current_rng = rng.spawn(4)
+        thruster_config = load_thruster_config(config.thrusters)
+        self.thruster_config = thruster_config
+        self.thruster_names: tuple[str, ...] = tuple(t.name for t in thruster_config.thrusters)
+        t200 = T200.from_table(config.supply_voltage_v)
+        self.allocator = Allocator(
+            thruster_config,
+            t200,
+            method=config.allocation,
+            current_limit_a=config.current_limit_a,
+            slew_limit_n_per_s=config.slew_limit_n_per_s,
+        )
+        self._matrix = np.array(thruster_config.matrix, dtype=float)
+        n = self._matrix.shape[1]
+        self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
+        self.physics = Physics(
+            load_model(config.model),
+            dt_s=config.physics_dt_s,
+            start_position_ned=config.start_position_ned_m,
+            start_euler_rad=config.start_euler_rad,
+            current=config.current,
+            rng=current_rng,
+        )
+        sensors = config.sensors
+        self.sensors = SensorSuite(
+            Imu(sensors.imu, imu_rng),
+            DepthSensor(sensors.depth, depth_rng),
+            None if sensors.position is None else PositionFix(sensors.position, position_rng),
+        )
+
+        self.world = World()
+        self.schedule = build_schedule()
+        world = self.world
+        self.entity: Entity = world.spawn(VehicleTag(), Replicate())
+        gains = config.gains
+        self.controllers = Controllers(
+            vehicle=self.entity,
+            attitude=AttitudeController(AttitudeGains(gains.roll, gains.pitch, gains.yaw)),
+            depth=DepthController(gains.depth, gains.depth_feedforward_n),
+            pilot=config.pilot,
+            failsafe=config.failsafe,
+            axis_maxima=tuple(float(v) for v in self.allocator.axis_maxima()),
+        )
+        for source in ("pilot", "depth", "attitude"):
+            zero = ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+            self.controllers.intents[source] = world.spawn(zero)
+        columns = tuple(tuple(float(v) for v in col) for col in self._matrix.T)
+        self.actuation = Actuation(self.allocator, self.dynamics, columns)
+        self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
+        self.truth = PlantTruth()
+        for resource in (self.clock, self.truth, self.sensors, self.controllers, self.actuation):
+            world.insert_resource(resource)
+        # operator intents written locally (scripted runs) live on their own entity
+        self.operator_entity: Entity = world.spawn(Replicate(), origin=Origin.REMOTE)
+        self._seq = 0
+        self._arm_seq = 0
+        self._control_period_s = 1.0 / config.control_rate_hz
+        self._next_control_s = 0.0
+        self._last_frame_s: float | None = None
+        self.frames = 0
+
+    # ------------------------------------------------------------------------- running
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time [s]."""
+        return self.physics.time_s
+
+    def advance(self, until_s: float) -> None:
+        """Step physics (and frames, at the control rate) until time ``until_s`` is reached.
+
+        Stops at the first physics instant ≥ ``until_s`` (within 1 ns), so successive calls
+        compose. See the module docstring for the frame timing.
+        """
+        physics = self.physics
+        step_physics = physics.step
+        actuation = self.actuation
+        limit = until_s - 1e-9
+        while physics.time_s < limit:
+            if physics.time_s >= self._next_control_s - 1e-9:
+                self._frame()
+            step_physics(actuation.plant_wrench)
+
+    def _frame(self) -> None:
+        physics = self.physics
+        now = physics.time_s
+        state = physics.state()
+        truth = self.truth
+        q = state.quaternion_wxyz.tolist()
+        truth.quaternion_wxyz = (q[0], q[1], q[2], q[3])
+        nu = state.nu.tolist()
+        truth.rates_rad_s = (nu[3], nu[4], nu[5])
+        p = state.position_ned.tolist()
+        truth.position_ned_m = (p[0], p[1], p[2])
+        period = self._control_period_s
+        clock = self.clock
+        clock.time_s = now
+        clock.dt_s = period if self._last_frame_s is None else now - self._last_frame_s
+        self._last_frame_s = now
+        # the next frame runs at the first physics instant at or after the next control time
+        self._next_control_s += period
+        if self._next_control_s <= now:  # never owe a burst of frames
+            self._next_control_s = now + period
+        dt = physics.dt_s
+        steps = max(1, math.ceil((self._next_control_s - now) / dt - 1e-6))
+        self.actuation.interval_s = steps * dt
+        self.schedule.run(self.world)
+        self.frames += 1
+
+    def state(self) -> BodyState:
+        """The physics truth now (for metrics and tests; the controllers never see it)."""
+        return self.physics.state()
+
+    def close(self) -> None:
+        """Release the physics client."""
+        self.physics.close()
+
+    def __enter__(self) -> Vehicle:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ operator intents
+
+    def command(self, sticks: Sequence[float], *, sampled_s: float | None = None) -> int:
+        """Send stick positions (6,) in [−1, 1] as the operator would; returns the seq used."""
+        if len(sticks) != 6:
+            raise ValueError(f"sticks must have 6 values, got {len(sticks)}")
+        self._seq += 1
+        values = tuple(float(s) for s in sticks)
+        sampled = self.time_s if sampled_s is None else sampled_s
+        self._write(MovementCommand(self._seq, sampled, values))  # type: ignore[arg-type]
+        return self._seq
+
+    def arm(self, armed: bool = True) -> None:
+        """Request arming (or disarming)."""
+        self._arm_seq += 1
+        self._write(ArmRequest(armed, self._arm_seq))
+
+    def disarm(self) -> None:
+        """Request disarming."""
+        self.arm(False)
+
+    def set_mode(self, mode: ControlMode, *, precision: bool = False) -> None:
+        """Request a control mode."""
+        self._write(ModeRequest(mode, precision))
+
+    def set_depth(self, depth_m: float) -> None:
+        """Set the depth target [m, positive down]."""
+        self._write(DepthSetpoint(float(depth_m)))
+
+    def set_attitude(self, quaternion_wxyz: Quaternion) -> None:
+        """Set the attitude target (body → NED, w x y z)."""
+        q = tuple(float(v) for v in quaternion_wxyz)
+        self._write(AttitudeSetpoint(q))  # type: ignore[arg-type]  # 4 floats
+
+    def _write(self, component: object) -> None:
+        self.world.set(self.operator_entity, component, origin=Origin.REMOTE)
+
+    # ------------------------------------------------------------------------ faults
+
+    def thruster_index(self, thruster: int | str) -> int:
+        """Index of a thruster given by index or name.
+
+        Raises:
+            KeyError: unknown name. IndexError: index out of range.
+        """
+        if isinstance(thruster, str):
+            try:
+                return self.thruster_names.index(thruster)
+            except ValueError:
+                known = ", ".join(self.thruster_names)
+                raise KeyError(f"unknown thruster {thruster!r} (known: {known})") from None
+        if not 0 <= thruster < len(self.thruster_names):
+            raise IndexError(f"thruster index {thruster} out of range")
+        return thruster
+
+    def fail_thruster(
+        self,
+        thruster: int | str,
+        mode: FaultMode,
+        value: float | None = None,
+        *,
+        inform_allocator: bool = True,
+    ) -> None:
+        """Fail a thruster in the plant and (by default) tell the allocator.
+
+        Args:
+            thruster: index or name.
+            mode: ``"dead"``, ``"stuck"`` (held force [N], default its force now) or
+                ``"degraded"`` (factor in [0, 1]).
+            value: the stuck force or degraded factor.
+            inform_allocator: also update the allocator (removes dead/stuck thrusters from
+                ``T``, scales degraded ones) and the axis maxima the pilot scales by.
+        """
+        index = self.thruster_index(thruster)
+        self.dynamics.set_fault(index, mode, value)
+        self._refresh_plant()
+        if inform_allocator:
+            fault = self.dynamics.faults[index]
+            self.allocator.set_failure(index, mode, fault.value)
+            self._refresh_maxima()
+
+    def clear_thruster_fault(self, thruster: int | str | None = None) -> None:
+        """Repair one thruster (or all) in the plant and the allocator."""
+        indices = (
+            range(len(self.thruster_names)) if thruster is None else [self.thruster_index(thruster)]
+        )
+        for index in indices:
+            self.dynamics.clear_fault(index)
+            self.allocator.clear_failure(index)
+        self._refresh_plant()
+        self._refresh_maxima()
+
+    def _refresh_plant(self) -> None:
+        # a fault between frames takes effect at once: the rest of the interval applies the
+        # plant's forces as they now are (a dead or stuck thruster changes instantly)
+        act = self.actuation
+        act.actual_forces_n = tuple(self.dynamics.forces_n.tolist())
+        act.plant_wrench = wrench_of(act.actual_forces_n, act.matrix_columns)
+
+    def _refresh_maxima(self) -> None:
+        self.controllers.axis_maxima = tuple(float(v) for v in self.allocator.axis_maxima())
+
+
+def euler_deg(state: BodyState) -> tuple[float, float, float]:
+    """Roll, pitch, yaw of a physics state [deg] (a convenience for reports)."""
+    r, p, y = state.euler_rad.tolist()
+    return (math.degrees(r), math.degrees(p), math.degrees(y))
