@@ -26,6 +26,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, NewType, TypeVar, overload
 
+from testbed.ecs.storage import Column, Slot, iter_all, iter_filtered, scan_one
+
 __all__ = [
     "Entity",
     "Origin",
@@ -115,43 +117,6 @@ def check_component_type(cls: type[Any]) -> None:
     _CHECKED_TYPES.add(cls)
 
 
-class _Slot:
-    """One stored component and its bookkeeping (mutable; never handed out)."""
-
-    __slots__ = ("added", "changed", "origin", "value")
-
-    def __init__(self, value: object, tick: int, origin: Origin) -> None:
-        self.value = value
-        self.added = tick
-        self.changed = tick
-        self.origin = origin
-
-
-class _Column:
-    """All components of one type, keyed by entity, with a cached ascending entity list."""
-
-    __slots__ = ("_order", "slots")
-
-    def __init__(self) -> None:
-        self.slots: dict[Entity, _Slot] = {}
-        self._order: list[Entity] | None = []
-
-    def order(self) -> list[Entity]:
-        """Entities holding this type, ascending. Never mutated once handed out."""
-        order = self._order
-        if order is None:
-            order = self._order = sorted(self.slots)
-        return order
-
-    def insert(self, entity: Entity, slot: _Slot) -> None:
-        self.slots[entity] = slot
-        self._order = None
-
-    def delete(self, entity: Entity) -> None:
-        del self.slots[entity]
-        self._order = None
-
-
 class World:
     """Entities, components with change ticks, resources and a removal log.
 
@@ -176,7 +141,7 @@ class World:
         self._next_id = 1
         # Alive entities (ascending by construction) → their component types in insertion order.
         self._entities: dict[Entity, dict[type[Any], None]] = {}
-        self._columns: dict[type[Any], _Column] = {}
+        self._columns: dict[type[Any], Column] = {}
         self._removals: list[Removal] = []
         self._resources: dict[type[Any], object] = {}
         self.last_run_tick: int = 0
@@ -277,22 +242,19 @@ class World:
             LookupError: the entity is not alive.
         """
         cls = type(component)
-        column = self._columns.get(cls)
-        if column is None:
-            check_component_type(cls)
-            column = self._columns[cls] = _Column()
+        column = self._columns.get(cls) or self._new_column(cls)
         slot = column.slots.get(entity)
         if slot is not None:
             old = slot.value
             if old is component or old == component:  # dataclass != is `not ==`
                 return False
             slot.value = component
-            slot.changed = self._tick
+            slot.changed = column.changed_max = self._tick
             slot.origin = origin
             return True
         types = self._alive_types(entity)
         types[cls] = None
-        column.insert(entity, _Slot(component, self._tick, origin))
+        column.insert(entity, Slot(component, self._tick, origin))
         return True
 
     def get(self, entity: Entity, cls: type[C]) -> C | None:
@@ -463,23 +425,14 @@ class World:
             TypeError: no types, or a type that is not a frozen dataclass.
             ValueError: ``since`` given without ``changed`` or ``added``.
         """
-        columns: list[_Column] = []
-        for cls in types:
-            column = self._columns.get(cls)
-            if column is None:
-                check_component_type(cls)
-                column = self._columns[cls] = _Column()
-            columns.append(column)
-        if not columns:
-            raise TypeError("query needs at least one component type")
-        if since is not None and not (changed or added):
-            raise ValueError("query: 'since' needs changed=True or added=True")
-        if not (changed or added or origin is not None):
-            if len(columns) == 1:
-                return _iter_one(columns[0])
-            return _iter_all(columns)
         tick = self.last_run_tick if since is None else since
-        return _iter_filtered(columns, changed, added, tick, origin)
+        if len(types) == 1:
+            column = self._query_column(types[0], changed, added, since)
+            return scan_one(column, changed, added, tick, origin, packed=True)
+        columns = self._query_columns(types, changed, added, since)
+        if not (changed or added or origin is not None):
+            return iter_all(columns)
+        return iter_filtered(columns, changed, added, tick, origin)
 
     def query1(
         self,
@@ -491,10 +444,9 @@ class World:
         origin: Origin | None = None,
     ) -> Iterator[tuple[Entity, C]]:
         """Like :meth:`query` with one type, yielding ``(entity, component)`` unwrapped."""
-        for entity, (value,) in self.query(
-            cls, changed=changed, added=added, since=since, origin=origin
-        ):
-            yield entity, value
+        column = self._query_column(cls, changed, added, since)
+        tick = self.last_run_tick if since is None else since
+        return scan_one(column, changed, added, tick, origin, packed=False)
 
     def single(self, cls: type[C]) -> tuple[Entity, C]:
         """The one entity having ``cls``, with its component.
@@ -539,13 +491,36 @@ class World:
 
     # -------------------------------------------------------------- helpers
 
+    def _query_columns(
+        self, types: tuple[type[Any], ...], changed: bool, added: bool, since: int | None
+    ) -> list[Column]:
+        known = self._columns
+        columns = [known.get(cls) or self._new_column(cls) for cls in types]
+        if not columns:
+            raise TypeError("query needs at least one component type")
+        if since is not None and not (changed or added):
+            raise ValueError("query: 'since' needs changed=True or added=True")
+        return columns
+
+    def _query_column(
+        self, cls: type[Any], changed: bool, added: bool, since: int | None
+    ) -> Column:
+        if since is not None and not (changed or added):
+            raise ValueError("query: 'since' needs changed=True or added=True")
+        return self._columns.get(cls) or self._new_column(cls)
+
+    def _new_column(self, cls: type[Any]) -> Column:
+        check_component_type(cls)
+        column = self._columns[cls] = Column()
+        return column
+
     def _alive_types(self, entity: Entity) -> dict[type[Any], None]:
         types = self._entities.get(entity)
         if types is None:
             raise LookupError(f"entity {entity} is not alive in this world")
         return types
 
-    def _slot(self, entity: Entity, cls: type[Any]) -> _Slot:
+    def _slot(self, entity: Entity, cls: type[Any]) -> Slot:
         column = self._columns.get(cls)
         slot = None if column is None else column.slots.get(entity)
         if slot is None:
@@ -555,55 +530,3 @@ class World:
 
 def _removal_tick(removal: Removal) -> int:
     return removal.tick
-
-
-def _iter_one(column: _Column) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
-    slots = column.slots
-    for entity in column.order():
-        slot = slots.get(entity)
-        if slot is not None:
-            yield entity, (slot.value,)
-
-
-def _iter_all(columns: list[_Column]) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
-    driver = min(columns, key=_column_size)
-    all_slots = [c.slots for c in columns]
-    for entity in driver.order():
-        values = []
-        for slots in all_slots:
-            slot = slots.get(entity)
-            if slot is None:
-                break
-            values.append(slot.value)
-        else:
-            yield entity, tuple(values)
-
-
-def _iter_filtered(
-    columns: list[_Column], changed: bool, added: bool, since: int, origin: Origin | None
-) -> Iterator[tuple[Entity, tuple[Any, ...]]]:
-    driver = min(columns, key=_column_size)
-    all_slots = [c.slots for c in columns]
-    for entity in driver.order():
-        values = []
-        keep = False
-        for slots in all_slots:
-            slot = slots.get(entity)
-            if slot is None:
-                break
-            values.append(slot.value)
-            if keep or (origin is not None and slot.origin is not origin):
-                continue
-            if changed:
-                keep = slot.changed > since
-            if added and not keep:
-                keep = slot.added > since
-            if not (changed or added):
-                keep = True  # origin alone, and it matched
-        else:
-            if keep:
-                yield entity, tuple(values)
-
-
-def _column_size(column: _Column) -> int:
-    return len(column.slots)
