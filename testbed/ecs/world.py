@@ -13,8 +13,12 @@ module for the exact visibility rules). A query "changed" means "changed at a ti
 ``since``", where ``since`` defaults to :attr:`World.last_run_tick`, the running system's
 previous run tick.
 
-This module holds storage and queries only: no scheduling, no replication wire format, no I/O,
-no randomness. Standard library only.
+The removal log grows with every removal; a node that removes components often should call
+:meth:`World.trim_removals` with the oldest tick any reader still needs.
+
+This module is the world's API; column storage and query scans live in
+:mod:`testbed.ecs.storage`. No scheduling, no replication wire format, no I/O, no randomness.
+Standard library only.
 """
 
 from __future__ import annotations
