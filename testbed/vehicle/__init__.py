@@ -1,1 +1,13 @@
-"""vehicle: physics, thrusters, allocation, control and sensors of the simulated ROV (see DESIGN.md)."""
+"""vehicle: physics, thrusters, allocation, control and sensors of the simulated ROV.
+
+See DESIGN.md.
+
+Modules (import them directly; this package imports nothing, so ``import testbed.vehicle``
+stays cheap and never loads pybullet):
+
+* ``hydrodynamics``: Fossen's 6-DOF model (``HydroModel``, ``load_model``, forces, the water
+  current), pure numpy.
+* ``physics``: the plant (``Physics``, ``PoolScene``, ``simulate_open_loop``), the only module
+  in the project that imports pybullet.
+* ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle.
+"""

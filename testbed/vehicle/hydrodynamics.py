@@ -11,8 +11,9 @@ M_RB about CO carries the m·S(r_g) coupling and the parallel-axis term. The app
 given about the CoG (thruster allocation works about the centre of mass) and moved to CO here.
 
 Two paths compute the same accelerations: the numpy reference functions (clear matrices, used by
-tests) and :func:`make_scalar_dynamics`, plain Python floats with constants folded in and M⁻¹
-precomputed once, which the pybullet stepping loop calls 240 times per simulated second.
+tests) and :func:`make_scalar_dynamics`, straight-line Python over floats generated once per
+model (constants folded in, zero terms dropped, M⁻¹ inverted once), which the pybullet stepping
+loop calls 240 times per simulated second. Tests hold the two to 1e-10.
 
 Pure numpy and math: this module must never import pybullet.
 """

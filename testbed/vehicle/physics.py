@@ -321,7 +321,7 @@ class Physics:
         self._nu_dot = (0.0,) * 6
         self._cached = None
 
-    def step(self, wrench_body: Sequence[float]) -> None:
+    def step(self, wrench_body: Sequence[float] | FloatArray) -> None:
         """Advance one ``dt_s`` with the applied wrench held constant.
 
         Args:
@@ -360,7 +360,7 @@ class Physics:
 
     # --- internals ---------------------------------------------------------------------------
 
-    def _make_stepper(self) -> Callable[[Sequence[float], Vec3], Vec6]:
+    def _make_stepper(self) -> Callable[[Sequence[float] | FloatArray, Vec3], Vec6]:
         """The per-step work as one closure over plain floats (attribute lookups cost here)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
@@ -375,11 +375,12 @@ class Physics:
         current_on = self._current_on
         m = self.model.mass_kg
         ixx, iyy, izz = self.model.inertia_kg_m2
+        izz_iyy, ixx_izz, iyy_ixx = izz - iyy, ixx - izz, iyy - ixx
         xg, yg, zg = self.model.cog_m
         dbx, dby, dbz = (b - g for b, g in zip(self.model.cob_m, self.model.cog_m, strict=True))
         inv_height = 1.0 / self.model.hull_size_m[2]
 
-        def advance(wrench_body: Sequence[float], current_ned: Vec3) -> Vec6:
+        def advance(wrench_body: Sequence[float] | FloatArray, current_ned: Vec3) -> Vec6:
             if isinstance(wrench_body, ndarray):  # numpy scalars are slow in float arithmetic
                 wrench_body = wrench_body.tolist()
             fx, fy, fz, mx, my, mz = wrench_body
@@ -449,9 +450,9 @@ class Physics:
                 body,
                 -1,
                 (
-                    ixx * dp + (izz - iyy) * q * r,
-                    -iyy * dq - (ixx - izz) * r * p,
-                    -izz * dr - (iyy - ixx) * p * q,
+                    ixx * dp + izz_iyy * q * r,
+                    -iyy * dq - ixx_izz * r * p,
+                    -izz * dr - iyy_ixx * p * q,
                 ),
                 link_frame,
                 cid,
