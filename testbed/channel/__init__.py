@@ -1,1 +1,61 @@
-"""simpy link models: bitrate, delay, bit errors, bursts, collisions, buffers, presets."""
+"""simpy link models: bitrate, delay, bit errors, bursts, collisions, buffers, presets.
+
+The link is simpy's ``Cable`` shape: a :class:`Medium` apart from the nodes, each node holding a
+:class:`Modem` made by :meth:`Medium.attach`. Frames are bytes, always; the receiver's decoder
+(:class:`testbed.protocol.FrameDecoder`) must catch corrupted ones, as on a real modem.
+
+- :mod:`~testbed.channel.config` — :class:`LinkConfig` and the packaged presets
+  (``s100``, ``m64``, ``s2c``, ``tether``) loaded by :func:`load_link_config`.
+- :mod:`~testbed.channel.medium` — :class:`Medium`, :class:`Modem`, :class:`Delivery`.
+- :mod:`~testbed.channel.errors` — independent and Gilbert–Elliott bit errors.
+- :mod:`~testbed.channel.mac` — token passing (the paper's) and free access, as simpy processes.
+- :mod:`~testbed.channel.trace` — typed link events.
+- :mod:`~testbed.channel.probe` — the one-way probe behind ``testbed link``.
+
+Depends on :mod:`testbed.protocol`, :mod:`testbed.config`, simpy and numpy only.
+"""
+
+from __future__ import annotations
+
+from .config import GilbertElliott, LinkConfig, Propagation, load_link_config, preset_names
+from .mac import (
+    TELEROBOTICS_2018,
+    TELEROBOTICS_2019,
+    TELEROBOTICS_2021,
+    Fixed,
+    FromFrameSize,
+    IpgPolicy,
+    run_periodic_sender,
+    run_token_master,
+    run_token_slave,
+)
+from .medium import Delivery, Medium, Modem, ModemCounters, Position
+from .probe import ProbeResult, run_probe
+from .trace import EventKind, LinkEvent, Trace
+
+__all__ = [
+    "TELEROBOTICS_2018",
+    "TELEROBOTICS_2019",
+    "TELEROBOTICS_2021",
+    "Delivery",
+    "EventKind",
+    "Fixed",
+    "FromFrameSize",
+    "GilbertElliott",
+    "IpgPolicy",
+    "LinkConfig",
+    "LinkEvent",
+    "Medium",
+    "Modem",
+    "ModemCounters",
+    "Position",
+    "ProbeResult",
+    "Propagation",
+    "Trace",
+    "load_link_config",
+    "preset_names",
+    "run_periodic_sender",
+    "run_probe",
+    "run_token_master",
+    "run_token_slave",
+]

@@ -19,6 +19,10 @@ with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
 - Any overlap of two receptions at one modem destroys both (no capture); destroyed copies are
   counted and traced, never delivered. Other copies are delivered with bits flipped by the
   receiver's :class:`~testbed.channel.errors.BitErrors` — the receiver's decoder must catch them.
+  The per-bit probability of independent errors is 1 − (1 − ber)(1 − min(1, ber_per_m·d)), with
+  d the distance at transmit time; the receiver's Gilbert–Elliott chain (if enabled) is ORed on
+  top and advances over the bits of the copies it is handed (not over destroyed ones).
+- Frame ids are given per medium, from 0, in ``send`` order (dropped frames included).
 
 Per copy the model schedules one simpy timeout (its delivery); a transmitter schedules a wake-up
 only when its FIFO must wait. There is no process per frame. All of it runs unchanged under
