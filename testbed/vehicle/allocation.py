@@ -328,6 +328,10 @@ class Allocator:
         1.05 N·m parasitic pitch moment (heave: 15.00 N with -0.15 N·m), which the vehicle's
         righting moment absorbs; both axes count. Where T has full rank, T T⁺ m = m exactly.
         Stuck thrusters' currents come off the budget; their wrench is not counted.
+
+        With the 12 V table this reproduces REFERENCE §3.5's derived maxima (standard and 6-DOF
+        BlueROV2, 25 and 50 A) to within 0.06 N or N·m; tests/vehicle/test_allocation.py
+        lists the two figures that round differently and why.
         """
         if self._axis_maxima is None:
             maxima = np.zeros((2, 6))
