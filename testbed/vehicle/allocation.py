@@ -79,7 +79,8 @@ class ThrusterCommand:
         achieved_wrench: (6,) body wrench [N, N·m], FRD, the thrusters are expected to give
             (degraded factors and stuck forces included).
         scale: the common factor applied for saturation × current limit (1 if neither bound;
-            a later slew limit or second current limit is not included).
+            ``method="lsq"`` reports 1 for its bounded solution; a later slew limit or second
+            current limit is not included).
     """
 
     forces_n: np.ndarray
@@ -273,7 +274,7 @@ class Allocator:
         f = self._pinv @ m
         values = f.tolist()
         if not math.isfinite(sum(values)):  # any nan/inf in m reaches every f_i
-            raise ValueError(f"wrench must be finite, got {m.tolist()}")
+            raise ValueError(f"wrench must be finite, got {np.asarray(wrench).tolist()}")
         scale = 1.0
         worst = max(max(values) * self._inv_hi, min(values) * self._inv_lo)
         if worst > 1.0:

@@ -20,7 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any, Literal
+from importlib.resources.abc import Traversable
+from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -182,7 +184,7 @@ class _ThrusterFile:
     center_of_mass_m: Vector3 = (0.0, 0.0, 0.0)
 
 
-def _data_dir() -> Any:
+def _data_dir() -> Traversable:
     return resources.files("testbed.vehicle").joinpath("data", "thrusters")
 
 
@@ -210,11 +212,11 @@ def load_thruster_config(name: str) -> ThrusterConfig:
         return read_thruster_config(path)
 
 
-def read_thruster_config(path: Any) -> ThrusterConfig:
+def read_thruster_config(path: str | Path) -> ThrusterConfig:
     """Read a thruster configuration TOML file and convert it to body FRD.
 
     Args:
-        path: the file (``str`` or ``pathlib.Path``). Keys: ``name``, ``frame`` (``"frd"`` or
+        path: the TOML file. Keys: ``name``, ``frame`` (``"frd"`` or
             ``"mate-rov"``), ``source``, ``current_budget_a``, ``slew_limit_n_per_s``,
             optional ``center_of_mass_m``, and ``[[thrusters]]`` tables with ``name``,
             ``position_m``, ``direction``, ``handedness``, ``pwm_channel``.
