@@ -164,6 +164,8 @@ def twist_angle(q: Quaternion, axis: Sequence[float]) -> float:
 
     Swing–twist decomposition: the twist is ``(w, (v·a)a)`` renormalised, whose angle is
     ``2·atan2(v·a, w)``; a rotation the long way round (``w < 0``) wraps to the short way.
+    A half turn about an axis perpendicular to ``axis`` (``w = v·a = 0``, where the twist is
+    undefined) gives 0.
     """
     along = q[1] * axis[0] + q[2] * axis[1] + q[3] * axis[2]
     return wrap_angle(2.0 * math.atan2(along, q[0]))
@@ -365,13 +367,16 @@ class AttitudeController:
         """
         errors = attitude_error(target, current)
         last = self._last_target
-        if last is None:
+        if last is None or last is target or last == target:
             target_rates: Vec3 = (0.0, 0.0, 0.0)
         else:
-            # target's increment since last step, expressed on the current body axes
-            step = quat_multiply(target, quat_conjugate(last))
-            inc = attitude_error(quat_multiply(step, current), current)
-            target_rates = (inc[0] / dt_s, inc[1] / dt_s, inc[2] / dt_s)
+            # the target's increment since the last step (a small world-frame rotation, whose
+            # rotation vector is 2·vec(target·last⁻¹)), on the current body axes
+            sw, sx, sy, sz = quat_multiply(target, quat_conjugate(last))
+            if sw < 0.0:
+                sx, sy, sz = -sx, -sy, -sz
+            k = 2.0 / dt_s
+            target_rates = quat_rotate_inverse(current, (k * sx, k * sy, k * sz))
         self._last_target = target
         out = [0.0, 0.0, 0.0]
         for k in range(3):

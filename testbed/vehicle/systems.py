@@ -61,6 +61,7 @@ from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 
 __all__ = [
     "Actuation",
+    "ControlFlags",
     "Controllers",
     "PlantTruth",
     "SensorSuite",
@@ -118,6 +119,17 @@ class SensorSuite:
 
 
 @dataclass(slots=True)
+class ControlFlags:
+    """What is in effect this frame (set by :func:`supervise_failsafe`, read by the loops)."""
+
+    armed: bool = False
+    depth_hold: bool = False
+    attitude_hold: bool = False
+    precision: bool = False
+    failsafe: bool = False
+
+
+@dataclass(slots=True)
 class Controllers:
     """Controller objects and per-vehicle control settings.
 
@@ -130,6 +142,7 @@ class Controllers:
         intents: the ForceIntent entity of each source (pilot, depth, attitude).
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
+        flags: the modes in effect this frame.
     """
 
     vehicle: Entity
@@ -141,6 +154,7 @@ class Controllers:
     intents: dict[str, Entity] = field(default_factory=dict)
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
+    flags: ControlFlags = field(default_factory=ControlFlags)
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -197,16 +211,19 @@ def _is_armed(world: World, vehicle: Entity) -> bool:
     return armed is not None and armed.armed
 
 
-def _holds(world: World, vehicle: Entity) -> tuple[bool, bool, bool, bool]:
-    """(depth hold, attitude hold, precision, failsafe active) in effect this frame."""
+def _update_flags(world: World, ctl: Controllers) -> None:
+    """Work out the modes in effect this frame from the vehicle's state components."""
+    vehicle = ctl.vehicle
+    flags = ctl.flags
     mode = world.get(vehicle, ActiveMode)
     status = world.get(vehicle, FailsafeStatus)
     failsafe = status is not None and status.level is not FailsafeLevel.NOMINAL
     m = ControlMode.MANUAL if mode is None else mode.mode
-    precision = mode is not None and mode.precision
-    depth_hold = failsafe or m is ControlMode.DEPTH_HOLD
-    attitude_hold = failsafe or m is not ControlMode.MANUAL
-    return depth_hold, attitude_hold, precision, failsafe
+    flags.armed = _is_armed(world, vehicle)
+    flags.failsafe = failsafe
+    flags.precision = mode is not None and mode.precision
+    flags.depth_hold = failsafe or m is ControlMode.DEPTH_HOLD
+    flags.attitude_hold = failsafe or m is not ControlMode.MANUAL
 
 
 def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
@@ -290,10 +307,16 @@ def supervise_failsafe(world: World) -> None:
     """Stale operator commands: hold depth and heading, then surface and disarm.
 
     The age is measured from the last accepted operator intent of any kind. HOLD clears when
-    commands resume; SURFACE is latched until the vehicle disarms (at the surface).
+    commands resume; SURFACE is latched until the vehicle disarms (at the surface). Also works
+    out the modes in effect this frame (``Controllers.flags``) for the systems after it.
     """
-    clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
+    _supervise(world, ctl)
+    _update_flags(world, ctl)
+
+
+def _supervise(world: World, ctl: Controllers) -> None:
+    clock = world.resource(SimClock)
     vehicle = ctl.vehicle
     now = clock.time_s
     status = world.get(vehicle, FailsafeStatus) or FailsafeStatus(FailsafeLevel.NOMINAL, now)
@@ -323,11 +346,12 @@ def run_pilot_interface(world: World) -> None:
     clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     vehicle = ctl.vehicle
-    if not _is_armed(world, vehicle):
+    flags = ctl.flags
+    sticks = ZERO6 if flags.failsafe else ctl.sticks
+    if not flags.armed or not any(sticks):
         _set_intent(world, ctl, "pilot", ZERO6)
         return
-    depth_hold, attitude_hold, precision, failsafe = _holds(world, vehicle)
-    sticks = ZERO6 if failsafe else ctl.sticks
+    depth_hold, attitude_hold, precision = flags.depth_hold, flags.attitude_hold, flags.precision
     imu = world.get(vehicle, ImuReading)
     attitude = LEVEL if imu is None else imu.quaternion_wxyz
     wrench = pilot_wrench(
@@ -340,7 +364,7 @@ def run_pilot_interface(world: World) -> None:
         attitude_hold=attitude_hold,
     )
     _set_intent(world, ctl, "pilot", wrench)
-    if failsafe or not (depth_hold or attitude_hold) or not any(sticks):
+    if not (depth_hold or attitude_hold):
         return
     targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
     depth_m, q = targets.depth_m, targets.quaternion_wxyz
@@ -370,11 +394,11 @@ def control_depth(world: World) -> None:
     clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     vehicle = ctl.vehicle
-    depth_hold = _holds(world, vehicle)[0]
     reading = world.get(vehicle, DepthReading)
     imu = world.get(vehicle, ImuReading)
     targets = world.get(vehicle, ControlTargets)
-    if not (_is_armed(world, vehicle) and depth_hold) or None in (reading, imu, targets):
+    flags = ctl.flags
+    if not (flags.armed and flags.depth_hold) or None in (reading, imu, targets):
         ctl.depth.reset()
         _set_intent(world, ctl, "depth", ZERO6)
         return
@@ -388,10 +412,10 @@ def control_attitude(world: World) -> None:
     clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     vehicle = ctl.vehicle
-    attitude_hold = _holds(world, vehicle)[1]
     imu = world.get(vehicle, ImuReading)
     targets = world.get(vehicle, ControlTargets)
-    if not (_is_armed(world, vehicle) and attitude_hold) or imu is None or targets is None:
+    flags = ctl.flags
+    if not (flags.armed and flags.attitude_hold) or imu is None or targets is None:
         ctl.attitude.reset()
         _set_intent(world, ctl, "attitude", ZERO6)
         return
@@ -411,7 +435,7 @@ def allocate_thrust(world: World) -> None:
     ctl = world.resource(Controllers)
     act = world.resource(Actuation)
     n = len(act.matrix_columns)
-    if not _is_armed(world, ctl.vehicle):
+    if not ctl.flags.armed:
         act.allocator.reset()  # re-arming slews up from 0 N
         act.requested = ZERO6
         act.commanded_forces_n = (0.0,) * n
