@@ -39,10 +39,14 @@ from testbed.config import build, check, load_toml
 from testbed.ecs import Entity, Origin, Replicate, World
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.components import (
+    ActiveMode,
+    Armed,
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
     DepthSetpoint,
+    FailsafeLevel,
+    FailsafeStatus,
     ForceIntent,
     ModeRequest,
     MovementCommand,
@@ -250,7 +254,13 @@ class Vehicle:
         self.world = World()
         self.schedule = build_schedule()
         world = self.world
-        self.entity: Entity = world.spawn(VehicleTag(), Replicate())
+        self.entity: Entity = world.spawn(
+            VehicleTag(),
+            Replicate(),
+            Armed(False),
+            ActiveMode(ControlMode.MANUAL),
+            FailsafeStatus(FailsafeLevel.NOMINAL, 0.0),
+        )
         gains = config.gains
         self.controllers = Controllers(
             vehicle=self.entity,

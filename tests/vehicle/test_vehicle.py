@@ -197,6 +197,18 @@ def test_stabilize_yaw_stick_trims_the_heading_target() -> None:
         assert math.degrees(v.state().euler_rad[2]) == pytest.approx(target_yaw, abs=1.0)
 
 
+def test_depth_hold_heave_stick_trims_the_depth_target() -> None:
+    with make(sensors=QUIET, start_position_ned_m=(0.0, 0.0, 1.0)) as v:
+        hold(v, 1.0)
+        run_with_sticks(v, 1.0, (0.0,) * 6)
+        run_with_sticks(v, 3.0, (0.0, 0.0, 1.0, 0.0, 0.0, 0.0))  # 0.3 m/s down for 2 s
+        targets = get(v, ControlTargets)
+        assert targets.depth_m == pytest.approx(1.6, abs=0.01)  # type: ignore[union-attr]
+        v.set_mode(ControlMode.DEPTH_HOLD, precision=True)  # same mode: target kept
+        run_with_sticks(v, 4.0, (0.0, 0.0, -1.0, 0.0, 0.0, 0.0))  # 0.2 m/s up for 1 s
+        assert get(v, ControlTargets).depth_m == pytest.approx(1.4, abs=0.01)  # type: ignore[union-attr]
+
+
 # ---------------------------------------------------------------------------- commands
 
 
