@@ -104,17 +104,17 @@ class T200:
       1100 µs (-28.449 N, not beyond 1104 µs's -28.6452 N) are dropped, so forces saturate at
       +36.3951 / -28.6452 N, reached at 1892 / 1104 µs (CW) with 16.74 / 17.08 A. The inverse
       crosses the dead band linearly between -1e-9 and +1e-9 N (:data:`ZERO_FORCE_N`), so
-      0 N maps to 1500 µs exactly, round-off from T⁺ stays within a few ns of it, and any
+      0 N maps to 1500 µs exactly, round-off from T⁺ stays within a nanosecond of it, and any
       real force maps outside the dead band; PWM(F) is continuous and strictly increasing.
 
     Voltage: the data are the 12 V sheet. At another supply V (12-20 V), the forward rows'
     force *and* current are multiplied by k_fwd(V) = F_fwd,max(V) / 36.4 N and the reverse
     rows' by k_rev(V) = F_rev,max(V) / 28.6 N, where F_max(V) is Blue Robotics' published
     maximum (:data:`PUBLISHED_MAXIMA`), linearly interpolated between the listed voltages. The
-    PWM axis and the 12 V dead band are kept (the published dead band narrows by at most 12 µs
-    at 20 V). Scaling current with force roughly reproduces Blue Robotics' (unverified) peak
-    currents: max(16.74 A × k_fwd, 17.08 A × k_rev) = 23.8 A at 16 V (published ≈ 24 A) and
-    30.3 A at 20 V (≈ 32 A); at 12 V nothing changes.
+    PWM axis and the 12 V dead band are kept (the published band shrinks from 1464-1536 µs to
+    1476-1528 µs at 20 V). Scaling current with force roughly reproduces Blue Robotics'
+    (unverified) peak currents: max(16.74 A × k_fwd, 17.08 A × k_rev) = 23.8 A at 16 V
+    (published ≈ 24 A) and 30.3 A at 20 V (≈ 32 A); at 12 V nothing changes.
 
     Args:
         pwm_us: (k,) table PWM [µs], strictly increasing, one row at 1500 µs for the dead band.
