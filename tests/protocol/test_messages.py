@@ -149,8 +149,9 @@ def test_state_round_trip_is_quantisation(s: VehicleState) -> None:
     assert q.encode() == s.encode()
 
 
-@given(st.floats(-327.68, 327.67), st.floats(-360, 720), st.floats(-180, 180))
+@given(st.floats(-327.67, 327.67), st.floats(-360, 720), st.floats(-180, 180))
 def test_quantisation_errors_within_range(position: float, heading: float, angle: float) -> None:
+    """Inside ±327.67 m (the range both x and its mirror y can carry) error ≤ half a step."""
     q = state(x_m=position, y_m=-position, heading_deg=heading, roll_deg=angle).quantized()
     assert abs(q.x_m - position) <= 0.005 + 1e-9
     assert abs(q.y_m + position) <= 0.005 + 1e-9
