@@ -5,15 +5,17 @@
 | config   | -                                           | -                      |
 | protocol | config                                      | numpy                  |
 | ecs      | config                                      | numpy                  |
+| common   | ecs, protocol, config                       | numpy                  |
 | channel  | protocol, config                            | numpy, simpy           |
 | imaging  | config                                      | numpy, pywt            |
-| vehicle  | ecs, protocol, imaging, config              | numpy, scipy, pybullet |
-| operator | ecs, protocol, imaging, config              | numpy                  |
+| vehicle  | common, ecs, protocol, imaging, config      | numpy, scipy, pybullet |
+| operator | common, ecs, protocol, imaging, config      | numpy                  |
 | hil      | protocol, config                            | numpy, serial          |
 | mavlink  | ecs, protocol, config                       | numpy, pymavlink       |
 | top      | anything (scenario, runner, sweep, report, cli) | anything           |
 
-Only ``testbed/vehicle/physics.py`` may import pybullet.
+``common`` is the ECS paper's shared library: the components both nodes replicate and the link
+codecs that carry them. Only ``testbed/vehicle/physics.py`` may import pybullet.
 """
 
 from __future__ import annotations
@@ -30,10 +32,11 @@ ALLOWED_INTERNAL: dict[str, set[str]] = {
     "config": set(),
     "protocol": {"config"},
     "ecs": {"config"},
+    "common": {"ecs", "protocol", "config"},
     "channel": {"protocol", "config"},
     "imaging": {"config"},
-    "vehicle": {"ecs", "protocol", "imaging", "config"},
-    "operator": {"ecs", "protocol", "imaging", "config"},
+    "vehicle": {"common", "ecs", "protocol", "imaging", "config"},
+    "operator": {"common", "ecs", "protocol", "imaging", "config"},
     "hil": {"protocol", "config"},
     "mavlink": {"ecs", "protocol", "config"},
 }
@@ -41,6 +44,7 @@ ALLOWED_THIRD_PARTY: dict[str, set[str]] = {
     "config": set(),
     "protocol": {"numpy"},
     "ecs": {"numpy"},
+    "common": {"numpy"},
     "channel": {"numpy", "simpy"},
     "imaging": {"numpy", "pywt"},
     "vehicle": {"numpy", "scipy", "pybullet"},
@@ -110,6 +114,9 @@ def test_checker_catches_forbidden_arrows() -> None:
     assert violations("protocol/x.py", "import simpy") != []
     assert violations("protocol/x.py", "from testbed.channel import Medium") != []
     assert violations("ecs/world.py", "from testbed.vehicle import physics") != []
+    assert violations("common/codec.py", "from testbed.vehicle import components") != []
+    assert violations("operator/pilot.py", "from testbed.vehicle import components") != []
+    assert violations("operator/pilot.py", "from testbed.common import components") == []
     assert violations("channel/medium.py", "import pybullet") != []
     assert violations("vehicle/allocation.py", "import pybullet") != []
     assert violations("vehicle/physics.py", "import pybullet") == []
