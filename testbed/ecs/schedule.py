@@ -128,14 +128,18 @@ class Schedule:
         elif self._world is not world:
             raise ValueError("this schedule already runs another world; make one per world")
         saved = world.last_run_tick
+        order = self._order if self._order is not None else self._run_order()
+        # Hot loop (every frame of every node): the tick is read and advanced in place rather
+        # than through ``World.tick``/``World.advance`` (the same package; same effect).
         try:
-            for entry in self._run_order():
+            for entry in order:
                 world.last_run_tick = entry.last_run
-                try:
-                    entry.system(world)
-                    entry.last_run = world.tick
-                finally:
-                    world.advance()
+                entry.system(world)
+                entry.last_run = world._tick  # a system may have advanced it itself
+                world._tick += 1
+        except BaseException:
+            world._tick += 1  # the failing system's run still owns a tick; its run tick is kept
+            raise
         finally:
             world.last_run_tick = saved
 
