@@ -56,6 +56,9 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
+Quat = tuple[float, float, float, float]
+_Raw = tuple[Sequence[float], Sequence[float], Sequence[float], Sequence[float]]
+"""pybullet's (position, orientation xyzw, linear velocity, angular velocity), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
@@ -193,6 +196,8 @@ class Physics:
         self._steps = 0
         self._nu_dot: Sequence[float] = (0.0,) * 6
         self._cached: BodyState | None = None
+        # pybullet's pose and velocity as read since the last step (reused by the next step)
+        self._raw: _Raw | None = None
 
         self._cog = model.cog_m
 
@@ -320,6 +325,7 @@ class Physics:
         self._next_current_update_s = self.current.update_period_s
         self._nu_dot = (0.0,) * 6
         self._cached = None
+        self._raw = None
 
     def step(self, wrench_body: Sequence[float] | FloatArray) -> None:
         """Advance one ``dt_s`` with the applied wrench held constant.
@@ -327,7 +333,9 @@ class Physics:
         Args:
             wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
         """
-        self._nu_dot = self._advance(wrench_body, self._current_ned)
+        raw = self._raw
+        self._raw = None
+        self._nu_dot = self._advance(wrench_body, self._current_ned, raw)
         self._steps += 1
         self._cached = None
         if self._current_varies and self._steps * self.dt_s >= self._next_current_update_s:
@@ -348,6 +356,22 @@ class Physics:
             )
         return self._cached
 
+    def state_floats(self) -> tuple[float, Vec3, Quat, Vec6]:
+        """The state now as plain floats, for per-frame use: no arrays, no Euler angles.
+
+        The same values as :meth:`state` (bit for bit), at a fraction of its cost; the pybullet
+        reads it makes are reused by the next :meth:`step`.
+
+        Returns:
+            ``(time_s, position_ned, quaternion_wxyz, nu)``: time [s]; (3,) position of CO [m],
+            NED; (4,) attitude, body FRD → NED; (6,) body velocity [u v w p q r] at CO
+            [m/s, rad/s], FRD.
+        """
+        raw = self._raw
+        if raw is None:
+            raw = self._raw = self._read()
+        return (self._steps * self.dt_s, *_state_of(raw, self._cog))
+
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""
         self._finalizer()
@@ -360,7 +384,7 @@ class Physics:
 
     # --- internals ---------------------------------------------------------------------------
 
-    def _make_stepper(self) -> Callable[[Sequence[float] | FloatArray, Vec3], Vec6]:
+    def _make_stepper(self) -> Callable[[Sequence[float] | FloatArray, Vec3, _Raw | None], Vec6]:
         """The per-step work as one closure over plain floats (attribute lookups cost here)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
@@ -380,12 +404,17 @@ class Physics:
         dbx, dby, dbz = (b - g for b, g in zip(self.model.cob_m, self.model.cog_m, strict=True))
         inv_height = 1.0 / self.model.hull_size_m[2]
 
-        def advance(wrench_body: Sequence[float] | FloatArray, current_ned: Vec3) -> Vec6:
+        def advance(
+            wrench_body: Sequence[float] | FloatArray, current_ned: Vec3, raw: _Raw | None
+        ) -> Vec6:
             if isinstance(wrench_body, ndarray):  # numpy scalars are slow in float arithmetic
                 wrench_body = wrench_body.tolist()
             fx, fy, fz, mx, my, mz = wrench_body
-            (_, _, pz), orientation = get_pose(body, cid)
-            (vx, vy, vz), (wx, wy, wz) = get_velocity(body, cid)
+            if raw is None:
+                (_, _, pz), orientation = get_pose(body, cid)
+                (vx, vy, vz), (wx, wy, wz) = get_velocity(body, cid)
+            else:  # read since the last step (by state_floats or _sample): still current
+                (_, _, pz), orientation, (vx, vy, vz), (wx, wy, wz) = raw
             # R: pybullet body FLU → world (N, −E, −D); R_ned = diag(1, −1, −1)·R·diag(1, −1, −1).
             r00, r01, r02, r10, r11, r12, r20, r21, r22 = matrix_from_quaternion(orientation)
             # Body FLU velocities Rᵀ·v, then FRD = (x, −y, −z).
@@ -466,23 +495,53 @@ class Physics:
         if not self._finalizer.alive:
             raise RuntimeError("Physics is closed")
 
-    def _sample(self) -> tuple[float, Vec3, tuple[float, ...], Vec3, tuple[float, ...]]:
-        """(time, CO position NED, quaternion wxyz, euler, ν at CO) as plain floats."""
+    def _read(self) -> _Raw:
+        """pybullet's base position, orientation, linear and angular velocity (world, z-up)."""
         self._check_open()
         cid = self.client_id
         pos, orn = pybullet.getBasePositionAndOrientation(self.body_id, cid)
         lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
-        quat = quaternion_pybullet_to_ned(orn)
-        rot = _rotation(*quat)
-        rot_t = tuple(zip(*rot, strict=True))
-        xg, yg, zg = self._cog
-        cog_ned = pybullet_to_ned(pos)
-        offset = _apply(rot, self._cog)
-        position = (cog_ned[0] - offset[0], cog_ned[1] - offset[1], cog_ned[2] - offset[2])
-        ug, vg, wg = _apply(rot_t, pybullet_to_ned(lin))
-        p, q, r = _apply(rot_t, pybullet_to_ned(ang))
-        nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
-        return self.time_s, position, quat, euler_from_quaternion(*quat), nu
+        return (pos, orn, lin, ang)
+
+    def _sample(self) -> tuple[float, Vec3, tuple[float, ...], Vec3, tuple[float, ...]]:
+        """(time, CO position NED, quaternion wxyz, euler, ν at CO) as plain floats."""
+        raw = self._raw
+        if raw is None:
+            raw = self._raw = self._read()
+        position, quat, nu = _state_of(raw, self._cog)
+        return self._steps * self.dt_s, position, quat, euler_from_quaternion(*quat), nu
+
+
+def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
+    """(CO position NED, quaternion wxyz, ν at CO) from pybullet's reads, as plain floats.
+
+    Written out in scalars (this runs every frame); the arithmetic is exactly that of
+    :func:`quaternion_pybullet_to_ned`, :func:`_rotation` and :func:`_apply`.
+    """
+    (px, py, pz), (ox, oy, oz, ow), (lx, ly, lz), (ax, ay, az) = raw
+    w, x, y, z = float(ow), float(ox), -float(oy), -float(oz)
+    # R (body FRD → NED) of (w, x, y, z), as _rotation
+    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    xg, yg, zg = cog
+    # CoG in NED, minus R·r_g
+    position = (
+        float(px) - (r00 * xg + r01 * yg + r02 * zg),
+        -float(py) - (r10 * xg + r11 * yg + r12 * zg),
+        -float(pz) - (r20 * xg + r21 * yg + r22 * zg),
+    )
+    # Rᵀ·v for the CoG velocity and the rates, both from pybullet's world → NED
+    vn, ve, vd = float(lx), -float(ly), -float(lz)
+    ug = r00 * vn + r10 * ve + r20 * vd
+    vg = r01 * vn + r11 * ve + r21 * vd
+    wg = r02 * vn + r12 * ve + r22 * vd
+    wn, we, wd = float(ax), -float(ay), -float(az)
+    p = r00 * wn + r10 * we + r20 * wd
+    q = r01 * wn + r11 * we + r21 * wd
+    r = r02 * wn + r12 * we + r22 * wd
+    nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
+    return position, (w, x, y, z), nu
 
 
 def _disconnect(client_id: int) -> None:

@@ -312,15 +312,11 @@ class Vehicle:
 
     def _frame(self) -> None:
         physics = self.physics
-        now = physics.time_s
-        state = physics.state()
+        now, position, quaternion, nu = physics.state_floats()
         truth = self.truth
-        q = state.quaternion_wxyz.tolist()
-        truth.quaternion_wxyz = (q[0], q[1], q[2], q[3])
-        nu = state.nu.tolist()
+        truth.quaternion_wxyz = quaternion
         truth.rates_rad_s = (nu[3], nu[4], nu[5])
-        p = state.position_ned.tolist()
-        truth.position_ned_m = (p[0], p[1], p[2])
+        truth.position_ned_m = position
         period = self._control_period_s
         clock = self.clock
         clock.time_s = now
