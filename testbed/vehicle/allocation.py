@@ -28,6 +28,7 @@ This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` 
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -147,12 +148,12 @@ class Allocator:
         self._names = config.names
         self._matrix = config.matrix
         ccw = config.ccw_mask
-        self._pwm_sign = np.where(ccw, -1.0, 1.0)  # pwm = sign * cw_pulse + offset
-        self._pwm_offset = np.where(ccw, 3000.0, 0.0)
-        self._inverse_force = t200.inverse_force_n
-        self._inverse_pwm = t200.inverse_pwm_us
+        # pwm = sign * cw_pulse + offset, per thruster
+        self._pwm_sign_offset = [(-1.0, 3000.0) if c else (1.0, 0.0) for c in ccw.tolist()]
         self._force_axis = t200.force_axis_n
         self._current_axis = t200.current_axis_a
+        self._current_table = _Table(t200.force_axis_n, t200.current_axis_a)
+        self._pwm_table = _Table(t200.inverse_force_n, t200.inverse_pwm_us)
         self._f_lo, self._f_hi = t200.force_limits_n
         self._inv_hi = 1.0 / self._f_hi
         self._inv_lo = 1.0 / self._f_lo  # negative: f_lo < 0
@@ -165,7 +166,7 @@ class Allocator:
             "slew_limit_n_per_s",
         )
         self._failures: dict[int, ThrusterFault] = {}
-        self._previous = np.zeros(self._n)
+        self._previous = [0.0] * self._n
         self._axis_maxima: np.ndarray | None = None
         self._rebuild()
 
@@ -245,7 +246,7 @@ class Allocator:
 
     def reset(self) -> None:
         """Forget the previous command (the slew limit starts again from 0 N)."""
-        self._previous = np.zeros(self._n)
+        self._previous = [0.0] * self._n
 
     # ----------------------------------------------------------------- allocation
 
@@ -264,55 +265,96 @@ class Allocator:
         Raises:
             ValueError: wrench not 6 finite numbers, or dt_s not > 0.
         """
-        # Hot path (100 Hz per vehicle): numpy only for the (n,) vectors, Python floats for
-        # the reductions, which are several times cheaper than numpy's on 4-8 elements.
+        forces, pwm, currents, scale = self._allocate(wrench, dt_s)
+        f = np.array(forces)
+        achieved = self._matrix_eff @ f
+        arrays = (f, np.array(pwm), np.array(currents), achieved)
+        for array in arrays:
+            array.setflags(write=False)
+        return ThrusterCommand(*arrays, scale)
+
+    def allocate_floats(
+        self, wrench: Sequence[float] | np.ndarray, dt_s: float | None = None
+    ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], float]:
+        """:meth:`allocate` as plain floats, without the achieved wrench (the per-frame path).
+
+        Args:
+            wrench: (6,) requested body wrench [N, N·m], FRD.
+            dt_s: time since the previous command [s]; when given, the slew limit applies.
+
+        Returns:
+            ``(forces_n, pwm_us, currents_a, scale)``, equal to those of :meth:`allocate`.
+
+        Raises:
+            ValueError: as :meth:`allocate`.
+        """
+        forces, pwm, currents, scale = self._allocate(wrench, dt_s)
+        return tuple(forces), tuple(pwm), tuple(currents), scale
+
+    def _allocate(
+        self, wrench: Sequence[float] | np.ndarray, dt_s: float | None
+    ) -> tuple[list[float], list[float], list[float], float]:
+        """The allocation in Python floats: numpy only for T⁺m (and the rare limit searches).
+
+        On 4-8 thrusters, numpy's per-call overhead costs more than the arithmetic; the float
+        operations here are those numpy did, element by element, so the results are the same.
+        """
         m = np.asarray(wrench, dtype=np.float64)
         if m.shape != (6,):
             raise ValueError(f"wrench must have shape (6,), got {m.shape}")
         if self._any_stuck:
             m = m - self._stuck_wrench
-        f = self._pinv @ m
-        values = f.tolist()
-        if not math.isfinite(sum(values)):  # any nan/inf in m reaches every f_i
+        f: list[float] = (self._pinv @ m).tolist()
+        if not math.isfinite(sum(f)):  # any nan/inf in m reaches every f_i
             raise ValueError(f"wrench must be finite, got {np.asarray(wrench).tolist()}")
         scale = 1.0
-        worst = max(max(values) * self._inv_hi, min(values) * self._inv_lo)
+        worst = max(max(f) * self._inv_hi, min(f) * self._inv_lo)
         if worst > 1.0:
             if self.method == "lsq":
-                f = self._solve_lsq(m)
+                f = self._solve_lsq(m).tolist()
             else:
                 scale = 1.0 / worst
-                f = f * scale
-        axis_f, axis_i = self._force_axis, self._current_axis
-        currents = np.interp(f, axis_f, axis_i)
+                f = [v * scale for v in f]
+        current_of = self._current_table.many
+        currents = current_of(f)
         cap = self._cap_active
-        total = sum(currents.tolist())
+        total = sum(currents)
         if total > cap:
-            alpha = self._current_scale(f, cap, 1.0, total)
+            alpha = self._current_scale(np.array(f), cap, 1.0, total)
             scale *= alpha
-            f = f * alpha
-            currents = np.interp(f, axis_f, axis_i)
+            f = [v * alpha for v in f]
+            currents = current_of(f)
         if dt_s is not None:
             if not dt_s > 0.0:
                 raise ValueError(f"dt_s must be > 0, got {dt_s}")
             step = self._slew * dt_s
-            previous = self._previous
-            f = previous + np.minimum(np.maximum(f - previous, -step), step)
-            currents = np.interp(f, axis_f, axis_i)
-            total = sum(currents.tolist())
+            low = -step
+            slewed = []
+            for v, p in zip(f, self._previous, strict=True):
+                d = v - p
+                if d > step:
+                    d = step
+                elif d < low:
+                    d = low
+                slewed.append(p + d)
+            if slewed != f:  # else the currents are those of f already
+                f = slewed
+                currents = current_of(f)
+            total = sum(currents)
             if total > cap:
-                f = f * self._current_scale(f, cap, 1.0, total)
-                currents = np.interp(f, axis_f, axis_i)
+                alpha = self._current_scale(np.array(f), cap, 1.0, total)
+                f = [v * alpha for v in f]
+                currents = current_of(f)
         self._previous = f
         if self._any_stuck:
-            f = f + self._stuck_forces
-            currents = currents + self._stuck_currents
-        pwm = np.interp(f, self._inverse_force, self._inverse_pwm) * self._pwm_sign
-        pwm += self._pwm_offset
-        achieved = self._matrix_eff @ f
-        for array in (f, pwm, currents, achieved):
-            array.setflags(write=False)
-        return ThrusterCommand(f, pwm, currents, achieved, scale)
+            f = [v + s for v, s in zip(f, self._stuck_force_list, strict=True)]
+            currents = [c + s for c, s in zip(currents, self._stuck_current_list, strict=True)]
+        pulses = self._pwm_table.many(f)
+        pwm = [
+            pulse * sign + offset
+            for pulse, (sign, offset) in zip(pulses, self._pwm_sign_offset, strict=True)
+        ]
+        return f, pwm, currents, scale
 
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.
@@ -401,8 +443,10 @@ class Allocator:
         self._stuck_currents = np.where(
             stuck_forces != 0.0, np.interp(stuck_forces, self._force_axis, self._current_axis), 0.0
         )
+        self._stuck_force_list = stuck_forces.tolist()
+        self._stuck_current_list = self._stuck_currents.tolist()
         self._cap_active = self._current_limit_a - float(self._stuck_currents.sum())
-        self._previous = self._previous * commandable
+        self._previous = (np.array(self._previous) * commandable).tolist()
         self._axis_maxima = None
 
     def _solve_lsq(self, m: np.ndarray) -> np.ndarray:
@@ -461,6 +505,40 @@ class Allocator:
                 side = 1
             a = a_lo + (cap_a - g_lo) * (a_hi - a_lo) / (g_hi - g_lo)
         return a_lo
+
+
+class _Table:
+    """A piecewise-linear table evaluated on Python floats exactly as ``np.interp`` does.
+
+    ``np.interp`` on x in [xp[j], xp[j+1]) returns ``fp[j]`` when ``x == xp[j]``, else
+    ``slope_j·(x − xp[j]) + fp[j]`` with ``slope_j = (fp[j+1] − fp[j]) / (xp[j+1] − xp[j])``,
+    and the end values outside; this reproduces it bit for bit (xp strictly increasing).
+    """
+
+    __slots__ = ("_fp", "_slopes", "_xp")
+
+    def __init__(self, xp: np.ndarray, fp: np.ndarray) -> None:
+        self._xp: list[float] = xp.tolist()
+        self._fp: list[float] = fp.tolist()
+        x, y = self._xp, self._fp
+        self._slopes = [(y[j + 1] - y[j]) / (x[j + 1] - x[j]) for j in range(len(x) - 1)]
+
+    def many(self, values: Sequence[float]) -> list[float]:
+        """The table at each of ``values`` (finite floats)."""
+        xp, fp, slopes = self._xp, self._fp, self._slopes
+        x_first, x_last = xp[0], xp[-1]
+        f_first, f_last = fp[0], fp[-1]
+        out = []
+        for x in values:
+            if x <= x_first:
+                out.append(f_first)
+            elif x >= x_last:
+                out.append(f_last)
+            else:
+                j = bisect_right(xp, x) - 1
+                x_j = xp[j]
+                out.append(fp[j] if x_j == x else slopes[j] * (x - x_j) + fp[j])
+        return out
 
 
 def _positive(value: float, name: str) -> float:

@@ -19,7 +19,7 @@ Controller objects and the allocator are mutable resources; components stay froz
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -168,10 +168,12 @@ class Actuation:
     """The allocator, the thruster plant and the wrench handed to the physics.
 
     Attributes:
-        allocator: an object with ``allocate(wrench, dt_s)`` returning a command with
-            ``forces_n``, ``pwm_us``, ``currents_a`` and ``scale``, and ``reset()``.
-        dynamics: the plant's thrusters: ``step(commanded_forces (n,), dt_s) -> actual (n,)``
-            with a first-order lag of ``time_constant_s`` (plus faults).
+        allocator: an object with ``allocate_floats(wrench, dt_s)`` returning
+            ``(forces_n, pwm_us, currents_a, scale)`` (see
+            :meth:`~testbed.vehicle.allocation.Allocator.allocate_floats`), and ``reset()``.
+        dynamics: the plant's thrusters:
+            ``step_floats(commanded_forces (n,), dt_s) -> actual (n,)`` with a first-order lag
+            of ``time_constant_s`` (plus faults).
         matrix_columns: per thruster, its (6,) column of the *physical* ``T`` (the plant's
             geometry, whatever the allocator believes).
         interval_s: time until the next frame [s] (the plant holds the command that long);
@@ -452,15 +454,10 @@ def allocate_thrust(world: World) -> None:
         m += w[4]
         nn += w[5]
     act.requested = (x, y, z, k, m, nn)
-    command = act.allocator.allocate(act.requested, clock.dt_s)
-    forces = tuple(_floats(command.forces_n))
-    pwm = tuple(_floats(command.pwm_us))
+    forces, pwm, currents, scale = act.allocator.allocate_floats(act.requested, clock.dt_s)
     act.commanded_forces_n = forces
     act.commanded_pwm_us = pwm
-    world.set(
-        ctl.vehicle,
-        ThrusterOutput(forces, pwm, tuple(_floats(command.currents_a)), float(command.scale)),
-    )
+    world.set(ctl.vehicle, ThrusterOutput(forces, pwm, currents, scale))
 
 
 # ---------------------------------------------------------------------------- POST_UPDATE
@@ -480,11 +477,11 @@ def actuate_thrusters(world: World) -> None:
     act = world.resource(Actuation)
     h = act.interval_s
     f0 = act.actual_forces_n
-    f1 = _floats(act.dynamics.step(act.commanded_forces_n, h))
+    f1 = act.dynamics.step_floats(act.commanded_forces_n, h)
     tau = act.dynamics.time_constant_s
     e = math.exp(-h / tau) if tau > 0.0 else 0.0
     c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
-    act.actual_forces_n = tuple(f1)
+    act.actual_forces_n = f1
     mean = [a + (b - a) * c for a, b in zip(f0, f1, strict=True)]
     act.plant_wrench = wrench_of(mean, act.matrix_columns)
     world.set(ctl.vehicle, AppliedWrench(act.requested, act.plant_wrench))
@@ -502,11 +499,6 @@ def wrench_of(forces_n: Sequence[float], columns: Sequence[Sequence[float]]) -> 
             m += f * col[4]
             n += f * col[5]
     return (x, y, z, k, m, n)
-
-
-def _floats(values: Any) -> Sequence[float]:
-    tolist: Callable[[], list[float]] | None = getattr(values, "tolist", None)
-    return tolist() if tolist is not None else [float(v) for v in values]
 
 
 # ------------------------------------------------------------------------------ schedule

@@ -20,6 +20,7 @@ import csv
 import functools
 import io
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from typing import Literal
@@ -377,18 +378,19 @@ class ThrusterDynamics:
             raise ValueError(f"time_constant_s must be >= 0, got {time_constant_s}")
         self.n_thrusters = n_thrusters
         self.time_constant_s = float(time_constant_s)
-        self._forces = np.zeros(n_thrusters)
+        # Plain float lists, not arrays: stepped once per frame for 4-8 thrusters, where
+        # numpy's per-call overhead costs more than the arithmetic (same IEEE results).
+        self._forces = [0.0] * n_thrusters
         self._faults: dict[int, ThrusterFault] = {}
-        self._gain = np.ones(n_thrusters)  # command multiplier: 0 dead, factor degraded
-        self._held = np.zeros(n_thrusters, dtype=bool)  # dead or stuck: output overridden
-        self._held_force = np.zeros(n_thrusters)
+        self._gain = [1.0] * n_thrusters  # command multiplier: 0 dead, factor degraded
+        self._held: dict[int, float] = {}  # dead or stuck: output overridden by this force
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
     @property
     def forces_n(self) -> np.ndarray:
         """(n,) current actual forces [N] (a copy)."""
-        return self._forces.copy()
+        return np.array(self._forces)
 
     @property
     def faults(self) -> dict[int, ThrusterFault]:
@@ -400,8 +402,9 @@ class ThrusterDynamics:
         forces = np.zeros(self.n_thrusters) if forces_n is None else np.asarray(forces_n, float)
         if forces.shape != (self.n_thrusters,):
             raise ValueError(f"forces_n must have shape ({self.n_thrusters},), got {forces.shape}")
-        self._forces = forces.copy()
-        self._forces[self._held] = self._held_force[self._held]
+        self._forces = forces.tolist()
+        for index, force in self._held.items():
+            self._forces[index] = force
 
     def set_fault(self, index: int, mode: FaultMode, value: float | None = None) -> None:
         """Fail thruster ``index``.
@@ -417,16 +420,17 @@ class ThrusterDynamics:
         """
         self._check_index(index)
         if mode == "stuck" and value is None:
-            value = float(self._forces[index])
+            value = self._forces[index]
         if mode == "degraded" and value is None:
             raise ValueError("a degraded fault needs its factor as value")
         fault = ThrusterFault(mode, 0.0 if value is None or mode == "dead" else float(value))
         self._faults[index] = fault
         self._gain[index] = fault.value if mode == "degraded" else 1.0
-        self._held[index] = mode != "degraded"
-        self._held_force[index] = fault.value if mode == "stuck" else 0.0
-        if self._held[index]:
-            self._forces[index] = self._held_force[index]
+        if mode == "degraded":
+            self._held.pop(index, None)
+        else:
+            held = self._held[index] = fault.value if mode == "stuck" else 0.0
+            self._forces[index] = held
 
     def clear_fault(self, index: int | None = None) -> None:
         """Repair thruster ``index`` (all thrusters when None)."""
@@ -435,8 +439,7 @@ class ThrusterDynamics:
             self._check_index(i)
             self._faults.pop(i, None)
             self._gain[i] = 1.0
-            self._held[i] = False
-            self._held_force[i] = 0.0
+            self._held.pop(i, None)
 
     def step(self, commanded_forces_n: np.ndarray, dt_s: float) -> np.ndarray:
         """Advance ``dt_s`` seconds with the command held; return the (n,) actual forces [N].
@@ -453,14 +456,35 @@ class ThrusterDynamics:
             raise ValueError(
                 f"commanded_forces_n must have shape ({self.n_thrusters},), got {command.shape}"
             )
+        return np.array(self.step_floats(command.tolist(), dt_s))
+
+    def step_floats(self, commanded_forces_n: Sequence[float], dt_s: float) -> tuple[float, ...]:
+        """:meth:`step` on plain floats: the same forces, as a tuple (the per-frame path).
+
+        Args:
+            commanded_forces_n: (n,) commanded forces [N].
+            dt_s: step length [s], >= 0.
+
+        Raises:
+            ValueError: wrong length or negative dt_s.
+        """
+        if len(commanded_forces_n) != self.n_thrusters:
+            raise ValueError(
+                f"commanded_forces_n must have shape ({self.n_thrusters},), "
+                f"got ({len(commanded_forces_n)},)"
+            )
         if not dt_s >= 0.0:
             raise ValueError(f"dt_s must be >= 0, got {dt_s}")
-        target = command * self._gain
         tau = self.time_constant_s
         blend = 1.0 if tau == 0.0 else -math.expm1(-dt_s / tau)
-        self._forces += (target - self._forces) * blend
-        self._forces[self._held] = self._held_force[self._held]
-        return self._forces.copy()
+        forces = [
+            f + (c * g - f) * blend
+            for f, c, g in zip(self._forces, commanded_forces_n, self._gain, strict=True)
+        ]
+        for index, force in self._held.items():
+            forces[index] = force
+        self._forces = forces
+        return tuple(forces)
 
     def _check_index(self, index: int) -> None:
         if not 0 <= index < self.n_thrusters:
