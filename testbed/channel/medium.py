@@ -98,6 +98,7 @@ class ModemCounters:
     rx_corrupted: int = 0
     rx_collided: int = 0
     rx_out_of_range: int = 0
+    rx_outage: int = 0
     rx_bit_errors: int = 0
 
 
@@ -159,6 +160,23 @@ class Medium:
         self._max_range_m = config.max_range_m
         self._ber = config.ber
         self._ber_per_m = config.ber_per_m
+        self._outages: list[tuple[float, float]] = []
+
+    def add_outage(self, start_s: float, end_s: float) -> None:
+        """Black the link out over ``[start_s, end_s)`` [s]: every copy whose reception overlaps
+        the window is lost (traced ``OUTAGE``), in both directions — an unplugged modem, a
+        shadowed acoustic path.
+
+        Raises:
+            ValueError: ``end_s <= start_s`` or ``start_s < 0`` (local misuse).
+        """
+        if start_s < 0.0 or end_s <= start_s:
+            raise ValueError(f"outage window must have 0 <= start < end, got [{start_s}, {end_s})")
+        self._outages.append((start_s, end_s))
+
+    def in_outage(self, start_s: float, end_s: float) -> bool:
+        """Whether the interval ``[start_s, end_s]`` overlaps an outage window."""
+        return any(a < end_s and start_s < b for a, b in self._outages)
 
     @property
     def modems(self) -> tuple[Modem, ...]:
@@ -388,6 +406,12 @@ class Modem:
         trace = self._medium.trace
         counters = self.counters
         now = self._env.now
+        if self._medium._outages and self._medium.in_outage(rec.start_s, now):
+            counters.rx_outage += 1
+            if trace is not None:
+                kind = EventKind.OUTAGE
+                trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
+            return
         if rec.collided:
             counters.rx_collided += 1
             if trace is not None:

@@ -6,8 +6,9 @@ are recorded when the medium decides them, so a ``TX_END`` is recorded at its tr
 with its future time: use :meth:`Trace.in_time_order` for a timeline.
 
 Every copy of a transmission that reaches a receiver ends in exactly one of ``DELIVER``,
-``CORRUPT``, ``COLLIDE`` or ``OUT_OF_RANGE``; every frame handed to a modem is ``ENQUEUE``\\ d and
-then either ``DROP``\\ ped or sent as one ``TX_START``/``TX_END`` pair per packet.
+``CORRUPT``, ``COLLIDE``, ``OUTAGE`` or ``OUT_OF_RANGE``; every frame handed to a modem is
+``ENQUEUE``\\ d and then either ``DROP``\\ ped or sent as one ``TX_START``/``TX_END`` pair per
+packet.
 
 This module imports nothing from simpy.
 """
@@ -43,6 +44,9 @@ class EventKind(enum.StrEnum):
     """A copy was destroyed by an overlapping reception or (half duplex) by transmitting."""
     OUT_OF_RANGE = "out_of_range"
     """The receiver was beyond ``max_range_m`` at transmit time: nothing arrives."""
+    OUTAGE = "outage"
+    """A copy overlapped a link outage window (:meth:`~testbed.channel.medium.Medium.add_outage`)
+    and was lost."""
 
 
 class LinkEvent(NamedTuple):

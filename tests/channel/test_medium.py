@@ -379,3 +379,36 @@ def test_local_misuse_raises() -> None:
         a.send(b"")
     with pytest.raises(ValueError, match="already attached"):
         medium.attach("a")
+
+
+# -- outages ---------------------------------------------------------------------------------
+
+
+def test_outage_loses_every_copy_that_overlaps_the_window_both_ways() -> None:
+    """A frame sent at t0 is on the air at the receiver over [t0 + I, t0 + I + 8L/R] (zero
+    distance); with an outage over [10, 20) s exactly the copies whose on-air interval overlaps
+    the window are lost, in either direction (full duplex, so the directions do not interact)."""
+    env, medium, trace, (a, b) = build(load_link_config("s100", ["ber=0", "duplex=full"]))
+    medium.add_outage(10.0, 20.0)
+    frame = encode_frame(bytes(54))
+    on_air_end = I_S + airtime(len(frame))
+    starts = [1.0, 9.0, 10.0 - on_air_end + 1e-3, 10.0 - on_air_end - 1e-3, 15.0]
+    starts += [20.0 - I_S - 1e-3, 20.0 - I_S + 1e-3, 25.0]
+    for t in starts:
+        send_at(env, a, t, frame)
+        send_at(env, b, t + 0.4, frame)
+
+    def lost(t0: float) -> bool:
+        return t0 + I_S < 20.0 and t0 + on_air_end > 10.0
+
+    env.run(40.0)
+    expected = sum(lost(t) for t in starts) + sum(lost(t + 0.4) for t in starts)
+    assert len(trace.of_kind(EventKind.OUTAGE)) == expected == 6
+    assert len(trace.of_kind(EventKind.DELIVER)) == 2 * len(starts) - expected
+    assert a.counters.rx_outage + b.counters.rx_outage == expected
+
+
+def test_outage_window_must_be_ordered() -> None:
+    _, medium, _, _ = build(S100)
+    with pytest.raises(ValueError, match="outage window"):
+        medium.add_outage(5.0, 5.0)
