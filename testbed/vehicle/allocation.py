@@ -153,6 +153,13 @@ class Allocator:
         self._force_axis = t200.force_axis_n
         self._current_axis = t200.current_axis_a
         self._current_table = _Table(t200.force_axis_n, t200.current_axis_a)
+        # I(F) falls to 0 A at 0 N and rises on both sides (so Σ I(f_i) ≤ n·max I(f_i), which
+        # lets the per-frame path skip a current sum that cannot bind); checked, not assumed
+        currents = t200.current_axis_a
+        zero = int(np.searchsorted(t200.force_axis_n, 0.0))
+        self._current_monotone = bool(
+            np.all(np.diff(currents[: zero + 1]) <= 0) and np.all(np.diff(currents[zero:]) >= 0)
+        )
         self._pwm_table = _Table(t200.inverse_force_n, t200.inverse_pwm_us)
         self._f_lo, self._f_hi = t200.force_limits_n
         self._inv_hi = 1.0 / self._f_hi
@@ -316,14 +323,16 @@ class Allocator:
                 scale = 1.0 / worst
                 f = [v * scale for v in f]
         current_of = self._current_table.many
-        currents = current_of(f)
         cap = self._cap_active
-        total = sum(currents)
-        if total > cap:
-            alpha = self._current_scale(np.array(f), cap, 1.0, total)
-            scale *= alpha
-            f = [v * alpha for v in f]
+        currents: list[float] | None = None
+        if dt_s is None or not self._surely_within(f, cap):
             currents = current_of(f)
+            total = sum(currents)
+            if total > cap:
+                alpha = self._current_scale(np.array(f), cap, 1.0, total)
+                scale *= alpha
+                f = [v * alpha for v in f]
+                currents = current_of(f)
         if dt_s is not None:
             if not dt_s > 0.0:
                 raise ValueError(f"dt_s must be > 0, got {dt_s}")
@@ -337,7 +346,7 @@ class Allocator:
                 elif d < low:
                     d = low
                 slewed.append(p + d)
-            if slewed != f:  # else the currents are those of f already
+            if currents is None or slewed != f:  # else the currents are those of f already
                 f = slewed
                 currents = current_of(f)
             total = sum(currents)
@@ -345,6 +354,7 @@ class Allocator:
                 alpha = self._current_scale(np.array(f), cap, 1.0, total)
                 f = [v * alpha for v in f]
                 currents = current_of(f)
+        assert currents is not None  # computed above whenever dt_s is None
         self._previous = f
         if self._any_stuck:
             f = [v + s for v, s in zip(f, self._stuck_force_list, strict=True)]
@@ -355,6 +365,17 @@ class Allocator:
             for pulse, (sign, offset) in zip(pulses, self._pwm_sign_offset, strict=True)
         ]
         return f, pwm, currents, scale
+
+    def _surely_within(self, f: list[float], cap_a: float) -> bool:
+        """Whether Σ I(f_i) ≤ ``cap_a`` follows from the two extreme forces alone.
+
+        With I rising in |F| on both sides of 0 N, Σ I(f_i) ≤ n·max(I(max f), I(min f)); the
+        1e-9 margin covers the rounding of the float sum. False means "compute the sum".
+        """
+        if not self._current_monotone:
+            return False
+        high, low = self._current_table.many((max(f), min(f)))
+        return len(f) * (high if high > low else low) * (1.0 + 1e-9) <= cap_a
 
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.

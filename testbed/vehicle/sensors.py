@@ -85,6 +85,15 @@ class _Normals:
         self._index += 1
         return value
 
+    def take_many(self, count: int) -> list[float]:
+        """The next ``count`` draws (the same as ``count`` calls of :meth:`take`)."""
+        start = self._index
+        end = start + count
+        if end <= len(self._buffer):
+            self._index = end
+            return self._buffer[start:end]
+        return [self.take() for _ in range(count)]
+
 
 class _Clock:
     """When a sensor at ``rate_hz`` is next due. Late polls do not produce bursts."""
@@ -144,7 +153,7 @@ class ImuReading:
 class Imu:
     """Attitude and rate sensor; see the module docstring for the model."""
 
-    __slots__ = ("_clock", "_decay", "_errors", "_innovation", "_normals", "config")
+    __slots__ = ("_clock", "_decay", "_errors", "_innovation", "_normals", "_sigmas", "config")
 
     def __init__(self, config: ImuConfig, rng: np.random.Generator) -> None:
         self.config = config
@@ -154,6 +163,7 @@ class Imu:
         self._decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
         self._innovation = math.sqrt(1.0 - self._decay * self._decay)
         sigmas = (config.attitude_noise_rad, config.attitude_noise_rad, config.heading_noise_rad)
+        self._sigmas = sigmas
         # stationary start: the correlated error already has its steady-state spread
         self._errors = [s * self._normals.take() for s in sigmas]
 
@@ -172,14 +182,14 @@ class Imu:
             rates_rad_s: (3,) true body rates [rad/s], FRD.
         """
         self._clock.advance(time_s)
-        cfg = self.config
-        take = self._normals.take
+        n0, n1, n2, n3, n4, n5 = self._normals.take_many(6)  # in the order they were drawn
         a, b = self._decay, self._innovation
-        errors = self._errors
-        sigmas = (cfg.attitude_noise_rad, cfg.attitude_noise_rad, cfg.heading_noise_rad)
-        for k in range(3):
-            errors[k] = a * errors[k] + b * sigmas[k] * take()
-        ex, ey, eh = errors
+        s0, s1, s2 = self._sigmas
+        e0, e1, e2 = self._errors
+        ex = a * e0 + b * s0 * n0
+        ey = a * e1 + b * s1 * n1
+        eh = a * e2 + b * s2 * n2
+        self._errors = [ex, ey, eh]
         # body roll/pitch error: rotation vector (ex, ey, 0) on the body axes
         angle = math.sqrt(ex * ex + ey * ey)
         if angle > 0.0:
@@ -189,12 +199,8 @@ class Imu:
             q_body = (1.0, 0.0, 0.0, 0.0)
         q_heading: Quaternion = (math.cos(0.5 * eh), 0.0, 0.0, math.sin(0.5 * eh))
         measured = quat_multiply(q_heading, quat_multiply(quaternion_wxyz, q_body))
-        g = cfg.gyro_noise_rad_s
-        rates = (
-            rates_rad_s[0] + g * take(),
-            rates_rad_s[1] + g * take(),
-            rates_rad_s[2] + g * take(),
-        )
+        g = self.config.gyro_noise_rad_s
+        rates = (rates_rad_s[0] + g * n3, rates_rad_s[1] + g * n4, rates_rad_s[2] + g * n5)
         return ImuReading(time_s, measured, rates)
 
 
@@ -254,15 +260,11 @@ class DepthSensor:
         """Measure the true depth [m, positive down] now (and schedule the next reading)."""
         self._clock.advance(time_s)
         cfg = self.config
-        pressure = baro_pressure_pa(
-            depth_m,
-            water_density_kg_m3=cfg.water_density_kg_m3,
-            surface_pressure_pa=cfg.surface_pressure_pa,
-        )
+        surface = cfg.surface_pressure_pa
+        # baro_pressure_pa and baro_depth_m written out (per frame), same operations
+        pressure = surface + cfg.water_density_kg_m3 * STANDARD_GRAVITY_M_S2 * max(depth_m, 0.0)
         pressure += cfg.noise_pa * self._normals.take()
-        depth = baro_depth_m(
-            pressure, spec_grav=cfg.spec_grav, surface_pressure_pa=cfg.surface_pressure_pa
-        )
+        depth = (pressure - surface) / (ARDUSUB_PA_PER_M * cfg.spec_grav)
         return DepthReading(time_s, pressure, depth)
 
 
