@@ -276,40 +276,50 @@ class PID:
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         g = self.gains
+        has_last = self._has_last
         if error_rate is None:
-            raw = (error - self._last_error) / dt_s if self._has_last else 0.0
+            raw = (error - self._last_error) / dt_s if has_last else 0.0
         else:
             raw = error_rate
-        if g.derivative_tau_s > 0.0 and self._has_last:
-            self._d_state += (raw - self._d_state) * (dt_s / (g.derivative_tau_s + dt_s))
+        tau = g.derivative_tau_s
+        if tau > 0.0 and has_last:
+            d_state = self._d_state
+            d_state += (raw - d_state) * (dt_s / (tau + dt_s))
         else:
-            self._d_state = raw
+            d_state = raw
+        self._d_state = d_state
         self._last_error = error
         self._has_last = True
 
+        # clamps below are max(-c, min(c, x)) written out (same result, NaN included)
         p = g.kp * error
-        d = g.kd * self._d_state
+        d = g.kd * d_state
         limit = g.max_output
         if abs(error) >= g.i_zone:
             self.integral = 0.0
         else:
+            cap = g.max_integral
             candidate = self.integral + error * dt_s
-            candidate = max(-g.max_integral, min(g.max_integral, candidate))
-            if g.anti_windup == "conditional":
+            candidate = candidate if candidate < cap else cap
+            candidate = candidate if candidate > -cap else -cap
+            anti_windup = g.anti_windup
+            if anti_windup == "conditional":
                 unsat = p + g.ki * candidate + d
                 if abs(unsat) <= limit or (unsat > 0.0) != (error > 0.0):
                     self.integral = candidate
-            elif g.anti_windup == "back_calculation" and g.ki != 0.0:
+            elif anti_windup == "back_calculation" and g.ki != 0.0:
                 # İ = e + (sat(u) − u)/(ki·Tt), u from the integral before this step
                 unsat = p + g.ki * self.integral + d
                 excess = max(-limit, min(limit, unsat)) - unsat
                 candidate += excess * dt_s / (g.tracking_time_s * g.ki)
-                self.integral = max(-g.max_integral, min(g.max_integral, candidate))
+                self.integral = max(-cap, min(cap, candidate))
             else:
                 self.integral = candidate
         i = g.ki * self.integral
         self.p, self.i, self.d = p, i, d
-        return max(-limit, min(limit, p + i + d))
+        out = p + i + d
+        out = out if out < limit else limit
+        return out if out > -limit else -limit
 
 
 # --------------------------------------------------------------------------------------------

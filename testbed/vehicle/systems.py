@@ -81,6 +81,7 @@ __all__ = [
 Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
+_LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 
 
 # ------------------------------------------------------------------------------ resources
@@ -326,7 +327,7 @@ def _supervise(world: World, ctl: Controllers) -> None:
         if status.level is not FailsafeLevel.NOMINAL:
             world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
         return
-    level = FailsafeLevel(failsafe_level(now - ctl.last_contact_s, ctl.failsafe))
+    level = _LEVELS[failsafe_level(now - ctl.last_contact_s, ctl.failsafe)]
     if status.level is FailsafeLevel.SURFACE:
         level = FailsafeLevel.SURFACE
     if level is not status.level:

@@ -305,10 +305,12 @@ class Vehicle:
         step_physics = physics.step
         actuation = self.actuation
         limit = until_s - 1e-9
-        while physics.time_s < limit:
-            if physics.time_s >= self._next_control_s - 1e-9:
+        now = physics.time_s
+        while now < limit:
+            if now >= self._next_control_s - 1e-9:
                 self._frame()
             step_physics(actuation.plant_wrench)
+            now = physics.time_s
 
     def _frame(self) -> None:
         physics = self.physics
@@ -353,9 +355,10 @@ class Vehicle:
         if len(sticks) != 6:
             raise ValueError(f"sticks must have 6 values, got {len(sticks)}")
         self._seq += 1
-        values = tuple(float(s) for s in sticks)
+        s0, s1, s2, s3, s4, s5 = sticks
+        values = (float(s0), float(s1), float(s2), float(s3), float(s4), float(s5))
         sampled = self.time_s if sampled_s is None else sampled_s
-        self._write(MovementCommand(self._seq, sampled, values))  # type: ignore[arg-type]
+        self._write(MovementCommand(self._seq, sampled, values))
         return self._seq
 
     def arm(self, armed: bool = True) -> None:
@@ -377,8 +380,8 @@ class Vehicle:
 
     def set_attitude(self, quaternion_wxyz: Quaternion) -> None:
         """Set the attitude target (body → NED, w x y z)."""
-        q = tuple(float(v) for v in quaternion_wxyz)
-        self._write(AttitudeSetpoint(q))  # type: ignore[arg-type]  # 4 floats
+        w, x, y, z = quaternion_wxyz
+        self._write(AttitudeSetpoint((float(w), float(x), float(y), float(z))))
 
     def _write(self, component: object) -> None:
         self.world.set(self.operator_entity, component, origin=Origin.REMOTE)
