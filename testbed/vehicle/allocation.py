@@ -315,17 +315,19 @@ class Allocator:
         if not math.isfinite(sum(f)):  # any nan/inf in m reaches every f_i
             raise ValueError(f"wrench must be finite, got {np.asarray(wrench).tolist()}")
         scale = 1.0
-        worst = max(max(f) * self._inv_hi, min(f) * self._inv_lo)
+        f_max, f_min = max(f), min(f)
+        worst = max(f_max * self._inv_hi, f_min * self._inv_lo)
         if worst > 1.0:
             if self.method == "lsq":
                 f = self._solve_lsq(m).tolist()
             else:
                 scale = 1.0 / worst
                 f = [v * scale for v in f]
+            f_max, f_min = max(f), min(f)
         current_of = self._current_table.many
         cap = self._cap_active
         currents: list[float] | None = None
-        if dt_s is None or not self._surely_within(f, cap):
+        if dt_s is None or not self._surely_within(len(f), f_max, f_min, cap):
             currents = current_of(f)
             total = sum(currents)
             if total > cap:
@@ -366,16 +368,16 @@ class Allocator:
         ]
         return f, pwm, currents, scale
 
-    def _surely_within(self, f: list[float], cap_a: float) -> bool:
-        """Whether Σ I(f_i) ≤ ``cap_a`` follows from the two extreme forces alone.
+    def _surely_within(self, n: int, f_max: float, f_min: float, cap_a: float) -> bool:
+        """Whether Σ I(f_i) ≤ ``cap_a`` follows from the n forces' extremes alone.
 
         With I rising in |F| on both sides of 0 N, Σ I(f_i) ≤ n·max(I(max f), I(min f)); the
         1e-9 margin covers the rounding of the float sum. False means "compute the sum".
         """
         if not self._current_monotone:
             return False
-        high, low = self._current_table.many((max(f), min(f)))
-        return len(f) * (high if high > low else low) * (1.0 + 1e-9) <= cap_a
+        high, low = self._current_table.many((f_max, f_min))
+        return n * (high if high > low else low) * (1.0 + 1e-9) <= cap_a
 
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.
