@@ -1,0 +1,560 @@
+"""Per-type binary codec of replicated component values, compiled once from their field types.
+
+:func:`compile_codec` turns a registered component type (a frozen dataclass whose fields the
+:class:`~testbed.ecs.ComponentRegistry` has already checked) into a :class:`FieldCodec` that
+writes a value as bytes and reads it back. Both nodes compile the same layout from the same
+type, so the bytes carry no names, tags or type information: only field values, in declaration
+order, big-endian, without padding.
+
+Value layout, by field type:
+
+==========================  ==============================================================
+``bool``                    1 byte: ``0x00`` False, ``0x01`` True (any other byte is malformed)
+``int``                     8 bytes, signed two's complement (i64). Values outside
+                            −2⁶³ … 2⁶³−1 cannot be encoded (``ValueError``). A fixed width
+                            rather than a zigzag varint: every all-fixed layout then packs
+                            with one precompiled ``struct`` format.
+``float``                   8 bytes, IEEE 754 binary64: every float round-trips exactly,
+                            −0.0 and ±inf included. NaN stays a NaN (``struct`` keeps its
+                            bits), but NaN ≠ NaN, so a component holding one never compares
+                            equal to its decoded copy and ``World.set`` records every receipt.
+``str``                     u16 byte count + UTF-8 (≤ 65 535 bytes; lone surrogates cannot
+                            be encoded; invalid UTF-8 is malformed)
+``bytes``                   u16 byte count + the bytes (≤ 65 535)
+enum with int values        its value as an i64 (a value that names no member is malformed)
+enum with str values        its value as a ``str``
+``tuple[A, B, …]``          the items in order, no count
+``tuple[A, ...]``           u16 item count + the items (≤ 65 535 items)
+nested frozen dataclass     its fields in declaration order
+==========================  ==============================================================
+
+Enums whose values are neither all ints nor all strs cannot be compiled (``TypeError``).
+
+A layout without ``str``, ``bytes``, str-valued enums or variable tuples is *fixed*: it has one
+size (:attr:`FieldCodec.fixed_size`) and encodes with a single precompiled ``struct`` call. A
+variable layout is written field by field, consecutive fixed fields still packed together.
+
+Local misuse (a value of the wrong type, an int out of range, an over-long string) raises
+``ValueError`` naming the component type. Remote garbage raises :class:`FieldDecodeError` and
+nothing else (a ``ValueError``/``TypeError`` from a component's own ``__post_init__`` included);
+the change-set codec turns it into a value. Standard library only; no pickle, no eval.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import operator
+import struct
+import typing
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["FieldCodec", "FieldDecodeError", "compile_codec"]
+
+U16_MAX = 0xFFFF
+_U16 = struct.Struct(">H")
+_BOOLS = (False, True)
+_I64_MIN = -(2**63)
+_I64_MAX = 2**63 - 1
+
+Buffer = bytes | bytearray | memoryview
+
+
+class FieldDecodeError(ValueError):
+    """Bytes that are not a valid encoding of the component type (remote data)."""
+
+
+# ------------------------------------------------------------------------------ layout nodes
+
+
+class _Node:
+    """One field type's layout. Fixed nodes also have struct formats and a flat form.
+
+    Attributes:
+        fixed: whether every value has the same size (then the struct attributes are set).
+        pack_fmt, unpack_fmt: struct format characters (no byte-order prefix); they differ only
+            for bools (packed with ``?``, which writes any truth value as 0/1, read as ``B``).
+        width: number of flat primitives a value becomes.
+        size: encoded size [B].
+        plain_out: the value is its own flat form (appended as is when flattening).
+        plain_in: the flat primitive is the value (no conversion when building).
+    """
+
+    __slots__ = ("fixed", "pack_fmt", "plain_in", "plain_out", "size", "unpack_fmt", "width")
+
+    def __init__(self, pack_fmt: str | None, unpack_fmt: str | None = None) -> None:
+        self.fixed = pack_fmt is not None
+        self.pack_fmt = pack_fmt or ""
+        self.unpack_fmt = unpack_fmt if unpack_fmt is not None else self.pack_fmt
+        self.width = len(self.pack_fmt)
+        self.size = struct.calcsize(">" + self.pack_fmt) if self.fixed else 0
+        self.plain_out = False
+        self.plain_in = False
+
+    # Fixed nodes: flat forms.
+    def flatten(self, value: Any, out: list[Any]) -> None:
+        """Append the flat primitives of ``value`` to ``out``."""
+        raise NotImplementedError
+
+    def build(self, values: Sequence[Any], i: int) -> Any:
+        """The value made of ``values[i : i + width]``."""
+        raise NotImplementedError
+
+    # Every node: streaming form.
+    def write(self, value: Any, out: bytearray) -> None:
+        """Append the encoding of ``value`` to ``out``."""
+        flat: list[Any] = []
+        self.flatten(value, flat)
+        out += struct.pack(">" + self.pack_fmt, *flat)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        """The value encoded at ``buf[pos:]`` and the position after it."""
+        values = struct.unpack_from(">" + self.unpack_fmt, buf, pos)
+        return self.build(values, 0), pos + self.size
+
+
+class _Plain(_Node):
+    """int (``q``) or float (``d``): the Python value is the struct value."""
+
+    __slots__ = ()
+
+    def __init__(self, fmt: str) -> None:
+        super().__init__(fmt)
+        self.plain_out = self.plain_in = True
+
+    def flatten(self, value: Any, out: list[Any]) -> None:
+        out.append(value)
+
+    def build(self, values: Sequence[Any], i: int) -> Any:
+        return values[i]
+
+
+class _Bool(_Node):
+    """bool: packed by truth as 0/1, read back strictly (only 0 or 1)."""
+
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        super().__init__("?", "B")
+        self.plain_out = True
+
+    def flatten(self, value: Any, out: list[Any]) -> None:
+        out.append(value)
+
+    def build(self, values: Sequence[Any], i: int) -> Any:
+        return _BOOLS[values[i]]  # IndexError on 2..255: malformed
+
+
+class _IntEnum(_Node):
+    """Enum with int values: its value as an i64."""
+
+    __slots__ = ("cls",)
+
+    def __init__(self, cls: type[enum.Enum]) -> None:
+        super().__init__("q")
+        self.cls = cls
+
+    def flatten(self, value: Any, out: list[Any]) -> None:
+        if not isinstance(value, self.cls):
+            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}")
+        out.append(value.value)
+
+    def build(self, values: Sequence[Any], i: int) -> Any:
+        return self.cls(values[i])
+
+
+class _Str(_Node):
+    """str: u16 byte count + UTF-8."""
+
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        super().__init__(None)
+
+    def write(self, value: Any, out: bytearray) -> None:
+        if not isinstance(value, str):
+            raise TypeError(f"expected a str, got {value!r}")
+        data = value.encode("utf-8")
+        _write_counted(data, out)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        data, pos = _read_counted(buf, pos)
+        return str(data, "utf-8"), pos
+
+
+class _Bytes(_Node):
+    """bytes: u16 byte count + the bytes."""
+
+    __slots__ = ()
+
+    def __init__(self) -> None:
+        super().__init__(None)
+
+    def write(self, value: Any, out: bytearray) -> None:
+        if not isinstance(value, bytes | bytearray):
+            raise TypeError(f"expected bytes, got {value!r}")
+        _write_counted(value, out)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        return _read_counted(buf, pos)
+
+
+class _StrEnum(_Node):
+    """Enum with str values: its value as a str."""
+
+    __slots__ = ("cls",)
+
+    def __init__(self, cls: type[enum.Enum]) -> None:
+        super().__init__(None)
+        self.cls = cls
+
+    def write(self, value: Any, out: bytearray) -> None:
+        if not isinstance(value, self.cls):
+            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}")
+        _write_counted(value.value.encode("utf-8"), out)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        data, pos = _read_counted(buf, pos)
+        return self.cls(str(data, "utf-8")), pos
+
+
+def _write_counted(data: bytes | bytearray, out: bytearray) -> None:
+    if len(data) > U16_MAX:
+        raise ValueError(f"{len(data)} B is longer than the {U16_MAX} B a u16 count allows")
+    out += _U16.pack(len(data))
+    out += data
+
+
+def _read_counted(buf: Buffer, pos: int) -> tuple[bytes, int]:
+    (count,) = _U16.unpack_from(buf, pos)
+    start = pos + 2
+    end = start + count
+    if end > len(buf):
+        raise FieldDecodeError(f"{count} B announced, {len(buf) - start} B left")
+    return bytes(buf[start:end]), end
+
+
+class _Composite(_Node):
+    """A fixed tuple or a dataclass: its children in order.
+
+    Attributes:
+        children: the item (or field) layouts, in order.
+        parts: the value → its child values (a tuple), checking the shape.
+        make: child values → the value.
+    """
+
+    __slots__ = ("children", "make", "parts", "segments")
+
+    def __init__(
+        self,
+        children: Sequence[_Node],
+        parts: Callable[[Any], Sequence[Any]],
+        make: Callable[..., Any],
+    ) -> None:
+        fixed = all(child.fixed for child in children)
+        super().__init__("".join(c.pack_fmt for c in children) if fixed else None)
+        if fixed:
+            self.unpack_fmt = "".join(c.unpack_fmt for c in children)
+            self.width = sum(c.width for c in children)
+        self.children = tuple(children)
+        self.parts = parts
+        self.make = make
+        self.segments = _segments(self.children)
+
+    def flatten(self, value: Any, out: list[Any]) -> None:
+        for child, part in zip(self.children, self.parts(value), strict=True):
+            if child.plain_out:
+                out.append(part)
+            else:
+                child.flatten(part, out)
+
+    def build(self, values: Sequence[Any], i: int) -> Any:
+        args = []
+        for child in self.children:
+            args.append(values[i] if child.plain_in else child.build(values, i))
+            i += child.width
+        return self.make(*args)
+
+    def write(self, value: Any, out: bytearray) -> None:
+        if self.fixed:
+            _Node.write(self, value, out)
+            return
+        parts = self.parts(value)
+        for start, stop, packer in self.segments:
+            if packer is None:
+                self.children[start].write(parts[start], out)
+            else:
+                flat: list[Any] = []
+                for child, part in zip(self.children[start:stop], parts[start:stop], strict=True):
+                    if child.plain_out:
+                        flat.append(part)
+                    else:
+                        child.flatten(part, flat)
+                out += packer[0].pack(*flat)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        if self.fixed:
+            return _Node.read(self, buf, pos)
+        args: list[Any] = []
+        for start, stop, packer in self.segments:
+            if packer is None:
+                value, pos = self.children[start].read(buf, pos)
+                args.append(value)
+            else:
+                unpacker = packer[1]
+                values = unpacker.unpack_from(buf, pos)
+                pos += unpacker.size
+                i = 0
+                for child in self.children[start:stop]:
+                    args.append(values[i] if child.plain_in else child.build(values, i))
+                    i += child.width
+        return self.make(*args), pos
+
+
+_Segment = tuple[int, int, tuple[struct.Struct, struct.Struct] | None]
+
+
+def _segments(children: Sequence[_Node]) -> tuple[_Segment, ...]:
+    """Runs of consecutive fixed children (one pack/unpack struct each) and single variable ones."""
+    segments: list[_Segment] = []
+    i = 0
+    while i < len(children):
+        if not children[i].fixed:
+            segments.append((i, i + 1, None))
+            i += 1
+            continue
+        stop = i
+        while stop < len(children) and children[stop].fixed:
+            stop += 1
+        run = children[i:stop]
+        pack = struct.Struct(">" + "".join(c.pack_fmt for c in run))
+        unpack = struct.Struct(">" + "".join(c.unpack_fmt for c in run))
+        segments.append((i, stop, (pack, unpack)))
+        i = stop
+    return tuple(segments)
+
+
+class _VarTuple(_Node):
+    """``tuple[A, ...]``: u16 item count + the items (fixed items in one struct call)."""
+
+    __slots__ = ("item",)
+
+    def __init__(self, item: _Node) -> None:
+        super().__init__(None)
+        self.item = item
+
+    def write(self, value: Any, out: bytearray) -> None:
+        if not isinstance(value, tuple):
+            raise TypeError(f"expected a tuple, got {value!r}")
+        count = len(value)
+        if count > U16_MAX:
+            raise ValueError(f"{count} items; a u16 count allows at most {U16_MAX}")
+        item = self.item
+        if not item.fixed:
+            out += _U16.pack(count)
+            for part in value:
+                item.write(part, out)
+            return
+        flat: list[Any] | tuple[Any, ...] = value
+        if not item.plain_out:
+            flat = []
+            for part in value:
+                item.flatten(part, flat)
+        out += struct.pack(">H" + _repeat(item.pack_fmt, count), count, *flat)
+
+    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
+        (count,) = _U16.unpack_from(buf, pos)
+        pos += 2
+        item = self.item
+        if not item.fixed:
+            items = []
+            for _ in range(count):
+                part, pos = item.read(buf, pos)
+                items.append(part)
+            return tuple(items), pos
+        end = pos + count * item.size
+        if end > len(buf):
+            raise FieldDecodeError(f"{count} items announced, {len(buf) - pos} B left")
+        values = struct.unpack_from(">" + _repeat(item.unpack_fmt, count), buf, pos)
+        if item.plain_in:
+            return values, end
+        width = item.width
+        return tuple(item.build(values, k * width) for k in range(count)), end
+
+
+def _repeat(fmt: str, count: int) -> str:
+    return f"{count}{fmt}" if len(fmt) == 1 else fmt * count
+
+
+# ----------------------------------------------------------------------------- compilation
+
+
+_INT = _Plain("q")
+_FLOAT = _Plain("d")
+_BOOL = _Bool()
+_STR = _Str()
+_BYTES = _Bytes()
+
+
+def _compile(annotation: Any, where: str) -> _Node:
+    """The layout of one (registry-checked) field type."""
+    if annotation is bool:
+        return _BOOL
+    if annotation is int:
+        return _INT
+    if annotation is float:
+        return _FLOAT
+    if annotation is str:
+        return _STR
+    if annotation is bytes:
+        return _BYTES
+    if isinstance(annotation, type) and issubclass(annotation, enum.Enum):
+        return _compile_enum(annotation, where)
+    if isinstance(annotation, type) and dataclasses.is_dataclass(annotation):
+        hints = typing.get_type_hints(annotation)
+        fields = dataclasses.fields(annotation)
+        children = [_compile(hints[f.name], f"{where}.{f.name}") for f in fields]
+        return _Composite(children, _field_getter(annotation, [f.name for f in fields]), annotation)
+    if typing.get_origin(annotation) is tuple:
+        args = typing.get_args(annotation)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return _VarTuple(_compile(args[0], f"{where}[]"))
+        children = [_compile(arg, f"{where}[{k}]") for k, arg in enumerate(args)]
+        return _Composite(children, _tuple_checker(len(children)), _make_tuple)
+    raise TypeError(f"{where}: no codec for field type {annotation!r}")
+
+
+def _compile_enum(cls: type[enum.Enum], where: str) -> _Node:
+    values = [member.value for member in cls]
+    if all(isinstance(v, int) for v in values):
+        if not all(_I64_MIN <= v <= _I64_MAX for v in values):
+            raise TypeError(f"{where}: enum {cls.__qualname__} has values outside i64")
+        return _IntEnum(cls)
+    if all(isinstance(v, str) for v in values):
+        return _StrEnum(cls)
+    raise TypeError(
+        f"{where}: enum {cls.__qualname__} must have all-int or all-str values to be replicated"
+    )
+
+
+def _field_getter(cls: type[Any], names: list[str]) -> Callable[[Any], Sequence[Any]]:
+    """value → its field values as a tuple, rejecting a value of another type."""
+    if not names:
+        get: Callable[[Any], Any] = _no_fields
+    elif len(names) == 1:
+        name = names[0]
+
+        def get(value: Any) -> tuple[Any]:
+            return (getattr(value, name),)
+
+    else:
+        get = operator.attrgetter(*names)
+
+    def parts(value: Any) -> Sequence[Any]:
+        if type(value) is not cls:
+            raise TypeError(f"expected a {cls.__qualname__}, got {value!r}")
+        return get(value)  # type: ignore[no-any-return]  # attrgetter of several names: tuple
+
+    return parts
+
+
+def _no_fields(value: Any) -> tuple[()]:
+    return ()
+
+
+def _tuple_checker(length: int) -> Callable[[Any], Sequence[Any]]:
+    def parts(value: Any) -> Sequence[Any]:
+        if not isinstance(value, tuple) or len(value) != length:
+            raise TypeError(f"expected a tuple of {length} items, got {value!r}")
+        return value
+
+    return parts
+
+
+def _make_tuple(*items: Any) -> tuple[Any, ...]:
+    return items
+
+
+_ENCODE_ERRORS = (struct.error, TypeError, ValueError, AttributeError, OverflowError)
+_DECODE_ERRORS = (struct.error, TypeError, ValueError, IndexError, OverflowError)
+
+
+class FieldCodec:
+    """The compiled codec of one component type.
+
+    Attributes:
+        cls: the component type.
+        fixed_size: the size of every encoded value [B], or None for a variable layout.
+    """
+
+    __slots__ = ("_flat", "_pack", "_root", "_unpack", "cls", "fixed_size")
+
+    def __init__(self, cls: type[Any]) -> None:
+        """Compile the layout of ``cls`` (see :func:`compile_codec`)."""
+        root = _compile(cls, cls.__qualname__)
+        assert isinstance(root, _Composite)
+        self.cls = cls
+        self._root = root
+        self.fixed_size: int | None = root.size if root.fixed else None
+        self._pack = struct.Struct(">" + root.pack_fmt).pack
+        self._unpack = struct.Struct(">" + root.unpack_fmt).unpack
+        # All-plain fixed layouts (only int/float/bool fields): the field tuple is the flat form.
+        self._flat = root.fixed and all(c.plain_out for c in root.children)
+
+    def encode(self, value: Any) -> bytes:
+        """The bytes of ``value`` (an instance of :attr:`cls`).
+
+        Raises:
+            ValueError: ``value`` is not a valid instance (wrong type, int outside i64, string
+                or tuple longer than a u16 count, lone surrogate in a string…), naming the type.
+        """
+        root = self._root
+        try:
+            if self._flat:
+                return self._pack(*root.parts(value))
+            if root.fixed:
+                flat: list[Any] = []
+                root.flatten(value, flat)
+                return self._pack(*flat)
+            out = bytearray()
+            root.write(value, out)
+            return bytes(out)
+        except _ENCODE_ERRORS as err:
+            raise ValueError(f"cannot encode {self.cls.__qualname__}: {err}") from err
+
+    def decode(self, data: Buffer) -> Any:
+        """The value encoded in exactly ``data``.
+
+        Raises:
+            FieldDecodeError: ``data`` is not exactly one valid encoding (truncated, trailing
+                bytes, bad count, bad UTF-8, bad bool byte, enum value naming no member, or a
+                value the component's constructor rejects).
+        """
+        root = self._root
+        try:
+            if root.fixed:
+                return root.build(self._unpack(data), 0)
+            value, end = root.read(data, 0)
+        except FieldDecodeError:
+            raise
+        except _DECODE_ERRORS as err:
+            raise FieldDecodeError(f"{self.cls.__qualname__}: {err}") from None
+        if end != len(data):
+            raise FieldDecodeError(
+                f"{self.cls.__qualname__}: {len(data) - end} trailing bytes after the value"
+            )
+        return value
+
+
+def compile_codec(cls: type[Any]) -> FieldCodec:
+    """Compile the field codec of a component type once; reuse it for every value.
+
+    Args:
+        cls: a frozen dataclass whose field types the component registry accepts.
+
+    Raises:
+        TypeError: a field type has no codec (an enum with values neither all int nor all str
+            or outside i64, or a type the registry would not have accepted).
+    """
+    return FieldCodec(cls)
