@@ -10,7 +10,9 @@ Run with ``.venv/bin/python -m pytest benchmarks/test_vehicle_bench.py -m benchm
    commands, failsafe, pilot, depth and attitude loops, allocation, thruster plant), ecs-4h
    holding depth while tracking the yaw experiment's setpoint in a 0.1 m/s current. Reported
    as simulated seconds per wall second, and as a ratio to the floor measured in the same run.
-3. The four ECS-paper experiment configurations: p50/p95 of |error| and the std, per axis.
+3. Where a frame's time goes: the same run with a timer around each system, the physics step
+   and the truth read, in µs per frame (timers add ≈0.1 µs each; the parts are what to compare).
+4. The four ECS-paper experiment configurations: p50/p95 of |error| and the std, per axis.
 
 Wall times are noisy on a shared machine; the ratios are what to compare between runs.
 """
@@ -20,11 +22,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from typing import Any, TypeVar, cast
 
 import numpy as np
 import pybullet
 import pytest
 
+from testbed.ecs import Phase, Schedule, World
+from testbed.vehicle import systems
 from testbed.vehicle.components import ControlMode
 from testbed.vehicle.control import quat_from_euler
 from testbed.vehicle.experiment import PAPER_EXPERIMENTS, run_attitude_experiment
@@ -36,6 +41,7 @@ pytestmark = pytest.mark.benchmark
 SIM_S = 20.0
 DT_S = 1.0 / 240.0
 SEED = 20250101
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 def bare_pybullet(sim_s: float) -> None:
@@ -131,6 +137,55 @@ def test_vehicle_real_time_factor(benchmark: pytest.FixtureRequest) -> None:
         f"vehicle costs {ratio:.2f}x the floor"
     )
     assert vehicle_rtf > 30.0  # a gross regression guard, not the target (see the report)
+
+
+def test_vehicle_frame_breakdown(benchmark: pytest.FixtureRequest) -> None:
+    clock = time.perf_counter
+    totals: dict[str, float] = {}
+
+    def timed(name: str, fn: F) -> F:
+        totals[name] = 0.0
+
+        def run(*args: object) -> object:
+            start = clock()
+            result = fn(*args)
+            totals[name] += clock() - start
+            return result
+
+        return cast(F, run)
+
+    def setup() -> tuple[tuple[Vehicle, float], dict[str, object]]:
+        totals.clear()
+        vehicle = make_vehicle(SIM_S)
+        vehicles.append(vehicle)
+        schedule = Schedule()
+        plain = systems.build_schedule()
+        for phase in Phase:
+            for name in plain.names(phase):
+                system: Callable[[World], None] = getattr(systems, name)
+                schedule.add(phase, timed(name, system), name=name)
+        vehicle.schedule = schedule
+        physics = vehicle.physics
+        physics.step = timed("Physics.step", physics.step)  # type: ignore[method-assign]
+        physics.state_floats = timed("Physics.state_floats", physics.state_floats)  # type: ignore[method-assign]
+        return (vehicle, SIM_S), {}
+
+    vehicles: list[Vehicle] = []
+    try:
+        start = clock()
+        benchmark.pedantic(drive, setup=setup, rounds=1, iterations=1)  # type: ignore[attr-defined]
+        wall_s = clock() - start
+    finally:
+        for vehicle in vehicles:
+            vehicle.close()
+    frames = vehicles[-1].frames
+    per_frame = {name: round(total / frames * 1e6, 2) for name, total in totals.items()}
+    per_frame["everything (incl. timers)"] = round(wall_s / frames * 1e6, 2)
+    benchmark.extra_info["us_per_frame"] = per_frame  # type: ignore[attr-defined]
+    print("\nµs per frame (100 frames and 240 physics steps per simulated second):")
+    for name, us in per_frame.items():
+        print(f"  {name:28s} {us:7.2f}")
+    assert frames == 100 * SIM_S
 
 
 @pytest.mark.parametrize("name", list(PAPER_EXPERIMENTS))

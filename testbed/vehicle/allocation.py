@@ -149,7 +149,8 @@ class Allocator:
         self._matrix = config.matrix
         ccw = config.ccw_mask
         # pwm = sign * cw_pulse + offset, per thruster
-        self._pwm_sign_offset = [(-1.0, 3000.0) if c else (1.0, 0.0) for c in ccw.tolist()]
+        self._pwm_sign = [-1.0 if c else 1.0 for c in ccw.tolist()]
+        self._pwm_offset = [3000.0 if c else 0.0 for c in ccw.tolist()]
         self._force_axis = t200.force_axis_n
         self._current_axis = t200.current_axis_a
         self._current_table = _Table(t200.force_axis_n, t200.current_axis_a)
@@ -340,14 +341,11 @@ class Allocator:
                 raise ValueError(f"dt_s must be > 0, got {dt_s}")
             step = self._slew * dt_s
             low = -step
-            slewed = []
-            for v, p in zip(f, self._previous, strict=True):
-                d = v - p
-                if d > step:
-                    d = step
-                elif d < low:
-                    d = low
-                slewed.append(p + d)
+            # p + clip(f - p, -step, step), per thruster
+            slewed = [
+                p + (step if (d := v - p) > step else low if d < low else d)
+                for v, p in zip(f, self._previous, strict=True)
+            ]
             if currents is None or slewed != f:  # else the currents are those of f already
                 f = slewed
                 currents = current_of(f)
@@ -364,7 +362,7 @@ class Allocator:
         pulses = self._pwm_table.many(f)
         pwm = [
             pulse * sign + offset
-            for pulse, (sign, offset) in zip(pulses, self._pwm_sign_offset, strict=True)
+            for pulse, sign, offset in zip(pulses, self._pwm_sign, self._pwm_offset, strict=True)
         ]
         return f, pwm, currents, scale
 
@@ -551,17 +549,18 @@ class _Table:
         xp, fp, slopes = self._xp, self._fp, self._slopes
         x_first, x_last = xp[0], xp[-1]
         f_first, f_last = fp[0], fp[-1]
-        out = []
-        for x in values:
-            if x <= x_first:
-                out.append(f_first)
-            elif x >= x_last:
-                out.append(f_last)
-            else:
-                j = bisect_right(xp, x) - 1
-                x_j = xp[j]
-                out.append(fp[j] if x_j == x else slopes[j] * (x - x_j) + fp[j])
-        return out
+        # one comprehension (this runs several times per frame): the end values outside
+        # the table; inside, segment j with xp[j] <= x < xp[j + 1]
+        return [
+            f_first
+            if x <= x_first
+            else f_last
+            if x >= x_last
+            else fp[j]
+            if (x_j := xp[(j := bisect_right(xp, x) - 1)]) == x
+            else slopes[j] * (x - x_j) + fp[j]
+            for x in values
+        ]
 
 
 def _positive(value: float, name: str) -> float:
