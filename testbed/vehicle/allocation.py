@@ -346,9 +346,9 @@ class Allocator:
                 p + (step if (d := v - p) > step else low if d < low else d)
                 for v, p in zip(f, self._previous, strict=True)
             ]
-            if currents is None or slewed != f:  # else the currents are those of f already
-                f = slewed
-                currents = current_of(f)
+            if currents is None or slewed != f:  # else they are the currents of f already
+                currents = current_of(slewed)
+            f = slewed  # (== f may still differ from it in the sign of a zero)
             total = sum(currents)
             if total > cap:
                 alpha = self._current_scale(np.array(f), cap, 1.0, total)
