@@ -232,7 +232,7 @@ class PilotSection:
         kind: ``"scripted"`` or ``"attitude"``.
         start_s: when the pilot starts [s], ≥ 0.
         x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms.
-        roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| < 90.
+        roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| ≤ 89.9.
         yaw_amplitude_deg: yaw setpoint amplitude [deg], |A| ≤ 180.
         roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], > 0.
         setpoint_rate_hz: how often the operator updates the setpoint [Hz], > 0.
@@ -254,19 +254,18 @@ class PilotSection:
 
     def __post_init__(self) -> None:
         _non_negative(self.start_s, "start_s")
-        for name, limit in zip(_ATTITUDE_AMPLITUDES, (90.0, 90.0, 180.0), strict=True):
+        for name, limit in zip(_ATTITUDE_AMPLITUDES, (89.9, 89.9, 180.0), strict=True):
             value = getattr(self, name)
-            bound = "<" if limit < 180.0 else "≤"
-            ok = abs(value) < limit if limit < 180.0 else abs(value) <= limit
-            check(ok, name, f"must have |value| {bound} {limit:g}, got {value}")
+            check(abs(value) <= limit, name, f"must be in [-{limit:g}, {limit:g}], got {value}")
         for name in ("roll_period_s", "pitch_period_s", "yaw_period_s", "setpoint_rate_hz"):
             _positive(getattr(self, name), name)
-        if self.kind == "scripted":
-            for name in _ATTITUDE_AMPLITUDES:
-                check(getattr(self, name) == 0.0, name, "only used when kind = 'attitude'")
-        else:
-            for name in _STICK_AXES:
-                check(not getattr(self, name), name, "only used when kind = 'scripted'")
+        used_by, unused = (
+            ("attitude", _ATTITUDE_AMPLITUDES)
+            if self.kind == "scripted"
+            else ("scripted", _STICK_AXES)
+        )
+        for name in unused:
+            check(not getattr(self, name), name, f"only used when kind = {used_by!r}")
 
     def sticks(self, t_s: float) -> tuple[float, float, float, float]:
         """Surge, sway, heave and yaw sticks in [−1, 1] at time ``t_s`` [s] (zero before start)."""
@@ -546,7 +545,7 @@ def _from_data(
         names = [t.name for t in load_thruster_config(vehicle.thrusters).thrusters]
         for i, fault in enumerate(faults.thrusters):
             key = f"faults.thrusters[{i}].thruster"
-            _check_name(fault.thruster, names, where, key, f"thruster of {vehicle.thrusters}")
+            _check_name(fault.thruster, names, where, key, "thruster", f" of {vehicle.thrusters}")
     try:
         return Scenario(
             id=top.id,
@@ -584,16 +583,17 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
         raise ConfigError(f"{where}: link.ipg_s: only used when link.ipg = 'fixed'")
     for key in ("uplink_rate_hz", "downlink_rate_hz"):
         if key in given and not section.rates_used:
-            raise ConfigError(
-                f"{where}: link.{key}: only used when link.mac = 'free' or link.codec = "
-                "'changeset'"
-            )
+            when = "link.mac = 'free' or link.codec = 'changeset'"
+            raise ConfigError(f"{where}: link.{key}: only used when {when}")
     return section
 
 
-def _check_name(value: object, known: Sequence[str], where: str, key: str, what: str) -> None:
+def _check_name(
+    value: object, known: Sequence[str], where: str, key: str, what: str, context: str = ""
+) -> None:
     if value not in known:
-        raise ConfigError(f"{where}: {key}: unknown {what} {value!r} (known: {', '.join(known)})")
+        listed = ", ".join(known)
+        raise ConfigError(f"{where}: {key}: unknown {what} {value!r}{context} (known: {listed})")
 
 
 def _merge(base: Mapping[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
