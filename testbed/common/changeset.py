@@ -187,7 +187,8 @@ class ChangeSetCodec:
         """The compiled field codec of a registered type id (KeyError if unregistered)."""
         codec = self._codecs.get(type_id)
         if codec is None:
-            codec = self._codecs[type_id] = compile_codec(self._registry.by_id(type_id))
+            entry = self._registry.entry_by_id(type_id)
+            codec = self._codecs[type_id] = compile_codec(entry.cls, entry.fields)
         return codec
 
     def check_fits(self, entry: Registration) -> None:

@@ -490,9 +490,14 @@ class FieldCodec:
 
     __slots__ = ("_flat", "_pack", "_root", "_unpack", "cls", "fixed_size")
 
-    def __init__(self, cls: type[Any]) -> None:
+    def __init__(self, cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None) -> None:
         """Compile the layout of ``cls`` (see :func:`compile_codec`)."""
-        root = _compile(cls, cls.__qualname__)
+        if fields is None:
+            root = _compile(cls, cls.__qualname__)
+        else:
+            children = [_compile(kind, f"{cls.__qualname__}.{name}") for name, kind in fields]
+            names = [name for name, _ in fields]
+            root = _Composite(children, _field_getter(cls, names), cls)
         assert isinstance(root, _Composite)
         self.cls = cls
         self._root = root
@@ -547,14 +552,18 @@ class FieldCodec:
         return value
 
 
-def compile_codec(cls: type[Any]) -> FieldCodec:
+def compile_codec(
+    cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None
+) -> FieldCodec:
     """Compile the field codec of a component type once; reuse it for every value.
 
     Args:
         cls: a frozen dataclass whose field types the component registry accepts.
+        fields: its ``(name, resolved type)`` pairs in declaration order, as in
+            :attr:`~testbed.ecs.Registration.fields`; resolved from ``cls`` if omitted.
 
     Raises:
         TypeError: a field type has no codec (an enum with values neither all int nor all str
             or outside i64, or a type the registry would not have accepted).
     """
-    return FieldCodec(cls)
+    return FieldCodec(cls, fields)
