@@ -328,7 +328,8 @@ class Allocator:
         current_of = self._current_table.many
         cap = self._cap_active
         currents: list[float] | None = None
-        if dt_s is None or not self._surely_within(len(f), f_max, f_min, cap):
+        low_ok, high_ok = self._within_cap_band
+        if dt_s is None or not (low_ok <= f_min and f_max <= high_ok):
             currents = current_of(f)
             total = sum(currents)
             if total > cap:
@@ -365,17 +366,6 @@ class Allocator:
             for pulse, sign, offset in zip(pulses, self._pwm_sign, self._pwm_offset, strict=True)
         ]
         return f, pwm, currents, scale
-
-    def _surely_within(self, n: int, f_max: float, f_min: float, cap_a: float) -> bool:
-        """Whether Σ I(f_i) ≤ ``cap_a`` follows from the n forces' extremes alone.
-
-        With I rising in |F| on both sides of 0 N, Σ I(f_i) ≤ n·max(I(max f), I(min f)); the
-        1e-9 margin covers the rounding of the float sum. False means "compute the sum".
-        """
-        if not self._current_monotone:
-            return False
-        high, low = self._current_table.many((f_max, f_min))
-        return n * (high if high > low else low) * (1.0 + 1e-9) <= cap_a
 
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.
@@ -467,8 +457,31 @@ class Allocator:
         self._stuck_force_list = stuck_forces.tolist()
         self._stuck_current_list = self._stuck_currents.tolist()
         self._cap_active = self._current_limit_a - float(self._stuck_currents.sum())
+        self._within_cap_band = self._cap_band()
         self._previous = (np.array(self._previous) * commandable).tolist()
         self._axis_maxima = None
+
+    def _cap_band(self) -> tuple[float, float]:
+        """(low, high) forces [N] within which n thrusters surely stay under the current cap.
+
+        With I rising in |F| on both sides of 0 N, forces all in [low, high] draw at most
+        n·max(I(low), I(high)); the band's ends are table rows with I ≤ cap / (n·(1 + 1e-9)) (the
+        margin covers the rounding of the float sum). Lets the per-frame path skip a
+        current sum that cannot bind. An empty band (nothing skipped) when I is not so shaped.
+        """
+        forces, currents = self._force_axis.tolist(), self._current_axis.tolist()
+        empty = (math.inf, -math.inf)
+        if not self._current_monotone or 0.0 not in forces:
+            return empty
+        budget = self._cap_active / (self._n * (1.0 + 1e-9))
+        low = high = forces.index(0.0)
+        if not currents[low] <= budget:
+            return empty
+        while low > 0 and currents[low - 1] <= budget:
+            low -= 1
+        while high + 1 < len(forces) and currents[high + 1] <= budget:
+            high += 1
+        return (forces[low], forces[high])
 
     def _solve_lsq(self, m: np.ndarray) -> np.ndarray:
         """Bounded least squares: min ‖T f - m‖ (+ a 1e-4 ‖f‖ tie-break) on the force limits."""
