@@ -1,0 +1,160 @@
+"""Run metrics: pure functions from recorded series to the numbers in ``metrics.json``.
+
+Nothing here simulates; the runner records, these functions reduce. Every function takes plain
+sequences or arrays and returns floats or small dicts of floats, so each can be checked against
+closed forms on hand-made inputs (tests/test_metrics.py).
+
+Age of information. A receiver that holds the latest update it applied, where update ``i`` was
+*sampled* at ``s_i`` and *applied* at ``a_i`` (``a_i ≥ s_i``, increasing), holds at time ``t``
+information of age ``Δ(t) = t − s_k`` with ``k`` the last update applied by ``t``. Its time
+average over ``[t0, t1]`` is ``(1/(t1 − t0)) ∫ Δ(t) dt``, computed exactly: on each interval
+between applications the age grows linearly, so each contributes a trapezoid.
+
+For periodic updates every ``T`` seconds, each delivered independently with probability ``q``,
+and applied a delay ``D`` after sampling (``D`` = latency + the wait for the receiver's tick),
+the intervals between applications are ``K·T`` with ``K`` geometric, ``P(K = k) = q(1 − q)^(k−1)``,
+``E[K] = 1/q`` and ``E[K²] = (2 − q)/q²``. The age at an application is ``D``; over the following
+interval it grows linearly, so by the renewal-reward theorem
+
+    E[Δ] = E[D] + E[(K·T)²] / (2·E[K·T]) = E[D] + T·(2 − q) / (2·q).
+
+With no loss (``q = 1``) this is ``D + T/2``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "age_of_information",
+    "aoi_periodic_closed_form",
+    "distribution",
+    "signal_lag_s",
+    "summary",
+]
+
+
+def summary(values: Sequence[float]) -> dict[str, float]:
+    """``{mean, p50, p95, max, n}`` of ``values`` (NaN statistics and n 0 when empty)."""
+    if len(values) == 0:
+        nan = math.nan
+        return {"mean": nan, "p50": nan, "p95": nan, "max": nan, "n": 0}
+    array = np.asarray(values, dtype=float)
+    return {
+        "mean": float(array.mean()),
+        "p50": float(np.percentile(array, 50)),
+        "p95": float(np.percentile(array, 95)),
+        "max": float(array.max()),
+        "n": int(array.size),
+    }
+
+
+def distribution(values: Sequence[float]) -> dict[str, float]:
+    """``{mean, std, p95}`` of ``values``; p95 of the absolute value (an error bound)."""
+    if len(values) == 0:
+        return {"mean": math.nan, "std": math.nan, "p95": math.nan}
+    array = np.asarray(values, dtype=float)
+    return {
+        "mean": float(array.mean()),
+        "std": float(array.std()),
+        "p95": float(np.percentile(np.abs(array), 95)),
+    }
+
+
+def age_of_information(
+    updates: Sequence[tuple[float, float]], t0_s: float, t1_s: float, grid_s: float = 0.01
+) -> dict[str, float]:
+    """Time-average and 95th percentile of the age of the information a receiver holds.
+
+    Args:
+        updates: ``(applied_s, sampled_s)`` of each update the receiver applied, in application
+            order; an update sampled earlier than the one held is ignored (it does not make
+            the held information newer).
+        t0_s: start of the window [s]; the update held then is the last applied at or before it.
+        t1_s: end of the window [s], > ``t0_s``.
+        grid_s: step of the uniform grid the 95th percentile is read on [s].
+
+    Returns:
+        ``{"mean", "p95"}`` [s]; ``inf`` for both if nothing was held at ``t0_s`` and nothing
+        arrived (the mean covers only the time something was held otherwise).
+    """
+    if t1_s <= t0_s:
+        raise ValueError(f"empty window [{t0_s}, {t1_s}]")
+    held: list[tuple[float, float]] = []  # (from_s, sampled_s) segments, newest sample wins
+    newest = -math.inf
+    for applied_s, sampled_s in updates:
+        if sampled_s <= newest:
+            continue
+        newest = sampled_s
+        start = max(applied_s, t0_s)
+        if held and start <= held[-1][0]:
+            held[-1] = (held[-1][0], sampled_s)  # several updates at once: the newest counts
+        elif start < t1_s or not held or applied_s <= t0_s:
+            held.append((start, sampled_s))
+    held = [seg for seg in held if seg[0] < t1_s]
+    if not held:
+        return {"mean": math.inf, "p95": math.inf}
+    area = 0.0
+    for k, (start, sampled) in enumerate(held):
+        end = held[k + 1][0] if k + 1 < len(held) else t1_s
+        area += 0.5 * ((end - sampled) ** 2 - (start - sampled) ** 2)
+    covered = t1_s - held[0][0]
+    grid = np.arange(held[0][0], t1_s, grid_s)
+    starts = np.array([s for s, _ in held])
+    sampled = np.array([s for _, s in held])
+    index = np.searchsorted(starts, grid, side="right") - 1
+    ages = grid - sampled[index]
+    return {"mean": area / covered, "p95": float(np.percentile(ages, 95))}
+
+
+def aoi_periodic_closed_form(period_s: float, delivery_probability: float, delay_s: float) -> float:
+    """Mean age of periodic updates with independent losses: ``D + T(2 − q)/(2q)`` [s]."""
+    q = delivery_probability
+    if not 0.0 < q <= 1.0:
+        raise ValueError(f"delivery probability must be in (0, 1], got {q}")
+    return delay_s + period_s * (2.0 - q) / (2.0 * q)
+
+
+def signal_lag_s(
+    t_s: Sequence[float] | np.ndarray,
+    commanded: Sequence[float] | np.ndarray,
+    received: Sequence[float] | np.ndarray,
+    max_lag_s: float = 5.0,
+) -> float:
+    """The delay that best aligns ``received`` with ``commanded`` (cross-correlation) [s].
+
+    Both signals are sampled at the same uniform times ``t_s``. The lag maximising the
+    normalised cross-correlation of the mean-removed signals over ``[0, max_lag_s]`` is found
+    on the grid and refined by a parabola through the peak and its neighbours.
+
+    Returns:
+        The lag [s], or NaN when either signal is constant (nothing to align).
+    """
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(commanded, dtype=float)
+    b = np.asarray(received, dtype=float)
+    if t.size < 3:
+        return math.nan
+    dt = float(t[1] - t[0])
+    a = a - a.mean()
+    b = b - b.mean()
+    if not a.any() or not b.any():
+        return math.nan
+    max_shift = min(round(max_lag_s / dt), t.size - 2)
+    scores = np.empty(max_shift + 1)
+    for shift in range(max_shift + 1):
+        x = a[: a.size - shift]
+        y = b[shift:]
+        denom = math.sqrt(float(x @ x) * float(y @ y))
+        scores[shift] = float(x @ y) / denom if denom > 0.0 else -math.inf
+    k = int(np.argmax(scores))
+    offset = 0.0
+    if 0 < k < max_shift:
+        left, mid, right = scores[k - 1], scores[k], scores[k + 1]
+        curvature = left - 2.0 * mid + right
+        if curvature < 0.0:
+            offset = 0.5 * (left - right) / curvature
+    return (k + offset) * dt
