@@ -98,15 +98,15 @@ def age_of_information(
     if not held:
         return {"mean": math.inf, "p95": math.inf}
     area = 0.0
-    for k, (start, sampled) in enumerate(held):
+    for k, (start, sampled_s) in enumerate(held):
         end = held[k + 1][0] if k + 1 < len(held) else t1_s
-        area += 0.5 * ((end - sampled) ** 2 - (start - sampled) ** 2)
+        area += 0.5 * ((end - sampled_s) ** 2 - (start - sampled_s) ** 2)
     covered = t1_s - held[0][0]
     grid = np.arange(held[0][0], t1_s, grid_s)
     starts = np.array([s for s, _ in held])
-    sampled = np.array([s for _, s in held])
+    sample_times = np.array([s for _, s in held])
     index = np.searchsorted(starts, grid, side="right") - 1
-    ages = grid - sampled[index]
+    ages = grid - sample_times[index]
     return {"mean": area / covered, "p95": float(np.percentile(ages, 95))}
 
 
