@@ -448,9 +448,11 @@ class World:
         origin: Origin | None = None,
     ) -> Iterator[tuple[Entity, C]]:
         """Like :meth:`query` with one type, yielding ``(entity, component)`` unwrapped."""
+        if since is None:  # the common case, checked inline (systems poll every frame)
+            column = self._columns.get(cls) or self._new_column(cls)
+            return scan_one(column, changed, added, self.last_run_tick, origin, packed=False)
         column = self._query_column(cls, changed, added, since)
-        tick = self.last_run_tick if since is None else since
-        return scan_one(column, changed, added, tick, origin, packed=False)
+        return scan_one(column, changed, added, since, origin, packed=False)
 
     def single(self, cls: type[C]) -> tuple[Entity, C]:
         """The one entity having ``cls``, with its component.

@@ -169,7 +169,7 @@ class Imu:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return self._clock.due(time_s)
+        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
 
     def sample(
         self, time_s: float, quaternion_wxyz: Quaternion, rates_rad_s: Sequence[float]
@@ -254,7 +254,7 @@ class DepthSensor:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return self._clock.due(time_s)
+        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
 
     def sample(self, time_s: float, depth_m: float) -> DepthReading:
         """Measure the true depth [m, positive down] now (and schedule the next reading)."""
@@ -308,7 +308,7 @@ class PositionFix:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return self._clock.due(time_s)
+        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
 
     def sample(self, time_s: float, position_ned_m: Sequence[float]) -> PositionReading:
         """Measure the true (3,) NED position [m] now (and schedule the next reading)."""
