@@ -97,7 +97,6 @@ _HEADER = struct.Struct(">BBHB")
 HEADER_SIZE = _HEADER.size
 """Payload header: version, side, sequence, entry count [B]."""
 _KIND_ENTITY = struct.Struct(">BI")
-_TYPE_ID = struct.Struct(">H")
 _VALUED = struct.Struct(">BIHB")
 _REMOVED = struct.Struct(">BIH")
 MAX_VALUE_SIZE = 255
@@ -154,6 +153,24 @@ class ChangeSet:
     entries: tuple[ChangeEntry, ...]
 
 
+class _TypeInfo:
+    """One registered type as the codec uses it: class, owner and compiled field codec."""
+
+    __slots__ = ("cls", "codec", "decode", "encode", "owner")
+
+    def __init__(self, entry: Registration) -> None:
+        self.cls = entry.cls
+        self.owner = entry.owner
+        self.codec = compile_codec(entry.cls, entry.fields)
+        self.encode = self.codec.encode
+        self.decode = self.codec.decode
+
+
+# A parsed entry: kind code, sender entity id, type (None for a despawn), value (or None).
+_Entry = tuple[int, int, _TypeInfo | None, object]
+_Parsed = tuple[Side, int, list[_Entry]]
+
+
 class ChangeSetCodec:
     """Change sets ⇄ payloads for one registry; field codecs compiled once per type.
 
@@ -167,35 +184,40 @@ class ChangeSetCodec:
         TypeError: a registered type has no field codec (see :func:`compile_codec`).
     """
 
-    __slots__ = ("_codecs", "_registry", "max_payload")
+    __slots__ = ("_registry", "_types", "max_payload", "max_value_size")
 
     def __init__(self, registry: ComponentRegistry, *, max_payload: int = MAX_PAYLOAD) -> None:
         if max_payload < MIN_PAYLOAD:
             raise ValueError(f"max_payload must be at least {MIN_PAYLOAD} B, got {max_payload}")
         self._registry = registry
-        self._codecs: dict[int, FieldCodec] = {}
+        self._types: dict[int, _TypeInfo] = {}
         self.max_payload = max_payload
-        for entry in registry:  # compile now: a type without a codec is a local error
-            self.field_codec(entry.type_id)
-
-    @property
-    def max_value_size(self) -> int:
+        self.max_value_size = min(MAX_VALUE_SIZE, max_payload - MIN_PAYLOAD)
         """The largest encoded value one entry can carry at this ``max_payload`` [B]."""
-        return min(MAX_VALUE_SIZE, self.max_payload - MIN_PAYLOAD)
+        for entry in registry:  # compile now: a type without a codec is a local error
+            self._info(entry.type_id)
 
     def field_codec(self, type_id: int) -> FieldCodec:
         """The compiled field codec of a registered type id (KeyError if unregistered)."""
-        codec = self._codecs.get(type_id)
-        if codec is None:
-            entry = self._registry.entry_by_id(type_id)
-            codec = self._codecs[type_id] = compile_codec(entry.cls, entry.fields)
-        return codec
+        return self._info(type_id).codec
+
+    def _info(self, type_id: int) -> _TypeInfo:
+        info = self._types.get(type_id)
+        if info is None:
+            info = self._types[type_id] = _TypeInfo(self._registry.entry_by_id(type_id))
+        return info
 
     def check_fits(self, entry: Registration) -> None:
         """Raise ValueError if a fixed-size type's values can never fit one entry."""
         size = self.field_codec(entry.type_id).fixed_size
         if size is not None and size > self.max_value_size:
             raise ValueError(self._too_big(entry.cls, size))
+
+    def _too_big(self, cls: type[Any], size: int) -> str:
+        return (
+            f"{cls.__qualname__} encodes to {size} B; one change-set entry carries at most "
+            f"{self.max_value_size} B at max_payload={self.max_payload}"
+        )
 
     def encode(self, changes: Iterable[Change], side: Side, first_sequence: int) -> list[bytes]:
         """Payloads carrying ``changes`` in order, split between entries to fit ``max_payload``.
@@ -210,51 +232,48 @@ class ChangeSetCodec:
             The payloads; none for no changes.
 
         Raises:
-            ValueError: an entity id beyond u32, or a value that does not fit one entry (the
-                type is named), or one the field codec cannot encode.
+            ValueError: an entity id beyond u32, a change without a type id, a value that does
+                not fit one entry (the type is named), or one its field codec cannot encode.
+            KeyError: a type id that is not registered.
         """
         side_code = _SIDE_CODES[side]
         limit = self.max_payload - HEADER_SIZE
+        max_value = self.max_value_size
+        types = self._types
+        pack_valued, pack_removed, pack_despawned = _VALUED.pack, _REMOVED.pack, _KIND_ENTITY.pack
+        added, despawned, removed = ChangeKind.ADDED, ChangeKind.DESPAWNED, ChangeKind.REMOVED
         payloads: list[bytes] = []
-        body = bytearray()
-        count = 0
+        body: list[bytes] = []
+        used = 0
         for change in changes:
-            entry = self._encode_entry(change)
-            if count and (len(body) + len(entry) > limit or count == MAX_ENTRIES):
-                sequence = (first_sequence + len(payloads)) % _SEQUENCE_MOD
-                payloads.append(_HEADER.pack(WIRE_VERSION, side_code, sequence, count) + body)
-                body = bytearray()
-                count = 0
-            body += entry
-            count += 1
-        if count:
-            sequence = (first_sequence + len(payloads)) % _SEQUENCE_MOD
-            payloads.append(_HEADER.pack(WIRE_VERSION, side_code, sequence, count) + body)
+            entity = change.entity
+            if not 0 <= entity <= _U32_MAX:
+                raise ValueError(f"entity id {entity} does not fit the u32 of a change-set entry")
+            kind = change.kind
+            if kind is despawned:
+                entry = pack_despawned(_DESPAWNED, entity)
+            else:
+                type_id = change.type_id
+                if type_id is None:
+                    raise ValueError(f"{kind.name} change without a type id: {change!r}")
+                info = types.get(type_id) or self._info(type_id)
+                if kind is removed:
+                    entry = pack_removed(_REMOVED_CODE, entity, type_id)
+                else:
+                    value = info.encode(change.value)
+                    if len(value) > max_value:
+                        raise ValueError(self._too_big(info.cls, len(value)))
+                    code = _ADDED if kind is added else _CHANGED
+                    entry = pack_valued(code, entity, type_id, len(value)) + value
+            if body and (used + len(entry) > limit or len(body) == MAX_ENTRIES):
+                payloads.append(_payload(side_code, first_sequence + len(payloads), body))
+                body = []
+                used = 0
+            body.append(entry)
+            used += len(entry)
+        if body:
+            payloads.append(_payload(side_code, first_sequence + len(payloads), body))
         return payloads
-
-    def _encode_entry(self, change: Change) -> bytes:
-        entity = change.entity
-        if not 0 <= entity <= _U32_MAX:
-            raise ValueError(f"entity id {entity} does not fit the u32 of a change-set entry")
-        kind = change.kind
-        if kind is ChangeKind.DESPAWNED:
-            return _KIND_ENTITY.pack(_DESPAWNED, entity)
-        type_id = change.type_id
-        if type_id is None:
-            raise ValueError(f"{kind.name} change without a type id: {change!r}")
-        if kind is ChangeKind.REMOVED:
-            return _REMOVED.pack(_REMOVED_CODE, entity, type_id)
-        codec = self.field_codec(type_id)
-        value = codec.encode(change.value)
-        if len(value) > self.max_value_size:
-            raise ValueError(self._too_big(codec.cls, len(value)))
-        return _VALUED.pack(_KIND_CODES[kind], entity, type_id, len(value)) + value
-
-    def _too_big(self, cls: type[Any], size: int) -> str:
-        return (
-            f"{cls.__qualname__} encodes to {size} B; one change-set entry carries at most "
-            f"{self.max_value_size} B at max_payload={self.max_payload}"
-        )
 
     def decode(self, payload: bytes) -> ChangeSet | MalformedPayload:
         """Parse one payload completely; never raises on any bytes.
@@ -262,12 +281,27 @@ class ChangeSetCodec:
         Returns:
             The change set, or :class:`~testbed.protocol.MalformedPayload` saying what was wrong.
         """
+        parsed = self._parse(payload)
+        if isinstance(parsed, MalformedPayload):
+            return parsed
+        side, sequence, entries = parsed
+        return ChangeSet(
+            side,
+            sequence,
+            tuple(
+                ChangeEntry(_KINDS[code], entity, None if info is None else info.cls, value)
+                for code, entity, info, value in entries
+            ),
+        )
+
+    def _parse(self, payload: bytes) -> _Parsed | MalformedPayload:
+        """Like :meth:`decode`, as plain tuples (the receiver's hot path)."""
         try:
-            return self._decode(payload)
+            return self._parse_entries(payload)
         except (FieldDecodeError, struct.error) as err:
             return MalformedPayload(str(err))
 
-    def _decode(self, payload: bytes) -> ChangeSet | MalformedPayload:
+    def _parse_entries(self, payload: bytes) -> _Parsed | MalformedPayload:
         size = len(payload)
         if size < HEADER_SIZE:
             return MalformedPayload(f"{size} B is shorter than the {HEADER_SIZE} B header")
@@ -277,43 +311,58 @@ class ChangeSetCodec:
         side = _SIDES.get(side_code)
         if side is None:
             return MalformedPayload(f"unknown sender side {side_code}")
-        registry = self._registry
-        entries: list[ChangeEntry] = []
+        types = self._types
+        unpack_valued, unpack_removed = _VALUED.unpack_from, _REMOVED.unpack_from
+        entries: list[_Entry] = []
         pos = HEADER_SIZE
         for index in range(count):
-            if pos + _KIND_ENTITY.size > size:
-                return MalformedPayload(f"entry {index} of {count} truncated")
-            code, entity = _KIND_ENTITY.unpack_from(payload, pos)
-            pos += _KIND_ENTITY.size
-            kind = _KINDS.get(code)
-            if kind is None:
+            code = payload[pos] if pos < size else 0
+            if code in (_ADDED, _CHANGED):
+                if pos + _VALUED.size > size:
+                    return MalformedPayload(f"entry {index} of {count}: truncated header")
+                _, entity, type_id, length = unpack_valued(payload, pos)
+                start = pos + _VALUED.size
+                pos = start + length
+                if pos > size:
+                    return MalformedPayload(f"entry {index}: value of {length} B truncated")
+                info = types.get(type_id) or self._known(type_id)
+                if info is None:
+                    return MalformedPayload(f"entry {index}: unknown type id {type_id}")
+                entries.append((code, entity, info, info.decode(payload[start:pos])))
+            elif code == _REMOVED_CODE:
+                if pos + _REMOVED.size > size:
+                    return MalformedPayload(f"entry {index} of {count}: truncated header")
+                _, entity, type_id = unpack_removed(payload, pos)
+                pos += _REMOVED.size
+                info = types.get(type_id) or self._known(type_id)
+                if info is None:
+                    return MalformedPayload(f"entry {index}: unknown type id {type_id}")
+                entries.append((code, entity, info, None))
+            elif code == _DESPAWNED:
+                if pos + _KIND_ENTITY.size > size:
+                    return MalformedPayload(f"entry {index} of {count}: truncated header")
+                _, entity = _KIND_ENTITY.unpack_from(payload, pos)
+                pos += _KIND_ENTITY.size
+                entries.append((code, entity, None, None))
+            elif pos >= size:
+                return MalformedPayload(f"entry {index} of {count}: truncated")
+            else:
                 return MalformedPayload(f"entry {index}: unknown kind {code}")
-            if kind is ChangeKind.DESPAWNED:
-                entries.append(ChangeEntry(kind, entity, None, None))
-                continue
-            if pos + 2 > size:
-                return MalformedPayload(f"entry {index}: truncated type id")
-            (type_id,) = _TYPE_ID.unpack_from(payload, pos)
-            pos += 2
-            try:
-                cls = registry.by_id(type_id)
-            except KeyError:
-                return MalformedPayload(f"entry {index}: unknown type id {type_id}")
-            if kind is ChangeKind.REMOVED:
-                entries.append(ChangeEntry(kind, entity, cls, None))
-                continue
-            if pos >= size:
-                return MalformedPayload(f"entry {index}: truncated value length")
-            length = payload[pos]
-            start = pos + 1
-            pos = start + length
-            if pos > size:
-                return MalformedPayload(f"entry {index}: value of {length} B truncated")
-            value = self.field_codec(type_id).decode(payload[start:pos])
-            entries.append(ChangeEntry(kind, entity, cls, value))
         if pos != size:
             return MalformedPayload(f"{size - pos} trailing bytes after {count} entries")
-        return ChangeSet(side, sequence, tuple(entries))
+        return side, sequence, entries
+
+    def _known(self, type_id: int) -> _TypeInfo | None:
+        """The type registered under ``type_id`` (compiled on first use), or None."""
+        try:
+            return self._info(type_id)
+        except (KeyError, TypeError):  # TypeError: registered since, but has no codec
+            return None
+
+
+def _payload(side_code: int, sequence: int, body: list[bytes]) -> bytes:
+    header = _HEADER.pack(WIRE_VERSION, side_code, sequence % _SEQUENCE_MOD, len(body))
+    return header + b"".join(body)
 
 
 class ChangeSetSender:
@@ -521,35 +570,26 @@ class ChangeSetReceiver:
         """
         if not isinstance(payload, bytes | bytearray | memoryview):
             raise TypeError(f"payload must be bytes, got {type(payload).__qualname__}")
-        decoded = self._codec.decode(bytes(payload))
-        if isinstance(decoded, MalformedPayload):
+        parsed = self._codec._parse(bytes(payload))  # same module: the tuple fast path
+        if isinstance(parsed, MalformedPayload):
             self.malformed += 1
-            return ApplyResult(ApplyStatus.MALFORMED, None, reason=decoded.reason)
-        lost = self._track(decoded.sequence)
-        reason = self._ownership_violation(decoded)
+            return ApplyResult(ApplyStatus.MALFORMED, None, reason=parsed.reason)
+        side, sequence, entries = parsed
+        lost = self._track(sequence)
+        reason = self._ownership_violation(side, entries)
         if reason:
             self.rejected_ownership += 1
-            return ApplyResult(
-                ApplyStatus.REJECTED_OWNERSHIP, decoded.sequence, lost=lost, reason=reason
-            )
+            return ApplyResult(ApplyStatus.REJECTED_OWNERSHIP, sequence, lost=lost, reason=reason)
         mirrors = self._mirrors
-        new = {
-            e.entity
-            for e in decoded.entries
-            if e.kind in (ChangeKind.ADDED, ChangeKind.CHANGED) and e.entity not in mirrors
-        }
+        new = {entity for code, entity, _, _ in entries if code <= _CHANGED} - mirrors.keys()
         if len(mirrors) + len(new) > self._max_entities:
             self.rejected_capacity += 1
             reason = f"{len(new)} new entities would pass the bound of {self._max_entities}"
-            return ApplyResult(
-                ApplyStatus.REJECTED_CAPACITY, decoded.sequence, lost=lost, reason=reason
-            )
-        spawned = self._write(decoded.entries)
+            return ApplyResult(ApplyStatus.REJECTED_CAPACITY, sequence, lost=lost, reason=reason)
+        spawned = self._write(entries)
         self.payloads_applied += 1
-        self.entries_applied += len(decoded.entries)
-        return ApplyResult(
-            ApplyStatus.APPLIED, decoded.sequence, len(decoded.entries), spawned, lost
-        )
+        self.entries_applied += len(entries)
+        return ApplyResult(ApplyStatus.APPLIED, sequence, len(entries), spawned, lost)
 
     def _track(self, sequence: int) -> int:
         """Update the sequence expectation; return the gap before ``sequence``."""
@@ -564,37 +604,36 @@ class ChangeSetReceiver:
         self.lost_payloads += gap
         return gap
 
-    def _ownership_violation(self, decoded: ChangeSet) -> str:
-        if decoded.side is self._side:
-            return f"payload claims to come from this node's own side ({self._side.name})"
-        owner_of = self._registry.owner_of
-        for entry in decoded.entries:
-            if entry.component is not None and owner_of(entry.component) is not decoded.side:
-                return f"{decoded.side.name} may not write {entry.component.__qualname__}"
+    def _ownership_violation(self, side: Side, entries: list[_Entry]) -> str:
+        if side is self._side:
+            return f"payload claims to come from this node's own side ({side.name})"
+        for _, _, info, _ in entries:
+            if info is not None and info.owner is not side:
+                return f"{side.name} may not write {info.cls.__qualname__}"
         return ""
 
-    def _write(self, entries: tuple[ChangeEntry, ...]) -> int:
-        """Apply decoded, checked entries in order; return the mirrors spawned."""
+    def _write(self, entries: list[_Entry]) -> int:
+        """Apply parsed, checked entries in order; return the mirrors spawned."""
         world = self._world
         mirrors = self._mirrors
         remote = Origin.REMOTE
         spawned = 0
-        for entry in entries:
-            local = mirrors.get(entry.entity)
+        for code, entity, info, value in entries:
+            local = mirrors.get(entity)
             if local is not None and not world.is_alive(local):
-                del mirrors[entry.entity]  # despawned here by a local system
+                del mirrors[entity]  # despawned here by a local system
                 local = None
-            if entry.kind is ChangeKind.DESPAWNED:
-                if local is not None:
-                    world.despawn(local, origin=remote)
-                    del mirrors[entry.entity]
-            elif entry.kind is ChangeKind.REMOVED:
-                if local is not None:
-                    assert entry.component is not None  # decoded REMOVED entries carry one
-                    world.remove(local, entry.component, origin=remote)
-            else:
+            if code <= _CHANGED:
                 if local is None:
-                    local = mirrors[entry.entity] = world.spawn(Replicate(), origin=remote)
+                    local = mirrors[entity] = world.spawn(Replicate(), origin=remote)
                     spawned += 1
-                world.set(local, entry.value, origin=remote)
+                world.set(local, value, origin=remote)
+            elif local is None:
+                continue  # removal or despawn of an entity never seen (or gone): nothing to do
+            elif code == _DESPAWNED:
+                world.despawn(local, origin=remote)
+                del mirrors[entity]
+            else:
+                assert info is not None  # parsed REMOVED entries carry their type
+                world.remove(local, info.cls, origin=remote)
         return spawned

@@ -9,7 +9,8 @@ order, big-endian, without padding.
 Value layout, by field type:
 
 ==========================  ==============================================================
-``bool``                    1 byte: ``0x00`` False, ``0x01`` True (any other byte is malformed)
+``bool``                    1 byte: ``0x00`` False, ``0x01`` True, written by truth value
+                            (reading any other byte is malformed)
 ``int``                     8 bytes, signed two's complement (i64). Values outside
                             −2⁶³ … 2⁶³−1 cannot be encoded (``ValueError``). A fixed width
                             rather than a zigzag varint: every all-fixed layout then packs
@@ -149,19 +150,23 @@ class _Bool(_Node):
 class _IntEnum(_Node):
     """Enum with int values: its value as an i64."""
 
-    __slots__ = ("cls",)
+    __slots__ = ("cls", "members", "values")
 
     def __init__(self, cls: type[enum.Enum]) -> None:
         super().__init__("q")
         self.cls = cls
+        self.values = {member: member.value for member in cls}
+        self.members = {member.value: member for member in cls}
 
     def flatten(self, value: Any, out: list[Any]) -> None:
-        if not isinstance(value, self.cls):
-            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}")
-        out.append(value.value)
+        try:
+            out.append(self.values[value])
+        except (KeyError, TypeError):
+            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}") from None
 
     def build(self, values: Sequence[Any], i: int) -> Any:
-        return self.cls(values[i])
+        member = self.members.get(values[i])
+        return self.cls(values[i]) if member is None else member  # flags: composite values
 
 
 class _Str(_Node):
@@ -244,7 +249,7 @@ class _Composite(_Node):
         make: child values → the value.
     """
 
-    __slots__ = ("children", "make", "parts", "segments")
+    __slots__ = ("children", "make", "parts", "segments", "steps")
 
     def __init__(
         self,
@@ -261,19 +266,17 @@ class _Composite(_Node):
         self.parts = parts
         self.make = make
         self.segments = _segments(self.children)
+        self.steps = tuple(_Step(child) for child in self.children)
 
     def flatten(self, value: Any, out: list[Any]) -> None:
-        for child, part in zip(self.children, self.parts(value), strict=True):
-            if child.plain_out:
-                out.append(part)
-            else:
-                child.flatten(part, out)
+        for step, part in zip(self.steps, self.parts(value), strict=True):
+            step.flatten(part, out)
 
     def build(self, values: Sequence[Any], i: int) -> Any:
         args = []
-        for child in self.children:
-            args.append(values[i] if child.plain_in else child.build(values, i))
-            i += child.width
+        for step in self.steps:
+            args.append(step.build(values, i))
+            i += step.width
         return self.make(*args)
 
     def write(self, value: Any, out: bytearray) -> None:
@@ -286,11 +289,8 @@ class _Composite(_Node):
                 self.children[start].write(parts[start], out)
             else:
                 flat: list[Any] = []
-                for child, part in zip(self.children[start:stop], parts[start:stop], strict=True):
-                    if child.plain_out:
-                        flat.append(part)
-                    else:
-                        child.flatten(part, flat)
+                for step, part in zip(self.steps[start:stop], parts[start:stop], strict=True):
+                    step.flatten(part, flat)
                 out += packer[0].pack(*flat)
 
     def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
@@ -306,10 +306,57 @@ class _Composite(_Node):
                 values = unpacker.unpack_from(buf, pos)
                 pos += unpacker.size
                 i = 0
-                for child in self.children[start:stop]:
-                    args.append(values[i] if child.plain_in else child.build(values, i))
-                    i += child.width
+                for step in self.steps[start:stop]:
+                    args.append(step.build(values, i))
+                    i += step.width
         return self.make(*args), pos
+
+
+class _Step:
+    """How a composite flattens and builds one fixed child, with the common cases inlined.
+
+    Plain scalars are appended and read as they are; a fixed tuple of plain items is spread
+    into the flat form (after a shape check) and read back as one slice; anything else goes
+    through the child's own ``flatten``/``build``.
+    """
+
+    __slots__ = ("build", "child", "flatten", "width")
+
+    def __init__(self, child: _Node) -> None:
+        self.child = child
+        self.width = child.width
+        spread = isinstance(child, _Composite) and child.make is _make_tuple
+        items = child.children if isinstance(child, _Composite) else ()
+        self.flatten: Callable[[Any, list[Any]], None]
+        self.build: Callable[[Sequence[Any], int], Any]
+        if child.plain_out:
+            self.flatten = _append
+        elif child.fixed and spread and all(c.plain_out for c in items):
+            self.flatten = self._spread
+        else:
+            self.flatten = child.flatten
+        if child.plain_in:
+            self.build = _index
+        elif child.fixed and spread and all(c.plain_in for c in items):
+            self.build = self._slice
+        else:
+            self.build = child.build
+
+    def _spread(self, value: Any, out: list[Any]) -> None:
+        if type(value) is not tuple or len(value) != self.width:
+            raise TypeError(f"expected a tuple of {self.width} items, got {value!r}")
+        out.extend(value)
+
+    def _slice(self, values: Sequence[Any], i: int) -> Any:
+        return tuple(values[i : i + self.width])
+
+
+def _append(value: Any, out: list[Any]) -> None:
+    out.append(value)
+
+
+def _index(values: Sequence[Any], i: int) -> Any:
+    return values[i]
 
 
 _Segment = tuple[int, int, tuple[struct.Struct, struct.Struct] | None]
@@ -338,11 +385,14 @@ def _segments(children: Sequence[_Node]) -> tuple[_Segment, ...]:
 class _VarTuple(_Node):
     """``tuple[A, ...]``: u16 item count + the items (fixed items in one struct call)."""
 
-    __slots__ = ("item",)
+    __slots__ = ("item", "packers", "unpackers")
 
     def __init__(self, item: _Node) -> None:
         super().__init__(None)
         self.item = item
+        # Structs per item count, for counts up to _CACHED_COUNT (bounded memory).
+        self.packers: dict[int, struct.Struct] = {}
+        self.unpackers: dict[int, struct.Struct] = {}
 
     def write(self, value: Any, out: bytearray) -> None:
         if not isinstance(value, tuple):
@@ -361,7 +411,8 @@ class _VarTuple(_Node):
             flat = []
             for part in value:
                 item.flatten(part, flat)
-        out += struct.pack(">H" + _repeat(item.pack_fmt, count), count, *flat)
+        packer = self.packers.get(count) or _cached(self.packers, "H", item.pack_fmt, count)
+        out += packer.pack(count, *flat)
 
     def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
         (count,) = _U16.unpack_from(buf, pos)
@@ -376,11 +427,23 @@ class _VarTuple(_Node):
         end = pos + count * item.size
         if end > len(buf):
             raise FieldDecodeError(f"{count} items announced, {len(buf) - pos} B left")
-        values = struct.unpack_from(">" + _repeat(item.unpack_fmt, count), buf, pos)
+        unpacker = self.unpackers.get(count) or _cached(self.unpackers, "", item.unpack_fmt, count)
+        values = unpacker.unpack_from(buf, pos)
         if item.plain_in:
             return values, end
         width = item.width
         return tuple(item.build(values, k * width) for k in range(count)), end
+
+
+_CACHED_COUNT = 256
+
+
+def _cached(cache: dict[int, struct.Struct], prefix: str, fmt: str, count: int) -> struct.Struct:
+    """The struct of ``prefix`` then ``count`` repetitions of ``fmt``, cached for small counts."""
+    packer = struct.Struct(">" + prefix + _repeat(fmt, count))
+    if count <= _CACHED_COUNT:
+        cache[count] = packer
+    return packer
 
 
 def _repeat(fmt: str, count: int) -> str:
@@ -488,7 +551,7 @@ class FieldCodec:
         fixed_size: the size of every encoded value [B], or None for a variable layout.
     """
 
-    __slots__ = ("_flat", "_pack", "_root", "_unpack", "cls", "fixed_size")
+    __slots__ = ("_decode", "_encode", "_pack", "_root", "_unpack", "cls", "fixed_size")
 
     def __init__(self, cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None) -> None:
         """Compile the layout of ``cls`` (see :func:`compile_codec`)."""
@@ -504,8 +567,16 @@ class FieldCodec:
         self.fixed_size: int | None = root.size if root.fixed else None
         self._pack = struct.Struct(">" + root.pack_fmt).pack
         self._unpack = struct.Struct(">" + root.unpack_fmt).unpack
-        # All-plain fixed layouts (only int/float/bool fields): the field tuple is the flat form.
-        self._flat = root.fixed and all(c.plain_out for c in root.children)
+        # The common layouts get their own straight-line paths.
+        self._encode: Callable[[Any], bytes]
+        self._decode: Callable[[Buffer], Any]
+        if not root.fixed:
+            self._encode, self._decode = self._encode_variable, self._decode_variable
+            return
+        plain_out = all(c.plain_out for c in root.children)  # only int/float/bool fields
+        plain_in = all(c.plain_in for c in root.children)  # only int/float fields
+        self._encode = self._encode_plain if plain_out else self._encode_fixed
+        self._decode = self._decode_plain if plain_in else self._decode_fixed
 
     def encode(self, value: Any) -> bytes:
         """The bytes of ``value`` (an instance of :attr:`cls`).
@@ -514,17 +585,8 @@ class FieldCodec:
             ValueError: ``value`` is not a valid instance (wrong type, int outside i64, string
                 or tuple longer than a u16 count, lone surrogate in a string…), naming the type.
         """
-        root = self._root
         try:
-            if self._flat:
-                return self._pack(*root.parts(value))
-            if root.fixed:
-                flat: list[Any] = []
-                root.flatten(value, flat)
-                return self._pack(*flat)
-            out = bytearray()
-            root.write(value, out)
-            return bytes(out)
+            return self._encode(value)
         except _ENCODE_ERRORS as err:
             raise ValueError(f"cannot encode {self.cls.__qualname__}: {err}") from err
 
@@ -536,15 +598,34 @@ class FieldCodec:
                 bytes, bad count, bad UTF-8, bad bool byte, enum value naming no member, or a
                 value the component's constructor rejects).
         """
-        root = self._root
         try:
-            if root.fixed:
-                return root.build(self._unpack(data), 0)
-            value, end = root.read(data, 0)
+            return self._decode(data)
         except FieldDecodeError:
             raise
         except _DECODE_ERRORS as err:
             raise FieldDecodeError(f"{self.cls.__qualname__}: {err}") from None
+
+    def _encode_plain(self, value: Any) -> bytes:
+        return self._pack(*self._root.parts(value))
+
+    def _encode_fixed(self, value: Any) -> bytes:
+        flat: list[Any] = []
+        self._root.flatten(value, flat)
+        return self._pack(*flat)
+
+    def _encode_variable(self, value: Any) -> bytes:
+        out = bytearray()
+        self._root.write(value, out)
+        return bytes(out)
+
+    def _decode_plain(self, data: Buffer) -> Any:
+        return self.cls(*self._unpack(data))
+
+    def _decode_fixed(self, data: Buffer) -> Any:
+        return self._root.build(self._unpack(data), 0)
+
+    def _decode_variable(self, data: Buffer) -> Any:
+        value, end = self._root.read(data, 0)
         if end != len(data):
             raise FieldDecodeError(
                 f"{self.cls.__qualname__}: {len(data) - end} trailing bytes after the value"
@@ -552,9 +633,7 @@ class FieldCodec:
         return value
 
 
-def compile_codec(
-    cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None
-) -> FieldCodec:
+def compile_codec(cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None) -> FieldCodec:
     """Compile the field codec of a component type once; reuse it for every value.
 
     Args:

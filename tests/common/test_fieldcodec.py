@@ -356,3 +356,21 @@ def test_any_bytes_decode_or_raise_field_decode_error(cls: type[Any], data: byte
         return
     assert type(value) is cls
     assert codec.encode(value) == data  # a decodable encoding is the canonical one
+
+
+def test_long_variable_tuples_round_trip() -> None:
+    codec = compile_codec(Variable)
+    value = Variable(
+        tags=(Tag.ALPHA,) * 300,
+        items=tuple(Inner(k % 3 == 0, k, k / 7) for k in range(300)),
+        words=(),
+        grid=tuple((k, -k / 3) for k in range(257)),
+        flags=tuple(k % 2 == 0 for k in range(1000)),
+        mixed=("", Color.MIN),
+        tag=Tag.ALPHA,
+        tail=0.0,
+    )
+    for _ in range(2):  # the second pass reuses what the first compiled
+        data = codec.encode(value)
+        assert len(data) == 2 + 300 * 7 + 2 + 300 * 17 + 2 + 2 + 257 * 16 + 2 + 1000 + 2 + 8 + 7 + 8
+        assert same(codec.decode(data), value)
