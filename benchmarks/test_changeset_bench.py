@@ -4,7 +4,8 @@ Every frame the vehicle changes all nine of its replicated state components (IMU
 fix, armed, mode, control targets, failsafe, command status, 8-thruster outputs), polls its
 :class:`ChangeSetSender` and the operator's :class:`ChangeSetReceiver` applies the payloads. The
 component values are built beforehand, so only ``world.set`` + poll + apply are timed. Reported as
-change sets per second and as the real-time factor of a 100 Hz replication loop. Run:
+change sets per second and as the real-time factor of a 100 Hz replication loop; a second test
+times the bytes part alone (codec encode + decode of the same nine changes, no worlds). Run:
 
     .venv/bin/python -m pytest benchmarks/test_changeset_bench.py -m benchmark --benchmark-enable
 """
@@ -16,8 +17,9 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from testbed.common import ChangeSetReceiver, ChangeSetSender
-from testbed.ecs import ComponentRegistry, Replicate, Side, World
+from testbed.common import ChangeSetCodec, ChangeSetReceiver, ChangeSetSender
+from testbed.common.changeset import ChangeSet
+from testbed.ecs import ComponentRegistry, Replicate, Side, World, replicated_changes
 from testbed.vehicle.components import (
     ActiveMode,
     Armed,
@@ -39,6 +41,11 @@ VARIANTS = 64
 FRAMES_PER_ROUND = 100
 
 
+def vec3(rng: np.random.Generator) -> tuple[float, float, float]:
+    x, y, z = rng.normal(size=3).tolist()
+    return (x, y, z)
+
+
 def vehicle_states(rng: np.random.Generator) -> list[tuple[object, ...]]:
     """``VARIANTS`` full sets of the vehicle's replicated state, all values differing."""
     states = []
@@ -50,9 +57,9 @@ def vehicle_states(rng: np.random.Generator) -> list[tuple[object, ...]]:
         forces = rng.normal(0.0, 10.0, THRUSTERS)
         states.append(
             (
-                ImuReading(t, quaternion, tuple(rng.normal(size=3).tolist())),  # type: ignore[arg-type]
+                ImuReading(t, quaternion, vec3(rng)),
                 DepthReading(t, 101325.0 + 9806.65 * k, float(k)),
-                PositionReading(t, tuple(rng.normal(size=3).tolist())),  # type: ignore[arg-type]
+                PositionReading(t, vec3(rng)),
                 Armed(k % 2 == 0),
                 ActiveMode((ControlMode.MANUAL, ControlMode.DEPTH_HOLD)[k % 2], k % 4 == 0),
                 ControlTargets(float(k), quaternion),
@@ -127,3 +134,27 @@ def test_vehicle_change_set_encode_and_apply(benchmark: pytest.FixtureDef) -> No
             f"{per_s:,.0f} change sets/s, {per_s / RATE_HZ:,.0f}× real time at {RATE_HZ:.0f} Hz, "
             f"{payloads_per_set:.0f} payloads ({bytes_per_set:.0f} B) per set"
         )
+
+
+@pytest.mark.benchmark
+def test_vehicle_change_set_codec_alone(benchmark: pytest.FixtureDef) -> None:  # type: ignore[type-arg]
+    """The bytes part alone: encode the nine changes and decode the payloads, no worlds."""
+    registry = ComponentRegistry()
+    register_components(registry)
+    world = World()
+    world.spawn(Replicate(), *vehicle_states(np.random.default_rng(20240612))[0])
+    changes = replicated_changes(world, 0, registry, side=Side.VEHICLE)
+    codec = ChangeSetCodec(registry)
+
+    def hundred_round_trips() -> None:
+        for _ in range(FRAMES_PER_ROUND):
+            for payload in codec.encode(changes, Side.VEHICLE, 0):
+                codec.decode(payload)
+
+    benchmark.pedantic(hundred_round_trips, rounds=30, warmup_rounds=2)
+    decoded = [codec.decode(p) for p in codec.encode(changes, Side.VEHICLE, 0)]
+    values = [e.value for d in decoded if isinstance(d, ChangeSet) for e in d.entries]
+    assert values == [c.value for c in changes]
+    set_s = benchmark.stats.stats.min / FRAMES_PER_ROUND
+    benchmark.extra_info["codec_round_trip_us_min"] = set_s * 1e6
+    print(f"\nvehicle change set, codec alone (min): {set_s * 1e6:.1f} µs encode+decode")
