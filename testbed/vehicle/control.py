@@ -23,6 +23,23 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
+from testbed.common.geometry import (
+    Quaternion,
+    Vec3,
+    Wrench,
+    attitude_error,
+    euler_from_quat,
+    quat_conjugate,
+    quat_from_axis_angle,
+    quat_from_euler,
+    quat_multiply,
+    quat_normalize,
+    quat_rotate,
+    quat_rotate_inverse,
+    twist_angle,
+    wrap_angle,
+    yaw_only,
+)
 from testbed.config import check
 
 __all__ = [
@@ -53,148 +70,7 @@ __all__ = [
     "yaw_only",
 ]
 
-Quaternion = tuple[float, float, float, float]
-Vec3 = tuple[float, float, float]
-Wrench = tuple[float, float, float, float, float, float]
-
-_TWO_PI = 2.0 * math.pi
 _DEG_PER_RAD = 180.0 / math.pi
-
-# --------------------------------------------------------------------------------------------
-# Quaternions (w, x, y, z), body → world.
-
-
-def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
-    """Hamilton product ``a·b`` (apply ``b`` first, then ``a``)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def quat_conjugate(q: Quaternion) -> Quaternion:
-    """The conjugate, which is the inverse of a unit quaternion."""
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def quat_normalize(q: Sequence[float]) -> Quaternion:
-    """``q`` scaled to unit norm.
-
-    Raises:
-        ValueError: ``q`` is (numerically) zero.
-    """
-    w, x, y, z = (float(v) for v in q)
-    norm = math.sqrt(w * w + x * x + y * y + z * z)
-    if norm < 1e-12:
-        raise ValueError("cannot normalise a zero quaternion")
-    return (w / norm, x / norm, y / norm, z / norm)
-
-
-def quat_rotate(q: Quaternion, v: Sequence[float]) -> Vec3:
-    """Rotate ``v`` by ``q`` (body → world for an attitude quaternion)."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    # t = 2 (q_vec × v); v' = v + w t + q_vec × t
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (
-        vx + w * tx + (y * tz - z * ty),
-        vy + w * ty + (z * tx - x * tz),
-        vz + w * tz + (x * ty - y * tx),
-    )
-
-
-def quat_rotate_inverse(q: Quaternion, v: Sequence[float]) -> Vec3:
-    """Rotate ``v`` by ``q⁻¹`` (world → body for an attitude quaternion)."""
-    return quat_rotate((q[0], -q[1], -q[2], -q[3]), v)
-
-
-def quat_from_axis_angle(axis: Sequence[float], angle_rad: float) -> Quaternion:
-    """Rotation by ``angle_rad`` about the unit vector ``axis`` (right-handed)."""
-    half = 0.5 * angle_rad
-    s = math.sin(half)
-    return (math.cos(half), axis[0] * s, axis[1] * s, axis[2] * s)
-
-
-def quat_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quaternion:
-    """Attitude from Z-Y-X (yaw, then pitch, then roll) Euler angles, body → NED."""
-    cr, sr = math.cos(0.5 * roll_rad), math.sin(0.5 * roll_rad)
-    cp, sp = math.cos(0.5 * pitch_rad), math.sin(0.5 * pitch_rad)
-    cy, sy = math.cos(0.5 * yaw_rad), math.sin(0.5 * yaw_rad)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-
-
-def euler_from_quat(q: Quaternion) -> Vec3:
-    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` [rad] of an attitude quaternion."""
-    w, x, y, z = q
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    sin_pitch = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
-    pitch = math.asin(sin_pitch)
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return (roll, pitch, yaw)
-
-
-def yaw_only(q: Quaternion) -> Quaternion:
-    """The heading part of an attitude: rotation about world down by the Z-Y-X yaw."""
-    w, x, y, z = q
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
-
-
-def wrap_angle(angle_rad: float) -> float:
-    """``angle_rad`` wrapped into (−π, π]."""
-    wrapped = math.fmod(angle_rad + math.pi, _TWO_PI)
-    if wrapped <= 0.0:
-        wrapped += _TWO_PI
-    return wrapped - math.pi
-
-
-def twist_angle(q: Quaternion, axis: Sequence[float]) -> float:
-    """Signed angle [rad] of the twist of ``q`` about the unit vector ``axis``, in (−π, π].
-
-    Swing–twist decomposition: the twist is ``(w, (v·a)a)`` renormalised, whose angle is
-    ``2·atan2(v·a, w)``; a rotation the long way round (``w < 0``) wraps to the short way.
-    A half turn about an axis perpendicular to ``axis`` (``w = v·a = 0``, where the twist is
-    undefined) gives 0.
-    """
-    along = q[1] * axis[0] + q[2] * axis[1] + q[3] * axis[2]
-    return wrap_angle(2.0 * math.atan2(along, q[0]))
-
-
-def attitude_error(target: Quaternion, current: Quaternion) -> Vec3:
-    """Per-body-axis attitude error [rad] of ``current`` against ``target`` (roll, pitch, yaw).
-
-    ``q_err = target·current⁻¹`` (a world-frame rotation) is split by swing–twist about each
-    body axis expressed in the world, ``current·e_i`` (mate-rov's ``instant_twist``). Since
-    ``(current·e_i)·v_err = e_i·(current⁻¹ v_err)``, this equals the twist of
-    ``current⁻¹·target`` about the body axes, which is what is computed (one product).
-
-    Returns:
-        (3,) errors [rad], each in (−π, π]; positive means a positive body torque about that
-        axis (FRD) turns the vehicle towards the target.
-    """
-    cw, cx, cy, cz = current
-    tw, tx, ty, tz = target
-    # current⁻¹ · target
-    w = cw * tw + cx * tx + cy * ty + cz * tz
-    x = cw * tx - cx * tw - cy * tz + cz * ty
-    y = cw * ty + cx * tz - cy * tw - cz * tx
-    z = cw * tz - cx * ty + cy * tx - cz * tw
-    return (
-        wrap_angle(2.0 * math.atan2(x, w)),
-        wrap_angle(2.0 * math.atan2(y, w)),
-        wrap_angle(2.0 * math.atan2(z, w)),
-    )
 
 
 # --------------------------------------------------------------------------------------------

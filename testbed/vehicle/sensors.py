@@ -26,8 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from testbed.common.components import DepthReading, ImuReading, PositionReading
+from testbed.common.geometry import Quaternion, quat_multiply
 from testbed.config import check
-from testbed.vehicle.control import Quaternion, Vec3, quat_multiply
 
 __all__ = [
     "DepthReading",
@@ -141,15 +142,6 @@ class ImuConfig:
         check(self.correlation_time_s >= 0, "correlation_time_s", "must be >= 0")
 
 
-@dataclass(frozen=True, slots=True)
-class ImuReading:
-    """One IMU output: attitude (body → NED, w x y z) and body rates (p, q, r) [rad/s], FRD."""
-
-    time_s: float
-    quaternion_wxyz: Quaternion
-    rates_rad_s: Vec3
-
-
 class Imu:
     """Attitude and rate sensor; see the module docstring for the model."""
 
@@ -233,15 +225,6 @@ class DepthSensorConfig:
         check(self.surface_pressure_pa > 0, "surface_pressure_pa", "must be > 0")
 
 
-@dataclass(frozen=True, slots=True)
-class DepthReading:
-    """One depth-sensor output: absolute pressure [Pa] and the depth [m, positive down]."""
-
-    time_s: float
-    pressure_pa: float
-    depth_m: float
-
-
 class DepthSensor:
     """Pressure depth sensor; see the module docstring for the model."""
 
@@ -286,14 +269,6 @@ class PositionFixConfig:
     def __post_init__(self) -> None:
         check(self.rate_hz > 0, "rate_hz", f"must be > 0, got {self.rate_hz}")
         check(self.noise_m >= 0, "noise_m", "must be >= 0")
-
-
-@dataclass(frozen=True, slots=True)
-class PositionReading:
-    """One position fix: NED position of the body origin [m]."""
-
-    time_s: float
-    position_ned_m: Vec3
 
 
 class PositionFix:
