@@ -245,6 +245,8 @@ class Modem:
         on_receive: callback called with each :class:`Delivery` at its delivery time (the copy
             then bypasses the inbox), or None.
         counters: this modem's counters.
+        last_frame_id: id of the frame most recently handed to :meth:`send` (−1 before any;
+            set whether or not it was dropped), for instrumentation.
     """
 
     def __init__(
@@ -255,6 +257,7 @@ class Modem:
         self.position = position
         self.on_receive: Callable[[Delivery], None] | None = None
         self.counters = ModemCounters()
+        self.last_frame_id = -1
         self._medium = medium
         self._env = medium.env
         self._half_duplex = config.duplex == "half"
@@ -316,6 +319,7 @@ class Modem:
         medium = self._medium
         frame_id = medium._next_frame_id
         medium._next_frame_id = frame_id + 1
+        self.last_frame_id = frame_id
         packet = self._packet_bytes
         if packet:
             n = -(-len(data) // packet)

@@ -9,7 +9,10 @@ Frame order (each a plain ``verb_noun(world) -> None``):
   :func:`control_depth`, :func:`control_attitude` (each writes its :class:`ForceIntent`),
   :func:`allocate_thrust` (Σ intents → allocator → thruster commands);
 - POST_UPDATE: :func:`actuate_thrusters` (commands → thruster plant, stepped over the interval
-  to the next frame → the wrench the physics applies, ``T @ actual forces``, recorded).
+  to the next frame → the wrench the physics applies, ``T @ actual forces``, recorded),
+  :func:`publish_odometry` (sensor readings → the :class:`Odometry` the operator is sent).
+
+A node adds its link systems around these (:func:`build_schedule`'s ``inbound``/``outbound``).
 
 Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading`); the
 physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it.
@@ -23,7 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from testbed.ecs import Entity, Phase, Schedule, World
+from testbed.ecs import Entity, Phase, Schedule, System, World
 from testbed.vehicle.components import (
     ActiveMode,
     AppliedWrench,
@@ -41,6 +44,8 @@ from testbed.vehicle.components import (
     ImuReading,
     ModeRequest,
     MovementCommand,
+    Odometry,
+    PositionReading,
     ThrusterOutput,
 )
 from testbed.vehicle.control import (
@@ -72,6 +77,7 @@ __all__ = [
     "control_attitude",
     "control_depth",
     "ingest_commands",
+    "publish_odometry",
     "read_sensors",
     "run_pilot_interface",
     "supervise_failsafe",
@@ -505,10 +511,36 @@ def wrench_of(forces_n: Sequence[float], columns: Sequence[Sequence[float]]) -> 
 # ------------------------------------------------------------------------------ schedule
 
 
-def build_schedule() -> Schedule:
+def publish_odometry(world: World) -> None:
+    """POST_UPDATE: the vehicle's own estimate for the operator, from its sensors only.
+
+    Position: the position fix when fitted (else north and east 0) with the depth sensor's
+    depth; attitude: the IMU's. Written only when a reading changed.
+    """
+    vehicle = world.resource(Controllers).vehicle
+    imu = world.get(vehicle, ImuReading)
+    depth = world.get(vehicle, DepthReading)
+    if imu is None or depth is None:
+        return
+    fix = world.get(vehicle, PositionReading)
+    north, east = (0.0, 0.0) if fix is None else fix.position_ned_m[:2]
+    sampled_s = max(imu.time_s, depth.time_s)
+    position = (north, east, depth.depth_m)
+    world.set(vehicle, Odometry(sampled_s, position, imu.quaternion_wxyz))
+
+
+def build_schedule(inbound: Sequence[System] = (), outbound: Sequence[System] = ()) -> Schedule:
     """The vehicle frame: sensors and inbound commands; failsafe, pilot, loops, allocation;
-    actuation."""
+    actuation and odometry.
+
+    Args:
+        inbound: link systems run first in PRE_UPDATE (they write the operator's intents the
+            frames brought, before :func:`ingest_commands` reads them).
+        outbound: link or recording systems run last in POST_UPDATE.
+    """
     schedule = Schedule()
+    for system in inbound:
+        schedule.add(Phase.PRE_UPDATE, system)
     schedule.add(Phase.PRE_UPDATE, read_sensors)
     schedule.add(Phase.PRE_UPDATE, ingest_commands)
     schedule.add(Phase.UPDATE, supervise_failsafe)
@@ -517,4 +549,7 @@ def build_schedule() -> Schedule:
     schedule.add(Phase.UPDATE, control_attitude)
     schedule.add(Phase.UPDATE, allocate_thrust)
     schedule.add(Phase.POST_UPDATE, actuate_thrusters)
+    schedule.add(Phase.POST_UPDATE, publish_odometry)
+    for system in outbound:
+        schedule.add(Phase.POST_UPDATE, system)
     return schedule

@@ -36,7 +36,7 @@ from typing import Any, Literal
 import numpy as np
 
 from testbed.config import build, check, load_toml
-from testbed.ecs import Entity, Origin, Replicate, World
+from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.components import (
     ActiveMode,
@@ -60,6 +60,7 @@ from testbed.vehicle.control import (
     PidGains,
     PilotGains,
     Quaternion,
+    shape_stick,
 )
 from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
 from testbed.vehicle.physics import BodyState, Physics
@@ -215,17 +216,27 @@ class Vehicle:
         config: the vehicle's configuration.
         rng: the generator this vehicle draws all its randomness from (sensors, current);
             child generators are spawned from it, so a seed gives identical runs.
+        inbound: link systems to run first in each frame's PRE_UPDATE.
+        outbound: link or recording systems to run last in each frame's POST_UPDATE.
 
     Use as a context manager or call :meth:`close` (pybullet client).
     """
 
-    def __init__(self, config: VehicleConfig, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        config: VehicleConfig,
+        rng: np.random.Generator,
+        *,
+        inbound: Sequence[System] = (),
+        outbound: Sequence[System] = (),
+    ) -> None:
         self.config = config
         imu_rng, depth_rng, position_rng, current_rng = rng.spawn(4)
         thruster_config = load_thruster_config(config.thrusters)
         self.thruster_config = thruster_config
         self.thruster_names: tuple[str, ...] = tuple(t.name for t in thruster_config.thrusters)
         t200 = T200.from_table(config.supply_voltage_v)
+        self.t200 = t200
         self.allocator = Allocator(
             thruster_config,
             t200,
@@ -236,8 +247,9 @@ class Vehicle:
         self._matrix = np.array(thruster_config.matrix, dtype=float)
         n = self._matrix.shape[1]
         self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
+        self.model = load_model(config.model)
         self.physics = Physics(
-            load_model(config.model),
+            self.model,
             dt_s=config.physics_dt_s,
             start_position_ned=config.start_position_ned_m,
             start_euler_rad=config.start_euler_rad,
@@ -252,7 +264,7 @@ class Vehicle:
         )
 
         self.world = World()
-        self.schedule = build_schedule()
+        self.schedule = build_schedule(inbound, outbound)
         world = self.world
         self.entity: Entity = world.spawn(
             VehicleTag(),
@@ -333,6 +345,74 @@ class Vehicle:
         self.actuation.interval_s = steps * dt
         self.schedule.run(self.world)
         self.frames += 1
+
+    @property
+    def next_frame_s(self) -> float:
+        """Time of the next ECS frame [s]: the first physics instant at or after the next
+        control instant (a node that waits until then and calls :meth:`advance` just past it
+        runs that frame with everything that arrived by then)."""
+        physics = self.physics
+        now = physics.time_s
+        steps = max(0, math.ceil((self._next_control_s - 1e-9 - now) / physics.dt_s - 1e-6))
+        return now + steps * physics.dt_s
+
+    def reference_velocity(self, sticks: Sequence[float]) -> tuple[float, float, float, float]:
+        """The velocity the pilot interface asks for with these sticks, in the active mode.
+
+        Surge and sway (and heave, yaw outside the hold modes) are force commands: the
+        reference is the steady speed at which the model's linear + quadratic damping balances
+        that force, ``|d_q|·v² + |d_l|·v = F``. In depth hold the heave stick moves the depth
+        target at ``shape(z)·depth_trim`` m/s; with attitude hold the yaw stick turns the
+        heading target at ``shape(yaw)·yaw_trim`` rad/s — those rates are the references.
+
+        Args:
+            sticks: (6,) stick positions in [−1, 1] (surge, sway, heave, roll, pitch, yaw).
+
+        Returns:
+            (u [m/s], v [m/s], w [m/s], r [rad/s]) references, body FRD.
+        """
+        ctl = self.controllers
+        flags = ctl.flags
+        pilot = ctl.pilot
+        dz = pilot.dead_zone
+        scale = pilot.precision_scale if flags.precision else pilot.normal_scale
+        if flags.depth_hold:
+            gains = (
+                pilot.depth_hold_translation_precision
+                if flags.precision
+                else pilot.depth_hold_translation
+            )
+        else:
+            gains = pilot.translation
+        model = self.model
+
+        def steady(axis: int, force: float) -> float:
+            linear = abs(model.linear_damping[axis])
+            quadratic = abs(model.quadratic_damping[axis])
+            magnitude = abs(force)
+            if quadratic > 0.0:
+                speed = (math.sqrt(linear * linear + 4.0 * quadratic * magnitude) - linear) / (
+                    2.0 * quadratic
+                )
+            else:
+                speed = magnitude / linear if linear > 0.0 else 0.0
+            return math.copysign(speed, force)
+
+        forces = [shape_stick(sticks[k], scale, dz) * ctl.axis_maxima[k] for k in range(6)]
+        u = steady(0, forces[0] * gains[0])
+        v = steady(1, forces[1] * gains[1])
+        if flags.depth_hold:
+            rate = pilot.depth_trim_m_s[1 if flags.precision else 0]
+            w = shape_stick(sticks[2], 1.0, dz) * rate
+        else:
+            w = steady(2, forces[2] * gains[2])
+        if flags.attitude_hold:
+            precise = flags.precision
+            trims = pilot.attitude_trim_precision_rad_s if precise else pilot.attitude_trim_rad_s
+            r = shape_stick(sticks[5], 1.0, dz) * trims[2]
+        else:
+            r = steady(5, forces[5] * pilot.torque[2])
+        return (u, v, w, r)
 
     def state(self) -> BodyState:
         """The physics truth now (for metrics and tests; the controllers never see it)."""

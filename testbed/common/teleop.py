@@ -1,0 +1,253 @@
+"""The compact teleop codec: ECS intents and state as the narrow-band paper's orders and replies.
+
+On a narrow link (S100, M64) the full change-set codec does not fit: the paper sends one
+7-byte order (13-byte frame) per inter-packet gap and gets one reply carrying the 12-byte
+vehicle state (REFERENCE §1.3–1.6). This module maps the replicated components onto those
+layouts and back:
+
+operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVehicleEnd.apply_order`)
+    the latest :class:`MovementCommand` becomes a ``Move`` (x, y, z, yaw stick codes, int8, so
+    sticks are quantised to 1/127), with the arm/disarm flags while an :class:`ArmRequest` is
+    not yet reflected in the vehicle's reported state, and the requested mode; a changed
+    :class:`AttitudeSetpoint` becomes a ``KeepHeading`` (whole degrees: only the heading
+    travels, roll and pitch setpoints cannot). Each new order toggles the order sequence bit.
+vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
+    :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
+    1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame).
+
+What the wire does not carry is not invented: a ``Move`` has no sample time, so the vehicle
+stamps the :class:`MovementCommand` it writes with the arrival time, and the operator stamps the
+:class:`Odometry` it writes with the reply's arrival time. (The simulation's recorder knows the
+true times through the frame ids; nodes never see them.) Garbled payloads are counted and
+ignored, never raised. Each end writes only the other side's components, with origin REMOTE.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from testbed.common.components import (
+    ActiveMode,
+    Armed,
+    ArmRequest,
+    AttitudeSetpoint,
+    ControlMode,
+    ModeRequest,
+    MovementCommand,
+    Odometry,
+)
+from testbed.common.geometry import euler_from_quat, quat_from_euler
+from testbed.ecs import Entity, Origin, World
+from testbed.protocol import (
+    KeepHeading,
+    MalformedPayload,
+    Mode,
+    Move,
+    OperatorMessage,
+    VehicleMessage,
+    VehicleState,
+    decode_operator_message,
+    decode_vehicle_message,
+)
+
+__all__ = [
+    "TeleopCounters",
+    "TeleopOperatorEnd",
+    "TeleopVehicleEnd",
+    "mode_from_wire",
+    "mode_to_wire",
+]
+
+_TO_WIRE = {
+    ControlMode.MANUAL: Mode.MANUAL,
+    ControlMode.STABILIZE: Mode.STABILIZE,
+    ControlMode.DEPTH_HOLD: Mode.DEPTH_HOLD,
+}
+_FROM_WIRE = {wire: mode for mode, wire in _TO_WIRE.items()}
+
+
+def mode_to_wire(mode: ControlMode) -> Mode:
+    """The protocol's 3-bit mode for a vehicle control mode."""
+    return _TO_WIRE[mode]
+
+
+def mode_from_wire(mode: Mode) -> ControlMode | None:
+    """The vehicle control mode for a protocol mode, or None if the vehicle has no such mode."""
+    return _FROM_WIRE.get(mode)
+
+
+@dataclass(slots=True)
+class TeleopCounters:
+    """What one end did with the payloads it was given.
+
+    Attributes:
+        applied: payloads decoded and applied.
+        malformed: payloads that did not decode (garbled past the CRC, or a foreign layout).
+        unsupported: orders decoded but not supported by this vehicle (e.g. GUIDED mode, go-to).
+    """
+
+    applied: int = 0
+    malformed: int = 0
+    unsupported: int = 0
+
+
+class TeleopOperatorEnd:
+    """The operator's end: encodes orders from its intents, applies the vehicle's replies.
+
+    Args:
+        world: the operator's world.
+        intents: the entity carrying the operator's intents.
+
+    Attributes:
+        vehicle: the entity that holds the vehicle's state as last received (origin REMOTE).
+        counters: what happened to the replies.
+        order_seq_bit: the sequence bit of the last order encoded.
+    """
+
+    def __init__(self, world: World, intents: Entity) -> None:
+        self._world = world
+        self._intents = intents
+        self.vehicle: Entity = world.spawn()
+        self.counters = TeleopCounters()
+        self.order_seq_bit = False
+        self._sent_attitude: AttitudeSetpoint | None = None
+
+    def encode_order(self) -> bytes:
+        """The payload of the next order (one per inter-packet gap)."""
+        world = self._world
+        intents = self._intents
+        self.order_seq_bit = not self.order_seq_bit
+        request = world.get(intents, ArmRequest)
+        reported = world.get(self.vehicle, Armed)
+        vehicle_armed = reported is not None and reported.armed
+        arm = request is not None and request.armed and not vehicle_armed
+        disarm = request is not None and not request.armed and vehicle_armed
+        setpoint = world.get(intents, AttitudeSetpoint)
+        if setpoint is not None and setpoint != self._sent_attitude and not arm:
+            self._sent_attitude = setpoint
+            yaw_deg = math.degrees(euler_from_quat(setpoint.quaternion_wxyz)[2])
+            order: Move | KeepHeading = KeepHeading.from_degrees(yaw_deg)
+        else:
+            command = world.get(intents, MovementCommand)
+            sticks = (0.0,) * 6 if command is None else command.sticks
+            mode_request = world.get(intents, ModeRequest)
+            mode = ControlMode.MANUAL if mode_request is None else mode_request.mode
+            order = Move.from_axes(
+                sticks[0], sticks[1], sticks[2], sticks[5], arm, disarm, mode_to_wire(mode)
+            )
+        message = OperatorMessage(False, False, 0, self.order_seq_bit, False, order)
+        return message.encode()
+
+    def apply_reply(self, payload: bytes, now_s: float) -> bool:
+        """Apply a reply's state to the vehicle entity; False (counted) if it is garbled."""
+        message = decode_vehicle_message(payload)
+        if isinstance(message, MalformedPayload):
+            self.counters.malformed += 1
+            return False
+        state = message.state
+        world = self._world
+        vehicle = self.vehicle
+        roll, pitch, yaw = (
+            math.radians(a) for a in (state.roll_deg, state.pitch_deg, state.heading_deg)
+        )
+        odometry = Odometry(
+            now_s, (state.x_m, state.y_m, state.z_m), quat_from_euler(roll, pitch, yaw)
+        )
+        world.set(vehicle, odometry, origin=Origin.REMOTE)
+        world.set(vehicle, Armed(state.armed), origin=Origin.REMOTE)
+        mode = mode_from_wire(state.mode)
+        if mode is not None:
+            world.set(vehicle, ActiveMode(mode), origin=Origin.REMOTE)
+        self.counters.applied += 1
+        return True
+
+
+class TeleopVehicleEnd:
+    """The vehicle's end: applies orders as operator intents, encodes replies from its state.
+
+    Args:
+        world: the vehicle's world.
+        vehicle: the entity carrying the vehicle's own state.
+        intents: the entity the operator's intents are written to (origin REMOTE).
+
+    Attributes:
+        counters: what happened to the orders.
+        order_ack_bit: the sequence bit of the last order applied (echoed in replies).
+    """
+
+    def __init__(self, world: World, vehicle: Entity, intents: Entity) -> None:
+        self._world = world
+        self._vehicle = vehicle
+        self._intents = intents
+        self.counters = TeleopCounters()
+        self.order_ack_bit = False
+        self._seq = 0
+        self._arm_seq = 0
+
+    def apply_order(self, payload: bytes, now_s: float) -> bool:
+        """Apply an order's intents; False (counted) if the payload is garbled or unsupported."""
+        message = decode_operator_message(payload)
+        if isinstance(message, MalformedPayload):
+            self.counters.malformed += 1
+            return False
+        order = message.order
+        world = self._world
+        intents = self._intents
+        if isinstance(order, Move):
+            mode = mode_from_wire(order.mode)
+            if mode is None:
+                self.counters.unsupported += 1
+                return False
+            armed = world.get(self._vehicle, Armed)
+            is_armed = armed is not None and armed.armed
+            if (order.arm and not is_armed) or (order.disarm and is_armed):
+                self._arm_seq += 1
+                request = ArmRequest(order.arm, self._arm_seq)
+                world.set(intents, request, origin=Origin.REMOTE)
+            world.set(intents, ModeRequest(mode), origin=Origin.REMOTE)
+            x, y, z, yaw = order.axes
+            self._seq += 1
+            command = MovementCommand(self._seq, now_s, (x, y, z, 0.0, 0.0, yaw))
+            world.set(intents, command, origin=Origin.REMOTE)
+        elif isinstance(order, KeepHeading):
+            yaw = math.radians(order.heading_deg)
+            world.set(
+                intents, AttitudeSetpoint(quat_from_euler(0.0, 0.0, yaw)), origin=Origin.REMOTE
+            )
+        else:
+            self.counters.unsupported += 1
+            return False
+        self.order_ack_bit = message.order_seq_bit
+        self.counters.applied += 1
+        return True
+
+    def encode_reply(self) -> bytes:
+        """The payload of a reply: the vehicle state, no image chunk (14 B; 20-B frame)."""
+        world = self._world
+        vehicle = self._vehicle
+        odometry = world.get(vehicle, Odometry)
+        armed = world.get(vehicle, Armed)
+        active = world.get(vehicle, ActiveMode)
+        mode = ControlMode.MANUAL if active is None else active.mode
+        if odometry is None:
+            position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+            roll = pitch = yaw = 0.0
+        else:
+            position = odometry.position_ned_m
+            roll, pitch, yaw = euler_from_quat(odometry.quaternion_wxyz)
+        state = VehicleState(
+            ready=True,
+            order_ack_bit=self.order_ack_bit,
+            last_order_cancelled=False,
+            keeping_heading=mode is not ControlMode.MANUAL,
+            armed=armed is not None and armed.armed,
+            mode=mode_to_wire(mode),
+            x_m=position[0],
+            y_m=position[1],
+            z_m=position[2],
+            heading_deg=math.degrees(yaw) % 360.0,
+            roll_deg=math.degrees(roll),
+            pitch_deg=math.degrees(pitch),
+        )
+        return VehicleMessage(False, False, state, False, False, 0, b"").encode()

@@ -1,0 +1,182 @@
+"""The operator's station: its own ECS world, the pilot, and the intents it sends.
+
+The operator node owns a :class:`~testbed.ecs.World` ticked like the vehicle's, in three phases:
+
+- PRE_UPDATE — the link adapter has already written what arrived (the vehicle's replicated
+  state, origin REMOTE) before :meth:`OperatorStation.frame` runs;
+- UPDATE — :func:`sample_pilot` writes this frame's :class:`MovementCommand` (a fresh sequence
+  number and the time the sticks were sampled) or, for the attitude experiment, the
+  :class:`AttitudeSetpoint`; :func:`request_session` asks for the mode, depth and arming the
+  scenario wants, once each;
+- POST_UPDATE — nothing here: the link adapter encodes what changed after the frame.
+
+The operator owns intents (sticks, arm and mode requests, setpoints); it writes only those. It
+sees the vehicle's state — odometry, armed, mode — as replicated components on the vehicle's
+entity, and :meth:`OperatorStation.vehicle_state_age_s` says how old that state is.
+
+Imports: ``common``, ``ecs`` and the standard library only (no simulator, no pybullet).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from testbed.common.components import (
+    ArmRequest,
+    AttitudeSetpoint,
+    ControlMode,
+    DepthSetpoint,
+    ModeRequest,
+    MovementCommand,
+    Odometry,
+)
+from testbed.common.geometry import quat_from_euler
+from testbed.ecs import Entity, Phase, Replicate, Schedule, World
+
+__all__ = [
+    "OperatorClock",
+    "OperatorStation",
+    "PilotSample",
+    "SessionPlan",
+    "request_session",
+    "sample_pilot",
+]
+
+Sticks = tuple[float, float, float, float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class PilotSample:
+    """What the pilot asks for at one instant.
+
+    Attributes:
+        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
+        attitude_deg: (3,) roll, pitch, yaw setpoint [deg] for setpoint-driven runs (the ECS
+            paper's attitude experiment), or None when the pilot flies by sticks.
+    """
+
+    sticks: Sticks
+    attitude_deg: tuple[float, float, float] | None = None
+
+
+Pilot = Callable[[float], PilotSample]
+"""A pilot: operator time [s] → :class:`PilotSample` (scripted, recorded or live)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SessionPlan:
+    """What the operator asks of the vehicle at the start of a session.
+
+    Attributes:
+        mode: control mode requested at ``arm_at_s``.
+        arm_at_s: operator time the arm request goes out [s].
+        depth_m: depth setpoint sent with the arm request [m, positive down], or None to hold
+            the depth the vehicle is at.
+        precision: precision stick scaling.
+    """
+
+    mode: ControlMode = ControlMode.DEPTH_HOLD
+    arm_at_s: float = 0.0
+    depth_m: float | None = None
+    precision: bool = False
+
+
+class OperatorClock:
+    """Resource: the operator's time [s] for the frame being run."""
+
+    __slots__ = ("time_s",)
+
+    def __init__(self) -> None:
+        self.time_s = 0.0
+
+
+class _Session:
+    """Resource: the pilot, the plan and what has been requested so far (mutable)."""
+
+    __slots__ = ("entity", "pilot", "plan", "requested", "seq")
+
+    def __init__(self, entity: Entity, pilot: Pilot, plan: SessionPlan) -> None:
+        self.entity = entity
+        self.pilot = pilot
+        self.plan = plan
+        self.requested = False
+        self.seq = 0
+
+
+def sample_pilot(world: World) -> None:
+    """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint."""
+    now = world.resource(OperatorClock).time_s
+    session = world.resource(_Session)
+    sample = session.pilot(now)
+    if sample.attitude_deg is not None:
+        roll, pitch, yaw = (math.radians(a) for a in sample.attitude_deg)
+        world.set(session.entity, AttitudeSetpoint(quat_from_euler(roll, pitch, yaw)))
+        return
+    session.seq += 1
+    world.set(session.entity, MovementCommand(session.seq, now, sample.sticks))
+
+
+def request_session(world: World) -> None:
+    """UPDATE: once the arm time has come, request the mode, the depth and arming (once)."""
+    now = world.resource(OperatorClock).time_s
+    session = world.resource(_Session)
+    plan = session.plan
+    if session.requested or now < plan.arm_at_s:
+        return
+    session.requested = True
+    world.set(session.entity, ModeRequest(plan.mode, plan.precision))
+    if plan.depth_m is not None:
+        world.set(session.entity, DepthSetpoint(plan.depth_m))
+    world.set(session.entity, ArmRequest(True, 1))
+
+
+class OperatorStation:
+    """The operator node's world, schedule and pilot.
+
+    Args:
+        pilot: operator time [s] → :class:`PilotSample`.
+        plan: mode, depth and arming to request.
+
+    Attributes:
+        world: the operator's ECS world.
+        entity: the entity carrying the operator's intents (marked :class:`Replicate`).
+        frames: frames run so far.
+    """
+
+    def __init__(self, pilot: Pilot, plan: SessionPlan) -> None:
+        self.world = World()
+        self.entity: Entity = self.world.spawn(Replicate())
+        self.clock = OperatorClock()
+        self.world.insert_resource(self.clock)
+        self.world.insert_resource(_Session(self.entity, pilot, plan))
+        self.schedule = Schedule()
+        self.schedule.add(Phase.UPDATE, request_session)
+        self.schedule.add(Phase.UPDATE, sample_pilot)
+        self.frames = 0
+
+    def frame(self, now_s: float) -> None:
+        """Run one frame at operator time ``now_s`` [s]."""
+        self.clock.time_s = now_s
+        self.schedule.run(self.world)
+        self.frames += 1
+
+    def add_system(self, phase: Phase, system: Callable[[World], None]) -> None:
+        """Append a system (e.g. a link adapter's ingest or publish) to a phase."""
+        self.schedule.add(phase, system)
+
+    def latest_command(self) -> MovementCommand | None:
+        """The sticks most recently sampled, or None before the first frame."""
+        return self.world.get(self.entity, MovementCommand)
+
+    def vehicle_odometry(self) -> Odometry | None:
+        """The vehicle's odometry as last received, or None if none has arrived."""
+        for _, odometry in self.world.query1(Odometry):
+            return odometry
+        return None
+
+    def vehicle_state_age_s(self, now_s: float) -> float:
+        """Age of the vehicle state the operator holds [s] (inf before the first)."""
+        odometry = self.vehicle_odometry()
+        return math.inf if odometry is None else now_s - odometry.sampled_s
