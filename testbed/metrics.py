@@ -126,9 +126,11 @@ def signal_lag_s(
 ) -> float:
     """The delay that best aligns ``received`` with ``commanded`` (cross-correlation) [s].
 
-    Both signals are sampled at the same uniform times ``t_s``. The lag maximising the
-    normalised cross-correlation of the mean-removed signals over ``[0, max_lag_s]`` is found
-    on the grid and refined by a parabola through the peak and its neighbours.
+    Both signals are sampled at the same increasing times ``t_s``, not necessarily uniform
+    (vehicle frames land 2 or 3 physics steps apart); they are first resampled by linear
+    interpolation onto a uniform grid with the mean spacing. The lag maximising the normalised
+    cross-correlation of the mean-removed signals over ``[0, max_lag_s]`` is found on that grid
+    and refined by a parabola through the peak and its neighbours.
 
     Returns:
         The lag [s], or NaN when either signal is constant (nothing to align).
@@ -138,7 +140,10 @@ def signal_lag_s(
     b = np.asarray(received, dtype=float)
     if t.size < 3:
         return math.nan
-    dt = float(t[1] - t[0])
+    dt = float(t[-1] - t[0]) / (t.size - 1)
+    grid = t[0] + dt * np.arange(t.size)
+    a = np.interp(grid, t, a)
+    b = np.interp(grid, t, b)
     a = a - a.mean()
     b = b - b.mean()
     if not a.any() or not b.any():

@@ -82,3 +82,13 @@ def test_summary_and_distribution() -> None:
     d = distribution([-2.0, 2.0])
     assert d == {"mean": 0.0, "std": 2.0, "p95": 2.0}
     assert summary([])["n"] == 0
+
+
+def test_signal_lag_on_an_uneven_grid_uses_real_time() -> None:
+    """Frames 8.3 or 12.5 ms apart (2 or 3 steps at 240 Hz): the lag is still in seconds."""
+    steps = np.tile([2, 3, 2, 3, 2], 4000)
+    t = np.concatenate([[0.0], np.cumsum(steps) / 240.0])
+    commanded = np.sin(2 * np.pi * t / 19.0) + 0.4 * np.sin(2 * np.pi * t / 6.1)
+    lag = 0.4
+    received = np.sin(2 * np.pi * (t - lag) / 19.0) + 0.4 * np.sin(2 * np.pi * (t - lag) / 6.1)
+    assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.005)

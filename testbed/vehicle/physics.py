@@ -22,12 +22,16 @@ rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
+import typing
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
-import pybullet
 from numpy.typing import NDArray
 
 from testbed.config import check
@@ -40,6 +44,32 @@ from testbed.vehicle.hydrodynamics import (
     make_scalar_dynamics,
     quaternion_from_euler,
 )
+
+
+def _import_pybullet_quietly() -> ModuleType:
+    """Import pybullet without its C-level "pybullet build time" banner.
+
+    pybullet prints the banner from C at import, straight to file descriptor 2, where it would
+    precede a command's one-line error message; descriptor 2 points at /dev/null for the
+    duration of the import only.
+    """
+    sys.stderr.flush()
+    libc = ctypes.CDLL(None)
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        import pybullet as module  # imported here to silence its banner
+
+        libc.fflush(None)  # anything still in C's buffers goes to /dev/null too
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+    return typing.cast(ModuleType, module)
+
+
+pybullet = _import_pybullet_quietly()
 
 __all__ = [
     "BodyState",

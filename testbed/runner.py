@@ -1,0 +1,335 @@
+"""One run, wired: scenario → environment, link, nodes, recorder → metrics and output files.
+
+:func:`run_scenario` makes one ``SeedSequence(seed)`` and spawns a generator for each random
+subsystem (the link's bit errors, the vehicle's sensors and current), builds one simpy
+``Environment``, the medium with both modems, the vehicle node and the operator node, schedules
+the scenario's faults, runs for the scenario's duration and reduces the recording to metrics
+(:func:`compute_metrics`). :func:`write_outputs` writes ``metrics.json``, ``events.csv``,
+``series.csv`` and the plots. Same scenario and seed ⇒ the same ``metrics.json`` byte for byte,
+apart from ``wall_s`` and ``rtf``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import simpy
+
+from testbed.channel import EventKind, Medium, Trace
+from testbed.common.components import ControlMode
+from testbed.metrics import age_of_information, distribution, signal_lag_s, summary
+from testbed.nodes import FRAME_OVERHEAD, OperatorNode, VehicleNode
+from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
+from testbed.recorder import SERIES_COLUMNS, Recorder
+from testbed.scenario import PilotSection, Scenario
+from testbed.vehicle.vehicle import Vehicle
+
+__all__ = ["RunResult", "compute_metrics", "run_scenario", "write_outputs"]
+
+_MODES = {
+    "manual": ControlMode.MANUAL,
+    "stabilize": ControlMode.STABILIZE,
+    "depth_hold": ControlMode.DEPTH_HOLD,
+}
+_ORDER_PAYLOAD_BYTES = 7
+"""A ``Move`` order's payload [B] (2-byte header + 5-byte body): the IPG rules size on it."""
+
+
+@dataclass(frozen=True, slots=True)
+class RunResult:
+    """One finished run.
+
+    Attributes:
+        scenario: what was run.
+        seed: the seed used.
+        metrics: the ``metrics.json`` content.
+        recorder: everything recorded (for plots and further analysis).
+    """
+
+    scenario: Scenario
+    seed: int
+    metrics: dict[str, Any]
+    recorder: Recorder
+
+
+def _pilot(section: PilotSection) -> tuple[Callable[[float], PilotSample], Callable[..., Any]]:
+    """The operator's pilot and the recorder's view of the commanded sticks (x, y, z, yaw)."""
+    if section.kind == "attitude":
+
+        def attitude(t_s: float) -> PilotSample:
+            return PilotSample((0.0,) * 6, section.attitude_deg(t_s))
+
+        return attitude, lambda t_s: (0.0, 0.0, 0.0, 0.0)
+
+    def sticks(t_s: float) -> PilotSample:
+        x, y, z, yaw = section.sticks(t_s)
+        return PilotSample((x, y, z, 0.0, 0.0, yaw))
+
+    return sticks, section.sticks
+
+
+def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
+    """Simulate ``scenario`` once.
+
+    Args:
+        scenario: the loaded scenario.
+        seed: overrides the scenario's seed.
+
+    Returns:
+        The metrics and the recording.
+    """
+    seed = scenario.seed if seed is None else seed
+    link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
+    env = simpy.Environment()
+    recorder = Recorder(trace=Trace())
+    link = scenario.link
+    medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
+    for outage in scenario.faults.link_outages:
+        medium.add_outage(outage.start_s, outage.end_s)
+        recorder.event(outage.start_s, "link", "outage", f"until {outage.end_s:g} s")
+
+    pilot, commanded = _pilot(scenario.pilot)
+    token = link.mac == "token"
+    holder: dict[str, VehicleNode] = {}
+    vehicle_modem = medium.attach("vehicle", lambda: holder["node"].vehicle.truth.position_ned_m)
+    factory = partial(Vehicle, scenario.vehicle, np.random.default_rng(vehicle_seed))
+    vehicle_node = VehicleNode(
+        env,
+        factory,
+        vehicle_modem,
+        codec=link.codec,
+        token=token,
+        downlink_rate_hz=link.downlink_rate_hz,
+        recorder=recorder,
+        commanded=commanded,
+    )
+    holder["node"] = vehicle_node
+    position = link.operator_position_ned_m
+    operator_modem = medium.attach("operator", lambda: position)
+    plan = SessionPlan(
+        mode=_MODES[scenario.operator.mode],
+        arm_at_s=scenario.operator.arm_at_s,
+        depth_m=scenario.operator.depth_m,
+        precision=scenario.operator.precision,
+    )
+    operator_node = OperatorNode(
+        env,
+        OperatorStation(pilot, plan),
+        operator_modem,
+        codec=link.codec,
+        ipg=link.ipg_policy if token else None,
+        uplink_rate_hz=link.uplink_rate_hz,
+        recorder=recorder,
+        reply_odometry_s=vehicle_node.reply_odometry_s,
+    )
+    vehicle = vehicle_node.vehicle
+    for fault in scenario.faults.thrusters:
+
+        def fail(_: simpy.Event, fault: Any = fault) -> None:
+            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
+            recorder.event(env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}")
+
+        env.timeout(fault.t_s).callbacks.append(fail)
+
+    env.process(vehicle_node.run())
+    env.process(operator_node.run())
+    start = time.perf_counter()
+    try:
+        env.run(until=scenario.duration_s)
+    finally:
+        vehicle.close()
+    wall_s = time.perf_counter() - start
+    metrics = compute_metrics(
+        scenario,
+        seed,
+        recorder,
+        sim_s=scenario.duration_s,
+        wall_s=wall_s,
+        energy_wh=vehicle_node.energy_wh,
+        payload_bytes={
+            "uplink": vehicle_node.port.payload_bytes,
+            "downlink": operator_node.port.payload_bytes,
+        },
+    )
+    return RunResult(scenario, seed, metrics, recorder)
+
+
+def _link_direction(
+    trace: Trace, src: str, dst: str, decoded: int, payload_bytes: int, sim_s: float
+) -> dict[str, Any]:
+    """Per-direction frame counts from the trace; delivered = frames the receiver decoded."""
+    sent = dropped = 0
+    sizes: list[int] = []
+    lost: dict[EventKind, set[int]] = {
+        EventKind.COLLIDE: set(),
+        EventKind.OUTAGE: set(),
+        EventKind.CORRUPT: set(),
+        EventKind.OUT_OF_RANGE: set(),
+    }
+    for event in trace.events:
+        if event.src != src:
+            continue
+        if event.kind is EventKind.ENQUEUE:
+            sent += 1
+            sizes.append(event.size_bytes)
+        elif event.kind is EventKind.DROP:
+            dropped += 1
+        elif event.dst == dst and event.kind in lost:
+            lost[event.kind].add(event.frame_id)
+    collided = lost[EventKind.COLLIDE]
+    outage = lost[EventKind.OUTAGE] - collided
+    corrupted = lost[EventKind.CORRUPT] - collided - outage
+    transmitted = sent - dropped
+    return {
+        "frames_sent": sent,
+        "frames_delivered": decoded,
+        "frames_corrupted": len(corrupted),
+        "frames_collided": len(collided),
+        "frames_dropped": dropped,
+        "frames_outage": len(outage),
+        "frames_out_of_range": len(lost[EventKind.OUT_OF_RANGE]),
+        "per": 1.0 - decoded / transmitted if transmitted else math.nan,
+        "goodput_bps": 8.0 * payload_bytes / sim_s,
+        "mean_frame_bytes": float(np.mean(sizes)) if sizes else math.nan,
+    }
+
+
+def compute_metrics(
+    scenario: Scenario,
+    seed: int,
+    recorder: Recorder,
+    *,
+    sim_s: float,
+    wall_s: float,
+    energy_wh: float,
+    payload_bytes: dict[str, int],
+) -> dict[str, Any]:
+    """Reduce a recording to the ``metrics.json`` content (README: "metrics.json")."""
+    series = recorder.series()
+    t = series["t_s"]
+    settle = scenario.metrics.settle_s
+    after = t >= settle
+    link = scenario.link
+    ipg_s = (
+        link.ipg_policy.gap_for(bytes(_ORDER_PAYLOAD_BYTES + FRAME_OVERHEAD))
+        if link.mac == "token"
+        else math.nan
+    )
+    lags = [
+        applied - recorder.commands_sampled[seq]
+        for seq, applied in sorted(recorder.commands_applied.items())
+        if seq in recorder.commands_sampled
+    ]
+    if not lags:  # change-set codec: the sample time travels with the command
+        lags = [applied - sampled for applied, sampled in recorder.command_updates]
+    axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
+    flying = after & (series["armed"] > 0.5)
+    signal = {
+        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
+        if flying.sum() > 10
+        else math.nan
+        for axis, _ in axes
+    }
+    rmse = {
+        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
+        if flying.any()
+        else math.nan
+        for axis, v in axes
+    }
+    attitude = {}
+    for axis in ("roll", "pitch", "yaw"):
+        values = series[f"err_{axis}_deg"][after]
+        attitude[axis] = distribution(values[~np.isnan(values)])
+    command_age = age_of_information(recorder.command_updates, settle, sim_s)
+    odometry_age = age_of_information(recorder.odometry_updates, settle, sim_s)
+    metrics: dict[str, Any] = {
+        "scenario": scenario.id,
+        "seed": seed,
+        "sim_s": sim_s,
+        "wall_s": wall_s,
+        "rtf": sim_s / wall_s if wall_s > 0 else math.inf,
+        "link": {
+            "uplink": _link_direction(
+                recorder.trace,
+                "operator",
+                "vehicle",
+                recorder.frames_decoded["uplink"],
+                payload_bytes["uplink"],
+                sim_s,
+            ),
+            "downlink": _link_direction(
+                recorder.trace,
+                "vehicle",
+                "operator",
+                recorder.frames_decoded["downlink"],
+                payload_bytes["downlink"],
+                sim_s,
+            ),
+        },
+        "ipg_s": ipg_s,
+        "command_lag_s": summary(lags),
+        "command_age_s": command_age,
+        "signal_lag_s": signal,
+        "odometry_age_s": odometry_age,
+        "velocity_tracking_rmse": rmse,
+        "attitude_error_deg": attitude,
+        "energy_wh": energy_wh,
+        "frames_rejected": dict(recorder.frames_rejected),
+        "events": {
+            "failsafe": sum(1 for e in recorder.events if e.kind == "failsafe"),
+            "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
+        },
+    }
+    return metrics
+
+
+def _json_ready(value: Any) -> Any:
+    """NaN and infinities become null (strict JSON); containers are converted recursively."""
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_outputs(result: RunResult, out_dir: Path, *, plots: bool = True) -> list[Path]:
+    """Write ``metrics.json``, ``events.csv``, ``series.csv`` and (optionally) the plots.
+
+    Returns:
+        The files written.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    metrics_path = out_dir / "metrics.json"
+    text = json.dumps(_json_ready(result.metrics), indent=2, allow_nan=False)
+    metrics_path.write_text(text + "\n", encoding="utf-8")
+    events_path = out_dir / "events.csv"
+    result.recorder.write_events_csv(events_path)
+    series_path = out_dir / "series.csv"
+    rows = result.recorder.rows
+    with series_path.open("w", encoding="utf-8") as handle:
+        handle.write(",".join(SERIES_COLUMNS) + "\n")
+        for row in rows:
+            handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
+    written = [metrics_path, events_path, series_path]
+    if plots:
+        from testbed.report import write_plots  # matplotlib only when plotting
+
+        scenario = result.scenario
+        written += write_plots(
+            result.recorder,
+            out_dir,
+            title=f"{scenario.id} (seed {result.seed})",
+            attitude_experiment=scenario.pilot.kind == "attitude",
+            settle_s=scenario.metrics.settle_s,
+        )
+    return written
