@@ -200,4 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as err:
         print(f"testbed: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # e.g. `testbed run | head`: the reader left, nothing to report
+        sys.stderr.close()
+        return EXIT_OK
     return code

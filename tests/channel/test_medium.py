@@ -106,7 +106,8 @@ def test_m64_packets_each_take_their_own_airtime() -> None:
     prop = 150.0 / 1500.0
     assert [d.part for d in got] == [0, 1, 2] and {d.parts for d in got} == {3}
     for k, d in enumerate(got):
-        assert d.t_delivered_s == pytest.approx((k + 1) * per_packet + k * GAP_S + prop, abs=1e-12)
+        gap = m64.queue_gap_s
+        assert d.t_delivered_s == pytest.approx((k + 1) * per_packet + k * gap + prop, abs=1e-12)
         assert len(d.data) == 8
     stream = b"".join(d.data for d in got)
     assert stream == frame + bytes(4)

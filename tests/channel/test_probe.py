@@ -54,9 +54,10 @@ def test_end_to_end_per_within_binomial_interval(ber: float, size: int) -> None:
 def test_m64_packetised_latency() -> None:
     m64 = load_link_config("m64")
     r = run_probe(m64, frames=50, frame_bytes=20, interval_s=4.0, distance_m=150.0)
-    # 20 B → 3 packets of 8 B, 1 s each, 100 µs apart, then 0.1 s of propagation.
+    # 20 B → 3 packets of 8 B, 1 s each, a guard gap apart, then 0.1 s of propagation.
     assert r.frames_delivered == 50
-    assert r.latency_s.max == pytest.approx(3 * 1.0 + 2 * 100e-6 + 150.0 / 1500.0, abs=1e-9)
+    expected = 3 * 1.0 + 2 * m64.queue_gap_s + 150.0 / 1500.0
+    assert r.latency_s.max == pytest.approx(expected, abs=1e-9)
 
 
 def test_overload_drops_and_range_loses_everything() -> None:
