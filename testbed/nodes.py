@@ -21,6 +21,7 @@ import math
 from collections.abc import Callable, Generator
 from typing import Any
 
+import numpy as np
 import simpy
 
 from testbed.channel import Delivery, IpgPolicy, Modem
@@ -116,6 +117,8 @@ class VehicleNode:
         downlink_rate_hz: change-set send rate (changeset codec only).
         recorder: ground-truth sink.
         commanded: the pilot's true sticks at a time (recording only).
+        sample_rate_hz: rate of the recorded series rows [Hz] (energy is integrated every
+            frame regardless).
     """
 
     def __init__(
@@ -129,8 +132,11 @@ class VehicleNode:
         downlink_rate_hz: float,
         recorder: Recorder,
         commanded: Callable[[float], tuple[float, float, float, float]],
+        sample_rate_hz: float = 50.0,
     ) -> None:
         self.env = env
+        self._sample_period_s = 1.0 / sample_rate_hz
+        self._next_sample_s = 0.0
         self.recorder = recorder
         self._commanded = commanded
         self._codec = codec
@@ -213,12 +219,24 @@ class VehicleNode:
     # -- recording -------------------------------------------------------------------------
 
     def _record(self, world: World) -> None:
-        """POST_UPDATE: one row of ground truth for metrics and plots."""
+        """POST_UPDATE: integrate energy; at the sample rate, one row of ground truth."""
         clock = world.resource(SimClock)
-        truth = world.resource(PlantTruth)
-        ctl = world.resource(Controllers)
         vehicle = self.vehicle
+        actuation = world.resource(Actuation)
+        currents = vehicle.t200.currents_for_forces(np.asarray(actuation.actual_forces_n))
+        current = float(currents.sum())
+        self._energy_j += current * vehicle.config.supply_voltage_v * clock.dt_s
         now = clock.time_s
+        ctl = world.resource(Controllers)
+        status = world.get(ctl.vehicle, FailsafeStatus)
+        level = 0 if status is None else int(status.level)
+        if level != self._last_failsafe:
+            self.recorder.event(now, "vehicle", "failsafe", status.level.name if status else "")
+            self._last_failsafe = level
+        if now < self._next_sample_s - 1e-9:
+            return
+        self._next_sample_s += self._sample_period_s
+        truth = world.resource(PlantTruth)
         sticks = ctl.sticks
         ref = vehicle.reference_velocity(sticks)
         roll, pitch, yaw = euler_from_quat(truth.quaternion_wxyz)
@@ -230,14 +248,6 @@ class VehicleNode:
         else:
             errors = attitude_error(targets.quaternion_wxyz, truth.quaternion_wxyz)
             depth_target = targets.depth_m if ctl.flags.depth_hold else math.nan
-        actuation = world.resource(Actuation)
-        current = sum(vehicle.t200.current_for_force(f) for f in actuation.actual_forces_n)
-        self._energy_j += current * vehicle.config.supply_voltage_v * clock.dt_s
-        status = world.get(ctl.vehicle, FailsafeStatus)
-        level = 0 if status is None else int(status.level)
-        if level != self._last_failsafe:
-            self.recorder.event(now, "vehicle", "failsafe", status.level.name if status else "")
-            self._last_failsafe = level
         cmd = self._commanded(now)
         deg = 180.0 / math.pi
         position = truth.position_ned_m

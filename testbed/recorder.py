@@ -5,7 +5,8 @@ computed); :mod:`testbed.metrics` and :mod:`testbed.report` read it afterwards. 
 the simulation's ground truth: it knows things the nodes cannot (when the sticks carried by a
 frame were really sampled, the physics pose), and nodes never read it.
 
-Series are sampled at every vehicle control frame (100 Hz by default). Node names on the link
+Series rows are taken at the first vehicle control frame at or after each sample instant
+(``metrics.sample_rate_hz``, so their spacing is uneven by up to a frame). Node names on the link
 are ``"operator"`` and ``"vehicle"``; the uplink is operator → vehicle.
 """
 

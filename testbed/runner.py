@@ -110,6 +110,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         downlink_rate_hz=link.downlink_rate_hz,
         recorder=recorder,
         commanded=commanded,
+        sample_rate_hz=scenario.metrics.sample_rate_hz,
     )
     holder["node"] = vehicle_node
     position = link.operator_position_ned_m
