@@ -8,8 +8,9 @@ layouts and back:
 operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVehicleEnd.apply_order`)
     the latest :class:`MovementCommand` becomes a ``Move`` (x, y, z, yaw stick codes, int8, so
     sticks are quantised to 1/127), with the arm/disarm flags while an :class:`ArmRequest` is
-    not yet reflected in the vehicle's reported state, and the requested mode; a changed
-    :class:`AttitudeSetpoint` becomes a ``KeepHeading`` (whole degrees: only the heading
+    not yet reflected in the vehicle's reported state (once per request: a later disarm by the
+    vehicle itself is not undone), and the requested mode; a changed :class:`AttitudeSetpoint`
+    becomes a ``KeepHeading`` when its heading in whole degrees changed (only the heading
     travels, roll and pitch setpoints cannot). Each new order toggles the order sequence bit.
 vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
@@ -112,6 +113,8 @@ class TeleopOperatorEnd:
         self.counters = TeleopCounters()
         self.order_seq_bit = False
         self._sent_attitude: AttitudeSetpoint | None = None
+        self._sent_heading: KeepHeading | None = None
+        self._settled_arm: ArmRequest | None = None
 
     def encode_order(self) -> bytes:
         """The payload of the next order (one per inter-packet gap)."""
@@ -121,14 +124,19 @@ class TeleopOperatorEnd:
         request = world.get(intents, ArmRequest)
         reported = world.get(self.vehicle, Armed)
         vehicle_armed = reported is not None and reported.armed
-        arm = request is not None and request.armed and not vehicle_armed
-        disarm = request is not None and not request.armed and vehicle_armed
+        arm = disarm = False
+        if request is not None and request != self._settled_arm:
+            arm = request.armed and not vehicle_armed
+            disarm = not request.armed and vehicle_armed
         setpoint = world.get(intents, AttitudeSetpoint)
+        order: Move | KeepHeading | None = None
         if setpoint is not None and setpoint != self._sent_attitude and not arm:
             self._sent_attitude = setpoint
             yaw_deg = math.degrees(euler_from_quat(setpoint.quaternion_wxyz)[2])
-            order: Move | KeepHeading = KeepHeading.from_degrees(yaw_deg)
-        else:
+            heading = KeepHeading.from_degrees(yaw_deg)
+            if heading != self._sent_heading:  # a roll/pitch-only change has nothing to send
+                self._sent_heading = order = heading
+        if order is None:
             command = world.get(intents, MovementCommand)
             sticks = (0.0,) * 6 if command is None else command.sticks
             mode_request = world.get(intents, ModeRequest)
@@ -156,6 +164,11 @@ class TeleopOperatorEnd:
         )
         world.set(vehicle, odometry, origin=Origin.REMOTE)
         world.set(vehicle, Armed(state.armed), origin=Origin.REMOTE)
+        request = world.get(self._intents, ArmRequest)
+        if request is not None and request.armed == state.armed:
+            # done once: a later change on the vehicle's side (a failsafe disarm) is not
+            # undone; only a new request (new seq) asks again
+            self._settled_arm = request
         mode = mode_from_wire(state.mode)
         if mode is not None:
             world.set(vehicle, ActiveMode(mode), origin=Origin.REMOTE)
