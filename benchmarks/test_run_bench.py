@@ -1,0 +1,46 @@
+"""Benchmark: real-time factor of whole runs (operator, link, vehicle, recording).
+
+Run: .venv/bin/python -m pytest benchmarks/test_run_bench.py -m benchmark --benchmark-enable -s
+"""
+
+from __future__ import annotations
+
+import cProfile
+import io
+import pstats
+
+import pytest
+
+from testbed.runner import run_scenario
+from testbed.scenario import load_scenario
+
+
+@pytest.mark.benchmark
+@pytest.mark.parametrize("name", ["s100-teleop-v1", "tether-teleop-v1", "ecs-yaw-4h-v1"])
+def test_run_real_time_factor(benchmark: pytest.FixtureRequest, name: str) -> None:
+    scenario = load_scenario(name)
+    rtfs: list[float] = []
+
+    def once() -> None:
+        rtfs.append(run_scenario(scenario, seed=0).metrics["rtf"])
+
+    benchmark.pedantic(once, rounds=3, iterations=1)  # type: ignore[attr-defined]
+    best = max(rtfs)
+    benchmark.extra_info["rtf_best"] = best  # type: ignore[attr-defined]
+    print(
+        f"\n{name}: {scenario.duration_s:.0f} s simulated, real-time factor best {best:.0f}x, "
+        f"median {sorted(rtfs)[len(rtfs) // 2]:.0f}x"
+    )
+
+
+@pytest.mark.benchmark
+def test_profile_top_costs_s100() -> None:
+    """Print the top cumulative costs of one s100-teleop-v1 run (for the README's notes)."""
+    scenario = load_scenario("s100-teleop-v1", ["duration_s=60"])
+    profiler = cProfile.Profile()
+    profiler.enable()
+    run_scenario(scenario, seed=0)
+    profiler.disable()
+    text = io.StringIO()
+    pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(12)
+    print(text.getvalue())
