@@ -303,9 +303,8 @@ def _legend_handle(outcome: FrameOutcome) -> Patch | Line2D:
         label = "dropped (transmit FIFO full)"
         return Line2D([], [], marker="x", linestyle="", color=_DROP_COLOUR, label=label)
     colour, hatch, label = _STYLE[outcome]
-    return Patch(
-        facecolor=colour, edgecolor=_darker(colour), hatch=hatch, hatchcolor="white", label=label
-    )
+    edge = _darker(colour)
+    return Patch(facecolor=colour, edgecolor=edge, hatch=hatch, hatchcolor="white", label=label)
 
 
 def timeline_window(
@@ -451,14 +450,11 @@ def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> 
         rx = np.asarray(series[f"rx_{axis}"], dtype=float)
         lag = signal_lag_s(t, cmd, rx) if t.size >= 3 else math.nan
         lag_text = "lag n/a (constant)" if math.isnan(lag) else f"lag ≈ {lag:.2f} s"
-        ax.plot(
-            t, cmd, drawstyle="steps-post", color="tab:blue", lw=1.6, label="commanded (operator)"
-        )
-        received = f"received (vehicle), {lag_text}"
+        commanded, received = "commanded (operator)", f"received (vehicle), {lag_text}"
+        ax.plot(t, cmd, drawstyle="steps-post", color="tab:blue", lw=1.6, label=commanded)
         ax.plot(t, rx, drawstyle="steps-post", color="tab:red", lw=1.2, ls="--", label=received)
-        low = min(-1.05, float(np.nanmin(np.concatenate([cmd, rx]))) - 0.05)
-        high = max(1.05, float(np.nanmax(np.concatenate([cmd, rx]))) + 0.05)
-        ax.set_ylim(low, high)
+        both = np.concatenate([cmd, rx])
+        ax.set_ylim(min(-1.05, np.nanmin(both) - 0.05), max(1.05, np.nanmax(both) + 0.05))
         ax.axhline(0.0, color="0.6", lw=0.6)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
@@ -650,9 +646,7 @@ def plot_attitude_errors(
             edges = np.histogram_bin_edges(values, bins=120)
         mean, std = float(values.mean()), float(values.std())
         label = f"mean {mean:+.2f}°, std {std:.2f}°\nn = {values.size}"
-        density, _, _ = ax.hist(
-            values, edges, density=True, color="tab:blue", alpha=0.75, label=label
-        )
+        density = ax.hist(values, edges, density=True, color="tab:blue", alpha=0.8, label=label)[0]
         ax.axvline(mean, color="k", ls="--", lw=1.0, label="mean")
         ax.set_ylim(0.0, 1.3 * float(np.max(density)))
         ax.grid(alpha=0.3)
