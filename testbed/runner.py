@@ -94,7 +94,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
     for outage in scenario.faults.link_outages:
         medium.add_outage(outage.start_s, outage.end_s)
-        recorder.event(outage.start_s, "link", "outage", f"until {outage.end_s:g} s")
+        recorder.event(outage.start_s, "scenario", "outage", f"until {outage.end_s:g} s")
 
     pilot, commanded = _pilot(scenario.pilot)
     token = link.mac == "token"
@@ -166,7 +166,12 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
 def _link_direction(
     trace: Trace, src: str, dst: str, decoded: int, payload_bytes: int, sim_s: float
 ) -> dict[str, Any]:
-    """Per-direction frame counts from the trace; delivered = frames the receiver decoded."""
+    """Per-direction frame counts from the trace; delivered = frames the receiver decoded.
+
+    A frame sent as several packets counts once, by its worst packet: collided, then lost in an
+    outage, then out of range, then corrupted (the order :func:`testbed.report.frame_outcomes`
+    uses too).
+    """
     sent = dropped = 0
     sizes: list[int] = []
     lost: dict[EventKind, set[int]] = {
@@ -187,7 +192,8 @@ def _link_direction(
             lost[event.kind].add(event.frame_id)
     collided = lost[EventKind.COLLIDE]
     outage = lost[EventKind.OUTAGE] - collided
-    corrupted = lost[EventKind.CORRUPT] - collided - outage
+    out_of_range = lost[EventKind.OUT_OF_RANGE] - collided - outage
+    corrupted = lost[EventKind.CORRUPT] - collided - outage - out_of_range
     transmitted = sent - dropped
     return {
         "frames_sent": sent,
@@ -196,7 +202,7 @@ def _link_direction(
         "frames_collided": len(collided),
         "frames_dropped": dropped,
         "frames_outage": len(outage),
-        "frames_out_of_range": len(lost[EventKind.OUT_OF_RANGE]),
+        "frames_out_of_range": len(out_of_range),
         "per": 1.0 - decoded / transmitted if transmitted else math.nan,
         "goodput_bps": 8.0 * payload_bytes / sim_s,
         "mean_frame_bytes": float(np.mean(sizes)) if sizes else math.nan,
