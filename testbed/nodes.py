@@ -21,7 +21,6 @@ import math
 from collections.abc import Callable, Generator
 from typing import Any
 
-import numpy as np
 import simpy
 
 from testbed.channel import Delivery, IpgPolicy, Modem
@@ -229,8 +228,7 @@ class VehicleNode:
         clock = world.resource(SimClock)
         vehicle = self.vehicle
         actuation = world.resource(Actuation)
-        currents = vehicle.t200.currents_for_forces(np.asarray(actuation.actual_forces_n))
-        current = float(currents.sum())
+        current = vehicle.t200.total_current_floats(actuation.actual_forces_n)
         self._energy_j += current * vehicle.config.supply_voltage_v * clock.dt_s
         now = clock.time_s
         ctl = world.resource(Controllers)

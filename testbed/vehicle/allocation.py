@@ -28,7 +28,6 @@ This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` 
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -36,7 +35,7 @@ from typing import Literal
 import numpy as np
 
 from testbed.vehicle.thruster_config import ThrusterConfig
-from testbed.vehicle.thrusters import T200, FaultMode, ThrusterFault
+from testbed.vehicle.thrusters import T200, FaultMode, InterpTable, ThrusterFault
 
 __all__ = [
     "AXIS_DIRECTION_TOLERANCE",
@@ -153,7 +152,7 @@ class Allocator:
         self._pwm_offset = [3000.0 if c else 0.0 for c in ccw.tolist()]
         self._force_axis = t200.force_axis_n
         self._current_axis = t200.current_axis_a
-        self._current_table = _Table(t200.force_axis_n, t200.current_axis_a)
+        self._current_table = InterpTable(t200.force_axis_n, t200.current_axis_a)
         # I(F) falls to 0 A at 0 N and rises on both sides (so Σ I(f_i) ≤ n·max I(f_i), which
         # lets the per-frame path skip a current sum that cannot bind); checked, not assumed
         currents = t200.current_axis_a
@@ -161,7 +160,7 @@ class Allocator:
         self._current_monotone = bool(
             np.all(np.diff(currents[: zero + 1]) <= 0) and np.all(np.diff(currents[zero:]) >= 0)
         )
-        self._pwm_table = _Table(t200.inverse_force_n, t200.inverse_pwm_us)
+        self._pwm_table = InterpTable(t200.inverse_force_n, t200.inverse_pwm_us)
         self._f_lo, self._f_hi = t200.force_limits_n
         self._inv_hi = 1.0 / self._f_hi
         self._inv_lo = 1.0 / self._f_lo  # negative: f_lo < 0
@@ -539,41 +538,6 @@ class Allocator:
                 side = 1
             a = a_lo + (cap_a - g_lo) * (a_hi - a_lo) / (g_hi - g_lo)
         return a_lo
-
-
-class _Table:
-    """A piecewise-linear table evaluated on Python floats exactly as ``np.interp`` does.
-
-    ``np.interp`` on x in [xp[j], xp[j+1]) returns ``fp[j]`` when ``x == xp[j]``, else
-    ``slope_j·(x − xp[j]) + fp[j]`` with ``slope_j = (fp[j+1] − fp[j]) / (xp[j+1] − xp[j])``,
-    and the end values outside; this reproduces it bit for bit (xp strictly increasing).
-    """
-
-    __slots__ = ("_fp", "_slopes", "_xp")
-
-    def __init__(self, xp: np.ndarray, fp: np.ndarray) -> None:
-        self._xp: list[float] = xp.tolist()
-        self._fp: list[float] = fp.tolist()
-        x, y = self._xp, self._fp
-        self._slopes = [(y[j + 1] - y[j]) / (x[j + 1] - x[j]) for j in range(len(x) - 1)]
-
-    def many(self, values: Sequence[float]) -> list[float]:
-        """The table at each of ``values`` (finite floats)."""
-        xp, fp, slopes = self._xp, self._fp, self._slopes
-        x_first, x_last = xp[0], xp[-1]
-        f_first, f_last = fp[0], fp[-1]
-        # one comprehension (this runs several times per frame): the end values outside
-        # the table; inside, segment j with xp[j] <= x < xp[j + 1]
-        return [
-            f_first
-            if x <= x_first
-            else f_last
-            if x >= x_last
-            else fp[j]
-            if (x_j := xp[(j := bisect_right(xp, x) - 1)]) == x
-            else slopes[j] * (x - x_j) + fp[j]
-            for x in values
-        ]
 
 
 def _positive(value: float, name: str) -> float:

@@ -228,6 +228,7 @@ class Physics:
         self._cached: BodyState | None = None
         # pybullet's pose and velocity as read since the last step (reused by the next step)
         self._raw: _Raw | None = None
+        self._floats: tuple[float, Vec3, Quat, Vec6] | None = None
 
         self._cog = model.cog_m
 
@@ -356,6 +357,7 @@ class Physics:
         self._nu_dot = (0.0,) * 6
         self._cached = None
         self._raw = None
+        self._floats = None
 
     def step(self, wrench_body: Sequence[float] | FloatArray) -> None:
         """Advance one ``dt_s`` with the applied wrench held constant.
@@ -365,6 +367,7 @@ class Physics:
         """
         raw = self._raw
         self._raw = None
+        self._floats = None
         self._nu_dot = self._advance(wrench_body, self._current_ned, raw)
         self._steps += 1
         self._cached = None
@@ -397,10 +400,13 @@ class Physics:
             NED; (4,) attitude, body FRD → NED; (6,) body velocity [u v w p q r] at CO
             [m/s, rad/s], FRD.
         """
-        raw = self._raw
-        if raw is None:
-            raw = self._raw = self._read()
-        return (self._steps * self.dt_s, *_state_of(raw, self._cog))
+        floats = self._floats
+        if floats is None:
+            raw = self._raw
+            if raw is None:
+                raw = self._raw = self._read()
+            floats = self._floats = (self._steps * self.dt_s, *_state_of(raw, self._cog))
+        return floats
 
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""

@@ -20,6 +20,7 @@ import csv
 import functools
 import io
 import math
+from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -46,6 +47,7 @@ __all__ = [
     "ZERO_FORCE_N",
     "FaultMode",
     "Handedness",
+    "InterpTable",
     "ThrusterConfig",
     "ThrusterDynamics",
     "ThrusterFault",
@@ -53,6 +55,7 @@ __all__ = [
     "known_thruster_configs",
     "load_thruster_config",
     "mate_rov_to_frd",
+    "numpy_sum",
     "read_thruster_config",
 ]
 
@@ -129,6 +132,7 @@ class T200:
 
     __slots__ = (
         "_current_axis_a",
+        "_current_table",
         "_force_axis_n",
         "_inverse_force_n",
         "_inverse_pwm_us",
@@ -181,6 +185,7 @@ class T200:
         self._inverse_pwm_us = _frozen(np.concatenate([rev_pwm[::-1], [lo, hi], fwd_pwm]))
         self._force_axis_n = _frozen(np.concatenate([rev_force[::-1], [0.0], fwd_force]))
         self._current_axis_a = _frozen(np.concatenate([rev_current[::-1], [0.0], fwd_current]))
+        self._current_table = InterpTable(self._force_axis_n, self._current_axis_a)
         self._max_forward_n = float(fwd_force[-1])
         self._max_reverse_n = float(-rev_force[-1])
 
@@ -285,6 +290,14 @@ class T200:
         """Vectorised :meth:`current_for_force`: (n,) currents [A] for (n,) forces [N]."""
         currents: np.ndarray = np.interp(forces_n, self._force_axis_n, self._current_axis_a)
         return currents
+
+    def total_current_floats(self, forces_n: Sequence[float]) -> float:
+        """Σ current [A] for (n,) forces [N], on plain floats (the per-frame path).
+
+        Bit for bit ``float(currents_for_forces(np.asarray(forces_n)).sum())``: the same
+        interpolation (:class:`InterpTable`) and numpy's summation order (:func:`numpy_sum`).
+        """
+        return numpy_sum(self._current_table.many(forces_n))
 
     def __repr__(self) -> str:
         return (
@@ -489,3 +502,73 @@ class ThrusterDynamics:
     def _check_index(self, index: int) -> None:
         if not 0 <= index < self.n_thrusters:
             raise IndexError(f"thruster index {index} out of range 0..{self.n_thrusters - 1}")
+
+
+class InterpTable:
+    """A piecewise-linear table evaluated on Python floats exactly as ``np.interp`` does.
+
+    ``np.interp`` on x in [xp[j], xp[j+1]) returns ``fp[j]`` when ``x == xp[j]``, else
+    ``slope_j·(x − xp[j]) + fp[j]`` with ``slope_j = (fp[j+1] − fp[j]) / (xp[j+1] − xp[j])``,
+    and the end values outside; this reproduces it bit for bit (xp strictly increasing).
+    """
+
+    __slots__ = ("_fp", "_slopes", "_xp")
+
+    def __init__(self, xp: np.ndarray, fp: np.ndarray) -> None:
+        self._xp: list[float] = xp.tolist()
+        self._fp: list[float] = fp.tolist()
+        x, y = self._xp, self._fp
+        self._slopes = [(y[j + 1] - y[j]) / (x[j + 1] - x[j]) for j in range(len(x) - 1)]
+
+    def many(self, values: Sequence[float]) -> list[float]:
+        """The table at each of ``values`` (finite floats)."""
+        xp, fp, slopes = self._xp, self._fp, self._slopes
+        x_first, x_last = xp[0], xp[-1]
+        f_first, f_last = fp[0], fp[-1]
+        # one comprehension (this runs several times per frame): the end values outside
+        # the table; inside, segment j with xp[j] <= x < xp[j + 1]
+        return [
+            f_first
+            if x <= x_first
+            else f_last
+            if x >= x_last
+            else fp[j]
+            if (x_j := xp[(j := bisect_right(xp, x) - 1)]) == x
+            else slopes[j] * (x - x_j) + fp[j]
+            for x in values
+        ]
+
+
+def numpy_sum(values: Sequence[float]) -> float:
+    """``float(np.sum(values))`` for a float64 vector, on plain floats, bit for bit.
+
+    numpy adds a contiguous vector pairwise: fewer than 8 values in order from 0.0; up to 128
+    in 8 interleaved partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)),
+    then the remainder in order. Longer vectors (never per frame here) go to numpy itself.
+    """
+    n = len(values)
+    if n < 8:
+        total = 0.0
+        for v in values:
+            total += v
+        return total
+    if n > 128:
+        return float(np.sum(np.asarray(values, dtype=np.float64)))
+    r0, r1, r2, r3, r4, r5, r6, r7 = values[:8]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        r0 += values[i]
+        r1 += values[i + 1]
+        r2 += values[i + 2]
+        r3 += values[i + 3]
+        r4 += values[i + 4]
+        r5 += values[i + 5]
+        r6 += values[i + 6]
+        r7 += values[i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += values[i]
+        i += 1
+    return total
