@@ -54,11 +54,14 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PilotGains,
     Quaternion,
+    Vec3,
     failsafe_level,
     pilot_wrench,
+    quat_conjugate,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
+    quat_rotate,
     shape_stick,
     yaw_only,
 )
@@ -87,6 +90,7 @@ __all__ = [
 Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
+_ZERO_INTENTS = {source: ForceIntent(source, ZERO6) for source in ("pilot", "depth", "attitude")}
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 
 
@@ -150,6 +154,7 @@ class Controllers:
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
+        shaped: the pilot interface's values for the current sticks and mode (a cache).
     """
 
     vehicle: Entity
@@ -162,6 +167,7 @@ class Controllers:
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
+    shaped: _ShapedSticks | None = None
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -244,7 +250,10 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
 
 
 def _set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
-    world.set(controllers.intents[source], ForceIntent(source, wrench))
+    intent = _ZERO_INTENTS.get(source) if wrench == ZERO6 else None
+    if intent is None:
+        intent = ForceIntent(source, wrench)
+    world.set(controllers.intents[source], intent)
 
 
 # ------------------------------------------------------------------------------ PRE_UPDATE
@@ -352,43 +361,44 @@ def _supervise(world: World, ctl: Controllers) -> None:
 
 def run_pilot_interface(world: World) -> None:
     """Sticks → pilot force intent; in hold modes the sticks also trim the targets."""
-    clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
-    vehicle = ctl.vehicle
     flags = ctl.flags
     sticks = ZERO6 if flags.failsafe else ctl.sticks
     if not flags.armed or not any(sticks):
         _set_intent(world, ctl, "pilot", ZERO6)
         return
-    depth_hold, attitude_hold, precision = flags.depth_hold, flags.attitude_hold, flags.precision
-    imu = world.get(vehicle, ImuReading)
-    attitude = LEVEL if imu is None else imu.quaternion_wxyz
-    wrench = pilot_wrench(
-        sticks,
-        ctl.axis_maxima,
-        attitude,
-        gains=ctl.pilot,
-        precision=precision,
-        depth_hold=depth_hold,
-        attitude_hold=attitude_hold,
-    )
-    _set_intent(world, ctl, "pilot", wrench)
+    vehicle = ctl.vehicle
+    depth_hold, attitude_hold = flags.depth_hold, flags.attitude_hold
+    shaped = ctl.shaped
+    if (
+        shaped is None
+        or shaped.sticks is not sticks
+        or shaped.modes != (flags.precision, depth_hold, attitude_hold)
+        or shaped.axis_maxima is not ctl.axis_maxima
+        or shaped.gains is not ctl.pilot
+    ):
+        shaped = ctl.shaped = _ShapedSticks(ctl, sticks)
+    if depth_hold:  # translation in the level (yaw-only) frame, rotated into the body
+        imu = world.get(vehicle, ImuReading)
+        attitude = LEVEL if imu is None else imu.quaternion_wxyz
+        level_to_body = quat_multiply(quat_conjugate(attitude), yaw_only(attitude))
+        fx, fy, fz = quat_rotate(level_to_body, shaped.force)
+        tx, ty, tz = shaped.torque
+        _set_intent(world, ctl, "pilot", (fx, fy, fz, tx, ty, tz))
+    else:
+        world.set(ctl.intents["pilot"], shaped.intent)
     if not (depth_hold or attitude_hold):
         return
     targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
     depth_m, q = targets.depth_m, targets.quaternion_wxyz
-    dt = clock.dt_s
-    dz = ctl.pilot.dead_zone
+    dt = world.resource(SimClock).dt_s
     if depth_hold:
-        rate = ctl.pilot.depth_trim_m_s[1 if precision else 0]
-        depth_m = max(0.0, depth_m + shape_stick(sticks[2], 1.0, dz) * rate * dt)
+        depth_m = max(0.0, depth_m + shaped.depth_trim * dt)
     if attitude_hold:
-        rates = (
-            ctl.pilot.attitude_trim_precision_rad_s if precision else ctl.pilot.attitude_trim_rad_s
-        )
-        roll = shape_stick(sticks[3], 1.0, dz) * rates[0] * dt
-        pitch = shape_stick(sticks[4], 1.0, dz) * rates[1] * dt
-        yaw = shape_stick(sticks[5], 1.0, dz) * rates[2] * dt
+        roll_trim, pitch_trim, yaw_trim = shaped.attitude_trims
+        roll = roll_trim * dt
+        pitch = pitch_trim * dt
+        yaw = yaw_trim * dt
         if roll or pitch:  # about the target's own body axes
             angle = math.hypot(roll, pitch)
             q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
@@ -396,6 +406,75 @@ def run_pilot_interface(world: World) -> None:
             q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
         q = quat_normalize(q)
     world.set(vehicle, ControlTargets(depth_m, q))
+
+
+class _ShapedSticks:
+    """What the pilot interface derives from one set of sticks in one mode (kept while the
+    sticks, the mode, the axis maxima and the gains stay the same: sticks change at the
+    operator's rate, frames run at the control rate).
+
+    The arithmetic is :func:`~testbed.vehicle.control.pilot_wrench`'s and the trims' own,
+    operation for operation, so the results are identical; only the repetition is saved.
+    """
+
+    __slots__ = (
+        "attitude_trims",
+        "axis_maxima",
+        "depth_trim",
+        "force",
+        "gains",
+        "intent",
+        "modes",
+        "sticks",
+        "torque",
+    )
+
+    def __init__(self, ctl: Controllers, sticks: tuple[float, ...]) -> None:
+        flags = ctl.flags
+        precision, depth_hold, attitude_hold = (
+            flags.precision,
+            flags.depth_hold,
+            flags.attitude_hold,
+        )
+        gains = ctl.pilot
+        self.sticks = sticks
+        self.modes = (precision, depth_hold, attitude_hold)
+        self.axis_maxima = ctl.axis_maxima
+        self.gains = gains
+        # pilot_wrench, without the rotation into the body (per frame, from the IMU)
+        wrench = pilot_wrench(
+            sticks,
+            ctl.axis_maxima,
+            LEVEL,
+            gains=gains,
+            precision=precision,
+            depth_hold=False,
+            attitude_hold=attitude_hold,
+        )
+        scale = gains.precision_scale if precision else gains.normal_scale
+        dz = gains.dead_zone
+        if depth_hold:  # pilot_wrench's depth-hold force gains, still in the level frame
+            u = [shape_stick(sticks[k], scale, dz) * ctl.axis_maxima[k] for k in range(3)]
+            tg = (
+                gains.depth_hold_translation_precision
+                if precision
+                else gains.depth_hold_translation
+            )
+            self.force: Vec3 = (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2])
+        else:
+            self.force = (wrench[0], wrench[1], wrench[2])
+        self.torque: Vec3 = (wrench[3], wrench[4], wrench[5])
+        self.intent = ForceIntent("pilot", wrench)
+        # trim rates at these sticks: shape · rate (× dt per frame)
+        self.depth_trim = (
+            shape_stick(sticks[2], 1.0, dz) * gains.depth_trim_m_s[1 if precision else 0]
+        )
+        rates = gains.attitude_trim_precision_rad_s if precision else gains.attitude_trim_rad_s
+        self.attitude_trims: Vec3 = (
+            shape_stick(sticks[3], 1.0, dz) * rates[0],
+            shape_stick(sticks[4], 1.0, dz) * rates[1],
+            shape_stick(sticks[5], 1.0, dz) * rates[2],
+        )
 
 
 def control_depth(world: World) -> None:
