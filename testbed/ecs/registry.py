@@ -275,30 +275,30 @@ def replicated_changes(
     """
     entries = [e for e in registry if side is None or e.owner is side]
     changes: list[Change] = []
-    fresh: set[Entity] = set()
-    for entity, _ in world.query(Replicate):
-        if (
-            world.added_tick(entity, Replicate) > since
-            and world.origin_of(entity, Replicate) is Origin.LOCAL
-        ):
-            fresh.add(entity)
+    # entities whose marker is new here: the peer has never seen them (rare after the start)
+    fresh = {e for e, _ in world.query1(Replicate, added=True, since=since, origin=Origin.LOCAL)}
     for entry in entries:
-        for entity, (value,) in world.query(entry.cls):
+        component = entry.cls
+        if fresh:
+            candidates = world.query1(component)
+        else:  # only LOCAL writes newer than ``since`` (a quiet column is skipped at once)
+            candidates = world.query1(component, changed=True, since=since, origin=Origin.LOCAL)
+        for entity, value in candidates:
             if not world.has(entity, Replicate):
                 continue
             if entity in fresh:
                 kind = ChangeKind.ADDED
             elif (
-                world.changed_tick(entity, entry.cls) <= since
-                or world.origin_of(entity, entry.cls) is not Origin.LOCAL
+                world.changed_tick(entity, component) <= since
+                or world.origin_of(entity, component) is not Origin.LOCAL
             ):
                 continue
-            elif world.added_tick(entity, entry.cls) > since:
+            elif world.added_tick(entity, component) > since:
                 kind = ChangeKind.ADDED
             else:
                 kind = ChangeKind.CHANGED
-            tick = world.changed_tick(entity, entry.cls)
-            changes.append(Change(entity, kind, entry.cls, entry.type_id, value, tick))
+            tick = world.changed_tick(entity, component)
+            changes.append(Change(entity, kind, component, entry.type_id, value, tick))
     owned = {e.cls: e.type_id for e in entries}
     last_removal: dict[tuple[Entity, type[Any] | None], tuple[int, bool]] = {}
     for removal in world.removals_since(since):
