@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
+from testbed.ecs.storage import GONE
 from testbed.ecs.world import Entity, Origin, Replicate, World, check_component_type
 
 __all__ = [
@@ -277,28 +278,27 @@ def replicated_changes(
     changes: list[Change] = []
     # entities whose marker is new here: the peer has never seen them (rare after the start)
     fresh = {e for e, _ in world.query1(Replicate, added=True, since=since, origin=Origin.LOCAL)}
+    # Same package as the world: read its columns and slots directly (this runs every frame of
+    # every replicating node); a column whose newest change is not after ``since`` is skipped.
+    columns = world._columns
     for entry in entries:
         component = entry.cls
-        if fresh:
-            candidates = world.query1(component)
-        else:  # only LOCAL writes newer than ``since`` (a quiet column is skipped at once)
-            candidates = world.query1(component, changed=True, since=since, origin=Origin.LOCAL)
-        for entity, value in candidates:
-            if not world.has(entity, Replicate):
+        column = columns.get(component)
+        if column is None or (not fresh and column.changed_max <= since):
+            continue
+        for entity, slot in column.pairs():
+            value = slot.value
+            if value is GONE or not world.has(entity, Replicate):
                 continue
             if entity in fresh:
                 kind = ChangeKind.ADDED
-            elif (
-                world.changed_tick(entity, component) <= since
-                or world.origin_of(entity, component) is not Origin.LOCAL
-            ):
+            elif slot.changed <= since or slot.origin is not Origin.LOCAL:
                 continue
-            elif world.added_tick(entity, component) > since:
+            elif slot.added > since:
                 kind = ChangeKind.ADDED
             else:
                 kind = ChangeKind.CHANGED
-            tick = world.changed_tick(entity, component)
-            changes.append(Change(entity, kind, component, entry.type_id, value, tick))
+            changes.append(Change(entity, kind, component, entry.type_id, value, slot.changed))
     owned = {e.cls: e.type_id for e in entries}
     last_removal: dict[tuple[Entity, type[Any] | None], tuple[int, bool]] = {}
     for removal in world.removals_since(since):
