@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed link|...``.
+"""Command-line interface: ``testbed run|link|sweep|scenarios``.
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -32,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     _add_run_parser(sub)
     _add_link_parser(sub)
+    _add_sweep_parser(sub)
     scenarios = sub.add_parser("scenarios", help="list the packaged scenarios")
     scenarios.set_defaults(handler=_list_scenarios)
     return parser
@@ -189,6 +190,57 @@ def _run_link(args: argparse.Namespace) -> int:
     else:
         print(format_report(result))
     return EXIT_OK
+
+
+def _add_sweep_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
+    """``testbed sweep``: a grid of runs on local processes or a Dask cluster (testbed.sweep)."""
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a scenario sweep (grid × seeds) locally or on a Dask cluster, resumable",
+        description="Run every (grid point, seed) of a sweep file as an independent run. Writes "
+        "runs.jsonl, results.csv (one row per run) and aggregate.csv (per point) to --out. "
+        "Exit 0 when every run succeeded, 1 when some failed (listed), 2 on bad input.",
+    )
+    sweep.add_argument("sweep", help="packaged sweep id (e.g. ber-vs-lag-v1) or a sweep .toml path")
+    sweep.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key in every run, e.g. --set duration_s=30 (repeatable)",
+    )
+    sweep.add_argument(
+        "--workers", type=int, default=None, help="worker processes (default: one per core)"
+    )
+    sweep.add_argument(
+        "--dask",
+        default=None,
+        metavar="ADDRESS|local",
+        help="run on a dask.distributed scheduler (tcp://host:8786) or a LocalCluster ('local')",
+    )
+    sweep.add_argument(
+        "--out", type=Path, default=None, help="results directory (default: sweeps/<id>/)"
+    )
+    sweep.add_argument(
+        "--resume", action="store_true", help="continue the sweep in --out, skipping done runs"
+    )
+    sweep.set_defaults(handler=_run_sweep)
+
+
+def _run_sweep(args: argparse.Namespace) -> int:
+    """Handler of ``testbed sweep``: load and check the sweep, run it, summarise."""
+    from testbed.sweep import format_summary, load_sweep, run_sweep
+
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers: must be ≥ 1, got {args.workers}")
+    if args.workers is not None and args.dask not in (None, "local"):
+        raise ConfigError("--workers: a remote --dask cluster brings its own workers")
+    sweep = load_sweep(args.sweep, args.overrides)
+    out = args.out if args.out is not None else Path("sweeps") / sweep.id
+    summary = run_sweep(sweep, out, workers=args.workers, dask=args.dask, resume=args.resume)
+    print(format_summary(sweep, summary))
+    return EXIT_OK if not summary.failed else 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:
