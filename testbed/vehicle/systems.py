@@ -196,6 +196,8 @@ class Actuation:
         actual_forces_n: (n,) the thrusters' actual forces at the end of the interval.
         requested: (6,) the summed intents of this frame.
         plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
+        mean_weight: ``((interval_s, time_constant_s), c)``, the last weight of the interval's
+            mean force (see :func:`actuate_thrusters`), kept while both stay the same.
     """
 
     allocator: Any
@@ -207,6 +209,7 @@ class Actuation:
     actual_forces_n: tuple[float, ...] = ()
     requested: Wrench6 = ZERO6
     plant_wrench: Wrench6 = ZERO6
+    mean_weight: tuple[tuple[float, float], float] = ((math.nan, math.nan), 0.5)
 
     def __post_init__(self) -> None:
         n = len(self.matrix_columns)
@@ -565,8 +568,13 @@ def actuate_thrusters(world: World) -> None:
     f0 = act.actual_forces_n
     f1 = act.dynamics.step_floats(act.commanded_forces_n, h)
     tau = act.dynamics.time_constant_s
-    e = math.exp(-h / tau) if tau > 0.0 else 0.0
-    c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+    key = (h, tau)
+    if act.mean_weight[0] == key:  # the interval is almost always the same
+        c = act.mean_weight[1]
+    else:
+        e = math.exp(-h / tau) if tau > 0.0 else 0.0
+        c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+        act.mean_weight = (key, c)
     act.actual_forces_n = f1
     mean = [a + (b - a) * c for a, b in zip(f0, f1, strict=True)]
     act.plant_wrench = wrench_of(mean, act.matrix_columns)
