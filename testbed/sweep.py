@@ -335,10 +335,13 @@ def expand(sweep: Sweep) -> list[RunSpec]:
 
 
 def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``metrics.json`` content → ``{"link.uplink.per": 0.0, ...}``; NaN and ±inf → None."""
+    """``metrics.json`` content → ``{"link.uplink.per": 0.0, ...}``: Python scalars only (numpy
+    scalars converted), NaN and ±inf → None."""
     flat: dict[str, Any] = {}
     for key, value in metrics.items():
         dotted = f"{prefix}{key}"
+        if isinstance(value, np.generic):  # numpy scalars → Python (and their plain repr)
+            value = value.item()
         if isinstance(value, Mapping):
             flat.update(flatten_metrics(value, f"{dotted}."))
         elif isinstance(value, float) and not math.isfinite(value):
@@ -687,9 +690,9 @@ def run_sweep(
                 row["error"] = outcome.error
                 row.update(outcome.metrics or {})
                 pending.append(row)
-                progress.update(outcome.metrics is None)
                 if time.monotonic() - last_flush >= flush_interval_s:
                     flush()
+                progress.update(outcome.metrics is None)
         flush()
     finally:
         progress.close()
