@@ -19,8 +19,7 @@ never hold a partial row. A run that raises is recorded with ``status = "failed"
 error; the sweep goes on. ``wall_s`` and ``rtf`` are left out of the rows so that the same sweep
 gives the same rows on any backend, interrupted or not.
 
-A top-level module (DESIGN.md, "Layering"): it may import every layer; nothing imports it but
-the CLI.
+A top-level module (DESIGN.md, "Layering"): it may import every layer; only the CLI imports it.
 """
 
 from __future__ import annotations
@@ -33,7 +32,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -110,9 +109,7 @@ class RangeSpec:
     def values(self) -> tuple[float, ...]:
         """The axis values, ascending, rounded to 12 significant digits (``1e-05``, not
         ``1.0000000000000001e-05``), duplicates removed."""
-        if self.num == 1:
-            raw = [self.start]
-        elif self.scale == "log":
+        if self.scale == "log":  # with num = 1 both give [start]
             raw = list(np.geomspace(self.start, self.stop, self.num))
         else:
             raw = list(np.linspace(self.start, self.stop, self.num))
@@ -424,29 +421,20 @@ def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iter
 
 
 def read_journal(path: Path, *, repair: bool = False) -> list[dict[str, Any]]:
-    """The rows recorded in ``runs.jsonl``; with ``repair``, cut off a torn last line.
+    """The rows in ``runs.jsonl``; with ``repair``, cut off a torn tail (no final newline).
 
     Raises:
-        ConfigError: a damaged line other than the last.
+        ConfigError: a complete line that is not a JSON record (the file was edited).
     """
-    if not path.exists():
-        return []
-    data = path.read_bytes()
-    rows: list[dict[str, Any]] = []
-    good_end = 0
-    lines = data.split(b"\n")
-    for number, line in enumerate(lines[:-1], start=1):
-        try:
-            rows.append(json.loads(line))
-        except ValueError:
-            if number < len(lines) - 1:
-                raise ConfigError(f"{path}: line {number}: damaged record") from None
-            break
-        good_end += len(line) + 1
-    if repair and good_end < len(data):
+    data = path.read_bytes() if path.exists() else b""
+    complete = data[: data.rfind(b"\n") + 1]
+    try:
+        rows = [json.loads(line) for line in complete.splitlines()]
+    except ValueError:
+        raise ConfigError(f"{path}: damaged record (not written by testbed sweep)") from None
+    if repair and len(complete) < len(data):
         with path.open("r+b") as handle:
-            handle.truncate(good_end)
-            handle.flush()
+            handle.truncate(len(complete))
             os.fsync(handle.fileno())
     return rows
 
@@ -560,16 +548,8 @@ def aggregate_rows(sweep: Sweep, rows: Sequence[Mapping[str, Any]]) -> list[dict
 
 @dataclass(frozen=True, slots=True)
 class SweepSummary:
-    """How a sweep ended.
-
-    Attributes:
-        total: runs in the sweep.
-        ran: runs done by this invocation (the rest were already recorded).
-        failed: ``(point, seed, grid values, error)`` of every failed run, recorded earlier or
-            now.
-        wall_s: wall time of this invocation [s].
-        out: the results directory.
-    """
+    """How a sweep ended: runs in all, run now, every failed run ``(point, seed, grid values,
+    error)`` recorded earlier or now, wall time of this invocation [s], the results directory."""
 
     total: int
     ran: int
@@ -673,30 +653,26 @@ def run_sweep(
             _append(journal, pending)
             rows.extend(pending)
             pending.clear()
-            _write_atomic(out / "results.csv", results_csv(sweep, rows))
+        _write_atomic(out / "results.csv", results_csv(sweep, rows))
         last_flush = time.monotonic()
 
-    outcomes: Callable[[], Iterator[RunOutcome]]
-    if dask is None:
-        outcomes = lambda: _pool_outcomes(specs, workers)  # noqa: E731  # deferred start
-    else:
-        outcomes = lambda: _dask_outcomes(specs, dask, workers)  # noqa: E731
+    # generators: the pool or cluster starts only when iterated, i.e. when there is work
+    outcomes = (
+        _pool_outcomes(specs, workers) if dask is None else _dask_outcomes(specs, dask, workers)
+    )
     try:
-        if specs:
-            for outcome in outcomes():
-                row: dict[str, Any] = {"point": outcome.point, "seed": outcome.seed}
-                row.update(points[outcome.point])
-                row["status"] = "ok" if outcome.metrics is not None else "failed"
-                row["error"] = outcome.error
-                row.update(outcome.metrics or {})
-                pending.append(row)
-                if time.monotonic() - last_flush >= flush_interval_s:
-                    flush()
-                progress.update(outcome.metrics is None)
+        for outcome in outcomes if specs else ():
+            status = "ok" if outcome.metrics is not None else "failed"
+            pending.append(
+                {"point": outcome.point, "seed": outcome.seed, **points[outcome.point]}
+                | {"status": status, "error": outcome.error, **(outcome.metrics or {})}
+            )
+            if time.monotonic() - last_flush >= flush_interval_s:
+                flush()
+            progress.update(outcome.metrics is None)
         flush()
     finally:
         progress.close()
-    _write_atomic(out / "results.csv", results_csv(sweep, rows))
     table = aggregate_rows(sweep, rows)
     columns: dict[str, None] = {}
     for entry in table:
