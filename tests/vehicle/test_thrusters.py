@@ -298,3 +298,37 @@ def test_dynamics_rejects_misuse() -> None:
         ThrusterDynamics(0)
     with pytest.raises(ValueError):
         ThrusterDynamics(2, time_constant_s=-1.0)
+
+
+# -- float fast paths (the vehicle frame uses them instead of numpy) -------------------------
+
+
+def test_interp_table_reproduces_np_interp_bit_for_bit() -> None:
+    from testbed.vehicle.thrusters import InterpTable
+
+    rng = np.random.default_rng(5)
+    xp = np.sort(rng.uniform(-30.0, 40.0, 60))
+    fp = rng.uniform(0.0, 17.0, 60)
+    table = InterpTable(xp, fp)
+    probes = np.concatenate([rng.uniform(-40.0, 50.0, 5000), xp, [xp[0], xp[-1], 0.0, -0.0]])
+    got = table.many(probes.tolist())
+    assert np.array_equal(np.array(got), np.interp(probes, xp, fp))
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 6, 8, 9, 17, 39])
+def test_numpy_sum_adds_in_numpys_order(n: int) -> None:
+    from testbed.vehicle.thrusters import numpy_sum
+
+    rng = np.random.default_rng(n)
+    for _ in range(500):
+        values = rng.normal(0.0, 10.0, n) * 10.0 ** rng.integers(-8, 8, n)
+        assert numpy_sum(values.tolist()) == float(np.sum(values))
+
+
+def test_total_current_floats_equals_the_vectorised_sum() -> None:
+    t200 = T200.from_table()
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        forces = rng.uniform(-35.0, 40.0, 8)
+        expected = float(t200.currents_for_forces(forces).sum())
+        assert t200.total_current_floats(forces.tolist()) == expected
