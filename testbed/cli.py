@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed run|link|sweep|scenarios``.
+"""Command-line interface: ``testbed run|link|sweep|plot|scenarios``.
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -33,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_parser(sub)
     _add_link_parser(sub)
     _add_sweep_parser(sub)
+    _add_plot_parser(sub)
     scenarios = sub.add_parser("scenarios", help="list the packaged scenarios")
     scenarios.set_defaults(handler=_list_scenarios)
     return parser
@@ -240,7 +241,42 @@ def _run_sweep(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else Path("sweeps") / sweep.id
     summary = run_sweep(sweep, out, workers=args.workers, dask=args.dask, resume=args.resume)
     print(format_summary(sweep, summary))
+    if any(key.rsplit(".", 1)[-1] == "ber" for key, _ in sweep.axes):
+        from testbed.sweep_report import plot_ber_sweep
+
+        paths = plot_ber_sweep(out / "results.csv", out)
+        print(f"  plots: {', '.join(path.name for path in paths)}")
     return EXIT_OK if not summary.failed else 1
+
+
+def _add_plot_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
+    """``testbed plot``: any results.csv column against another (testbed.sweep_report)."""
+    plot = sub.add_parser(
+        "plot",
+        help="plot one column of a sweep's results.csv against another",
+        description="Scatter a metric of every successful run against a grid key or another "
+        "metric, with the median per x and 95 %% t-intervals of the mean; one colour per --hue "
+        "value. Writes a PNG (default: RESULTS' folder, <y>_vs_<x>.png).",
+    )
+    plot.add_argument("results", type=Path, help="a results.csv written by testbed sweep")
+    plot.add_argument("--x", required=True, metavar="KEY", help="x column, e.g. link.ber")
+    plot.add_argument(
+        "--y", required=True, metavar="METRIC", help="y column, e.g. command_age_s.mean"
+    )
+    plot.add_argument("--hue", default=None, metavar="KEY", help="colour by this column")
+    plot.add_argument("--out", type=Path, default=None, help="PNG path")
+    plot.set_defaults(handler=_run_plot)
+
+
+def _run_plot(args: argparse.Namespace) -> int:
+    """Handler of ``testbed plot``: check the columns, draw, print the path."""
+    from testbed.sweep_report import default_plot_name, plot_pair
+
+    out = args.out
+    if out is None:
+        out = args.results.parent / default_plot_name(args.x, args.y)
+    print(plot_pair(args.results, args.x, args.y, args.hue, out))
+    return EXIT_OK
 
 
 def main(argv: Sequence[str] | None = None) -> int:
