@@ -140,7 +140,7 @@ def closed_form_per(ber: np.ndarray | float, frame_bytes: float) -> np.ndarray:
     Returns:
         PER, the shape of ``ber``.
     """
-    return 1.0 - (1.0 - np.asarray(ber, dtype=float)) ** (8.0 * frame_bytes)
+    return -np.expm1(8.0 * frame_bytes * np.log1p(-np.asarray(ber, dtype=float)))  # no 1 − ~1
 
 
 def closed_form_age_s(
