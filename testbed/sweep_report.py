@@ -140,7 +140,8 @@ def closed_form_per(ber: np.ndarray | float, frame_bytes: float) -> np.ndarray:
     Returns:
         PER, the shape of ``ber``.
     """
-    return -np.expm1(8.0 * frame_bytes * np.log1p(-np.asarray(ber, dtype=float)))  # no 1 − ~1
+    log_survival = 8.0 * frame_bytes * np.log1p(-np.asarray(ber, dtype=float))
+    return np.asarray(-np.expm1(log_survival), dtype=float)  # expm1: no 1 − (≈1) cancellation
 
 
 def closed_form_age_s(
