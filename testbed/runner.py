@@ -170,10 +170,16 @@ def _link_direction(
 
     A frame sent as several packets counts once, by its worst packet: collided, then lost in an
     outage, then out of range, then corrupted (the order :func:`testbed.report.frame_outcomes`
-    uses too).
+    uses too). ``per`` = 1 − delivered / settled, over the frames whose every packet had reached
+    the receiver (or been lost) when the run ended: a frame still queued or on the air at the end
+    is neither delivered nor lost.
     """
     sent = dropped = 0
     sizes: list[int] = []
+    packets_sent: dict[int, int] = {}
+    packets_settled: dict[int, int] = {}
+    outcomes = {EventKind.DELIVER, EventKind.CORRUPT, EventKind.COLLIDE}
+    outcomes |= {EventKind.OUTAGE, EventKind.OUT_OF_RANGE}
     lost: dict[EventKind, set[int]] = {
         EventKind.COLLIDE: set(),
         EventKind.OUTAGE: set(),
@@ -188,13 +194,17 @@ def _link_direction(
             sizes.append(event.size_bytes)
         elif event.kind is EventKind.DROP:
             dropped += 1
-        elif event.dst == dst and event.kind in lost:
-            lost[event.kind].add(event.frame_id)
+        elif event.kind is EventKind.TX_START:
+            packets_sent[event.frame_id] = packets_sent.get(event.frame_id, 0) + 1
+        elif event.dst == dst and event.kind in outcomes:
+            packets_settled[event.frame_id] = packets_settled.get(event.frame_id, 0) + 1
+            if event.kind in lost:
+                lost[event.kind].add(event.frame_id)
     collided = lost[EventKind.COLLIDE]
     outage = lost[EventKind.OUTAGE] - collided
     out_of_range = lost[EventKind.OUT_OF_RANGE] - collided - outage
     corrupted = lost[EventKind.CORRUPT] - collided - outage - out_of_range
-    transmitted = sent - dropped
+    settled = sum(1 for f, n in packets_sent.items() if packets_settled.get(f, 0) >= n)
     return {
         "frames_sent": sent,
         "frames_delivered": decoded,
@@ -203,7 +213,7 @@ def _link_direction(
         "frames_dropped": dropped,
         "frames_outage": len(outage),
         "frames_out_of_range": len(out_of_range),
-        "per": 1.0 - decoded / transmitted if transmitted else math.nan,
+        "per": 1.0 - decoded / settled if settled else math.nan,
         "goodput_bps": 8.0 * payload_bytes / sim_s,
         "mean_frame_bytes": float(np.mean(sizes)) if sizes else math.nan,
     }

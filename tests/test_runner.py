@@ -141,3 +141,13 @@ def test_metrics_json_is_strict_json(tmp_path: Any) -> None:
 
 def _reject(token: str) -> float:
     raise AssertionError(f"non-strict JSON constant {token}")
+
+
+def test_frames_in_flight_at_the_end_are_not_counted_lost() -> None:
+    """Without bit errors nothing is lost, however the run's end cuts the last exchange."""
+    for duration in ("10", "10.3", "10.45"):
+        metrics = run(
+            "s100-teleop-v1", f"duration_s={duration}", "link.ber=0", "metrics.settle_s=1"
+        ).metrics
+        for direction in ("uplink", "downlink"):
+            assert metrics["link"][direction]["per"] == 0.0
