@@ -110,6 +110,30 @@ class LinkPort:
         self._recorder.frames_rejected[self._direction] += 1
 
 
+class ChangeSetOutbox:
+    """What a node sends on a change-set link: the changes since the last send, or, once per
+    ``snapshot_period_s``, its whole owned state so a peer that lost a payload resyncs.
+
+    Args:
+        sender: the node's change-set sender.
+        snapshot_period_s: time between full snapshots [s]; 0 = never.
+    """
+
+    def __init__(self, sender: ChangeSetSender, snapshot_period_s: float) -> None:
+        self.sender = sender
+        self._period_s = snapshot_period_s
+        self._next_snapshot_s = snapshot_period_s if snapshot_period_s > 0.0 else math.inf
+
+    def payloads(self, now_s: float) -> list[bytes]:
+        """The payloads to send at time ``now_s`` [s]."""
+        changes = self.sender.poll()  # moves the poll mark either way
+        if now_s < self._next_snapshot_s:
+            return changes
+        while self._next_snapshot_s <= now_s:
+            self._next_snapshot_s += self._period_s
+        return self.sender.snapshot()
+
+
 class VehicleNode:
     """The vehicle node: the vehicle's frames in simpy time, its link systems and recording.
 
@@ -124,6 +148,8 @@ class VehicleNode:
         commanded: the pilot's true sticks at a time (recording only).
         sample_rate_hz: rate of the recorded series rows [Hz] (energy is integrated every
             frame regardless).
+        snapshot_period_s: change-set codec: send the full owned state this often [s] (0:
+            never), so an operator that lost a payload resyncs.
     """
 
     def __init__(
@@ -138,6 +164,7 @@ class VehicleNode:
         recorder: Recorder,
         commanded: Callable[[float], tuple[float, float, float, float]],
         sample_rate_hz: float = 50.0,
+        snapshot_period_s: float = 0.0,
     ) -> None:
         self.env = env
         self._sample_period_s = 1.0 / sample_rate_hz
@@ -152,7 +179,8 @@ class VehicleNode:
         self.vehicle = vehicle_factory(inbound=(self._ingest,), outbound=outbound)
         vehicle = self.vehicle
         self.teleop = TeleopVehicleEnd(vehicle.world, vehicle.entity, vehicle.operator_entity)
-        self.sender = ChangeSetSender(vehicle.world, self.registry, Side.VEHICLE)
+        sender = ChangeSetSender(vehicle.world, self.registry, Side.VEHICLE)
+        self.outbox = ChangeSetOutbox(sender, snapshot_period_s)
         self.receiver = ChangeSetReceiver(vehicle.world, self.registry, Side.VEHICLE)
         self._send_every = max(1, round(vehicle.config.control_rate_hz / downlink_rate_hz))
         self._frame_count = 0
@@ -211,7 +239,7 @@ class VehicleNode:
         self._frame_count += 1
         if self._frame_count % self._send_every:
             return
-        for payload in self.sender.poll():
+        for payload in self.outbox.payloads(world.resource(SimClock).time_s):
             self.port.send(payload)
 
     def _answer(self, payload: bytes, delivery: Delivery) -> None:
@@ -281,6 +309,8 @@ class OperatorNode:
         recorder: ground-truth sink.
         reply_odometry_s: the vehicle node's map of reply frame id → true odometry sample time
             (teleop replies carry no time; recording only).
+        snapshot_period_s: change-set codec: send the full owned state this often [s] (0:
+            never), so a vehicle that lost a payload (an arm request, a setpoint) resyncs.
     """
 
     def __init__(
@@ -294,6 +324,7 @@ class OperatorNode:
         uplink_rate_hz: float,
         recorder: Recorder,
         reply_odometry_s: dict[int, float],
+        snapshot_period_s: float = 0.0,
     ) -> None:
         self.env = env
         self.station = station
@@ -306,7 +337,8 @@ class OperatorNode:
         self.port = LinkPort(modem, "downlink", recorder, on_frame)
         registry = make_registry()
         self.teleop = TeleopOperatorEnd(station.world, station.entity)
-        self.sender = ChangeSetSender(station.world, registry, Side.OPERATOR)
+        sender = ChangeSetSender(station.world, registry, Side.OPERATOR)
+        self.outbox = ChangeSetOutbox(sender, snapshot_period_s)
         self.receiver = ChangeSetReceiver(station.world, registry, Side.OPERATOR)
         self._held_sampled = -math.inf
         station.add_system(Phase.PRE_UPDATE, self._ingest)
@@ -320,7 +352,7 @@ class OperatorNode:
                 payloads = [self.teleop.encode_order()]
                 self._send_order(payloads[0])
             else:
-                payloads = self.sender.poll()
+                payloads = self.outbox.payloads(env.now)
                 for part in payloads:
                     self.port.send(part)
             if self._ipg is None:

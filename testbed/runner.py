@@ -111,6 +111,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         recorder=recorder,
         commanded=commanded,
         sample_rate_hz=scenario.metrics.sample_rate_hz,
+        snapshot_period_s=link.snapshot_period_s,
     )
     holder["node"] = vehicle_node
     position = link.operator_position_ned_m
@@ -130,6 +131,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         uplink_rate_hz=link.uplink_rate_hz,
         recorder=recorder,
         reply_odometry_s=vehicle_node.reply_odometry_s,
+        snapshot_period_s=link.snapshot_period_s,
     )
     vehicle = vehicle_node.vehicle
     for fault in scenario.faults.thrusters:

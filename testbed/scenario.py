@@ -116,6 +116,9 @@ class LinkSection:
         uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or
             ``codec == "changeset"``.
         downlink_rate_hz: vehicle send rate [Hz], same condition.
+        snapshot_period_s: change-set codec: every this many seconds a node sends its full
+            owned state instead of the changes alone, so a peer that lost a payload resyncs
+            [s]; 0 = never.
         operator_position_ned_m: (3,) the operator's modem [m], world NED; the vehicle's modem
             moves with the vehicle.
     """
@@ -130,10 +133,16 @@ class LinkSection:
     ipg_s: float = 0.6
     uplink_rate_hz: float = 50.0
     downlink_rate_hz: float = 100.0
+    snapshot_period_s: float = 5.0
     operator_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         _positive(self.ipg_s, "ipg_s")
+        check(
+            self.snapshot_period_s >= 0.0 and math.isfinite(self.snapshot_period_s),
+            "snapshot_period_s",
+            f"must be a finite number ≥ 0, got {self.snapshot_period_s}",
+        )
         _positive(self.uplink_rate_hz, "uplink_rate_hz")
         _positive(self.downlink_rate_hz, "downlink_rate_hz")
         for i, value in enumerate(self.operator_position_ned_m):
@@ -581,6 +590,10 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
     section = build(LinkSection, {**options, "channel": channel_data}, source=where, prefix="link.")
     if "ipg_s" in given and section.ipg != "fixed":
         raise ConfigError(f"{where}: link.ipg_s: only used when link.ipg = 'fixed'")
+    if "snapshot_period_s" in given and section.codec != "changeset":
+        raise ConfigError(
+            f"{where}: link.snapshot_period_s: only used when link.codec = 'changeset'"
+        )
     for key in ("uplink_rate_hz", "downlink_rate_hz"):
         if key in given and not section.rates_used:
             when = "link.mac = 'free' or link.codec = 'changeset'"

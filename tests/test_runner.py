@@ -151,3 +151,19 @@ def test_frames_in_flight_at_the_end_are_not_counted_lost() -> None:
         ).metrics
         for direction in ("uplink", "downlink"):
             assert metrics["link"][direction]["per"] == 0.0
+
+
+def test_change_set_snapshots_resync_a_lost_arm_request() -> None:
+    """Over the tether the operator's arm request (t = 1 s) is lost in an outage over [0.5, 2) s.
+    With periodic snapshots the vehicle arms at the first snapshot after the outage; with none
+    the lost change is never sent again and the vehicle stays disarmed."""
+    common = (
+        "duration_s=12",
+        "metrics.settle_s=1",
+        "faults.link_outages=[{start_s=0.5, end_s=2.0}]",
+    )
+    synced = run("tether-teleop-v1", *common, "link.snapshot_period_s=5").recorder.series()
+    never = run("tether-teleop-v1", *common, "link.snapshot_period_s=0").recorder.series()
+    armed_at = synced["t_s"][np.argmax(synced["armed"] > 0.5)]
+    assert synced["armed"][-1] == 1.0 and 2.0 < armed_at < 5.1
+    assert not never["armed"].any()
