@@ -1,1 +1,52 @@
-"""hil: reserved for a later issue (see DESIGN.md); empty for now."""
+"""Hardware in the loop: serial and TCP transports and modem adapters (REFERENCE §1.10–1.12).
+
+* :mod:`~testbed.hil.adapters` — sans-IO :class:`Adapter` protocol, :class:`Write`,
+  :class:`RawAdapter` (transparent cable/socket) and :class:`S100Adapter` (WFS Seatooth S100).
+* :mod:`~testbed.hil.evologics` — :class:`EvoLogicsAdapter` (S2C data mode, instant messages).
+* :mod:`~testbed.hil.m64` — :class:`M64Adapter` (Water Linked Modem-M64, 8-byte packets).
+* :mod:`~testbed.hil.transport` — :class:`SerialTransport` (any pyserial URL),
+  :class:`TcpTransport`, and :class:`LinkEndpoint` (transport + frame decoder, polled by nodes).
+
+The bytes written are the frames the simulation would have carried; the receiver runs the same
+:class:`~testbed.protocol.FrameDecoder`. Imports only :mod:`testbed.protocol`, pyserial and the
+standard library.
+"""
+
+from __future__ import annotations
+
+from .adapters import S100_MAX_STATUS_LEN, S100_MAX_WRITE, Adapter, RawAdapter, S100Adapter, Write
+from .evologics import SENDIM_MAX, EvoLogicsAdapter, parse_received_message
+from .m64 import CRC8_CHECK_VALUE, M64_PACKET_SIZE, M64Adapter, crc8, m64_sentence
+from .transport import (
+    PORT_ERRORS,
+    LinkEndpoint,
+    PortLike,
+    Received,
+    SerialTransport,
+    TcpTransport,
+    Transport,
+)
+
+__all__ = [
+    "CRC8_CHECK_VALUE",
+    "M64_PACKET_SIZE",
+    "PORT_ERRORS",
+    "S100_MAX_STATUS_LEN",
+    "S100_MAX_WRITE",
+    "SENDIM_MAX",
+    "Adapter",
+    "EvoLogicsAdapter",
+    "LinkEndpoint",
+    "M64Adapter",
+    "PortLike",
+    "RawAdapter",
+    "Received",
+    "S100Adapter",
+    "SerialTransport",
+    "TcpTransport",
+    "Transport",
+    "Write",
+    "crc8",
+    "m64_sentence",
+    "parse_received_message",
+]

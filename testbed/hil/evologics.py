@@ -1,0 +1,239 @@
+"""EvoLogics S2C adapter for the modem's data mode (sans-IO; REFERENCE §1.11).
+
+In data mode the port is transparent, and commands are escaped with ``+++``: we send each frame
+as instant messages ``+++AT*SENDIM,<len>,<addr>,<ack|noack>,<data>`` (≤ 64 B each; a longer
+frame is several messages, joined again by the receiver's frame decoder). The modem wraps its
+replies and events as ``+++AT<cmd>:<len>:<body>`` CR LF, the body ``len`` bytes long, so binary
+bodies with commas, CR or LF are read by count. Received instant messages arrive as the event
+``RECVIM,<len>,<src>,<dst>,<ack>,<duration>,<rssi>,<integrity>,<velocity>,<data>`` (``RECVIMS``
+has a timestamp for the ack field; ``RECVPBM`` has no ack field); their data is cut from the end
+of the body by its length, so commas in the data do not matter. Bytes outside the wrappers are
+burst data from a peer in transparent mode and are passed on as payload stream.
+
+No I/O, no clock. Remote garbage never raises.
+"""
+
+from __future__ import annotations
+
+from .adapters import Write, is_printable
+
+__all__ = ["SENDIM_MAX", "EvoLogicsAdapter", "parse_received_message"]
+
+SENDIM_MAX = 64
+"""Largest instant-message payload [B] (REFERENCE §1.11)."""
+
+_ESCAPE = b"+++AT"
+_CRLF = b"\r\n"
+_MAX_CMD_LEN = 32
+_MAX_BODY_LEN = 4096
+_RECEIVE_FIELDS = {b"RECVIM": 8, b"RECVIMS": 8, b"RECVPBM": 7}
+"""Comma-separated fields between the event name and the data, by receive event."""
+
+
+def parse_received_message(body: bytes) -> tuple[bytes, list[bytes], bytes] | None:
+    """Split a RECVIM / RECVIMS / RECVPBM event body.
+
+    Args:
+        body: the event body, e.g. ``b"RECVIM,3,1,2,noack,1125,-46,191,0.0,a,b"``.
+
+    Returns:
+        ``(name, fields, data)`` with the fields between the name and the data
+        (``fields[0]`` is the data length), or None if the body is not a well-formed receive
+        event (unknown name, wrong field count, length field not matching the data).
+    """
+    name, sep, rest = body.partition(b",")
+    n_fields = _RECEIVE_FIELDS.get(name)
+    if n_fields is None or not sep:
+        return None
+    length_text, sep, _ = rest.partition(b",")
+    if not sep or not length_text.isdigit() or len(length_text) > 4:
+        return None
+    length = int(length_text)
+    if length > len(rest):
+        return None
+    head = rest[: len(rest) - length]
+    data = rest[len(rest) - length :]
+    if not head.endswith(b","):
+        return None
+    fields = head[:-1].split(b",")
+    if len(fields) != n_fields or not is_printable(head):
+        return None
+    return name, fields, data
+
+
+class EvoLogicsAdapter:
+    """EvoLogics S2C in data mode: frames as instant messages, events parsed and counted.
+
+    Args:
+        remote_address: acoustic address of the peer modem (1..254).
+        ack: ask the modem for delivery reports (``ack``) instead of ``noack``.
+        message_hold_s: hold after each instant message [s], so the modem is not handed a new
+            message while one is on the air (it answers ``BUSY``/``ERROR`` otherwise; those
+            are counted in :attr:`event_counts`).
+        line_end: terminator of the commands we send.
+
+    Attributes:
+        messages_in: instant messages received (RECVIM, RECVIMS, RECVPBM).
+        event_counts: replies and events by name: ``"OK"``, ``"DELIVEREDIM"``,
+            ``"FAILEDIM"``, ``"BUSY"``, ``"ERROR"``…  (the body up to the first comma or space).
+        parse_errors: ``+++AT`` wrappers or receive events that did not parse.
+        garbage_bytes: bytes dropped with a bad wrapper [B].
+        transparent_bytes: bytes received outside wrappers and passed on [B].
+        bytes_in: bytes received [B].
+
+    Raises:
+        ValueError: address out of range.
+    """
+
+    __slots__ = (
+        "_buf",
+        "_flag",
+        "bytes_in",
+        "event_counts",
+        "garbage_bytes",
+        "line_end",
+        "message_hold_s",
+        "messages_in",
+        "parse_errors",
+        "remote_address",
+        "transparent_bytes",
+    )
+
+    def __init__(
+        self,
+        remote_address: int,
+        *,
+        ack: bool = False,
+        message_hold_s: float = 0.0,
+        line_end: bytes = b"\n",
+    ) -> None:
+        if not 1 <= remote_address <= 254:
+            raise ValueError(f"remote_address must be in 1..254, got {remote_address!r}")
+        if message_hold_s < 0:
+            raise ValueError(f"message_hold_s must be >= 0, got {message_hold_s!r}")
+        self.remote_address = remote_address
+        self._flag = b"ack" if ack else b"noack"
+        self.message_hold_s = float(message_hold_s)
+        self.line_end = bytes(line_end)
+        self._buf = bytearray()
+        self.messages_in = 0
+        self.event_counts: dict[str, int] = {}
+        self.parse_errors = 0
+        self.garbage_bytes = 0
+        self.transparent_bytes = 0
+        self.bytes_in = 0
+
+    def command(self, text: str) -> bytes:
+        """A data-mode command: ``+++`` + ``text`` (e.g. ``"AT?MODE"``) + line end."""
+        return b"+++" + text.encode("ascii") + self.line_end
+
+    def writes(self, frame: bytes) -> list[Write]:
+        """One ``+++AT*SENDIM`` per ≤ 64 B piece of the frame."""
+        frame = bytes(frame)
+        addr = str(self.remote_address).encode("ascii")
+        out: list[Write] = []
+        for i in range(0, len(frame), SENDIM_MAX):
+            piece = frame[i : i + SENDIM_MAX]
+            head = b"+++AT*SENDIM,%d,%s,%s," % (len(piece), addr, self._flag)
+            out.append(Write(head + piece + self.line_end, self.message_hold_s))
+        return out
+
+    def feed(self, data: bytes) -> bytes:
+        """Parse wrapped events; return received message data and transparent bytes."""
+        self.bytes_in += len(data)
+        buf = self._buf
+        buf += data
+        out = bytearray()
+        pos = 0
+        while True:
+            i = buf.find(_ESCAPE, pos)
+            if i < 0:
+                keep = _partial_escape(buf, pos)
+                self.transparent_bytes += len(buf) - keep - pos
+                out += buf[pos : len(buf) - keep]
+                pos = len(buf) - keep
+                break
+            self.transparent_bytes += i - pos
+            out += buf[pos:i]
+            pos = i
+            end = self._wrapped(buf, i, out)
+            if end is None:
+                break
+            pos = end
+        del buf[:pos]
+        return bytes(out)
+
+    def _wrapped(self, buf: bytearray, i: int, out: bytearray) -> int | None:
+        """Parse ``+++AT<cmd>:<len>:<body>`` CR LF at ``i``; the index after it, None to wait."""
+        start = i + len(_ESCAPE)
+        colon = buf.find(b":", start, start + _MAX_CMD_LEN + 1)
+        if colon < 0:
+            if len(buf) - start <= _MAX_CMD_LEN and is_printable(buf[start:]):
+                return None
+            return self._bad(i)
+        cmd = bytes(buf[start:colon])
+        colon2 = buf.find(b":", colon + 1, colon + 6)
+        if colon2 < 0:
+            tail = bytes(buf[colon + 1 :])
+            if (len(tail) < 5 and tail.isdigit()) or not tail:
+                return None
+            return self._bad(i)
+        length_text = bytes(buf[colon + 1 : colon2])
+        if not is_printable(cmd) or not length_text.isdigit():
+            return self._bad(i)
+        length = int(length_text)
+        if length > _MAX_BODY_LEN:
+            return self._bad(i)
+        body_end = colon2 + 1 + length
+        if len(buf) < body_end + len(_CRLF):
+            return None
+        if buf[body_end : body_end + 2] != _CRLF:
+            return self._bad(i)
+        body = bytes(buf[colon2 + 1 : body_end])
+        self._event(cmd, body, out)
+        return body_end + 2
+
+    def _bad(self, i: int) -> int:
+        """Drop the ``+++AT`` of a malformed wrapper and hunt on after it."""
+        self.parse_errors += 1
+        self.garbage_bytes += len(_ESCAPE)
+        return i + len(_ESCAPE)
+
+    def _event(self, cmd: bytes, body: bytes, out: bytearray) -> None:
+        received = parse_received_message(body)
+        if received is not None:
+            self.messages_in += 1
+            self._count(received[0].decode("ascii"))
+            out += received[2]
+            return
+        if body.startswith(tuple(_RECEIVE_FIELDS)):
+            self.parse_errors += 1
+            return
+        name = body.split(b",", 1)[0].split(b" ", 1)[0]
+        if not is_printable(name) or not name:
+            self.parse_errors += 1
+            return
+        self._count(name.decode("ascii"))
+
+    def _count(self, name: str) -> None:
+        self.event_counts[name] = self.event_counts.get(name, 0) + 1
+
+    def counters(self) -> dict[str, int]:
+        """Messages in, parse errors, garbage, transparent bytes, bytes in, and each event."""
+        counts = {
+            "bytes_in": self.bytes_in,
+            "messages_in": self.messages_in,
+            "parse_errors": self.parse_errors,
+            "garbage_bytes": self.garbage_bytes,
+            "transparent_bytes": self.transparent_bytes,
+        }
+        counts.update({f"event_{name}": n for name, n in self.event_counts.items()})
+        return counts
+
+
+def _partial_escape(buf: bytearray, pos: int) -> int:
+    """Length of the longest tail of ``buf[pos:]`` that is a proper prefix of ``+++AT``."""
+    for keep in range(min(len(_ESCAPE) - 1, len(buf) - pos), 0, -1):
+        if buf.endswith(_ESCAPE[:keep]):
+            return keep
+    return 0

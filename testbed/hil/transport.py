@@ -1,0 +1,495 @@
+"""Transports: a link endpoint on a serial port (any pyserial URL) or a TCP socket.
+
+A transport owns two threads and never blocks its caller:
+
+* the **reader** reads the port, passes the bytes through the modem adapter
+  (:meth:`Adapter.feed <testbed.hil.adapters.Adapter.feed>`) and puts the payload stream on
+  :attr:`Transport.inbox` (a :class:`queue.Queue` of :class:`Received`), stamped with the time
+  the read returned; an optional ``on_bytes`` callback then wakes whoever waits (e.g. a
+  real-time simpy loop);
+* the **writer** takes frames queued by :meth:`Transport.send` and writes the adapter's chunks,
+  holding after each as the adapter asks (air-rate pacing).
+
+Faults never stop a run. A read or write that fails (port unplugged, socket closed, write
+timeout) closes the port and counts a port error; the reader reopens it with exponential
+backoff while frames sent in the meantime are dropped and counted, as on a dead link. Garbage
+on the line is the adapter's and the frame decoder's business: counted, never fatal.
+
+:class:`LinkEndpoint` joins a transport and a :class:`~testbed.protocol.FrameDecoder`: the
+simpy side calls :meth:`LinkEndpoint.poll` (non-blocking) and gets frame events, and the
+software's own latency (port read returned → frame handed over) is recorded per frame.
+
+The adapter's ``feed`` runs on the reader thread and ``writes`` on the writer thread only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import queue
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import serial
+
+from testbed.protocol import Frame, FrameDecoder, FrameEvent
+
+from .adapters import Adapter
+
+__all__ = [
+    "PORT_ERRORS",
+    "LinkEndpoint",
+    "PortLike",
+    "Received",
+    "SerialTransport",
+    "TcpTransport",
+    "Transport",
+]
+
+PORT_ERRORS: tuple[type[Exception], ...] = (OSError, TypeError, ValueError)
+"""What a failing port raises: pyserial's SerialException is an OSError; a port closed under a
+blocked read can surface as TypeError/ValueError from a vanished file descriptor."""
+
+_MAX_READ = 4096
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    """Payload-stream bytes from one port read.
+
+    Attributes:
+        data: bytes for the frame decoder (modem chatter already removed).
+        read_ns: :func:`time.perf_counter_ns` when the port read returned [ns].
+    """
+
+    data: bytes
+    read_ns: int
+
+
+class PortLike(Protocol):
+    """The part of a pyserial port (or a fake) a transport uses."""
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes) -> int | None: ...
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def close(self) -> None: ...
+
+
+class Transport:
+    """Reader and writer threads around a port that may fail and come back.
+
+    Subclasses provide ``_open`` (may raise one of :data:`PORT_ERRORS`), ``_read`` and
+    ``_write``. The first open happens in the constructor and its error propagates (a wrong
+    path is the user's mistake); later opens retry with backoff.
+
+    Args:
+        adapter: the modem adapter.
+        on_bytes: called on the reader thread after each :class:`Received` is queued; must not
+            block. Exceptions from it are counted (``callback_errors``), not raised.
+        backoff_initial_s: first wait before reopening a failed port [s].
+        backoff_max_s: longest wait between reopen attempts [s].
+        max_pending_frames: frames :meth:`send` may queue; more are dropped and counted.
+
+    Attributes:
+        inbox: received payload stream, in order.
+        connected: set while the port is open.
+    """
+
+    def __init__(
+        self,
+        adapter: Adapter,
+        *,
+        on_bytes: Callable[[], None] | None = None,
+        backoff_initial_s: float = 0.05,
+        backoff_max_s: float = 2.0,
+        max_pending_frames: int = 64,
+    ) -> None:
+        if not 0 < backoff_initial_s <= backoff_max_s:
+            raise ValueError(
+                f"need 0 < backoff_initial_s <= backoff_max_s, got "
+                f"{backoff_initial_s!r}, {backoff_max_s!r}"
+            )
+        if max_pending_frames < 1:
+            raise ValueError(f"max_pending_frames must be >= 1, got {max_pending_frames!r}")
+        self.adapter = adapter
+        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.connected = threading.Event()
+        self._on_bytes = on_bytes
+        self._backoff_initial_s = backoff_initial_s
+        self._backoff_max_s = backoff_max_s
+        self._outbox: queue.Queue[bytes | None] = queue.Queue(max_pending_frames)
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._port: Any = None
+        self._threads: list[threading.Thread] = []
+        self.opens = 0
+        self.port_errors = 0
+        self.reopen_failures = 0
+        self.last_error = ""
+        self.frames_sent = 0
+        self.frames_dropped = 0
+        self.bytes_in = 0
+        self.bytes_out = 0
+        self.callback_errors = 0
+
+    def _start(self, name: str) -> None:
+        self._set_port(self._open())
+        for role, target in (("reader", self._read_loop), ("writer", self._write_loop)):
+            thread = threading.Thread(target=target, name=f"{name}-{role}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+
+    # -- subclass hooks -------------------------------------------------------------------
+    def _open(self) -> Any:
+        raise NotImplementedError
+
+    def _read(self, port: Any) -> bytes:
+        raise NotImplementedError
+
+    def _write(self, port: Any, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _close_port(self, port: Any) -> None:
+        port.close()
+
+    # -- caller side ----------------------------------------------------------------------
+    def send(self, frame: bytes) -> bool:
+        """Queue one encoded frame for writing; never blocks.
+
+        Returns:
+            False if the queue was full or the transport closed (the frame is dropped and
+            counted), else True.
+        """
+        if self._stop.is_set():
+            self.frames_dropped += 1
+            return False
+        try:
+            self._outbox.put_nowait(bytes(frame))
+        except queue.Full:
+            self.frames_dropped += 1
+            return False
+        return True
+
+    def counters(self) -> dict[str, int]:
+        """Transport counters merged with the adapter's (prefixed ``adapter_``)."""
+        counts = {
+            "opens": self.opens,
+            "port_errors": self.port_errors,
+            "reopen_failures": self.reopen_failures,
+            "frames_sent": self.frames_sent,
+            "frames_dropped": self.frames_dropped,
+            "bytes_in": self.bytes_in,
+            "bytes_out": self.bytes_out,
+            "callback_errors": self.callback_errors,
+        }
+        counts.update({f"adapter_{k}": v for k, v in self.adapter.counters().items()})
+        return counts
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Stop both threads, close the port and join the threads."""
+        self._stop.set()
+        while True:  # make room for the writer's stop sentinel
+            try:
+                self._outbox.put_nowait(None)
+                break
+            except queue.Full:
+                with contextlib.suppress(queue.Empty):
+                    self._outbox.get_nowait()
+        with self._lock:
+            port, self._port = self._port, None
+        if port is not None:
+            self._safe_close(port)
+        self.connected.clear()
+        for thread in self._threads:
+            thread.join(timeout_s)
+
+    def __enter__(self) -> Transport:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- threads --------------------------------------------------------------------------
+    def _set_port(self, port: Any) -> None:
+        with self._lock:
+            self._port = port
+            self.opens += 1
+        self.connected.set()
+
+    def _safe_close(self, port: Any) -> None:
+        with contextlib.suppress(*PORT_ERRORS):
+            self._close_port(port)
+
+    def _fail(self, port: Any, exc: BaseException) -> None:
+        """The port errored: drop it (once, whichever thread notices first)."""
+        with self._lock:
+            if self._port is not port:
+                return
+            self._port = None
+            self.port_errors += 1
+            self.last_error = f"{type(exc).__name__}: {exc}"
+        self.connected.clear()
+        self._safe_close(port)
+
+    def _read_loop(self) -> None:
+        backoff = self._backoff_initial_s
+        while not self._stop.is_set():
+            port = self._port
+            if port is None:
+                try:
+                    port = self._open()
+                except PORT_ERRORS as exc:
+                    self.reopen_failures += 1
+                    self.last_error = f"{type(exc).__name__}: {exc}"
+                    self._stop.wait(backoff)
+                    backoff = min(2 * backoff, self._backoff_max_s)
+                    continue
+                if self._stop.is_set():
+                    self._safe_close(port)
+                    return
+                self._set_port(port)
+                backoff = self._backoff_initial_s
+            try:
+                data = self._read(port)
+            except PORT_ERRORS as exc:
+                if not self._stop.is_set():
+                    self._fail(port, exc)
+                continue
+            if not data:
+                continue
+            read_ns = time.perf_counter_ns()
+            self.bytes_in += len(data)
+            stream = self.adapter.feed(data)
+            if stream:
+                self.inbox.put(Received(stream, read_ns))
+                if self._on_bytes is not None:
+                    try:
+                        self._on_bytes()
+                    except Exception:
+                        self.callback_errors += 1
+
+    def _write_loop(self) -> None:
+        next_ok = 0.0
+        while True:
+            frame = self._outbox.get()
+            if frame is None or self._stop.is_set():
+                return
+            for chunk in self.adapter.writes(frame):
+                delay = next_ok - time.monotonic()
+                if delay > 0 and self._stop.wait(delay):
+                    return
+                port = self._port
+                if port is None:
+                    self.frames_dropped += 1
+                    break
+                try:
+                    self._write(port, chunk.data)
+                except PORT_ERRORS as exc:
+                    self._fail(port, exc)
+                    self.frames_dropped += 1
+                    break
+                self.bytes_out += len(chunk.data)
+                next_ok = time.monotonic() + chunk.hold_s
+            else:
+                self.frames_sent += 1
+
+
+class SerialTransport(Transport):
+    """A link endpoint on a serial port: any pyserial URL (``/dev/ttyUSB0``, ``loop://``,
+    ``socket://host:port``, ``rfc2217://host:port``).
+
+    Args:
+        url: port name or pyserial URL.
+        adapter: the modem adapter.
+        baudrate: port speed [bit/s].
+        on_bytes: see :class:`Transport`.
+        rtscts: RTS/CTS hardware flow control (pair it with ``S100Adapter(rtscts=True)``).
+        read_timeout_s: how long a read waits for a first byte [s]; bounds how fast
+            :meth:`close` returns, not latency (a read returns on its first byte).
+        write_timeout_s: a write blocked longer than this (flow control stuck) counts as a
+            port error [s].
+        port_factory: opens the port (tests inject fakes); defaults to
+            :func:`serial.serial_for_url` with the settings above.
+        **kwargs: :class:`Transport` options (backoff, queue size).
+
+    Raises:
+        serial.SerialException: the port cannot be opened the first time.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        adapter: Adapter,
+        *,
+        baudrate: int,
+        on_bytes: Callable[[], None] | None = None,
+        rtscts: bool = False,
+        read_timeout_s: float = 0.05,
+        write_timeout_s: float = 2.0,
+        port_factory: Callable[[], PortLike] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(adapter, on_bytes=on_bytes, **kwargs)
+        self.url = url
+        if port_factory is None:
+
+            def port_factory() -> PortLike:
+                port: PortLike = serial.serial_for_url(
+                    url,
+                    baudrate=baudrate,
+                    rtscts=rtscts,
+                    timeout=read_timeout_s,
+                    write_timeout=write_timeout_s,
+                )
+                return port
+
+        self._factory = port_factory
+        self._start(f"serial:{url}")
+
+    def _open(self) -> PortLike:
+        return self._factory()
+
+    def _read(self, port: PortLike) -> bytes:
+        data = port.read(1)
+        if data:
+            waiting = port.in_waiting
+            if waiting:
+                data += port.read(min(waiting, _MAX_READ))
+        return data
+
+    def _write(self, port: PortLike, data: bytes) -> None:
+        port.write(data)
+
+
+class TcpTransport(Transport):
+    """A link endpoint on a TCP connection (a modem's TCP port, e.g. EvoLogics 9200, or a
+    peer testbed). Reconnects with backoff when the connection drops.
+
+    Args:
+        host: address to connect to.
+        port: TCP port.
+        adapter: the modem adapter.
+        on_bytes: see :class:`Transport`.
+        read_timeout_s: how long a receive waits [s] (bounds :meth:`close`, not latency).
+        connect_timeout_s: connection attempt timeout [s].
+        **kwargs: :class:`Transport` options.
+
+    Raises:
+        OSError: the first connection fails.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        adapter: Adapter,
+        *,
+        on_bytes: Callable[[], None] | None = None,
+        read_timeout_s: float = 0.05,
+        connect_timeout_s: float = 2.0,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(adapter, on_bytes=on_bytes, **kwargs)
+        self.address = (host, port)
+        self._read_timeout_s = read_timeout_s
+        self._connect_timeout_s = connect_timeout_s
+        self._start(f"tcp:{host}:{port}")
+
+    def _open(self) -> socket.socket:
+        sock = socket.create_connection(self.address, timeout=self._connect_timeout_s)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.settimeout(self._read_timeout_s)
+        return sock
+
+    def _read(self, port: socket.socket) -> bytes:
+        try:
+            data = port.recv(_MAX_READ)
+        except TimeoutError:
+            return b""
+        if not data:
+            raise ConnectionError("connection closed by peer")
+        return data
+
+    def _write(self, port: socket.socket, data: bytes) -> None:
+        port.sendall(data)
+
+
+class LinkEndpoint:
+    """A transport plus a frame decoder: what a node polls for frames.
+
+    Args:
+        transport: where bytes come from and frames go.
+        decoder: the frame decoder (default: WAFrame settings).
+        max_latency_samples: latency samples kept (the newest) [frames].
+
+    Attributes:
+        latencies_ns: per delivered frame, port read returned → frame handed over [ns].
+    """
+
+    def __init__(
+        self,
+        transport: Transport,
+        decoder: FrameDecoder | None = None,
+        *,
+        max_latency_samples: int = 100_000,
+    ) -> None:
+        self.transport = transport
+        self.decoder = decoder if decoder is not None else FrameDecoder()
+        self.latencies_ns: deque[int] = deque(maxlen=max_latency_samples)
+
+    def send(self, frame: bytes) -> bool:
+        """Queue one encoded frame for the port (non-blocking); False if it was dropped."""
+        return self.transport.send(frame)
+
+    def poll(self) -> list[FrameEvent]:
+        """Frame events from everything received so far; never blocks."""
+        events: list[FrameEvent] = []
+        while True:
+            try:
+                received = self.transport.inbox.get_nowait()
+            except queue.Empty:
+                return events
+            self._decode(received, events)
+
+    def wait(self, timeout_s: float) -> list[FrameEvent]:
+        """Block until at least one frame event is decoded or ``timeout_s`` passes.
+
+        For tests and command-line tools; nodes use :meth:`poll`.
+
+        Returns:
+            The events decoded (empty on timeout).
+        """
+        deadline = time.monotonic() + timeout_s
+        events: list[FrameEvent] = []
+        while not events:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            try:
+                received = self.transport.inbox.get(timeout=remaining)
+            except queue.Empty:
+                break
+            self._decode(received, events)
+        events.extend(self.poll())
+        return events
+
+    def _decode(self, received: Received, events: list[FrameEvent]) -> None:
+        new = self.decoder.feed(received.data)
+        if new:
+            now_ns = time.perf_counter_ns()
+            self.latencies_ns.extend(
+                now_ns - received.read_ns for event in new if isinstance(event, Frame)
+            )
+            events.extend(new)
+
+    def close(self) -> None:
+        """Close the transport."""
+        self.transport.close()
