@@ -1,0 +1,264 @@
+"""Embedded bit-plane wavelet coder: ``encode`` an image to a truncatable stream, ``decode`` any
+prefix of one.
+
+The coder is in the SPIHT family. Wavelet coefficients (CDF 9/7, see ``wavelet``) are quantised
+to integer magnitudes ``floor(|c|)`` (ROI coefficients first scaled by 2^shift, Maxshift-style)
+and sent bit plane by bit plane, top plane first. Each plane p has, in order:
+
+1. for each group g, coarse to fine (LL, then detail levels from the coarsest):
+   a. significance bits of the group's *active* coefficients not yet significant (1 if
+      magnitude >= 2^p), then one sign bit (1 = negative) per coefficient just found significant;
+   b. (all groups but the finest) descendant bits of the group's active coefficients whose
+      descendant set is not yet significant (1 if any descendant magnitude >= 2^p). A coefficient
+      is active once its parent's descendant set is significant (LL coefficients always are), so
+      a 1 here activates four children (three below LL) which group g + 1 codes in this plane;
+2. refinement bits (bit p of the magnitude) of every coefficient significant before plane p, in
+   flat order (coarse to fine).
+
+Bits are raw (no entropy coder): the set partitioning does the compression, and the bits of a
+step are produced and parsed as whole numpy arrays, so there is no per-coefficient Python loop.
+The stream is the header (``header``) followed by the packed bits; the encoder stops when the
+byte budget is spent. The decoder replays the same steps and stops at the first step the data
+does not complete, keeping what that step's available bits say; every coefficient is rebuilt at
+the midpoint of the interval its known bits leave, so every prefix is the best image it allows.
+
+Remote data never raises here: a stream whose header is short or invalid decodes to a mid-grey
+image of the ``shape`` the caller expects, or to an empty (0, 0) array if none was given.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from testbed.imaging.header import MAX_PLANES, MAX_SHIFT, MAX_SIDE, Header, parse_header
+from testbed.imaging.wavelet import default_levels, forward, inverse, layout, roi_mask
+
+_OFFSET = 128.0  # level shift of 8-bit samples before the transform
+
+
+def _grey(image: NDArray[np.generic]) -> NDArray[np.float64]:
+    """(h, w) float luma of a grey (h, w) or colour (h, w, 3) image (ITU-R BT.601 weights)."""
+    arr = np.asarray(image)
+    if arr.ndim == 3 and arr.shape[2] in (3, 4):
+        rgb = arr[..., :3].astype(np.float64)
+        luma: NDArray[np.float64] = np.round(rgb @ np.array([0.299, 0.587, 0.114]))
+        return luma
+    if arr.ndim != 2:
+        raise ValueError(f"image must be (h, w) or (h, w, 3), got shape {arr.shape}")
+    return arr.astype(np.float64)
+
+
+def _normalise_roi(
+    roi: tuple[int, int, int, int], height: int, width: int
+) -> tuple[int, int, int, int]:
+    """Order the corners and clip them to the image (inclusive pixels)."""
+    x0, y0, x1, y1 = (int(v) for v in roi)
+    xa, xb = sorted((x0, x1))
+    ya, yb = sorted((y0, y1))
+    return (
+        min(max(xa, 0), width - 1),
+        min(max(ya, 0), height - 1),
+        min(max(xb, 0), width - 1),
+        min(max(yb, 0), height - 1),
+    )
+
+
+def encode(
+    image: NDArray[np.generic],
+    budget_bytes: int,
+    roi: tuple[int, int, int, int] | None = None,
+    roi_shift: int = 0,
+    mono: bool = True,
+    *,
+    levels: int | None = None,
+) -> bytes:
+    """Encode an 8-bit image into an embedded stream of at most ``budget_bytes`` bytes.
+
+    Any prefix of the result is itself a valid stream (see ``decode``), so the caller may cut
+    it anywhere.
+
+    Args:
+        image: (h, w) grey or (h, w, 3) RGB uint8-range image, 1..1024 px per side.
+        budget_bytes: largest stream size [B], header included; 0 gives an empty stream.
+        roi: (x0, y0, x1, y1) inclusive pixel rectangle in image-settings units (0..1023);
+            corners are ordered and clipped to the image. Ignored when ``roi_shift`` is 0.
+        roi_shift: bit planes the ROI coefficients are scaled up by, 0..15 (Maxshift-style).
+        mono: code greyscale. Colour images are coded as their luma; mono=False is reserved
+            for a colour mode that is not implemented.
+        levels: wavelet levels, 0..7; default leaves an LL band of 4..8 samples.
+
+    Returns:
+        The stream: header and coded bits, ``len <= budget_bytes``.
+
+    Raises:
+        ValueError: on a bad image shape, budget, ROI, shift or level count.
+        NotImplementedError: if mono is False.
+    """
+    if not mono:
+        raise NotImplementedError("colour coding is not implemented; use mono=True")
+    pixels = _grey(image)
+    height, width = pixels.shape
+    if not (1 <= height <= MAX_SIDE and 1 <= width <= MAX_SIDE):
+        raise ValueError(f"image sides must be 1..{MAX_SIDE} px, got {width} x {height}")
+    if budget_bytes < 0:
+        raise ValueError(f"budget_bytes must be >= 0, got {budget_bytes}")
+    if not 0 <= roi_shift <= MAX_SHIFT:
+        raise ValueError(f"roi_shift must be in 0..{MAX_SHIFT}, got {roi_shift}")
+    nlev = default_levels(height, width) if levels is None else levels
+    if not 0 <= nlev <= 7:
+        raise ValueError(f"levels must be in 0..7, got {nlev}")
+    lay = layout(height, width, nlev)
+    coef = forward(pixels - _OFFSET, nlev)
+    mag_f = np.abs(coef)
+    rect = None
+    if roi is not None and roi_shift > 0:
+        if len(roi) != 4 or not all(0 <= int(v) <= MAX_SIDE - 1 for v in roi):
+            raise ValueError(f"roi must be 4 ints in 0..{MAX_SIDE - 1}, got {roi!r}")
+        rect = _normalise_roi(roi, height, width)
+        inside = roi_mask(lay, rect)
+        mag_f = np.where(inside, mag_f * float(1 << roi_shift), mag_f)
+    mag = np.floor(mag_f).astype(np.int64)
+    planes = int(mag.max()).bit_length() if mag.size else 0
+    planes = min(planes, MAX_PLANES)
+    mag = np.minimum(mag, (1 << planes) - 1)
+    head = Header(width, height, nlev, planes, True, rect, roi_shift if rect else 0).pack()
+    if budget_bytes <= len(head):
+        return head[:budget_bytes]
+    bits = _encode_bits(
+        mag, coef < 0, lay.bounds, lay.parent, planes, 8 * (budget_bytes - len(head))
+    )
+    return head + np.packbits(bits).tobytes()[: budget_bytes - len(head)]
+
+
+def _encode_bits(
+    mag: NDArray[np.int64],
+    neg: NDArray[np.bool_],
+    bounds: tuple[int, ...],
+    parent: NDArray[np.int64],
+    planes: int,
+    max_bits: int,
+) -> NDArray[np.bool_]:
+    """The coded bits, plane by plane, stopping once ``max_bits`` are produced."""
+    ngroups = len(bounds) - 1
+    nd = bounds[-2]  # coefficients with descendants: all groups but the finest
+    desc = np.zeros(nd, dtype=np.int64)
+    for g in range(ngroups - 1, 0, -1):
+        a, b = bounds[g], bounds[g + 1]
+        below = mag[a:b] if g == ngroups - 1 else np.maximum(mag[a:b], desc[a:b])
+        np.maximum.at(desc, parent[a:b], below)
+    out: list[NDArray[np.bool_]] = []
+    produced = 0
+    for p in range(planes - 1, -1, -1):
+        t = 1 << p
+        was_sig = mag >= 2 * t
+        desc_sig = desc >= t
+        for g in range(ngroups):
+            a, b = bounds[g], bounds[g + 1]
+            active = desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
+            cand = active & ~was_sig[a:b]
+            sig = mag[a:b][cand] >= t
+            out.append(sig)
+            out.append(neg[a:b][cand][sig])
+            produced += sig.size + int(sig.sum())
+            if g < ngroups - 1:
+                dbits = desc[a:b][active & (desc[a:b] < 2 * t)] >= t
+                out.append(dbits)
+                produced += dbits.size
+            if produced >= max_bits:
+                return np.concatenate(out)
+        ref = (mag[was_sig] & t) != 0
+        out.append(ref)
+        produced += ref.size
+        if produced >= max_bits:
+            break
+    return np.concatenate(out) if out else np.zeros(0, dtype=bool)
+
+
+class _Bits:
+    """A cursor over the unpacked stream bits."""
+
+    __slots__ = ("bits", "pos")
+
+    def __init__(self, data: bytes) -> None:
+        self.bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8)).astype(bool)
+        self.pos = 0
+
+    def take(self, n: int) -> NDArray[np.bool_]:
+        """Up to n next bits (fewer at the end of the data)."""
+        chunk = self.bits[self.pos : self.pos + n]
+        self.pos += chunk.size
+        return chunk
+
+
+def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint8]:
+    """Decode a stream or any prefix of one to the best image its bytes allow.
+
+    Args:
+        data: the stream, possibly truncated or corrupted.
+        shape: (height, width) [px] to return as mid-grey if the header is short or invalid.
+
+    Returns:
+        (height, width) uint8 image; mid-grey (128) of ``shape`` if the header cannot be read
+        and a shape was given, else an empty (0, 0) array. Never raises on bad data.
+    """
+    hdr = parse_header(bytes(data))
+    if hdr is None:
+        if shape is None:
+            return np.zeros((0, 0), dtype=np.uint8)
+        return np.full(shape, 128, dtype=np.uint8)
+    lay = layout(hdr.height, hdr.width, hdr.levels)
+    rec = _decode_coefficients(bytes(data[hdr.size :]), lay.bounds, lay.parent, hdr.planes)
+    if hdr.roi is not None:
+        inside = roi_mask(lay, hdr.roi)
+        rec = np.where(inside, rec / float(1 << hdr.roi_shift), rec)
+    pixels = inverse(rec, lay) + _OFFSET
+    return np.clip(np.round(pixels), 0, 255).astype(np.uint8)
+
+
+def _decode_coefficients(
+    body: bytes, bounds: tuple[int, ...], parent: NDArray[np.int64], planes: int
+) -> NDArray[np.float64]:
+    """(n,) coefficients rebuilt from the coded bits, at the midpoint of what is known."""
+    n = bounds[-1]
+    ngroups = len(bounds) - 1
+    stream = _Bits(body)
+    mag = np.zeros(n, dtype=np.int64)
+    low = np.full(n, planes, dtype=np.int64)  # lowest plane known for significant coefficients
+    sig = np.zeros(n, dtype=bool)
+    neg = np.zeros(n, dtype=bool)
+    desc_sig = np.zeros(bounds[-2], dtype=bool)
+    done = False
+    for p in range(planes - 1, -1, -1):
+        t = 1 << p
+        for g in range(ngroups):
+            a, b = bounds[g], bounds[g + 1]
+            active = desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
+            idx = a + np.flatnonzero(active & ~sig[a:b])
+            got = stream.take(idx.size)
+            new = idx[: got.size][got]
+            signs = stream.take(new.size)
+            new = new[: signs.size]
+            mag[new], low[new], sig[new], neg[new] = t, p, True, signs
+            if signs.size < got.sum() or got.size < idx.size:
+                done = True
+                break
+            if g < ngroups - 1:
+                didx = a + np.flatnonzero(active & ~desc_sig[a:b])
+                dbits = stream.take(didx.size)
+                desc_sig[didx[: dbits.size][dbits]] = True
+                if dbits.size < didx.size:
+                    done = True
+                    break
+        if done:
+            break
+        ridx = np.flatnonzero(sig & (low > p))
+        rbits = stream.take(ridx.size)
+        complete = rbits.size == ridx.size
+        ridx = ridx[: rbits.size]
+        mag[ridx] |= rbits.astype(np.int64) * t
+        low[ridx] = p
+        if not complete or stream.pos >= stream.bits.size:
+            break
+    value = np.where(sig, mag + 0.5 * np.left_shift(1, low), 0.0)
+    return np.where(neg, -value, value)

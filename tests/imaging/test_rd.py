@@ -1,0 +1,70 @@
+"""Rate-distortion of the coder against JPEG 2000 (OpenJPEG via Pillow) and baseline JPEG.
+
+Run with ``-s`` to see the table. Only what the coder meets is asserted: within 1 dB of JPEG 2000
+at every budget on 160 x 120, within 2.5 dB on 320 x 240, and above baseline JPEG wherever JPEG
+can get under the budget.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from testbed.imaging import decode, encode, pool_scene
+
+BUDGETS = (300, 600, 1200, 2400)
+
+
+def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return 10.0 * np.log10(255.0**2 / mse)
+
+
+def jpeg2000_at(img: np.ndarray, budget: int) -> tuple[int, float]:
+    """Bytes and PSNR of the largest raw J2K codestream (9/7, rate-controlled) within budget."""
+    ratio = img.size / budget
+    for _ in range(60):
+        buf = io.BytesIO()
+        Image.fromarray(img).save(
+            buf, "JPEG2000", no_jp2=True, irreversible=True, quality_mode="rates",
+            quality_layers=[ratio],
+        )  # fmt: skip
+        if buf.tell() <= budget:
+            out = np.asarray(Image.open(io.BytesIO(buf.getvalue())))
+            return buf.tell(), psnr_db(img, out)
+        ratio *= 1.03
+    raise AssertionError("OpenJPEG never got under the budget")
+
+
+def jpeg_at(img: np.ndarray, budget: int) -> tuple[int, float] | None:
+    """Bytes and PSNR of the best baseline JPEG (quality 1..95) within budget, None if none fits."""
+    best = None
+    for quality in range(1, 96):
+        buf = io.BytesIO()
+        Image.fromarray(img).save(buf, "JPEG", quality=quality)
+        if buf.tell() > budget:
+            break
+        best = (buf.tell(), psnr_db(img, np.asarray(Image.open(io.BytesIO(buf.getvalue())))))
+    return best
+
+
+@pytest.mark.parametrize(("width", "height", "margin_db"), [(160, 120, 1.0), (320, 240, 2.5)])
+def test_rate_distortion_against_jpeg2000_and_jpeg(
+    width: int, height: int, margin_db: float
+) -> None:
+    img = pool_scene(width, height, np.random.default_rng(1))
+    print(f"\n{width}x{height}  budget  ours[dB]  J2K[B]  J2K[dB]  JPEG[B]  JPEG[dB]")
+    for budget in BUDGETS:
+        stream = encode(img, budget)
+        ours = psnr_db(img, decode(stream))
+        j2k_bytes, j2k = jpeg2000_at(img, budget)
+        jpg = jpeg_at(img, budget)
+        jpg_txt = f"{jpg[0]:7d}  {jpg[1]:8.2f}" if jpg else "      -         -"
+        print(f"          {budget:6d}  {ours:8.2f}  {j2k_bytes:6d}  {j2k:7.2f}  {jpg_txt}")
+        assert len(stream) == budget
+        assert ours > j2k - margin_db
+        if jpg is not None:
+            assert ours > jpg[1]
