@@ -50,9 +50,10 @@ __all__ = [
     "Transport",
 ]
 
-PORT_ERRORS: tuple[type[Exception], ...] = (OSError, TypeError, ValueError)
+PORT_ERRORS: tuple[type[Exception], ...] = (OSError, AttributeError, TypeError, ValueError)
 """What a failing port raises: pyserial's SerialException is an OSError; a port closed under a
-blocked read can surface as TypeError/ValueError from a vanished file descriptor."""
+blocked read can surface as AttributeError/TypeError/ValueError from its vanished socket or
+file descriptor."""
 
 _MAX_READ = 4096
 
