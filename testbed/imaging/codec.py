@@ -86,7 +86,7 @@ def encode(
         roi_shift: bit planes the ROI coefficients are scaled up by, 0..15 (Maxshift-style).
         mono: code greyscale. Colour images are coded as their luma; mono=False is reserved
             for a colour mode that is not implemented.
-        levels: wavelet levels, 0..7; default leaves an LL band of 4..8 samples.
+        levels: wavelet levels, 0..7; default leaves an LL band of 3..4 samples.
 
     Returns:
         The stream: header and coded bits, ``len <= budget_bytes``.

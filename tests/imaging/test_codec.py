@@ -103,7 +103,7 @@ def test_encoder_writes_the_header_it_was_asked_for(small: np.ndarray) -> None:
     assert (hdr.width, hdr.height, hdr.mono, hdr.roi_shift) == (160, 120, True, 3)
     assert hdr.roi == (10, 20, 80, 100)  # corners ordered
     assert parse_header(encode(small, 500, roi=(1, 2, 3, 4), roi_shift=0)) == Header(
-        160, 120, 4, hdr.planes - 3
+        160, 120, hdr.levels, hdr.planes - 3
     )
 
 
