@@ -93,11 +93,11 @@ def _check_body(name: str, size: int, body: bytes) -> None:
         raise ValueError(f"{name} body must be {size} B, got {len(body)} B")
 
 
-@dataclass(frozen=True, slots=True)
-class NoOrder:
-    """No order: the operator only polls the vehicle (and acknowledges image chunks)."""
+class _EmptyBody:
+    """Shared codec of the orders that carry no body (their type code says everything)."""
 
-    CODE: ClassVar[int] = 0
+    __slots__ = ()
+
     BODY_SIZE: ClassVar[int] = 0
 
     def encode(self) -> bytes:
@@ -109,6 +109,13 @@ class NoOrder:
         """Parse an empty body. Raises ValueError if ``data`` is not empty."""
         _check_body(cls.__name__, cls.BODY_SIZE, data)
         return cls()
+
+
+@dataclass(frozen=True, slots=True)
+class NoOrder(_EmptyBody):
+    """No order: the operator only polls the vehicle (and acknowledges image chunks)."""
+
+    CODE: ClassVar[int] = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -344,21 +351,10 @@ class ImageSettings:
 
 
 @dataclass(frozen=True, slots=True)
-class DisableKeepHeading:
+class DisableKeepHeading(_EmptyBody):
     """Stop holding a heading (no body)."""
 
     CODE: ClassVar[int] = 5
-    BODY_SIZE: ClassVar[int] = 0
-
-    def encode(self) -> bytes:
-        """The (empty) body."""
-        return b""
-
-    @classmethod
-    def decode(cls, data: bytes) -> Self:
-        """Parse an empty body. Raises ValueError if ``data`` is not empty."""
-        _check_body(cls.__name__, cls.BODY_SIZE, data)
-        return cls()
 
 
 @dataclass(frozen=True, slots=True)
@@ -401,21 +397,10 @@ class GoTo:
 
 
 @dataclass(frozen=True, slots=True)
-class OrderIncoming:
+class OrderIncoming(_EmptyBody):
     """Announces that an order follows (no body)."""
 
     CODE: ClassVar[int] = 7
-    BODY_SIZE: ClassVar[int] = 0
-
-    def encode(self) -> bytes:
-        """The (empty) body."""
-        return b""
-
-    @classmethod
-    def decode(cls, data: bytes) -> Self:
-        """Parse an empty body. Raises ValueError if ``data`` is not empty."""
-        _check_body(cls.__name__, cls.BODY_SIZE, data)
-        return cls()
 
 
 Order = (
