@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed run|link|sweep|plot|scenarios``.
+"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|scenarios``.
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_link_parser(sub)
     _add_sweep_parser(sub)
     _add_plot_parser(sub)
+    _add_modem_emulator_parser(sub)
     scenarios = sub.add_parser("scenarios", help="list the packaged scenarios")
     scenarios.set_defaults(handler=_list_scenarios)
     return parser
@@ -276,6 +277,78 @@ def _run_plot(args: argparse.Namespace) -> int:
     if out is None:
         out = args.results.parent / default_plot_name(args.x, args.y)
     print(plot_pair(args.results, args.x, args.y, args.hue, out))
+    return EXIT_OK
+
+
+def _add_modem_emulator_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
+    """``testbed modem-emulator``: two PTYs joined by the simulated link (testbed.emulator)."""
+    emu = sub.add_parser(
+        "modem-emulator",
+        help="open two pseudo-terminals joined in real time by a simulated link",
+        description="Open two pseudo-terminals, A and B, joined in real time by the channel "
+        "model (bitrate, delay, bit errors, buffer), print their paths and run until Ctrl-C. "
+        "Bytes written on one port with no idle gap longer than 3 ms are one transmission.",
+    )
+    emu.add_argument("--preset", default="s100", help="link preset (default: s100)")
+    emu.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a link parameter, e.g. --set ber=0 (repeatable)",
+    )
+    emu.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    emu.add_argument(
+        "--time-factor",
+        type=float,
+        default=1.0,
+        help="wall seconds per simulated second (default: 1, real time)",
+    )
+    emu.add_argument(
+        "--distance", type=float, default=0.0, help="distance between the modems in m (default: 0)"
+    )
+    emu.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many seconds (default: run until Ctrl-C)",
+    )
+    emu.set_defaults(handler=_run_modem_emulator)
+
+
+def _run_modem_emulator(args: argparse.Namespace) -> int:
+    """Handler of ``testbed modem-emulator``: print the two paths, run, report counters."""
+    import contextlib
+    import math
+    import threading
+
+    from testbed.channel.config import load_link_config
+    from testbed.emulator import ModemEmulator
+
+    if not (args.time_factor > 0.0 and math.isfinite(args.time_factor)):
+        raise ConfigError(f"--time-factor: must be > 0, got {args.time_factor}")
+    if not (args.distance >= 0.0 and math.isfinite(args.distance)):
+        raise ConfigError(f"--distance: must be ≥ 0 m, got {args.distance}")
+    if args.duration is not None and not args.duration >= 0.0:
+        raise ConfigError(f"--duration: must be ≥ 0 s, got {args.duration}")
+    if args.seed < 0:
+        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    config = load_link_config(args.preset, args.overrides)
+    with ModemEmulator(
+        config, seed=args.seed, time_factor=args.time_factor, distance_m=args.distance
+    ) as emulator:
+        path_a, path_b = emulator.paths
+        print(f"A {path_a}\nB {path_b}", flush=True)
+        print(
+            f"testbed: {config.name} link, {config.bitrate_bps:g} bit/s, intrinsic delay "
+            f"{1000 * config.intrinsic_delay_s:.1f} ms, BER {config.ber:g}; Ctrl-C stops",
+            file=sys.stderr,
+        )
+        with contextlib.suppress(KeyboardInterrupt):
+            threading.Event().wait(args.duration)
+        for name, counters in zip("AB", emulator.counters, strict=True):
+            print(f"testbed: port {name}: {counters}", file=sys.stderr)
     return EXIT_OK
 
 
