@@ -40,6 +40,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_set_option(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` override option, collected in ``args.overrides``."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=help_text
+    )
+
+
 def _add_run_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
     """``testbed run``: one end-to-end teleoperation run of a scenario."""
     run = sub.add_parser(
@@ -55,14 +62,7 @@ def _add_run_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
         help="packaged scenario id or a .toml path (default: s100-teleop-v1; "
         "`testbed scenarios` lists them)",
     )
-    run.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. --set link.ber=1e-4 (repeatable)",
-    )
+    _add_set_option(run, "override a scenario key, e.g. --set link.ber=1e-4 (repeatable)")
     run.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
     run.add_argument(
         "--out", type=Path, default=None, help="output directory (default: runs/<id>-<time>/)"
@@ -136,14 +136,7 @@ def _add_link_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
         "what the receiver's frame decoder got: counts, PER, goodput and latency.",
     )
     link.add_argument("--preset", default="s100", help="link preset (default: s100)")
-    link.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a link parameter, e.g. --set ber=1e-4 (repeatable)",
-    )
+    _add_set_option(link, "override a link parameter, e.g. --set ber=1e-4 (repeatable)")
     link.add_argument("--frames", type=int, default=1000, help="frames to send (default: 1000)")
     link.add_argument(
         "--size", type=int, default=60, help="frame size in bytes, all included (default: 60)"
@@ -204,13 +197,8 @@ def _add_sweep_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
         "Exit 0 when every run succeeded, 1 when some failed (listed), 2 on bad input.",
     )
     sweep.add_argument("sweep", help="packaged sweep id (e.g. ber-vs-lag-v1) or a sweep .toml path")
-    sweep.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key in every run, e.g. --set duration_s=30 (repeatable)",
+    _add_set_option(
+        sweep, "override a scenario key in every run, e.g. --set duration_s=30 (repeatable)"
     )
     sweep.add_argument(
         "--workers", type=int, default=None, help="worker processes (default: one per core)"
@@ -290,14 +278,7 @@ def _add_modem_emulator_parser(sub: argparse._SubParsersAction[_Parser]) -> None
         "Bytes written on one port with no idle gap longer than 3 ms are one transmission.",
     )
     emu.add_argument("--preset", default="s100", help="link preset (default: s100)")
-    emu.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a link parameter, e.g. --set ber=0 (repeatable)",
-    )
+    _add_set_option(emu, "override a link parameter, e.g. --set ber=0 (repeatable)")
     emu.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     emu.add_argument(
         "--time-factor",
