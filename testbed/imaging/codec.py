@@ -32,7 +32,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.imaging.header import MAX_PLANES, MAX_SHIFT, MAX_SIDE, Header, parse_header
-from testbed.imaging.wavelet import default_levels, forward, inverse, layout, roi_mask
+from testbed.imaging.passes import DESC, REF, SIG, State, steps
+from testbed.imaging.runlength import Reader, Writer
+from testbed.imaging.wavelet import Layout, default_levels, forward, inverse, layout, roi_mask
 
 _OFFSET = 128.0  # level shift of 8-bit samples before the transform
 
@@ -125,21 +127,19 @@ def encode(
     head = Header(width, height, nlev, planes, True, rect, roi_shift if rect else 0).pack()
     if budget_bytes <= len(head):
         return head[:budget_bytes]
-    bits = _encode_bits(
-        mag, coef < 0, lay.bounds, lay.parent, planes, 8 * (budget_bytes - len(head))
-    )
+    bits = _encode_bits(mag, coef < 0, lay, planes, 8 * (budget_bytes - len(head)))
     return head + np.packbits(bits).tobytes()[: budget_bytes - len(head)]
 
 
 def _encode_bits(
     mag: NDArray[np.int64],
     neg: NDArray[np.bool_],
-    bounds: tuple[int, ...],
-    parent: NDArray[np.int64],
+    lay: Layout,
     planes: int,
     max_bits: int,
-) -> NDArray[np.bool_]:
-    """The coded bits, plane by plane, stopping once ``max_bits`` are produced."""
+) -> NDArray[np.uint8]:
+    """The coded bits, step by step, stopping once ``max_bits`` are produced."""
+    bounds, parent = lay.bounds, lay.parent
     ngroups = len(bounds) - 1
     nd = bounds[-2]  # coefficients with descendants: all groups but the finest
     desc = np.zeros(nd, dtype=np.int64)
@@ -147,48 +147,26 @@ def _encode_bits(
         a, b = bounds[g], bounds[g + 1]
         below = mag[a:b] if g == ngroups - 1 else np.maximum(mag[a:b], desc[a:b])
         np.maximum.at(desc, parent[a:b], below)
-    out: list[NDArray[np.bool_]] = []
-    produced = 0
-    for p in range(planes - 1, -1, -1):
-        t = 1 << p
-        was_sig = mag >= 2 * t
-        desc_sig = desc >= t
-        for g in range(ngroups):
-            a, b = bounds[g], bounds[g + 1]
-            active = desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
-            cand = active & ~was_sig[a:b]
-            sig = mag[a:b][cand] >= t
-            out.append(sig)
-            out.append(neg[a:b][cand][sig])
-            produced += sig.size + int(sig.sum())
-            if g < ngroups - 1:
-                dbits = desc[a:b][active & (desc[a:b] < 2 * t)] >= t
-                out.append(dbits)
-                produced += dbits.size
-            if produced >= max_bits:
-                return np.concatenate(out)
-        ref = (mag[was_sig] & t) != 0
-        out.append(ref)
-        produced += ref.size
-        if produced >= max_bits:
+    state = State.empty(lay)
+    out = Writer()
+    adapt: dict[int, int] = {}
+    for step in steps(state, lay, planes):
+        t = 1 << step.plane
+        idx = step.idx
+        if step.kind == SIG:
+            bits = mag[idx] >= t
+            new = idx[bits]
+            adapt[step.context] = out.runs(bits, neg[new], adapt.get(step.context, 0))
+            state.sig[new] = True
+        elif step.kind == DESC:
+            bits = desc[idx] >= t
+            adapt[step.context] = out.runs(bits, None, adapt.get(step.context, 0))
+            state.desc_sig[idx[bits]] = True
+        else:
+            out.raw((mag[idx] & t) != 0)
+        if out.size >= max_bits:
             break
-    return np.concatenate(out) if out else np.zeros(0, dtype=bool)
-
-
-class _Bits:
-    """A cursor over the unpacked stream bits."""
-
-    __slots__ = ("bits", "pos")
-
-    def __init__(self, data: bytes) -> None:
-        self.bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8)).astype(bool)
-        self.pos = 0
-
-    def take(self, n: int) -> NDArray[np.bool_]:
-        """Up to n next bits (fewer at the end of the data)."""
-        chunk = self.bits[self.pos : self.pos + n]
-        self.pos += chunk.size
-        return chunk
+    return out.bits()
 
 
 def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint8]:
@@ -208,7 +186,7 @@ def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint
             return np.zeros((0, 0), dtype=np.uint8)
         return np.full(shape, 128, dtype=np.uint8)
     lay = layout(hdr.height, hdr.width, hdr.levels)
-    rec = _decode_coefficients(bytes(data[hdr.size :]), lay.bounds, lay.parent, hdr.planes)
+    rec = _decode_coefficients(bytes(data[hdr.size :]), lay, hdr.planes)
     if hdr.roi is not None:
         inside = roi_mask(lay, hdr.roi)
         rec = np.where(inside, rec / float(1 << hdr.roi_shift), rec)
@@ -216,49 +194,36 @@ def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint
     return np.clip(np.round(pixels), 0, 255).astype(np.uint8)
 
 
-def _decode_coefficients(
-    body: bytes, bounds: tuple[int, ...], parent: NDArray[np.int64], planes: int
-) -> NDArray[np.float64]:
+def _decode_coefficients(body: bytes, lay: Layout, planes: int) -> NDArray[np.float64]:
     """(n,) coefficients rebuilt from the coded bits, at the midpoint of what is known."""
-    n = bounds[-1]
-    ngroups = len(bounds) - 1
-    stream = _Bits(body)
+    n = lay.size
+    stream = Reader(body)
     mag = np.zeros(n, dtype=np.int64)
     low = np.full(n, planes, dtype=np.int64)  # lowest plane known for significant coefficients
-    sig = np.zeros(n, dtype=bool)
     neg = np.zeros(n, dtype=bool)
-    desc_sig = np.zeros(bounds[-2], dtype=bool)
-    done = False
-    for p in range(planes - 1, -1, -1):
-        t = 1 << p
-        for g in range(ngroups):
-            a, b = bounds[g], bounds[g + 1]
-            active = desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
-            idx = a + np.flatnonzero(active & ~sig[a:b])
-            got = stream.take(idx.size)
-            new = idx[: got.size][got]
-            signs = stream.take(new.size)
-            new = new[: signs.size]
-            mag[new], low[new], sig[new], neg[new] = t, p, True, signs
-            if signs.size < got.sum() or got.size < idx.size:
-                done = True
-                break
-            if g < ngroups - 1:
-                didx = a + np.flatnonzero(active & ~desc_sig[a:b])
-                dbits = stream.take(didx.size)
-                desc_sig[didx[: dbits.size][dbits]] = True
-                if dbits.size < didx.size:
-                    done = True
-                    break
-        if done:
+    state = State.empty(lay)
+    adapt: dict[int, int] = {}
+    for step in steps(state, lay, planes):
+        p = step.plane
+        idx = step.idx
+        if step.kind == REF:
+            rbits = stream.raw(idx.size)
+            part = idx[: rbits.size]
+            mag[part] |= rbits.astype(np.int64) << p
+            low[part] = p
+            complete = rbits.size == idx.size
+        else:
+            ones, signs, k, complete = stream.runs(
+                idx.size, step.kind == SIG, adapt.get(step.context, 0)
+            )
+            adapt[step.context] = k
+            hit = idx[np.asarray(ones, dtype=np.int64)]
+            if step.kind == SIG:
+                mag[hit], low[hit], neg[hit] = 1 << p, p, np.asarray(signs, dtype=bool)
+                state.sig[hit] = True
+            else:
+                state.desc_sig[hit] = True
+        if not complete or stream.left == 0:
             break
-        ridx = np.flatnonzero(sig & (low > p))
-        rbits = stream.take(ridx.size)
-        complete = rbits.size == ridx.size
-        ridx = ridx[: rbits.size]
-        mag[ridx] |= rbits.astype(np.int64) * t
-        low[ridx] = p
-        if not complete or stream.pos >= stream.bits.size:
-            break
-    value = np.where(sig, mag + 0.5 * np.left_shift(1, low), 0.0)
+    value = np.where(state.sig, mag + 0.5 * np.left_shift(1, low), 0.0)
     return np.where(neg, -value, value)

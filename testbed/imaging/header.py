@@ -2,7 +2,7 @@
 
 Layout (big-endian bit order, 5 bytes, or 11 with a region of interest)::
 
-    b0      magic 0xD (4 bits) · version 0 (2 bits) · ROI present (1) · mono (1)
+    b0      magic 0xD (4 bits) · version 1 (2 bits) · ROI present (1) · mono (1)
     b1..b3  width - 1 (12 bits) · height - 1 (12 bits)
     b4      decomposition levels (3 bits) · bit planes coded (5 bits)
     b5..b9  ROI x0, y0, x1, y1, 10 bits each, packed as in the image-settings order
@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 MAGIC = 0xD
-VERSION = 0
+VERSION = 1
 BASE_SIZE = 5
 ROI_SIZE = 6
 MAX_SIDE = 1024  # [px] the image-settings ROI units address 0..1023
