@@ -8,6 +8,9 @@ Three layers, none of which does I/O, reads a clock or draws random numbers:
 * :mod:`~testbed.protocol.orders` and :mod:`~testbed.protocol.messages` — the operator and
   vehicle payload layouts.
 
+On top of the messages, :mod:`~testbed.protocol.image_transfer` holds the image transfer state
+machines (:class:`ImageSender`, :class:`ImageAssembler`): chunking, image CRC, selective repeat.
+
 Sending is ``encode_frame(message.encode())``; receiving is ``decoder.feed(data)`` followed by
 ``decode_vehicle_message(frame.payload)`` (or ``decode_operator_message``) for each
 :class:`Frame`. Remote garbage becomes :class:`CorruptFrame` / :class:`MalformedPayload` values;
@@ -31,6 +34,17 @@ from .framing import (
     FrameEvent,
     encode_frame,
     frame_overhead,
+)
+from .image_transfer import (
+    IMAGE_CRC_SIZE,
+    MAX_CHUNKS,
+    AssemblyCounters,
+    AssemblyEvent,
+    ImageAssembler,
+    ImageSender,
+    OutgoingChunk,
+    SenderCounters,
+    max_image_bytes,
 )
 from .messages import (
     DEFAULT_CHUNK_SIZE,
@@ -66,6 +80,8 @@ __all__ = [
     "CRC16_CHECK_VALUE",
     "DEFAULT_CHUNK_SIZE",
     "DEFAULT_PREAMBLE_LEN",
+    "IMAGE_CRC_SIZE",
+    "MAX_CHUNKS",
     "MAX_CHUNK_INDEX",
     "MAX_CHUNK_SIZE",
     "MAX_PAYLOAD",
@@ -75,6 +91,8 @@ __all__ = [
     "START_BYTE",
     "STATE_SIZE",
     "VEHICLE_HEADER_SIZE",
+    "AssemblyCounters",
+    "AssemblyEvent",
     "CorruptFrame",
     "CorruptReason",
     "DisableKeepHeading",
@@ -83,6 +101,8 @@ __all__ = [
     "FrameEvent",
     "GoTo",
     "HoldChannel",
+    "ImageAssembler",
+    "ImageSender",
     "ImageSettings",
     "KeepHeading",
     "MalformedPayload",
@@ -92,6 +112,8 @@ __all__ = [
     "OperatorMessage",
     "Order",
     "OrderIncoming",
+    "OutgoingChunk",
+    "SenderCounters",
     "VehicleMessage",
     "VehicleState",
     "crc16",
@@ -99,4 +121,5 @@ __all__ = [
     "decode_vehicle_message",
     "encode_frame",
     "frame_overhead",
+    "max_image_bytes",
 ]
