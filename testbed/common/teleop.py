@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 from testbed.common.components import (
     ActiveMode,
@@ -41,6 +42,7 @@ from testbed.common.components import (
 from testbed.common.geometry import euler_from_quat, quat_from_euler
 from testbed.ecs import Entity, Origin, World
 from testbed.protocol import (
+    ImageSettings,
     KeepHeading,
     MalformedPayload,
     Mode,
@@ -53,6 +55,7 @@ from testbed.protocol import (
 )
 
 __all__ = [
+    "ReplyChunk",
     "TeleopCounters",
     "TeleopOperatorEnd",
     "TeleopVehicleEnd",
@@ -66,6 +69,23 @@ _TO_WIRE = {
     ControlMode.DEPTH_HOLD: Mode.DEPTH_HOLD,
 }
 _FROM_WIRE = {wire: mode for mode, wire in _TO_WIRE.items()}
+
+
+class ReplyChunk(Protocol):
+    """The image fields of a reply (what an image sender hands out for each reply)."""
+
+    @property
+    def first(self) -> bool: ...
+    @property
+    def last(self) -> bool: ...
+    @property
+    def image_seq_bit(self) -> bool: ...
+    @property
+    def cancel(self) -> bool: ...
+    @property
+    def index(self) -> int: ...
+    @property
+    def data(self) -> bytes: ...
 
 
 def mode_to_wire(mode: ControlMode) -> Mode:
@@ -116,8 +136,19 @@ class TeleopOperatorEnd:
         self._sent_heading: KeepHeading | None = None
         self._settled_arm: ArmRequest | None = None
 
-    def encode_order(self) -> bytes:
-        """The payload of the next order (one per inter-packet gap)."""
+    def encode_order(
+        self,
+        image_request: tuple[bool, bool, int] = (False, False, 0),
+        image_settings: ImageSettings | None = None,
+    ) -> bytes:
+        """The payload of the next order (one per inter-packet gap).
+
+        Args:
+            image_request: the header's image fields: (expected image sequence bit, cancel the
+                image, index of the first missing chunk).
+            image_settings: send these coder settings as this gap's order (unless an arm or
+                disarm request is pending, which goes first).
+        """
         world = self._world
         intents = self._intents
         self.order_seq_bit = not self.order_seq_bit
@@ -129,8 +160,10 @@ class TeleopOperatorEnd:
             arm = request.armed and not vehicle_armed
             disarm = not request.armed and vehicle_armed
         setpoint = world.get(intents, AttitudeSetpoint)
-        order: Move | KeepHeading | None = None
-        if setpoint is not None and setpoint != self._sent_attitude and not arm:
+        order: Move | KeepHeading | ImageSettings | None = None
+        if image_settings is not None and not (arm or disarm):
+            order = image_settings
+        elif setpoint is not None and setpoint != self._sent_attitude and not arm:
             self._sent_attitude = setpoint
             yaw_deg = math.degrees(euler_from_quat(setpoint.quaternion_wxyz)[2])
             heading = KeepHeading.from_degrees(yaw_deg)
@@ -144,15 +177,21 @@ class TeleopOperatorEnd:
             order = Move.from_axes(
                 sticks[0], sticks[1], sticks[2], sticks[5], arm, disarm, mode_to_wire(mode)
             )
-        message = OperatorMessage(False, False, 0, self.order_seq_bit, False, order)
+        seq_bit, cancel, first_missing = image_request
+        message = OperatorMessage(seq_bit, cancel, first_missing, self.order_seq_bit, False, order)
         return message.encode()
 
-    def apply_reply(self, payload: bytes, now_s: float) -> bool:
-        """Apply a reply's state to the vehicle entity; False (counted) if it is garbled."""
+    def apply_reply(self, payload: bytes, now_s: float) -> VehicleMessage | None:
+        """Apply a reply's state to the vehicle entity.
+
+        Returns:
+            The decoded reply (its image chunk is the caller's), or None (counted) if it is
+            garbled.
+        """
         message = decode_vehicle_message(payload)
         if isinstance(message, MalformedPayload):
             self.counters.malformed += 1
-            return False
+            return None
         state = message.state
         world = self._world
         vehicle = self.vehicle
@@ -173,7 +212,7 @@ class TeleopOperatorEnd:
         if mode is not None:
             world.set(vehicle, ActiveMode(mode), origin=Origin.REMOTE)
         self.counters.applied += 1
-        return True
+        return message
 
 
 class TeleopVehicleEnd:
@@ -228,15 +267,20 @@ class TeleopVehicleEnd:
             world.set(
                 intents, AttitudeSetpoint(quat_from_euler(0.0, 0.0, yaw)), origin=Origin.REMOTE
             )
-        else:
+        elif not isinstance(order, ImageSettings):  # image settings: the image source's
             self.counters.unsupported += 1
             return False
         self.order_ack_bit = message.order_seq_bit
         self.counters.applied += 1
         return True
 
-    def encode_reply(self) -> bytes:
-        """The payload of a reply: the vehicle state, no image chunk (14 B; 20-B frame)."""
+    def encode_reply(self, chunk: ReplyChunk | None = None) -> bytes:
+        """The payload of a reply: the vehicle state and an image chunk, if any.
+
+        Args:
+            chunk: the image chunk to carry; None = no image (14 B; a 20-B frame). A 40-B
+                chunk makes a 54-B payload (60-B frame).
+        """
         world = self._world
         vehicle = self._vehicle
         odometry = world.get(vehicle, Odometry)
@@ -263,4 +307,14 @@ class TeleopVehicleEnd:
             roll_deg=math.degrees(roll),
             pitch_deg=math.degrees(pitch),
         )
-        return VehicleMessage(False, False, state, False, False, 0, b"").encode()
+        if chunk is None:
+            return VehicleMessage(False, False, state, False, False, 0, b"").encode()
+        return VehicleMessage(
+            chunk.first,
+            chunk.last,
+            state,
+            chunk.image_seq_bit,
+            chunk.cancel,
+            chunk.index,
+            chunk.data,
+        ).encode()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import struct
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -46,6 +47,9 @@ from testbed.protocol import (
     OperatorMessage,
     Order,
     OrderIncoming,
+    VehicleMessage,
+    decode_operator_message,
+    decode_vehicle_message,
     encode_frame,
 )
 
@@ -312,7 +316,6 @@ def test_keep_heading_sets_a_level_attitude_setpoint() -> None:
     [
         NoOrder(),
         HoldChannel(5),
-        ImageSettings(0, 0, 1023, 1023, 3, True, 2000),
         DisableKeepHeading(),
         GoTo(100, -200, 300, 45),
         OrderIncoming(),
@@ -454,7 +457,7 @@ def test_reply_in_a_mode_the_vehicle_lacks_keeps_the_last_known_mode() -> None:
 )
 def test_malformed_replies_are_counted_never_raised(payload: bytes) -> None:
     world, _, end = operator_end()
-    assert end.apply_reply(payload, 1.0) is False
+    assert end.apply_reply(payload, 1.0) is None
     assert (end.counters.applied, end.counters.malformed) == (0, 1)
     assert world.components(end.vehicle) == ()
 
@@ -478,8 +481,8 @@ def classify_order(payload: bytes) -> str:
         return "applied" if body[4] & 7 <= 2 else "unsupported"
     if code == 2:
         return "applied" if int.from_bytes(body, "big") <= 359 else "malformed"
-    if code == 4 and body[5] & 0x0E:
-        return "malformed"
+    if code == 4:  # image settings: the vehicle's image source takes them
+        return "malformed" if body[5] & 0x0E else "applied"
     return "unsupported"
 
 
@@ -564,7 +567,7 @@ def test_fuzz_replies_are_applied_or_counted_never_raised() -> None:
         ok = classify_reply(payload) == "applied"
         applied += ok
         malformed += not ok
-        assert end.apply_reply(payload, float(k)) is ok
+        assert (end.apply_reply(payload, float(k)) is not None) is ok
     assert (end.counters.applied, end.counters.malformed, end.counters.unsupported) == (
         applied,
         malformed,
@@ -575,3 +578,51 @@ def test_fuzz_replies_are_applied_or_counted_never_raised() -> None:
     assert odometry is not None and math.isclose(
         math.fsum(v * v for v in odometry.quaternion_wxyz), 1.0
     )
+
+
+def test_image_settings_order_is_acknowledged_and_leaves_the_intents_alone() -> None:
+    world, _, intents, end = vehicle_end()
+    settings = ImageSettings(10, 20, 60, 50, 4, True, 600)
+    payload = OperatorMessage(False, False, 0, True, False, settings).encode()
+    assert end.apply_order(payload, 1.0) is True
+    assert (end.counters.applied, end.counters.unsupported) == (1, 0)
+    assert end.order_ack_bit is True  # echoed in the next reply: the operator knows it landed
+    assert world.components(intents) == ()
+
+
+def test_order_header_carries_the_image_request_and_settings_replace_the_move() -> None:
+    world = World()
+    intents = world.spawn()
+    end = TeleopOperatorEnd(world, intents)
+    settings = ImageSettings(0, 0, 159, 119, 2, True, 1200)
+    message = decode_operator_message(end.encode_order((True, False, 37), settings))
+    assert isinstance(message, OperatorMessage)
+    assert (message.image_seq_bit, message.cancel_image, message.first_missing_chunk) == (
+        True,
+        False,
+        37,
+    )
+    assert message.order == settings
+    plain = decode_operator_message(end.encode_order())
+    assert isinstance(plain, OperatorMessage) and isinstance(plain.order, Move)
+    assert (plain.image_seq_bit, plain.first_missing_chunk) == (False, 0)
+
+
+def test_reply_with_a_40_byte_chunk_is_the_papers_60_byte_frame() -> None:
+    @dataclass(frozen=True)
+    class Chunk:
+        first: bool = True
+        last: bool = False
+        image_seq_bit: bool = True
+        cancel: bool = False
+        index: int = 5
+        data: bytes = bytes(range(40))
+
+    _, _, _, end = vehicle_end()
+    payload = end.encode_reply(Chunk())
+    assert len(encode_frame(payload)) == 60  # REFERENCE §1.6: 6 + 1 + 12 + 1 + 40
+    message = decode_vehicle_message(payload)
+    assert isinstance(message, VehicleMessage)
+    assert (message.first_chunk, message.last_chunk, message.image_seq_bit) == (True, False, True)
+    assert (message.chunk_index, message.chunk) == (5, bytes(range(40)))
+    assert len(encode_frame(end.encode_reply())) == 20
