@@ -11,7 +11,8 @@ image sequence bit · cancel · chunk index; then the chunk).
   at most 64 of them because the index has 6 bits (:func:`max_image_bytes`).
 * :class:`ImageAssembler`, on the operator, asks for the chunks it misses, checks the image CRC
   and hands out the image; :meth:`ImageAssembler.prefix` gives the contiguous bytes received so
-  far for progressive decoding.
+  far for progressive decoding (less one byte until the length is known, so that it is always
+  a true prefix of the image, never a CRC byte).
 
 **Selective repeat** (the default). The operator drives; one bit names the image:
 
@@ -56,10 +57,12 @@ Rules, and why:
 * A request beyond the image's last chunk is answered with the last chunk: its *last* flag tells
   the operator the real length, which drops whatever it held beyond it (a chunk at index modulo
   the count would repeat a chunk the operator holds and carry no news).
-* Cancel: the operator sets *cancel* in every request until it sees a reply with *cancel* set and
-  its expected bit. The vehicle answers every cancelling request with such a notice (no data),
+* Cancel: the operator sets *cancel* in every request until it sees a reply with *cancel* set.
+  The vehicle answers every cancelling request with such a notice (the request's bit, no data),
   drops any image it holds and wants a new one, which takes the same bit: the bit means "the
-  image I expect", cancelled or not. A notice lost on the way is repeated on the next request.
+  image I expect", cancelled or not. A notice lost on the way is repeated on the next request
+  (dropping an image loaded meanwhile); a notice for the expected bit that arrives after the
+  cancel ended drops the partial image too, since the vehicle dropped its image again.
 * A reply built without a fresh request (hold-channel streaming) continues with the next chunk,
   wrapping after the last.
 * Garbled remote data — any flags, any index, any bytes — becomes an :class:`AssemblyEvent` and
@@ -436,19 +439,18 @@ class ImageAssembler:
         self._cancelling = True
 
     def prefix(self) -> bytes:
-        """Contiguous bytes received from chunk 0, CRC bytes excluded once the length is known.
+        """The longest run of bytes from chunk 0 surely image data, for progressive decoding.
 
-        Before the last chunk arrives the length is unknown, so the prefix may end with one CRC
-        byte (when the CRC straddles two chunks); an embedded decoder reads it as one more byte.
+        It is always a prefix of the encoded image (CRC excluded). Until the last chunk is held
+        the image length is unknown and the run's final byte could be the first CRC byte (the CRC
+        may straddle two chunks), so that one byte is held back; once the last chunk is held, a
+        run that reached the CRC would have completed the image, so nothing is held back.
         """
         run: list[bytes] = []
         while len(run) in self._parts:
             run.append(self._parts[len(run)])
         data = b"".join(run)
-        if self._last_index is not None:
-            total = self._last_index * self._chunk_bytes + len(self._parts[self._last_index])
-            data = data[: total - IMAGE_CRC_SIZE]
-        return data
+        return data if self._last_index is not None else data[:-1]
 
     def on_chunk(
         self, first: bool, last: bool, image_seq_bit: bool, cancel: bool, index: int, data: bytes
