@@ -18,6 +18,9 @@ Frames: this module is the only place that knows pybullet is z-up. pybullet's wo
 rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
 rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x, y, z) maps to
 (w, x, −y, −z). Nothing outside this module imports pybullet.
+
+Rendering: :meth:`Physics.add_scenery` (visual-only static bodies) and :meth:`Physics.render`
+(pybullet's CPU renderer, from a camera pose in NED); the camera model is in :mod:`.camera`.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from __future__ import annotations
 import ctypes
 import os
 import sys
+import tempfile
 import typing
 import weakref
 from collections.abc import Callable, Sequence
@@ -35,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.config import check
+from testbed.vehicle.camera import LIGHT_TOWARDS_NED, CameraConfig, CameraPose, Scenery
 from testbed.vehicle.hydrodynamics import (
     CurrentProcess,
     HydroModel,
@@ -407,6 +412,64 @@ class Physics:
                 raw = self._raw = self._read()
             floats = self._floats = (self._steps * self.dt_s, *_state_of(raw, self._cog))
         return floats
+
+    def add_scenery(self, scenery: Scenery) -> None:
+        """Add the camera's scenery as static visual-only bodies (no collision, no mass: stepping
+        is unchanged); bodies already here (the hull, a pool's boxes) turn transparent."""
+        self._check_open()
+        pb = {"physicsClientId": self.client_id}
+        for index in range(pybullet.getNumBodies(**pb)):
+            body = pybullet.getBodyUniqueId(index, **pb)
+            pybullet.changeVisualShape(body, -1, rgbaColor=(0, 0, 0, 0), **pb)
+        with tempfile.TemporaryDirectory(prefix="testbed-") as folder:  # loadTexture needs a file
+            paths = scenery.write_textures(folder).items()
+            textures = {name: pybullet.loadTexture(path, **pb) for name, path in paths}
+        placed = []  # (visual shape, position NED, attitude wxyz, texture or None)
+        # quads: counter-clockwise seen from the normal's side; the texture's row 0 is v = 1
+        mesh = {"indices": [0, 2, 1, 0, 3, 2], "uvs": [(0, 1), (1, 1), (1, 0), (0, 0)], **pb}
+        for quad in scenery.quads:
+            vertices = [ned_to_pybullet(c) for c in quad.corners_ned_m]
+            normals = [ned_to_pybullet(quad.normal_ned)] * 4
+            shape = pybullet.createVisualShape(
+                pybullet.GEOM_MESH, vertices=vertices, normals=normals, **mesh
+            )
+            placed.append((shape, _ZERO3, (1.0, 0.0, 0.0, 0.0), textures[quad.texture]))
+        for solid in scenery.solids:
+            kind, size = getattr(pybullet, f"GEOM_{solid.kind.upper()}"), solid.size_m
+            half = [0.5 * s for s in size] if solid.kind == "box" else None
+            rgba = (*solid.rgb, 1.0)
+            shape = pybullet.createVisualShape(
+                kind, radius=size[0], length=size[-1], halfExtents=half, rgbaColor=rgba, **pb
+            )
+            placed.append((shape, solid.position_ned_m, solid.quaternion_wxyz, None))
+        sleep = pybullet.ACTIVATION_STATE_SLEEP  # a sleeping static rigid body costs no step time
+        for shape, position, attitude, texture in placed:
+            at = ned_to_pybullet(position), quaternion_ned_to_pybullet(attitude)
+            body = pybullet.createMultiBody(0.0, -1, shape, *at, useMaximalCoordinates=True, **pb)
+            pybullet.changeDynamics(body, -1, activationState=sleep, **pb)
+            if texture is not None:
+                pybullet.changeVisualShape(body, -1, textureUniqueId=texture, **pb)
+
+    def render(
+        self, pose: CameraPose, camera: CameraConfig
+    ) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
+        """Draw the scenery from a camera pose (NED) with pybullet's CPU renderer, TinyRenderer.
+
+        Returns:
+            ``(rgb, zbuffer)``: (h, w, 3) uint8 colour, row 0 at the top; (h, w) OpenGL depth
+            buffer in [0, 1], 1 where nothing was hit (see :func:`.camera.linear_depth_m`).
+        """
+        self._check_open()
+        eye, w, h = pose.position_ned_m, camera.width_px, camera.height_px
+        target = [e + f for e, f in zip(eye, pose.forward_ned, strict=True)]
+        view = pybullet.computeViewMatrix(*map(ned_to_pybullet, (eye, target, pose.up_ned)))
+        projection = pybullet.computeProjectionMatrixFOV(*camera.perspective)
+        light = ned_to_pybullet(LIGHT_TOWARDS_NED)
+        tiny = {"renderer": pybullet.ER_TINY_RENDERER, "flags": pybullet.ER_NO_SEGMENTATION_MASK}
+        options = {"lightDirection": light, "shadow": 0, "physicsClientId": self.client_id, **tiny}
+        _, _, rgba, zbuffer, _ = pybullet.getCameraImage(w, h, view, projection, **options)
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)[:, :, :3]
+        return rgb, np.asarray(zbuffer, dtype=np.float32).reshape(h, w)
 
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""
