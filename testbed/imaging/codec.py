@@ -3,24 +3,20 @@ prefix of one.
 
 The coder is in the SPIHT family. Wavelet coefficients (CDF 9/7, see ``wavelet``) are quantised
 to integer magnitudes ``floor(|c|)`` (ROI coefficients first scaled by 2^shift, Maxshift-style)
-and sent bit plane by bit plane, top plane first. Each plane p has, in order:
+and sent bit plane by bit plane, top plane first, in the steps ``passes`` schedules: per plane,
+significance bits (each new significant coefficient followed by its sign) and descendant-set
+bits group by group, coarse to fine, the coefficients with a significant neighbour or parent
+first and the rest in a second pass, then refinement bits (bit p of the magnitude) of the
+coefficients significant before the plane. A coefficient is *active* (gets significance bits)
+once its parent's descendant set is significant; LL coefficients always are.
 
-1. for each group g, coarse to fine (LL, then detail levels from the coarsest):
-   a. significance bits of the group's *active* coefficients not yet significant (1 if
-      magnitude >= 2^p), then one sign bit (1 = negative) per coefficient just found significant;
-   b. (all groups but the finest) descendant bits of the group's active coefficients whose
-      descendant set is not yet significant (1 if any descendant magnitude >= 2^p). A coefficient
-      is active once its parent's descendant set is significant (LL coefficients always are), so
-      a 1 here activates four children (three below LL) which group g + 1 codes in this plane;
-2. refinement bits (bit p of the magnitude) of every coefficient significant before plane p, in
-   flat order (coarse to fine).
-
-Bits are raw (no entropy coder): the set partitioning does the compression, and the bits of a
-step are produced and parsed as whole numpy arrays, so there is no per-coefficient Python loop.
-The stream is the header (``header``) followed by the packed bits; the encoder stops when the
-byte budget is spent. The decoder replays the same steps and stops at the first step the data
-does not complete, keeping what that step's available bits say; every coefficient is rebuilt at
-the midpoint of the interval its known bits leave, so every prefix is the best image it allows.
+Significance and descendant bits are coded by the adaptive run-length coder of ``runlength``
+(one adaptation state per group, kind and pass); refinement bits are raw. The stream is the
+header (``header``) followed by the packed bits; the encoder stops when the byte budget is
+spent. The decoder replays the same schedule and stops at the first step the data does not
+complete, keeping what that step's available bits say. A significant coefficient is rebuilt at
+3/8 of the interval its known bits leave (wavelet magnitudes are denser at the low end; the
+midpoint measured the same PSNR but let refinement bits lower it slightly more often).
 
 Remote data never raises here: a stream whose header is short or invalid decodes to a mid-grey
 image of the ``shape`` the caller expects, or to an empty (0, 0) array if none was given.
@@ -195,7 +191,7 @@ def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint
 
 
 def _decode_coefficients(body: bytes, lay: Layout, planes: int) -> NDArray[np.float64]:
-    """(n,) coefficients rebuilt from the coded bits, at the midpoint of what is known."""
+    """(n,) coefficients rebuilt from the coded bits, at 3/8 of the interval still open."""
     n = lay.size
     stream = Reader(body)
     mag = np.zeros(n, dtype=np.int64)
@@ -225,5 +221,5 @@ def _decode_coefficients(body: bytes, lay: Layout, planes: int) -> NDArray[np.fl
                 state.desc_sig[hit] = True
         if not complete or stream.left == 0:
             break
-    value = np.where(state.sig, mag + 0.5 * np.left_shift(1, low), 0.0)
+    value = np.where(state.sig, mag + 0.375 * np.left_shift(1, low), 0.0)
     return np.where(neg, -value, value)

@@ -12,12 +12,14 @@ Per bit plane p, top plane first (t = 2^p):
    parent as of the previous plane (these are the likely ones), then the descendant-set bits
    of the group's active coefficients whose set is not yet significant; a 1 activates the
    children in the next group, in this plane;
-2. refinement bits (bit p) of coefficients significant before plane p;
-3. *far* pass, for each group coarse to fine: significance of the remaining active candidates.
+2. *far* pass, for each group coarse to fine: significance of the remaining active candidates;
+3. refinement bits (bit p) of coefficients significant before plane p, coarse to fine.
 
-Splitting significance by neighbourhood codes the bits with the best quality per bit first (as
-the JPEG 2000 coding passes do) and gives the run-length coder two sharply different
-statistics to adapt to. No I/O lives here.
+The order follows the measured quality gain per bit: significance steps (with the descendant
+bits that open them) gain several times more per bit than raw refinement bits, so refinement
+comes last (0.4 dB at 320 x 240, 1200 B, over refinement between the passes). Splitting
+significance by neighbourhood gives the run-length coder separate statistics to adapt to.
+No I/O lives here.
 """
 
 from __future__ import annotations
@@ -103,9 +105,9 @@ def steps(state: State, lay: Layout, planes: int) -> Iterator[Step]:
             if g < ngroups - 1:
                 open_sets = active & ~state.desc_sig[a:b]
                 yield Step(DESC, 4 * g + 1, p, a + np.flatnonzero(open_sets))
-        yield Step(REF, -1, p, before)
         for g in range(ngroups):
             a, b = bounds[g], bounds[g + 1]
             active = state.desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
             cand = active & ~state.sig[a:b] & ~near[a:b]
             yield Step(SIG, 4 * g + 2, p, a + np.flatnonzero(cand))
+        yield Step(REF, -1, p, before)
