@@ -86,6 +86,8 @@ class CameraConfig:
         water_grey: grey level of water seen at infinite range, 0–255.
         noise_std_grey: standard deviation of additive Gaussian sensor noise [grey levels],
             ≥ 0; drawn from the generator given to the capture (0 = none).
+        supersampling: k, 1–4: each pixel averages k × k rendered samples (the renderer
+            samples textures at nearest texels; k = 1 aliases fine tile joints into moiré).
     """
 
     enabled: bool = False
@@ -100,6 +102,7 @@ class CameraConfig:
     attenuation_per_m: float = 0.15
     water_grey: float = 95.0
     noise_std_grey: float = 0.0
+    supersampling: int = 2
 
     def __post_init__(self) -> None:
         for key in ("width_px", "height_px"):
@@ -127,11 +130,18 @@ class CameraConfig:
         check(0.0 <= grey <= 255.0, "water_grey", f"must be in [0, 255], got {grey}")
         noise = self.noise_std_grey
         check(math.isfinite(noise) and noise >= 0, "noise_std_grey", f"must be >= 0, got {noise}")
+        k = self.supersampling
+        check(1 <= k <= 4, "supersampling", f"must be in [1, 4], got {k}")
 
     @property
     def focal_length_px(self) -> float:
         """Pinhole focal length f [px] from the vertical field of view."""
         return 0.5 * self.height_px / math.tan(math.radians(0.5 * self.vertical_fov_deg))
+
+    @property
+    def render_size_px(self) -> tuple[int, int]:
+        """(width, height) of the render [px]: the image's times ``supersampling``."""
+        return (self.width_px * self.supersampling, self.height_px * self.supersampling)
 
     @property
     def perspective(self) -> tuple[float, float, float, float]:
@@ -223,16 +233,18 @@ def linear_depth_m(zbuffer: NDArray[np.floating], near_m: float, far_m: float) -
     return depth
 
 
-def ray_length_m(depth_m: FloatImage, config: CameraConfig) -> FloatImage:
+def ray_length_m(depth_m: FloatImage, vertical_fov_deg: float) -> FloatImage:
     """(h, w) distance [m] from the optical centre to the surface seen in each pixel.
 
     Args:
-        depth_m: (h, w) distance along the optical axis [m] (:func:`linear_depth_m`).
-        config: the camera (image size, focal length).
+        depth_m: (h, w) distance along the optical axis [m] (:func:`linear_depth_m`) of an
+            image whose pixels are square and whose height spans ``vertical_fov_deg``.
+        vertical_fov_deg: the image's vertical field of view [deg].
     """
-    f = config.focal_length_px
-    x = (np.arange(config.width_px) + 0.5 - 0.5 * config.width_px) / f
-    y = (np.arange(config.height_px) + 0.5 - 0.5 * config.height_px) / f
+    height, width = depth_m.shape
+    f = 0.5 * height / math.tan(math.radians(0.5 * vertical_fov_deg))
+    x = (np.arange(width) + 0.5 - 0.5 * width) / f
+    y = (np.arange(height) + 0.5 - 0.5 * height) / f
     secant = np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)
     length: FloatImage = depth_m * secant
     return length
@@ -254,22 +266,27 @@ def underwater_grey(
     """The rendered frame as the camera sees it under water: grey, veiled by distance, noisy.
 
     Args:
-        rgb: (h, w, 3 or 4) rendered colour, uint8.
-        zbuffer: (h, w) the renderer's depth buffer in [0, 1] (1 = nothing hit).
+        rgb: (k·h, k·w, 3 or 4) rendered colour, uint8, k = ``config.supersampling``.
+        zbuffer: (k·h, k·w) the renderer's depth buffer in [0, 1] (1 = nothing hit).
         config: the camera.
         rng: generator for the sensor noise; required when ``config.noise_std_grey > 0``.
 
     Returns:
-        (h, w) grey image, uint8.
+        (h, w) grey image, uint8: each pixel the mean of its k × k rendered samples.
 
     Raises:
-        ValueError: noise is configured but no generator was given.
+        ValueError: renders of the wrong size, or noise configured without a generator.
     """
+    k, height, width = config.supersampling, config.height_px, config.width_px
+    if rgb.shape[:2] != (k * height, k * width) or zbuffer.shape != rgb.shape[:2]:
+        raise ValueError(f"expected {k * height} x {k * width} renders, got {rgb.shape[:2]}")
     grey = grey_from_rgb(rgb)
     buffer = np.asarray(zbuffer, dtype=np.float64)
-    distance = ray_length_m(linear_depth_m(buffer, config.near_m, config.far_m), config)
+    depth = linear_depth_m(buffer, config.near_m, config.far_m)
+    distance = ray_length_m(depth, config.vertical_fov_deg)
     transmission = np.where(buffer < 1.0, np.exp(-config.attenuation_per_m * distance), 0.0)
     grey = grey * transmission + config.water_grey * (1.0 - transmission)
+    grey = grey.reshape(height, k, width, k).mean(axis=(1, 3))  # each pixel sums its k x k
     if config.noise_std_grey > 0.0:
         if rng is None:
             raise ValueError("noise_std_grey > 0 needs a numpy Generator")

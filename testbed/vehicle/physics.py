@@ -456,11 +456,11 @@ class Physics:
         """Draw the scenery from a camera pose (NED) with pybullet's CPU renderer, TinyRenderer.
 
         Returns:
-            ``(rgb, zbuffer)``: (h, w, 3) uint8 colour, row 0 at the top; (h, w) OpenGL depth
-            buffer in [0, 1], 1 where nothing was hit (see :func:`.camera.linear_depth_m`).
+            ``(rgb, zbuffer)`` at ``camera.render_size_px``: (h, w, 3) uint8 colour, row 0 at the
+            top; (h, w) OpenGL depth buffer in [0, 1], 1 where nothing was hit.
         """
         self._check_open()
-        eye, w, h = pose.position_ned_m, camera.width_px, camera.height_px
+        eye, (w, h) = pose.position_ned_m, camera.render_size_px
         target = [e + f for e, f in zip(eye, pose.forward_ned, strict=True)]
         view = pybullet.computeViewMatrix(*map(ned_to_pybullet, (eye, target, pose.up_ned)))
         projection = pybullet.computeProjectionMatrixFOV(*camera.perspective)

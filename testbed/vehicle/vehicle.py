@@ -38,6 +38,13 @@ import numpy as np
 from testbed.config import build, check, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
+from testbed.vehicle.camera import (
+    CameraConfig,
+    CapturedImage,
+    camera_pose,
+    pool_scenery,
+    underwater_grey,
+)
 from testbed.vehicle.components import (
     ActiveMode,
     Armed,
@@ -63,7 +70,7 @@ from testbed.vehicle.control import (
     shape_stick,
 )
 from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
-from testbed.vehicle.physics import BodyState, Physics
+from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.sensors import (
     DepthSensor,
     DepthSensorConfig,
@@ -162,6 +169,8 @@ class VehicleConfig:
         current: water current.
         start_position_ned_m: (3,) initial body-origin position [m], NED.
         start_euler_rad: (3,) initial roll, pitch, yaw [rad].
+        camera: the forward camera (disabled by default); when enabled, the physics client
+            also holds the pool's scenery (visual only: the dynamics are the same).
     """
 
     model: str = "bluerov2"
@@ -180,6 +189,7 @@ class VehicleConfig:
     current: WaterCurrent = field(default_factory=WaterCurrent)
     start_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.5)
     start_euler_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    camera: CameraConfig = field(default_factory=CameraConfig)
 
     def __post_init__(self) -> None:
         check(self.control_rate_hz > 0, "control_rate_hz", "must be > 0")
@@ -256,6 +266,13 @@ class Vehicle:
             current=config.current,
             rng=current_rng,
         )
+        camera = config.camera
+        if camera.enabled:
+            pool = PoolScene()
+            self.physics.add_scenery(pool_scenery(pool.length_m, pool.width_m, pool.depth_m))
+        # spawned only when drawn from, so runs without camera noise keep their streams
+        self._camera_rng = rng.spawn(1)[0] if camera.enabled and camera.noise_std_grey else None
+        self._last_capture_s: float | None = None
         sensors = config.sensors
         self.sensors = SensorSuite(
             Imu(sensors.imu, imu_rng),
@@ -413,6 +430,35 @@ class Vehicle:
         else:
             r = steady(5, forces[5] * pilot.torque[2])
         return (u, v, w, r)
+
+    def capture_image(self) -> CapturedImage | None:
+        """Render the forward camera at the plant's true pose now.
+
+        Refused (None, nothing rendered) when called less than ``1/camera.max_rate_hz`` after
+        the last capture: the caller asks again later (:attr:`next_capture_s`); a stale image is
+        never handed out as a new one.
+
+        Raises:
+            RuntimeError: the camera is disabled.
+        """
+        camera = self.config.camera
+        if not camera.enabled:
+            raise RuntimeError("the camera is disabled (vehicle.camera.enabled = false)")
+        now, position, quaternion, _ = self.physics.state_floats()
+        if now < self.next_capture_s - 1e-9:
+            return None
+        self._last_capture_s = now
+        pose = camera_pose(position, quaternion, camera)
+        rgb, zbuffer = self.physics.render(pose, camera)
+        pixels = underwater_grey(rgb, zbuffer, camera, self._camera_rng)
+        pixels.setflags(write=False)
+        return CapturedImage(now, pixels, pose, position, quaternion)
+
+    @property
+    def next_capture_s(self) -> float:
+        """Earliest time of the next capture [s] (the camera's ``max_rate_hz``)."""
+        last = self._last_capture_s
+        return 0.0 if last is None else last + self.config.camera.min_interval_s
 
     def state(self) -> BodyState:
         """The physics truth now (for metrics and tests; the controllers never see it)."""
