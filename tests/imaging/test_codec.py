@@ -1,4 +1,4 @@
-"""The embedded wavelet coder: prefixes, monotone quality, ROI, garbage, header, transform."""
+"""The embedded wavelet coder: prefixes, monotone quality, ROI, garbage, header."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from testbed.imaging import Header, decode, encode, parse_header, pool_scene
-from testbed.imaging.wavelet import forward, inverse, layout, roi_mask
 
 
 def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
@@ -29,45 +28,6 @@ def large() -> np.ndarray:
 
 
 AMPHORA_ROI = (30, 40, 80, 110)
-
-
-@pytest.mark.parametrize("shape", [(120, 160), (240, 320), (17, 33), (1, 9), (64, 64)])
-def test_transform_is_exactly_invertible(shape: tuple[int, int]) -> None:
-    img = np.random.default_rng(3).uniform(-128, 128, size=shape)
-    lay = layout(*shape, 4)
-    flat = forward(img, 4)
-    assert flat.size == lay.size >= img.size
-    if shape[0] % 16 == 0 and shape[1] % 16 == 0:
-        assert flat.size == img.size  # periodization is non-expansive on whole blocks
-    assert np.max(np.abs(inverse(flat, lay) - img)) < 1e-9
-
-
-def test_parent_of_every_detail_coefficient_is_one_group_coarser() -> None:
-    lay = layout(128, 160, 4)  # whole 2x2 blocks at every level
-    for g in range(1, len(lay.bounds) - 1):
-        par = lay.parent[lay.bounds[g] : lay.bounds[g + 1]]
-        assert par.min() >= lay.bounds[g - 1] and par.max() < lay.bounds[g]
-    assert np.all(lay.parent[: lay.bounds[1]] == -1)
-    # Four children per detail parent, three per LL parent
-    counts = np.bincount(lay.parent[lay.bounds[2] :], minlength=lay.size)
-    assert set(counts[lay.bounds[1] : lay.bounds[2]].tolist()) == {4}
-    assert set(np.bincount(lay.parent[lay.bounds[1] : lay.bounds[2]]).tolist()) == {3}
-
-
-def test_roi_mask_holds_every_coefficient_that_reaches_the_roi() -> None:
-    # Independent check by synthesis: coefficients outside the mask never touch ROI pixels,
-    # and each one inside does (probed on a sample of them).
-    lay = layout(120, 160, 4)
-    roi = (50, 30, 90, 70)
-    mask = roi_mask(lay, roi)
-    rng = np.random.default_rng(4)
-    outside = np.where(mask, 0.0, rng.normal(size=lay.size))
-    assert np.max(np.abs(inverse(outside, lay)[30:71, 50:91])) < 1e-9
-    for i in rng.choice(np.flatnonzero(mask), size=40, replace=False):
-        unit = np.zeros(lay.size)
-        unit[i] = 1.0
-        assert np.max(np.abs(inverse(unit, lay)[30:71, 50:91])) > 1e-6
-    assert 0.1 < mask.mean() < 0.5  # padded rectangle, not the whole image
 
 
 @pytest.mark.parametrize(
