@@ -144,9 +144,25 @@ class CameraConfig:
         return (self.width_px * self.supersampling, self.height_px * self.supersampling)
 
     @property
-    def perspective(self) -> tuple[float, float, float, float]:
-        """(vertical field of view [deg], aspect width/height, near [m], far [m])."""
-        return (self.vertical_fov_deg, self.width_px / self.height_px, self.near_m, self.far_m)
+    def projection_matrix(self) -> tuple[float, ...]:
+        """The OpenGL projection (16 values, column-major) of the render, half-pixel centred.
+
+        gluPerspective's matrix from the vertical field of view, the aspect and near/far, with
+        the frustum moved by half a render pixel left and down: pybullet's TinyRenderer samples
+        pixel (row i, column j) at (j, i + 1) of the continuous image rather than at the pixel
+        centre (j + ½, i + ½), which would put everything half a pixel right and up.
+        """
+        width, height = self.render_size_px
+        f = 1.0 / math.tan(math.radians(0.5 * self.vertical_fov_deg))
+        near, far = self.near_m, self.far_m
+        depth = (far + near) / (near - far)
+        shift_x, shift_y = 1.0 / width, 1.0 / height
+        return (
+            f * height / width, 0.0, 0.0, 0.0,
+            0.0, f, 0.0, 0.0,
+            shift_x, shift_y, depth, -1.0,
+            0.0, 0.0, 2.0 * far * near / (near - far), 0.0,
+        )  # fmt: skip
 
     @property
     def min_interval_s(self) -> float:

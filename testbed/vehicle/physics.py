@@ -463,7 +463,7 @@ class Physics:
         eye, (w, h) = pose.position_ned_m, camera.render_size_px
         target = [e + f for e, f in zip(eye, pose.forward_ned, strict=True)]
         view = pybullet.computeViewMatrix(*map(ned_to_pybullet, (eye, target, pose.up_ned)))
-        projection = pybullet.computeProjectionMatrixFOV(*camera.perspective)
+        projection = camera.projection_matrix
         light = ned_to_pybullet(LIGHT_TOWARDS_NED)
         tiny = {"renderer": pybullet.ER_TINY_RENDERER, "flags": pybullet.ER_NO_SEGMENTATION_MASK}
         options = {"lightDirection": light, "shadow": 0, "physicsClientId": self.client_id, **tiny}
