@@ -21,6 +21,7 @@ import math
 from collections.abc import Callable, Generator
 from typing import Any
 
+import numpy as np
 import simpy
 
 from testbed.channel import Delivery, IpgPolicy, Modem
@@ -29,12 +30,25 @@ from testbed.common.components import MovementCommand, Odometry, register_compon
 from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
 from testbed.ecs import ComponentRegistry, Origin, Phase, Side, World
+from testbed.image_log import CapturedImage, ReceivedImage
 from testbed.operator.station import OperatorStation
-from testbed.protocol import Frame, FrameDecoder, encode_frame, frame_overhead
+from testbed.operator.video import ImageConsole
+from testbed.protocol import (
+    AssemblyEvent,
+    Frame,
+    FrameDecoder,
+    ImageSettings,
+    OperatorMessage,
+    VehicleMessage,
+    decode_operator_message,
+    encode_frame,
+    frame_overhead,
+)
 from testbed.recorder import Recorder
 from testbed.vehicle.components import ControlTargets, FailsafeStatus
 from testbed.vehicle.systems import Actuation, Controllers, PlantTruth, SimClock
 from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.video import CodedImage, ImageSource
 
 __all__ = ["LinkPort", "OperatorNode", "VehicleNode", "make_registry"]
 
@@ -43,6 +57,7 @@ FRAME_OVERHEAD = frame_overhead()
 
 _MOVE_CODE = 1
 """Order type code of a ``Move`` (low nibble of an operator payload's byte 1)."""
+_ORDER_CODE_MASK = 0x0F
 
 
 def make_registry() -> ComponentRegistry:
@@ -150,6 +165,8 @@ class VehicleNode:
             frame regardless).
         snapshot_period_s: change-set codec: send the full owned state this often [s] (0:
             never), so an operator that lost a payload resyncs.
+        image_source: builds the vehicle's image source from the vehicle (image feedback on
+            token-passing teleop links), or None for replies without images.
     """
 
     def __init__(
@@ -165,6 +182,7 @@ class VehicleNode:
         commanded: Callable[[float], tuple[float, float, float, float]],
         sample_rate_hz: float = 50.0,
         snapshot_period_s: float = 0.0,
+        image_source: Callable[[Vehicle, Callable[[CodedImage], None]], ImageSource] | None = None,
     ) -> None:
         self.env = env
         self._sample_period_s = 1.0 / sample_rate_hz
@@ -190,6 +208,7 @@ class VehicleNode:
         self.reply_odometry_s = self._reply_sampled
         self._energy_j = 0.0
         self._last_failsafe = 0
+        self.images = None if image_source is None else image_source(vehicle, self._captured)
 
     # -- process ---------------------------------------------------------------------------
 
@@ -243,11 +262,29 @@ class VehicleNode:
             self.port.send(payload)
 
     def _answer(self, payload: bytes, delivery: Delivery) -> None:
-        """Token passing: answer a valid order at once with the state (teleop codec)."""
-        del payload, delivery
+        """Token passing: answer an order at once with the state and an image chunk."""
+        del delivery
+        message = decode_operator_message(payload)
+        images = self.images
+        chunk = None
+        if isinstance(message, OperatorMessage):
+            self.teleop.acknowledge(message)
+            if images is not None:
+                images.on_order(message)
+        if images is not None:
+            chunk = images.reply_chunk()
         odometry = self.vehicle.world.get(self.vehicle.entity, Odometry)
-        frame_id = self.port.send(self.teleop.encode_reply())
+        frame_id = self.port.send(self.teleop.encode_reply(chunk))
         self._reply_sampled[frame_id] = -math.inf if odometry is None else odometry.sampled_s
+        if chunk is not None and chunk.data and images is not None and images.current:
+            self.recorder.images.reply_images[frame_id] = images.current.number
+
+    def _captured(self, image: CodedImage) -> None:
+        """Recording: the image source captured and coded a new image (stamped with the event
+        clock, like every other record; the scene is the plant at its latest physics step)."""
+        now = self.env.now
+        record = CapturedImage(image.number, now, image.pixels, len(image.encoded))
+        self.recorder.images.captured[image.number] = record
 
     # -- recording -------------------------------------------------------------------------
 
@@ -311,6 +348,7 @@ class OperatorNode:
             (teleop replies carry no time; recording only).
         snapshot_period_s: change-set codec: send the full owned state this often [s] (0:
             never), so a vehicle that lost a payload (an arm request, a setpoint) resyncs.
+        console: the operator's image console (image feedback), or None.
     """
 
     def __init__(
@@ -325,8 +363,10 @@ class OperatorNode:
         recorder: Recorder,
         reply_odometry_s: dict[int, float],
         snapshot_period_s: float = 0.0,
+        console: ImageConsole | None = None,
     ) -> None:
         self.env = env
+        self.console = console
         self.station = station
         self.recorder = recorder
         self._codec = codec
@@ -349,7 +389,7 @@ class OperatorNode:
         while True:
             self.station.frame(env.now)
             if self._codec == "teleop":
-                payloads = [self.teleop.encode_order()]
+                payloads = [self._order()]
                 self._send_order(payloads[0])
             else:
                 payloads = self.outbox.payloads(env.now)
@@ -360,6 +400,19 @@ class OperatorNode:
             else:  # the gap follows the size of the frame just sent (telerobotics rules)
                 largest = max((len(p) for p in payloads), default=0)
                 yield env.timeout(self._ipg.gap_for(bytes(largest + FRAME_OVERHEAD)))
+
+    def _order(self) -> bytes:
+        """This gap's order: the image request in its header, coder settings when due."""
+        console = self.console
+        if console is None:
+            return self.teleop.encode_order()
+        settings = console.settings_due(self.env.now)
+        payload = self.teleop.encode_order(console.request(), settings)
+        if settings is not None and payload[1] & _ORDER_CODE_MASK == ImageSettings.CODE:
+            console.settings_sent_with(self.teleop.order_seq_bit)
+        else:
+            console.order_sent()
+        return payload
 
     def _send_order(self, payload: bytes) -> int:
         frame_id = self.port.send(payload)
@@ -379,16 +432,30 @@ class OperatorNode:
         now = self.env.now
         if self._codec == "teleop":
             for payload, frame_id in self.port.take():
-                if not self.teleop.apply_reply(payload, now):
+                message = self.teleop.apply_reply(payload, now)
+                if message is None:
                     self.port.rejected()
                     continue
                 self._held(now, self._reply_odometry_s.get(frame_id, -math.inf))
+                if self.console is not None:
+                    self._image_chunk(self.console, message, frame_id, now)
             return
         for payload, _ in self.port.take():
             if self.receiver.apply(payload).status is not ApplyStatus.APPLIED:
                 self.port.rejected()
         for _, odometry in world.query1(Odometry, origin=Origin.REMOTE):
             self._held(now, odometry.sampled_s)
+
+    def _image_chunk(
+        self, console: ImageConsole, message: VehicleMessage, frame_id: int, now: float
+    ) -> None:
+        """A reply's image fields into the console; a completed image into the record."""
+        log = self.recorder.images
+        event = console.on_reply(message)
+        if event is AssemblyEvent.COMPLETED and console.completed is not None:
+            number = log.reply_images.get(frame_id, -1)
+            pixels = console.view if console.view is not None else np.zeros((0, 0), np.uint8)
+            log.received.append(ReceivedImage(number, now, pixels, len(console.completed)))
 
     def _held(self, now: float, sampled_s: float) -> None:
         if sampled_s > self._held_sampled:

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from testbed.channel import Trace
+from testbed.image_log import ImageLog
 
 __all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder"]
 
@@ -71,6 +72,7 @@ class Recorder:
             the codec (garbled past the CRC, or written by the wrong side).
         events: node events in time order.
         rows: series rows (see :data:`SERIES_COLUMNS`).
+        images: images captured, sent and received (image feedback runs).
     """
 
     trace: Trace = field(default_factory=Trace)
@@ -83,6 +85,7 @@ class Recorder:
     frames_rejected: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     events: list[NodeEvent] = field(default_factory=list)
     rows: list[tuple[float, ...]] = field(default_factory=list)
+    images: ImageLog = field(default_factory=ImageLog)
 
     def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:
         """Record a node event."""

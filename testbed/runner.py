@@ -25,12 +25,17 @@ import simpy
 
 from testbed.channel import EventKind, Medium, Trace
 from testbed.common.components import ControlMode
+from testbed.image_log import image_metrics
 from testbed.metrics import age_of_information, distribution, signal_lag_s, summary
 from testbed.nodes import FRAME_OVERHEAD, OperatorNode, VehicleNode
 from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
+from testbed.operator.video import ImageConsole
+from testbed.protocol import ImageSettings
 from testbed.recorder import SERIES_COLUMNS, Recorder
 from testbed.scenario import PilotSection, Scenario
 from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.video import CodedImage, ImageSource
+from testbed.video_config import ImagesSection
 
 __all__ = ["RunResult", "compute_metrics", "run_scenario", "write_outputs"]
 
@@ -76,6 +81,51 @@ def _pilot(section: PilotSection) -> tuple[Callable[[float], PilotSample], Calla
     return sticks, section.sticks
 
 
+def _image_source(images: ImagesSection) -> Callable[..., ImageSource]:
+    """Builds the vehicle's image source on its camera (``VehicleNode(image_source=...)``)."""
+
+    def build(vehicle: Vehicle, on_image: Callable[[CodedImage], None]) -> ImageSource:
+        def capture() -> tuple[float, np.ndarray] | None:
+            image = vehicle.capture_image()
+            return None if image is None else (image.time_s, image.pixels)
+
+        camera = vehicle.config.camera
+        return ImageSource(
+            capture,
+            width_px=camera.width_px,
+            height_px=camera.height_px,
+            chunk_bytes=images.chunk_bytes,
+            selective_repeat=images.selective_repeat,
+            on_image=on_image,
+        )
+
+    return build
+
+
+def _settings_schedule(images: ImagesSection) -> list[tuple[float, ImageSettings]]:
+    """The operator's ``ImageSettings`` orders: the section's at 0 s, then each change."""
+    budget, roi, shift = images.budget_bytes, images.roi, images.roi_shift
+    schedule: list[tuple[float, ImageSettings]] = []
+    for t_s, change in [(0.0, None), *((c.t_s, c) for c in images.changes)]:
+        if change is not None:
+            budget = budget if change.budget_bytes is None else change.budget_bytes
+            roi = roi if change.roi is None else change.roi
+            shift = shift if change.roi_shift is None else change.roi_shift
+        x0, y0, x1, y1 = roi if roi else (0, 0, 0, 0)
+        schedule.append((t_s, ImageSettings(x0, y0, x1, y1, shift if roi else 0, True, budget)))
+    return schedule
+
+
+def _image_console(images: ImagesSection) -> ImageConsole | None:
+    if not images.enabled:
+        return None
+    return ImageConsole(
+        chunk_bytes=images.chunk_bytes,
+        selective_repeat=images.selective_repeat,
+        schedule=_settings_schedule(images),
+    )
+
+
 def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     """Simulate ``scenario`` once.
 
@@ -112,6 +162,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         commanded=commanded,
         sample_rate_hz=scenario.metrics.sample_rate_hz,
         snapshot_period_s=link.snapshot_period_s,
+        image_source=_image_source(scenario.images) if scenario.images.enabled else None,
     )
     holder["node"] = vehicle_node
     position = link.operator_position_ned_m
@@ -132,6 +183,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         recorder=recorder,
         reply_odometry_s=vehicle_node.reply_odometry_s,
         snapshot_period_s=link.snapshot_period_s,
+        console=_image_console(scenario.images),
     )
     vehicle = vehicle_node.vehicle
     for fault in scenario.faults.thrusters:
@@ -150,6 +202,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     finally:
         vehicle.close()
     wall_s = time.perf_counter() - start
+    _tally_images(recorder, vehicle_node, operator_node)
     metrics = compute_metrics(
         scenario,
         seed,
@@ -163,6 +216,21 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         },
     )
     return RunResult(scenario, seed, metrics, recorder)
+
+
+def _tally_images(recorder: Recorder, vehicle: VehicleNode, operator: OperatorNode) -> None:
+    """Copy the image transfer counters of both ends into the image log."""
+    log = recorder.images
+    if vehicle.images is not None:
+        sent = vehicle.images.sender.counters
+        log.count("chunks_sent", sent.chunks_sent)
+    if operator.console is not None:
+        got = operator.console.assembler.counters
+        log.count("chunks_received", got.chunks_received)
+        for key in ("crc_failures", "spoiled", "duplicates", "inconsistent"):
+            log.count(key, getattr(got, key))
+        log.count("settings_sent", operator.console.settings_sent)
+        log.count("settings_acknowledged", operator.console.settings_acknowledged)
 
 
 def _link_direction(
@@ -307,6 +375,8 @@ def compute_metrics(
             "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
         },
     }
+    if scenario.images.enabled:
+        metrics["images"] = image_metrics(recorder.images, sim_s)
     return metrics
 
 
@@ -351,4 +421,15 @@ def write_outputs(result: RunResult, out_dir: Path, *, plots: bool = True) -> li
             attitude_experiment=scenario.pilot.kind == "attitude",
             settle_s=scenario.metrics.settle_s,
         )
+        if scenario.images.enabled:
+            from testbed.report_images import plot_image_strip
+
+            written.append(
+                plot_image_strip(
+                    result.recorder.images,
+                    out_dir / "images.png",
+                    title=f"{scenario.id} (seed {result.seed})",
+                    count=scenario.images.strip_images,
+                )
+            )
     return written

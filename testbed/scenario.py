@@ -56,6 +56,7 @@ from testbed.config import (
 from testbed.vehicle.hydrodynamics import known_models
 from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
 from testbed.vehicle.vehicle import VehicleConfig
+from testbed.video_config import ImagesSection
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -392,7 +393,7 @@ class Scenario:
         schema: scenario schema version; only :data:`SCHEMA_VERSION` is accepted.
         duration_s: simulated time [s], > 0.
         seed: default seed, ≥ 0.
-        link, vehicle, operator, pilot, faults, metrics: the sections.
+        link, vehicle, operator, pilot, faults, metrics, images: the sections.
         source: where it was loaded from (a path or ``package:<id>``), for messages; not a
             TOML key.
     """
@@ -408,6 +409,7 @@ class Scenario:
     pilot: PilotSection = field(default_factory=PilotSection)
     faults: FaultsSection = field(default_factory=FaultsSection)
     metrics: MetricsSection = field(default_factory=MetricsSection)
+    images: ImagesSection = field(default_factory=ImagesSection)
     source: str
 
     def __post_init__(self) -> None:
@@ -438,11 +440,41 @@ class Scenario:
             ("metrics.settle_s", self.metrics.settle_s),
         ):
             check(value < end, key, f"must be < duration_s ({end}), got {value}")
+        self._check_images()
         check(
             self.pilot.kind != "attitude" or self.operator.mode != "manual",
             "operator.mode",
             "the attitude pilot needs 'stabilize' or 'depth_hold', got 'manual'",
         )
+
+    def _check_images(self) -> None:
+        """Images ride on token-passing teleop replies and need the vehicle's camera."""
+        images = self.images
+        if not images.enabled:
+            return
+        check(
+            self.link.codec == "teleop" and self.link.mac == "token",
+            "images.enabled",
+            "needs link.codec = 'teleop' and link.mac = 'token' (chunks ride on the replies)",
+        )
+        camera = self.vehicle.camera
+        check(camera.enabled, "images.enabled", "needs vehicle.camera.enabled = true")
+        rois: list[tuple[str, tuple[int, ...] | None]] = [("images.roi", images.roi)]
+        rois += [(f"images.changes[{i}].roi", c.roi) for i, c in enumerate(images.changes)]
+        for key, roi in rois:
+            if roi:
+                check(
+                    roi[2] < camera.width_px and roi[3] < camera.height_px,
+                    key,
+                    f"must lie inside the {camera.width_px}x{camera.height_px} camera image, "
+                    f"got {list(roi)}",
+                )
+        for i, change in enumerate(images.changes):
+            check(
+                change.t_s < self.duration_s,
+                f"images.changes[{i}].t_s",
+                f"must be < duration_s ({self.duration_s}), got {change.t_s}",
+            )
 
 
 # --- loading -----------------------------------------------------------------------------------
@@ -463,6 +495,7 @@ class _ScenarioFile:
     pilot: dict[str, Any] = field(default_factory=dict)
     faults: dict[str, Any] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
+    images: dict[str, Any] = field(default_factory=dict)
 
 
 _LINK_OPTIONS = tuple(f.name for f in dataclasses.fields(LinkSection) if f.name != "channel")
@@ -550,6 +583,7 @@ def _from_data(
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
     faults = build(FaultsSection, top.faults, source=where, prefix="faults.")
     metrics = build(MetricsSection, top.metrics, source=where, prefix="metrics.")
+    images = build(ImagesSection, top.images, source=where, prefix="images.")
     if faults.thrusters:
         names = [t.name for t in load_thruster_config(vehicle.thrusters).thrusters]
         for i, fault in enumerate(faults.thrusters):
@@ -568,6 +602,7 @@ def _from_data(
             pilot=pilot,
             faults=faults,
             metrics=metrics,
+            images=images,
             source=source,
         )
     except FieldError as err:

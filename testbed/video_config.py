@@ -14,18 +14,9 @@ import math
 from dataclasses import dataclass
 
 from testbed.config import check
+from testbed.protocol import max_image_bytes
 
-__all__ = ["ImageSettingsChange", "ImagesSection", "max_image_bytes"]
-
-MAX_CHUNKS = 64
-"""Chunks per image: the reply's chunk index has 6 bits."""
-IMAGE_CRC_BYTES = 2
-"""The CRC-16 the vehicle appends to each encoded image [B]."""
-
-
-def max_image_bytes(chunk_bytes: int) -> int:
-    """Largest encoded image [B] that fits 64 chunks of ``chunk_bytes`` with its CRC."""
-    return MAX_CHUNKS * chunk_bytes - IMAGE_CRC_BYTES
+__all__ = ["ImageSettingsChange", "ImagesSection"]
 
 
 def _check_roi(roi: tuple[int, int, int, int] | None, key: str) -> None:

@@ -33,6 +33,7 @@ PACKAGED = [
     "s100-outage-v1",
     "s100-teleop-v1",
     "s100-thruster-failure-v1",
+    "s100-video-v1",
     "tether-teleop-v1",
 ]
 TELEOP = ["s100-teleop-v1", "tether-teleop-v1", "m64-teleop-v1", "s100-outage-v1"]

@@ -274,6 +274,14 @@ class TeleopVehicleEnd:
         self.counters.applied += 1
         return True
 
+    def acknowledge(self, message: OperatorMessage) -> None:
+        """Echo this intact order's sequence bit in the replies from now on.
+
+        A token-passing reply answers its order at once, before the order is applied at the
+        vehicle's next frame; the reply still acknowledges the order it answers.
+        """
+        self.order_ack_bit = message.order_seq_bit
+
     def encode_reply(self, chunk: ReplyChunk | None = None) -> bytes:
         """The payload of a reply: the vehicle state and an image chunk, if any.
 
