@@ -14,7 +14,10 @@ at (x, y, z) in that frame lands at the continuous pixel coordinates
 Underwater look. Each pixel's grey (ITU-R BT.601 luma of the rendered RGB) is blended toward
 the water's grey by the transmission ``exp(−c·d)`` over the ray's length d from the optical
 centre (the depth buffer's z, linearised with the projection's near/far planes, times the
-ray's secant): ``g = g₀·e^{−cd} + water·(1 − e^{−cd})``. Empty sky (no geometry) is water.
+ray's secant): ``g = g₀·e^{−cd} + water·(1 − e^{−cd})``; where no geometry is hit, water.
+The renderer samples textures at the nearest texel, so fine tile joints alias; each pixel is
+the mean of ``supersampling``² rendered samples, blended one by one (a sensor pixel integrates
+the light over its area), then sensor noise (from a generator passed in) and rounding.
 
 Scenery. :func:`pool_scenery` describes a tiled pool (floor with lane line and sand, walls
 with a waterline band and targets, a rippled surface) and a few objects in front of the start
