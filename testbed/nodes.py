@@ -454,7 +454,8 @@ class OperatorNode:
         event = console.on_reply(message)
         if event is AssemblyEvent.COMPLETED and console.completed is not None:
             number = log.reply_images.get(frame_id, -1)
-            pixels = console.view if console.view is not None else np.zeros((0, 0), np.uint8)
+            view = console.completed_view
+            pixels = view if view is not None else np.zeros((0, 0), np.uint8)
             log.received.append(ReceivedImage(number, now, pixels, len(console.completed)))
 
     def _held(self, now: float, sampled_s: float) -> None:

@@ -30,8 +30,8 @@ class ImageConsole:
         schedule: (time [s], settings) to send, in time order; the first is usually at 0.
 
     Attributes:
-        view: (h, w) uint8 grey: the latest picture (partial or complete), None before any.
         completed: the latest completed image's stream (CRC removed), None before any.
+        completed_view: the latest completed image, decoded; None before any.
         assembler: the chunk state machine.
     """
 
@@ -46,11 +46,11 @@ class ImageConsole:
         self._schedule = list(schedule)
         self._pending: ImageSettings | None = None
         self._sent_with_bit: bool | None = None
-        self.view: np.ndarray | None = None
         self.completed: bytes | None = None
+        self.completed_view: np.ndarray | None = None
         self.settings_sent = 0
         self.settings_acknowledged = 0
-        self._shown_bytes = 0
+        self._partial: tuple[int, np.ndarray] | None = None
 
     def request(self) -> tuple[bool, bool, int]:
         """Image fields for the next order's header (see ``ImageAssembler.request``)."""
@@ -96,17 +96,20 @@ class ImageConsole:
         if event is AssemblyEvent.COMPLETED:
             self.completed = self.assembler.last_image
             if self.completed is not None:
-                self.view = decode(self.completed)
-                self._shown_bytes = 0
-        elif event is AssemblyEvent.PROGRESS:
-            self._show_partial()
+                self.completed_view = decode(self.completed)
         return event
 
-    def _show_partial(self) -> None:
+    @property
+    def view(self) -> np.ndarray | None:
+        """(h, w) uint8 grey: the newest picture — the image being assembled, decoded from the
+        bytes received so far (it sharpens as chunks arrive), or, until its header is in, the
+        last completed image; None before any. Decoded when read and cached, so a batch run
+        that never looks pays nothing.
+        """
         prefix = self.assembler.prefix()
-        if len(prefix) <= self._shown_bytes:
-            return
-        picture = decode(prefix)
-        if picture.size:
-            self.view = picture
-            self._shown_bytes = len(prefix)
+        if not prefix:
+            return self.completed_view
+        if self._partial is None or self._partial[0] != len(prefix):
+            self._partial = (len(prefix), decode(prefix))
+        picture = self._partial[1]
+        return picture if picture.size else self.completed_view
