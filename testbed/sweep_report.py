@@ -41,6 +41,7 @@ __all__ = [
     "Results",
     "ber_key",
     "closed_form_age_s",
+    "closed_form_images_per_minute",
     "closed_form_per",
     "default_plot_name",
     "plot_ber_sweep",
@@ -51,6 +52,10 @@ __all__ = [
 DPI = 110
 ORDER_FRAME_BYTES = 13
 """Length of the operator's move-order frame [B]: 7 B payload + 6 B framing (README)."""
+REPLY_FRAME_BYTES = 60
+"""Length of a reply frame with a 40-B image chunk [B] (REFERENCE §1.6)."""
+CHUNK_BYTES = 40
+"""Image bytes per reply in the shipped image scenario [B]."""
 _META_COLUMNS = ("point", "seed", "status", "error")
 _TRACKING_AXES = (("x", "m/s"), ("y", "m/s"), ("z", "m/s"), ("yaw", "rad/s"))
 
@@ -172,6 +177,43 @@ def closed_form_age_s(
     q = 1.0 - closed_form_per(ber, frame_bytes)
     ages = [aoi_periodic_closed_form(period_s, float(p), delay_s) for p in np.ravel(q)]
     return np.reshape(np.array(ages, dtype=float), np.shape(q))
+
+
+def closed_form_images_per_minute(
+    ber: np.ndarray | float,
+    gap_s: float,
+    chunks: int,
+    *,
+    selective_repeat: bool,
+    order_bytes: float = ORDER_FRAME_BYTES,
+    reply_bytes: float = REPLY_FRAME_BYTES,
+) -> np.ndarray:
+    """Images per minute over a token-passing link with one chunk per reply.
+
+    One order goes out every ``gap_s`` (``T``); it survives with ``q_o = (1 − BER)^(8·L_o)``
+    and the vehicle answers it with a reply that survives with ``q_r = (1 − BER)^(8·L_r)``.
+    Selective repeat: a chunk is done in an exchange where both survive (``q = q_o·q_r``), so
+    an image of ``n`` chunks takes ``n/q`` gaps on average (the order that acknowledges one
+    image already fetches chunk 0 of the next): ``60·q / (n·T)``. Paper mode: the vehicle
+    streams one chunk per order it receives, so an image takes ``n/q_o`` gaps, and it is whole
+    only if all ``n`` replies survive: ``60·q_o·q_r^n / (n·T)``.
+
+    Args:
+        ber: bit error rate(s), each in [0, 1).
+        gap_s: the inter-packet gap ``T`` [s].
+        chunks: chunks per image ``n`` (image and its 2-B CRC over the chunk size).
+        selective_repeat: the transfer mode.
+        order_bytes: the order frame ``L_o`` [B] (13: a move).
+        reply_bytes: the reply frame ``L_r`` [B] (60: with a 40-B chunk).
+
+    Returns:
+        Images per minute, the shape of ``ber``.
+    """
+    q_order = 1.0 - closed_form_per(ber, order_bytes)
+    q_reply = 1.0 - closed_form_per(ber, reply_bytes)
+    if selective_repeat:
+        return np.asarray(60.0 * q_order * q_reply / (chunks * gap_s), dtype=float)
+    return np.asarray(60.0 * q_order * q_reply**chunks / (chunks * gap_s), dtype=float)
 
 
 # --- statistics and axes -----------------------------------------------------------------------
@@ -345,11 +387,14 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
     others = [k for k in results.grid if k != key]
     groups = _groups(results, others)
     colours = [f"C{i % 10}" for i in range(len(groups))]
-    return [
+    paths = [
         _plot_lag(results, out / "ber_vs_lag.png", ber, axis, groups, colours),
         _plot_per(results, out / "ber_vs_per.png", ber, axis, groups, colours),
         _plot_tracking(results, out / "ber_vs_tracking.png", ber, axis, groups, colours),
     ]
+    if "images.per_minute" in results.columns:
+        paths.append(_plot_images(results, out / "ber_vs_images.png", ber, axis, groups, colours))
+    return paths
 
 
 def _ber_curve(ber: np.ndarray, axis: _LogAxis | None) -> np.ndarray:
@@ -422,6 +467,64 @@ def _plot_lag(
         age_ax.legend(title="grid", fontsize="small")
     _footnote(fig, _BARS_NOTE + "; D = lag at the lowest BER, T = inter-packet gap")
     _title(fig, results, "BER vs command lag and age")
+    return _save(fig, path)
+
+
+def _plot_images(
+    results: Results,
+    path: Path,
+    ber: np.ndarray,
+    axis: _LogAxis | None,
+    groups: list[tuple[str, np.ndarray]],
+    colours: list[str],
+) -> Path:
+    """Images per minute (with :func:`closed_form_images_per_minute`) and image latency."""
+    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
+    rate_ax, latency_ax = fig.subplots(1, 2, sharex=True)
+    rate = results.numbers("images.per_minute")
+    latency = results.numbers("images.latency_s.mean")
+    gap = results.numbers("ipg_s")
+    delivered = results.numbers("images.bytes_delivered")
+    completed = results.numbers("images.completed")
+    repeat = np.array([row.get("images.selective_repeat", "true") for row in results.rows])
+    curve_ber = _ber_curve(ber, axis)
+    for (label, mask), colour in zip(groups, colours, strict=True):
+        _draw(rate_ax, axis, ber[mask], rate[mask], color=colour, label=label or None)
+        _draw(latency_ax, axis, ber[mask], latency[mask], color=colour, label=label or None)
+        some = mask & (completed > 0)
+        sizes = delivered[some] / completed[some]
+        t = gap[mask & np.isfinite(gap)]
+        if sizes.size == 0 or t.size == 0:
+            continue
+        chunks = math.ceil((float(np.median(sizes)) + 2.0) / CHUNK_BYTES)
+        selective = str(repeat[mask][0]).lower() != "false"
+        curve = closed_form_images_per_minute(
+            curve_ber, float(np.median(t)), chunks, selective_repeat=selective
+        )
+        rate_ax.plot(curve_ber, curve, ls="--", lw=1.2, color=colour)
+        at_zero = float(
+            closed_form_images_per_minute(
+                0.0, float(np.median(t)), chunks, selective_repeat=selective
+            )
+        )
+        _closed_form_at_zero(rate_ax, axis, at_zero, colour)
+    rate_ax.plot([], [], "k--", lw=1.2, label="closed form")
+    rate_ax.set_title("images completed per minute")
+    rate_ax.set_ylabel("images / min")
+    latency_ax.set_title("capture to complete, mean")
+    latency_ax.set_ylabel("image latency [s]")
+    for ax in (rate_ax, latency_ax):
+        ax.set_xlabel("bit error rate")
+        ax.grid(True, which="major", alpha=0.3)
+    if axis is not None:
+        axis.apply(rate_ax)
+    rate_ax.legend(title="grid", fontsize="small")
+    _footnote(
+        fig,
+        _BARS_NOTE + "; dashed: 60·q/(nT) with selective repeat, 60·q_o·q_r^n/(nT) without "
+        "(n chunks, gap T)",
+    )
+    _title(fig, results, "BER vs image feedback")
     return _save(fig, path)
 
 

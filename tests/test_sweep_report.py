@@ -17,6 +17,7 @@ from testbed.sweep_report import (
     ORDER_FRAME_BYTES,
     _LogAxis,
     closed_form_age_s,
+    closed_form_images_per_minute,
     closed_form_per,
     plot_ber_sweep,
     plot_pair,
@@ -198,3 +199,50 @@ def test_a_tiny_real_ber_sweep_is_plotted_at_the_end(
     # with no loss the age is D + T/2 (8 s runs: within a tenth of a gap)
     assert age_at_zero == pytest.approx(lag[0] + gap[0] / 2, abs=0.1 * gap[0])
     assert not math.isnan(gap[0])
+
+
+def _simulated_images_per_minute(
+    ber: float, gap_s: float, chunks: int, selective_repeat: bool, cycles: int, seed: int
+) -> float:
+    """The transfer state machines themselves over Bernoulli frame losses (a second method)."""
+    from testbed.protocol import AssemblyEvent, ImageAssembler, ImageSender
+
+    rng = np.random.default_rng(seed)
+    q_order = (1.0 - ber) ** (8 * 13)
+    q_reply = (1.0 - ber) ** (8 * 60)
+    sender = ImageSender(40, selective_repeat=selective_repeat)
+    assembler = ImageAssembler(40, selective_repeat=selective_repeat)
+    image = bytes(range(256)) * 3
+    image = image[: chunks * 40 - 2]
+    completed = 0
+    for _ in range(cycles):
+        request = assembler.request()
+        if rng.random() >= q_order:
+            continue  # order lost: no reply
+        sender.on_request(*request)
+        if sender.wants_image:
+            sender.load(image)
+        chunk = sender.next_chunk()
+        if chunk is None or rng.random() >= q_reply:
+            continue
+        event = assembler.on_chunk(
+            chunk.first, chunk.last, chunk.image_seq_bit, chunk.cancel, chunk.index, chunk.data
+        )
+        completed += event is AssemblyEvent.COMPLETED
+    return 60.0 * completed / (cycles * gap_s)
+
+
+@pytest.mark.parametrize("selective_repeat", [True, False])
+@pytest.mark.parametrize("ber", [0.0, 2e-4, 6e-4])
+def test_images_per_minute_closed_form_matches_the_state_machines(
+    ber: float, selective_repeat: bool
+) -> None:
+    gap_s, chunks, cycles = 0.6, 8, 40_000
+    expected = float(
+        closed_form_images_per_minute(ber, gap_s, chunks, selective_repeat=selective_repeat)
+    )
+    simulated = _simulated_images_per_minute(ber, gap_s, chunks, selective_repeat, cycles, 5)
+    # images are a renewal count: ≈ Poisson-like spread; 4σ of the count, plus one image
+    count = expected * cycles * gap_s / 60.0
+    tolerance = (4.0 * math.sqrt(max(count, 1.0)) + 1.0) * 60.0 / (cycles * gap_s)
+    assert simulated == pytest.approx(expected, abs=tolerance)
