@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|scenarios``.
+"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|hil|scenarios``.
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(sub)
     _add_plot_parser(sub)
     _add_modem_emulator_parser(sub)
+    _add_hil_parser(sub)
     scenarios = sub.add_parser("scenarios", help="list the packaged scenarios")
     scenarios.set_defaults(handler=_list_scenarios)
     return parser
@@ -331,6 +332,24 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
         for name, counters in zip("AB", emulator.counters, strict=True):
             print(f"testbed: port {name}: {counters}", file=sys.stderr)
     return EXIT_OK
+
+
+def _add_hil_parser(sub: argparse._SubParsersAction[_Parser]) -> None:
+    """``testbed hil``: the nodes in real time over serial modems (testbed.hil_cli)."""
+    from testbed.hil_cli import add_hil_arguments
+
+    hil = sub.add_parser(
+        "hil",
+        help="run a scenario in real time with its frames through serial modems",
+        description="Hardware in the loop: run the operator and the simulated vehicle in real "
+        "time, their frames through real (or emulated) modems on serial ports or any pyserial "
+        "URL. `testbed hil --operator-port P1 --vehicle-port P2` runs both nodes here; `testbed "
+        "hil vehicle|operator --port P` runs one node, its peer on another computer. Writes "
+        "what `testbed run` writes, plus the software's added latency.",
+        usage="testbed hil [vehicle|operator] [SCENARIO] (--operator-port P1 --vehicle-port P2 "
+        "| --port P) [--modem M] [options]",
+    )
+    add_hil_arguments(hil)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import simpy
 
-from testbed.channel import Delivery, IpgPolicy, Modem
+from testbed.channel import Delivery, IpgPolicy
 from testbed.common.changeset import ApplyStatus, ChangeSetReceiver, ChangeSetSender
 from testbed.common.components import MovementCommand, Odometry, register_components
 from testbed.common.geometry import attitude_error, euler_from_quat
@@ -50,7 +50,7 @@ from testbed.vehicle.systems import Actuation, Controllers, PlantTruth, SimClock
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import CodedImage, ImageSource
 
-__all__ = ["LinkPort", "OperatorNode", "VehicleNode", "make_registry"]
+__all__ = ["LinkModem", "LinkPort", "OperatorNode", "VehicleNode", "make_registry"]
 
 FRAME_OVERHEAD = frame_overhead()
 """Bytes a frame adds to its payload (preamble, length, CRC)."""
@@ -58,6 +58,18 @@ FRAME_OVERHEAD = frame_overhead()
 _MOVE_CODE = 1
 """Order type code of a ``Move`` (low nibble of an operator payload's byte 1)."""
 _ORDER_CODE_MASK = 0x0F
+
+
+class LinkModem(Protocol):
+    """What a node needs of its modem: the simulated :class:`~testbed.channel.Modem`, or a
+    serial modem in hardware-in-the-loop runs (:mod:`testbed.hil_run`)."""
+
+    on_receive: Callable[[Delivery], None] | None
+    last_frame_id: int
+
+    def send(self, data: bytes) -> bool:
+        """Queue one frame; False if it was dropped."""
+        ...
 
 
 def make_registry() -> ComponentRegistry:
@@ -80,7 +92,7 @@ class LinkPort:
 
     def __init__(
         self,
-        modem: Modem,
+        modem: LinkModem,
         direction: str,
         recorder: Recorder,
         on_frame: Callable[[bytes, Delivery], None] | None = None,
@@ -173,7 +185,7 @@ class VehicleNode:
         self,
         env: simpy.Environment,
         vehicle_factory: Callable[..., Vehicle],
-        modem: Modem,
+        modem: LinkModem,
         *,
         codec: str,
         token: bool,
@@ -355,7 +367,7 @@ class OperatorNode:
         self,
         env: simpy.Environment,
         station: OperatorStation,
-        modem: Modem,
+        modem: LinkModem,
         *,
         codec: str,
         ipg: IpgPolicy | None,

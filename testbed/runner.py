@@ -27,7 +27,7 @@ from testbed.channel import EventKind, Medium, Trace
 from testbed.common.components import ControlMode
 from testbed.image_log import image_metrics
 from testbed.metrics import age_of_information, distribution, signal_lag_s, summary
-from testbed.nodes import FRAME_OVERHEAD, OperatorNode, VehicleNode
+from testbed.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
 from testbed.operator.video import ImageConsole
 from testbed.protocol import ImageSettings
@@ -37,7 +37,15 @@ from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import CodedImage, ImageSource
 from testbed.video_config import ImagesSection
 
-__all__ = ["RunResult", "compute_metrics", "run_scenario", "write_outputs"]
+__all__ = [
+    "RunResult",
+    "compute_metrics",
+    "make_operator_node",
+    "make_vehicle_node",
+    "run_scenario",
+    "tally_images",
+    "write_outputs",
+]
 
 _MODES = {
     "manual": ControlMode.MANUAL,
@@ -126,6 +134,73 @@ def _image_console(images: ImagesSection) -> ImageConsole | None:
     )
 
 
+def make_vehicle_node(
+    env: simpy.Environment,
+    scenario: Scenario,
+    rng: np.random.Generator,
+    modem: LinkModem,
+    recorder: Recorder,
+) -> VehicleNode:
+    """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
+    scheduled. ``rng`` feeds the vehicle's sensors and current."""
+    link = scenario.link
+    factory = partial(Vehicle, scenario.vehicle, rng)
+    node = VehicleNode(
+        env,
+        factory,
+        modem,
+        codec=link.codec,
+        token=link.mac == "token",
+        downlink_rate_hz=link.downlink_rate_hz,
+        recorder=recorder,
+        commanded=_pilot(scenario.pilot)[1],
+        sample_rate_hz=scenario.metrics.sample_rate_hz,
+        snapshot_period_s=link.snapshot_period_s,
+        image_source=_image_source(scenario.images) if scenario.images.enabled else None,
+    )
+    vehicle = node.vehicle
+    for fault in scenario.faults.thrusters:
+
+        def fail(_: simpy.Event, fault: Any = fault) -> None:
+            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
+            recorder.event(env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}")
+
+        env.timeout(fault.t_s).callbacks.append(fail)
+    return node
+
+
+def make_operator_node(
+    env: simpy.Environment,
+    scenario: Scenario,
+    modem: LinkModem,
+    recorder: Recorder,
+    reply_odometry_s: dict[int, float],
+) -> OperatorNode:
+    """The scenario's operator node on ``modem`` (simulated or HIL). ``reply_odometry_s`` is
+    the vehicle node's map of reply frame → odometry sample time (recording only; empty when
+    the vehicle runs elsewhere)."""
+    link = scenario.link
+    token = link.mac == "token"
+    plan = SessionPlan(
+        mode=_MODES[scenario.operator.mode],
+        arm_at_s=scenario.operator.arm_at_s,
+        depth_m=scenario.operator.depth_m,
+        precision=scenario.operator.precision,
+    )
+    return OperatorNode(
+        env,
+        OperatorStation(_pilot(scenario.pilot)[0], plan),
+        modem,
+        codec=link.codec,
+        ipg=link.ipg_policy if token else None,
+        uplink_rate_hz=link.uplink_rate_hz,
+        recorder=recorder,
+        reply_odometry_s=reply_odometry_s,
+        snapshot_period_s=link.snapshot_period_s,
+        console=_image_console(scenario.images),
+    )
+
+
 def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     """Simulate ``scenario`` once.
 
@@ -146,54 +221,17 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         medium.add_outage(outage.start_s, outage.end_s)
         recorder.event(outage.start_s, "scenario", "outage", f"until {outage.end_s:g} s")
 
-    pilot, commanded = _pilot(scenario.pilot)
-    token = link.mac == "token"
     holder: dict[str, VehicleNode] = {}
     vehicle_modem = medium.attach("vehicle", lambda: holder["node"].vehicle.truth.position_ned_m)
-    factory = partial(Vehicle, scenario.vehicle, np.random.default_rng(vehicle_seed))
-    vehicle_node = VehicleNode(
-        env,
-        factory,
-        vehicle_modem,
-        codec=link.codec,
-        token=token,
-        downlink_rate_hz=link.downlink_rate_hz,
-        recorder=recorder,
-        commanded=commanded,
-        sample_rate_hz=scenario.metrics.sample_rate_hz,
-        snapshot_period_s=link.snapshot_period_s,
-        image_source=_image_source(scenario.images) if scenario.images.enabled else None,
-    )
+    rng = np.random.default_rng(vehicle_seed)
+    vehicle_node = make_vehicle_node(env, scenario, rng, vehicle_modem, recorder)
     holder["node"] = vehicle_node
     position = link.operator_position_ned_m
     operator_modem = medium.attach("operator", lambda: position)
-    plan = SessionPlan(
-        mode=_MODES[scenario.operator.mode],
-        arm_at_s=scenario.operator.arm_at_s,
-        depth_m=scenario.operator.depth_m,
-        precision=scenario.operator.precision,
-    )
-    operator_node = OperatorNode(
-        env,
-        OperatorStation(pilot, plan),
-        operator_modem,
-        codec=link.codec,
-        ipg=link.ipg_policy if token else None,
-        uplink_rate_hz=link.uplink_rate_hz,
-        recorder=recorder,
-        reply_odometry_s=vehicle_node.reply_odometry_s,
-        snapshot_period_s=link.snapshot_period_s,
-        console=_image_console(scenario.images),
+    operator_node = make_operator_node(
+        env, scenario, operator_modem, recorder, vehicle_node.reply_odometry_s
     )
     vehicle = vehicle_node.vehicle
-    for fault in scenario.faults.thrusters:
-
-        def fail(_: simpy.Event, fault: Any = fault) -> None:
-            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
-            recorder.event(env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}")
-
-        env.timeout(fault.t_s).callbacks.append(fail)
-
     env.process(vehicle_node.run())
     env.process(operator_node.run())
     start = time.perf_counter()
@@ -202,7 +240,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     finally:
         vehicle.close()
     wall_s = time.perf_counter() - start
-    _tally_images(recorder, vehicle_node, operator_node)
+    tally_images(recorder, vehicle_node, operator_node)
     metrics = compute_metrics(
         scenario,
         seed,
@@ -218,13 +256,15 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     return RunResult(scenario, seed, metrics, recorder)
 
 
-def _tally_images(recorder: Recorder, vehicle: VehicleNode, operator: OperatorNode) -> None:
-    """Copy the image transfer counters of both ends into the image log."""
+def tally_images(
+    recorder: Recorder, vehicle: VehicleNode | None, operator: OperatorNode | None
+) -> None:
+    """Copy the image transfer counters of both ends (those running here) into the image log."""
     log = recorder.images
-    if vehicle.images is not None:
+    if vehicle is not None and vehicle.images is not None:
         sent = vehicle.images.sender.counters
         log.count("chunks_sent", sent.chunks_sent)
-    if operator.console is not None:
+    if operator is not None and operator.console is not None:
         got = operator.console.assembler.counters
         log.count("chunks_received", got.chunks_received)
         for key in ("crc_failures", "spoiled", "duplicates", "inconsistent"):

@@ -6,6 +6,11 @@
 * :mod:`~testbed.hil.m64` — :class:`M64Adapter` (Water Linked Modem-M64, 8-byte packets).
 * :mod:`~testbed.hil.transport` — :class:`SerialTransport` (any pyserial URL),
   :class:`TcpTransport`, and :class:`LinkEndpoint` (transport + frame decoder, polled by nodes).
+* :mod:`~testbed.hil.endpoint` — :class:`PortSettings`, :func:`open_endpoint` (the adapter a
+  node's role needs, on its port) and :func:`endpoint_report` (counters, added latency).
+
+The real-time run that puts the nodes on these endpoints is :mod:`testbed.hil_run` (it knows
+nodes and scenarios, so it lives above this layer).
 
 The bytes written are the frames the simulation would have carried; the receiver runs the same
 :class:`~testbed.protocol.FrameDecoder`. Imports only :mod:`testbed.protocol`, pyserial and the
@@ -15,6 +20,15 @@ standard library.
 from __future__ import annotations
 
 from .adapters import S100_MAX_STATUS_LEN, S100_MAX_WRITE, Adapter, RawAdapter, S100Adapter, Write
+from .endpoint import (
+    DEFAULT_BAUD,
+    MODEM_KINDS,
+    PortSettings,
+    endpoint_report,
+    latency_summary_ms,
+    make_adapter,
+    open_endpoint,
+)
 from .evologics import SENDIM_MAX, EvoLogicsAdapter, parse_received_message
 from .m64 import CRC8_CHECK_VALUE, M64_PACKET_SIZE, M64Adapter, crc8, m64_sentence
 from .transport import (
@@ -29,7 +43,9 @@ from .transport import (
 
 __all__ = [
     "CRC8_CHECK_VALUE",
+    "DEFAULT_BAUD",
     "M64_PACKET_SIZE",
+    "MODEM_KINDS",
     "PORT_ERRORS",
     "S100_MAX_STATUS_LEN",
     "S100_MAX_WRITE",
@@ -39,6 +55,7 @@ __all__ = [
     "LinkEndpoint",
     "M64Adapter",
     "PortLike",
+    "PortSettings",
     "RawAdapter",
     "Received",
     "S100Adapter",
@@ -47,6 +64,10 @@ __all__ = [
     "Transport",
     "Write",
     "crc8",
+    "endpoint_report",
+    "latency_summary_ms",
     "m64_sentence",
+    "make_adapter",
+    "open_endpoint",
     "parse_received_message",
 ]

@@ -72,6 +72,11 @@ class Adapter(Protocol):
         """The adapter's counters by name (status lines, garbage, parse errors…)."""
         ...
 
+    def setup(self) -> list[Write]:
+        """The writes that configure the modem, sent each time the port (re)opens, before any
+        frame (empty for a modem that needs none)."""
+        ...
+
 
 def is_printable(data: bytes | bytearray) -> bool:
     """True if every byte is printable ASCII (0x20–0x7E)."""
@@ -104,6 +109,10 @@ class RawAdapter:
     def counters(self) -> dict[str, int]:
         """``{"bytes_in": …}``."""
         return {"bytes_in": self.bytes_in}
+
+    def setup(self) -> list[Write]:
+        """Nothing: a cable needs no configuration."""
+        return []
 
 
 class S100Adapter:
@@ -265,3 +274,8 @@ class S100Adapter:
             "terminators": self.terminators,
             "missing_terminators": self.missing_terminators,
         }
+
+    def setup(self) -> list[Write]:
+        """Nothing: the S100's data port is transparent and no configuration command for it is
+        documented (REFERENCE §1.10)."""
+        return []

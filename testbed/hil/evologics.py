@@ -71,6 +71,8 @@ class EvoLogicsAdapter:
             message while one is on the air (it answers ``BUSY``/``ERROR`` otherwise; those
             are counted in :attr:`event_counts`).
         line_end: terminator of the commands we send.
+        local_address: this modem's acoustic address (1..254), set with ``AT!AL`` on open; None
+            leaves the modem's own setting.
 
     Attributes:
         messages_in: instant messages received (RECVIM, RECVIMS, RECVPBM).
@@ -92,6 +94,7 @@ class EvoLogicsAdapter:
         "event_counts",
         "garbage_bytes",
         "line_end",
+        "local_address",
         "message_hold_s",
         "messages_in",
         "parse_errors",
@@ -106,9 +109,13 @@ class EvoLogicsAdapter:
         ack: bool = False,
         message_hold_s: float = 0.0,
         line_end: bytes = b"\n",
+        local_address: int | None = None,
     ) -> None:
         if not 1 <= remote_address <= 254:
             raise ValueError(f"remote_address must be in 1..254, got {remote_address!r}")
+        if local_address is not None and not 1 <= local_address <= 254:
+            raise ValueError(f"local_address must be in 1..254, got {local_address!r}")
+        self.local_address = local_address
         if message_hold_s < 0:
             raise ValueError(f"message_hold_s must be >= 0, got {message_hold_s!r}")
         self.remote_address = remote_address
@@ -126,6 +133,16 @@ class EvoLogicsAdapter:
     def command(self, text: str) -> bytes:
         """A data-mode command: ``+++`` + ``text`` (e.g. ``"AT?MODE"``) + line end."""
         return b"+++" + text.encode("ascii") + self.line_end
+
+    def setup(self) -> list[Write]:
+        """Sent on each open: ``+++ATZ4`` drops instant messages still queued in the modem from
+        before (a reopened port must not replay stale orders; DESERT's ms2c_evologics driver
+        does the same), then ``+++AT!AL<n>`` if a local address was given. The modem must be
+        in data mode (``ATO`` from command mode); its replies are parsed and counted."""
+        out = [Write(self.command("ATZ4"))]
+        if self.local_address is not None:
+            out.append(Write(self.command(f"AT!AL{self.local_address}")))
+        return out
 
     def writes(self, frame: bytes) -> list[Write]:
         """One ``+++AT*SENDIM`` per ≤ 64 B piece of the frame."""

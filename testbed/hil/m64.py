@@ -95,6 +95,9 @@ class M64Adapter:
         packet_hold_s: hold after each queued packet [s] (0: the modem's queue buffers them).
         preamble_len: preamble length of our frames (1 or 3); with 1 a data packet starting with
             0x55 is taken for a frame start 1 time in 256, so 3 is advised.
+        role: ``"a"`` or ``"b"``: configure the modem on open with ``wcs,<role>,<channel>``
+            (peers need different roles, same channel); None leaves its settings alone.
+        channel: acoustic channel 1..7 (used with ``role``).
 
     Attributes:
         packets_in: data packets received (``wrp``) with a good or absent CRC.
@@ -107,7 +110,7 @@ class M64Adapter:
         bytes_in: bytes received [B].
 
     Raises:
-        ValueError: negative hold or bad ``preamble_len``.
+        ValueError: negative hold, bad ``preamble_len``, role or channel.
     """
 
     __slots__ = (
@@ -116,6 +119,7 @@ class M64Adapter:
         "_remaining",
         "acks",
         "bytes_in",
+        "channel",
         "checksum",
         "crc_errors",
         "garbage_bytes",
@@ -126,13 +130,26 @@ class M64Adapter:
         "padding_bytes",
         "parse_errors",
         "replies",
+        "role",
     )
 
     def __init__(
-        self, *, checksum: bool = True, packet_hold_s: float = 0.0, preamble_len: int = 3
+        self,
+        *,
+        checksum: bool = True,
+        packet_hold_s: float = 0.0,
+        preamble_len: int = 3,
+        role: str | None = None,
+        channel: int = 4,
     ) -> None:
         if packet_hold_s < 0:
             raise ValueError(f"packet_hold_s must be >= 0, got {packet_hold_s!r}")
+        if role not in (None, "a", "b"):
+            raise ValueError(f"role must be 'a', 'b' or None, got {role!r}")
+        if not 1 <= channel <= 7:
+            raise ValueError(f"channel must be in 1..7, got {channel!r}")
+        self.role = role
+        self.channel = channel
         frame_overhead(preamble_len)  # validates preamble_len
         self.checksum = checksum
         self.packet_hold_s = float(packet_hold_s)
@@ -149,6 +166,20 @@ class M64Adapter:
         self.replies = 0
         self.last_reply = b""
         self.bytes_in = 0
+
+    def setup(self) -> list[Write]:
+        """Sent on each open, as Water Linked's own library connects: a lone LF (ends any half
+        sentence the modem holds), ``wcv`` (version) and ``wcn`` (payload size), whose answers
+        are counted as replies; ``wcs,<role>,<channel>`` when a role was given; and ``wcf``,
+        which flushes packets queued before the (re)open so no stale frame goes out."""
+        sentences = [b"\n", self._command("v"), self._command("n")]
+        if self.role is not None:
+            sentences.append(self._command("s", [self.role.encode(), b"%d" % self.channel]))
+        sentences.append(self._command("f"))
+        return [Write(s) for s in sentences]
+
+    def _command(self, command: str, options: Sequence[bytes] = ()) -> bytes:
+        return m64_sentence(command, options, checksum=self.checksum)
 
     def writes(self, frame: bytes) -> list[Write]:
         """One ``wcq,8,<packet>`` per 8-byte piece; the last piece padded with zeros."""

@@ -10,13 +10,18 @@ A transport owns two threads and never blocks its caller:
 * the **writer** takes frames queued by :meth:`Transport.send` and writes the adapter's chunks,
   holding after each as the adapter asks (air-rate pacing).
 
+Each time the port opens (the first time and after every fault) the adapter's
+:meth:`~testbed.hil.adapters.Adapter.setup` writes go out first (modem configuration, queue
+flush), before the writer may use the port.
+
 Faults never stop a run. A read or write that fails (port unplugged, socket closed, write
 timeout) closes the port and counts a port error; the reader reopens it with exponential
 backoff while frames sent in the meantime are dropped and counted, as on a dead link. Garbage
 on the line is the adapter's and the frame decoder's business: counted, never fatal.
 
 :class:`LinkEndpoint` joins a transport and a :class:`~testbed.protocol.FrameDecoder`: the
-simpy side calls :meth:`LinkEndpoint.poll` (non-blocking) and gets frame events, and the
+simpy side calls :meth:`LinkEndpoint.poll` (non-blocking) and gets frame events, or
+:meth:`LinkEndpoint.deliver` to have each frame handed to a callback as it is decoded, and the
 software's own latency (port read returned → frame handed over) is recorded per frame.
 
 The adapter's ``feed`` runs on the reader thread and ``writes`` on the writer thread only.
@@ -140,9 +145,16 @@ class Transport:
         self.bytes_in = 0
         self.bytes_out = 0
         self.callback_errors = 0
+        self.setup_writes = 0
 
     def _start(self, name: str) -> None:
-        self._set_port(self._open())
+        port = self._open()
+        try:
+            self._setup(port)
+        except PORT_ERRORS:
+            self._safe_close(port)
+            raise
+        self._set_port(port)
         for role, target in (("reader", self._read_loop), ("writer", self._write_loop)):
             thread = threading.Thread(target=target, name=f"{name}-{role}", daemon=True)
             thread.start()
@@ -190,6 +202,7 @@ class Transport:
             "bytes_in": self.bytes_in,
             "bytes_out": self.bytes_out,
             "callback_errors": self.callback_errors,
+            "setup_writes": self.setup_writes,
         }
         counts.update({f"adapter_{k}": v for k, v in self.adapter.counters().items()})
         return counts
@@ -225,6 +238,16 @@ class Transport:
             self.opens += 1
         self.connected.set()
 
+    def _setup(self, port: Any) -> None:
+        """Write the adapter's setup sequence on a freshly opened port (reader thread, or the
+        constructor, before the writer can see the port)."""
+        for chunk in self.adapter.setup():
+            self._write(port, chunk.data)
+            self.bytes_out += len(chunk.data)
+            self.setup_writes += 1
+            if chunk.hold_s > 0:
+                self._stop.wait(chunk.hold_s)
+
     def _safe_close(self, port: Any) -> None:
         with contextlib.suppress(*PORT_ERRORS):
             self._close_port(port)
@@ -247,6 +270,11 @@ class Transport:
             if port is None:
                 try:
                     port = self._open()
+                    try:
+                        self._setup(port)
+                    except PORT_ERRORS:
+                        self._safe_close(port)
+                        raise
                 except PORT_ERRORS as exc:
                     self.reopen_failures += 1
                     self.last_error = f"{type(exc).__name__}: {exc}"
@@ -433,6 +461,8 @@ class LinkEndpoint:
 
     Attributes:
         latencies_ns: per delivered frame, port read returned → frame handed over [ns].
+        frames_in: frames decoded [frames].
+        corrupt_frames: frame candidates the decoder rejected (bad CRC, oversize, truncated).
     """
 
     def __init__(
@@ -445,6 +475,8 @@ class LinkEndpoint:
         self.transport = transport
         self.decoder = decoder if decoder is not None else FrameDecoder()
         self.latencies_ns: deque[int] = deque(maxlen=max_latency_samples)
+        self.frames_in = 0
+        self.corrupt_frames = 0
 
     def send(self, frame: bytes) -> bool:
         """Queue one encoded frame for the port (non-blocking); False if it was dropped."""
@@ -482,13 +514,37 @@ class LinkEndpoint:
         events.extend(self.poll())
         return events
 
+    def deliver(self, handler: Callable[[Frame], None]) -> int:
+        """Decode everything received so far and hand each frame to ``handler`` at once; never
+        blocks. The latency is stamped just before each hand-over.
+
+        Returns:
+            The number of frames handed over.
+        """
+        inbox = self.transport.inbox
+        handed = 0
+        while True:
+            try:
+                received = inbox.get_nowait()
+            except queue.Empty:
+                return handed
+            for event in self.decoder.feed(received.data):
+                if isinstance(event, Frame):
+                    self.frames_in += 1
+                    self.latencies_ns.append(time.perf_counter_ns() - received.read_ns)
+                    handed += 1
+                    handler(event)
+                else:
+                    self.corrupt_frames += 1
+
     def _decode(self, received: Received, events: list[FrameEvent]) -> None:
         new = self.decoder.feed(received.data)
         if new:
             now_ns = time.perf_counter_ns()
-            self.latencies_ns.extend(
-                now_ns - received.read_ns for event in new if isinstance(event, Frame)
-            )
+            frames = sum(isinstance(event, Frame) for event in new)
+            self.frames_in += frames
+            self.corrupt_frames += len(new) - frames
+            self.latencies_ns.extend(now_ns - received.read_ns for _ in range(frames))
             events.extend(new)
 
     def close(self) -> None:
