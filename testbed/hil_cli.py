@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -157,6 +158,12 @@ def run_hil_command(args: argparse.Namespace) -> int:
         for endpoint in endpoints.values():
             endpoint.close()
         raise
+    where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
+    print(
+        f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, Ctrl-C ends early",
+        file=sys.stderr,
+        flush=True,
+    )
     result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
     write_outputs(result, out, plots=not args.no_plots)
     print(format_hil_summary(result.metrics, out))
