@@ -131,3 +131,8 @@ def test_s100_never_raises_and_never_invents_bytes(chunks: list[bytes]) -> None:
     adapter = S100Adapter()
     out = b"".join(adapter.feed(c) for c in chunks)
     assert len(out) <= sum(map(len, chunks))
+
+
+def test_transparent_modems_need_no_setup() -> None:
+    assert RawAdapter().setup() == []
+    assert S100Adapter().setup() == S100Adapter(rtscts=True).setup() == []

@@ -134,3 +134,14 @@ def test_never_raises(chunks: list[bytes]) -> None:
     adapter = EvoLogicsAdapter(2)
     out = b"".join(adapter.feed(c) for c in chunks)
     assert len(out) <= sum(map(len, chunks))
+
+
+def test_setup_drops_stale_messages_and_sets_the_local_address() -> None:
+    assert [w.data for w in EvoLogicsAdapter(1).setup()] == [b"+++ATZ4\n"]
+    adapter = EvoLogicsAdapter(1, local_address=2, line_end=b"\r\n")
+    assert [w.data for w in adapter.setup()] == [b"+++ATZ4\r\n", b"+++AT!AL2\r\n"]
+    # The modem's answers to the setup are events, counted, and never payload.
+    assert adapter.feed(wrap(b"OK", b"Z4") + wrap(b"OK", b"!AL")) == b""
+    assert adapter.event_counts == {"OK": 2}
+    with pytest.raises(ValueError):
+        EvoLogicsAdapter(1, local_address=255)

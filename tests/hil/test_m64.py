@@ -7,6 +7,7 @@ documented ``wrp,8,<8 raw bytes>*xx`` LF form (REFERENCE §1.12).
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -132,3 +133,25 @@ def test_never_raises(chunks: list[bytes]) -> None:
     adapter = M64Adapter()
     out = b"".join(adapter.feed(c) for c in chunks)
     assert len(out) <= sum(map(len, chunks))
+
+
+def with_crc(body: bytes) -> bytes:
+    return body + b"*%02x\n" % crc8_bitwise(body)
+
+
+def test_setup_queries_configures_and_flushes_like_water_linkeds_library() -> None:
+    adapter = M64Adapter(role="b", channel=6)
+    expected = [b"\n", with_crc(b"wcv"), with_crc(b"wcn"), with_crc(b"wcs,b,6"), with_crc(b"wcf")]
+    assert [w.data for w in adapter.setup()] == expected
+    plain = M64Adapter(checksum=False)  # no role: the modem's settings are left alone
+    assert [w.data for w in plain.setup()] == [b"\n", b"wcv\n", b"wcn\n", b"wcf\n"]
+    # The answers are counted as replies and never reach the frame decoder.
+    answers = b"wrv,1,0,2\n" + with_crc(b"wrn,8") + b"wrs,a\nwrf,a\n"
+    assert adapter.feed(answers) == b""
+    assert adapter.replies == 4 and adapter.last_reply == b"wrf,a"
+
+
+def test_setup_rejects_a_bad_role_or_channel() -> None:
+    for kwargs in ({"role": "c"}, {"role": "a", "channel": 0}, {"channel": 8}):
+        with pytest.raises(ValueError):
+            M64Adapter(**kwargs)  # type: ignore[arg-type]  # str and int options mixed
