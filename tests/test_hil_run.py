@@ -4,7 +4,8 @@ One real-time window of about 20 s runs three things at once (the default run's 
 test, shared by the tests below through a module fixture):
 
 * in this process, ``run_hil`` with both nodes on the two ports of a modem emulator (s100
-  preset, BER 0), the operator's port unplugged from 8 s to 10 s (a port factory that fails);
+  preset, BER 0), the operator's port unplugged from 8 s to 10 s (a port factory that fails),
+  and line noise sent when it comes back;
 * in two child processes, ``testbed hil vehicle`` and ``testbed hil operator`` on the two ports
   of a second emulator (two computers);
 * in a third child, ``testbed hil --operator-port … --vehicle-port …`` on a third emulator
@@ -64,7 +65,7 @@ def test_ledger_numbers_frames_in_send_order_and_counts_skipped_ones_lost() -> N
     ids = [ledger.record_sent("operator", bytes([k]), 0.1 * k) for k in range(3)]
     ids.append(ledger.record_sent("vehicle", b"reply", 0.5))
     assert ids == [0, 1, 2, 3]  # one sequence for both senders, like the medium's
-    assert ledger.match("operator", b"\x01") == (1, pytest.approx(0.1))  # frame 0 was lost
+    assert ledger.match("operator", b"\x01") == (1, 0.1 * 1)  # frame 0 was lost
     assert ledger.match("operator", b"\x01") is None  # already matched
     assert ledger.match("operator", b"nothing sent") is None
     assert ledger.match("vehicle", b"reply") == (3, 0.5)
@@ -200,7 +201,8 @@ class UnpluggedPort:
 
     def write(self, data: bytes) -> int | None:
         self.check(self._window)
-        return self._port.write(data)
+        written: int | None = self._port.write(data)
+        return written
 
     @property
     def in_waiting(self) -> int:
@@ -211,10 +213,20 @@ class UnpluggedPort:
         self._port.close()
 
 
+NOISE = b"\x00\xffline noise\x00"
+"""What the operator's modem blurts out when it is plugged back in (no 0x55, no ``+++``)."""
+
+
 def _unplugged_factory(url: str, window: tuple[float, float]) -> Callable[[], UnpluggedPort]:
+    opened: list[UnpluggedPort] = []
+
     def factory() -> UnpluggedPort:
         UnpluggedPort.check(window)
-        return UnpluggedPort(url, window)
+        port = UnpluggedPort(url, window)
+        if opened:  # plugged back in: line noise goes out before any frame
+            port.write(NOISE)
+        opened.append(port)
+        return port
 
     return factory
 
@@ -386,7 +398,16 @@ def test_added_latency_is_under_a_millisecond_at_the_median(window: Window) -> N
     assert ends["vehicle"]["frames_in"] == up["frames_delivered"]
     assert ends["operator"]["bytes_in"] == ends["operator"]["adapter"]["bytes_in"] > 0
     assert ends["vehicle"]["adapter"]["terminators"] == up["frames_delivered"]
-    assert hil["garbage_bytes"] == 0
+    assert ends["operator"]["garbage_bytes"] == 0
+
+
+def test_garbage_on_the_line_is_counted_not_fatal(window: Window) -> None:
+    hil = window.single.metrics["hil"]
+    # The noise the operator's modem sent when plugged back in crossed the link: the
+    # vehicle's decoder skipped it, and the orders behind it still decoded.
+    assert hil["endpoints"]["vehicle"]["garbage_bytes"] == len(NOISE)
+    assert hil["garbage_bytes"] == len(NOISE)
+    assert hil["endpoints"]["vehicle"]["corrupt_frames"] == 0
 
 
 def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None:
