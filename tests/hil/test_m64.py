@@ -152,6 +152,9 @@ def test_setup_queries_configures_and_flushes_like_water_linkeds_library() -> No
 
 
 def test_setup_rejects_a_bad_role_or_channel() -> None:
-    for kwargs in ({"role": "c"}, {"role": "a", "channel": 0}, {"channel": 8}):
-        with pytest.raises(ValueError):
-            M64Adapter(**kwargs)  # type: ignore[arg-type]  # str and int options mixed
+    with pytest.raises(ValueError):
+        M64Adapter(role="c")
+    with pytest.raises(ValueError):
+        M64Adapter(role="a", channel=0)
+    with pytest.raises(ValueError):
+        M64Adapter(channel=8)
