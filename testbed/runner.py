@@ -266,7 +266,7 @@ def tally_images(
         log.count("chunks_sent", sent.chunks_sent)
     if operator is not None and operator.console is not None:
         got = operator.console.assembler.counters
-        log.count("chunks_received", got.chunks_received)
+        log.count("chunks_received", operator.console.chunks_received)
         for key in ("crc_failures", "spoiled", "duplicates", "inconsistent"):
             log.count(key, getattr(got, key))
         log.count("settings_sent", operator.console.settings_sent)

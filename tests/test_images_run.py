@@ -84,6 +84,13 @@ def test_images_metrics_and_strip(clean_run: RunResult, tmp_path: Path) -> None:
     assert metrics["per_minute"] == pytest.approx(len(log.received))  # a 60-s run
     assert metrics["bytes_delivered"] == sum(r.encoded_bytes for r in log.received)
     assert metrics["crc_failures"] == 0 and metrics["spoiled"] == 0
+    whole = sum(math.ceil((r.encoded_bytes + 2) / CHUNK) for r in log.received)
+    assert (
+        whole
+        <= metrics["chunks_received"]
+        <= metrics["chunks_sent"]
+        <= metrics["chunks_received"] + 1
+    )
     assert 20.0 < metrics["psnr_db"]["mean"] < 60.0  # lossy at 600 B, not garbage
     assert metrics["latency_s"]["p95"] >= metrics["latency_s"]["mean"] > 0.0
     written = write_outputs(clean_run, tmp_path)

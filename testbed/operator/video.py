@@ -30,6 +30,7 @@ class ImageConsole:
         schedule: (time [s], settings) to send, in time order; the first is usually at 0.
 
     Attributes:
+        chunks_received: replies that carried image data.
         completed: the latest completed image's stream (CRC removed), None before any.
         completed_view: the latest completed image, decoded; None before any.
         assembler: the chunk state machine.
@@ -50,6 +51,7 @@ class ImageConsole:
         self.completed_view: np.ndarray | None = None
         self.settings_sent = 0
         self.settings_acknowledged = 0
+        self.chunks_received = 0
         self._partial: tuple[int, np.ndarray] | None = None
 
     def request(self) -> tuple[bool, bool, int]:
@@ -85,6 +87,7 @@ class ImageConsole:
         ):
             self._pending = self._sent_with_bit = None
             self.settings_acknowledged += 1
+        self.chunks_received += bool(message.chunk)
         event = self.assembler.on_chunk(
             message.first_chunk,
             message.last_chunk,
