@@ -9,6 +9,7 @@ can get under the budget.
 from __future__ import annotations
 
 import io
+import math
 
 import numpy as np
 import pytest
@@ -54,22 +55,34 @@ def jpeg_at(img: np.ndarray, budget: int) -> tuple[int, float] | None:
     return best
 
 
-def rendered_frame(width: int, height: int) -> np.ndarray:
-    """The forward camera's first frame from the vehicle at its spawn pose in the pool scene."""
+POSES = {
+    "spawn": ((0.0, 0.0, 0.5), (0.0, 0.0, 0.0)),
+    "close-panel": ((2.5, 0.0, 1.5), (0.0, 0.0, 0.0)),
+    "yaw-east": ((1.0, -1.0, 1.0), (0.0, 0.0, math.radians(60.0))),
+    "deep-south": ((0.0, 1.5, 2.2), (0.0, 0.0, math.radians(200.0))),
+}
+"""Vehicle poses (NED position [m], roll/pitch/yaw [rad]) the rendered frames are taken from:
+the spawn pose, a close-up of the valve panel, a view across the pool, a deep view south."""
+
+
+def rendered_frame(width: int, height: int, pose: str = "spawn") -> np.ndarray:
+    """The forward camera's first frame from the vehicle at ``pose`` in the pool scene."""
     camera = CameraConfig(enabled=True, width_px=width, height_px=height)
-    with Vehicle(VehicleConfig(camera=camera), np.random.default_rng(3)) as vehicle:
+    position, euler = POSES[pose]
+    config = VehicleConfig(camera=camera, start_position_ned_m=position, start_euler_rad=euler)
+    with Vehicle(config, np.random.default_rng(3)) as vehicle:
         captured = vehicle.capture_image()
     assert captured is not None
     return np.asarray(captured.pixels)
 
 
-@pytest.mark.parametrize("source", ["synthetic", "rendered"])
+@pytest.mark.parametrize("source", ["synthetic", *(f"rendered:{pose}" for pose in POSES)])
 @pytest.mark.parametrize(("width", "height"), [(160, 120), (320, 240)])
 def test_rate_distortion_against_jpeg2000_and_jpeg(source: str, width: int, height: int) -> None:
     if source == "synthetic":
         img = pool_scene(width, height, np.random.default_rng(1))
     else:
-        img = rendered_frame(width, height)
+        img = rendered_frame(width, height, source.split(":", 1)[1])
     assert img.shape == (height, width) and img.std() > 10.0  # real content
     print(f"\n{source} {width}x{height}  budget  ours[dB]  J2K[B]  J2K[dB]  JPEG[B]  JPEG[dB]")
     for budget in BUDGETS:
