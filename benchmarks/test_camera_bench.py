@@ -16,9 +16,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from testbed.vehicle.camera import CameraConfig, camera_pose, pool_scenery, underwater_grey
+from testbed.vehicle.camera import CameraConfig, camera_pose, underwater_grey
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.physics import Physics
+from testbed.vehicle.scenery import pool_scenery
 
 
 @pytest.fixture(scope="module")

@@ -19,8 +19,8 @@ rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is
 rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x, y, z) maps to
 (w, x, −y, −z). Nothing outside this module imports pybullet.
 
-Rendering: :meth:`Physics.add_scenery` (visual-only static bodies) and :meth:`Physics.render`
-(pybullet's CPU renderer, from a camera pose in NED); the camera model is in :mod:`.camera`.
+Rendering: :meth:`Physics.add_scenery` (visual-only static bodies, :mod:`.scenery`) and
+:meth:`Physics.render` (pybullet's CPU renderer from a camera pose in NED, :mod:`.camera`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,6 @@ import ctypes
 import os
 import sys
 import tempfile
-import typing
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.config import check
-from testbed.vehicle.camera import LIGHT_TOWARDS_NED, CameraConfig, CameraPose, Scenery
+from testbed.vehicle.camera import CameraConfig, CameraPose
 from testbed.vehicle.hydrodynamics import (
     CurrentProcess,
     HydroModel,
@@ -49,6 +48,7 @@ from testbed.vehicle.hydrodynamics import (
     make_scalar_dynamics,
     quaternion_from_euler,
 )
+from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
 
 
 def _import_pybullet_quietly() -> ModuleType:
@@ -71,7 +71,7 @@ def _import_pybullet_quietly() -> ModuleType:
         os.dup2(saved, 2)
         os.close(saved)
         os.close(devnull)
-    return typing.cast(ModuleType, module)
+    return module  # type: ignore[no-any-return]
 
 
 pybullet = _import_pybullet_quietly()

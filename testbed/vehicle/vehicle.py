@@ -38,13 +38,7 @@ import numpy as np
 from testbed.config import build, check, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
-from testbed.vehicle.camera import (
-    CameraConfig,
-    CapturedImage,
-    camera_pose,
-    pool_scenery,
-    underwater_grey,
-)
+from testbed.vehicle.camera import CameraConfig, CapturedImage, camera_pose, underwater_grey
 from testbed.vehicle.components import (
     ActiveMode,
     Armed,
@@ -71,6 +65,7 @@ from testbed.vehicle.control import (
 )
 from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
+from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
     DepthSensor,
     DepthSensorConfig,

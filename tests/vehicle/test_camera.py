@@ -19,18 +19,10 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from testbed.config import ConfigError, build
-from testbed.vehicle.camera import (
-    CameraConfig,
-    Quad,
-    Scenery,
-    Solid,
-    camera_pose,
-    linear_depth_m,
-    png_bytes,
-    underwater_grey,
-)
+from testbed.vehicle.camera import CameraConfig, camera_pose, linear_depth_m, underwater_grey
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.physics import Physics
+from testbed.vehicle.scenery import Quad, Scenery, Solid, png_bytes
 from testbed.vehicle.vehicle import Vehicle, VehicleConfig, load_vehicle_config
 
 # black water and no haze: only lit geometry is non-zero
