@@ -171,7 +171,25 @@ class SenderCounters:
     requests_beyond_end: int = 0
 
 
-class ImageSender:
+class _TransferEnd:
+    """What both ends share: the chunk size and the transfer mode (they must agree)."""
+
+    def __init__(self, chunk_bytes: int, selective_repeat: bool) -> None:
+        self._chunk_bytes = _check_chunk_bytes(chunk_bytes)
+        self._selective_repeat = bool(selective_repeat)
+
+    @property
+    def chunk_bytes(self) -> int:
+        """Chunk size [B]."""
+        return self._chunk_bytes
+
+    @property
+    def selective_repeat(self) -> bool:
+        """True for selective repeat, False for paper-mode streaming."""
+        return self._selective_repeat
+
+
+class ImageSender(_TransferEnd):
     """Vehicle side: one image at a time, chunk by chunk (see the module docstring).
 
     Per reply cycle the node calls :meth:`on_request` with the order's header, then loads a new
@@ -189,24 +207,13 @@ class ImageSender:
     def __init__(
         self, chunk_bytes: int = DEFAULT_CHUNK_SIZE, *, selective_repeat: bool = True
     ) -> None:
-        self._chunk_bytes = _check_chunk_bytes(chunk_bytes)
-        self._selective_repeat = bool(selective_repeat)
+        super().__init__(chunk_bytes, selective_repeat)
         self._chunks: tuple[bytes, ...] = ()
         self._image_bit = False
         self._next_bit = False
         self._index = 0  # selective repeat: chunk asked for; paper mode: stream position
         self._cancel_notice: bool | None = None
         self._tally = dict.fromkeys(SenderCounters.__dataclass_fields__, 0)
-
-    @property
-    def chunk_bytes(self) -> int:
-        """Chunk size [B]."""
-        return self._chunk_bytes
-
-    @property
-    def selective_repeat(self) -> bool:
-        """True for selective repeat, False for paper-mode streaming."""
-        return self._selective_repeat
 
     @property
     def wants_image(self) -> bool:
@@ -367,7 +374,7 @@ class _Stream(enum.Enum):
     SPOILED = enum.auto()
 
 
-class ImageAssembler:
+class ImageAssembler(_TransferEnd):
     """Operator side: gathers chunks, checks the image CRC (see the module docstring).
 
     Per cycle the node puts :meth:`request` in the next order's header and passes each reply's
@@ -385,8 +392,7 @@ class ImageAssembler:
     def __init__(
         self, chunk_bytes: int = DEFAULT_CHUNK_SIZE, *, selective_repeat: bool = True
     ) -> None:
-        self._chunk_bytes = _check_chunk_bytes(chunk_bytes)
-        self._selective_repeat = bool(selective_repeat)
+        super().__init__(chunk_bytes, selective_repeat)
         self._expected = False  # paper mode: the bit of the image being streamed
         self._parts: dict[int, bytes] = {}
         self._last_index: int | None = None
@@ -394,16 +400,6 @@ class ImageAssembler:
         self._stream = _Stream.IDLE
         self._last_image: bytes | None = None
         self._tally = dict.fromkeys(AssemblyCounters.__dataclass_fields__, 0)
-
-    @property
-    def chunk_bytes(self) -> int:
-        """Chunk size [B]."""
-        return self._chunk_bytes
-
-    @property
-    def selective_repeat(self) -> bool:
-        """True for selective repeat, False for paper mode."""
-        return self._selective_repeat
 
     @property
     def cancelling(self) -> bool:
