@@ -113,8 +113,18 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
         f"  yaw error std {yaw['std']:.2f} deg; energy {metrics['energy_wh']:.3f} Wh",
-        f"  wrote {out}/",
     ]
+    images = metrics.get("images")
+    if images is not None:
+        latency, psnr = images["latency_s"]["mean"], images["psnr_db"]["mean"]
+        lines.append(
+            f"  images {images['completed']}/{images['captured']} completed "
+            f"({images['per_minute']:.1f}/min), latency mean "
+            + ("n/a" if latency is None or latency != latency else f"{latency:.1f} s")
+            + ", PSNR mean "
+            + ("n/a" if psnr is None or psnr != psnr else f"{psnr:.1f} dB")
+        )
+    lines.append(f"  wrote {out}/")
     return "\n".join(lines)
 
 

@@ -149,3 +149,16 @@ def test_same_seed_same_images() -> None:
 def test_bad_image_settings_name_the_key(override: str, key: str) -> None:
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
         load_scenario("s100-video-v1", [override])
+
+
+def test_run_summary_has_an_images_line(clean_run: RunResult) -> None:
+    from testbed.cli import format_summary
+
+    images = clean_run.metrics["images"]
+    text = format_summary(clean_run.metrics, Path("out"))
+    assert f"images {images['completed']}/{images['captured']} completed" in text
+    assert f"latency mean {images['latency_s']['mean']:.1f} s" in text
+    none_yet = {**clean_run.metrics, "images": {**images, "completed": 0}}
+    none_yet["images"]["latency_s"] = {"mean": math.nan}
+    none_yet["images"]["psnr_db"] = {"mean": None}
+    assert "latency mean n/a, PSNR mean n/a" in format_summary(none_yet, Path("out"))
