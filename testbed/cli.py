@@ -286,9 +286,19 @@ def _add_modem_emulator_parser(sub: argparse._SubParsersAction[_Parser]) -> None
         help="open two pseudo-terminals joined in real time by a simulated link",
         description="Open two pseudo-terminals, A and B, joined in real time by the channel "
         "model (bitrate, delay, bit errors, buffer), print their paths and run until Ctrl-C. "
-        "Bytes written on one port with no idle gap longer than 3 ms are one transmission.",
+        "Bytes written on one port with no idle gap longer than 3 ms are one transmission "
+        "(--modem transparent); with --modem evologics or m64 each port speaks that modem's "
+        "serial protocol instead (AT*SENDIM/RECVIM, wcq/wrp).",
     )
     emu.add_argument("--preset", default="s100", help="link preset (default: s100)")
+    emu.add_argument(
+        "--modem",
+        choices=("transparent", "evologics", "m64"),
+        default="transparent",
+        help="the modems' serial interface: transparent (S100 style, default), evologics "
+        "(S2C data mode; port A address 1, B address 2) or m64 (Water Linked; A role a, "
+        "B role b, channel 4)",
+    )
     _add_set_option(emu, "override a link parameter, e.g. --set ber=0 (repeatable)")
     emu.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     emu.add_argument(
@@ -328,19 +338,28 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
     config = load_link_config(args.preset, args.overrides)
     with ModemEmulator(
-        config, seed=args.seed, time_factor=args.time_factor, distance_m=args.distance
+        config,
+        seed=args.seed,
+        time_factor=args.time_factor,
+        distance_m=args.distance,
+        modem=args.modem,
     ) as emulator:
         path_a, path_b = emulator.paths
         print(f"A {path_a}\nB {path_b}", flush=True)
         print(
             f"testbed: {config.name} link, {config.bitrate_bps:g} bit/s, intrinsic delay "
-            f"{1000 * config.intrinsic_delay_s:.1f} ms, BER {config.ber:g}; Ctrl-C stops",
+            f"{1000 * config.intrinsic_delay_s:.1f} ms, BER {config.ber:g}, "
+            f"{args.modem} modems; Ctrl-C stops",
             file=sys.stderr,
         )
         with contextlib.suppress(KeyboardInterrupt):
             threading.Event().wait(args.duration)
         for name, counters in zip("AB", emulator.counters, strict=True):
             print(f"testbed: port {name}: {counters}", file=sys.stderr)
+        modem_counters = emulator.personality_counters
+        if modem_counters is not None:
+            for name, counts in zip("AB", modem_counters, strict=True):
+                print(f"testbed: {args.modem} modem {name}: {counts}", file=sys.stderr)
     return EXIT_OK
 
 

@@ -15,6 +15,18 @@ therefore one transmission; writes closer together than ``idle_s`` merge. Preset
 as the model delivers it. Delivered copies are written to the other port as they are delivered;
 bytes the other PTY cannot take (nobody reading, its buffer full) are dropped and counted.
 
+Modem personalities (``modem="evologics"`` or ``"m64"``, :mod:`testbed.emulator_modems`): each
+port then behaves as that modem's serial interface instead of a transparent one. Every burst is
+fed to the port's personality at the instant it closed; its replies (``OK``, ``wrq,a``…) go
+straight back to the same port, and what it queues for the water (instant messages, 8-byte
+packets) is handed to the simulated modem one packet at a time, whenever that modem is neither
+transmitting nor holding a queued packet. What the link delivers goes through the receiving
+port's personality, which writes it as that modem would (``RECVIM`` events, ``wrp`` sentences)
+or drops it (bit errors, wrong address, role or channel). Port A starts as EvoLogics address 1
+or M64 role ``a``, port B as address 2 or role ``b`` (both M64 on channel 4), until the user's
+own setup commands change them. The default, ``"transparent"``, is the byte-transparent modem
+above, unchanged.
+
 Threads: one reader thread (``select`` on both PTY masters) and one simulation thread. The only
 thing they share is a :class:`queue.Queue` of bursts, drained by a simpy process every
 ``poll_s`` (default 1 ms); nothing calls into simpy from outside its thread. Wall time maps to
@@ -41,12 +53,28 @@ import simpy
 import simpy.rt
 
 from testbed.channel import Delivery, LinkConfig, Medium, Modem
+from testbed.emulator_modems import (
+    EVOLOGICS_IM_MAX,
+    AirPacket,
+    EvoLogicsPersonality,
+    M64Personality,
+    ModemPersonality,
+)
 
-__all__ = ["ModemEmulator", "PortCounters"]
+__all__ = ["MODEM_PERSONALITIES", "ModemEmulator", "PortCounters"]
+
+MODEM_PERSONALITIES = ("transparent", "evologics", "m64")
+"""What the emulated modems are: byte-transparent (S100 style), EvoLogics S2C in data mode, or
+Water Linked M64."""
 
 _READ_CHUNK = 4096
 _SELECT_TIMEOUT_S = 0.1
 _JOIN_TIMEOUT_S = 2.0
+_MAX_IN_FLIGHT = 4096
+"""Headers of transmissions kept for their delivery (copies lost in collisions never claim
+theirs; the oldest are forgotten beyond this many)."""
+_ACK_MARGIN_S = 0.5
+"""Added to the round trip of an EvoLogics instant message and its ack to time it out [s]."""
 
 
 @dataclass(slots=True)
@@ -57,8 +85,10 @@ class PortCounters:
         bytes_in: bytes the user wrote on this port.
         bursts: transmissions made from them (see the module's framing rule).
         bursts_dropped: bursts the modem's FIFO tail-dropped.
-        deliveries: copies delivered to this port by the other modem.
-        bytes_out: bytes written to this port (deliveries, bit errors included).
+        deliveries: copies delivered to this port by the other modem (with a personality,
+            including those it then drops).
+        bytes_out: bytes written to this port (deliveries, bit errors included; with a modem
+            personality, its replies and events).
         bytes_overflowed: delivered bytes the PTY could not take (nobody reading).
     """
 
@@ -104,10 +134,12 @@ class ModemEmulator:
         idle_s: line idle time that closes a burst [s, wall clock].
         max_burst_bytes: largest burst [B]; None = ``config.tx_buffer_bytes``.
         poll_s: period at which the simulation takes bursts from the reader [s, wall clock].
+        modem: the modems' serial interface, one of :data:`MODEM_PERSONALITIES`.
 
     Raises:
         ValueError: a non-positive ``time_factor``, ``idle_s``, ``poll_s`` or
-            ``max_burst_bytes``, or a negative ``distance_m`` (local misuse).
+            ``max_burst_bytes``, a negative ``distance_m`` or an unknown ``modem`` (local
+            misuse).
         OSError: the PTYs could not be opened.
     """
 
@@ -121,7 +153,10 @@ class ModemEmulator:
         idle_s: float = 0.003,
         max_burst_bytes: int | None = None,
         poll_s: float = 0.001,
+        modem: str = "transparent",
     ) -> None:
+        if modem not in MODEM_PERSONALITIES:
+            raise ValueError(f"modem must be one of {MODEM_PERSONALITIES}, got {modem!r}")
         if not time_factor > 0.0:
             raise ValueError(f"time_factor must be > 0, got {time_factor}")
         if not (idle_s > 0.0 and poll_s > 0.0):
@@ -143,8 +178,14 @@ class ModemEmulator:
             medium.attach("b", lambda: (distance_m, 0.0, 0.0)),
         )
         self._ports: tuple[_Port, _Port] = (_Port("a"), _Port("b"))
-        for modem, port in zip(self._modems, self._ports, strict=True):
-            modem.on_receive = self._writer(port)  # what modem b receives comes out of port B
+        self.modem = modem
+        self._personalities = _personalities(modem, config, distance_m)
+        self._in_flight: dict[int, AirPacket] = {}
+        for side, port in enumerate(self._ports):
+            # what modem b receives comes out of port B
+            self._modems[side].on_receive = (
+                self._writer(port) if self._personalities is None else self._receiver(side)
+            )
         self._inbox: queue.Queue[tuple[int, bytes, float]] = queue.Queue()
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
@@ -169,6 +210,14 @@ class ModemEmulator:
     def modems(self) -> tuple[Modem, Modem]:
         """The simulated modems behind ports A and B (read their ``counters`` only)."""
         return self._modems
+
+    @property
+    def personality_counters(self) -> tuple[dict[str, int], dict[str, int]] | None:
+        """Counters of the modem personalities behind ports A and B (copies); None when the
+        modems are transparent."""
+        if self._personalities is None:
+            return None
+        return self._personalities[0].counters(), self._personalities[1].counters()
 
     @property
     def error(self) -> BaseException | None:
@@ -297,17 +346,83 @@ class ModemEmulator:
                     env.timeout(at_s - env.now).callbacks.append(send)
                 else:
                     send(None)
+            if self._personalities is not None:
+                for side, personality in enumerate(self._personalities):
+                    self._write_port(self._ports[side], personality.poll(env.now))
+                    self._pump(side)
             yield env.timeout(poll_sim_s)
 
     def _sender(self, side: int, data: bytes) -> Callable[[simpy.Event | None], None]:
         modem = self._modems[side]
         counters = self._ports[side].counters
+        personalities = self._personalities
 
         def send(_event: simpy.Event | None) -> None:
-            if not modem.send(data):
+            if personalities is not None:
+                replies = personalities[side].feed(data, self._env.now)
+                self._write_port(self._ports[side], replies)
+                self._pump(side)
+            elif not modem.send(data):
                 counters.bursts_dropped += 1
 
         return send
+
+    def _pump(self, side: int) -> None:
+        """Hand the personality's next packet to its modem if the modem is free."""
+        assert self._personalities is not None
+        personality = self._personalities[side]
+        modem = self._modems[side]
+        in_flight = self._in_flight
+        while not modem.transmitting and modem.queued_bytes == 0:
+            packet = personality.next_packet(self._env.now)
+            if packet is None:
+                return
+            if not modem.send(packet.data):
+                self._ports[side].counters.bursts_dropped += 1
+                continue
+            in_flight[modem.last_frame_id] = packet
+            if len(in_flight) > _MAX_IN_FLIGHT:
+                del in_flight[next(iter(in_flight))]
+
+    def _receiver(self, side: int) -> Callable[[Delivery], None]:
+        """The ``on_receive`` callback that passes deliveries through port ``side``'s
+        personality."""
+        assert self._personalities is not None
+        personality = self._personalities[side]
+        port = self._ports[side]
+        airtime_s = self.config.airtime_s
+
+        def receive(delivery: Delivery) -> None:
+            port.counters.deliveries += 1
+            packet = self._in_flight.pop(delivery.frame_id, None)
+            if packet is None:
+                return
+            data = personality.receive(
+                packet,
+                delivery.data,
+                bit_errors=delivery.bit_errors,
+                duration_s=airtime_s(len(delivery.data)),
+                now_s=self._env.now,
+            )
+            self._write_port(port, data)
+            self._pump(side)
+
+        return receive
+
+    def _write_port(self, port: _Port, data: bytes) -> None:
+        """Write a personality's output to ``port`` (what the PTY cannot take is counted)."""
+        if not data:
+            return
+        try:
+            written = os.write(port.master, data)
+        except BlockingIOError:
+            written = 0
+        except OSError:
+            if self._closed:
+                return
+            raise
+        port.counters.bytes_out += written
+        port.counters.bytes_overflowed += len(data) - written
 
     def _writer(self, port: _Port) -> Callable[[Delivery], None]:
         """The ``on_receive`` callback that writes a modem's deliveries to ``port``."""
@@ -328,3 +443,28 @@ class ModemEmulator:
             counters.bytes_overflowed += len(data) - written
 
         return write
+
+
+def _personalities(
+    modem: str, config: LinkConfig, distance_m: float
+) -> tuple[ModemPersonality, ModemPersonality] | None:
+    """The personalities behind ports A and B, or None for transparent modems."""
+    if modem == "evologics":
+        # An instant message and its 1-byte ack, each with the modem's latency and the
+        # propagation there and back, plus a margin.
+        one_way_s = config.intrinsic_delay_s + config.propagation.delay_s(distance_m)
+        round_trip_s = 2 * one_way_s + config.airtime_s(EVOLOGICS_IM_MAX + 1) + config.queue_gap_s
+        return (
+            EvoLogicsPersonality(
+                1, queue_bytes=config.tx_buffer_bytes, ack_timeout_s=round_trip_s + _ACK_MARGIN_S
+            ),
+            EvoLogicsPersonality(
+                2, queue_bytes=config.tx_buffer_bytes, ack_timeout_s=round_trip_s + _ACK_MARGIN_S
+            ),
+        )
+    if modem == "m64":
+        packets = max(1, config.tx_buffer_bytes // 8)
+        return M64Personality("a", queue_packets=packets), M64Personality(
+            "b", queue_packets=packets
+        )
+    return None
