@@ -19,13 +19,13 @@ Modem personalities (``modem="evologics"`` or ``"m64"``, :mod:`testbed.emulator_
 port then behaves as that modem's serial interface instead of a transparent one. Every burst is
 fed to the port's personality at the instant it closed; its replies (``OK``, ``wrq,a``…) go
 straight back to the same port, and what it queues for the water (instant messages, 8-byte
-packets) is handed to the simulated modem one packet at a time, whenever that modem is neither
-transmitting nor holding a queued packet. What the link delivers goes through the receiving
-port's personality, which writes it as that modem would (``RECVIM`` events, ``wrp`` sentences)
-or drops it (bit errors, wrong address, role or channel). Port A starts as EvoLogics address 1
-or M64 role ``a``, port B as address 2 or role ``b`` (both M64 on channel 4), until the user's
-own setup commands change them. The default, ``"transparent"``, is the byte-transparent modem
-above, unchanged.
+packets) is handed to the simulated modem one packet at a time, whenever that modem's FIFO is
+empty (the next packet waits in the modem while the previous one is on the air). What the link
+delivers goes through the receiving port's personality, which writes it as that modem would
+(``RECVIM`` events, ``wrp`` sentences) or drops it (bit errors, wrong address, role or
+channel). Port A starts as EvoLogics address 1 or M64 role ``a``, port B as address 2 or role
+``b`` (both M64 on channel 4), until the user's own setup commands change them. The default,
+``"transparent"``, is the byte-transparent modem above, unchanged.
 
 Threads: one reader thread (``select`` on both PTY masters) and one simulation thread. The only
 thing they share is a :class:`queue.Queue` of bursts, drained by a simpy process every
@@ -368,12 +368,13 @@ class ModemEmulator:
         return send
 
     def _pump(self, side: int) -> None:
-        """Hand the personality's next packet to its modem if the modem is free."""
+        """Hand the personality's next packet to its modem when the modem's FIFO is empty (so
+        it follows the one on the air after exactly the link's queue gap)."""
         assert self._personalities is not None
         personality = self._personalities[side]
         modem = self._modems[side]
         in_flight = self._in_flight
-        while not modem.transmitting and modem.queued_bytes == 0:
+        while modem.queued_bytes == 0:
             packet = personality.next_packet(self._env.now)
             if packet is None:
                 return
@@ -451,9 +452,12 @@ def _personalities(
     """The personalities behind ports A and B, or None for transparent modems."""
     if modem == "evologics":
         # An instant message and its 1-byte ack, each with the modem's latency and the
-        # propagation there and back, plus a margin.
+        # propagation, plus a margin.
         one_way_s = config.intrinsic_delay_s + config.propagation.delay_s(distance_m)
-        round_trip_s = 2 * one_way_s + config.airtime_s(EVOLOGICS_IM_MAX + 1) + config.queue_gap_s
+        # The message may wait in the modem behind one on the air: one more message airtime.
+        round_trip_s = (
+            2 * one_way_s + config.airtime_s(2 * EVOLOGICS_IM_MAX + 1) + 2 * config.queue_gap_s
+        )
         return (
             EvoLogicsPersonality(
                 1, queue_bytes=config.tx_buffer_bytes, ack_timeout_s=round_trip_s + _ACK_MARGIN_S

@@ -95,8 +95,9 @@ class ModemPersonality(Protocol):
 
 
 def bump(counts: dict[str, int], name: str, n: int = 1) -> None:
-    """Add ``n`` to the counter ``name``."""
-    counts[name] = counts.get(name, 0) + n
+    """Add ``n`` to the counter ``name`` (a zero leaves it absent)."""
+    if n:
+        counts[name] = counts.get(name, 0) + n
 
 
 def parse_int(text: str) -> int | None:
