@@ -154,7 +154,7 @@ class EvoLogicsPersonality:
         """A command other than ``*SENDIM``."""
         bump(self._counts, "commands")
         text = line.decode("ascii", "replace")
-        name = text.split(",", 1)[0]
+        name = _reply_name(text)
         if not line or not line.isascii() or not text.isprintable():
             self._error(out, name, "ERROR WRONG FORMAT")
         elif len(text) == 2 and text[0] == "Z" and text[1] in "01234":
@@ -330,6 +330,14 @@ class EvoLogicsPersonality:
     def counters(self) -> dict[str, int]:
         """See the class docstring (names absent until they count)."""
         return dict(self._counts)
+
+
+def _reply_name(text: str) -> str:
+    """The name a reply echoes: the command up to its first comma, if it is made of command
+    characters (letters, digits, ``*!?@&``); empty otherwise, so a garbled command cannot
+    garble the reply's framing."""
+    name = text.split(",", 1)[0]
+    return name if all(c.isascii() and (c.isalnum() or c in "*!?@&") for c in name) else ""
 
 
 def _wrap(name: str, body: bytes) -> bytes:
