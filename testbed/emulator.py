@@ -430,18 +430,8 @@ class ModemEmulator:
         counters = port.counters
 
         def write(delivery: Delivery) -> None:
-            data = delivery.data
             counters.deliveries += 1
-            try:
-                written = os.write(port.master, data)
-            except BlockingIOError:
-                written = 0
-            except OSError:
-                if self._closed:
-                    return
-                raise
-            counters.bytes_out += written
-            counters.bytes_overflowed += len(data) - written
+            self._write_port(port, delivery.data)
 
         return write
 
