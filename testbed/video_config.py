@@ -19,13 +19,15 @@ from testbed.protocol import max_image_bytes
 __all__ = ["ImageSettingsChange", "ImagesSection"]
 
 
-def _check_roi(roi: tuple[int, int, int, int] | None, key: str) -> None:
-    if roi is None:
+def _check_roi(roi: tuple[int, ...] | None) -> None:
+    """A region of interest is empty (none) or four inclusive pixel bounds in order."""
+    if not roi:
         return
+    check(len(roi) == 4, "roi", f"must have 4 values or none, got {list(roi)}")
     x0, y0, x1, y1 = roi
     check(
         all(0 <= v <= 1023 for v in roi) and x0 <= x1 and y0 <= y1,
-        key,
+        "roi",
         f"must be [x0, y0, x1, y1] inclusive pixels, 0..1023, x0 ≤ x1, y0 ≤ y1, got {list(roi)}",
     )
 
@@ -52,9 +54,7 @@ class ImageSettingsChange:
         check(self.t_s >= 0.0 and math.isfinite(self.t_s), "t_s", f"must be ≥ 0, got {self.t_s}")
         if self.budget_bytes is not None:
             check(self.budget_bytes >= 1, "budget_bytes", f"must be ≥ 1, got {self.budget_bytes}")
-        if self.roi:
-            check(len(self.roi) == 4, "roi", f"must have 4 values or none, got {list(self.roi)}")
-            _check_roi((self.roi[0], self.roi[1], self.roi[2], self.roi[3]), "roi")
+        _check_roi(self.roi)
         if self.roi_shift is not None:
             check(0 <= self.roi_shift <= 15, "roi_shift", f"must be 0..15, got {self.roi_shift}")
 
@@ -96,9 +96,7 @@ class ImagesSection:
             f"must be 1..{limit} (64 chunks of {self.chunk_bytes} B minus the 2-B CRC), "
             f"got {self.budget_bytes}",
         )
-        if self.roi:
-            check(len(self.roi) == 4, "roi", f"must have 4 values or none, got {list(self.roi)}")
-            _check_roi((self.roi[0], self.roi[1], self.roi[2], self.roi[3]), "roi")
+        _check_roi(self.roi)
         check(0 <= self.roi_shift <= 15, "roi_shift", f"must be 0..15, got {self.roi_shift}")
         check(self.strip_images >= 0, "strip_images", f"must be ≥ 0, got {self.strip_images}")
         for i, change in enumerate(self.changes):
