@@ -11,8 +11,8 @@ import pstats
 
 import pytest
 
-from testbed.runner import run_scenario
-from testbed.scenario import load_scenario
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
 
 
 @pytest.mark.benchmark

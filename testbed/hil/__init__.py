@@ -9,7 +9,7 @@
 * :mod:`~testbed.hil.endpoint` — :class:`PortSettings`, :func:`open_endpoint` (the adapter a
   node's role needs, on its port) and :func:`endpoint_report` (counters, added latency).
 
-The real-time run that puts the nodes on these endpoints is :mod:`testbed.hil_run` (it knows
+The real-time run that puts the nodes on these endpoints is :mod:`testbed.run.realtime` (it knows
 nodes and scenarios, so it lives above this layer).
 
 The bytes written are the frames the simulation would have carried; the receiver runs the same

@@ -13,6 +13,7 @@ import queue
 import pytest
 import serial
 
+from testbed.cli.hil import _MODEMS
 from testbed.hil import (
     DEFAULT_BAUD,
     MODEM_KINDS,
@@ -26,7 +27,6 @@ from testbed.hil import (
     make_adapter,
     open_endpoint,
 )
-from testbed.hil_cli import _MODEMS
 from testbed.protocol import Frame, FrameDecoder, encode_frame
 
 WAIT_S = 5.0

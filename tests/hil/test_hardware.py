@@ -18,9 +18,9 @@ import os
 import pytest
 
 from testbed.hil import LinkEndpoint, PortSettings, S100Adapter, SerialTransport, open_endpoint
-from testbed.hil_run import run_hil
 from testbed.protocol import Frame, encode_frame
-from testbed.scenario import load_scenario
+from testbed.run.realtime import run_hil
+from testbed.run.scenario import load_scenario
 
 pytestmark = pytest.mark.hil
 

@@ -1,0 +1,205 @@
+"""``testbed hil``: a scenario's nodes in real time with their frames through serial modems.
+
+Usage (any pyserial URL as a port: ``/dev/ttyUSB0``, ``socket://host:9200``, ``rfc2217://…``)::
+
+    testbed hil [SCENARIO] --operator-port P1 --vehicle-port P2 [--modem M] [options]
+    testbed hil vehicle [SCENARIO] --port P [--modem M] [options]
+    testbed hil operator [SCENARIO] --port P [--modem M] [options]
+
+The first form runs the operator and the simulated vehicle on this computer, each on its own
+modem (the paper's Fig. 4a); the other two run one node each, for two computers. Options:
+``--set K=V`` (repeatable), ``--seed``, ``--duration S``, ``--out DIR``, ``--baud``,
+``--rtscts``, ``--m64-channel``, ``--no-plots``. Outputs are those of ``testbed run``
+(``metrics.json``, ``events.csv``, ``series.csv``, plots) plus the ``hil`` section of
+``metrics.json`` (see :func:`testbed.run.realtime.hil_metrics`).
+
+A user's mistake prints one line naming the option and exits 2 (the CLI's
+:class:`~testbed.config.ConfigError` path). This module is wired into :mod:`testbed.cli.main`; heavy
+imports happen only when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from testbed.config import ConfigError
+
+__all__ = ["add_hil_arguments", "format_hil_summary", "run_hil_command"]
+
+_MODES = ("vehicle", "operator")
+_MODEMS = ("s100", "evologics", "m64", "raw")  # = testbed.hil.MODEM_KINDS (checked in tests)
+
+
+def add_hil_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``testbed hil`` arguments to ``parser`` and set its handler."""
+    parser.add_argument(
+        "words",
+        nargs="*",
+        metavar="[vehicle|operator] [SCENARIO]",
+        help="run one node only (two computers), and/or the scenario: a packaged id or a "
+        ".toml path (default: s100-teleop-v1)",
+    )
+    parser.add_argument("--operator-port", default=None, help="the operator's modem port")
+    parser.add_argument("--vehicle-port", default=None, help="the vehicle's modem port")
+    parser.add_argument(
+        "--port", default=None, help="this node's modem port (with `hil vehicle|operator`)"
+    )
+    parser.add_argument(
+        "--modem", choices=_MODEMS, default="s100", help="modem on the port(s) (default: s100)"
+    )
+    parser.add_argument(
+        "--baud",
+        type=int,
+        default=None,
+        help="port speed in bit/s (default by modem: s100 9600, evologics 19200, m64 115200)",
+    )
+    parser.add_argument(
+        "--rtscts", action="store_true", help="RTS/CTS hardware flow control (S100: unpaced)"
+    )
+    parser.add_argument(
+        "--m64-channel", type=int, default=4, help="Water Linked channel 1-7 (default: 4)"
+    )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key, e.g. --set operator.arm_at_s=2 (repeatable)",
+    )
+    parser.add_argument("--seed", type=int, default=None, help="random seed (vehicle sensors)")
+    parser.add_argument(
+        "--duration", type=float, default=None, help="seconds to run (default: the scenario's)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output directory (default: runs/hil-…)"
+    )
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.set_defaults(handler=run_hil_command)
+
+
+def _words(words: list[str]) -> tuple[str, str]:
+    """``(mode, scenario)`` from the positional words; mode ``both`` when none is named."""
+    mode = "both"
+    if words and words[0] in _MODES:
+        mode, words = words[0], words[1:]
+    if len(words) > 1:
+        raise ConfigError(f"hil: unexpected argument {words[1]!r} (one scenario at most)")
+    return mode, words[0] if words else "s100-teleop-v1"
+
+
+def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
+    """Role → (option name, URL), checked against the mode."""
+    pair = {
+        "operator": ("--operator-port", args.operator_port),
+        "vehicle": ("--vehicle-port", args.vehicle_port),
+    }
+    if mode == "both":
+        if args.port is not None:
+            raise ConfigError("--port: only with `testbed hil vehicle|operator`")
+        for option, url in pair.values():
+            if not url:
+                raise ConfigError(
+                    f"{option}: required (or run one node: `testbed hil vehicle|operator --port P`)"
+                )
+        if args.operator_port == args.vehicle_port:
+            raise ConfigError("--vehicle-port: must differ from --operator-port")
+        return pair
+    for option, url in pair.values():
+        if url is not None:
+            raise ConfigError(f"{option}: not with `testbed hil {mode}`; use --port")
+    if not args.port:
+        raise ConfigError(f"--port: required with `testbed hil {mode}`")
+    return {mode: ("--port", args.port)}
+
+
+def run_hil_command(args: argparse.Namespace) -> int:
+    """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
+    from testbed.hil import PortSettings, open_endpoint
+    from testbed.run.realtime import run_hil
+    from testbed.run.runner import write_outputs
+    from testbed.run.scenario import load_scenario
+
+    mode, scenario_name = _words(args.words)
+    ports = _ports(args, mode)
+    if args.baud is not None and args.baud <= 0:
+        raise ConfigError(f"--baud: must be > 0, got {args.baud}")
+    if not 1 <= args.m64_channel <= 7:
+        raise ConfigError(f"--m64-channel: must be 1..7, got {args.m64_channel}")
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    scenario = load_scenario(scenario_name, args.overrides)
+    duration = scenario.duration_s if args.duration is None else args.duration
+    settle = scenario.metrics.settle_s
+    if not (math.isfinite(duration) and duration > settle):
+        raise ConfigError(
+            f"--duration: must exceed the scenario's metrics.settle_s ({settle:g} s), "
+            f"got {duration:g}"
+        )
+    out = args.out
+    if out is None:
+        out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a directory")
+    endpoints: dict[str, Any] = {}
+    try:
+        for role, (option, url) in ports.items():
+            settings = PortSettings(url, args.modem, role, args.baud, args.rtscts, args.m64_channel)
+            try:
+                endpoints[role] = open_endpoint(settings)
+            except OSError as err:
+                raise ConfigError(f"{option}: cannot open {url}: {err}") from None
+    except BaseException:
+        for endpoint in endpoints.values():
+            endpoint.close()
+        raise
+    where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
+    print(
+        f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, Ctrl-C ends early",
+        file=sys.stderr,
+        flush=True,
+    )
+    result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
+    write_outputs(result, out, plots=not args.no_plots)
+    print(format_hil_summary(result.metrics, out))
+    return 0
+
+
+def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:
+    """A few lines a person reads after a HIL run (NaN shows as n/a)."""
+
+    def ms(value: float | None, digits: int = 0) -> str:
+        if value is None or value != value:
+            return "n/a"
+        return f"{1000 * value:.{digits}f} ms"
+
+    def count(value: float | None) -> str:
+        return "n/a" if value is None or value != value else f"{value:.0f}"
+
+    def percent(value: float | None) -> str:
+        return "n/a" if value is None or value != value else f"{100 * value:.2f} %"
+
+    hil = metrics["hil"]
+    up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
+    added = hil["added_latency_ms"]
+    lag, rtt = metrics["command_lag_s"], hil["round_trip_s"]
+    lines = [
+        f"hil {metrics['scenario']} ({hil['mode']}, {hil['modem']}): "
+        f"{metrics['sim_s']:.1f} s in real time",
+        f"  uplink   sent {count(up['frames_sent'])}, delivered {count(up['frames_delivered'])}"
+        f", PER {percent(up['per'])}",
+        f"  downlink sent {count(down['frames_sent'])}, delivered "
+        f"{count(down['frames_delivered'])}, PER {percent(down['per'])}",
+        f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; round trip mean "
+        f"{ms(rtt['mean'])}",
+        f"  added latency p50 {ms(added['p50'] / 1000, 2)} p95 {ms(added['p95'] / 1000, 2)} "
+        f"max {ms(added['max'] / 1000, 2)}; reopens {hil['reopens']}; garbage "
+        f"{hil['garbage_bytes']} B",
+        f"  wrote {out}/",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,121 @@
+"""What one run records: link events, command and state updates, and vehicle time series.
+
+The runner's nodes append to a :class:`Recorder` as the run goes (plain list appends, nothing
+computed); :mod:`testbed.run.metrics` and :mod:`testbed.report.run_plots` read it
+afterwards. The recorder is
+the simulation's ground truth: it knows things the nodes cannot (when the sticks carried by a
+frame were really sampled, the physics pose), and nodes never read it.
+
+Series rows are taken at the first vehicle control frame at or after each sample instant
+(``metrics.sample_rate_hz``, so their spacing is uneven by up to a frame). Node names on the link
+are ``"operator"`` and ``"vehicle"``; the uplink is operator → vehicle.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from testbed.channel import Trace
+from testbed.run.image_log import ImageLog
+
+__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder"]
+
+OPERATOR = "operator"
+VEHICLE = "vehicle"
+
+SERIES_COLUMNS = (
+    "t_s",
+    "cmd_x", "cmd_y", "cmd_z", "cmd_yaw",            # pilot's sticks at t (operator truth)
+    "rx_x", "rx_y", "rx_z", "rx_yaw",                # sticks the vehicle is applying at t
+    "ref_u", "ref_v", "ref_w", "ref_r",              # velocity the applied sticks ask for
+    "north_m", "east_m", "down_m",                   # physics truth, body origin, NED
+    "roll_deg", "pitch_deg", "yaw_deg",
+    "u", "v", "w", "p", "q", "r",                    # body velocities [m/s, rad/s], FRD
+    "err_roll_deg", "err_pitch_deg", "err_yaw_deg",  # attitude error against the target
+    "depth_target_m",
+    "current_a",                                     # total thruster current (plant forces)
+    "armed", "failsafe",
+)  # fmt: skip
+"""Columns of :attr:`Recorder.series`, in order."""
+
+
+@dataclass(frozen=True, slots=True)
+class NodeEvent:
+    """Something a node did, for the event file: arming, a fault, a failsafe change."""
+
+    t_s: float
+    node: str
+    kind: str
+    detail: str = ""
+
+
+@dataclass(slots=True)
+class Recorder:
+    """Append-only record of one run.
+
+    Attributes:
+        trace: every link event (both directions).
+        commands_sampled: operator command seq → time its sticks were sampled [s].
+        commands_applied: operator command seq → vehicle frame time it was first applied [s].
+        uplink_commands: uplink frame id → (command seq, sampled time [s]) of the sticks it
+            carries (teleop orders carry no time on the wire).
+        command_updates: ``(applied_s, sampled_s)`` each time the vehicle started applying a
+            newer command (for the age of the command in force).
+        odometry_updates: ``(applied_s, sampled_s)`` each time the operator took in newer
+            vehicle state.
+        frames_decoded: link direction (``"uplink"``/``"downlink"``) → frames whose CRC checked
+            at the receiver.
+        frames_rejected: link direction → payloads that decoded as frames but were refused by
+            the codec (garbled past the CRC, or written by the wrong side).
+        events: node events in time order.
+        rows: series rows (see :data:`SERIES_COLUMNS`).
+        images: images captured, sent and received (image feedback runs).
+    """
+
+    trace: Trace = field(default_factory=Trace)
+    commands_sampled: dict[int, float] = field(default_factory=dict)
+    commands_applied: dict[int, float] = field(default_factory=dict)
+    uplink_commands: dict[int, tuple[int, float]] = field(default_factory=dict)
+    command_updates: list[tuple[float, float]] = field(default_factory=list)
+    odometry_updates: list[tuple[float, float]] = field(default_factory=list)
+    frames_decoded: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
+    frames_rejected: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
+    events: list[NodeEvent] = field(default_factory=list)
+    rows: list[tuple[float, ...]] = field(default_factory=list)
+    images: ImageLog = field(default_factory=ImageLog)
+
+    def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:
+        """Record a node event."""
+        self.events.append(NodeEvent(t_s, node, kind, detail))
+
+    def series(self) -> dict[str, np.ndarray]:
+        """The series as one array per column."""
+        table = np.array(self.rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
+        return {name: table[:, k] for k, name in enumerate(SERIES_COLUMNS)}
+
+    def write_events_csv(self, path: Path) -> None:
+        """Write every link and node event, in time order, as CSV.
+
+        Columns: ``t_s, source, kind, src, dst, frame_id, part, size_bytes, bit_errors, detail``;
+        ``source`` is ``link`` or the node's name.
+        """
+        rows: list[tuple[float, int, list[str]]] = []
+        for order, e in enumerate(self.trace.events):
+            fields = [f"{e.t_s:.9f}", "link", str(e.kind), e.src, e.dst, str(e.frame_id)]
+            fields += [str(e.part), str(e.size_bytes), str(e.bit_errors), ""]
+            rows.append((e.t_s, order, fields))
+        base = len(rows)
+        for order, n in enumerate(self.events):
+            fields = [f"{n.t_s:.9f}", n.node, n.kind, "", "", "", "", "", "", n.detail]
+            rows.append((n.t_s, base + order, fields))
+        rows.sort(key=lambda r: (r[0], r[1]))
+        header = ["t_s", "source", "kind", "src", "dst", "frame_id", "part", "size_bytes"]
+        header += ["bit_errors", "detail"]
+        with path.open("w", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(header)
+            writer.writerows(fields for _, _, fields in rows)

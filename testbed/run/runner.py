@@ -1,0 +1,476 @@
+"""One run, wired: scenario → environment, link, nodes, recorder → metrics and output files.
+
+:func:`run_scenario` makes one ``SeedSequence(seed)`` and spawns a generator for each random
+subsystem (the link's bit errors, the vehicle's sensors and current), builds one simpy
+``Environment``, the medium with both modems, the vehicle node and the operator node, schedules
+the scenario's faults, runs for the scenario's duration and reduces the recording to metrics
+(:func:`compute_metrics`). :func:`write_outputs` writes ``metrics.json``, ``events.csv``,
+``series.csv`` and the plots. Same scenario and seed ⇒ the same ``metrics.json`` byte for byte,
+apart from ``wall_s`` and ``rtf``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import simpy
+
+from testbed.channel import EventKind, Medium, Trace
+from testbed.common.components import ControlMode
+from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
+from testbed.operator.video import ImageConsole
+from testbed.protocol import ImageSettings
+from testbed.run.image_config import ImagesSection
+from testbed.run.image_log import image_metrics
+from testbed.run.metrics import age_of_information, distribution, signal_lag_s, summary
+from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
+from testbed.run.recorder import SERIES_COLUMNS, Recorder
+from testbed.run.scenario import PilotSection, Scenario
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.video import CodedImage, ImageSource
+
+__all__ = [
+    "RunResult",
+    "compute_metrics",
+    "make_operator_node",
+    "make_vehicle_node",
+    "run_scenario",
+    "tally_images",
+    "write_outputs",
+]
+
+_MODES = {
+    "manual": ControlMode.MANUAL,
+    "stabilize": ControlMode.STABILIZE,
+    "depth_hold": ControlMode.DEPTH_HOLD,
+}
+_ORDER_PAYLOAD_BYTES = 7
+"""A ``Move`` order's payload [B] (2-byte header + 5-byte body): the IPG rules size on it."""
+
+
+@dataclass(frozen=True, slots=True)
+class RunResult:
+    """One finished run.
+
+    Attributes:
+        scenario: what was run.
+        seed: the seed used.
+        metrics: the ``metrics.json`` content.
+        recorder: everything recorded (for plots and further analysis).
+    """
+
+    scenario: Scenario
+    seed: int
+    metrics: dict[str, Any]
+    recorder: Recorder
+
+
+def _pilot(section: PilotSection) -> tuple[Callable[[float], PilotSample], Callable[..., Any]]:
+    """The operator's pilot and the recorder's view of the commanded sticks (x, y, z, yaw)."""
+    if section.kind == "attitude":
+
+        def attitude(t_s: float) -> PilotSample:
+            return PilotSample((0.0,) * 6, section.attitude_deg(t_s))
+
+        return attitude, lambda t_s: (0.0, 0.0, 0.0, 0.0)
+
+    def sticks(t_s: float) -> PilotSample:
+        x, y, z, yaw = section.sticks(t_s)
+        return PilotSample((x, y, z, 0.0, 0.0, yaw))
+
+    return sticks, section.sticks
+
+
+def _image_source(images: ImagesSection) -> Callable[..., ImageSource]:
+    """Builds the vehicle's image source on its camera (``VehicleNode(image_source=...)``)."""
+
+    def build(vehicle: Vehicle, on_image: Callable[[CodedImage], None]) -> ImageSource:
+        def capture() -> tuple[float, np.ndarray] | None:
+            image = vehicle.capture_image()
+            return None if image is None else (image.time_s, image.pixels)
+
+        camera = vehicle.config.camera
+        return ImageSource(
+            capture,
+            width_px=camera.width_px,
+            height_px=camera.height_px,
+            chunk_bytes=images.chunk_bytes,
+            selective_repeat=images.selective_repeat,
+            on_image=on_image,
+        )
+
+    return build
+
+
+def _settings_schedule(images: ImagesSection) -> list[tuple[float, ImageSettings]]:
+    """The operator's ``ImageSettings`` orders: the section's at 0 s, then each change."""
+    budget, roi, shift = images.budget_bytes, images.roi, images.roi_shift
+    schedule: list[tuple[float, ImageSettings]] = []
+    for t_s, change in [(0.0, None), *((c.t_s, c) for c in images.changes)]:
+        if change is not None:
+            budget = budget if change.budget_bytes is None else change.budget_bytes
+            roi = roi if change.roi is None else change.roi
+            shift = shift if change.roi_shift is None else change.roi_shift
+        x0, y0, x1, y1 = roi if roi else (0, 0, 0, 0)
+        schedule.append((t_s, ImageSettings(x0, y0, x1, y1, shift if roi else 0, True, budget)))
+    return schedule
+
+
+def _image_console(images: ImagesSection) -> ImageConsole | None:
+    if not images.enabled:
+        return None
+    return ImageConsole(
+        chunk_bytes=images.chunk_bytes,
+        selective_repeat=images.selective_repeat,
+        schedule=_settings_schedule(images),
+    )
+
+
+def make_vehicle_node(
+    env: simpy.Environment,
+    scenario: Scenario,
+    rng: np.random.Generator,
+    modem: LinkModem,
+    recorder: Recorder,
+) -> VehicleNode:
+    """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
+    scheduled. ``rng`` feeds the vehicle's sensors and current."""
+    link = scenario.link
+    factory = partial(Vehicle, scenario.vehicle, rng)
+    node = VehicleNode(
+        env,
+        factory,
+        modem,
+        codec=link.codec,
+        token=link.mac == "token",
+        downlink_rate_hz=link.downlink_rate_hz,
+        recorder=recorder,
+        commanded=_pilot(scenario.pilot)[1],
+        sample_rate_hz=scenario.metrics.sample_rate_hz,
+        snapshot_period_s=link.snapshot_period_s,
+        image_source=_image_source(scenario.images) if scenario.images.enabled else None,
+    )
+    vehicle = node.vehicle
+    for fault in scenario.faults.thrusters:
+
+        def fail(_: simpy.Event, fault: Any = fault) -> None:
+            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
+            recorder.event(env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}")
+
+        env.timeout(fault.t_s).callbacks.append(fail)
+    return node
+
+
+def make_operator_node(
+    env: simpy.Environment,
+    scenario: Scenario,
+    modem: LinkModem,
+    recorder: Recorder,
+    reply_odometry_s: dict[int, float],
+) -> OperatorNode:
+    """The scenario's operator node on ``modem`` (simulated or HIL). ``reply_odometry_s`` is
+    the vehicle node's map of reply frame → odometry sample time (recording only; empty when
+    the vehicle runs elsewhere)."""
+    link = scenario.link
+    token = link.mac == "token"
+    plan = SessionPlan(
+        mode=_MODES[scenario.operator.mode],
+        arm_at_s=scenario.operator.arm_at_s,
+        depth_m=scenario.operator.depth_m,
+        precision=scenario.operator.precision,
+    )
+    return OperatorNode(
+        env,
+        OperatorStation(_pilot(scenario.pilot)[0], plan),
+        modem,
+        codec=link.codec,
+        ipg=link.ipg_policy if token else None,
+        uplink_rate_hz=link.uplink_rate_hz,
+        recorder=recorder,
+        reply_odometry_s=reply_odometry_s,
+        snapshot_period_s=link.snapshot_period_s,
+        console=_image_console(scenario.images),
+    )
+
+
+def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
+    """Simulate ``scenario`` once.
+
+    Args:
+        scenario: the loaded scenario.
+        seed: overrides the scenario's seed.
+
+    Returns:
+        The metrics and the recording.
+    """
+    seed = scenario.seed if seed is None else seed
+    link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
+    env = simpy.Environment()
+    recorder = Recorder(trace=Trace())
+    link = scenario.link
+    medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
+    for outage in scenario.faults.link_outages:
+        medium.add_outage(outage.start_s, outage.end_s)
+        recorder.event(outage.start_s, "scenario", "outage", f"until {outage.end_s:g} s")
+
+    holder: dict[str, VehicleNode] = {}
+    vehicle_modem = medium.attach("vehicle", lambda: holder["node"].vehicle.truth.position_ned_m)
+    rng = np.random.default_rng(vehicle_seed)
+    vehicle_node = make_vehicle_node(env, scenario, rng, vehicle_modem, recorder)
+    holder["node"] = vehicle_node
+    position = link.operator_position_ned_m
+    operator_modem = medium.attach("operator", lambda: position)
+    operator_node = make_operator_node(
+        env, scenario, operator_modem, recorder, vehicle_node.reply_odometry_s
+    )
+    vehicle = vehicle_node.vehicle
+    env.process(vehicle_node.run())
+    env.process(operator_node.run())
+    start = time.perf_counter()
+    try:
+        env.run(until=scenario.duration_s)
+    finally:
+        vehicle.close()
+    wall_s = time.perf_counter() - start
+    tally_images(recorder, vehicle_node, operator_node)
+    metrics = compute_metrics(
+        scenario,
+        seed,
+        recorder,
+        sim_s=scenario.duration_s,
+        wall_s=wall_s,
+        energy_wh=vehicle_node.energy_wh,
+        payload_bytes={
+            "uplink": vehicle_node.port.payload_bytes,
+            "downlink": operator_node.port.payload_bytes,
+        },
+    )
+    return RunResult(scenario, seed, metrics, recorder)
+
+
+def tally_images(
+    recorder: Recorder, vehicle: VehicleNode | None, operator: OperatorNode | None
+) -> None:
+    """Copy the image transfer counters of both ends (those running here) into the image log."""
+    log = recorder.images
+    if vehicle is not None and vehicle.images is not None:
+        sent = vehicle.images.sender.counters
+        log.count("chunks_sent", sent.chunks_sent)
+    if operator is not None and operator.console is not None:
+        got = operator.console.assembler.counters
+        log.count("chunks_received", operator.console.chunks_received)
+        for key in ("crc_failures", "spoiled", "duplicates", "inconsistent"):
+            log.count(key, getattr(got, key))
+        log.count("settings_sent", operator.console.settings_sent)
+        log.count("settings_acknowledged", operator.console.settings_acknowledged)
+
+
+def _link_direction(
+    trace: Trace, src: str, dst: str, decoded: int, payload_bytes: int, sim_s: float
+) -> dict[str, Any]:
+    """Per-direction frame counts from the trace; delivered = frames the receiver decoded.
+
+    A frame sent as several packets counts once, by its worst packet: collided, then lost in an
+    outage, then out of range, then corrupted (the order
+    :func:`testbed.report.run_plots.frame_outcomes`
+    uses too). ``per`` = 1 − delivered / settled, over the frames whose every packet had reached
+    the receiver (or been lost) when the run ended: a frame still queued or on the air at the end
+    is neither delivered nor lost.
+    """
+    sent = dropped = 0
+    sizes: list[int] = []
+    packets_sent: dict[int, int] = {}
+    packets_settled: dict[int, int] = {}
+    outcomes = {EventKind.DELIVER, EventKind.CORRUPT, EventKind.COLLIDE}
+    outcomes |= {EventKind.OUTAGE, EventKind.OUT_OF_RANGE}
+    lost: dict[EventKind, set[int]] = {
+        EventKind.COLLIDE: set(),
+        EventKind.OUTAGE: set(),
+        EventKind.CORRUPT: set(),
+        EventKind.OUT_OF_RANGE: set(),
+    }
+    for event in trace.events:
+        if event.src != src:
+            continue
+        if event.kind is EventKind.ENQUEUE:
+            sent += 1
+            sizes.append(event.size_bytes)
+        elif event.kind is EventKind.DROP:
+            dropped += 1
+        elif event.kind is EventKind.TX_START:
+            packets_sent[event.frame_id] = packets_sent.get(event.frame_id, 0) + 1
+        elif event.dst == dst and event.kind in outcomes:
+            packets_settled[event.frame_id] = packets_settled.get(event.frame_id, 0) + 1
+            if event.kind in lost:
+                lost[event.kind].add(event.frame_id)
+    collided = lost[EventKind.COLLIDE]
+    outage = lost[EventKind.OUTAGE] - collided
+    out_of_range = lost[EventKind.OUT_OF_RANGE] - collided - outage
+    corrupted = lost[EventKind.CORRUPT] - collided - outage - out_of_range
+    settled = sum(1 for f, n in packets_sent.items() if packets_settled.get(f, 0) >= n)
+    return {
+        "frames_sent": sent,
+        "frames_delivered": decoded,
+        "frames_corrupted": len(corrupted),
+        "frames_collided": len(collided),
+        "frames_dropped": dropped,
+        "frames_outage": len(outage),
+        "frames_out_of_range": len(out_of_range),
+        "per": 1.0 - decoded / settled if settled else math.nan,
+        "goodput_bps": 8.0 * payload_bytes / sim_s,
+        "mean_frame_bytes": float(np.mean(sizes)) if sizes else math.nan,
+    }
+
+
+def compute_metrics(
+    scenario: Scenario,
+    seed: int,
+    recorder: Recorder,
+    *,
+    sim_s: float,
+    wall_s: float,
+    energy_wh: float,
+    payload_bytes: dict[str, int],
+) -> dict[str, Any]:
+    """Reduce a recording to the ``metrics.json`` content (README: "metrics.json")."""
+    series = recorder.series()
+    t = series["t_s"]
+    settle = scenario.metrics.settle_s
+    after = t >= settle
+    link = scenario.link
+    ipg_s = (
+        link.ipg_policy.gap_for(bytes(_ORDER_PAYLOAD_BYTES + FRAME_OVERHEAD))
+        if link.mac == "token"
+        else math.nan
+    )
+    lags = [
+        applied - recorder.commands_sampled[seq]
+        for seq, applied in sorted(recorder.commands_applied.items())
+        if seq in recorder.commands_sampled
+    ]
+    if not lags:  # change-set codec: the sample time travels with the command
+        lags = [applied - sampled for applied, sampled in recorder.command_updates]
+    axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
+    flying = after & (series["armed"] > 0.5)
+    signal = {
+        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
+        if flying.sum() > 10
+        else math.nan
+        for axis, _ in axes
+    }
+    rmse = {
+        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
+        if flying.any()
+        else math.nan
+        for axis, v in axes
+    }
+    attitude = {}
+    for axis in ("roll", "pitch", "yaw"):
+        values = series[f"err_{axis}_deg"][after]
+        attitude[axis] = distribution(values[~np.isnan(values)])
+    command_age = age_of_information(recorder.command_updates, settle, sim_s)
+    odometry_age = age_of_information(recorder.odometry_updates, settle, sim_s)
+    metrics: dict[str, Any] = {
+        "scenario": scenario.id,
+        "seed": seed,
+        "sim_s": sim_s,
+        "wall_s": wall_s,
+        "rtf": sim_s / wall_s if wall_s > 0 else math.inf,
+        "link": {
+            "uplink": _link_direction(
+                recorder.trace,
+                "operator",
+                "vehicle",
+                recorder.frames_decoded["uplink"],
+                payload_bytes["uplink"],
+                sim_s,
+            ),
+            "downlink": _link_direction(
+                recorder.trace,
+                "vehicle",
+                "operator",
+                recorder.frames_decoded["downlink"],
+                payload_bytes["downlink"],
+                sim_s,
+            ),
+        },
+        "ipg_s": ipg_s,
+        "command_lag_s": summary(lags),
+        "command_age_s": command_age,
+        "signal_lag_s": signal,
+        "odometry_age_s": odometry_age,
+        "velocity_tracking_rmse": rmse,
+        "attitude_error_deg": attitude,
+        "energy_wh": energy_wh,
+        "frames_rejected": dict(recorder.frames_rejected),
+        "events": {
+            "failsafe": sum(1 for e in recorder.events if e.kind == "failsafe"),
+            "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
+        },
+    }
+    if scenario.images.enabled:
+        metrics["images"] = image_metrics(recorder.images, sim_s)
+    return metrics
+
+
+def _json_ready(value: Any) -> Any:
+    """NaN and infinities become null (strict JSON); containers are converted recursively."""
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_outputs(result: RunResult, out_dir: Path, *, plots: bool = True) -> list[Path]:
+    """Write ``metrics.json``, ``events.csv``, ``series.csv`` and (optionally) the plots.
+
+    Returns:
+        The files written.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    metrics_path = out_dir / "metrics.json"
+    text = json.dumps(_json_ready(result.metrics), indent=2, allow_nan=False)
+    metrics_path.write_text(text + "\n", encoding="utf-8")
+    events_path = out_dir / "events.csv"
+    result.recorder.write_events_csv(events_path)
+    series_path = out_dir / "series.csv"
+    rows = result.recorder.rows
+    with series_path.open("w", encoding="utf-8") as handle:
+        handle.write(",".join(SERIES_COLUMNS) + "\n")
+        for row in rows:
+            handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
+    written = [metrics_path, events_path, series_path]
+    if plots:
+        from testbed.report.run_plots import write_plots  # matplotlib only when plotting
+
+        scenario = result.scenario
+        written += write_plots(
+            result.recorder,
+            out_dir,
+            title=f"{scenario.id} (seed {result.seed})",
+            attitude_experiment=scenario.pilot.kind == "attitude",
+            settle_s=scenario.metrics.settle_s,
+        )
+        if scenario.images.enabled:
+            from testbed.report.images import plot_image_strip
+
+            written.append(
+                plot_image_strip(
+                    result.recorder.images,
+                    out_dir / "images.png",
+                    title=f"{scenario.id} (seed {result.seed})",
+                    count=scenario.images.strip_images,
+                )
+            )
+    return written

@@ -1,0 +1,1 @@
+"""Parameter sweeps over scenario keys: spec, backends (process pool, Dask), journal, aggregate."""

@@ -1,0 +1,78 @@
+"""`testbed run` and `testbed scenarios`: outputs on success, one line and exit 2 on bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from testbed.cli.main import main
+
+
+def test_run_writes_metrics_events_and_series(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "run"
+    code = main(
+        [
+            "run",
+            "s100-teleop-v1",
+            "--set",
+            "duration_s=15",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+            "--no-plots",
+        ]
+    )
+    assert code == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["scenario"] == "s100-teleop-v1" and metrics["seed"] == 3
+    assert metrics["sim_s"] == 15.0
+    for key in (
+        "link",
+        "ipg_s",
+        "command_lag_s",
+        "command_age_s",
+        "signal_lag_s",
+        "odometry_age_s",
+    ):
+        assert key in metrics
+    for key in ("velocity_tracking_rmse", "attitude_error_deg", "energy_wh"):
+        assert key in metrics
+    assert (out / "events.csv").read_text().startswith("t_s,source,kind")
+    assert (out / "series.csv").read_text().startswith("t_s,cmd_x")
+    assert f"wrote {out}" in capsys.readouterr().out
+
+
+def test_scenarios_lists_the_default(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scenarios"]) == 0
+    assert "s100-teleop-v1" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["run", "{tmp}/missing.toml"], "missing.toml: file not found"),
+        (["run", "{tmp}/bad.toml"], "bad.toml: malformed TOML"),
+        (["run", "{tmp}/unknown.toml"], "unknown.toml: wobble: unknown key"),
+        (["run", "s100-teleop-v1", "--set", "link.ber=lots"], "--set: link.ber: expected a number"),
+        (["run", "s100-teleop-v1", "--set", "link.ber=2"], "--set: link.ber: must be in [0, 1]"),
+        (["run", "s100-teleop-v1", "--set", "noequals"], "expected KEY=VALUE"),
+        (["run", "no-such-scenario-v1"], "unknown scenario id"),
+        (["run", "s100-teleop-v1", "--seed", "-1"], "--seed: must be ≥ 0"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], fragment: str
+) -> None:
+    (tmp_path / "bad.toml").write_text("schema = 1\nid = [\n", encoding="utf-8")
+    good = (Path(__file__).parents[2] / "testbed" / "scenarios" / "s100-teleop-v1.toml").read_text()
+    (tmp_path / "unknown.toml").write_text("wobble = 1\n" + good, encoding="utf-8")
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert fragment in err
+    assert err.count("\n") == 1 and "Traceback" not in err

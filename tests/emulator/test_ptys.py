@@ -1,0 +1,169 @@
+"""``testbed.emulator.ptys``: two PTYs joined in real time by the channel model,
+opened with pyserial.
+
+Truth is the channel model's closed form: unloaded latency = intrinsic delay + 8·L / bitrate
+(+ propagation, ~0 here). Measured latency must be at least that, and at most that plus the
+burst idle gap and a scheduling allowance for a shared 2-core machine. Reads are bounded by the
+serial timeout; there is no sleep.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import pytest
+import serial
+
+from testbed.channel import LinkConfig, load_link_config
+from testbed.cli.main import main
+from testbed.emulator.ptys import ModemEmulator
+from testbed.protocol import Frame, FrameDecoder, encode_frame
+
+FAST = ["bitrate_bps=19200", "intrinsic_delay_s=0.02", "ber=0"]
+"""s100 made fast enough for a test: 10× the bitrate, 20 ms intrinsic delay, no bit errors."""
+IDLE_S = 0.003
+SLACK_S = 0.15
+"""Allowance above model + idle gap for thread scheduling on a loaded CI machine."""
+TIMEOUT_S = 1.0
+
+
+@pytest.fixture
+def fast() -> LinkConfig:
+    return load_link_config("s100", FAST)
+
+
+@pytest.fixture
+def ports(fast: LinkConfig) -> Iterator[tuple[ModemEmulator, serial.Serial, serial.Serial]]:
+    with ModemEmulator(fast, seed=1, idle_s=IDLE_S) as emulator:
+        path_a, path_b = emulator.paths
+        with (
+            serial.Serial(path_a, timeout=TIMEOUT_S) as port_a,
+            serial.Serial(path_b, timeout=TIMEOUT_S) as port_b,
+        ):
+            yield emulator, port_a, port_b
+
+
+def send_and_time(src: serial.Serial, dst: serial.Serial, data: bytes) -> tuple[bytes, float]:
+    """Write ``data`` on ``src`` and read as many bytes on ``dst``: (bytes read, seconds)."""
+    t0 = time.monotonic()
+    src.write(data)
+    got = dst.read(len(data))
+    return got, time.monotonic() - t0
+
+
+def test_frame_crosses_both_ways_after_the_model_latency(
+    fast: LinkConfig, ports: tuple[ModemEmulator, serial.Serial, serial.Serial]
+) -> None:
+    emulator, port_a, port_b = ports
+    for k, (src, dst) in enumerate([(port_a, port_b), (port_b, port_a), (port_a, port_b)]):
+        frame = encode_frame(bytes([k]) * 40)
+        got, latency_s = send_and_time(src, dst, frame)
+        assert got == frame
+        assert FrameDecoder().feed(got) == [Frame(bytes([k]) * 40)]
+        model_s = fast.intrinsic_delay_s + fast.airtime_s(len(frame))  # 20 + 19.2 ms
+        assert model_s <= latency_s <= model_s + IDLE_S + SLACK_S
+    counters_a, counters_b = emulator.counters
+    assert (counters_a.bursts, counters_b.bursts) == (2, 1)
+    assert (counters_a.deliveries, counters_b.deliveries) == (1, 2)
+    assert counters_b.bytes_out == counters_a.bytes_in == 2 * len(frame)
+    assert counters_a.bytes_overflowed == counters_b.bytes_overflowed == 0
+    assert emulator.modems[1].counters.rx_bit_errors == 0
+    assert emulator.error is None
+
+
+def test_model_latency_scales_with_bitrate_not_with_the_emulator(fast: LinkConfig) -> None:
+    """Halving the bitrate adds exactly one more airtime: the delay comes from the model."""
+    slow = load_link_config("s100", [*FAST, "bitrate_bps=9600"])
+    frame = encode_frame(bytes(100))  # 106 B: 44 ms at 19.2 kbit/s, 88 ms at 9.6 kbit/s
+    latencies = []
+    for config in (fast, slow):
+        with ModemEmulator(config, seed=0, idle_s=IDLE_S) as emulator:
+            path_a, path_b = emulator.paths
+            with serial.Serial(path_a, timeout=TIMEOUT_S) as a, serial.Serial(path_b) as b:
+                b.timeout = TIMEOUT_S
+                got, latency_s = send_and_time(a, b, frame)
+        assert got == frame
+        model_s = config.intrinsic_delay_s + config.airtime_s(len(frame))
+        assert model_s <= latency_s <= model_s + IDLE_S + SLACK_S
+        latencies.append(latency_s)
+    extra_s = fast.airtime_s(len(frame))  # the slower link's airtime is twice the faster one's
+    assert latencies[1] - latencies[0] == pytest.approx(extra_s, abs=SLACK_S / 2)
+
+
+def test_bit_errors_reach_the_port_and_the_decoder_rejects_them() -> None:
+    config = load_link_config("s100", [*FAST, "ber=0.05"])
+    frame = encode_frame(bytes(range(60)))
+    with ModemEmulator(config, seed=3, idle_s=IDLE_S) as emulator:
+        path_a, path_b = emulator.paths
+        with serial.Serial(path_a) as a, serial.Serial(path_b, timeout=TIMEOUT_S) as b:
+            got, _ = send_and_time(a, b, frame)
+        flipped = sum(bin(x ^ y).count("1") for x, y in zip(got, frame, strict=True))
+        assert flipped == emulator.modems[1].counters.rx_bit_errors > 0  # 528 bits at 5 %
+    assert Frame(bytes(range(60))) not in FrameDecoder().feed(got)
+
+
+def test_a_burst_larger_than_the_fifo_is_split_and_still_arrives() -> None:
+    config = load_link_config("s100", [*FAST, "tx_buffer_bytes=30"])
+    frame = encode_frame(bytes(range(40)))  # 46 B → bursts of 30 and 16 B
+    with ModemEmulator(config, seed=0, idle_s=IDLE_S) as emulator:
+        path_a, path_b = emulator.paths
+        with serial.Serial(path_a) as a, serial.Serial(path_b, timeout=TIMEOUT_S) as b:
+            got, latency_s = send_and_time(a, b, frame)
+        assert got == frame
+        assert emulator.counters[0].bursts == 2
+        assert emulator.modems[0].counters.tx_transmissions == 2
+    # The second part waits for the first: two intrinsic delays, both airtimes, one queue gap.
+    model_s = 2 * config.intrinsic_delay_s + config.airtime_s(len(frame)) + config.queue_gap_s
+    assert model_s <= latency_s <= model_s + IDLE_S + SLACK_S
+
+
+def test_close_joins_threads_and_is_final(fast: LinkConfig) -> None:
+    emulator = ModemEmulator(fast, seed=0)
+    emulator.start()
+    with pytest.raises(RuntimeError):
+        emulator.start()
+    threads = list(emulator._threads)
+    assert all(t.is_alive() for t in threads)
+    emulator.close()
+    emulator.close()
+    assert not any(t.is_alive() for t in threads)
+    with pytest.raises(RuntimeError):
+        emulator.start()
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"time_factor": 0.0}, {"idle_s": 0.0}, {"poll_s": -1.0}, {"distance_m": -1.0}],
+)
+def test_bad_arguments_raise(fast: LinkConfig, kwargs: dict[str, float]) -> None:
+    with pytest.raises(ValueError):
+        ModemEmulator(fast, seed=0, **kwargs)  # type: ignore[arg-type]  # float for every key
+
+
+def test_cli_prints_both_paths(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["modem-emulator", "--set", "ber=0", "--duration", "0"]) == 0
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert [line.split()[0] for line in lines] == ["A", "B"]
+    assert all(line.split()[1].startswith("/dev/") for line in lines)
+    assert "s100" in err
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--preset", "nope"],
+        ["--set", "bitrate_bps=-1"],
+        ["--set", "no_such_key=1"],
+        ["--time-factor", "0"],
+        ["--duration", "-1"],
+    ],
+)
+def test_cli_bad_input_is_one_line_exit_2(
+    capsys: pytest.CaptureFixture[str], args: list[str]
+) -> None:
+    assert main(["modem-emulator", *args]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1

@@ -1,0 +1,248 @@
+"""Sweep plots: the closed forms against a second method, files from hand-made and real results,
+``testbed plot`` and its errors."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from testbed.cli.main import main
+from testbed.config import ConfigError
+from testbed.report.sweep_plots import (
+    ORDER_FRAME_BYTES,
+    _LogAxis,
+    closed_form_age_s,
+    closed_form_images_per_minute,
+    closed_form_per,
+    plot_ber_sweep,
+    plot_pair,
+    read_results,
+)
+from testbed.run.metrics import age_of_information
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+BERS = (0.0, 1e-5, 1e-4, 1e-3)
+GAPS = (0.6, 1.8)
+LAG_S = 0.145
+
+
+def _write_results(path: Path) -> Path:
+    """A results.csv shaped like testbed sweep's: BER × gap × 3 seeds, metrics from the closed
+    forms plus a seed-dependent wobble, one failed run (empty metrics)."""
+    head = ["point", "seed", "link.ber", "link.ipg_s", "status", "error", "ipg_s"]
+    metrics = [
+        "link.uplink.per",
+        "link.uplink.mean_frame_bytes",
+        "link.downlink.per",
+        "link.downlink.mean_frame_bytes",
+        "command_lag_s.mean",
+        "command_age_s.mean",
+        *(f"velocity_tracking_rmse.{a}" for a in ("x", "y", "z", "yaw")),
+    ]
+    with path.open("w", encoding="utf-8", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow([*head, *metrics])
+        point = 0
+        for ber in BERS:
+            for gap in GAPS:
+                for seed in range(3):
+                    wobble = 0.01 * (seed - 1)
+                    age = float(closed_form_age_s(ber, gap, LAG_S)) + wobble
+                    values = [
+                        float(closed_form_per(ber, 13)) + wobble / 10,
+                        13.0,
+                        float(closed_form_per(ber, 60)),
+                        60.0,
+                        LAG_S,
+                        age,
+                        0.1 + ber,
+                        0.09,
+                        0.02,
+                        0.05 + wobble,
+                    ]
+                    writer.writerow([point, seed, ber, gap, "ok", "", gap, *values])
+                writer.writerow([point, 3, ber, gap, "failed", "RuntimeError: boom"])
+                point += 1
+    return path
+
+
+# --- closed forms -------------------------------------------------------------------------------
+
+
+def test_closed_form_per_is_the_probability_of_any_bit_error() -> None:
+    from scipy import stats
+
+    ber = np.array([0.0, 1e-5, 1e-4, 1e-3, 3e-3])
+    expected = stats.binom.sf(0, 8 * 13, ber)  # P(at least one of the 104 bits flipped)
+    np.testing.assert_allclose(closed_form_per(ber, 13), expected, rtol=1e-12, atol=1e-15)
+    assert float(closed_form_per(1e-3, 13)) == pytest.approx(0.0988, abs=5e-4)  # README table
+
+
+def test_closed_form_age_matches_the_formula_and_a_simulated_sawtooth() -> None:
+    ber, gap, lag = 3e-3, 0.6, 0.145
+    q = (1.0 - ber) ** (8 * ORDER_FRAME_BYTES)
+    formula = lag + gap * (2.0 - q) / (2.0 * q)
+    assert float(closed_form_age_s(ber, gap, lag)) == pytest.approx(formula, rel=1e-12)
+    assert float(closed_form_age_s(0.0, gap, lag)) == pytest.approx(lag + gap / 2, rel=1e-12)
+    curve = closed_form_age_s(np.array([[0.0, 1e-4], [1e-3, ber]]), gap, lag)
+    assert curve.shape == (2, 2) and curve[1, 1] == pytest.approx(formula, rel=1e-12)
+    # second method: orders every T, each lost with 1 − q, applied `lag` after sampling
+    rng = np.random.default_rng(7)
+    sampled = np.arange(20_000) * gap
+    kept = sampled[rng.random(sampled.size) < q]
+    updates = [(s + lag, s) for s in kept]
+    measured = age_of_information(updates, 10.0, float(sampled[-1]), grid_s=1.0)["mean"]
+    assert measured == pytest.approx(formula, rel=0.01)
+
+
+def test_ber_zero_sits_one_decade_below_the_smallest_positive_value() -> None:
+    axis = _LogAxis.fit(np.array([0.0, 1e-5, 1e-3, 1e-4]))
+    assert axis is not None and axis.zero_at == pytest.approx(1e-6)
+    np.testing.assert_allclose(axis.place(np.array([0.0, 1e-5])), [1e-6, 1e-5])
+    assert _LogAxis.fit(np.array([0.6, 1.0, 1.8])) is None  # under two decades: linear
+    assert _LogAxis.fit(np.array([-1.0, 1.0, 1000.0])) is None
+
+
+# --- files ----------------------------------------------------------------------------------------
+
+
+def test_hand_made_results_give_the_three_ber_plots(tmp_path: Path) -> None:
+    results = read_results(_write_results(tmp_path / "results.csv"))
+    assert results.grid == ("link.ber", "link.ipg_s")
+    assert len(results.rows) == len(BERS) * len(GAPS) * 3  # failed rows left out
+    paths = plot_ber_sweep(results.path, tmp_path / "plots")
+    names = ["ber_vs_lag.png", "ber_vs_per.png", "ber_vs_tracking.png"]
+    assert [p.name for p in paths] == names
+    for path in paths:
+        assert path.read_bytes()[:8] == PNG_MAGIC and path.stat().st_size > 20_000
+
+
+def test_plot_pair_numeric_categorical_and_hue(tmp_path: Path) -> None:
+    source = _write_results(tmp_path / "results.csv")
+    out = plot_pair(source, "link.ipg_s", "command_age_s.mean", "link.ber", tmp_path / "a.png")
+    assert out.read_bytes()[:8] == PNG_MAGIC
+    text = source.read_text(encoding="utf-8").replace(",0.6,", ",ecs-4h,")
+    (tmp_path / "cat.csv").write_text(text, encoding="utf-8")
+    out = plot_pair(tmp_path / "cat.csv", "link.ipg_s", "link.uplink.per", None, tmp_path / "b.png")
+    assert out.read_bytes()[:8] == PNG_MAGIC
+    with pytest.raises(ConfigError, match="no numeric value"):
+        plot_pair(tmp_path / "cat.csv", "link.ber", "error", None, tmp_path / "c.png")
+
+
+def test_cli_plot_writes_next_to_the_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = _write_results(tmp_path / "results.csv")
+    argv = ["plot", str(source), "--x", "link.ber", "--y", "command_lag_s.mean"]
+    assert main([*argv, "--hue", "link.ipg_s"]) == 0
+    written = tmp_path / "command_lag_s.mean_vs_link.ber.png"
+    assert capsys.readouterr().out.strip() == str(written) and written.is_file()
+
+
+@pytest.mark.parametrize(
+    ("option", "column"), [("--x", "link.bre"), ("--y", "command_lag"), ("--hue", "ipg")]
+)
+def test_cli_plot_unknown_column_exits_2_with_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, column: str
+) -> None:
+    source = _write_results(tmp_path / "results.csv")
+    args = {"--x": "link.ber", "--y": "command_age_s.mean", "--hue": "link.ipg_s"} | {
+        option: column
+    }
+    assert main(["plot", str(source), *(v for kv in args.items() for v in kv)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{option}: unknown column {column!r}" in err and "command_age_s.mean" in err
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_missing_or_foreign_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        read_results(tmp_path / "none.csv")
+    (tmp_path / "other.csv").write_text("a,b\n1,2\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"not a results\.csv"):
+        read_results(tmp_path / "other.csv")
+    with pytest.raises(ConfigError, match="no BER grid key"):
+        source = _write_results(tmp_path / "results.csv")
+        text = source.read_text(encoding="utf-8").replace("link.ber", "link.bitrate_bps", 1)
+        source.write_text(text, encoding="utf-8")
+        plot_ber_sweep(source, tmp_path)
+
+
+# --- end to end -----------------------------------------------------------------------------------
+
+
+def test_a_tiny_real_ber_sweep_is_plotted_at_the_end(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "tiny.toml"
+    path.write_text(
+        'schema = 1\nid = "tiny-v1"\ndescription = "3 BER"\nscenario = "s100-teleop-v1"\n'
+        'seeds = 1\n[grid]\n"link.ber" = [0.0, 1e-4, 1e-3]\n',
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    short = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
+    assert main(["sweep", str(path), *short, "--workers", "2", "--out", str(out)]) == 0
+    assert "ber_vs_lag.png" in capsys.readouterr().out
+    for name in ("ber_vs_lag.png", "ber_vs_per.png", "ber_vs_tracking.png"):
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC
+    results = read_results(out / "results.csv")
+    lag = results.numbers("command_lag_s.mean")
+    assert len(results.rows) == 3 and np.isfinite(lag).all()
+    gap = results.numbers("ipg_s")
+    age_at_zero = float(results.numbers("command_age_s.mean")[0])
+    # with no loss the age is D + T/2 (8 s runs: within a tenth of a gap)
+    assert age_at_zero == pytest.approx(lag[0] + gap[0] / 2, abs=0.1 * gap[0])
+    assert not math.isnan(gap[0])
+
+
+def _simulated_images_per_minute(
+    ber: float, gap_s: float, chunks: int, selective_repeat: bool, cycles: int, seed: int
+) -> float:
+    """The transfer state machines themselves over Bernoulli frame losses (a second method)."""
+    from testbed.protocol import AssemblyEvent, ImageAssembler, ImageSender
+
+    rng = np.random.default_rng(seed)
+    q_order = (1.0 - ber) ** (8 * 13)
+    q_reply = (1.0 - ber) ** (8 * 60)
+    sender = ImageSender(40, selective_repeat=selective_repeat)
+    assembler = ImageAssembler(40, selective_repeat=selective_repeat)
+    image = bytes(range(256)) * 3
+    image = image[: chunks * 40 - 2]
+    completed = 0
+    for _ in range(cycles):
+        request = assembler.request()
+        if rng.random() >= q_order:
+            continue  # order lost: no reply
+        sender.on_request(*request)
+        if sender.wants_image:
+            sender.load(image)
+        chunk = sender.next_chunk()
+        if chunk is None or rng.random() >= q_reply:
+            continue
+        event = assembler.on_chunk(
+            chunk.first, chunk.last, chunk.image_seq_bit, chunk.cancel, chunk.index, chunk.data
+        )
+        completed += event is AssemblyEvent.COMPLETED
+    return 60.0 * completed / (cycles * gap_s)
+
+
+@pytest.mark.parametrize("selective_repeat", [True, False])
+@pytest.mark.parametrize("ber", [0.0, 2e-4, 6e-4])
+def test_images_per_minute_closed_form_matches_the_state_machines(
+    ber: float, selective_repeat: bool
+) -> None:
+    gap_s, chunks, cycles = 0.6, 8, 40_000
+    expected = float(
+        closed_form_images_per_minute(ber, gap_s, chunks, selective_repeat=selective_repeat)
+    )
+    simulated = _simulated_images_per_minute(ber, gap_s, chunks, selective_repeat, cycles, 5)
+    # images are a renewal count: ≈ Poisson-like spread; 4σ of the count, plus one image
+    count = expected * cycles * gap_s / 60.0
+    tolerance = (4.0 * math.sqrt(max(count, 1.0)) + 1.0) * 60.0 / (cycles * gap_s)
+    assert simulated == pytest.approx(expected, abs=tolerance)

@@ -1,0 +1,164 @@
+"""Image feedback end to end: camera → coder → chunks over the simulated S100 → operator.
+
+Independent truth: the transfer timing of a token-passing link without bit errors in closed
+form (one chunk per inter-packet gap, the last reply's airtime and delay), the coder itself
+(a received image must equal ``decode(encode(captured, budget))``), and the paper's behaviour
+(one lost chunk spoils an image) against selective repeat on the same link.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from testbed.channel import load_link_config
+from testbed.config import ConfigError
+from testbed.imaging import decode, encode
+from testbed.run.runner import RunResult, run_scenario, write_outputs
+from testbed.run.scenario import load_scenario
+
+GAP_S = 0.6
+CHUNK = 40
+REPLY_HEADER_FRAME_BYTES = 20
+"""A reply frame without a chunk [B] (6 framing + 14 payload)."""
+
+
+def run(*overrides: str, seed: int | None = None) -> RunResult:
+    return run_scenario(load_scenario("s100-video-v1", overrides), seed=seed)
+
+
+@pytest.fixture(scope="module")
+def clean_run() -> RunResult:
+    """60 s, no bit errors, a fixed 0.6-s gap, 600-B images (16 chunks)."""
+    return run(
+        "duration_s=60",
+        "link.ber=0",
+        "link.ipg=fixed",
+        f"link.ipg_s={GAP_S}",
+        "images.budget_bytes=600",
+        "images.changes=[]",
+    )
+
+
+def _same_image_as_the_coder_gives(result: RunResult, budget: int) -> None:
+    log = result.recorder.images
+    for image in log.received:
+        source = log.captured[image.number]
+        expected = decode(encode(source.pixels, budget))
+        np.testing.assert_array_equal(image.pixels, expected)
+
+
+def test_without_errors_each_image_takes_one_gap_per_chunk(clean_run: RunResult) -> None:
+    link = load_link_config("s100")
+    log = clean_run.recorder.images
+    assert len(log.received) >= 4
+    for image in log.received:
+        source = log.captured[image.number]
+        framed = image.encoded_bytes + 2  # image CRC
+        chunks = math.ceil(framed / CHUNK)
+        last_frame = REPLY_HEADER_FRAME_BYTES + framed - (chunks - 1) * CHUNK
+        delivery_s = link.intrinsic_delay_s + last_frame * 8.0 / link.bitrate_bps
+        # the capture happens when the order asking for chunk 0 lands; the first image's is the
+        # 16-B ImageSettings order, later chunk requests are 13-B moves that land sooner
+        early_s = (16 - 13) * 8.0 / link.bitrate_bps if image.number == 0 else 0.0
+        expected = (chunks - 1) * GAP_S + delivery_s - early_s
+        assert image.t_s - source.t_s == pytest.approx(expected, abs=1e-6)
+    # the next image is captured when the order acknowledging the last one arrives
+    captures = sorted(c.t_s for c in log.captured.values())
+    chunks = [math.ceil((log.captured[n].encoded_bytes + 2) / CHUNK) for n in sorted(log.captured)]
+    for k in range(1, len(captures)):
+        early_s = (16 - 13) * 8.0 / link.bitrate_bps if k == 1 else 0.0
+        expected = chunks[k - 1] * GAP_S - early_s
+        assert captures[k] - captures[k - 1] == pytest.approx(expected, abs=1e-6)
+    _same_image_as_the_coder_gives(clean_run, 600)
+
+
+def test_images_metrics_and_strip(clean_run: RunResult, tmp_path: Path) -> None:
+    metrics = clean_run.metrics["images"]
+    log = clean_run.recorder.images
+    assert metrics["completed"] == len(log.received)
+    assert metrics["per_minute"] == pytest.approx(len(log.received))  # a 60-s run
+    assert metrics["bytes_delivered"] == sum(r.encoded_bytes for r in log.received)
+    assert metrics["crc_failures"] == 0 and metrics["spoiled"] == 0
+    whole = sum(math.ceil((r.encoded_bytes + 2) / CHUNK) for r in log.received)
+    assert (
+        whole
+        <= metrics["chunks_received"]
+        <= metrics["chunks_sent"]
+        <= metrics["chunks_received"] + 1
+    )
+    assert 20.0 < metrics["psnr_db"]["mean"] < 60.0  # lossy at 600 B, not garbage
+    assert metrics["latency_s"]["p95"] >= metrics["latency_s"]["mean"] > 0.0
+    written = write_outputs(clean_run, tmp_path)
+    assert tmp_path / "images.png" in written and (tmp_path / "images.png").stat().st_size > 5000
+    on_disk = json.loads((tmp_path / "metrics.json").read_text())
+    assert on_disk["images"]["completed"] == metrics["completed"]
+
+
+def test_selective_repeat_completes_what_paper_mode_spoils() -> None:
+    """BER 5e-4: a 60-B reply is lost with p ≈ 21 %, so a 16-chunk image survives paper mode
+    with p ≈ 0.79^16 ≈ 2 %, while selective repeat completes every image it starts."""
+    common = ("duration_s=90", "link.ber=5e-4", "images.budget_bytes=600", "images.changes=[]")
+    repeat = run(*common)
+    paper = run(*common, "images.selective_repeat=false")
+    got, lost = repeat.metrics["images"], paper.metrics["images"]
+    assert got["completed"] >= 3 and got["crc_failures"] == 0
+    assert got["completed"] >= got["captured"] - 1  # all but the one in flight at the end
+    _same_image_as_the_coder_gives(repeat, 600)
+    assert lost["completed"] <= 1 and lost["spoiled"] >= 3
+    assert paper.metrics["link"]["downlink"]["per"] > 0.1
+
+
+def test_settings_change_reaches_the_coder() -> None:
+    result = run("duration_s=60", "link.ber=0", "images.changes=[{t_s=20, budget_bytes=400}]")
+    log = result.recorder.images
+    before = [c for c in log.captured.values() if c.t_s < 20.0]
+    after = [c for c in log.captured.values() if c.t_s > 21.0]
+    assert before and after
+    assert all(c.encoded_bytes > 1000 for c in before)  # 1200-B budget of the scenario
+    assert all(c.encoded_bytes <= 400 for c in after)
+    assert result.metrics["images"]["settings_sent"] == 2  # no loss: each sent once
+    assert result.metrics["images"]["settings_acknowledged"] == 2
+
+
+def test_same_seed_same_images() -> None:
+    args = ("duration_s=40", "link.ber=3e-4", "images.changes=[]")
+    first = run(*args, seed=3).recorder.images
+    second = run(*args, seed=3).recorder.images
+    assert [(r.number, r.t_s) for r in first.received] == [
+        (r.number, r.t_s) for r in second.received
+    ]
+    for a, b in zip(first.received, second.received, strict=True):
+        np.testing.assert_array_equal(a.pixels, b.pixels)
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("vehicle.camera.enabled=false", "images.enabled"),
+        ("link.codec=changeset", "images.enabled"),
+        ("images.budget_bytes=3000", "images.budget_bytes"),
+        ("images.roi=[0, 0, 200, 10]", "images.roi"),
+        ("images.chunk_bytes=151", "images.chunk_bytes"),
+    ],
+)
+def test_bad_image_settings_name_the_key(override: str, key: str) -> None:
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        load_scenario("s100-video-v1", [override])
+
+
+def test_run_summary_has_an_images_line(clean_run: RunResult) -> None:
+    from testbed.cli.main import format_summary
+
+    images = clean_run.metrics["images"]
+    text = format_summary(clean_run.metrics, Path("out"))
+    assert f"images {images['completed']}/{images['captured']} completed" in text
+    assert f"latency mean {images['latency_s']['mean']:.1f} s" in text
+    none_yet = {**clean_run.metrics, "images": {**images, "completed": 0}}
+    none_yet["images"]["latency_s"] = {"mean": math.nan}
+    none_yet["images"]["psnr_db"] = {"mean": None}
+    assert "latency mean n/a, PSNR mean n/a" in format_summary(none_yet, Path("out"))

@@ -1,0 +1,94 @@
+"""testbed.run.metrics against closed forms on hand-made inputs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from testbed.run.metrics import (
+    age_of_information,
+    aoi_periodic_closed_form,
+    distribution,
+    signal_lag_s,
+    summary,
+)
+
+
+def test_age_of_periodic_lossless_updates_is_delay_plus_half_period() -> None:
+    period, delay = 0.5, 0.12
+    updates = [(k * period + delay, k * period) for k in range(2000)]
+    aoi = age_of_information(updates, 10.0 + delay, 900.0 + delay)
+    assert aoi["mean"] == pytest.approx(delay + period / 2, rel=1e-9)
+    assert aoi["p95"] == pytest.approx(delay + 0.95 * period, abs=0.011)
+
+
+def test_age_of_updates_with_random_losses_follows_the_renewal_formula() -> None:
+    rng = np.random.default_rng(3)
+    period, delay, q = 0.6, 0.3, 0.7
+    kept = rng.random(200_000) < q
+    updates = [(k * period + delay, k * period) for k in np.flatnonzero(kept)]
+    mean = age_of_information(updates, updates[0][0], updates[-1][0])["mean"]
+    expected = aoi_periodic_closed_form(period, q, delay)
+    assert mean == pytest.approx(expected, rel=0.01)
+
+
+def test_age_ignores_stale_updates_and_counts_the_held_one_at_the_start() -> None:
+    # held at t0 = 1: sampled 0 -> age 1 at t0, grows to 3 at t = 3 when an update sampled at 2.5
+    # arrives (age 0.5), then grows to 1.5 at t1 = 4; a stale update (sampled 0.1) is ignored.
+    updates = [(0.5, 0.0), (2.0, -1.0), (3.0, 2.5), (3.5, 0.1)]
+    mean = age_of_information(updates, 1.0, 4.0)["mean"]
+    area = 0.5 * (3.0**2 - 1.0**2) + 0.5 * (1.5**2 - 0.5**2)
+    assert mean == pytest.approx(area / 3.0)
+
+
+def test_age_is_infinite_when_nothing_was_ever_held() -> None:
+    assert age_of_information([], 0.0, 1.0)["mean"] == math.inf
+
+
+def test_closed_form_rejects_impossible_probability() -> None:
+    with pytest.raises(ValueError, match="probability"):
+        aoi_periodic_closed_form(1.0, 0.0, 0.1)
+
+
+def test_signal_lag_recovers_a_known_delay_between_grid_points() -> None:
+    t = np.arange(0.0, 120.0, 0.01)
+    lag = 0.347
+    commanded = np.sin(2 * np.pi * t / 17.0) + 0.5 * np.sin(2 * np.pi * t / 5.3 + 1.0)
+    received = np.interp(t - lag, t, commanded, left=0.0)
+    assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.004)
+
+
+def test_signal_lag_of_a_staircase_hold_is_about_half_the_hold_plus_delay() -> None:
+    """A signal sampled every T and held, after a delay D, lags by D + T/2 on average."""
+    t = np.arange(0.0, 200.0, 0.01)
+    commanded = np.sin(2 * np.pi * t / 23.0) + 0.3 * np.sin(2 * np.pi * t / 7.0)
+    period, delay = 0.6, 0.14
+    sample_index = np.floor((t - delay) / period)
+    held_times = np.clip(sample_index * period, 0.0, None)
+    received = np.interp(held_times, t, commanded)
+    assert signal_lag_s(t, commanded, received) == pytest.approx(delay + period / 2, abs=0.02)
+
+
+def test_signal_lag_of_a_constant_is_nan() -> None:
+    t = np.arange(0.0, 10.0, 0.1)
+    assert math.isnan(signal_lag_s(t, np.ones_like(t), np.sin(t)))
+
+
+def test_summary_and_distribution() -> None:
+    s = summary([1.0, 2.0, 3.0, 4.0])
+    assert s == {"mean": 2.5, "p50": 2.5, "p95": pytest.approx(3.85), "max": 4.0, "n": 4}
+    d = distribution([-2.0, 2.0])
+    assert d == {"mean": 0.0, "std": 2.0, "p95": 2.0}
+    assert summary([])["n"] == 0
+
+
+def test_signal_lag_on_an_uneven_grid_uses_real_time() -> None:
+    """Frames 8.3 or 12.5 ms apart (2 or 3 steps at 240 Hz): the lag is still in seconds."""
+    steps = np.tile([2, 3, 2, 3, 2], 4000)
+    t = np.concatenate([[0.0], np.cumsum(steps) / 240.0])
+    commanded = np.sin(2 * np.pi * t / 19.0) + 0.4 * np.sin(2 * np.pi * t / 6.1)
+    lag = 0.4
+    received = np.sin(2 * np.pi * (t - lag) / 19.0) + 0.4 * np.sin(2 * np.pi * (t - lag) / 6.1)
+    assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.005)

@@ -1,0 +1,477 @@
+"""testbed.run.scenario: packaged scenarios, --set overrides and one-line errors naming
+file and key."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from testbed.channel import TELEROBOTICS_2021, Fixed, load_link_config
+from testbed.config import ConfigError
+from testbed.run.scenario import (
+    LinkOutage,
+    PilotSection,
+    SineTerm,
+    ThrusterFault,
+    load_scenario,
+    scenario_names,
+)
+from testbed.vehicle.experiment import PAPER_EXPERIMENTS
+from testbed.vehicle.thruster_config import load_thruster_config
+
+PACKAGED = [
+    "ecs-rollpitch-6dof-v1",
+    "ecs-yaw-2h-v1",
+    "ecs-yaw-3h-v1",
+    "ecs-yaw-4h-v1",
+    "m64-teleop-v1",
+    "s100-outage-v1",
+    "s100-teleop-v1",
+    "s100-thruster-failure-v1",
+    "s100-video-v1",
+    "tether-teleop-v1",
+]
+TELEOP = ["s100-teleop-v1", "tether-teleop-v1", "m64-teleop-v1", "s100-outage-v1"]
+ECS = {
+    "ecs-yaw-4h-v1": "ecs-4h",
+    "ecs-yaw-3h-v1": "ecs-3h",
+    "ecs-yaw-2h-v1": "ecs-2h",
+    "ecs-rollpitch-6dof-v1": "ecs-6dof",
+}
+
+MINIMAL = """\
+schema = 1
+id = "t-v1"
+description = "test"
+duration_s = 20.0
+"""
+
+
+def raw_toml(scenario_id: str) -> dict[str, object]:
+    """The packaged file's data, read straight from the package (not through the loader)."""
+    text = resources.files("testbed").joinpath("scenarios", f"{scenario_id}.toml").read_text()
+    return tomllib.loads(text)
+
+
+def write(tmp_path: Path, text: str, name: str = "t.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def error_of(name: str, overrides: tuple[str, ...] = ()) -> str:
+    with pytest.raises(ConfigError) as info:
+        load_scenario(name, overrides)
+    message = str(info.value)
+    assert "\n" not in message
+    return message
+
+
+# --- packaged scenarios ------------------------------------------------------------------------
+
+
+def test_packaged_ids_are_the_file_names() -> None:
+    assert scenario_names() == PACKAGED
+    folder = resources.files("testbed").joinpath("scenarios")
+    stems = sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.is_file())
+    assert stems == PACKAGED
+
+
+@pytest.mark.parametrize("scenario_id", PACKAGED)
+def test_every_packaged_scenario_loads(scenario_id: str) -> None:
+    scenario = load_scenario(scenario_id)
+    assert scenario.id == scenario_id
+    assert scenario.source == f"package:{scenario_id}"
+    assert scenario.schema == 1
+    assert scenario.description
+    raw = raw_toml(scenario_id)
+    assert scenario.duration_s == raw["duration_s"]
+    assert scenario.link.channel.name == scenario.link.preset
+    assert scenario.link.channel == load_link_config(scenario.link.preset)  # no channel keys
+    names = {t.name for t in load_thruster_config(scenario.vehicle.thrusters).thrusters}
+    assert {fault.thruster for fault in scenario.faults.thrusters} <= names
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scenario.duration_s = 1.0  # type: ignore[misc]  # checking it is frozen
+
+
+def test_load_by_path_equals_packaged(tmp_path: Path) -> None:
+    text = resources.files("testbed").joinpath("scenarios", "m64-teleop-v1.toml").read_text()
+    path = write(tmp_path, text, "copy.toml")
+    from_path = load_scenario(str(path))
+    assert from_path.source == str(path)
+    assert from_path == dataclasses.replace(load_scenario("m64-teleop-v1"), source=str(path))
+
+
+def test_default_scenario_is_the_papers_setup() -> None:
+    s = load_scenario("s100-teleop-v1")
+    c = s.link.channel
+    assert (c.bitrate_bps, c.ber, round(c.intrinsic_delay_s, 3)) == (1900.0, 7e-6, 0.085)
+    assert (s.link.codec, s.link.mac) == ("teleop", "token")
+    assert s.link.ipg_policy is TELEROBOTICS_2021
+    # telerobotics 2021: max(13, L)·8/175 s, 0.594 s for the 13-byte move order.
+    assert s.link.ipg_policy.gap_for(bytes(13)) == pytest.approx(13 * 8 / 175)
+    assert (s.vehicle.model, s.vehicle.thrusters) == ("bluerov2", "bluerov2")
+    assert s.vehicle.sensors.position is not None
+    assert s.vehicle.start_position_ned_m[2] == pytest.approx(1.0)
+    distance = math.dist(s.link.operator_position_ned_m, s.vehicle.start_position_ned_m)
+    assert distance == pytest.approx(0.5)
+    assert (s.operator.mode, s.pilot.kind, s.duration_s) == ("depth_hold", "scripted", 120.0)
+
+
+@pytest.mark.parametrize("scenario_id", TELEOP)
+def test_teleop_scenarios_share_pilot_and_bound_the_sticks(scenario_id: str) -> None:
+    s = load_scenario(scenario_id)
+    assert s.pilot == load_scenario("s100-teleop-v1").pilot
+    assert s.operator == load_scenario("s100-teleop-v1").operator
+    for axis in ("x", "y", "z", "yaw"):
+        terms = getattr(s.pilot, axis)
+        assert len(terms) >= 2
+        assert sum(abs(t.amplitude) for t in terms) <= 0.6 + 1e-12
+        assert len({t.period_s for t in terms}) == len(terms)
+    assert sum(abs(t.amplitude) for t in s.pilot.x) <= 0.35 + 1e-12  # modest surge
+    start = s.pilot.start_s
+    assert s.pilot.sticks(start) == pytest.approx((0.0, 0.0, 0.0, 0.0), abs=1e-12)  # no jump
+
+
+def test_tether_and_m64_change_only_the_link_and_what_it_needs() -> None:
+    base = load_scenario("s100-teleop-v1")
+    tether = load_scenario("tether-teleop-v1")
+    assert tether.vehicle == base.vehicle
+    assert (tether.link.preset, tether.link.codec, tether.link.mac) == (
+        "tether",
+        "changeset",
+        "free",
+    )
+    assert tether.link.rates_used
+    assert tether.link.uplink_rate_hz == tether.link.downlink_rate_hz
+    assert tether.link.downlink_rate_hz == tether.vehicle.control_rate_hz
+    m64 = load_scenario("m64-teleop-v1")
+    assert dataclasses.replace(m64.vehicle, failsafe=base.vehicle.failsafe) == base.vehicle
+    assert (m64.link.preset, m64.link.codec, m64.link.mac) == ("m64", "teleop", "token")
+
+
+def test_m64_gap_fits_a_fragmented_exchange() -> None:
+    s = load_scenario("m64-teleop-v1")
+    c = s.link.channel
+    assert c.packet_bytes == 8
+    assert c.airtime_s(8) == pytest.approx(1.0)  # one packet a second at 64 bps
+    # A 13 B move order and a 20 B state reply, each cut into 8-byte packets (REFERENCE §1.6).
+    packets = math.ceil(13 / 8) + math.ceil(20 / 8)
+    exchange_s = packets * c.airtime_s(8) + 2 * c.propagation.delay_s(c.max_range_m)
+    assert isinstance(s.link.ipg_policy, Fixed)
+    assert s.link.ipg_policy.gap_s > exchange_s
+    # The failsafe does not fire between two orders: age peaks at gap + uplink airtime.
+    peak_age_s = s.link.ipg_s + math.ceil(13 / 8) * c.airtime_s(8)
+    assert s.vehicle.failsafe.hold_after_s > peak_age_s
+
+
+def test_outage_triggers_hold_but_not_surfacing() -> None:
+    s = load_scenario("s100-outage-v1")
+    assert s.pilot == load_scenario("s100-teleop-v1").pilot
+    (outage,) = s.faults.link_outages
+    failsafe = s.vehicle.failsafe
+    c = s.link.channel
+    delivery_s = c.intrinsic_delay_s + c.airtime_s(13)
+    gap_s = s.link.ipg_policy.gap_for(bytes(13))
+    assert outage.duration_s > failsafe.hold_after_s
+    # Worst case: the last order before the window, a 2 s back-off after it (telerobotics 2021).
+    worst_age_s = gap_s + delivery_s + outage.duration_s + 2.0 + delivery_s
+    assert worst_age_s < failsafe.surface_after_s
+    assert s.metrics.settle_s < outage.start_s
+
+
+def test_thruster_failure_scenario() -> None:
+    s = load_scenario("s100-thruster-failure-v1")
+    (fault,) = s.faults.thrusters
+    assert (fault.t_s, fault.mode) == (30.0, "dead")
+    assert fault.thruster.startswith("Lateral")
+    assert s.link.preset == "s100"
+    ecs = load_scenario("ecs-yaw-4h-v1")
+    assert s.vehicle == ecs.vehicle
+    assert s.pilot.attitude_deg(7.3) == ecs.pilot.attitude_deg(7.3)
+
+
+@pytest.mark.parametrize(("scenario_id", "layout"), sorted(ECS.items()))
+def test_ecs_scenarios_mirror_the_paper_experiments(scenario_id: str, layout: str) -> None:
+    s = load_scenario(scenario_id)
+    experiment = PAPER_EXPERIMENTS[layout]
+    assert s.vehicle == experiment.vehicle_config()
+    assert s.vehicle.current.velocity_ned_mps == (0.1, 0.0, 0.0)
+    assert s.operator.depth_m == experiment.depth_m
+    assert s.duration_s == experiment.duration_s
+    assert s.metrics.settle_s == experiment.settle_s
+    assert 1.0 / s.metrics.sample_rate_hz == pytest.approx(experiment.sample_period_s)
+    assert 1.0 / s.pilot.setpoint_rate_hz == pytest.approx(experiment.setpoint_period_s)
+    assert (s.link.preset, s.link.codec) == ("tether", "changeset")
+    for t in np.linspace(0.0, s.duration_s, 241):
+        expected = [
+            math.degrees(p.at(float(t)))
+            for p in (experiment.roll, experiment.pitch, experiment.yaw)
+        ]
+        assert s.pilot.attitude_deg(float(t)) == pytest.approx(expected, abs=1e-9)
+    assert s.pilot.sticks(30.0) == (0.0, 0.0, 0.0, 0.0)
+
+
+# --- pilot ---------------------------------------------------------------------------------------
+
+
+def test_sticks_match_the_closed_form_of_the_file() -> None:
+    raw = raw_toml("s100-teleop-v1")["pilot"]
+    assert isinstance(raw, dict)
+    pilot = load_scenario("s100-teleop-v1").pilot
+    times = np.linspace(0.0, 120.0, 1201)
+    tau = times - raw["start_s"]
+    expected = []
+    for axis in ("x", "y", "z", "yaw"):
+        total = np.zeros_like(times)
+        for term in raw[axis]:
+            phase = term.get("phase_rad", 0.0)
+            total += term["amplitude"] * np.sin(2 * np.pi * tau / term["period_s"] + phase)
+        expected.append(np.where(times < raw["start_s"], 0.0, np.clip(total, -1.0, 1.0)))
+    got = np.array([pilot.sticks(float(t)) for t in times]).T
+    np.testing.assert_allclose(got, np.array(expected), atol=1e-12)
+
+
+def test_sticks_are_clipped_and_zero_before_start() -> None:
+    pilot = PilotSection(
+        start_s=2.0,
+        x=(SineTerm(0.9, 10.0), SineTerm(0.8, 10.0)),  # peak 1.7 at τ = 2.5 s
+        yaw=(SineTerm(-1.0, 4.0, math.pi / 2),),
+    )
+    assert pilot.sticks(1.999) == (0.0, 0.0, 0.0, 0.0)
+    assert pilot.sticks(4.5)[0] == 1.0
+    assert pilot.sticks(9.5)[0] == -1.0
+    assert pilot.sticks(2.0 + 1.0)[0] == pytest.approx(1.7 * math.sin(2 * math.pi / 10))
+    assert pilot.sticks(2.0)[3] == pytest.approx(-1.0)  # -sin(π/2)
+    assert pilot.sticks(4.0)[3] == pytest.approx(1.0)
+
+
+def test_pilot_kinds_reject_each_others_settings() -> None:
+    with pytest.raises(ValueError, match="yaw_amplitude_deg"):
+        PilotSection(yaw_amplitude_deg=10.0)
+    with pytest.raises(ValueError, match="x: only used"):
+        PilotSection(kind="attitude", x=(SineTerm(0.1, 10.0),))
+
+
+# --- overrides -----------------------------------------------------------------------------------
+
+
+def test_overrides_reach_nested_keys() -> None:
+    s = load_scenario(
+        "s100-teleop-v1",
+        [
+            "link.ber=1e-4",
+            "link.propagation.speed_mps=1500",
+            "vehicle.model=bluerov2-heavy",
+            "vehicle.thrusters=bluerov2-heavy",
+            "vehicle.gains.yaw.kp=0.4",
+            "pilot.x=[{amplitude = 0.2, period_s = 30.0}]",
+            "faults.thrusters=[{t_s = 50.0, thruster = 'VerticalBackLeft', mode = 'dead'}]",
+            "faults.link_outages=[{start_s = 10.0, end_s = 12.0}]",
+            "seed=7",
+        ],
+    )
+    assert s.link.channel.ber == 1e-4
+    assert s.link.channel.propagation.speed_mps == 1500.0
+    assert s.link.channel.propagation.fixed_s == 0.0  # the rest of the table is kept
+    assert (s.vehicle.model, s.vehicle.thrusters) == ("bluerov2-heavy", "bluerov2-heavy")
+    assert s.vehicle.gains.yaw.kp == 0.4
+    assert s.pilot.x == (SineTerm(0.2, 30.0),)
+    assert s.pilot.y == load_scenario("s100-teleop-v1").pilot.y
+    assert s.faults.thrusters == (ThrusterFault(50.0, "VerticalBackLeft", "dead"),)
+    assert s.faults.link_outages == (LinkOutage(10.0, 12.0),)
+    assert s.seed == 7
+    assert s.source == "package:s100-teleop-v1"
+
+
+@pytest.mark.parametrize(
+    ("preset", "keys"),
+    [
+        ("s100", ["ber=1e-3"]),
+        ("s100", ["propagation.speed_mps=1500", "max_range_m=40"]),
+        ("m64", ["burst.p_good_to_bad=0.01", "burst.ber_bad=0.2", "tx_buffer_bytes=64"]),
+        ("tether", ["bitrate_bps=1e6", "duplex='half'"]),
+    ],
+)
+def test_link_channel_equals_load_link_config(preset: str, keys: list[str], tmp_path: Path) -> None:
+    expected = load_link_config(preset, keys)
+    via_set = load_scenario(
+        "s100-teleop-v1", [f"link.preset={preset}", *(f"link.{k}" for k in keys)]
+    )
+    assert via_set.link.channel == expected
+    # The same keys written flat in the file's [link] table (TOML dotted keys for nested ones).
+    text = "\n".join([MINIMAL, "[link]", f'preset = "{preset}"', *keys])
+    via_file = load_scenario(str(write(tmp_path, text)))
+    assert via_file.link.channel == expected
+
+
+def test_ipg_policies() -> None:
+    fixed = load_scenario("s100-teleop-v1", ["link.ipg=fixed", "link.ipg_s=1.25"])
+    assert fixed.link.ipg_policy == Fixed(1.25)
+    old = load_scenario("s100-teleop-v1", ["link.ipg=telerobotics-2019"])
+    assert old.link.ipg_policy.gap_for(bytes(13)) == pytest.approx(2.08)  # REFERENCE §1.7
+    # A file's ipg_s is ignored, not an error, when an override switches the policy away.
+    m64 = load_scenario("m64-teleop-v1", ["link.ipg=telerobotics-2018"])
+    assert m64.link.ipg_policy.gap_for(bytes(60)) == pytest.approx(0.8)
+
+
+# --- errors --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("override", "fragment"),
+    [
+        # unknown keys, at every level
+        ("bogus=1", "--set: bogus: unknown key"),
+        ("source='x'", "--set: source: unknown key"),
+        ("link.bogus=1", "--set: link.bogus: unknown key"),
+        ("link.channel.ber=0.1", "--set: link.channel: unknown key"),
+        ("link.propagation.bogus=1", "--set: link.propagation.bogus: unknown key"),
+        ("vehicle.bogus=1", "--set: vehicle.bogus: unknown key"),
+        ("vehicle.gains.yaw.bogus=1", "--set: vehicle.gains.yaw.bogus: unknown key"),
+        ("operator.bogus=1", "--set: operator.bogus: unknown key"),
+        ("pilot.bogus=1", "--set: pilot.bogus: unknown key"),
+        ("pilot.x=[{amplitude=0.1, period_s=3, bogus=1}]", "--set: pilot.x[0].bogus: unknown"),
+        ("faults.bogus=1", "--set: faults.bogus: unknown key"),
+        (
+            "faults.thrusters=[{t_s=1, thruster='VerticalLeft', mode='dead', bogus=1}]",
+            "--set: faults.thrusters[0].bogus: unknown key",
+        ),
+        ("faults.link_outages=[{start_s=1, end_s=2, x=1}]", "--set: faults.link_outages[0].x:"),
+        ("metrics.bogus=1", "--set: metrics.bogus: unknown key"),
+        # wrong types
+        ("duration_s=long", "--set: duration_s: expected a number"),
+        ("seed=1.5", "--set: seed: expected an integer"),
+        ("link.ber=high", "--set: link.ber: expected a number"),
+        ("link=3", "--set: link: expected a table"),
+        ("link.codec=zip", "--set: link.codec: expected one of"),
+        ("operator.precision=1", "--set: operator.precision: expected true or false"),
+        ("pilot.x=0.3", "--set: pilot.x: expected an array"),
+        ("vehicle.start_position_ned_m=[1, 2]", "--set: vehicle.start_position_ned_m: expected 3"),
+        # values out of range
+        ("duration_s=-1", "--set: duration_s: must be > 0"),
+        ("link.ber=2", "--set: link.ber: must be in [0, 1]"),
+        ("link.ipg_s=0", "--set: link.ipg_s: must be > 0"),
+        ("link.ipg_s=2", "--set: link.ipg_s: only used when link.ipg = 'fixed'"),
+        ("link.uplink_rate_hz=5", "--set: link.uplink_rate_hz: only used when"),
+        ("vehicle.control_rate_hz=0", "--set: vehicle.control_rate_hz: must be > 0"),
+        ("operator.arm_at_s=-1", "--set: operator.arm_at_s: must be ≥ 0"),
+        ("operator.arm_at_s=500", "--set: operator.arm_at_s: must be < duration_s"),
+        ("pilot.x=[{amplitude=1.5, period_s=3}]", "--set: pilot.x[0].amplitude: must be in"),
+        ("pilot.x=[{amplitude=0.5, period_s=0}]", "--set: pilot.x[0].period_s: must be > 0"),
+        ("pilot.kind=attitude", "--set: pilot.x: only used when kind = 'scripted'"),
+        ("metrics.sample_rate_hz=0", "--set: metrics.sample_rate_hz: must be > 0"),
+        ("metrics.settle_s=200", "--set: metrics.settle_s: must be < duration_s"),
+        ("id=Bad_Id", "--set: id: must match"),
+        (
+            "faults.thrusters=[{t_s=200, thruster='VerticalLeft', mode='dead'}]",
+            "--set: faults.thrusters[0].t_s: must be < duration_s",
+        ),
+        (
+            "faults.thrusters=[{t_s=1, thruster='VerticalLeft', mode='degraded', value=2}]",
+            "--set: faults.thrusters[0].value: must be in [0, 1]",
+        ),
+        (
+            "faults.thrusters=[{t_s=1, thruster='VerticalLeft', mode='melted'}]",
+            "--set: faults.thrusters[0].mode: expected one of",
+        ),
+        (
+            "faults.link_outages=[{start_s=100, end_s=130}]",
+            "--set: faults.link_outages[0].end_s: must be ≤ duration_s",
+        ),
+        (
+            "faults.link_outages=[{start_s=10, end_s=9}]",
+            "--set: faults.link_outages[0].end_s: must be > start_s",
+        ),
+        (
+            "faults.link_outages=[{start_s=10, end_s=20}, {start_s=15, end_s=30}]",
+            "--set: faults.link_outages[1].start_s: must be ≥ the previous",
+        ),
+        # names
+        ("link.preset=s999", "--set: link.preset: unknown link preset 's999' (known: m64, s100"),
+        ("vehicle.model=nautilus", "--set: vehicle.model: unknown vehicle model 'nautilus'"),
+        ("vehicle.thrusters=octo", "--set: vehicle.thrusters: unknown thruster layout 'octo'"),
+        (
+            "faults.thrusters=[{t_s=1, thruster='Foo', mode='dead'}]",
+            "--set: faults.thrusters[0].thruster: unknown thruster 'Foo' of bluerov2 "
+            "(known: LateralFrontLeft",
+        ),
+        # schema
+        ("schema=2", "--set: schema: unsupported schema version 2 (supported: 1)"),
+        ("schema=true", "--set: schema: unsupported schema version True"),
+        # syntax
+        ("link.ber", "--set 'link.ber': expected KEY=VALUE"),
+    ],
+)
+def test_bad_override_names_set_and_key(override: str, fragment: str) -> None:
+    message = error_of("s100-teleop-v1", (override,))
+    assert message.startswith(fragment.split(":")[0])
+    assert fragment in message
+
+
+@pytest.mark.parametrize(
+    ("extra", "key"),
+    [
+        ("bogus = 1\n", "bogus: unknown key"),
+        ("[link]\nbogus = 1\n", "link.bogus: unknown key (known: ber, ber_per_m, bitrate_bps"),
+        ("[link.burst]\nbogus = 1\n", "link.burst.bogus: unknown key"),
+        ("[vehicle.sensors.imu]\nbogus = 1\n", "vehicle.sensors.imu.bogus: unknown key"),
+        ("[operator]\nmode = 'auto'\n", "operator.mode: expected one of"),
+        ("[[pilot.y]]\namplitude = 0.1\n", "pilot.y[0].period_s: required key missing"),
+        ("[[faults.thrusters]]\nt_s = 1\nthruster = 'X'\nmode = 'dead'\n", "thrusters[0].thruster"),
+        ("[metrics]\nsettle_s = -1\n", "metrics.settle_s: must be ≥ 0"),
+        ("[link]\nipg_s = 1.0\n", "link.ipg_s: only used when link.ipg = 'fixed'"),
+        ("[link]\ndownlink_rate_hz = 5.0\n", "link.downlink_rate_hz: only used when"),
+        ("[operator]\nmode = 'manual'\n[pilot]\nkind = 'attitude'\n", "operator.mode: the att"),
+    ],
+)
+def test_bad_file_names_file_and_key(tmp_path: Path, extra: str, key: str) -> None:
+    path = write(tmp_path, MINIMAL + extra)
+    message = error_of(str(path))
+    assert message.startswith(f"{path}: ")
+    assert key in message
+
+
+def test_minimal_file_takes_the_defaults(tmp_path: Path) -> None:
+    s = load_scenario(str(write(tmp_path, MINIMAL)))
+    assert (s.link.preset, s.link.ipg, s.seed, s.pilot.x) == ("s100", "telerobotics-2021", 0, ())
+    assert s.link.channel == load_link_config("s100")
+    assert s.operator.depth_m is None
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        (MINIMAL.replace("schema = 1", "schema = 2") + "new_thing = 1\n", "schema: unsupported"),
+        (MINIMAL.replace("schema = 1\n", ""), "schema: required key missing"),
+        (MINIMAL.replace('description = "test"\n', ""), "description: required key missing"),
+        (MINIMAL.replace("duration_s = 20.0", 'duration_s = "20"'), "duration_s: expected a"),
+        (MINIMAL + "[link\n", "malformed TOML"),
+        (MINIMAL + "duration_s = 5.0\n", "malformed TOML"),  # duplicate key
+    ],
+)
+def test_bad_header_or_syntax(tmp_path: Path, text: str, fragment: str) -> None:
+    path = write(tmp_path, text)
+    message = error_of(str(path))
+    assert message.startswith(f"{path}: ")
+    assert fragment in message
+
+
+def test_file_errors_come_before_override_errors(tmp_path: Path) -> None:
+    path = write(tmp_path, MINIMAL + "[pilot]\nbogus = 1\n")
+    message = error_of(str(path), ("link.ber=5",))
+    assert message.startswith(f"{path}: pilot.bogus")
+
+
+def test_missing_file_and_unknown_id(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.toml"
+    assert error_of(str(missing)) == f"{missing}: file not found"
+    message = error_of("s200-teleop-v1")
+    assert message.startswith("scenario 's200-teleop-v1': unknown scenario id (known: ")
+    assert all(name in message for name in PACKAGED)
