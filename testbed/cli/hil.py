@@ -27,12 +27,29 @@ import time
 from pathlib import Path
 from typing import Any
 
+from testbed.cli.options import Subparsers
 from testbed.config import ConfigError
 
-__all__ = ["add_hil_arguments", "format_hil_summary", "run_hil_command"]
+__all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
 
 _MODES = ("vehicle", "operator")
 _MODEMS = ("s100", "evologics", "m64", "raw")  # = testbed.hil.MODEM_KINDS (checked in tests)
+
+
+def add_hil_parser(sub: Subparsers) -> None:
+    """``testbed hil``: the nodes in real time over serial modems."""
+    hil = sub.add_parser(
+        "hil",
+        help="run a scenario in real time with its frames through serial modems",
+        description="Hardware in the loop: run the operator and the simulated vehicle in real "
+        "time, their frames through real (or emulated) modems on serial ports or any pyserial "
+        "URL. `testbed hil --operator-port P1 --vehicle-port P2` runs both nodes here; `testbed "
+        "hil vehicle|operator --port P` runs one node, its peer on another computer. Writes "
+        "what `testbed run` writes, plus the software's added latency.",
+        usage="testbed hil [vehicle|operator] [SCENARIO] (--operator-port P1 --vehicle-port P2 "
+        "| --port P) [--modem M] [options]",
+    )
+    add_hil_arguments(hil)
 
 
 def add_hil_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,70 @@
+"""``testbed link``: a one-way frame probe through the simulated channel."""
+
+from __future__ import annotations
+
+import argparse
+
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
+from testbed.config import ConfigError
+
+__all__ = ["add_link_parser"]
+
+
+def add_link_parser(sub: Subparsers) -> None:
+    """``testbed link``: one-way frame probe through the simulated channel (see channel.probe)."""
+    link = sub.add_parser(
+        "link",
+        help="send frames one way through a simulated link and report PER, goodput, latency",
+        description="Send frames one way through a simulated link (testbed.channel) and report "
+        "what the receiver's frame decoder got: counts, PER, goodput and latency.",
+    )
+    link.add_argument("--preset", default="s100", help="link preset (default: s100)")
+    add_set_option(link, "override a link parameter, e.g. --set ber=1e-4 (repeatable)")
+    link.add_argument("--frames", type=int, default=1000, help="frames to send (default: 1000)")
+    link.add_argument(
+        "--size", type=int, default=60, help="frame size in bytes, all included (default: 60)"
+    )
+    link.add_argument(
+        "--interval", type=float, default=1.0, help="seconds between frames (default: 1)"
+    )
+    link.add_argument(
+        "--distance", type=float, default=0.0, help="sender-receiver distance in m (default: 0)"
+    )
+    link.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    link.add_argument("--json", action="store_true", help="print one JSON object")
+    link.set_defaults(handler=_run_link)
+
+
+def _run_link(args: argparse.Namespace) -> int:
+    """Handler of ``testbed link``: check the arguments, run the probe, print the result."""
+    import json
+    import math
+
+    from testbed.channel.config import load_link_config
+    from testbed.channel.probe import format_report, frame_size_limits, run_probe
+
+    lo, hi = frame_size_limits()
+    if args.frames < 1:
+        raise ConfigError(f"--frames: must be ≥ 1, got {args.frames}")
+    if not lo <= args.size <= hi:
+        raise ConfigError(f"--size: a probe frame must be {lo}..{hi} bytes, got {args.size}")
+    if not (args.interval > 0.0 and math.isfinite(args.interval)):
+        raise ConfigError(f"--interval: must be > 0 s, got {args.interval}")
+    if not (args.distance >= 0.0 and math.isfinite(args.distance)):
+        raise ConfigError(f"--distance: must be ≥ 0 m, got {args.distance}")
+    if args.seed < 0:
+        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    config = load_link_config(args.preset, args.overrides)
+    result = run_probe(
+        config,
+        frames=args.frames,
+        frame_bytes=args.size,
+        interval_s=args.interval,
+        seed=args.seed,
+        distance_m=args.distance,
+    )
+    if args.json:
+        print(json.dumps(result.to_json_dict()))
+    else:
+        print(format_report(result))
+    return EXIT_OK

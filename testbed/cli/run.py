@@ -1,0 +1,108 @@
+"""``testbed run`` (one scenario end to end, its summary) and ``testbed scenarios``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
+from testbed.config import ConfigError
+
+__all__ = ["add_run_parser", "add_scenarios_parser", "format_summary"]
+
+
+def add_run_parser(sub: Subparsers) -> None:
+    """``testbed run``: one end-to-end teleoperation run of a scenario."""
+    run = sub.add_parser(
+        "run",
+        help="simulate one scenario end to end and write metrics, events and plots",
+        description="Simulate a scenario: operator and vehicle, each with its ECS world, over "
+        "the simulated link. Writes metrics.json, events.csv, series.csv and plots to --out.",
+    )
+    run.add_argument(
+        "scenario",
+        nargs="?",
+        default="s100-teleop-v1",
+        help="packaged scenario id or a .toml path (default: s100-teleop-v1; "
+        "`testbed scenarios` lists them)",
+    )
+    add_set_option(run, "override a scenario key, e.g. --set link.ber=1e-4 (repeatable)")
+    run.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    run.add_argument(
+        "--out", type=Path, default=None, help="output directory (default: runs/<id>-<time>/)"
+    )
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    run.set_defaults(handler=_run_scenario)
+
+
+def _run_scenario(args: argparse.Namespace) -> int:
+    """Handler of ``testbed run``: load, simulate, write, summarise."""
+    import time
+
+    from testbed.run.runner import run_scenario, write_outputs
+    from testbed.run.scenario import load_scenario
+
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    scenario = load_scenario(args.scenario, args.overrides)
+    out = args.out
+    if out is None:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        out = Path("runs") / f"{scenario.id}-{stamp}"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a directory")
+    result = run_scenario(scenario, seed=args.seed)
+    write_outputs(result, out, plots=not args.no_plots)
+    print(format_summary(result.metrics, out))
+    return EXIT_OK
+
+
+def format_summary(metrics: dict[str, Any], out: Path) -> str:
+    """A few lines a person reads after a run."""
+
+    def ms(value: float | None) -> str:
+        return "n/a" if value is None or value != value else f"{1000 * value:.0f} ms"
+
+    up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
+    lag, age = metrics["command_lag_s"], metrics["command_age_s"]
+    yaw = metrics["attitude_error_deg"]["yaw"]
+    lines = [
+        f"{metrics['scenario']} seed {metrics['seed']}: {metrics['sim_s']:.0f} s simulated in "
+        f"{metrics['wall_s']:.1f} s ({metrics['rtf']:.0f}x real time)",
+        f"  uplink   {up['frames_delivered']}/{up['frames_sent']} frames, PER "
+        f"{100 * up['per']:.2f} %, {up['goodput_bps']:.0f} bit/s",
+        f"  downlink {down['frames_delivered']}/{down['frames_sent']} frames, PER "
+        f"{100 * down['per']:.2f} %, {down['goodput_bps']:.0f} bit/s",
+        f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
+        f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
+        f"  yaw error std {yaw['std']:.2f} deg; energy {metrics['energy_wh']:.3f} Wh",
+    ]
+    images = metrics.get("images")
+    if images is not None:
+        latency, psnr = images["latency_s"]["mean"], images["psnr_db"]["mean"]
+        lines.append(
+            f"  images {images['completed']}/{images['captured']} completed "
+            f"({images['per_minute']:.1f}/min), latency mean "
+            + ("n/a" if latency is None or latency != latency else f"{latency:.1f} s")
+            + ", PSNR mean "
+            + ("n/a" if psnr is None or psnr != psnr else f"{psnr:.1f} dB")
+        )
+    lines.append(f"  wrote {out}/")
+    return "\n".join(lines)
+
+
+def _list_scenarios(args: argparse.Namespace) -> int:
+    """Handler of ``testbed scenarios``: one line per packaged scenario."""
+    from testbed.run.scenario import load_scenario, scenario_names
+
+    del args
+    for name in scenario_names():
+        print(f"{name:28s} {load_scenario(name).description.splitlines()[0]}")
+    return EXIT_OK
+
+
+def add_scenarios_parser(sub: Subparsers) -> None:
+    """``testbed scenarios``: list the packaged scenarios."""
+    scenarios = sub.add_parser("scenarios", help="list the packaged scenarios")
+    scenarios.set_defaults(handler=_list_scenarios)
