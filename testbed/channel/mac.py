@@ -8,8 +8,12 @@ never transmit at once and a half-duplex link never collides.
 **Free access**: every node sends on its own schedule (:func:`run_periodic_sender`); on a shared
 half-duplex medium their frames then collide.
 
-These are simpy processes (``env.process(run_token_master(...))``) over a
-:class:`~testbed.channel.medium.Modem`; they move bytes only and know nothing of the messages.
+This module is the one implementation of both rules: the simulated nodes and the real-time
+(HIL) runs use it (:mod:`testbed.run.nodes`), as do the link probe and the tests. The master and
+the periodic sender are simpy processes (``env.process(run_token_master(...))``) around a
+``send`` callback, so the same rule drives a simulated :class:`~testbed.channel.medium.Modem`,
+a serial modem or a node's link codec; :class:`TokenSlave` answers frames as they are decoded.
+They move bytes only and know nothing of the messages.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ __all__ = [
     "FrameSource",
     "FromFrameSize",
     "IpgPolicy",
+    "TokenSlave",
     "run_periodic_sender",
     "run_token_master",
     "run_token_slave",
@@ -51,9 +56,13 @@ class Fixed:
     def __post_init__(self) -> None:
         check(self.gap_s > 0.0, "gap_s", f"must be > 0, got {self.gap_s}")
 
+    def gap_after(self, size_bytes: int) -> float:
+        """The gap [s] to wait after sending a frame of ``size_bytes`` [B]."""
+        return self.gap_s
+
     def gap_for(self, frame: bytes) -> float:
         """The gap [s] to wait after sending ``frame``."""
-        return self.gap_s
+        return self.gap_after(len(frame))
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,9 +81,13 @@ class FromFrameSize:
         check(self.divisor_bps > 0.0, "divisor_bps", f"must be > 0, got {self.divisor_bps}")
         check(self.min_bytes >= 0, "min_bytes", f"must be ≥ 0, got {self.min_bytes}")
 
+    def gap_after(self, size_bytes: int) -> float:
+        """The gap [s] to wait after sending a frame of ``size_bytes`` [B]."""
+        return max(size_bytes, self.min_bytes) * 8.0 / self.divisor_bps
+
     def gap_for(self, frame: bytes) -> float:
         """The gap [s] to wait after sending ``frame``."""
-        return max(len(frame), self.min_bytes) * 8.0 / self.divisor_bps
+        return self.gap_after(len(frame))
 
 
 IpgPolicy = Fixed | FromFrameSize
@@ -99,28 +112,52 @@ class FrameSource(Protocol):
 
 def run_token_master(
     env: simpy.Environment,
-    modem: Modem,
-    next_frame: Callable[[], bytes],
+    send_slot: Callable[[], int],
     ipg: IpgPolicy,
     count: int | None = None,
 ) -> Generator[simpy.Event, Any, None]:
-    """Token master: send ``next_frame()`` now, then once per IPG.
+    """Token master: use the first slot now, then one slot per IPG.
 
     Args:
-        env: simpy environment.
-        modem: the master's modem.
-        next_frame: returns the next frame's bytes (already encoded), called at each slot.
+        env: simpy environment (simulated or real time).
+        send_slot: sends this slot's frame(s) and returns the size [B] the gap follows (the
+            largest frame just sent; the telerobotics rules size the gap on it).
         ipg: the inter-packet-gap policy.
-        count: stop after this many frames; None = forever.
+        count: stop after this many slots; None = forever.
     """
     sent = 0
     while count is None or sent < count:
-        frame = next_frame()
-        modem.send(frame)
+        size_bytes = send_slot()
         sent += 1
         if count is not None and sent >= count:
             break
-        yield env.timeout(ipg.gap_for(frame))
+        yield env.timeout(ipg.gap_after(size_bytes))
+
+
+class TokenSlave:
+    """Token slave: answer each valid frame at once, and nothing else.
+
+    Corrupted frames never reach :meth:`on_frame` (the stream decoder drops them), so they get
+    no answer, as in the paper.
+
+    Args:
+        reply: a valid frame's payload → the bytes to send back, or None to stay silent.
+        send: hands the answer to the modem.
+    """
+
+    __slots__ = ("_reply", "_send")
+
+    def __init__(
+        self, reply: Callable[[bytes], bytes | None], send: Callable[[bytes], object]
+    ) -> None:
+        self._reply = reply
+        self._send = send
+
+    def on_frame(self, payload: bytes) -> None:
+        """A valid frame arrived: answer it now."""
+        answer = self._reply(payload)
+        if answer is not None:
+            self._send(answer)
 
 
 def run_token_slave(
@@ -129,10 +166,10 @@ def run_token_slave(
     reply: Callable[[bytes], bytes | None],
     decoder: FrameSource,
 ) -> Generator[simpy.Event, Any, None]:
-    """Token slave: feed every delivery to ``decoder``; answer each valid frame at once.
+    """Token slave on a simulated modem: feed every delivery to ``decoder`` and let a
+    :class:`TokenSlave` answer each valid frame at once.
 
-    Corrupted frames are caught by the decoder and get no answer, as in the paper. The modem's
-    ``on_receive`` must be None (deliveries are read from its inbox).
+    The modem's ``on_receive`` must be None (deliveries are read from its inbox).
 
     Args:
         env: simpy environment.
@@ -141,32 +178,30 @@ def run_token_slave(
             or None to stay silent.
         decoder: stream decoder fed with every delivered copy's bytes.
     """
+    del env
+    slave = TokenSlave(reply, modem.send)
     while True:
         yield modem.wait()
         for delivery in modem.drain():
             for item in decoder.feed(delivery.data):
                 if isinstance(item, Frame):
-                    answer = reply(item.payload)
-                    if answer is not None:
-                        modem.send(answer)
+                    slave.on_frame(item.payload)
 
 
 def run_periodic_sender(
     env: simpy.Environment,
-    modem: Modem,
-    make_frame: Callable[[], bytes],
+    send: Callable[[], object],
     interval_s: float,
     count: int | None = None,
     start_s: float = 0.0,
 ) -> Generator[simpy.Event, Any, None]:
-    """Free access: send ``make_frame()`` every ``interval_s``, regardless of anyone else.
+    """Free access: call ``send()`` every ``interval_s``, regardless of anyone else.
 
     Args:
-        env: simpy environment.
-        modem: the sender's modem.
-        make_frame: returns the next frame's bytes, called at each send.
+        env: simpy environment (simulated or real time).
+        send: sends the next frame(s).
         interval_s: time between sends [s], > 0.
-        count: stop after this many frames; None = forever.
+        count: stop after this many sends; None = forever.
         start_s: delay before the first send [s].
 
     Raises:
@@ -180,7 +215,7 @@ def run_periodic_sender(
         yield env.timeout(start_s)
     sent = 0
     while count is None or sent < count:
-        modem.send(make_frame())
+        send()
         sent += 1
         if count is not None and sent >= count:
             break

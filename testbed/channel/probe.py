@@ -202,7 +202,9 @@ def run_probe(
         accept(decoder.feed(delivery.data), delivery.t_delivered_s)
 
     receiver.on_receive = on_receive
-    env.process(run_periodic_sender(env, sender, make_frame, interval_s, count=frames))
+    env.process(
+        run_periodic_sender(env, lambda: sender.send(make_frame()), interval_s, count=frames)
+    )
     wall_start = time.perf_counter()
     env.run()
     sim_s = float(env.now)

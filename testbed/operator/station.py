@@ -34,35 +34,17 @@ from testbed.common.components import (
 )
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Entity, Phase, Replicate, Schedule, World
+from testbed.operator.pilots import Pilot, PilotSample
 
 __all__ = [
     "OperatorClock",
     "OperatorStation",
+    "Pilot",
     "PilotSample",
     "SessionPlan",
     "request_session",
     "sample_pilot",
 ]
-
-Sticks = tuple[float, float, float, float, float, float]
-
-
-@dataclass(frozen=True, slots=True)
-class PilotSample:
-    """What the pilot asks for at one instant.
-
-    Attributes:
-        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
-        attitude_deg: (3,) roll, pitch, yaw setpoint [deg] for setpoint-driven runs (the ECS
-            paper's attitude experiment), or None when the pilot flies by sticks.
-    """
-
-    sticks: Sticks
-    attitude_deg: tuple[float, float, float] | None = None
-
-
-Pilot = Callable[[float], PilotSample]
-"""A pilot: operator time [s] → :class:`PilotSample` (scripted, recorded or live)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,7 +91,7 @@ def sample_pilot(world: World) -> None:
     """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint."""
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
-    sample = session.pilot(now)
+    sample = session.pilot.sample(now)
     if sample.attitude_deg is not None:
         roll, pitch, yaw = (math.radians(a) for a in sample.attitude_deg)
         world.set(session.entity, AttitudeSetpoint(quat_from_euler(roll, pitch, yaw)))
@@ -136,7 +118,7 @@ class OperatorStation:
     """The operator node's world, schedule and pilot.
 
     Args:
-        pilot: operator time [s] → :class:`PilotSample`.
+        pilot: the :class:`~testbed.operator.pilots.Pilot` sampled each frame.
         plan: mode, depth and arming to request.
 
     Attributes:

@@ -59,6 +59,7 @@ from .messages import (
     VehicleState,
     decode_operator_message,
     decode_vehicle_message,
+    order_type_of,
 )
 from .orders import (
     AXIS_SCALE,
@@ -122,4 +123,5 @@ __all__ = [
     "encode_frame",
     "frame_overhead",
     "max_image_bytes",
+    "order_type_of",
 ]

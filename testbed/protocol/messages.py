@@ -70,6 +70,7 @@ __all__ = [
     "VehicleState",
     "decode_operator_message",
     "decode_vehicle_message",
+    "order_type_of",
 ]
 
 OPERATOR_HEADER_SIZE = 2
@@ -106,6 +107,14 @@ class MalformedPayload:
     """
 
     reason: str
+
+
+def order_type_of(payload: bytes) -> type[Order] | None:
+    """The order class an operator payload's header names (low nibble of byte 1), without
+    decoding the body; None if the payload is shorter than the header or names no order."""
+    if len(payload) < OPERATOR_HEADER_SIZE:
+        return None
+    return ORDER_TYPES.get(payload[1] & 0x0F)
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,7 +168,7 @@ class OperatorMessage:
         byte0, byte1 = data[0], data[1]
         if byte1 & 0x30:
             raise ValueError(f"operator header byte 1 reserved bits 5..4 set: {byte1:#04x}")
-        order_type = ORDER_TYPES.get(byte1 & 0x0F)
+        order_type = order_type_of(data)
         if order_type is None:
             raise ValueError(f"unknown order type {byte1 & 0x0F}")
         return cls(

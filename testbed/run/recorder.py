@@ -14,15 +14,22 @@ are ``"operator"`` and ``"vehicle"``; the uplink is operator → vehicle.
 from __future__ import annotations
 
 import csv
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from testbed.channel import Trace
+from testbed.common.geometry import attitude_error, euler_from_quat
+from testbed.ecs import World
+from testbed.operator.pilots import Pilot
 from testbed.run.image_log import ImageLog
+from testbed.vehicle.components import ControlTargets, FailsafeStatus
+from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
-__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder"]
+__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder", "VehicleObserver"]
 
 OPERATOR = "operator"
 VEHICLE = "vehicle"
@@ -40,7 +47,74 @@ SERIES_COLUMNS = (
     "current_a",                                     # total thruster current (plant forces)
     "armed", "failsafe",
 )  # fmt: skip
-"""Columns of :attr:`Recorder.series`, in order."""
+"""Columns of :attr:`Recorder.series`, in order (filled by :meth:`VehicleObserver.row`)."""
+
+_DEG = 180.0 / math.pi
+
+
+class VehicleObserver:
+    """POST_UPDATE system appended to the vehicle's schedule: records what the vehicle
+    publishes — failsafe changes as node events and, at ``sample_rate_hz``, one series row —
+    reading its resources and components only (never the controllers' or the plant's insides).
+
+    Args:
+        recorder: where rows and events go.
+        pilot: the operator's pilot, sampled again at the vehicle's time for the ``cmd_*``
+            columns (the pilot's true sticks, which the vehicle only sees late).
+        reference_velocity: applied sticks (6,) → the (u, v, w, r) they ask for
+            (:meth:`~testbed.vehicle.vehicle.Vehicle.reference_velocity`).
+        sample_rate_hz: rate of the series rows [Hz]; a row is taken at the first frame at
+            or after each sample instant.
+    """
+
+    def __init__(
+        self,
+        recorder: Recorder,
+        pilot: Pilot,
+        reference_velocity: Callable[[Sequence[float]], tuple[float, float, float, float]],
+        sample_rate_hz: float,
+    ) -> None:
+        self._recorder = recorder
+        self._pilot = pilot
+        self._reference_velocity = reference_velocity
+        self._sample_period_s = 1.0 / sample_rate_hz
+        self._next_sample_s = 0.0
+        self._last_failsafe = 0
+
+    def __call__(self, world: World) -> None:
+        now = world.resource(SimClock).time_s
+        ctl = world.resource(Controllers)
+        status = world.get(ctl.vehicle, FailsafeStatus)
+        level = 0 if status is None else int(status.level)
+        if level != self._last_failsafe:
+            self._recorder.event(now, "vehicle", "failsafe", status.level.name if status else "")
+            self._last_failsafe = level
+        if now < self._next_sample_s - 1e-9:
+            return
+        self._next_sample_s += self._sample_period_s
+        self._recorder.rows.append(self.row(world, now, float(level)))
+
+    def row(self, world: World, now: float, failsafe: float) -> tuple[float, ...]:
+        """One row of :data:`SERIES_COLUMNS` at vehicle time ``now`` [s], in their order."""
+        ctl = world.resource(Controllers)
+        truth = world.resource(PlantTruth)
+        sticks = ctl.sticks
+        pilot = self._pilot.sample(now).sticks
+        roll, pitch, yaw = euler_from_quat(truth.quaternion_wxyz)
+        targets = world.get(ctl.vehicle, ControlTargets)
+        if targets is None or not ctl.flags.armed:
+            errors = (math.nan, math.nan, math.nan)
+            depth_target = math.nan
+        else:
+            errors = attitude_error(targets.quaternion_wxyz, truth.quaternion_wxyz)
+            depth_target = targets.depth_m if ctl.flags.depth_hold else math.nan
+        row: tuple[float, ...] = (now, pilot[0], pilot[1], pilot[2], pilot[5])
+        row += (sticks[0], sticks[1], sticks[2], sticks[5], *self._reference_velocity(sticks))
+        row += truth.position_ned_m
+        row += (roll * _DEG, pitch * _DEG, yaw * _DEG, *truth.velocity_m_s, *truth.rates_rad_s)
+        row += (errors[0] * _DEG, errors[1] * _DEG, errors[2] * _DEG, depth_target)
+        row += (world.resource(PowerMeter).current_a, float(ctl.flags.armed), failsafe)
+        return row
 
 
 @dataclass(frozen=True, slots=True)

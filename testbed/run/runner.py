@@ -25,15 +25,16 @@ import simpy
 
 from testbed.channel import EventKind, Medium, Trace
 from testbed.common.components import ControlMode
-from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
+from testbed.ecs import Phase
+from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.operator.video import ImageConsole
 from testbed.protocol import ImageSettings
 from testbed.run.image_config import ImagesSection
 from testbed.run.image_log import image_metrics
 from testbed.run.metrics import age_of_information, distribution, signal_lag_s, summary
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
-from testbed.run.recorder import SERIES_COLUMNS, Recorder
-from testbed.run.scenario import PilotSection, Scenario
+from testbed.run.recorder import SERIES_COLUMNS, Recorder, VehicleObserver
+from testbed.run.scenario import Scenario
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import CodedImage, ImageSource
 
@@ -71,22 +72,6 @@ class RunResult:
     seed: int
     metrics: dict[str, Any]
     recorder: Recorder
-
-
-def _pilot(section: PilotSection) -> tuple[Callable[[float], PilotSample], Callable[..., Any]]:
-    """The operator's pilot and the recorder's view of the commanded sticks (x, y, z, yaw)."""
-    if section.kind == "attitude":
-
-        def attitude(t_s: float) -> PilotSample:
-            return PilotSample((0.0,) * 6, section.attitude_deg(t_s))
-
-        return attitude, lambda t_s: (0.0, 0.0, 0.0, 0.0)
-
-    def sticks(t_s: float) -> PilotSample:
-        x, y, z, yaw = section.sticks(t_s)
-        return PilotSample((x, y, z, 0.0, 0.0, yaw))
-
-    return sticks, section.sticks
 
 
 def _image_source(images: ImagesSection) -> Callable[..., ImageSource]:
@@ -153,12 +138,17 @@ def make_vehicle_node(
         token=link.mac == "token",
         downlink_rate_hz=link.downlink_rate_hz,
         recorder=recorder,
-        commanded=_pilot(scenario.pilot)[1],
-        sample_rate_hz=scenario.metrics.sample_rate_hz,
         snapshot_period_s=link.snapshot_period_s,
         image_source=_image_source(scenario.images) if scenario.images.enabled else None,
     )
     vehicle = node.vehicle
+    observer = VehicleObserver(
+        recorder,
+        scenario.pilot.pilot(),
+        vehicle.reference_velocity,
+        scenario.metrics.sample_rate_hz,
+    )
+    vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
     for fault in scenario.faults.thrusters:
 
         def fail(_: simpy.Event, fault: Any = fault) -> None:
@@ -189,7 +179,7 @@ def make_operator_node(
     )
     return OperatorNode(
         env,
-        OperatorStation(_pilot(scenario.pilot)[0], plan),
+        OperatorStation(scenario.pilot.pilot(), plan),
         modem,
         codec=link.codec,
         ipg=link.ipg_policy if token else None,
@@ -347,7 +337,7 @@ def compute_metrics(
     after = t >= settle
     link = scenario.link
     ipg_s = (
-        link.ipg_policy.gap_for(bytes(_ORDER_PAYLOAD_BYTES + FRAME_OVERHEAD))
+        link.ipg_policy.gap_after(_ORDER_PAYLOAD_BYTES + FRAME_OVERHEAD)
         if link.mac == "token"
         else math.nan
     )

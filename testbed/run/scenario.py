@@ -53,6 +53,7 @@ from testbed.config import (
     load_toml,
     parse_override,
 )
+from testbed.operator.pilots import AttitudePilot, Pilot, ScriptedPilot, SineTerm
 from testbed.run.image_config import ImagesSection
 from testbed.vehicle.hydrodynamics import known_models
 from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
@@ -190,47 +191,15 @@ class OperatorSection:
             )
 
 
-@dataclass(frozen=True, slots=True)
-class SineTerm:
-    """One term ``amplitude · sin(2π τ / period_s + phase_rad)`` of a stick signal.
-
-    Attributes:
-        amplitude: stick units, |a| ≤ 1.
-        period_s: period [s], > 0.
-        phase_rad: phase [rad] at the pilot's start.
-    """
-
-    amplitude: float
-    period_s: float
-    phase_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        check(abs(self.amplitude) <= 1.0, "amplitude", f"must be in [-1, 1], got {self.amplitude}")
-        _positive(self.period_s, "period_s")
-        _finite(self.phase_rad, "phase_rad")
-
-    def at(self, tau_s: float) -> float:
-        """The term's value at ``tau_s`` [s] after the pilot's start."""
-        return self.amplitude * math.sin(2.0 * math.pi * tau_s / self.period_s + self.phase_rad)
-
-
-def _mix(terms: tuple[SineTerm, ...], tau_s: float) -> float:
-    return min(1.0, max(-1.0, math.fsum(term.at(tau_s) for term in terms)))
-
-
-def _sine(amplitude: float, period_s: float, tau_s: float) -> float:
-    if amplitude == 0.0:
-        return 0.0
-    return amplitude * math.sin(2.0 * math.pi * tau_s / period_s)
-
-
 _STICK_AXES = ("x", "y", "z", "yaw")
 _ATTITUDE_AMPLITUDES = ("roll_amplitude_deg", "pitch_amplitude_deg", "yaw_amplitude_deg")
 
 
 @dataclass(frozen=True, slots=True)
 class PilotSection:
-    """The scripted operator: smooth stick signals or oscillating attitude setpoints.
+    """The scripted operator's settings: smooth stick signals or oscillating attitude setpoints
+    (the pilots themselves are :class:`~testbed.operator.pilots.ScriptedPilot` and
+    :class:`~testbed.operator.pilots.AttitudePilot`; :meth:`pilot` builds the one configured).
 
     ``kind = "scripted"``: each stick is ``clip(Σ terms, −1, 1)`` of the time ``τ = t − start_s``
     since the pilot started, zero before (Centelles et al., Fig. 5: a few slow sinusoids per
@@ -277,23 +246,19 @@ class PilotSection:
         for name in unused:
             check(not getattr(self, name), name, f"only used when kind = {used_by!r}")
 
-    def sticks(self, t_s: float) -> tuple[float, float, float, float]:
-        """Surge, sway, heave and yaw sticks in [−1, 1] at time ``t_s`` [s] (zero before start)."""
-        if t_s < self.start_s:
-            return (0.0, 0.0, 0.0, 0.0)
-        tau = t_s - self.start_s
-        return (_mix(self.x, tau), _mix(self.y, tau), _mix(self.z, tau), _mix(self.yaw, tau))
-
-    def attitude_deg(self, t_s: float) -> tuple[float, float, float]:
-        """Roll, pitch and yaw setpoint [deg] at time ``t_s`` [s] (zero before start)."""
-        if t_s < self.start_s:
-            return (0.0, 0.0, 0.0)
-        tau = t_s - self.start_s
-        return (
-            _sine(self.roll_amplitude_deg, self.roll_period_s, tau),
-            _sine(self.pitch_amplitude_deg, self.pitch_period_s, tau),
-            _sine(self.yaw_amplitude_deg, self.yaw_period_s, tau),
-        )
+    def pilot(self) -> Pilot:
+        """The pilot this section configures (:mod:`testbed.operator.pilots`)."""
+        if self.kind == "attitude":
+            return AttitudePilot(
+                self.start_s,
+                self.roll_amplitude_deg,
+                self.roll_period_s,
+                self.pitch_amplitude_deg,
+                self.pitch_period_s,
+                self.yaw_amplitude_deg,
+                self.yaw_period_s,
+            )
+        return ScriptedPilot(self.start_s, self.x, self.y, self.z, self.yaw)
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,19 +10,21 @@ Frame order (each a plain ``verb_noun(world) -> None``):
   :func:`allocate_thrust` (Σ intents → allocator → thruster commands);
 - POST_UPDATE: :func:`actuate_thrusters` (commands → thruster plant, stepped over the interval
   to the next frame → the wrench the physics applies, ``T @ actual forces``, recorded),
+  :func:`meter_power` (actual forces → thruster current and energy drawn),
   :func:`publish_odometry` (sensor readings → the :class:`Odometry` the operator is sent).
 
 A node adds its link systems around these (:func:`build_schedule`'s ``inbound``/``outbound``).
 
 Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading`); the
-physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it.
+physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it (observers
+of a run, such as the recorder, read it too, from outside the schedule's control path).
 Controller objects and the allocator are mutable resources; components stay frozen values.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,6 +74,7 @@ __all__ = [
     "ControlFlags",
     "Controllers",
     "PlantTruth",
+    "PowerMeter",
     "SensorSuite",
     "SimClock",
     "actuate_thrusters",
@@ -80,6 +83,7 @@ __all__ = [
     "control_attitude",
     "control_depth",
     "ingest_commands",
+    "meter_power",
     "publish_odometry",
     "read_sensors",
     "run_pilot_interface",
@@ -107,17 +111,37 @@ class SimClock:
 
 @dataclass(slots=True)
 class PlantTruth:
-    """The physics truth at this frame, for the sensors only.
+    """The physics truth at this frame: for the sensors and for observers of the run (the
+    recorder), never for the controllers.
 
     Attributes:
         quaternion_wxyz: (4,) attitude, body → NED.
         rates_rad_s: (3,) body rates (p, q, r), FRD.
         position_ned_m: (3,) body-origin position, NED [m] (depth = down component).
+        velocity_m_s: (3,) body velocity (u, v, w) at the body origin [m/s], FRD.
     """
 
     quaternion_wxyz: Quaternion = LEVEL
     rates_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(slots=True)
+class PowerMeter:
+    """The thrusters' electrical draw: what a battery monitor would read.
+
+    Attributes:
+        supply_voltage_v: the thrusters' supply [V].
+        current_of: (n,) thruster forces [N] → total current [A] (the T200 model's).
+        current_a: total current of this frame's actual forces [A].
+        energy_j: energy drawn since the start [J], ``Σ current · voltage · dt``.
+    """
+
+    supply_voltage_v: float
+    current_of: Callable[[Sequence[float]], float]
+    current_a: float = 0.0
+    energy_j: float = 0.0
 
 
 @dataclass(slots=True)
@@ -581,6 +605,15 @@ def actuate_thrusters(world: World) -> None:
     world.set(ctl.vehicle, AppliedWrench(act.requested, act.plant_wrench))
 
 
+def meter_power(world: World) -> None:
+    """POST_UPDATE: the current of the thrusters' actual forces, and the energy it draws over
+    the time since the last frame."""
+    meter = world.resource(PowerMeter)
+    current = meter.current_of(world.resource(Actuation).actual_forces_n)
+    meter.current_a = current
+    meter.energy_j += current * meter.supply_voltage_v * world.resource(SimClock).dt_s
+
+
 def wrench_of(forces_n: Sequence[float], columns: Sequence[Sequence[float]]) -> Wrench6:
     """``T @ forces`` as a (6,) tuple [N, N·m], body FRD (scalar loop: n is small)."""
     x = y = z = k = m = n = 0.0
@@ -636,6 +669,7 @@ def build_schedule(inbound: Sequence[System] = (), outbound: Sequence[System] = 
     schedule.add(Phase.UPDATE, control_attitude)
     schedule.add(Phase.UPDATE, allocate_thrust)
     schedule.add(Phase.POST_UPDATE, actuate_thrusters)
+    schedule.add(Phase.POST_UPDATE, meter_power)
     schedule.add(Phase.POST_UPDATE, publish_odometry)
     for system in outbound:
         schedule.add(Phase.POST_UPDATE, system)

@@ -78,6 +78,7 @@ from testbed.vehicle.systems import (
     Actuation,
     Controllers,
     PlantTruth,
+    PowerMeter,
     SensorSuite,
     SimClock,
     build_schedule,
@@ -301,7 +302,9 @@ class Vehicle:
         self.actuation = Actuation(self.allocator, self.dynamics, columns)
         self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
         self.truth = PlantTruth()
-        for resource in (self.clock, self.truth, self.sensors, self.controllers, self.actuation):
+        self.power = PowerMeter(config.supply_voltage_v, t200.total_current_floats)
+        resources = (self.clock, self.truth, self.sensors, self.controllers, self.actuation)
+        for resource in (*resources, self.power):
             world.insert_resource(resource)
         # operator intents written locally (scripted runs) live on their own entity
         self.operator_entity: Entity = world.spawn(Replicate(), origin=Origin.REMOTE)
@@ -343,6 +346,7 @@ class Vehicle:
         truth.quaternion_wxyz = quaternion
         truth.rates_rad_s = (nu[3], nu[4], nu[5])
         truth.position_ned_m = position
+        truth.velocity_m_s = (nu[0], nu[1], nu[2])
         period = self._control_period_s
         clock = self.clock
         clock.time_s = now

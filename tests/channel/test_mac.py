@@ -65,7 +65,11 @@ def token_run(
         answered.append(payload)
         return REPLY
 
-    env.process(run_token_master(env, op, lambda: ORDER, ipg, count=cycles))
+    def send_order() -> int:
+        op.send(ORDER)
+        return len(ORDER)
+
+    env.process(run_token_master(env, send_order, ipg, count=cycles))
     env.process(run_token_slave(env, rov, reply, FrameDecoder()))
     env.run()
     return trace, op, rov, answered
@@ -152,8 +156,10 @@ def test_free_access_collides_unless_the_second_sender_hears_the_first(
     medium = Medium(env, S100, np.random.default_rng(0))
     a, b = medium.attach("a"), medium.attach("b")
     n, period = 50, 2.0
-    env.process(run_periodic_sender(env, a, lambda: bytes(30), period, count=n))
-    env.process(run_periodic_sender(env, b, lambda: bytes(30), period, count=n, start_s=offset_s))
+    env.process(run_periodic_sender(env, lambda: a.send(bytes(30)), period, count=n))
+    env.process(
+        run_periodic_sender(env, lambda: b.send(bytes(30)), period, count=n, start_s=offset_s)
+    )
     env.run()
     lost = a.counters.rx_collided + b.counters.rx_collided
     assert lost == (2 * n if collisions else 0)
@@ -164,8 +170,8 @@ def test_periodic_sender_timing_and_misuse() -> None:
     env = simpy.Environment()
     medium = Medium(env, S100, np.random.default_rng(0))
     a, b = medium.attach("a"), medium.attach("b")
-    env.process(run_periodic_sender(env, a, lambda: b"x", 3.0, count=4, start_s=1.0))
+    env.process(run_periodic_sender(env, lambda: a.send(b"x"), 3.0, count=4, start_s=1.0))
     env.run()
     assert [d.t_tx_start_s for d in b.drain()] == [1.0, 4.0, 7.0, 10.0]
     with pytest.raises(ValueError):
-        next(run_periodic_sender(env, a, lambda: b"x", 0.0))
+        next(run_periodic_sender(env, lambda: a.send(b"x"), 0.0))

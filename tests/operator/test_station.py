@@ -20,19 +20,26 @@ from testbed.common.components import (
 from testbed.common.geometry import Quaternion
 from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
 from testbed.ecs import Phase, Replicate, World
-from testbed.operator.station import OperatorStation, PilotSample, SessionPlan
+from testbed.operator.pilots import PilotSample, ScriptedPilot
+from testbed.operator.station import OperatorStation, SessionPlan
 
-STILL = PilotSample((0.0,) * 6)
+
+class FnPilot:
+    """A pilot from a function of time."""
+
+    def __init__(self, fn: Callable[[float], PilotSample]) -> None:
+        self.sample = fn
 
 
-def ramp_pilot(calls: list[float]) -> Callable[[float], PilotSample]:
+class ramp_pilot:  # noqa: N801 - used like the factory function it replaced
     """A pilot whose surge stick is the time it is asked at (and which logs the times)."""
 
-    def pilot(t_s: float) -> PilotSample:
-        calls.append(t_s)
-        return PilotSample((t_s, 0.0, -0.5, 0.0, 0.0, 0.25))
+    def __init__(self, calls: list[float]) -> None:
+        self.calls = calls
 
-    return pilot
+    def sample(self, t_s: float) -> PilotSample:
+        self.calls.append(t_s)
+        return PilotSample((t_s, 0.0, -0.5, 0.0, 0.0, 0.25))
 
 
 def euler_to_quat_wxyz(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quaternion:
@@ -74,13 +81,13 @@ def test_pilot_sampled_every_frame_with_increasing_seq_and_sample_time() -> None
 
 
 def test_intents_entity_is_replicated() -> None:
-    station = OperatorStation(lambda t: STILL, SessionPlan())
+    station = OperatorStation(ScriptedPilot(), SessionPlan())
     assert station.world.get(station.entity, Replicate) == Replicate()
 
 
 def test_session_requested_once_at_arm_time() -> None:
     plan = SessionPlan(mode=ControlMode.STABILIZE, arm_at_s=1.0, depth_m=2.5, precision=True)
-    station = OperatorStation(lambda t: STILL, plan)
+    station = OperatorStation(ScriptedPilot(), plan)
     world, entity = station.world, station.entity
     for t in (0.0, 0.5, 0.999):
         station.frame(t)
@@ -103,7 +110,7 @@ def test_session_requested_once_at_arm_time() -> None:
 
 
 def test_session_without_depth_holds_the_present_depth() -> None:
-    station = OperatorStation(lambda t: STILL, SessionPlan(arm_at_s=0.0))
+    station = OperatorStation(ScriptedPilot(), SessionPlan(arm_at_s=0.0))
     station.frame(0.0)
     assert station.world.get(station.entity, DepthSetpoint) is None
     assert station.world.get(station.entity, ModeRequest) == ModeRequest(ControlMode.DEPTH_HOLD)
@@ -111,7 +118,7 @@ def test_session_without_depth_holds_the_present_depth() -> None:
 
 
 def test_late_first_frame_still_requests_the_session() -> None:
-    station = OperatorStation(lambda t: STILL, SessionPlan(arm_at_s=1.0))
+    station = OperatorStation(ScriptedPilot(), SessionPlan(arm_at_s=1.0))
     station.frame(5.0)
     assert station.world.get(station.entity, ArmRequest) == ArmRequest(True, 1)
 
@@ -123,7 +130,7 @@ def test_attitude_pilot_writes_the_attitude_setpoint(
     attitude_deg: tuple[float, float, float],
 ) -> None:
     station = OperatorStation(
-        lambda t: PilotSample((0.3,) * 6, attitude_deg), SessionPlan(arm_at_s=100.0)
+        FnPilot(lambda t: PilotSample((0.3,) * 6, attitude_deg)), SessionPlan(arm_at_s=100.0)
     )
     station.frame(0.0)
     setpoint = station.world.get(station.entity, AttitudeSetpoint)
@@ -141,7 +148,7 @@ def test_attitude_pilot_writes_the_attitude_setpoint(
 
 def test_unchanged_attitude_is_not_a_change() -> None:
     station = OperatorStation(
-        lambda t: PilotSample((0.0,) * 6, (0.0, 0.0, 10.0 if t < 1.0 else 20.0)),
+        FnPilot(lambda t: PilotSample((0.0,) * 6, (0.0, 0.0, 10.0 if t < 1.0 else 20.0))),
         SessionPlan(arm_at_s=100.0),
     )
     world = station.world
@@ -176,7 +183,7 @@ def test_added_systems_run_around_the_pilot_in_phase_order() -> None:
 
 
 def test_vehicle_state_age_over_the_teleop_codec() -> None:
-    station = OperatorStation(lambda t: STILL, SessionPlan())
+    station = OperatorStation(ScriptedPilot(), SessionPlan())
     assert station.vehicle_odometry() is None
     assert station.vehicle_state_age_s(3.0) == math.inf
 
@@ -197,7 +204,7 @@ def test_vehicle_state_age_over_the_teleop_codec() -> None:
 def test_station_session_through_the_teleop_codec() -> None:
     """The first order after the arm time carries the pilot's sticks, the mode and the arm flag."""
     station = OperatorStation(
-        lambda t: PilotSample((0.5, 0.0, -0.25, 0.0, 0.0, 1.0)),
+        FnPilot(lambda t: PilotSample((0.5, 0.0, -0.25, 0.0, 0.0, 1.0))),
         SessionPlan(mode=ControlMode.DEPTH_HOLD, arm_at_s=0.0, depth_m=1.0),
     )
     end = TeleopOperatorEnd(station.world, station.entity)

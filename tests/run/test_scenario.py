@@ -22,8 +22,9 @@ from testbed.run.scenario import (
     load_scenario,
     scenario_names,
 )
-from testbed.vehicle.experiment import PAPER_EXPERIMENTS
 from testbed.vehicle.thruster_config import load_thruster_config
+from testbed.vehicle.vehicle import VehicleConfig
+from testbed.vehicle.water_current import WaterCurrent
 
 PACKAGED = [
     "ecs-rollpitch-6dof-v1",
@@ -136,7 +137,8 @@ def test_teleop_scenarios_share_pilot_and_bound_the_sticks(scenario_id: str) -> 
         assert len({t.period_s for t in terms}) == len(terms)
     assert sum(abs(t.amplitude) for t in s.pilot.x) <= 0.35 + 1e-12  # modest surge
     start = s.pilot.start_s
-    assert s.pilot.sticks(start) == pytest.approx((0.0, 0.0, 0.0, 0.0), abs=1e-12)  # no jump
+    no_jump = pytest.approx((0.0, 0.0, 0.0, 0.0), abs=1e-12)
+    assert s.pilot.pilot().sticks(start) == no_jump
 
 
 def test_tether_and_m64_change_only_the_link_and_what_it_needs() -> None:
@@ -194,28 +196,39 @@ def test_thruster_failure_scenario() -> None:
     assert s.link.preset == "s100"
     ecs = load_scenario("ecs-yaw-4h-v1")
     assert s.vehicle == ecs.vehicle
-    assert s.pilot.attitude_deg(7.3) == ecs.pilot.attitude_deg(7.3)
+    assert s.pilot.pilot().attitude_deg(7.3) == ecs.pilot.pilot().attitude_deg(7.3)
+
+
+ECS_SETPOINTS_DEG = {  # (amplitude [deg], period [s]) of roll, pitch, yaw (the paper gives none)
+    "ecs-4h": ((0.0, 1.0), (0.0, 1.0), (20.0, 25.0)),
+    "ecs-3h": ((0.0, 1.0), (0.0, 1.0), (20.0, 25.0)),
+    "ecs-2h": ((0.0, 1.0), (0.0, 1.0), (20.0, 25.0)),
+    "ecs-6dof": ((15.0, 20.0), (10.0, 30.0), (0.0, 1.0)),
+}
 
 
 @pytest.mark.parametrize(("scenario_id", "layout"), sorted(ECS.items()))
-def test_ecs_scenarios_mirror_the_paper_experiments(scenario_id: str, layout: str) -> None:
+def test_ecs_scenarios_are_the_paper_experiments(scenario_id: str, layout: str) -> None:
     s = load_scenario(scenario_id)
-    experiment = PAPER_EXPERIMENTS[layout]
-    assert s.vehicle == experiment.vehicle_config()
-    assert s.vehicle.current.velocity_ned_mps == (0.1, 0.0, 0.0)
-    assert s.operator.depth_m == experiment.depth_m
-    assert s.duration_s == experiment.duration_s
-    assert s.metrics.settle_s == experiment.settle_s
-    assert 1.0 / s.metrics.sample_rate_hz == pytest.approx(experiment.sample_period_s)
-    assert 1.0 / s.pilot.setpoint_rate_hz == pytest.approx(experiment.setpoint_period_s)
+    # depth held at 0.3 m in a 0.1 m/s current, default gains and sensor noise
+    assert s.vehicle == VehicleConfig(
+        thrusters=layout,
+        current=WaterCurrent(velocity_ned_mps=(0.1, 0.0, 0.0)),
+        start_position_ned_m=(0.0, 0.0, 0.3),
+    )
+    assert s.operator.depth_m == 0.3
+    assert s.duration_s == 60.0
+    assert s.metrics.settle_s == 10.0
+    assert 1.0 / s.metrics.sample_rate_hz == pytest.approx(0.05)
+    assert 1.0 / s.pilot.setpoint_rate_hz == pytest.approx(0.025)
     assert (s.link.preset, s.link.codec) == ("tether", "changeset")
     for t in np.linspace(0.0, s.duration_s, 241):
         expected = [
-            math.degrees(p.at(float(t)))
-            for p in (experiment.roll, experiment.pitch, experiment.yaw)
+            amplitude * math.sin(2.0 * math.pi * float(t) / period)
+            for amplitude, period in ECS_SETPOINTS_DEG[layout]
         ]
-        assert s.pilot.attitude_deg(float(t)) == pytest.approx(expected, abs=1e-9)
-    assert s.pilot.sticks(30.0) == (0.0, 0.0, 0.0, 0.0)
+        assert s.pilot.pilot().attitude_deg(float(t)) == pytest.approx(expected, abs=1e-9)
+    assert s.pilot.pilot().sample(30.0).sticks == (0.0,) * 6
 
 
 # --- pilot ---------------------------------------------------------------------------------------
@@ -234,7 +247,7 @@ def test_sticks_match_the_closed_form_of_the_file() -> None:
             phase = term.get("phase_rad", 0.0)
             total += term["amplitude"] * np.sin(2 * np.pi * tau / term["period_s"] + phase)
         expected.append(np.where(times < raw["start_s"], 0.0, np.clip(total, -1.0, 1.0)))
-    got = np.array([pilot.sticks(float(t)) for t in times]).T
+    got = np.array([pilot.pilot().sticks(float(t)) for t in times]).T
     np.testing.assert_allclose(got, np.array(expected), atol=1e-12)
 
 
@@ -244,12 +257,12 @@ def test_sticks_are_clipped_and_zero_before_start() -> None:
         x=(SineTerm(0.9, 10.0), SineTerm(0.8, 10.0)),  # peak 1.7 at τ = 2.5 s
         yaw=(SineTerm(-1.0, 4.0, math.pi / 2),),
     )
-    assert pilot.sticks(1.999) == (0.0, 0.0, 0.0, 0.0)
-    assert pilot.sticks(4.5)[0] == 1.0
-    assert pilot.sticks(9.5)[0] == -1.0
-    assert pilot.sticks(2.0 + 1.0)[0] == pytest.approx(1.7 * math.sin(2 * math.pi / 10))
-    assert pilot.sticks(2.0)[3] == pytest.approx(-1.0)  # -sin(π/2)
-    assert pilot.sticks(4.0)[3] == pytest.approx(1.0)
+    assert pilot.pilot().sticks(1.999) == (0.0, 0.0, 0.0, 0.0)
+    assert pilot.pilot().sticks(4.5)[0] == 1.0
+    assert pilot.pilot().sticks(9.5)[0] == -1.0
+    assert pilot.pilot().sticks(2.0 + 1.0)[0] == pytest.approx(1.7 * math.sin(2 * math.pi / 10))
+    assert pilot.pilot().sticks(2.0)[3] == pytest.approx(-1.0)  # -sin(π/2)
+    assert pilot.pilot().sticks(4.0)[3] == pytest.approx(1.0)
 
 
 def test_pilot_kinds_reject_each_others_settings() -> None:

@@ -1,0 +1,162 @@
+"""Pilots: who or what moves the operator's sticks — the seam every new pilot plugs into.
+
+A :class:`Pilot` is sampled by the operator station once per operator frame
+(:func:`~testbed.operator.station.sample_pilot`) and returns a :class:`PilotSample`: six stick
+positions, or an attitude setpoint for setpoint-driven runs. The station turns that into the
+intents the link carries; a pilot never touches the link or the vehicle. Scripted pilots are
+pure functions of time, so observers of a run (the recorder) may sample them again to know what
+the pilot was commanding at any instant; a live pilot (a person at a console, a ground station)
+returns what it holds now.
+
+Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig. 5) and
+:class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints). A scenario
+configures them (:class:`~testbed.run.scenario.PilotSection`); it does not implement them.
+
+Imports: ``config`` and the standard library only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+from testbed.config import check
+
+__all__ = [
+    "AttitudePilot",
+    "Pilot",
+    "PilotSample",
+    "ScriptedPilot",
+    "SineTerm",
+    "Sticks",
+]
+
+Sticks = tuple[float, float, float, float, float, float]
+"""(6,) stick positions in [−1, 1]: surge, sway, heave (+ down), roll, pitch, yaw."""
+
+_NO_STICKS: Sticks = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class PilotSample:
+    """What the pilot asks for at one instant.
+
+    Attributes:
+        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
+        attitude_deg: (3,) roll, pitch, yaw setpoint [deg] for setpoint-driven runs (the ECS
+            paper's attitude experiment), or None when the pilot flies by sticks.
+    """
+
+    sticks: Sticks
+    attitude_deg: tuple[float, float, float] | None = None
+
+
+class Pilot(Protocol):
+    """Anything that can be asked, at an operator time, what it commands."""
+
+    def sample(self, t_s: float) -> PilotSample:
+        """What the pilot commands at operator time ``t_s`` [s]."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class SineTerm:
+    """One term ``amplitude · sin(2π τ / period_s + phase_rad)`` of a stick signal.
+
+    Attributes:
+        amplitude: stick units, |a| ≤ 1.
+        period_s: period [s], > 0.
+        phase_rad: phase [rad] at the pilot's start.
+    """
+
+    amplitude: float
+    period_s: float
+    phase_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        check(abs(self.amplitude) <= 1.0, "amplitude", f"must be in [-1, 1], got {self.amplitude}")
+        check(
+            math.isfinite(self.period_s) and self.period_s > 0.0,
+            "period_s",
+            f"must be > 0 and finite, got {self.period_s}",
+        )
+        check(math.isfinite(self.phase_rad), "phase_rad", f"must be finite, got {self.phase_rad}")
+
+    def at(self, tau_s: float) -> float:
+        """The term's value at ``tau_s`` [s] after the pilot's start."""
+        return self.amplitude * math.sin(2.0 * math.pi * tau_s / self.period_s + self.phase_rad)
+
+
+def _mix(terms: tuple[SineTerm, ...], tau_s: float) -> float:
+    return min(1.0, max(-1.0, math.fsum(term.at(tau_s) for term in terms)))
+
+
+def _sine(amplitude: float, period_s: float, tau_s: float) -> float:
+    if amplitude == 0.0:
+        return 0.0
+    return amplitude * math.sin(2.0 * math.pi * tau_s / period_s)
+
+
+@dataclass(frozen=True, slots=True)
+class ScriptedPilot:
+    """Smooth stick signals: each stick is ``clip(Σ terms, −1, 1)`` of ``τ = t − start_s``,
+    zero before the start (Centelles et al., Fig. 5: a few slow sinusoids per axis).
+
+    Attributes:
+        start_s: when the pilot starts [s].
+        x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms.
+    """
+
+    start_s: float = 0.0
+    x: tuple[SineTerm, ...] = ()
+    y: tuple[SineTerm, ...] = ()
+    z: tuple[SineTerm, ...] = ()
+    yaw: tuple[SineTerm, ...] = ()
+
+    def sticks(self, t_s: float) -> tuple[float, float, float, float]:
+        """Surge, sway, heave and yaw sticks in [−1, 1] at ``t_s`` [s] (zero before start)."""
+        if t_s < self.start_s:
+            return (0.0, 0.0, 0.0, 0.0)
+        tau = t_s - self.start_s
+        return (_mix(self.x, tau), _mix(self.y, tau), _mix(self.z, tau), _mix(self.yaw, tau))
+
+    def sample(self, t_s: float) -> PilotSample:
+        """The sticks at ``t_s`` [s]; roll and pitch sticks stay centred."""
+        x, y, z, yaw = self.sticks(t_s)
+        return PilotSample((x, y, z, 0.0, 0.0, yaw))
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudePilot:
+    """The ECS paper's attitude experiment: no sticks; roll, pitch and yaw setpoints
+    ``A · sin(2π τ / T)`` [deg] of ``τ = t − start_s``, zero before the start.
+
+    Attributes:
+        start_s: when the pilot starts [s].
+        roll_amplitude_deg, pitch_amplitude_deg, yaw_amplitude_deg: amplitudes ``A`` [deg].
+        roll_period_s, pitch_period_s, yaw_period_s: periods ``T`` [s], > 0.
+    """
+
+    start_s: float = 0.0
+    roll_amplitude_deg: float = 0.0
+    roll_period_s: float = 20.0
+    pitch_amplitude_deg: float = 0.0
+    pitch_period_s: float = 30.0
+    yaw_amplitude_deg: float = 0.0
+    yaw_period_s: float = 25.0
+
+    def attitude_deg(self, t_s: float) -> tuple[float, float, float]:
+        """Roll, pitch and yaw setpoint [deg] at ``t_s`` [s] (zero before start)."""
+        if t_s < self.start_s:
+            return (0.0, 0.0, 0.0)
+        tau = t_s - self.start_s
+        return (
+            _sine(self.roll_amplitude_deg, self.roll_period_s, tau),
+            _sine(self.pitch_amplitude_deg, self.pitch_period_s, tau),
+            _sine(self.yaw_amplitude_deg, self.yaw_period_s, tau),
+        )
+
+    def sample(self, t_s: float) -> PilotSample:
+        """Centred sticks and the setpoint at ``t_s`` [s]."""
+        return PilotSample(_NO_STICKS, self.attitude_deg(t_s))
