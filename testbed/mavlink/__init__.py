@@ -1,1 +1,0 @@
-"""mavlink: reserved for a later issue (see DESIGN.md); empty for now."""
