@@ -3,7 +3,7 @@
 The issue's aim: 1,000 runs of 60 s in under 10 minutes on two cores (100 runs/min), and
 near-linear scaling with workers. The subset is every grid point of ber-vs-lag-v1 (6 BER × 4
 gaps) with seed 0 only: 24 runs of ``duration_s = 60``, ``metrics.settle_s = 10``, through
-:func:`testbed.sweep.core.run_sweep` on the local process pool (spawned workers, journal and tables
+:func:`testbed.sweep.run_sweep` on the local process pool (spawned workers, journal and tables
 written as in ``testbed sweep``). Reported: runs per minute for each worker count, their ratio
 (2.0 would be linear), and the projected wall time of 1,000 such runs.
 
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from testbed.sweep.core import load_sweep, run_sweep
+from testbed.sweep import load_sweep, run_sweep
 
 OVERRIDES = ("duration_s=60", "metrics.settle_s=10")
 SEEDS = (0,)

@@ -9,7 +9,8 @@ The link is simpy's ``Cable`` shape: a :class:`Medium` apart from the nodes, eac
 - :mod:`~testbed.channel.medium` — :class:`Medium`, :class:`Modem`, :class:`Delivery`.
 - :mod:`~testbed.channel.errors` — independent and Gilbert–Elliott bit errors.
 - :mod:`~testbed.channel.mac` — token passing (the paper's) and free access, as simpy processes.
-- :mod:`~testbed.channel.trace` — typed link events.
+- :mod:`~testbed.channel.trace` — typed link events, and what became of each frame
+  (:func:`frame_outcomes`, :func:`transmissions`, :func:`direction_counts`).
 - :mod:`~testbed.channel.probe` — the one-way probe behind ``testbed link``.
 
 Depends on :mod:`testbed.protocol`, :mod:`testbed.config`, simpy and numpy only.
@@ -31,15 +32,30 @@ from .mac import (
 )
 from .medium import Delivery, Medium, Modem, ModemCounters, Position
 from .probe import ProbeResult, run_probe
-from .trace import EventKind, LinkEvent, Trace
+from .trace import (
+    RECEPTION_OUTCOMES,
+    DirectionCounts,
+    EventKind,
+    FrameOutcome,
+    LinkEvent,
+    Trace,
+    Transmission,
+    direction_counts,
+    frame_outcomes,
+    transmissions,
+    worst_outcome,
+)
 
 __all__ = [
+    "RECEPTION_OUTCOMES",
     "TELEROBOTICS_2018",
     "TELEROBOTICS_2019",
     "TELEROBOTICS_2021",
     "Delivery",
+    "DirectionCounts",
     "EventKind",
     "Fixed",
+    "FrameOutcome",
     "FromFrameSize",
     "GilbertElliott",
     "IpgPolicy",
@@ -52,10 +68,15 @@ __all__ = [
     "ProbeResult",
     "Propagation",
     "Trace",
+    "Transmission",
+    "direction_counts",
+    "frame_outcomes",
     "load_link_config",
     "preset_names",
     "run_periodic_sender",
     "run_probe",
     "run_token_master",
     "run_token_slave",
+    "transmissions",
+    "worst_outcome",
 ]

@@ -32,6 +32,7 @@ __all__ = [
     "age_of_information",
     "aoi_periodic_closed_form",
     "distribution",
+    "mean_ci95_half_width",
     "signal_lag_s",
     "summary",
 ]
@@ -62,6 +63,27 @@ def distribution(values: Sequence[float]) -> dict[str, float]:
         "std": float(array.std()),
         "p95": float(np.percentile(np.abs(array), 95)),
     }
+
+
+def mean_ci95_half_width(values: Sequence[float] | np.ndarray) -> float:
+    """Half-width of the 95 % Student-t confidence interval of the mean of ``values``.
+
+    ``t(0.975, n − 1) · s / √n`` with ``s`` the sample standard deviation (``ddof = 1``): the
+    interval is ``mean ± half-width``.
+
+    Args:
+        values: the samples (in the unit of the result).
+
+    Returns:
+        The half-width, in the unit of ``values``; NaN with fewer than two values.
+    """
+    from scipy import stats  # scipy only when intervals are asked for
+
+    array = np.asarray(values, dtype=float)
+    n = array.size
+    if n < 2:
+        return math.nan
+    return float(stats.t.ppf(0.975, n - 1)) * float(array.std(ddof=1)) / math.sqrt(n)
 
 
 def age_of_information(

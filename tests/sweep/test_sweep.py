@@ -22,7 +22,7 @@ from testbed.cli.main import main
 from testbed.config import ConfigError, parse_override
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
-from testbed.sweep.core import (
+from testbed.sweep import (
     EXCLUDED_METRICS,
     Sweep,
     aggregate_rows,

@@ -1,0 +1,289 @@
+"""The sweep file: its TOML layout, the loaded :class:`Sweep` and its run list.
+
+:func:`load_sweep` reads a packaged sweep (``testbed/scenarios/sweeps/*.toml``) or a file, checks
+that every grid point gives a scenario that loads, and :func:`expand` turns it into one
+:class:`RunSpec` per (point, seed): points are the Cartesian product of the axes in file order
+(last axis fastest). :func:`toml_literal` writes a value so that ``--set`` parsing reads it back
+exactly; grid values travel to the runs that way.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from testbed.config import ConfigError, build, check, load_toml
+
+__all__ = [
+    "DEFAULT_METRICS",
+    "RESERVED_COLUMNS",
+    "SCHEMA_VERSION",
+    "RangeSpec",
+    "RunSpec",
+    "Sweep",
+    "describe_point",
+    "expand",
+    "load_sweep",
+    "sweep_names",
+    "toml_literal",
+]
+
+SCHEMA_VERSION = 1
+RESERVED_COLUMNS = ("point", "seed", "status", "error")
+"""Columns every result row starts with (grid columns follow ``seed``)."""
+DEFAULT_METRICS = (
+    "link.uplink.per",
+    "link.downlink.per",
+    "command_lag_s.mean",
+    "command_age_s.mean",
+    "odometry_age_s.mean",
+    "energy_wh",
+)
+_SIGNIFICANT_DIGITS = 12
+_SWEEP_DIR = "scenarios/sweeps"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RangeSpec:
+    """A numeric grid axis given as a range.
+
+    Attributes:
+        scale: ``"linear"`` (evenly spaced) or ``"log"`` (evenly spaced exponents).
+        start, stop: the end values, both included; > 0 for ``"log"``.
+        num: number of values, ≥ 1 (1 gives ``start``).
+        include: extra values merged in (e.g. ``[0.0]`` in front of a log range of BER).
+    """
+
+    scale: Literal["linear", "log"]
+    start: float
+    stop: float
+    num: int
+    include: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        check(math.isfinite(self.start), "start", f"must be finite, got {self.start}")
+        check(math.isfinite(self.stop), "stop", f"must be finite, got {self.stop}")
+        check(self.num >= 1, "num", f"must be ≥ 1, got {self.num}")
+        if self.scale == "log":
+            check(self.start > 0.0, "start", f"must be > 0 on a log scale, got {self.start}")
+            check(self.stop > 0.0, "stop", f"must be > 0 on a log scale, got {self.stop}")
+
+    def values(self) -> tuple[float, ...]:
+        """The axis values, ascending, rounded to 12 significant digits (``1e-05``, not
+        ``1.0000000000000001e-05``), duplicates removed."""
+        if self.scale == "log":  # with num = 1 both give [start]
+            raw = list(np.geomspace(self.start, self.stop, self.num))
+        else:
+            raw = list(np.linspace(self.start, self.stop, self.num))
+        rounded = {float(f"{v:.{_SIGNIFICANT_DIGITS}g}") for v in (*raw, *self.include)}
+        return tuple(sorted(rounded))
+
+
+@dataclass(frozen=True, slots=True)
+class _SweepFile:
+    schema: int
+    id: str
+    description: str
+    scenario: str
+    grid: dict[str, Any]
+    seeds: int | tuple[int, ...] = 1
+    set: dict[str, Any] = field(default_factory=dict)
+    metrics: tuple[str, ...] = DEFAULT_METRICS
+
+    def __post_init__(self) -> None:
+        check(self.schema == SCHEMA_VERSION, "schema", f"unsupported version {self.schema}")
+        if isinstance(self.seeds, int):
+            check(self.seeds >= 1, "seeds", f"must be ≥ 1 (a count) or a list, got {self.seeds}")
+        else:
+            check(len(self.seeds) > 0, "seeds", "must not be empty")
+            check(all(s >= 0 for s in self.seeds), "seeds", "must be ≥ 0")
+            check(len(set(self.seeds)) == len(self.seeds), "seeds", "must not repeat")
+        check(bool(self.grid), "grid", "must have at least one axis")
+        check(len(set(self.metrics)) == len(self.metrics), "metrics", "must not repeat")
+
+
+@dataclass(frozen=True, slots=True)
+class Sweep:
+    """A loaded sweep.
+
+    Attributes:
+        id: the sweep id (``ber-vs-lag-v1``).
+        description: one line.
+        scenario: the base scenario: a packaged id or an absolute ``.toml`` path.
+        overrides: ``KEY=VALUE`` overrides applied to every run (the file's ``[set]``, then
+            the CLI's ``--set``).
+        axes: ``(dotted key, values)`` per grid axis, in file order.
+        seeds: the seeds of every point.
+        metrics: flattened metric names to aggregate (``command_lag_s.mean``).
+        source: where it was loaded from, for messages.
+    """
+
+    id: str
+    description: str
+    scenario: str
+    overrides: tuple[str, ...]
+    axes: tuple[tuple[str, tuple[Any, ...]], ...]
+    seeds: tuple[int, ...]
+    metrics: tuple[str, ...]
+    source: str
+
+    @property
+    def points(self) -> list[dict[str, Any]]:
+        """Every grid point as ``{key: value}``, last axis fastest."""
+        keys = [key for key, _ in self.axes]
+        return [
+            dict(zip(keys, combo, strict=True))
+            for combo in itertools.product(*(v for _, v in self.axes))
+        ]
+
+    def identity(self) -> dict[str, Any]:
+        """What a results directory must match to be resumed (not the aggregated metrics)."""
+        return {
+            "id": self.id,
+            "scenario": self.scenario,
+            "overrides": list(self.overrides),
+            "axes": [[key, [toml_literal(v) for v in values]] for key, values in self.axes],
+            "seeds": list(self.seeds),
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class RunSpec:
+    """One independent run: base scenario, overrides (fixed ones, then the point's), seed."""
+
+    point: int
+    seed: int
+    scenario: str
+    overrides: tuple[str, ...]
+
+
+def sweep_names() -> list[str]:
+    """Ids of the packaged sweeps (``testbed/scenarios/sweeps/*.toml``), sorted."""
+    folder = resources.files("testbed").joinpath(_SWEEP_DIR)
+    return sorted(
+        e.name.removesuffix(".toml") for e in folder.iterdir() if e.name.endswith(".toml")
+    )
+
+
+def toml_literal(value: Any) -> str:
+    """``value`` as a TOML value, so it survives ``--set``-style parsing exactly."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)  # repr round-trips floats; TOML reads inf, nan, 1e-05
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(toml_literal(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        items = ", ".join(f"{json.dumps(str(k))} = {toml_literal(v)}" for k, v in value.items())
+        return "{" + items + "}"
+    raise TypeError(f"cannot write {value!r} as TOML")  # TOML data holds no other types
+
+
+def _flatten_table(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level."""
+    flat: dict[str, Any] = {}
+    for key, value in table.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, Mapping) and "scale" not in value:
+            flat.update(_flatten_table(value, f"{dotted}."))
+        else:
+            flat[dotted] = value
+    return flat
+
+
+def load_sweep(name_or_path: str, overrides: Sequence[str] = ()) -> Sweep:
+    """Load a packaged sweep by id, or a sweep file by path, and check every point loads.
+
+    Args:
+        name_or_path: a packaged id (:func:`sweep_names`) or a ``.toml`` path. A relative
+            ``scenario`` path in the file is taken relative to the file.
+        overrides: ``KEY=VALUE`` scenario overrides (the CLI's ``--set``) for every run.
+
+    Raises:
+        ConfigError: one line naming the file and key: missing file, malformed TOML, unknown or
+            missing key, bad value, a key both fixed and swept, or a grid point whose scenario
+            does not load (named by its values).
+    """
+    from testbed.run.scenario import load_scenario
+
+    text = str(name_or_path)
+    base_dir: Path | None = None
+    if text.endswith(".toml") or "/" in text or "\\" in text or Path(text).is_file():
+        source, data = text, load_toml(text)
+        base_dir = Path(text).resolve().parent
+    else:
+        known = sweep_names()
+        if text not in known:
+            raise ConfigError(f"sweep {text!r}: unknown sweep id (known: {', '.join(known)})")
+        source = f"package:{text}"
+        entry = resources.files("testbed").joinpath(_SWEEP_DIR, f"{text}.toml")
+        with resources.as_file(entry) as path:
+            data = load_toml(path)
+    top = build(_SweepFile, data, source=source)
+    if source.startswith("package:") and top.id != text:
+        raise ConfigError(f"{source}: id: must equal the file name, got {top.id!r}")
+    scenario = top.scenario
+    if base_dir is not None and (scenario.endswith(".toml") or "/" in scenario):
+        scenario = str((base_dir / scenario).resolve())
+    fixed = [f"{k}={toml_literal(v)}" for k, v in _flatten_table(top.set).items()]
+    axes = []
+    for key, spec in _flatten_table(top.grid).items():
+        where = f"grid.{key}"
+        if key in RESERVED_COLUMNS:
+            raise ConfigError(f"{source}: {where}: {key!r} cannot be swept (use seeds)")
+        if key in _flatten_table(top.set):
+            raise ConfigError(f"{source}: {where}: also fixed in [set]")
+        values: tuple[Any, ...]
+        if isinstance(spec, Mapping):
+            values = build(RangeSpec, spec, source=source, prefix=f"{where}.").values()
+        elif isinstance(spec, list) and spec:
+            values = tuple(spec)
+        else:
+            raise ConfigError(f"{source}: {where}: expected a non-empty array or a range table")
+        axes.append((key, values))
+    seeds = tuple(range(top.seeds)) if isinstance(top.seeds, int) else top.seeds
+    sweep = Sweep(
+        id=top.id,
+        description=top.description,
+        scenario=scenario,
+        overrides=(*fixed, *overrides),
+        axes=tuple(axes),
+        seeds=seeds,
+        metrics=top.metrics,
+        source=source,
+    )
+    load_scenario(sweep.scenario, sweep.overrides)  # the base alone: its errors name --set
+    for point in sweep.points:
+        try:
+            load_scenario(sweep.scenario, (*sweep.overrides, *_point_overrides(point)))
+        except ConfigError as err:
+            raise ConfigError(f"{source}: grid point {describe_point(point)}: {err}") from None
+    return sweep
+
+
+def _point_overrides(point: Mapping[str, Any]) -> tuple[str, ...]:
+    return tuple(f"{key}={toml_literal(value)}" for key, value in point.items())
+
+
+def describe_point(point: Mapping[str, Any]) -> str:
+    """``key=value, …`` of a grid point, values as TOML (for messages)."""
+    return ", ".join(_point_overrides(point))
+
+
+def expand(sweep: Sweep) -> list[RunSpec]:
+    """The run list: every (point, seed), ordered by point then seed."""
+    return [
+        RunSpec(index, seed, sweep.scenario, (*sweep.overrides, *_point_overrides(point)))
+        for index, point in enumerate(sweep.points)
+        for seed in sweep.seeds
+    ]
