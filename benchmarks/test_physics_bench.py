@@ -26,8 +26,9 @@ import pybullet
 import pytest
 from pytest_benchmark.fixture import BenchmarkFixture
 
-from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
+from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.physics import Physics
+from testbed.vehicle.water_current import WaterCurrent
 
 pytestmark = pytest.mark.benchmark
 

@@ -12,7 +12,7 @@ Run with ``.venv/bin/python -m pytest benchmarks/test_vehicle_bench.py -m benchm
    as simulated seconds per wall second, and as a ratio to the floor measured in the same run.
 3. Where a frame's time goes: the same run with a timer around each system, the physics step
    and the truth read, in µs per frame (timers add ≈0.1 µs each; the parts are what to compare).
-4. The four ECS-paper experiment configurations: p50/p95 of |error| and the std, per axis.
+4. The four ECS-paper experiment scenarios through the runner: mean, std and p95 of |error|.
 
 Wall times are noisy on a shared machine; the ratios are what to compare between runs.
 """
@@ -28,13 +28,14 @@ import numpy as np
 import pybullet
 import pytest
 
+from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Phase, Schedule, World
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
 from testbed.vehicle import systems
 from testbed.vehicle.components import ControlMode
-from testbed.vehicle.control import quat_from_euler
-from testbed.vehicle.experiment import PAPER_EXPERIMENTS, run_attitude_experiment
-from testbed.vehicle.hydrodynamics import WaterCurrent
 from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.water_current import WaterCurrent
 
 pytestmark = pytest.mark.benchmark
 
@@ -188,30 +189,30 @@ def test_vehicle_frame_breakdown(benchmark: pytest.FixtureRequest) -> None:
     assert frames == 100 * SIM_S
 
 
-@pytest.mark.parametrize("name", list(PAPER_EXPERIMENTS))
+ECS_SCENARIOS = ["ecs-yaw-4h-v1", "ecs-yaw-3h-v1", "ecs-yaw-2h-v1", "ecs-rollpitch-6dof-v1"]
+
+
+@pytest.mark.parametrize("name", ECS_SCENARIOS)
 def test_experiment_error_distributions(benchmark: pytest.FixtureRequest, name: str) -> None:
-    experiment = PAPER_EXPERIMENTS[name]
+    scenario = load_scenario(name)
     result = benchmark.pedantic(  # type: ignore[attr-defined]
-        run_attitude_experiment, args=(experiment, SEED), rounds=1, iterations=1
+        run_scenario, args=(scenario,), kwargs={"seed": SEED}, rounds=1, iterations=1
     )
-    table = {}
-    for axis in ("roll", "pitch", "yaw"):
-        stats = getattr(result, axis)
-        table[axis] = {
-            "p50_abs_deg": round(stats.p50_abs_deg, 3),
-            "p95_abs_deg": round(stats.p95_abs_deg, 3),
-            "std_deg": round(stats.std_deg, 3),
-        }
+    attitude = result.metrics["attitude_error_deg"]
+    table = {
+        axis: {key: round(attitude[axis][key], 3) for key in ("mean", "std", "p95")}
+        for axis in ("roll", "pitch", "yaw")
+    }
     benchmark.extra_info.update(table)  # type: ignore[attr-defined]
-    benchmark.extra_info["simulated_s"] = experiment.duration_s  # type: ignore[attr-defined]
+    benchmark.extra_info["simulated_s"] = scenario.duration_s  # type: ignore[attr-defined]
     print(
         f"\n{name}: "
         + "; ".join(
-            f"{axis} p50 {v['p50_abs_deg']:.2f} p95 {v['p95_abs_deg']:.2f} std {v['std_deg']:.2f}"
+            f"{axis} mean {v['mean']:.2f} p95 {v['p95']:.2f} std {v['std']:.2f}"
             for axis, v in table.items()
         )
     )
-    if name == "ecs-6dof":
-        assert result.roll.std_deg <= 1.3 and result.pitch.std_deg <= 1.3
+    if name == "ecs-rollpitch-6dof-v1":
+        assert attitude["roll"]["std"] <= 1.3 and attitude["pitch"]["std"] <= 1.3
     else:
-        assert result.yaw.p95_abs_deg < 2.0
+        assert attitude["yaw"]["p95"] < 2.0

@@ -1,8 +1,11 @@
-"""Rotation helpers shared by both nodes: quaternions ``(w, x, y, z)`` and Z-Y-X Euler angles.
+"""The rotation module: quaternions ``(w, x, y, z)``, Z-Y-X Euler angles and rotation matrices.
 
-Conventions: world NED, body FRD; an attitude quaternion rotates body vectors into the world.
+Every rotation formula of the testbed is written here once (the vehicle's physics, its control
+laws and both nodes' teleoperation call these). Conventions: world NED, body FRD; an attitude
+quaternion rotates body vectors into the world, and so does its :func:`rotation_matrix`.
 Plain floats and tuples (no NumPy): these run in every control frame, where six-element arrays
-cost more in call overhead than the arithmetic they hold. Standard library only.
+cost more in call overhead than the arithmetic they hold (``np.array(rotation_matrix(q))`` is the
+(3, 3) matrix where one is wanted). Standard library only.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from collections.abc import Sequence
 
 __all__ = [
     "Quaternion",
+    "Rotation",
     "Vec3",
     "Wrench",
     "attitude_error",
@@ -23,6 +27,8 @@ __all__ = [
     "quat_normalize",
     "quat_rotate",
     "quat_rotate_inverse",
+    "rotate",
+    "rotation_matrix",
     "twist_angle",
     "wrap_angle",
     "yaw_only",
@@ -31,6 +37,8 @@ __all__ = [
 Quaternion = tuple[float, float, float, float]
 Vec3 = tuple[float, float, float]
 Wrench = tuple[float, float, float, float, float, float]
+Rotation = tuple[Vec3, Vec3, Vec3]
+"""A (3, 3) rotation matrix as three row tuples."""
 
 _TWO_PI = 2.0 * math.pi
 
@@ -85,6 +93,26 @@ def quat_rotate_inverse(q: Quaternion, v: Sequence[float]) -> Vec3:
     return quat_rotate((q[0], -q[1], -q[2], -q[3]), v)
 
 
+def rotation_matrix(q: Sequence[float]) -> Rotation:
+    """R of the unit quaternion ``q`` (body → world for an attitude quaternion), rows as tuples.
+
+    ``q`` is not normalised here: pass :func:`quat_normalize` of it if it may not be unit.
+    """
+    w, x, y, z = q
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+    )
+
+
+def rotate(rows: Sequence[Sequence[float]], v: Sequence[float]) -> Vec3:
+    """``R·v`` for a (3, 3) matrix given by rows (e.g. a :func:`rotation_matrix`)."""
+    x, y, z = v
+    (a, b, c), (d, e, f), (g, h, i) = rows
+    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
+
+
 def quat_from_axis_angle(axis: Sequence[float], angle_rad: float) -> Quaternion:
     """Rotation by ``angle_rad`` about the unit vector ``axis`` (right-handed)."""
     half = 0.5 * angle_rad
@@ -105,8 +133,11 @@ def quat_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quater
     )
 
 
-def euler_from_quat(q: Quaternion) -> Vec3:
-    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` [rad] of an attitude quaternion."""
+def euler_from_quat(q: Sequence[float]) -> Vec3:
+    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` [rad] of an attitude quaternion.
+
+    Pitch is clamped to ±π/2 at the singularity.
+    """
     w, x, y, z = q
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     sin_pitch = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))

@@ -1,4 +1,4 @@
-"""Vehicle control laws: PID, quaternion helpers, attitude and depth hold, pilot shaping, failsafe.
+"""Vehicle control laws: PID, attitude and depth hold, pilot shaping, failsafe.
 
 Everything here is pure and framework-free: controllers are small stateful objects fed with
 *sensor* values (never the physics truth) and returning body-frame force/torque intents; the ECS
@@ -42,6 +42,9 @@ from testbed.common.geometry import (
 )
 from testbed.config import check
 
+# The rotation names below (Quaternion … yaw_only) are re-exports of testbed.common.geometry, the
+# one rotation module: import them from there. They stay here for testbed.vehicle.systems and
+# testbed.vehicle.vehicle, which still import them from this module.
 __all__ = [
     "PID",
     "AttitudeController",

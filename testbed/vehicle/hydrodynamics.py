@@ -1,4 +1,4 @@
-"""Fossen's 6-DOF vehicle model: parameters, forces, and the water current.
+"""Fossen's 6-DOF vehicle model: its parameters and the force law (the numpy reference).
 
 The equation of motion (Fossen 2011, body frame, relative velocity ν_r = ν − ν_c)::
 
@@ -10,19 +10,18 @@ frame; ``inertia_kg_m2`` are the principal moments about the CoG (body-aligned a
 M_RB about CO carries the m·S(r_g) coupling and the parallel-axis term. The applied wrench is
 given about the CoG (thruster allocation works about the centre of mass) and moved to CO here.
 
-Two paths compute the same accelerations: the numpy reference functions (clear matrices, used by
-tests) and :func:`make_scalar_dynamics`, straight-line Python over floats generated once per
-model (constants folded in, zero terms dropped, M⁻¹ inverted once), which the pybullet stepping
-loop calls 240 times per simulated second. Tests hold the two to 1e-10.
+Two paths compute the same accelerations: the numpy reference functions here (clear matrices,
+used by tests) and :func:`testbed.vehicle.scalar_dynamics.make_scalar_dynamics`, straight-line
+Python over floats generated once per model, which the pybullet stepping loop calls 240 times per
+simulated second. Tests hold the two to 1e-10. The water current (ν_c) is
+:mod:`testbed.vehicle.water_current`; :class:`WaterCurrent` is re-exported here for the callers
+that import it with the model. Rotations are :mod:`testbed.common.geometry`.
 
 Pure numpy and math: this module must never import pybullet.
 """
 
 from __future__ import annotations
 
-import math
-import typing
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 
@@ -30,25 +29,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from testbed.config import ConfigError, build, check, load_toml
+from testbed.vehicle.water_current import WaterCurrent
 
 __all__ = [
-    "CurrentProcess",
     "HydroModel",
-    "ScalarDynamics",
     "WaterCurrent",
     "body_acceleration",
     "coriolis_added_mass",
     "coriolis_rigid_body",
     "damping_matrix",
-    "euler_from_quaternion",
     "known_models",
     "load_model",
-    "make_scalar_dynamics",
-    "quaternion_from_euler",
     "restoring_forces",
-    "rotation_from_euler",
-    "rotation_from_quaternion",
-    "scalar_dynamics_source",
     "skew",
     "submerged_fraction",
     "wrench_about_origin",
@@ -56,7 +48,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
-Vec4 = tuple[float, float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 
 
@@ -171,57 +162,7 @@ def skew(a: ArrayLike) -> FloatArray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-def rotation_from_quaternion(q_wxyz: ArrayLike) -> FloatArray:
-    """(3, 3) rotation R (body → world) of the unit quaternion (w, x, y, z)."""
-    w, x, y, z = np.asarray(q_wxyz, dtype=float) / np.linalg.norm(q_wxyz)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def rotation_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> FloatArray:
-    """(3, 3) R = Rz(yaw)·Ry(pitch)·Rx(roll), body FRD → NED (ZYX convention)."""
-    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
-    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
-    cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def quaternion_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Vec4:
-    """Unit quaternion (w, x, y, z) of the ZYX Euler angles (body FRD → NED)."""
-    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
-    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
-    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-
-
-def euler_from_quaternion(w: float, x: float, y: float, z: float) -> Vec3:
-    """ZYX Euler angles (roll, pitch, yaw) [rad] of the unit quaternion (w, x, y, z).
-
-    Pitch is clamped to ±π/2 at the singularity.
-    """
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return (roll, pitch, yaw)
-
-
-# --- forces (numpy reference path) -------------------------------------------------------------
+# --- forces -------------------------------------------------------------
 
 
 def coriolis_rigid_body(model: HydroModel, nu: ArrayLike) -> FloatArray:
@@ -347,254 +288,3 @@ def body_acceleration(
     )
     result: FloatArray = np.linalg.solve(model.mass_matrix, rhs)
     return result
-
-
-# --- fast scalar path ---------------------------------------------------------------------------
-#
-# The stepping loop runs 240 times per simulated second, where tiny numpy arrays cost ~40 µs a
-# step (REFERENCE §5). Instead, the equation above is expanded once per model into polynomials
-# in the scalar inputs, with every constant folded in and every zero term dropped (r_g along z
-# alone leaves M⁻¹ with 10 non-zeros of 36), and compiled to one straight-line function of
-# floats. The numpy functions above stay the reference; tests compare the two.
-
-ScalarDynamics = Callable[..., Vec6]
-"""``f(u, v, w, p, q, r, gx, gy, gz, uc, vc, wc, scale, X, Y, Z, K, M, N) -> ν̇``."""
-
-_Poly = dict[tuple[str, ...], float]
-_ARGS = "u, v, w, p, q, r, gx, gy, gz, uc, vc, wc, scale, fx, fy, fz, mx, my, mz"
-
-
-def _var(name: str) -> _Poly:
-    return {(name,): 1.0}
-
-
-def _const(value: float) -> _Poly:
-    return {(): value} if value != 0.0 else {}
-
-
-def _add(*polys: _Poly) -> _Poly:
-    total: _Poly = {}
-    for poly in polys:
-        for mono, coef in poly.items():
-            total[mono] = total.get(mono, 0.0) + coef
-    return {mono: coef for mono, coef in total.items() if coef != 0.0}
-
-
-def _mul(a: _Poly, b: _Poly) -> _Poly:
-    terms = [{tuple(sorted(ma + mb)): ca * cb} for ma, ca in a.items() for mb, cb in b.items()]
-    return _add(*terms)
-
-
-def _scale(k: float, a: _Poly) -> _Poly:
-    return _add({mono: k * coef for mono, coef in a.items()})
-
-
-def _cross(a: Sequence[_Poly], b: Sequence[_Poly]) -> list[_Poly]:
-    return [
-        _add(_mul(a[1], b[2]), _scale(-1.0, _mul(a[2], b[1]))),
-        _add(_mul(a[2], b[0]), _scale(-1.0, _mul(a[0], b[2]))),
-        _add(_mul(a[0], b[1]), _scale(-1.0, _mul(a[1], b[0]))),
-    ]
-
-
-def _code(poly: _Poly) -> str:
-    if not poly:
-        return "0.0"
-    parts = []
-    for mono, coef in sorted(poly.items()):
-        factors = " * ".join(mono)
-        if not mono:
-            parts.append(repr(coef))
-        elif coef == 1.0:
-            parts.append(factors)
-        elif coef == -1.0:
-            parts.append(f"-{factors}")
-        else:
-            parts.append(f"{coef!r} * {factors}")
-    return " + ".join(parts).replace("+ -", "- ")
-
-
-def scalar_dynamics_source(model: HydroModel, *, with_current: bool = True) -> str:
-    """Python source of the model's ν̇ function (see :func:`make_scalar_dynamics`)."""
-    m = model.mass_kg
-    rg = [_const(c) for c in model.cog_m]
-    omega = [_var("p"), _var("q"), _var("r")]
-    vel = [_var("u"), _var("v"), _var("w")]
-    # Without a current, ν_r = ν: the added-mass terms share the rigid body's monomials.
-    rel = [_var(n) for n in (("ur", "vr", "wr") if with_current else ("u", "v", "w"))]
-    down = [_var("gx"), _var("gy"), _var("gz")]
-    force = [_var("fx"), _var("fy"), _var("fz")]
-    moment = [_var("mx"), _var("my"), _var("mz")]
-    added = [-a for a in model.added_mass]
-    inertia = model.inertia_origin.tolist()
-    # −C_RB(ν)ν − C_A(ν_r)ν_r, Kirchhoff's form: momenta P = m·v_g + A₁₁ν_r, L = I_o·ω + A₂₂ω.
-    v_cog = [_add(vi, ci) for vi, ci in zip(vel, _cross(omega, rg), strict=True)]
-    a_lin = [_scale(added[i], rel[i]) for i in range(3)]
-    momentum = [_add(_scale(m, v_cog[i]), a_lin[i]) for i in range(3)]
-    spin = [
-        _add(
-            *(_scale(inertia[i][j] + (added[3 + i] if i == j else 0.0), omega[j]) for j in range(3))
-        )
-        for i in range(3)
-    ]
-    lin = [_scale(-1.0, c) for c in _cross(omega, momentum)]
-    ang = [
-        _scale(-1.0, _add(a, b, c))
-        for a, b, c in zip(
-            _cross([_scale(m, g) for g in rg], _cross(omega, vel)),
-            _cross(omega, spin),
-            _cross(rel, a_lin),
-            strict=True,
-        )
-    ]
-    # −D(ν_r)ν_r, quadratic terms through |x| helper variables.
-    names = ["ur", "vr", "wr", "p", "q", "r"] if with_current else ["u", "v", "w", "p", "q", "r"]
-    damping = [
-        _add(
-            _scale(model.linear_damping[i], _var(n)),
-            _scale(model.quadratic_damping[i], _mul(_var(f"abs_{n}"), _var(n))),
-        )
-        for i, n in enumerate(names)
-    ]
-    # −g(η): net·down and (W·r_g − B·s·r_b) × down, with net = W − B·s computed first.
-    weight, buoyancy = model.weight_n, model.buoyancy_n
-    preamble = [f"net = {weight!r} - {buoyancy!r} * scale"]
-    lever = []
-    for axis, g, b in zip("xyz", model.cog_m, model.cob_m, strict=True):
-        if b == 0.0:
-            lever.append(_const(weight * g))
-        else:
-            h = _add(_const(weight * g), _scale(-buoyancy * b, _var("scale")))
-            preamble.append(f"h{axis} = {_code(h)}")
-            lever.append(_var(f"h{axis}"))
-    restoring = [_mul(_var("net"), d) for d in down] + _cross(lever, down)
-    # τ about CO from the wrench about the CoG; + M_A·ν̇_c with ν̇_c = [v_c × ω; 0].
-    applied = force + [_add(mi, ci) for mi, ci in zip(moment, _cross(rg, force), strict=True)]
-    current = [_var("uc"), _var("vc"), _var("wc")]
-    transport = [_scale(added[i], c) for i, c in enumerate(_cross(current, omega))]
-    tau = [
-        _add(applied[i], restoring[i], damping[i], (lin + ang)[i], transport[i] if i < 3 else {})
-        if with_current
-        else _add(applied[i], restoring[i], damping[i], (lin + ang)[i])
-        for i in range(6)
-    ]
-    minv = np.linalg.inv(model.mass_matrix)
-    tiny = 1e-12 * float(np.abs(minv).max())
-    lines = [f"def accelerate({_ARGS}):"] + [f"    {line}" for line in preamble]
-    if with_current:
-        lines.append("    ur = u - uc; vr = v - vc; wr = w - wc")
-    used = {f for poly in tau for mono in poly for f in mono}
-    for n in names:
-        if f"abs_{n}" in used:
-            lines.append(f"    abs_{n} = {n} if {n} >= 0.0 else -{n}")
-    for i, poly in enumerate(tau):
-        lines.append(f"    t{i} = {_code(poly)}")
-    rows = [
-        _code({(f"t{j}",): float(minv[i, j]) for j in range(6) if abs(minv[i, j]) > tiny})
-        for i in range(6)
-    ]
-    lines.append("    return (" + ", ".join(rows) + ")")
-    return "\n".join(lines) + "\n"
-
-
-def make_scalar_dynamics(model: HydroModel, *, with_current: bool = True) -> ScalarDynamics:
-    """The same ν̇ as :func:`body_acceleration`, as one function of plain floats.
-
-    The function takes the body velocity at CO (u, v, w, p, q, r), the world "down" direction in
-    the body (gx, gy, gz) = Rᵀ·[0, 0, 1] (the last row of R), the current in the body
-    (uc, vc, wc), the submerged fraction, and the applied wrench about the CoG
-    (X, Y, Z, K, M, N), FRD; it returns ν̇ at CO as a 6-tuple [m/s², rad/s²]. M⁻¹ is inverted
-    once, here, for the general M (r_g ≠ 0 couples surge–pitch and sway–roll).
-
-    Args:
-        model: the vehicle.
-        with_current: False drops the current terms (uc, vc, wc are then ignored).
-    """
-    source = scalar_dynamics_source(model, with_current=with_current)
-    namespace: dict[str, object] = {}
-    # The source is generated from the model's numbers only, never from user text.
-    exec(compile(source, f"<scalar dynamics: {model.name}>", "exec"), namespace)
-    return typing.cast(ScalarDynamics, namespace["accelerate"])
-
-
-# --- water current -----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class WaterCurrent:
-    """A water current: a constant NED velocity plus an optional slow Gauss–Markov variation.
-
-    Each NED component of the variation is a first-order Gauss–Markov process
-    ẋ = −x/T + w (Fossen 2011, §8.3), sampled exactly every ``update_period_s`` and held in
-    between, so the current is irrotational and piecewise constant in NED.
-
-    Attributes:
-        velocity_ned_mps: (3,) mean water velocity [m/s], NED.
-        variation_std_mps: (3,) stationary standard deviation of each component's variation [m/s].
-        time_constant_s: correlation time T of the variation [s].
-        update_period_s: how often the variation is sampled [s].
-    """
-
-    velocity_ned_mps: Vec3 = (0.0, 0.0, 0.0)
-    variation_std_mps: Vec3 = (0.0, 0.0, 0.0)
-    time_constant_s: float = 120.0
-    update_period_s: float = 0.5
-
-    def __post_init__(self) -> None:
-        for i, value in enumerate(self.variation_std_mps):
-            check(value >= 0.0, f"variation_std_mps[{i}]", f"must be ≥ 0, got {value}")
-        check(
-            self.time_constant_s > 0.0,
-            "time_constant_s",
-            f"must be > 0, got {self.time_constant_s}",
-        )
-        check(
-            self.update_period_s > 0.0,
-            "update_period_s",
-            f"must be > 0, got {self.update_period_s}",
-        )
-
-    @property
-    def varies(self) -> bool:
-        """Whether the current has a random variation."""
-        return any(value > 0.0 for value in self.variation_std_mps)
-
-
-class CurrentProcess:
-    """The running state of a :class:`WaterCurrent`: its NED velocity now.
-
-    Args:
-        current: the current's parameters.
-        rng: the generator driving the variation (required when the current varies).
-
-    Raises:
-        ValueError: the current varies and no generator was given.
-    """
-
-    def __init__(self, current: WaterCurrent, rng: np.random.Generator | None = None) -> None:
-        if current.varies and rng is None:
-            raise ValueError("a varying WaterCurrent needs a numpy Generator (rng=...)")
-        self._current = current
-        self._rng = rng
-        self._std = np.asarray(current.variation_std_mps, dtype=float)
-        # Start in the stationary distribution, as if the process had always been running.
-        self._deviation = (
-            self._std * rng.standard_normal(3) if current.varies and rng is not None else None
-        )
-        self.velocity_ned: Vec3 = self._velocity()
-
-    def _velocity(self) -> Vec3:
-        mean = self._current.velocity_ned_mps
-        if self._deviation is None:
-            return (float(mean[0]), float(mean[1]), float(mean[2]))
-        vx, vy, vz = (np.asarray(mean) + self._deviation).tolist()
-        return (vx, vy, vz)
-
-    def advance(self, dt_s: float) -> Vec3:
-        """Advance the variation by ``dt_s`` (exact discretisation); the velocity [m/s], NED."""
-        if self._deviation is not None and self._rng is not None:
-            phi = math.exp(-dt_s / self._current.time_constant_s)
-            noise = self._std * math.sqrt(1.0 - phi * phi) * self._rng.standard_normal(3)
-            self._deviation = phi * self._deviation + noise
-            self.velocity_ned = self._velocity()
-        return self.velocity_ned

@@ -12,7 +12,7 @@ transport term ω×v_g and the torque puts back ω×I_gω.
 pybullet's body frame is placed at the CoG: its base position *is* the centre of mass, so there
 is no inertial-frame offset to get wrong, and the hydrodynamic origin CO sits at −r_g from it.
 M = M_RB + M_A about CO is then general (r_g ≠ 0 couples surge–pitch and sway–roll); its inverse
-is computed once (see :func:`testbed.vehicle.hydrodynamics.make_scalar_dynamics`).
+is computed once (see :func:`testbed.vehicle.scalar_dynamics.make_scalar_dynamics`).
 
 Frames: this module is the only place that knows pybullet is z-up. pybullet's world is NED
 rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
@@ -37,18 +37,13 @@ from types import ModuleType
 import numpy as np
 from numpy.typing import NDArray
 
+from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
 from testbed.config import check
 from testbed.vehicle.camera import CameraConfig, CameraPose
-from testbed.vehicle.hydrodynamics import (
-    CurrentProcess,
-    HydroModel,
-    WaterCurrent,
-    euler_from_quaternion,
-    load_model,
-    make_scalar_dynamics,
-    quaternion_from_euler,
-)
+from testbed.vehicle.hydrodynamics import HydroModel, load_model
+from testbed.vehicle.scalar_dynamics import make_scalar_dynamics
 from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
+from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
 
 def _import_pybullet_quietly() -> ModuleType:
@@ -337,10 +332,10 @@ class Physics:
         px, py, pz = position_ned if position_ned is not None else self._start_position
         roll, pitch, yaw = euler_rad if euler_rad is not None else self._start_euler
         u, v, w, p, q, r = nu if nu is not None else (0.0,) * 6
-        quat = quaternion_from_euler(roll, pitch, yaw)
-        rot = _rotation(*quat)
+        quat = quat_from_euler(roll, pitch, yaw)
+        rot = rotation_matrix(quat)
         xg, yg, zg = self._cog
-        cog_offset = _apply(rot, (xg, yg, zg))
+        cog_offset = rotate(rot, (xg, yg, zg))
         cog_ned = (px + cog_offset[0], py + cog_offset[1], pz + cog_offset[2])
         # CoG velocity in the body: v_g = v_o + ω × r_g; then to NED.
         vg_body = (u + q * zg - r * yg, v + r * xg - p * zg, w + p * yg - q * xg)
@@ -353,8 +348,8 @@ class Physics:
         )
         pybullet.resetBaseVelocity(
             self.body_id,
-            ned_to_pybullet(_apply(rot, vg_body)),
-            ned_to_pybullet(_apply(rot, (p, q, r))),
+            ned_to_pybullet(rotate(rot, vg_body)),
+            ned_to_pybullet(rotate(rot, (p, q, r))),
             physicsClientId=cid,
         )
         self._steps = 0
@@ -608,21 +603,20 @@ class Physics:
         if raw is None:
             raw = self._raw = self._read()
         position, quat, nu = _state_of(raw, self._cog)
-        return self._steps * self.dt_s, position, quat, euler_from_quaternion(*quat), nu
+        return self._steps * self.dt_s, position, quat, euler_from_quat(quat), nu
 
 
 def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
     """(CO position NED, quaternion wxyz, ν at CO) from pybullet's reads, as plain floats.
 
     Written out in scalars (this runs every frame); the arithmetic is exactly that of
-    :func:`quaternion_pybullet_to_ned`, :func:`_rotation` and :func:`_apply`.
+    :func:`quaternion_pybullet_to_ned`, :func:`~testbed.common.geometry.rotation_matrix` and
+    :func:`~testbed.common.geometry.rotate`.
     """
     (px, py, pz), (ox, oy, oz, ow), (lx, ly, lz), (ax, ay, az) = raw
     w, x, y, z = float(ow), float(ox), -float(oy), -float(oz)
-    # R (body FRD → NED) of (w, x, y, z), as _rotation
-    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-    r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-    r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    # R (body FRD → NED) of (w, x, y, z)
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_matrix((w, x, y, z))
     xg, yg, zg = cog
     # CoG in NED, minus R·r_g
     position = (
@@ -646,21 +640,6 @@ def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
 def _disconnect(client_id: int) -> None:
     if pybullet.isConnected(client_id):
         pybullet.disconnect(client_id)
-
-
-def _rotation(w: float, x: float, y: float, z: float) -> tuple[Vec3, Vec3, Vec3]:
-    """R (body → world) of the unit quaternion (w, x, y, z), rows as tuples."""
-    return (
-        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
-    )
-
-
-def _apply(rows: Sequence[Sequence[float]], vector: Sequence[float]) -> Vec3:
-    x, y, z = vector
-    (a, b, c), (d, e, f), (g, h, i) = rows
-    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
 
 
 def simulate_open_loop(

@@ -7,27 +7,23 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from testbed.config import ConfigError, build
 from testbed.vehicle.hydrodynamics import (
-    CurrentProcess,
     HydroModel,
-    WaterCurrent,
     body_acceleration,
     coriolis_added_mass,
     coriolis_rigid_body,
     damping_matrix,
-    euler_from_quaternion,
     known_models,
     load_model,
-    make_scalar_dynamics,
-    quaternion_from_euler,
     restoring_forces,
-    rotation_from_euler,
-    rotation_from_quaternion,
     submerged_fraction,
     wrench_about_origin,
 )
+from testbed.vehicle.scalar_dynamics import make_scalar_dynamics
+from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
 
 @pytest.fixture(scope="module")
@@ -130,11 +126,12 @@ def test_munk_moment_turns_the_body_broadside(wu: HydroModel) -> None:
 
 @pytest.mark.parametrize("roll_rad", [0.1, -0.4, 1.0])
 def test_restoring_moment_rights_a_rolled_vehicle(wu: HydroModel, roll_rad: float) -> None:
-    g = restoring_forces(wu, rotation_from_euler(roll_rad, 0.0, 0.0))
+    rolled = Rotation.from_euler("x", roll_rad).as_matrix()  # body FRD → NED
+    g = restoring_forces(wu, rolled)
     # Weight at r_g = (0, 0, z_g): K = −W·z_g·sin φ on the body, and g(η) is its negative.
     assert -g[3] == pytest.approx(-wu.weight_n * wu.cog_m[2] * math.sin(roll_rad), rel=1e-12)
     # The net force is B − W upwards, in the body frame.
-    down_body = rotation_from_euler(roll_rad, 0.0, 0.0).T @ [0.0, 0.0, 1.0]
+    down_body = rolled.T @ [0.0, 0.0, 1.0]
     assert np.allclose(-g[:3], -wu.net_buoyancy_n * down_body)
 
 
@@ -162,7 +159,7 @@ def test_scalar_path_matches_the_numpy_reference(name: str) -> None:
     rng = np.random.default_rng(4)
     for _ in range(100):
         nu = rng.normal(scale=0.5, size=6)
-        rot = rotation_from_quaternion(rng.normal(size=4))
+        rot = Rotation.from_quat(rng.normal(size=4)).as_matrix()
         wrench = rng.normal(scale=10.0, size=6)
         current_ned = rng.normal(scale=0.3, size=3)
         scale = float(rng.uniform(0.0, 1.0))
@@ -172,18 +169,6 @@ def test_scalar_path_matches_the_numpy_reference(name: str) -> None:
         assert np.allclose(got, expected, rtol=1e-10, atol=1e-12)
         still = body_acceleration(model, nu, rot, wrench, (0.0, 0.0, 0.0), scale)
         assert np.allclose(fast_still(*nu, *rot[2], 0.0, 0.0, 0.0, scale, *wrench), still)
-
-
-def test_euler_quaternion_and_rotation_agree() -> None:
-    rng = np.random.default_rng(5)
-    for _ in range(50):
-        roll, yaw = rng.uniform(-math.pi, math.pi, size=2)
-        pitch = rng.uniform(-1.5, 1.5)
-        q = quaternion_from_euler(roll, pitch, yaw)
-        assert np.allclose(rotation_from_quaternion(q), rotation_from_euler(roll, pitch, yaw))
-        assert np.allclose(euler_from_quaternion(*q), (roll, pitch, yaw))
-    # Yaw 90°: the body's x axis (forward) points east.
-    assert np.allclose(rotation_from_euler(0.0, 0.0, math.pi / 2) @ [1, 0, 0], [0, 1, 0])
 
 
 def test_submerged_fraction_fades_across_the_surface() -> None:

@@ -15,14 +15,13 @@ import numpy as np
 import pybullet
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
 
+from testbed.common.geometry import quat_from_euler
 from testbed.vehicle.hydrodynamics import (
     HydroModel,
-    WaterCurrent,
     body_acceleration,
     load_model,
-    quaternion_from_euler,
-    rotation_from_quaternion,
     submerged_fraction,
 )
 from testbed.vehicle.physics import (
@@ -34,6 +33,7 @@ from testbed.vehicle.physics import (
     quaternion_pybullet_to_ned,
     simulate_open_loop,
 )
+from testbed.vehicle.water_current import WaterCurrent
 
 DT_S = 1.0 / 240.0
 
@@ -66,7 +66,7 @@ def run(sim: Physics, wrench: list[float], duration_s: float) -> None:
 def test_vector_and_quaternion_conversions_round_trip() -> None:
     v = (1.0, -2.0, 3.5)
     assert pybullet_to_ned(ned_to_pybullet(v)) == v
-    q = quaternion_from_euler(0.3, -0.2, 2.0)
+    q = quat_from_euler(0.3, -0.2, 2.0)
     assert np.allclose(quaternion_pybullet_to_ned(quaternion_ned_to_pybullet(q)), q)
 
 
@@ -79,7 +79,7 @@ def test_pose_round_trips_through_pybullet(wu: HydroModel) -> None:
         assert np.allclose(state.nu, 0.0)
         # pybullet's own view: z up, base at the CoG, body FLU.
         base, orn = pybullet.getBasePositionAndOrientation(sim.body_id, sim.client_id)
-        rot = rotation_from_quaternion(quaternion_from_euler(*euler))
+        rot = Rotation.from_euler("ZYX", euler[::-1]).as_matrix()  # body FRD → NED
         cog_ned = np.array(position) + rot @ wu.cog_m
         assert np.allclose(base, [cog_ned[0], -cog_ned[1], -cog_ned[2]])
         forward_pb = np.array(pybullet.getMatrixFromQuaternion(orn)).reshape(3, 3)[:, 0]
@@ -305,7 +305,7 @@ def integrate_reference(
     def rhs(_t: float, y: np.ndarray) -> np.ndarray:
         q = y[3:7] / np.linalg.norm(y[3:7])
         nu = y[7:]
-        rot = rotation_from_quaternion(q)
+        rot = Rotation.from_quat(q, scalar_first=True).as_matrix()
         depth_cob = y[2] + (rot @ model.cob_m)[2]
         scale = submerged_fraction(depth_cob, model.hull_size_m[2])
         nu_dot = body_acceleration(model, nu, rot, wrench, current_ned, scale)
@@ -321,7 +321,8 @@ def integrate_reference(
         )
         return np.concatenate([rot @ nu[:3], q_dot, nu_dot])
 
-    y0 = np.concatenate([[0.0, 0.0, 10.0], quaternion_from_euler(*euler0), nu0])
+    q0 = Rotation.from_euler("ZYX", euler0[::-1]).as_quat(scalar_first=True)
+    y0 = np.concatenate([[0.0, 0.0, 10.0], q0, nu0])
     sol = solve_ivp(rhs, (0.0, duration_s), y0, rtol=1e-10, atol=1e-12)
     return np.asarray(sol.y[:, -1])
 
@@ -349,7 +350,8 @@ def test_constant_current_carries_the_vehicle_at_its_speed(wu: HydroModel) -> No
     with Physics(wu, current=WaterCurrent(velocity_ned_mps=current)) as sim:
         run(sim, [0.0] * 6, 20.0)
         state = sim.state()
-    velocity_ned = rotation_from_quaternion(state.quaternion_wxyz) @ state.nu[:3]
+    attitude = Rotation.from_quat(state.quaternion_wxyz, scalar_first=True)
+    velocity_ned = attitude.as_matrix() @ state.nu[:3]
     assert velocity_ned[:2] == pytest.approx(current[:2], rel=0.02)
 
 

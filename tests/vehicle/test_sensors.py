@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from testbed.common.geometry import attitude_error, quat_from_euler
 from testbed.config import ConfigError, build
-from testbed.vehicle.control import attitude_error, quat_from_euler
 from testbed.vehicle.sensors import (
     DepthSensor,
     DepthSensorConfig,

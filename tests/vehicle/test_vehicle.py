@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from testbed.common.geometry import quat_from_euler, quat_rotate
 from testbed.config import ConfigError
 from testbed.ecs import ComponentRegistry, Side, World, replicated_changes
 from testbed.vehicle.components import (
@@ -23,7 +24,7 @@ from testbed.vehicle.components import (
     ThrusterOutput,
     register_components,
 )
-from testbed.vehicle.control import FailsafeConfig, quat_from_euler, quat_rotate
+from testbed.vehicle.control import FailsafeConfig
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.sensors import DepthSensorConfig, ImuConfig
 from testbed.vehicle.systems import SimClock
