@@ -52,19 +52,9 @@ from testbed.protocol import (
     decode_vehicle_message,
     encode_frame,
 )
+from tests.strategies import crc16_bitwise
 
 # ------------------------------------------------------------------------------ helpers
-
-
-def crc16_bitwise(data: bytes) -> int:
-    """CRC-16/XMODEM one bit at a time (poly 0x1021, init 0, MSB first, no final XOR)."""
-    crc = 0
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
-    return crc
 
 
 def quat_wxyz(roll_deg: float, pitch_deg: float, yaw_deg: float) -> Quaternion:

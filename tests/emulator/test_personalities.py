@@ -14,7 +14,6 @@ the modem latency plus the airtime of what the modem transmits, each packet in t
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,6 +35,7 @@ from testbed.emulator.personalities import (
 from testbed.emulator.ptys import ModemEmulator
 from testbed.hil import LinkEndpoint, PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
+from tests.strategies import split_at
 
 # -- helpers -------------------------------------------------------------------------------------
 
@@ -60,11 +60,7 @@ def feed_in_chunks(
     personality: EvoLogicsPersonality | M64Personality, data: bytes, cuts: list[int]
 ) -> bytes:
     """Feed ``data`` cut at ``cuts``; the concatenated replies."""
-    out = b""
-    edges = [0, *sorted(c % (len(data) + 1) for c in cuts), len(data)]
-    for a, b in itertools.pairwise(edges):
-        out += personality.feed(data[a:b], 0.0)
-    return out
+    return b"".join(personality.feed(piece, 0.0) for piece in split_at(data, cuts))
 
 
 def drain(personality: EvoLogicsPersonality | M64Personality) -> list[AirPacket]:

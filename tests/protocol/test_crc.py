@@ -7,16 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from testbed.protocol import CRC16_CHECK_VALUE, crc16
-
-
-def crc16_bitwise(data: bytes, crc: int = 0) -> int:
-    """Textbook MSB-first CRC: poly 0x1021, no reflection, no final XOR (one bit at a time)."""
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
-    return crc
+from tests.strategies import crc16_bitwise
 
 
 def test_check_value_is_the_xmodem_catalogue_value() -> None:

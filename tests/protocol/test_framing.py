@@ -7,7 +7,6 @@ from the rules in the framing module docstring.
 
 from __future__ import annotations
 
-import itertools
 import tracemalloc
 
 import numpy as np
@@ -29,18 +28,10 @@ from testbed.protocol import (
     encode_frame,
     frame_overhead,
 )
+from tests.strategies import crc16_bitwise, cut_lists, split_at
 
 Event = Frame | CorruptFrame
 MAX_FRAME = 3 + 1 + MAX_PAYLOAD + 2
-
-
-def crc16_bitwise(data: bytes) -> int:
-    crc = 0
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = (((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)) & 0xFFFF
-    return crc
 
 
 def reference_decode(
@@ -82,9 +73,8 @@ def reference_decode(
 def decode_in_chunks(decoder: FrameDecoder, stream: bytes, cuts: list[int]) -> list[Event]:
     """Feed ``stream`` split at ``cuts`` (positions, any order), then close."""
     events: list[Event] = []
-    bounds = [0, *sorted(c % (len(stream) + 1) for c in cuts), len(stream)]
-    for a, b in itertools.pairwise(bounds):
-        events += decoder.feed(stream[a:b])
+    for piece in split_at(stream, cuts):
+        events += decoder.feed(piece)
     events += decoder.close()
     return events
 
@@ -161,7 +151,7 @@ no_start_bytes = st.binary(max_size=30).map(lambda g: g.replace(b"U", b""))
 payload_lists = st.lists(st.binary(max_size=255), max_size=8)
 
 
-@given(payload_lists, st.sampled_from([1, 3]), st.lists(st.integers(0, 10_000), max_size=12))
+@given(payload_lists, st.sampled_from([1, 3]), cut_lists(12))
 def test_whole_bytewise_and_chunked_give_the_same_frames(
     items: list[bytes], preamble_len: int, cuts: list[int]
 ) -> None:
@@ -182,7 +172,7 @@ def test_whole_bytewise_and_chunked_give_the_same_frames(
         max_size=6,
     ),
     st.sampled_from([1, 3]),
-    st.lists(st.integers(0, 10_000), max_size=6),
+    cut_lists(6),
 )
 def test_garbage_without_start_bytes_is_counted_not_reported(
     items: list[tuple[bytes, bytes]], preamble_len: int, cuts: list[int]
@@ -196,7 +186,7 @@ def test_garbage_without_start_bytes_is_counted_not_reported(
 @given(
     st.lists(st.tuples(st.binary(max_size=120), st.binary(max_size=30)), min_size=1, max_size=6),
     st.sampled_from([1, 3]),
-    st.lists(st.integers(0, 10_000), max_size=6),
+    cut_lists(6),
 )
 def test_all_frames_recovered_in_order_through_arbitrary_garbage(
     items: list[tuple[bytes, bytes]], preamble_len: int, cuts: list[int]
@@ -232,7 +222,7 @@ def damaged_streams(draw: st.DrawFn) -> tuple[bytes, int]:
     damaged_streams(),
     st.sampled_from([255, 60, 10]),
     st.sampled_from([4096, 261, 40, 8]),
-    st.lists(st.integers(0, 10_000), max_size=8),
+    cut_lists(8),
 )
 def test_matches_reference_decoder(
     damaged: tuple[bytes, int], max_payload: int, max_buffer: int, cuts: list[int]

@@ -35,18 +35,10 @@ from testbed.protocol import (
     decode_vehicle_message,
     max_image_bytes,
 )
+from tests.strategies import crc16_bitwise
 
 Corrupt = Callable[[OutgoingChunk, int], OutgoingChunk]
 STATE = VehicleState(True, False, False, False, False, Mode.MANUAL, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-
-def crc16_bitwise(data: bytes) -> int:
-    crc = 0
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = (((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)) & 0xFFFF
-    return crc
 
 
 def chunks_for(size: int, chunk_bytes: int = DEFAULT_CHUNK_SIZE) -> int:

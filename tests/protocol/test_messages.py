@@ -13,40 +13,22 @@ from testbed.protocol import (
     DEFAULT_CHUNK_SIZE,
     MAX_CHUNK_SIZE,
     STATE_SIZE,
-    DisableKeepHeading,
     GoTo,
     HoldChannel,
     ImageSettings,
-    KeepHeading,
     MalformedPayload,
     Mode,
     Move,
     NoOrder,
     OperatorMessage,
-    Order,
-    OrderIncoming,
     VehicleMessage,
     VehicleState,
     decode_operator_message,
     decode_vehicle_message,
     encode_frame,
 )
+from tests.strategies import orders
 
-axis = st.integers(-127, 127)
-roi = st.integers(0, 1023)
-int16 = st.integers(-32768, 32767)
-orders: st.SearchStrategy[Order] = st.one_of(
-    st.just(NoOrder()),
-    st.builds(Move, axis, axis, axis, axis, st.booleans(), st.booleans(), st.sampled_from(Mode)),
-    st.builds(KeepHeading, st.integers(0, 359)),
-    st.builds(HoldChannel, st.integers(0, 255)),
-    st.builds(
-        ImageSettings, roi, roi, roi, roi, st.integers(0, 15), st.booleans(), st.integers(0, 65535)
-    ),
-    st.just(DisableKeepHeading()),
-    st.builds(GoTo, int16, int16, int16, int16),
-    st.just(OrderIncoming()),
-)
 chunk_index = st.integers(0, 63)
 operator_messages = st.builds(
     OperatorMessage, st.booleans(), st.booleans(), chunk_index, st.booleans(), st.booleans(), orders

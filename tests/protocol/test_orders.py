@@ -24,22 +24,7 @@ from testbed.protocol import (
     Order,
     OrderIncoming,
 )
-
-axis = st.integers(-127, 127)
-roi = st.integers(0, 1023)
-int16 = st.integers(-32768, 32767)
-orders: st.SearchStrategy[Order] = st.one_of(
-    st.just(NoOrder()),
-    st.builds(Move, axis, axis, axis, axis, st.booleans(), st.booleans(), st.sampled_from(Mode)),
-    st.builds(KeepHeading, st.integers(0, 359)),
-    st.builds(HoldChannel, st.integers(0, 255)),
-    st.builds(
-        ImageSettings, roi, roi, roi, roi, st.integers(0, 15), st.booleans(), st.integers(0, 65535)
-    ),
-    st.just(DisableKeepHeading()),
-    st.builds(GoTo, int16, int16, int16, int16),
-    st.just(OrderIncoming()),
-)
+from tests.strategies import orders, roi
 
 
 def test_type_codes_and_body_sizes_follow_the_reference_table() -> None:
