@@ -44,7 +44,7 @@ def add_sweep_parser(sub: Subparsers) -> None:
 
 def _run_sweep(args: argparse.Namespace) -> int:
     """Handler of ``testbed sweep``: load and check the sweep, run it, summarise."""
-    from testbed.sweep.core import format_summary, load_sweep, run_sweep
+    from testbed.sweep import format_summary, load_sweep, run_sweep
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: must be ≥ 1, got {args.workers}")
