@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_distance, check_seed
 from testbed.config import ConfigError
 
 __all__ = ["add_modem_emulator_parser"]
@@ -62,12 +62,10 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
 
     if not (args.time_factor > 0.0 and math.isfinite(args.time_factor)):
         raise ConfigError(f"--time-factor: must be > 0, got {args.time_factor}")
-    if not (args.distance >= 0.0 and math.isfinite(args.distance)):
-        raise ConfigError(f"--distance: must be ≥ 0 m, got {args.distance}")
+    check_distance(args.distance)
     if args.duration is not None and not args.duration >= 0.0:
         raise ConfigError(f"--duration: must be ≥ 0 s, got {args.duration}")
-    if args.seed < 0:
-        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    check_seed(args.seed)
     config = load_link_config(args.preset, args.overrides)
     with ModemEmulator(
         config,

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers
+from testbed.cli.options import Subparsers, check_out_dir, check_seed
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -148,8 +148,7 @@ def run_hil_command(args: argparse.Namespace) -> int:
         raise ConfigError(f"--baud: must be > 0, got {args.baud}")
     if not 1 <= args.m64_channel <= 7:
         raise ConfigError(f"--m64-channel: must be 1..7, got {args.m64_channel}")
-    if args.seed is not None and args.seed < 0:
-        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    check_seed(args.seed)
     scenario = load_scenario(scenario_name, args.overrides)
     duration = scenario.duration_s if args.duration is None else args.duration
     settle = scenario.metrics.settle_s
@@ -161,8 +160,7 @@ def run_hil_command(args: argparse.Namespace) -> int:
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a directory")
+    check_out_dir(out)
     endpoints: dict[str, Any] = {}
     try:
         for role, (option, url) in ports.items():

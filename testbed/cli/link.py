@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_distance, check_seed
 from testbed.config import ConfigError
 
 __all__ = ["add_link_parser"]
@@ -50,10 +50,8 @@ def _run_link(args: argparse.Namespace) -> int:
         raise ConfigError(f"--size: a probe frame must be {lo}..{hi} bytes, got {args.size}")
     if not (args.interval > 0.0 and math.isfinite(args.interval)):
         raise ConfigError(f"--interval: must be > 0 s, got {args.interval}")
-    if not (args.distance >= 0.0 and math.isfinite(args.distance)):
-        raise ConfigError(f"--distance: must be ≥ 0 m, got {args.distance}")
-    if args.seed < 0:
-        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    check_distance(args.distance)
+    check_seed(args.seed)
     config = load_link_config(args.preset, args.overrides)
     result = run_probe(
         config,

@@ -1,11 +1,24 @@
-"""What every ``testbed`` subcommand shares: exit codes, the parser class, ``--set``."""
+"""What the ``testbed`` subcommands share: exit codes, the parser class, ``--set``, checks."""
 
 from __future__ import annotations
 
 import argparse
+import math
+from pathlib import Path
 from typing import NoReturn, TypeAlias
 
-__all__ = ["EXIT_OK", "EXIT_USAGE", "Parser", "Subparsers", "add_set_option"]
+from testbed.config import ConfigError
+
+__all__ = [
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "Parser",
+    "Subparsers",
+    "add_set_option",
+    "check_distance",
+    "check_out_dir",
+    "check_seed",
+]
 
 EXIT_OK = 0
 EXIT_USAGE = 2
@@ -26,3 +39,21 @@ def add_set_option(parser: argparse.ArgumentParser, help_text: str) -> None:
     parser.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=help_text
     )
+
+
+def check_seed(seed: int | None) -> None:
+    """``--seed``: absent (the default) or ≥ 0; else :class:`ConfigError`."""
+    if seed is not None and seed < 0:
+        raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
+
+
+def check_distance(distance_m: float) -> None:
+    """``--distance``: a finite distance ≥ 0 m; else :class:`ConfigError`."""
+    if not (distance_m >= 0.0 and math.isfinite(distance_m)):
+        raise ConfigError(f"--distance: must be ≥ 0 m, got {distance_m}")
+
+
+def check_out_dir(out: Path) -> None:
+    """``--out``: a directory or nothing yet; else :class:`ConfigError`."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a directory")

@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
-from testbed.config import ConfigError
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir, check_seed
 
 __all__ = ["add_run_parser", "add_scenarios_parser", "format_summary"]
 
@@ -43,15 +42,13 @@ def _run_scenario(args: argparse.Namespace) -> int:
     from testbed.run.runner import run_scenario, write_outputs
     from testbed.run.scenario import load_scenario
 
-    if args.seed is not None and args.seed < 0:
-        raise ConfigError(f"--seed: must be ≥ 0, got {args.seed}")
+    check_seed(args.seed)
     scenario = load_scenario(args.scenario, args.overrides)
     out = args.out
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a directory")
+    check_out_dir(out)
     result = run_scenario(scenario, seed=args.seed)
     write_outputs(result, out, plots=not args.no_plots)
     print(format_summary(result.metrics, out))
