@@ -77,6 +77,10 @@ whole is not seen and not counted; a tail lost is noticed when the next image sh
 the 2017–2019 behaviour, where one lost packet lost the image.
 
 Standard library only; no I/O, no clock.
+
+Size: the sender and the assembler are the two ends of one protocol (chunk layout, image CRC, the
+alternating bit, both modes); the module stays whole, over 500 lines, so each rule's two ends
+read together.
 """
 
 from __future__ import annotations

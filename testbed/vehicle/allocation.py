@@ -23,6 +23,9 @@ its current from the budget; a degraded thruster's column is scaled by its facto
 maxima (how far the vehicle can push along each axis, for pilot scaling) are recomputed.
 
 This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` is the plant.
+
+Size: one concept, one class; the allocation steps share the allocator's reconfigurable state
+(T, T⁺, limits, stuck offsets, axis maxima), so the module stays whole, over 500 lines.
 """
 
 from __future__ import annotations
@@ -34,8 +37,9 @@ from typing import Literal
 
 import numpy as np
 
+from testbed.vehicle.t200 import T200, InterpTable
 from testbed.vehicle.thruster_config import ThrusterConfig
-from testbed.vehicle.thrusters import T200, FaultMode, InterpTable, ThrusterFault
+from testbed.vehicle.thrusters import FaultMode, ThrusterFault
 
 __all__ = [
     "AXIS_DIRECTION_TOLERANCE",

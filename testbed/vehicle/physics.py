@@ -21,6 +21,10 @@ rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x
 
 Rendering: :meth:`Physics.add_scenery` (visual-only static bodies, :mod:`.scenery`) and
 :meth:`Physics.render` (pybullet's CPU renderer from a camera pose in NED, :mod:`.camera`).
+
+Size: this module stays whole, over the 500-line guideline, because it is the one module allowed
+to import pybullet and the one that knows pybullet's z-up frames; the scene, the stepper and the
+frame conversions cannot move out without spreading that knowledge.
 """
 
 from __future__ import annotations
