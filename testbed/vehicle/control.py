@@ -28,23 +28,14 @@ from testbed.common.geometry import (
     Vec3,
     Wrench,
     attitude_error,
-    euler_from_quat,
     quat_conjugate,
-    quat_from_axis_angle,
-    quat_from_euler,
     quat_multiply,
-    quat_normalize,
     quat_rotate,
     quat_rotate_inverse,
-    twist_angle,
-    wrap_angle,
     yaw_only,
 )
 from testbed.config import check
 
-# The rotation names below (Quaternion … yaw_only) are re-exports of testbed.common.geometry, the
-# one rotation module: import them from there. They stay here for testbed.vehicle.systems and
-# testbed.vehicle.vehicle, which still import them from this module.
 __all__ = [
     "PID",
     "AttitudeController",
@@ -53,24 +44,9 @@ __all__ = [
     "FailsafeConfig",
     "PidGains",
     "PilotGains",
-    "Quaternion",
-    "Vec3",
-    "Wrench",
-    "attitude_error",
-    "euler_from_quat",
     "failsafe_level",
     "pilot_wrench",
-    "quat_conjugate",
-    "quat_from_axis_angle",
-    "quat_from_euler",
-    "quat_multiply",
-    "quat_normalize",
-    "quat_rotate",
-    "quat_rotate_inverse",
     "shape_stick",
-    "twist_angle",
-    "wrap_angle",
-    "yaw_only",
 ]
 
 _DEG_PER_RAD = 180.0 / math.pi

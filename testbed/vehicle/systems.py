@@ -28,6 +28,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from testbed.common.geometry import (
+    Quaternion,
+    Vec3,
+    quat_conjugate,
+    quat_from_axis_angle,
+    quat_multiply,
+    quat_normalize,
+    quat_rotate,
+    yaw_only,
+)
 from testbed.ecs import Entity, Phase, Schedule, System, World
 from testbed.vehicle.components import (
     ActiveMode,
@@ -55,17 +65,9 @@ from testbed.vehicle.control import (
     DepthController,
     FailsafeConfig,
     PilotGains,
-    Quaternion,
-    Vec3,
     failsafe_level,
     pilot_wrench,
-    quat_conjugate,
-    quat_from_axis_angle,
-    quat_multiply,
-    quat_normalize,
-    quat_rotate,
     shape_stick,
-    yaw_only,
 )
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 

@@ -35,6 +35,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from testbed.common.geometry import Quaternion
 from testbed.config import build, check, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
@@ -60,10 +61,9 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
     PilotGains,
-    Quaternion,
     shape_stick,
 )
-from testbed.vehicle.hydrodynamics import WaterCurrent, load_model
+from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
@@ -91,6 +91,7 @@ from testbed.vehicle.thrusters import (
     ThrusterDynamics,
     load_thruster_config,
 )
+from testbed.vehicle.water_current import WaterCurrent
 
 __all__ = ["ControlGains", "SensorsConfig", "Vehicle", "VehicleConfig", "load_vehicle_config"]
 
