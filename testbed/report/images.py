@@ -15,11 +15,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from testbed.report.figures import DPI
 from testbed.run.image_log import ImageLog, ReceivedImage, psnr_db
 
 __all__ = ["plot_image_strip", "strip_selection"]
-
-DPI = 110
 
 
 def strip_selection(received: list[ReceivedImage], count: int) -> list[ReceivedImage]:

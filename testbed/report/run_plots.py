@@ -4,7 +4,7 @@
 
 - ``timeline.png`` — the link's PDUs over time, one row per direction, a bar per transmission
   from ``tx_start`` to ``tx_end`` as tall as the packet is long, coloured by what became of it
-  (the narrow-band paper's Fig. 4). Long runs show a window from the first transmission.
+  (the narrow-band paper's Fig. 4; drawn by :mod:`testbed.report.timeline`).
 - ``speeds.png`` — the pilot's sticks against the sticks the vehicle applies, per axis
   (its Fig. 5), with the cross-correlation lag of each axis.
 - ``state.png`` — depth and depth target, roll/pitch/yaw over time, the north–east track;
@@ -12,220 +12,29 @@
 - ``attitude_errors.png`` (attitude experiments only) — probability-density histograms of the
   attitude error per axis after the settling time (the ECS paper's Figs. 2–3).
 
-The pure helpers :func:`frame_outcomes` and :func:`transmissions` classify link events and are
-what the timeline draws; they are tested on hand-made traces. Figures are built with
-:class:`matplotlib.figure.Figure` directly (Agg canvas), never through ``pyplot``, so no global
-figure state is touched. Nothing here simulates or computes metrics beyond what a plot states.
+Figures are built with :class:`matplotlib.figure.Figure` directly (Agg canvas, see
+:mod:`testbed.report.figures`), never through ``pyplot``, so no global figure state is touched.
+Nothing here simulates or computes metrics beyond what a plot states.
 """
 
 from __future__ import annotations
 
-import enum
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import PolyCollection
-from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from testbed.channel import EventKind, LinkEvent
+from testbed.report.figures import no_data, save
+from testbed.report.timeline import TIMELINE_WINDOW_S, plot_timeline
 from testbed.run.metrics import signal_lag_s
 from testbed.run.recorder import NodeEvent, Recorder
 
-__all__ = [
-    "FrameOutcome",
-    "Transmission",
-    "frame_outcomes",
-    "plot_attitude_errors",
-    "plot_speeds",
-    "plot_state",
-    "plot_timeline",
-    "timeline_window",
-    "transmissions",
-    "write_plots",
-]
-
-DPI = 110
-TIMELINE_WINDOW_S = 20.0
-"""Default longest window of the timeline, from the first transmission [s]."""
-TIMELINE_MAX_PACKETS = 300
-"""Default most transmissions the timeline draws (its window shrinks to fit)."""
-
-
-class FrameOutcome(enum.StrEnum):
-    """What became of a frame (or of one transmitted packet of it)."""
-
-    DELIVERED = "delivered"
-    """Every packet reached every receiver clean."""
-    CORRUPTED = "corrupted"
-    """A packet arrived with flipped bits (the receiver's CRC rejects the frame)."""
-    COLLIDED = "collided"
-    """A packet was destroyed by an overlapping transmission."""
-    OUTAGE = "outage"
-    """A packet overlapped a link outage window."""
-    OUT_OF_RANGE = "out_of_range"
-    """The receiver was beyond the link's range."""
-    DROPPED = "dropped"
-    """Tail-dropped by the sender's full FIFO: never transmitted."""
-    PENDING = "pending"
-    """Queued or on the air when the run ended: no outcome yet."""
-
-
-# Worst first: a frame takes the worst outcome of its packets (a lost packet loses the frame).
-# Collided > outage > corrupted is the precedence of the runner's metrics.json counts.
-_SEVERITY = (
-    FrameOutcome.DROPPED,
-    FrameOutcome.COLLIDED,
-    FrameOutcome.OUTAGE,
-    FrameOutcome.OUT_OF_RANGE,
-    FrameOutcome.CORRUPTED,
-    FrameOutcome.PENDING,
-    FrameOutcome.DELIVERED,
-)
-_RANK = {outcome: rank for rank, outcome in enumerate(_SEVERITY)}
-_RECEPTION = {
-    EventKind.DELIVER: FrameOutcome.DELIVERED,
-    EventKind.CORRUPT: FrameOutcome.CORRUPTED,
-    EventKind.COLLIDE: FrameOutcome.COLLIDED,
-    EventKind.OUTAGE: FrameOutcome.OUTAGE,
-    EventKind.OUT_OF_RANGE: FrameOutcome.OUT_OF_RANGE,
-}
-_STYLE: dict[FrameOutcome, tuple[str, str, str]] = {  # colour, hatch, legend label
-    FrameOutcome.DELIVERED: ("tab:blue", "", "delivered"),
-    FrameOutcome.CORRUPTED: ("tab:orange", "////", "corrupted (bit errors)"),
-    FrameOutcome.COLLIDED: ("tab:purple", "xxxx", "collided"),
-    FrameOutcome.OUTAGE: ("tab:cyan", "....", "lost in outage"),
-    FrameOutcome.OUT_OF_RANGE: ("tab:brown", "\\\\\\\\", "out of range"),
-    FrameOutcome.PENDING: ("0.75", "", "in flight at end of run"),
-}
-_DROP_COLOUR = "tab:red"
-_NODE_ORDER = ("operator", "vehicle")
-
-
-def _worst(outcomes: Iterable[FrameOutcome]) -> FrameOutcome:
-    return min(outcomes, key=_RANK.__getitem__, default=FrameOutcome.PENDING)
-
-
-@dataclass(frozen=True, slots=True)
-class Transmission:
-    """One packet on the air, from the sender's ``tx_start`` to its ``tx_end``.
-
-    Attributes:
-        src: sending node.
-        frame_id: the medium's frame id.
-        part: packet index within the frame.
-        start_s: transmission start (intrinsic delay first, then airtime) [s].
-        end_s: last bit sent [s].
-        size_bytes: packet length [B].
-        outcome: what became of this packet at its receiver(s) (worst over receivers).
-    """
-
-    src: str
-    frame_id: int
-    part: int
-    start_s: float
-    end_s: float
-    size_bytes: int
-    outcome: FrameOutcome
-
-
-def _part_outcomes(events: Iterable[LinkEvent]) -> dict[tuple[int, int], FrameOutcome]:
-    """(frame_id, part) → worst reception outcome over its receivers."""
-    parts: dict[tuple[int, int], FrameOutcome] = {}
-    for e in events:
-        outcome = _RECEPTION.get(e.kind)
-        if outcome is None:
-            continue
-        key = (e.frame_id, e.part)
-        held = parts.get(key)
-        parts[key] = outcome if held is None else _worst((held, outcome))
-    return parts
-
-
-def frame_outcomes(events: Iterable[LinkEvent]) -> dict[int, FrameOutcome]:
-    """Classify every frame that appears in a link trace.
-
-    A dropped frame is :attr:`~FrameOutcome.DROPPED`. Otherwise the frame takes the worst
-    outcome of its packets (``collided`` > ``outage`` > ``out_of_range`` > ``corrupted`` >
-    ``pending`` > ``delivered``): one lost packet loses the frame. A transmitted packet with no
-    reception outcome, or a frame only enqueued, is ``pending`` (the run ended first).
-
-    Args:
-        events: link events (a :class:`~testbed.channel.Trace` or any iterable of them).
-
-    Returns:
-        Frame id → outcome, for every frame id seen in ``events``.
-    """
-    events = list(events)
-    received = _part_outcomes(events)
-    seen: dict[int, set[int]] = {}
-    dropped: set[int] = set()
-    for e in events:
-        seen.setdefault(e.frame_id, set())
-        if e.kind is EventKind.DROP:
-            dropped.add(e.frame_id)
-        elif e.kind is not EventKind.ENQUEUE:
-            seen[e.frame_id].add(e.part)
-    outcomes: dict[int, FrameOutcome] = {}
-    for frame_id, parts in seen.items():
-        if frame_id in dropped:
-            outcomes[frame_id] = FrameOutcome.DROPPED
-        else:
-            per_part = (received.get((frame_id, p), FrameOutcome.PENDING) for p in parts)
-            outcomes[frame_id] = _worst(per_part)
-    return outcomes
-
-
-def transmissions(events: Iterable[LinkEvent]) -> list[Transmission]:
-    """Pair every ``tx_start`` with its ``tx_end`` and the packet's reception outcome.
-
-    A packet whose ``tx_end`` is missing (a trace limited to some kinds) ends where it starts.
-
-    Args:
-        events: link events (a :class:`~testbed.channel.Trace` or any iterable of them).
-
-    Returns:
-        The transmissions in order of start time.
-    """
-    events = list(events)
-    received = _part_outcomes(events)
-    ends = {(e.src, e.frame_id, e.part): e.t_s for e in events if e.kind is EventKind.TX_END}
-    out = []
-    for e in events:
-        if e.kind is not EventKind.TX_START:
-            continue
-        end_s = ends.get((e.src, e.frame_id, e.part), e.t_s)
-        outcome = received.get((e.frame_id, e.part), FrameOutcome.PENDING)
-        out.append(Transmission(e.src, e.frame_id, e.part, e.t_s, end_s, e.size_bytes, outcome))
-    out.sort(key=lambda x: x.start_s)
-    return out
-
-
-# -- shared drawing helpers --------------------------------------------------------------------
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=DPI, metadata={"Software": None})
-    return path
-
-
-def _note(ax: Axes, text: str) -> None:
-    """Grey text in the middle of ``ax`` (for a panel with nothing to draw)."""
-    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.35")
-
-
-def _no_data(ax: Axes, what: str) -> None:
-    _note(ax, f"no {what} recorded")
-    ax.set_xticks([])
-    ax.set_yticks([])
+__all__ = ["plot_attitude_errors", "plot_speeds", "plot_state", "write_plots"]
 
 
 def _intervals(t: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
@@ -249,168 +58,6 @@ def _wrap_breaks(angle_deg: np.ndarray) -> np.ndarray:
         jumps = np.flatnonzero(np.abs(np.diff(out)) > 180.0) + 1
         out[jumps] = np.nan
     return out
-
-
-# -- timeline (Fig. 4) -------------------------------------------------------------------------
-
-
-def _row_title(src: str, dsts: set[str], outcomes: list[FrameOutcome]) -> str:
-    arrow = f"{src} → {', '.join(sorted(dsts)) or '?'}"
-    counts = {o: outcomes.count(o) for o in FrameOutcome if outcomes.count(o)}
-    tally = ", ".join(f"{n} {o.value.replace('_', ' ')}" for o, n in counts.items())
-    return f"{arrow}:  {len(outcomes)} frames in the run ({tally})" if outcomes else arrow
-
-
-def _draw_row(ax: Axes, sent: list[Transmission], dropped: list[LinkEvent]) -> set[FrameOutcome]:
-    """One direction's bars and drop crosses; returns the outcomes drawn."""
-    drawn = set()
-    for outcome, (colour, hatch, _) in _STYLE.items():
-        group = [x for x in sent if x.outcome is outcome]
-        if group:
-            drawn.add(outcome)
-            boxes = [
-                ((x.start_s, 0.0), (x.start_s, x.size_bytes), (x.end_s, x.size_bytes),
-                 (x.end_s, 0.0))
-                for x in group
-            ]  # fmt: skip
-            bars = PolyCollection(
-                boxes, facecolors=colour, edgecolors=_darker(colour), linewidths=0.6, hatch=hatch
-            )
-            bars.set_hatchcolor("white")
-            ax.add_collection(bars, autolim=False)
-    if dropped:
-        drawn.add(FrameOutcome.DROPPED)
-        times = [e.t_s for e in dropped]
-        sizes = [e.size_bytes for e in dropped]
-        ax.scatter(times, sizes, marker="x", s=40, color=_DROP_COLOUR, zorder=3)
-    ax.set_ylabel("PDU size [B]")
-    top = max([x.size_bytes for x in sent] + [e.size_bytes for e in dropped] + [1])
-    ax.set_ylim(0.0, 1.12 * top)
-    ax.grid(axis="y", alpha=0.3)
-    if not drawn:
-        _note(ax, "nothing sent in this window")
-    return drawn
-
-
-def _darker(colour: str) -> tuple[float, float, float]:
-    """``colour`` at 60 % brightness: bar outlines that separate adjacent packets."""
-    r, g, b = to_rgb(colour)
-    return (0.6 * r, 0.6 * g, 0.6 * b)
-
-
-def _legend_handle(outcome: FrameOutcome) -> Patch | Line2D:
-    if outcome is FrameOutcome.DROPPED:
-        label = "dropped (transmit FIFO full)"
-        return Line2D([], [], marker="x", linestyle="", color=_DROP_COLOUR, label=label)
-    colour, hatch, label = _STYLE[outcome]
-    edge = _darker(colour)
-    return Patch(facecolor=colour, edgecolor=edge, hatch=hatch, hatchcolor="white", label=label)
-
-
-def timeline_window(
-    sent: Sequence[Transmission],
-    *,
-    window_s: float = TIMELINE_WINDOW_S,
-    max_packets: int = TIMELINE_MAX_PACKETS,
-) -> tuple[float, float]:
-    """The time window :func:`plot_timeline` draws.
-
-    It starts at the first transmission and lasts ``window_s``, cut short at the start of the
-    first transmission beyond ``max_packets``, and never past the last transmission's end.
-
-    Args:
-        sent: the transmissions, in order of start time (:func:`transmissions`).
-        window_s: longest window [s].
-        max_packets: most transmissions starting in the window.
-
-    Returns:
-        ``(t0, t1)`` [s]; ``(0.0, 0.0)`` when nothing was sent.
-    """
-    if not sent:
-        return 0.0, 0.0
-    t0 = sent[0].start_s
-    t1 = min(max(x.end_s for x in sent), t0 + window_s)
-    if len(sent) > max_packets:
-        t1 = min(t1, sent[max_packets].start_s)  # the first packet left out starts here
-    return t0, t1
-
-
-def plot_timeline(
-    events: Iterable[LinkEvent],
-    path: Path,
-    *,
-    title: str,
-    window_s: float = TIMELINE_WINDOW_S,
-    max_packets: int = TIMELINE_MAX_PACKETS,
-) -> Path:
-    """Draw the link timeline: one row per sending node, a bar per transmitted packet.
-
-    Each bar spans ``tx_start`` → ``tx_end`` and is as tall as the packet [B]; its colour and
-    hatch say what became of it. Dropped frames are red crosses at their enqueue time and size.
-    Only a window from the first transmission ``t0`` is drawn: ``window_s`` long, or shorter
-    so that at most ``max_packets`` transmissions start in it (fast links send hundreds a
-    second); the figure title states it. The row titles count every frame of the run.
-
-    Args:
-        events: link events (a :class:`~testbed.channel.Trace` or any iterable of them).
-        path: PNG file to write.
-        title: the run's title (first line of the figure title).
-        window_s: longest window drawn [s], > 0.
-        max_packets: most transmissions drawn, ≥ 1.
-
-    Returns:
-        ``path``.
-
-    Raises:
-        ValueError: ``window_s`` ≤ 0 or ``max_packets`` < 1.
-    """
-    if not window_s > 0.0:
-        raise ValueError(f"window_s must be > 0, got {window_s}")
-    if max_packets < 1:
-        raise ValueError(f"max_packets must be ≥ 1, got {max_packets}")
-    events = list(events)
-    sent = transmissions(events)
-    outcomes = frame_outcomes(events)
-    drops = [e for e in events if e.kind is EventKind.DROP]
-    src_of = {e.frame_id: e.src for e in events}
-    dsts: dict[str, set[str]] = {}
-    for e in events:
-        dsts.setdefault(e.src, set())
-        if e.kind in _RECEPTION:
-            dsts[e.src].add(e.dst)
-    known = [n for n in _NODE_ORDER if n in dsts]  # operator's row first, then vehicle's
-    rows = known + sorted(set(dsts) - set(known)) or list(_NODE_ORDER)
-
-    fig = Figure(figsize=(12.0, 2.2 + 2.3 * len(rows)), layout="constrained")
-    axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
-    if not sent:
-        fig.suptitle(f"{title}\nlink timeline")
-        for ax in axes:
-            _no_data(ax, "transmissions")
-        return _save(fig, path)
-
-    t0, t1 = timeline_window(sent, window_s=window_s, max_packets=max_packets)
-    t_last = max(x.end_s for x in sent)
-    if t1 < t_last:
-        span = f"first {t1 - t0:.3g} s of {t_last - t0:.3g} s of link activity, from t = {t0:.2f} s"
-    else:
-        span = f"whole run ({t_last - t0:.3g} s of link activity)"
-    fig.suptitle(f"{title}\nlink timeline (PDUs per direction): {span}")
-
-    drawn: set[FrameOutcome] = set()
-    for ax, src in zip(axes, rows, strict=True):
-        mine = [x for x in sent if x.src == src and x.end_s >= t0 and x.start_s <= t1]
-        lost = [e for e in drops if e.src == src and t0 <= e.t_s <= t1]
-        drawn |= _draw_row(ax, mine, lost)
-        row_outcomes = [o for f, o in sorted(outcomes.items()) if src_of.get(f) == src]
-        ax.set_title(_row_title(src, dsts.get(src, set()), row_outcomes), loc="left", fontsize=10)
-    margin = 0.01 * max(t1 - t0, 1e-3)
-    axes[-1].set_xlim(t0 - margin, t1 + margin)
-    axes[-1].set_xlabel("simulated time [s]")
-    handles = [_legend_handle(o) for o in FrameOutcome if o in drawn]
-    if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4))
-    return _save(fig, path)
 
 
 # -- commanded vs received sticks (Fig. 5) -----------------------------------------------------
@@ -444,7 +91,7 @@ def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> 
     for ax, (axis, name) in zip(axes, _STICKS, strict=True):
         ax.set_ylabel(f"{name} [−1…1]")
         if t.size == 0:
-            _no_data(ax, "series")
+            no_data(ax, "no series recorded")
             continue
         cmd = np.asarray(series[f"cmd_{axis}"], dtype=float)
         rx = np.asarray(series[f"rx_{axis}"], dtype=float)
@@ -461,7 +108,7 @@ def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> 
     axes[-1].set_xlabel("simulated time [s]")
     if t.size:
         axes[-1].set_xlim(float(t[0]), float(t[-1]))
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- vehicle state -----------------------------------------------------------------------------
@@ -569,8 +216,8 @@ def plot_state(
         _list_events(fig.add_subplot(grid[2, 1]), events)
     if t.size == 0:
         for ax in (ax_depth, ax_tilt, ax_yaw, ax_track):
-            _no_data(ax, "series")
-        return _save(fig, path)
+            no_data(ax, "no series recorded")
+        return save(fig, path)
 
     time_axes = (ax_depth, ax_tilt, ax_yaw)
     flags = _shade_flags(time_axes, t, series)
@@ -603,7 +250,7 @@ def plot_state(
     ax_track.set_aspect("equal", adjustable="datalim")
     ax_track.grid(alpha=0.3)
     ax_track.legend(loc="best", fontsize=8)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- attitude error distributions (ECS paper, Figs. 2-3) ---------------------------------------
@@ -639,7 +286,7 @@ def plot_attitude_errors(
         ax.set_xlabel(f"{name} error [deg]")
         ax.set_ylabel("probability density [1/deg]")
         if values.size == 0:
-            _no_data(ax, "settled samples")
+            no_data(ax, "no settled samples recorded")
             continue
         edges = np.histogram_bin_edges(values, bins="auto")
         if edges.size > 121:
@@ -651,7 +298,7 @@ def plot_attitude_errors(
         ax.set_ylim(0.0, 1.3 * float(np.max(density)))
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # -- entry point -------------------------------------------------------------------------------

@@ -1,5 +1,5 @@
-"""testbed.report.run_plots: frame classification on a hand-made trace, and the PNGs of a
-synthetic run."""
+"""testbed.report.run_plots and .timeline: the timeline's window, and the PNGs of a synthetic
+run (the frame classification they draw is tested in tests/channel/test_trace.py)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,9 @@ import pytest
 from matplotlib import colors
 from matplotlib.image import imread
 
-from testbed.channel import EventKind, Trace
-from testbed.report.run_plots import (
-    FrameOutcome,
-    frame_outcomes,
-    plot_attitude_errors,
-    plot_timeline,
-    timeline_window,
-    transmissions,
-    write_plots,
-)
+from testbed.channel import EventKind, Trace, transmissions
+from testbed.report.run_plots import plot_attitude_errors, write_plots
+from testbed.report.timeline import plot_timeline, timeline_window
 from testbed.run.recorder import SERIES_COLUMNS, Recorder
 
 K = EventKind
@@ -51,8 +44,8 @@ def _received(
     trace.record(t_s, kind, src, dst, frame_id, part, size, 3 if kind is K.CORRUPT else 0)
 
 
-def hand_made_trace() -> tuple[Trace, dict[int, FrameOutcome]]:
-    """A trace with every kind of event, and the outcome of each frame decided by hand."""
+def hand_made_trace() -> Trace:
+    """A trace with every kind of event and every frame outcome (the timeline's colours)."""
     trace = Trace()
     _sent(trace, 0.0, OP, 0, 20)
     _received(trace, 0.2, K.DELIVER, OP, VEH, 0)
@@ -86,28 +79,12 @@ def hand_made_trace() -> tuple[Trace, dict[int, FrameOutcome]]:
     _received(trace, 7.9, K.OUTAGE, VEH, OP, 13, part=1, size=60)
     _sent(trace, 9.8, OP, 10, 20)  # on the air when the run ends
     trace.record(9.9, K.ENQUEUE, VEH, "*", 11, 0, 60)  # still queued
-    expected = {
-        0: FrameOutcome.DELIVERED,
-        1: FrameOutcome.CORRUPTED,
-        2: FrameOutcome.COLLIDED,
-        3: FrameOutcome.OUTAGE,
-        4: FrameOutcome.OUT_OF_RANGE,
-        5: FrameOutcome.DROPPED,
-        6: FrameOutcome.CORRUPTED,
-        7: FrameOutcome.COLLIDED,
-        8: FrameOutcome.COLLIDED,
-        9: FrameOutcome.DELIVERED,
-        10: FrameOutcome.PENDING,
-        11: FrameOutcome.PENDING,
-        12: FrameOutcome.COLLIDED,
-        13: FrameOutcome.OUTAGE,
-    }
-    return trace, expected
+    return trace
 
 
 def synthetic_recorder() -> Recorder:
     """A 10 s run at 100 Hz: step sticks received 0.3 s late, a failsafe, noisy attitude."""
-    rec = Recorder(trace=hand_made_trace()[0])
+    rec = Recorder(trace=hand_made_trace())
     t = np.arange(1000) * 0.01
     rng = np.random.default_rng(7)
     cols = {name: np.zeros_like(t) for name in SERIES_COLUMNS}
@@ -157,44 +134,7 @@ def plots(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     )
 
 
-# -- classification ----------------------------------------------------------------------------
-
-
-def test_frame_outcomes_match_the_hand_classified_trace() -> None:
-    trace, expected = hand_made_trace()
-    assert frame_outcomes(trace) == expected
-
-
-def test_frame_outcomes_do_not_depend_on_recording_order() -> None:
-    trace, expected = hand_made_trace()
-    assert frame_outcomes(reversed(trace.events)) == expected
-
-
-def test_transmissions_pair_starts_with_ends_and_keep_each_packets_own_outcome() -> None:
-    trace, _ = hand_made_trace()
-    sent = transmissions(trace)
-    assert len(sent) == len(trace.of_kind(K.TX_START)) == 17
-    assert [x.start_s for x in sent] == sorted(x.start_s for x in sent)
-    assert all(x.end_s - x.start_s == pytest.approx(0.2) for x in sent)
-    by_packet = {(x.frame_id, x.part): x for x in sent}
-    assert by_packet[6, 0].outcome is FrameOutcome.DELIVERED
-    assert by_packet[6, 1].outcome is FrameOutcome.CORRUPTED
-    assert by_packet[7, 0].outcome is FrameOutcome.CORRUPTED
-    assert by_packet[10, 0].outcome is FrameOutcome.PENDING
-    assert (by_packet[1, 0].src, by_packet[1, 0].size_bytes) == (VEH, 60)
-    assert 5 not in {x.frame_id for x in sent}  # dropped frames never go on the air
-
-
-def test_a_loss_only_trace_still_classifies_its_frames() -> None:
-    trace = Trace(kinds=(K.COLLIDE, K.OUT_OF_RANGE))
-    full, expected = hand_made_trace()
-    for e in full:
-        trace.record(*e)
-    lost = {
-        f: o for f, o in expected.items() if o in (FrameOutcome.COLLIDED, FrameOutcome.OUT_OF_RANGE)
-    }
-    assert frame_outcomes(trace) == lost
-    assert transmissions(trace) == []
+# -- the timeline's window ---------------------------------------------------------------------
 
 
 def test_timeline_window_is_twenty_seconds_from_the_first_transmission_unless_too_dense() -> None:
@@ -208,7 +148,7 @@ def test_timeline_window_is_twenty_seconds_from_the_first_transmission_unless_to
         _sent(dense, 2.0 + 0.01 * k, VEH, k, 20)
     t0, t1 = timeline_window(transmissions(dense), max_packets=300)
     assert (t0, t1) == (2.0, pytest.approx(5.0))
-    short, _ = hand_made_trace()  # last event: frame 10's tx_end at 10.0 s
+    short = hand_made_trace()  # last event: frame 10's tx_end at 10.0 s
     assert timeline_window(transmissions(short)) == (0.0, pytest.approx(10.0))
     assert timeline_window([]) == (0.0, 0.0)
 

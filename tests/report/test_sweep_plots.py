@@ -1,5 +1,6 @@
 """Sweep plots: the closed forms against a second method, files from hand-made and real results,
-``testbed plot`` and its errors."""
+the closed forms built from the rows' own frame and chunk sizes, ``testbed plot`` and its
+errors."""
 
 from __future__ import annotations
 
@@ -12,16 +13,15 @@ import pytest
 
 from testbed.cli.main import main
 from testbed.config import ConfigError
-from testbed.report.sweep_plots import (
+from testbed.report.closed_forms import (
     ORDER_FRAME_BYTES,
-    _LogAxis,
     closed_form_age_s,
     closed_form_images_per_minute,
     closed_form_per,
-    plot_ber_sweep,
-    plot_pair,
-    read_results,
 )
+from testbed.report.sweep_axes import LogAxis
+from testbed.report.sweep_plots import image_rate_model, plot_ber_sweep, plot_pair
+from testbed.report.sweep_results import read_results
 from testbed.run.metrics import age_of_information
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -100,11 +100,94 @@ def test_closed_form_age_matches_the_formula_and_a_simulated_sawtooth() -> None:
 
 
 def test_ber_zero_sits_one_decade_below_the_smallest_positive_value() -> None:
-    axis = _LogAxis.fit(np.array([0.0, 1e-5, 1e-3, 1e-4]))
+    axis = LogAxis.fit(np.array([0.0, 1e-5, 1e-3, 1e-4]))
     assert axis is not None and axis.zero_at == pytest.approx(1e-6)
     np.testing.assert_allclose(axis.place(np.array([0.0, 1e-5])), [1e-6, 1e-5])
-    assert _LogAxis.fit(np.array([0.6, 1.0, 1.8])) is None  # under two decades: linear
-    assert _LogAxis.fit(np.array([-1.0, 1.0, 1000.0])) is None
+    assert LogAxis.fit(np.array([0.6, 1.0, 1.8])) is None  # under two decades: linear
+    assert LogAxis.fit(np.array([-1.0, 1.0, 1000.0])) is None
+
+
+def test_frame_lengths_come_from_the_protocol_layouts() -> None:
+    from testbed.protocol import encode_frame
+    from testbed.report.closed_forms import REPLY_FRAME_BYTES, reply_frame_bytes
+
+    assert ORDER_FRAME_BYTES == len(encode_frame(bytes(7))) == 13  # 2-B header + 5-B move
+    assert REPLY_FRAME_BYTES == reply_frame_bytes(40) == 60  # REFERENCE §1.6
+    assert reply_frame_bytes(20) == 40
+
+
+# --- closed forms from the rows -------------------------------------------------------------------
+
+IMAGE_BYTES = 598  # a coded image; with its 2-B CRC: 15 chunks of 40 B, 30 of 20 B
+IMAGE_GAP_S = 0.6
+
+
+def _write_image_results(path: Path, *, chunk_in_grid: bool, chunk_column: bool = True) -> Path:
+    """An image sweep's results.csv: BER × chunk size (a grid column, or the value recorded
+    after the metrics) × 2 seeds, every run completing images of IMAGE_BYTES."""
+    grid = ["link.ber", "images.chunk_bytes"] if chunk_in_grid else ["link.ber"]
+    metrics = ["ipg_s", "images.completed", "images.bytes_delivered", "images.per_minute"]
+    recorded = [] if chunk_in_grid or not chunk_column else ["images.chunk_bytes"]
+    point = 0
+    with path.open("w", encoding="utf-8", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["point", "seed", *grid, "status", "error", *metrics, *recorded])
+        for ber in BERS:
+            for chunk in (20, 40) if chunk_in_grid else (20,):
+                keys = [ber, chunk] if chunk_in_grid else [ber]
+                for seed in range(2):
+                    values = [IMAGE_GAP_S, 3, 3 * IMAGE_BYTES, 5.0 - seed]
+                    extra = [chunk] if recorded else []
+                    writer.writerow([point, seed, *keys, "ok", "", *values, *extra])
+                point += 1
+    return path
+
+
+def _by_hand(ber: np.ndarray, chunk_bytes: int) -> np.ndarray:
+    """60·q_o·q_r/(n·T): a 13-B order, a reply of 6 B framing + 14 B header + the chunk."""
+    q_order = (1.0 - ber) ** (8 * 13)
+    q_reply = (1.0 - ber) ** (8 * (6 + 14 + chunk_bytes))
+    chunks = math.ceil((IMAGE_BYTES + 2) / chunk_bytes)
+    return 60.0 * q_order * q_reply / (chunks * IMAGE_GAP_S)
+
+
+@pytest.mark.filterwarnings("ignore:No artists with labels")  # no PER or tracking columns here
+def test_a_sweep_over_chunk_bytes_draws_one_closed_form_per_chunk_size(tmp_path: Path) -> None:
+    results = read_results(_write_image_results(tmp_path / "results.csv", chunk_in_grid=True))
+    ber = np.array([0.0, 1e-4, 1e-3])
+    models = {}
+    for label, mask in results.groups(["images.chunk_bytes"]):
+        model = image_rate_model(results, mask)
+        assert model is not None
+        models[label] = model
+    assert list(models) == ["chunk_bytes=20", "chunk_bytes=40"]
+    small, large = models["chunk_bytes=20"], models["chunk_bytes=40"]
+    assert (small.chunk_bytes, small.chunks, small.reply_bytes) == (20, 30, 40)
+    assert (large.chunk_bytes, large.chunks, large.reply_bytes) == (40, 15, 60)
+    assert small.gap_s == large.gap_s == IMAGE_GAP_S and small.selective_repeat
+    np.testing.assert_allclose(small.per_minute(ber), _by_hand(ber, 20), rtol=1e-12)
+    np.testing.assert_allclose(large.per_minute(ber), _by_hand(ber, 40), rtol=1e-12)
+    # at BER 0: 60/(30·0.6) = 3.33 images/min with 20-B chunks, 60/(15·0.6) = 6.67 with 40 B
+    assert float(small.per_minute(0.0)) == pytest.approx(60.0 / 18.0, rel=1e-12)
+    assert float(large.per_minute(0.0)) == pytest.approx(60.0 / 9.0, rel=1e-12)
+    names = [p.name for p in plot_ber_sweep(results.path, tmp_path / "plots")]
+    assert "ber_vs_images.png" in names
+
+
+def test_the_chunk_size_a_run_recorded_sets_the_curve_and_old_tables_keep_40_bytes(
+    tmp_path: Path,
+) -> None:
+    ber = np.array([1e-4, 1e-3])
+    recorded = read_results(_write_image_results(tmp_path / "recorded.csv", chunk_in_grid=False))
+    model = image_rate_model(recorded, np.ones(len(recorded.rows), dtype=bool))
+    assert model is not None and (model.chunk_bytes, model.chunks) == (20, 30)
+    np.testing.assert_allclose(model.per_minute(ber), _by_hand(ber, 20), rtol=1e-12)
+    old = read_results(
+        _write_image_results(tmp_path / "old.csv", chunk_in_grid=False, chunk_column=False)
+    )
+    model = image_rate_model(old, np.ones(len(old.rows), dtype=bool))
+    assert model is not None and (model.chunk_bytes, model.chunks) == (40, 15)
+    np.testing.assert_allclose(model.per_minute(ber), _by_hand(ber, 40), rtol=1e-12)
 
 
 # --- files ----------------------------------------------------------------------------------------

@@ -24,8 +24,10 @@ from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.sweep import (
     EXCLUDED_METRICS,
+    RunSpec,
     Sweep,
     aggregate_rows,
+    execute_run,
     expand,
     flatten_metrics,
     load_sweep,
@@ -182,6 +184,17 @@ def test_aggregate_median_p95_and_student_t_interval_by_hand() -> None:
     only_other = {"point": 0, "seed": 0, "status": "ok", "error": "", "other": 1.0}
     with pytest.raises(ConfigError, match="unknown metric 'm'"):
         aggregate_rows(_toy_sweep(), [only_other])
+
+
+def test_image_runs_record_their_chunk_size_and_mode_after_the_metrics() -> None:
+    image_keys = ("images.changes=[]", "images.chunk_bytes=20", "images.selective_repeat=false")
+    images = execute_run(RunSpec(0, 0, "s100-video-v1", (*SHORT[1::2], *image_keys)))
+    assert images.error == "" and images.metrics is not None
+    assert list(images.metrics)[-2:] == ["images.chunk_bytes", "images.selective_repeat"]
+    assert images.metrics["images.chunk_bytes"] == 20
+    assert images.metrics["images.selective_repeat"] is False
+    teleop = execute_run(RunSpec(0, 0, "s100-teleop-v1", tuple(SHORT[1::2])))
+    assert teleop.metrics is not None and not any(k.startswith("images.") for k in teleop.metrics)
 
 
 # --- running -------------------------------------------------------------------------------------

@@ -1,0 +1,94 @@
+"""A sweep's ``results.csv`` as the plots read it: the successful rows, cells as strings.
+
+:func:`read_results` reads the file ``testbed sweep`` writes (:mod:`testbed.sweep`: ``point``,
+``seed``, the grid keys, ``status``, ``error``, then the metrics); :class:`Results` gives a
+column as numbers and splits the rows into the lines of a plot.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from testbed.config import ConfigError
+
+__all__ = ["Results", "read_results", "short_key"]
+
+
+@dataclass(frozen=True, slots=True)
+class Results:
+    """The successful rows of a ``results.csv``.
+
+    Attributes:
+        path: where it was read from, for messages.
+        columns: every column, in file order.
+        grid: the grid keys (the columns between ``seed`` and ``status``).
+        rows: the rows with ``status = ok``, cells as the file's strings.
+    """
+
+    path: Path
+    columns: tuple[str, ...]
+    grid: tuple[str, ...]
+    rows: tuple[dict[str, str], ...]
+
+    def require(self, column: str, option: str) -> None:
+        """Raise a one-line :class:`ConfigError` unless ``column`` exists.
+
+        Raises:
+            ConfigError: naming ``option`` and the column, listing the known columns.
+        """
+        if column not in self.columns:
+            known = ", ".join(c for c in self.columns if c not in ("status", "error"))
+            raise ConfigError(f"{self.path}: {option}: unknown column {column!r} (known: {known})")
+
+    def numbers(self, column: str) -> np.ndarray:
+        """``column`` of every row as floats; NaN for an empty or non-numeric cell."""
+        return np.array([_number(row.get(column, "")) for row in self.rows], dtype=float)
+
+    def labels(self, columns: Sequence[str]) -> list[str]:
+        """Per row, ``key=value`` of ``columns`` joined by ``, `` (``""`` for no columns)."""
+        return [", ".join(f"{short_key(c)}={row[c]}" for c in columns) for row in self.rows]
+
+    def groups(self, by: Sequence[str]) -> list[tuple[str, np.ndarray]]:
+        """``(label, row mask)`` per distinct value of the ``by`` columns, in first-seen order."""
+        labels = self.labels(by)
+        seen = list(dict.fromkeys(labels))
+        array = np.array(labels, dtype=object)
+        return [(label, array == label) for label in seen]
+
+
+def _number(cell: str) -> float:
+    try:
+        return float(cell)
+    except ValueError:
+        return math.nan
+
+
+def short_key(key: str) -> str:
+    """``link.ipg_s`` → ``ipg_s``: the last part of a dotted key, for legends."""
+    return key.rsplit(".", 1)[-1]
+
+
+def read_results(results_csv: Path | str) -> Results:
+    """Read a sweep's ``results.csv``.
+
+    Raises:
+        ConfigError: a missing file, or one without the ``point, seed, …, status, error`` head.
+    """
+    path = Path(results_csv)
+    try:
+        with path.open(encoding="utf-8", newline="") as handle:
+            reader = csv.DictReader(handle)
+            columns = tuple(reader.fieldnames or ())
+            rows = tuple(row for row in reader if row.get("status") == "ok")
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
+    if columns[:2] != ("point", "seed") or "status" not in columns:
+        raise ConfigError(f"{path}: not a results.csv of testbed sweep (no point, seed, status)")
+    grid = columns[2 : columns.index("status")]
+    return Results(path, columns, grid, rows)
