@@ -34,6 +34,12 @@ thing they share is a :class:`queue.Queue` of bursts, drained by a simpy process
 simulated time as the real-time environment does (``env_start + (wall − real_start) / factor``),
 so a burst polled late is still sent at the simulated instant it closed, whenever that is not
 already past. POSIX only (``os.openpty``).
+
+Scheduler lateness (instrumentation, :attr:`ModemEmulator.scheduler_lateness_ms`): each poll of
+the simulation thread records how late it ran against its real-time schedule, and the reader
+records how late it closed each burst against the instant its idle gap ended. A delivery is
+written to its port as late as the simulation thread runs, and a burst enters the link as late
+as the reader closes it; tests add these to the channel model's latency on a loaded machine.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ import select
 import threading
 import time
 import tty
+from collections import deque
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from types import TracebackType
@@ -76,6 +83,8 @@ _MAX_IN_FLIGHT = 4096
 theirs; the oldest are forgotten beyond this many)."""
 _ACK_MARGIN_S = 0.5
 """Added to the round trip of an EvoLogics instant message and its ack to time it out [s]."""
+_LATENESS_SAMPLES = 100_000
+"""Scheduler lateness samples kept per thread (the newest)."""
 
 
 @dataclass(slots=True)
@@ -194,6 +203,8 @@ class ModemEmulator:
         self._started = False
         self._closed = False
         self._error: BaseException | None = None
+        self._sim_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+        self._reader_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
 
     # -- public --------------------------------------------------------------------------------
 
@@ -219,6 +230,18 @@ class ModemEmulator:
         if self._personalities is None:
             return None
         return self._personalities[0].counters(), self._personalities[1].counters()
+
+    @property
+    def scheduler_lateness_ms(self) -> dict[str, dict[str, float]]:
+        """How late the emulator's threads ran [ms]: ``simulation``, each poll of the simulation
+        thread against its real-time schedule (deliveries are written as late); ``reader``, each
+        burst closed by the reader against the instant its line went idle for ``idle_s`` (or its
+        byte count was reached: 0). Each ``{p50, p95, max, mean, n}``, NaN (``n`` 0) before any
+        sample. Read it after :meth:`close` (or accept a snapshot that is already stale)."""
+        return {
+            "simulation": _summary_ms(list(self._sim_lateness_ns)),
+            "reader": _summary_ms(list(self._reader_lateness_ns)),
+        }
 
     @property
     def error(self) -> BaseException | None:
@@ -316,9 +339,12 @@ class ModemEmulator:
                 port.last_byte_s = now
                 while len(port.burst) >= self._burst_cap:
                     self._close_burst(port, self._burst_cap, now)
+                    self._reader_lateness_ns.append(0)
             for port in ports:
                 if port.burst and now - port.last_byte_s >= self._idle_s:
+                    late_s = now - (port.last_byte_s + self._idle_s)
                     self._close_burst(port, len(port.burst), now)
+                    self._reader_lateness_ns.append(round(late_s * 1e9))
 
     def _close_burst(self, port: _Port, size: int, now_s: float) -> None:
         data = bytes(port.burst[:size])
@@ -335,7 +361,10 @@ class ModemEmulator:
         """simpy process: hand queued bursts to their modems at the instant they closed."""
         poll_sim_s = self._poll_s / env.factor
         inbox = self._inbox
+        lateness_ns = self._sim_lateness_ns
         while not self._stop.is_set():
+            scheduled_s = env.real_start + (env.now - env.env_start) * env.factor
+            lateness_ns.append(round((time.monotonic() - scheduled_s) * 1e9))
             while True:
                 try:
                     side, data, wall_s = inbox.get_nowait()
@@ -435,6 +464,21 @@ class ModemEmulator:
             self._write_port(port, delivery.data)
 
         return write
+
+
+def _summary_ms(values_ns: list[int]) -> dict[str, float]:
+    """``{p50, p95, max, mean, n}`` of nanosecond samples, in ms (NaN and 0 when empty)."""
+    if not values_ns:
+        nan = float("nan")
+        return {"p50": nan, "p95": nan, "max": nan, "mean": nan, "n": 0}
+    values = np.asarray(values_ns, dtype=float) / 1e6
+    return {
+        "p50": float(np.median(values)),
+        "p95": float(np.percentile(values, 95)),
+        "max": float(values.max()),
+        "mean": float(values.mean()),
+        "n": int(values.size),
+    }
 
 
 def _personalities(

@@ -19,6 +19,13 @@ its node's ``on_receive`` as a :class:`~testbed.channel.Delivery` holding that f
 which the node feeds to its own decoder exactly as in a simulated run. Nodes never block on I/O
 and nothing calls into simpy from another thread. Node code is unchanged.
 
+Scheduler lateness (instrumentation): each time :func:`run_poll` wakes it records how late it
+runs against the wall-clock instant the real-time environment scheduled it for
+(:func:`rt_lateness_ns`); ``metrics.json`` reports it as ``hil.scheduler_lateness_ms``. Every
+event of the run (vehicle frames, orders, hand-overs) is late by as much as the poll beside it,
+so tests derive their real-time bounds from it (a loaded machine runs late; the model does not
+change).
+
 Ground truth the wire does not carry: in ``both`` mode one :class:`FrameLedger` numbers the
 frames both nodes send and recognises each received frame by its bytes, so the recorder follows
 a command from its sampling to its application (command lag, age of information) as in
@@ -72,6 +79,7 @@ __all__ = [
     "FrameLedger",
     "HilModem",
     "hil_metrics",
+    "rt_lateness_ns",
     "run_hil",
     "run_poll",
 ]
@@ -84,6 +92,18 @@ DIRECTIONS = {"uplink": ("operator", "vehicle"), "downlink": ("vehicle", "operat
 
 _LEDGER_HORIZON = 256
 """Frames per sender the ledger keeps outstanding; older ones are counted lost."""
+
+_LATENESS_SAMPLES = 200_000
+"""Scheduler lateness samples kept (the newest): 200 s of 1-ms polls."""
+
+
+def rt_lateness_ns(env: simpy.rt.RealtimeEnvironment) -> int:
+    """How late the real-time environment is running now [ns]: the wall clock less the
+    instant ``env.now`` was scheduled for (``real_start + (now − env_start)·factor``, on
+    :func:`time.monotonic`, simpy's clock). Called from a process just resumed, it is how late
+    that step ran; ≥ 0 except for clock rounding."""
+    scheduled_s = env.real_start + (env.now - env.env_start) * env.factor
+    return round((time.monotonic() - scheduled_s) * 1e9)
 
 
 class FrameLedger:
@@ -236,10 +256,19 @@ class HilModem:
 
 
 def run_poll(
-    env: simpy.Environment, modems: Sequence[HilModem], period_s: float = POLL_S
+    env: simpy.Environment,
+    modems: Sequence[HilModem],
+    period_s: float = POLL_S,
+    lateness_ns: deque[int] | list[int] | None = None,
 ) -> Generator[simpy.Event, Any, None]:
-    """simpy process: every ``period_s`` [s], hand each modem's received frames to its node."""
+    """simpy process: every ``period_s`` [s], hand each modem's received frames to its node.
+
+    With ``lateness_ns`` (and a real-time ``env``), each wake-up first appends how late it ran
+    (:func:`rt_lateness_ns`) [ns]."""
+    rt_env = env if isinstance(env, simpy.rt.RealtimeEnvironment) else None
     while True:
+        if rt_env is not None and lateness_ns is not None:
+            lateness_ns.append(rt_lateness_ns(rt_env))
         for modem in modems:
             modem.poll()
         yield env.timeout(period_s)
@@ -319,7 +348,8 @@ def run_hil(
             replies = {} if vehicle_node is None else vehicle_node.reply_odometry_s
             operator_node = make_operator_node(env, scenario, modems["operator"], recorder, replies)
             env.process(operator_node.run())
-        env.process(run_poll(env, list(modems.values()), poll_s))
+        lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+        env.process(run_poll(env, list(modems.values()), poll_s, lateness_ns))
         env.sync()  # start the clock now, after the vehicle's physics has loaded
         start = time.perf_counter()
         try:
@@ -347,6 +377,7 @@ def run_hil(
         operator_node=operator_node,
         poll_s=poll_s,
         modem=modem,
+        lateness_ns=lateness_ns,
     )
     return RunResult(scenario, seed, metrics, recorder)
 
@@ -368,6 +399,7 @@ def hil_metrics(
     operator_node: OperatorNode | None,
     poll_s: float,
     modem: str,
+    lateness_ns: Sequence[int] | deque[int] = (),
 ) -> dict[str, Any]:
     """The ``metrics.json`` of a HIL run: :func:`~testbed.run.runner.compute_metrics`'s keys, with
     the link section rebuilt from what the endpoints observed, plus a ``hil`` section.
@@ -388,7 +420,9 @@ def hil_metrics(
     ``hil``: ``mode``, ``modem``, ``poll_s``; ``added_latency_ms`` (port read returned → frame
     handed to the node, both endpoints pooled: ``p50``, ``p95``, ``max``, ``mean``, ``n``);
     ``round_trip_s`` (operator, token passing: order handed to the modem → next reply handed
-    to the node); ``reopens`` and ``garbage_bytes`` summed over the endpoints; ``endpoints``
+    to the node); ``scheduler_lateness_ms`` (``lateness_ns``: how late the poll process ran
+    against its real-time schedule, :func:`rt_lateness_ns`; same keys as ``added_latency_ms``);
+    ``reopens`` and ``garbage_bytes`` summed over the endpoints; ``endpoints``
     (:func:`~testbed.hil.endpoint_report` per node: bytes and frames in/out, drops, garbage,
     corrupt frames, port faults, latency, adapter counters).
     """
@@ -425,6 +459,7 @@ def hil_metrics(
         "poll_s": poll_s,
         "added_latency_ms": latency_summary_ms(latencies),
         "round_trip_s": summary(round_trips),
+        "scheduler_lateness_ms": latency_summary_ms(lateness_ns),
         "reopens": sum(r["reopens"] for r in reports.values()),
         "garbage_bytes": sum(r["garbage_bytes"] for r in reports.values()),
         "endpoints": reports,

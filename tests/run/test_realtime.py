@@ -22,11 +22,13 @@ ledger and the modem shape use a plain simpy environment and fake endpoints.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -40,10 +42,9 @@ import simpy
 
 import testbed
 from testbed.channel import Delivery, EventKind, LinkConfig, Trace, load_link_config
-from testbed.emulator.ptys import ModemEmulator
 from testbed.hil import PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
-from testbed.run.realtime import FrameLedger, HilModem, run_hil
+from testbed.run.realtime import POLL_S, FrameLedger, HilModem, run_hil
 from testbed.run.runner import RunResult, write_outputs
 from testbed.run.scenario import load_scenario
 
@@ -51,6 +52,8 @@ IDLE_S = 0.003
 """Emulator idle gap that closes a burst [s] (its default, set explicitly)."""
 DURATION_S = 20.0
 PAIR_DURATION_S = 12.0
+CLI_DURATION_S = 8.0
+"""The one-computer CLI child's run [s]: inside the window, so it costs no time."""
 UNPLUG_S = (8.0, 10.0)
 """Operator port unplugged [s after the run is started]."""
 CRLF = 2
@@ -231,17 +234,98 @@ def _unplugged_factory(url: str, window: tuple[float, float]) -> Callable[[], Un
     return factory
 
 
-def _cli(args: list[str], cwd: Path) -> subprocess.Popen[str]:
-    """``python -m testbed ARGS`` in a child process, on this checkout's package."""
+def _python(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    """``python ARGS`` in a child process, on this checkout's package."""
     env = dict(os.environ, PYTHONPATH=str(Path(testbed.__file__).resolve().parents[1]))
     return subprocess.Popen(
-        [sys.executable, "-m", "testbed", *args],
+        [sys.executable, *args],
         cwd=cwd,
         env=env,
+        stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+
+
+def _cli(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    """``python -m testbed ARGS`` in a child process, on this checkout's package."""
+    return _python(["-m", "testbed", *args], cwd)
+
+
+EMULATORS = """
+import dataclasses, json, sys
+from testbed.channel import load_link_config
+from testbed.emulator.ptys import ModemEmulator
+
+config = load_link_config("s100", ["ber=0"])
+emulators = [ModemEmulator(config, seed=seed, idle_s=float(sys.argv[1])) for seed in range(4)]
+for emulator in emulators:
+    emulator.start()
+print(json.dumps([emulator.paths for emulator in emulators]), flush=True)
+sys.stdin.read()  # the test closes our stdin once every program has closed its ports
+for emulator in emulators:
+    emulator.close()
+report = [
+    {
+        "error": None if emulator.error is None else repr(emulator.error),
+        "ports": [dataclasses.asdict(counters) for counters in emulator.counters],
+        "modems": [dataclasses.asdict(modem.counters) for modem in emulator.modems],
+        "scheduler_lateness_ms": emulator.scheduler_lateness_ms,
+    }
+    for emulator in emulators
+]
+print(json.dumps(report), flush=True)
+"""
+"""The four modem emulators (single run, two computers, one-computer CLI, timing probe) in a
+process of their own, as real modems are outside the computer: prints their port paths, runs
+until its stdin closes, then prints each one's port and modem counters and scheduler lateness
+(``ModemEmulator.scheduler_lateness_ms``) as JSON."""
+
+
+class LinkProbe:
+    """Measures, while the window runs, how much longer than the model a frame takes to cross
+    an emulated link under this machine's load: a thread in this process writes a 15-B frame
+    on port A of the fourth emulator, reads it on port B (pyserial, as the transports do) and
+    records the time taken less the model (idle gap + intrinsic delay + airtime), then waits
+    ``gap_s``. The excess is the scheduler lateness the run's frames meet on the same path
+    (transport threads, GIL, PTYs, the emulator's threads), measured at the same time."""
+
+    FRAME = encode_frame(b"probe frame") + b"\r\n"  # 15 B, the size of an order and its CR LF
+
+    def __init__(self, paths: tuple[str, str], config: LinkConfig, gap_s: float = 0.1) -> None:
+        self.model_s = IDLE_S + config.intrinsic_delay_s + config.airtime_s(len(self.FRAME))
+        self.excess_s: list[float] = []
+        self.lost = 0
+        self._paths = paths
+        self._gap_s = gap_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="link-probe", daemon=True)
+
+    def _run(self) -> None:
+        with serial.Serial(self._paths[0]) as a, serial.Serial(self._paths[1], timeout=5) as b:
+            while not self._stop.is_set():
+                t0 = time.monotonic()
+                a.write(self.FRAME)
+                got = b.read(len(self.FRAME))
+                if got == self.FRAME:
+                    self.excess_s.append(time.monotonic() - t0 - self.model_s)
+                else:
+                    self.lost += 1
+                    b.reset_input_buffer()
+                self._stop.wait(self._gap_s)
+
+    def __enter__(self) -> LinkProbe:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def quantile(self, q: float) -> float:
+        """The ``q`` quantile of the excess [s] (never below 0: the model is a lower bound)."""
+        return max(0.0, float(np.quantile(self.excess_s, q)))
 
 
 @dataclass
@@ -251,10 +335,32 @@ class Window:
     config: LinkConfig
     single: RunResult
     single_dir: Path
-    unplug_env_s: tuple[float, float]
+    unplug_env_s: tuple[tuple[float, float], tuple[float, float]]
+    """Earliest and latest instants of the unplug's start and of its end on the run's clock
+    [s]: the clock started after ``run_hil`` was called and before the run's ``wall_s``
+    ended at its return."""
     pair_dirs: dict[str, Path]
     cli_dir: Path
     outputs: dict[str, tuple[int, str, str]]
+    emulators: list[dict[str, Any]]
+    """Per emulator (single run, two computers, CLI, probe): ``ports`` and ``modems`` counters
+    (A then B) and ``scheduler_lateness_ms``."""
+    probe: LinkProbe
+
+    def lateness_s(self, key: str) -> float:
+        """The run's measured scheduler lateness (``hil.scheduler_lateness_ms[key]``) [s]."""
+        return max(0.0, float(self.single.metrics["hil"]["scheduler_lateness_ms"][key]) / 1e3)
+
+    def host_s(self, which: str) -> float:
+        """What a loaded host adds to one crossing of the link, from this run's measurements
+        [s]: ``"p95"`` is the probe's 95th-percentile excess plus the run's p95 lateness (the
+        sending step's stamp is that much early); ``"max"`` the same with the maxima. A frame
+        exceeds the p95 allowance with probability ≤ 5 % + 5 % (union bound), so a median
+        exceeds it never; a p95 exceeds the max allowance only if the probe missed the worst
+        stall."""
+        if which == "p95":
+            return self.probe.quantile(0.95) + self.lateness_s("p95")
+        return self.probe.quantile(1.0) + self.lateness_s("max")
 
 
 @pytest.fixture(scope="module")
@@ -262,57 +368,67 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
     root = tmp_path_factory.mktemp("hil")
     config = load_link_config("s100", ["ber=0"])
     scenario = load_scenario("s100-teleop-v1")
-    with (
-        ModemEmulator(config, seed=0, idle_s=IDLE_S) as single,
-        ModemEmulator(config, seed=1, idle_s=IDLE_S) as pair,
-        ModemEmulator(config, seed=2, idle_s=IDLE_S) as third,
-    ):
-        common = ["--modem", "s100", "--no-plots", "--duration", str(PAIR_DURATION_S)]
-        vehicle_args = ["hil", "vehicle", "--port", pair.paths[1], "--out", "vehicle"]
-        operator_args = ["hil", "operator", "--port", pair.paths[0], "--out", "operator"]
-        one_computer = ["hil", "--operator-port", third.paths[0], "--vehicle-port"]
-        one_computer += [third.paths[1], "--set", "metrics.settle_s=1", "--duration", "3"]
-        children = {
-            "vehicle": _cli([*vehicle_args, *common], root),
-            "operator": _cli([*operator_args, *common], root),
-            "cli": _cli([*one_computer, "--out", "cli"], root),
-        }
-        try:
-            for child in children.values():  # each says when its port is open: importing
-                assert child.stderr is not None  # numpy and pybullet is over by then
-                child.stderr.readline()
-            t0 = time.monotonic()
-            unplug = (t0 + UNPLUG_S[0], t0 + UNPLUG_S[1])
-            operator = open_endpoint(
-                PortSettings(single.paths[0], "s100", "operator"),
-                port_factory=_unplugged_factory(single.paths[0], unplug),
-                backoff_initial_s=0.05,
-                backoff_max_s=0.25,
-            )
-            vehicle = open_endpoint(PortSettings(single.paths[1], "s100", "vehicle"))
-            start = time.monotonic()  # the run's clock starts within the loading time after
+    emulator = _python(["-c", EMULATORS, str(IDLE_S)], root)
+    assert emulator.stdout is not None
+    single, pair, third, probe_ports = json.loads(emulator.stdout.readline())
+    common = ["--modem", "s100", "--no-plots", "--duration", str(PAIR_DURATION_S)]
+    vehicle_args = ["hil", "vehicle", "--port", pair[1], "--out", "vehicle"]
+    operator_args = ["hil", "operator", "--port", pair[0], "--out", "operator"]
+    one_computer = ["hil", "--operator-port", third[0], "--vehicle-port", third[1]]
+    one_computer += ["--set", "metrics.settle_s=1", "--duration", str(CLI_DURATION_S)]
+    children = {
+        "vehicle": _cli([*vehicle_args, *common], root),
+        "operator": _cli([*operator_args, *common], root),
+        "cli": _cli([*one_computer, "--out", "cli"], root),
+    }
+    probe = LinkProbe(probe_ports, config)
+    try:
+        for child in children.values():  # each says when its port is open: importing
+            assert child.stderr is not None  # numpy and pybullet is over by then
+            child.stderr.readline()
+        t0 = time.monotonic()
+        unplug = (t0 + UNPLUG_S[0], t0 + UNPLUG_S[1])
+        operator = open_endpoint(
+            PortSettings(single[0], "s100", "operator"),
+            port_factory=_unplugged_factory(single[0], unplug),
+            backoff_initial_s=0.05,
+            backoff_max_s=0.25,
+        )
+        vehicle = open_endpoint(PortSettings(single[1], "s100", "vehicle"))
+        with probe:
+            called = time.monotonic()
             result = run_hil(
                 scenario,
                 {"operator": operator, "vehicle": vehicle},
                 duration_s=DURATION_S,
                 modem="s100",
             )
-            single_dir = root / "single"
-            write_outputs(result, single_dir, plots=False)
-        finally:
-            outputs = {}
-            for name, child in children.items():
-                out, err = child.communicate(timeout=60)
-                outputs[name] = (child.returncode, out, err)
-        assert single.error is None and pair.error is None and third.error is None
+            clock_started = (called, time.monotonic() - result.metrics["wall_s"])
+        single_dir = root / "single"
+        write_outputs(result, single_dir)
+    finally:
+        outputs = {}
+        for name, child in children.items():
+            out, err = child.communicate(timeout=60)
+            outputs[name] = (child.returncode, out, err)
+        out, err = emulator.communicate(timeout=60)  # closes its stdin: it reports and exits
+    assert emulator.returncode == 0, err
+    reports: list[dict[str, Any]] = json.loads(out.splitlines()[-1])
+    assert [report["error"] for report in reports] == [None] * 4
+    assert len(probe.excess_s) >= 20
     yield Window(
         config,
         result,
         single_dir,
-        (UNPLUG_S[0] - (start - t0), UNPLUG_S[1] - (start - t0)),
+        (  # (earliest, latest) of the start, then of the end
+            (t0 + UNPLUG_S[0] - clock_started[1], t0 + UNPLUG_S[0] - clock_started[0]),
+            (t0 + UNPLUG_S[1] - clock_started[1], t0 + UNPLUG_S[1] - clock_started[0]),
+        ),
         {"vehicle": root / "vehicle", "operator": root / "operator"},
         root / "cli",
         outputs,
+        reports,
+        probe,
     )
 
 
@@ -321,21 +437,66 @@ def _read(path: Path) -> dict[str, Any]:
     return data
 
 
+def _link_s(config: LinkConfig, size: int) -> float:
+    """Model latency of one frame of ``size`` B on the emulated link: the idle gap that closes
+    the burst, the intrinsic delay and the airtime [s]."""
+    return IDLE_S + config.intrinsic_delay_s + config.airtime_s(size)
+
+
 def test_orders_reach_the_vehicle_and_state_returns(window: Window) -> None:
+    """Counts load cannot change. The operator keeps its schedule (one order per IPG of the
+    run's clock, so 34 in 20 s); every order its transport accepted was written to the port
+    (byte count at the emulator: 15 B each, plus the noise); the link lost only what its
+    emulator counts as collided (BER 0); and the vehicle read and decoded every byte the link
+    delivered (15 B per order, plus the noise as garbage). Collisions only happen when a reply
+    comes back later than the token-passing margin (IPG − model round trip), i.e. when the
+    measured lateness exceeded that margin. The held state is never fresher than one downlink
+    crossing, nor older than the longest gap between replies plus the oldest reply."""
     metrics = window.single.metrics
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
-    # One order per 0.594 s IPG over 20 s, less the ≈ 2.5 s the port was away.
-    assert up["frames_delivered"] >= 25
-    assert down["frames_delivered"] >= 25
+    ports, modems = window.emulators[0]["ports"], window.emulators[0]["modems"]
+    ends = metrics["hil"]["endpoints"]
+    order, reply = 13 + CRLF, 20 + CRLF
+    trace = window.single.recorder.trace
+    sent_at = [e.t_s for e in trace.of_kind(EventKind.ENQUEUE) if e.src == "operator"]
+    ipg_s = float(np.diff(sent_at)[0])
+    assert up["frames_sent"] == len(sent_at) == math.ceil(DURATION_S / ipg_s)
+    assert np.ptp(np.diff(sent_at)) < 1e-9  # the IPG of the run's clock, whatever the load
+    written = (ports[0]["bytes_in"] - len(NOISE)) / order
+    assert written.is_integer()  # whole orders and the noise, nothing else
+    # At most one order is caught in the port's failing write (the transport counts it
+    # dropped and may write it again on the reopened port, or lose it).
+    assert up["frames_sent"] - up["frames_dropped"] - 1 <= written <= up["frames_sent"]
+    lost_on_air = (ports[0]["bytes_in"] - ports[1]["bytes_out"]) / order
+    # Each collided burst held one order, or two the writer sent back to back after a stall.
+    assert lost_on_air.is_integer()
+    assert modems[1]["rx_collided"] <= lost_on_air <= 2 * modems[1]["rx_collided"]
+    assert ends["vehicle"]["bytes_in"] == order * up["frames_delivered"] + len(NOISE)
+    late_orders = (ports[1]["bytes_out"] - ends["vehicle"]["bytes_in"]) / order
+    in_flight = math.ceil((_link_s(window.config, order) + window.host_s("max")) / ipg_s)
+    assert late_orders.is_integer() and 0 <= late_orders <= in_flight  # came after the end
+    assert ends["operator"]["bytes_in"] == reply * down["frames_delivered"]
+    assert ends["operator"]["bytes_in"] <= ports[0]["bytes_out"]  # less what came while away
+    assert down["frames_sent"] == up["frames_delivered"]  # one reply per order
+    assert up["frames_delivered"] >= 1 and down["frames_delivered"] >= 1
+    margin_s = ipg_s - (_link_s(window.config, order) + _link_s(window.config, reply))
+    collided = modems[0]["rx_collided"] + modems[1]["rx_collided"]
+    assert collided == 0 or 2 * window.host_s("max") > margin_s
     assert up["frames_corrupted"] == down["frames_corrupted"] == 0
     assert metrics["frames_rejected"] == {"uplink": 0, "downlink": 0}
-    assert metrics["odometry_age_s"]["mean"] < 1.0
+    settle_s = window.single.scenario.metrics.settle_s
+    updates = [(t, s) for t, s in window.single.recorder.odometry_updates if t >= settle_s]
+    ages = [t - s for t, s in updates]
+    gaps = np.diff([settle_s] + [t for t, _ in updates] + [DURATION_S])
+    age = metrics["odometry_age_s"]["mean"]
+    assert _link_s(window.config, reply) - window.lateness_s("max") <= age
+    assert age <= max(ages) + gaps.max()
     series = window.single.recorder.series()
     assert series["armed"][-1] == 1.0  # the arm request travelled as an order
     assert math.isnan(up["frames_collided"])
-    written = _read(window.single_dir)
-    assert written["hil"]["mode"] == "both"
-    assert written["link"]["uplink"]["frames_collided"] is None  # only the simulator knows
+    written_metrics = _read(window.single_dir)
+    assert written_metrics["hil"]["mode"] == "both"
+    assert written_metrics["link"]["uplink"]["frames_collided"] is None  # only the simulator
     assert {p.name for p in window.single_dir.iterdir()} >= {
         "metrics.json",
         "events.csv",
@@ -345,11 +506,11 @@ def test_orders_reach_the_vehicle_and_state_returns(window: Window) -> None:
 
 def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
     """Lag = idle gap + intrinsic delay + airtime(frame + CR LF) + the wait for the vehicle's
-    next control frame (≤ 1/100 s + one 1/240-s physics step) + two 1-ms polls and the host.
-    Lower bound: the link part alone, less 2 ms for the real-time clock running behind the
-    wall clock when busy. Upper bound for the median: plus a full frame wait and 3 ms of
-    polls and host; p95: 40 ms more, the scheduling delays seen on a loaded, shared 2-core
-    machine (still well under a second intrinsic delay or one inter-packet gap)."""
+    next control frame (≤ 1/100 s + one 1/240-s physics step) + two 1-ms polls + what the host
+    adds. Lower bound: the link part alone, less the run's largest measured lateness (the
+    receiving poll is stamped that much early). Upper bounds: the model plus the host's
+    measured allowance (:meth:`Window.host_s`): its p95 one for the median, its max one for
+    the 95th percentile; 2 ms of clock rounding on each."""
     recorder = window.single.recorder
     sizes = {
         e.size_bytes
@@ -357,9 +518,8 @@ def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
         if e.frame_id in recorder.uplink_commands
     }
     assert sizes == {13}  # the paper's move order in a WAFrame
-    config = window.config
-    link_s = IDLE_S + config.intrinsic_delay_s + config.airtime_s(13 + CRLF)  # 151.4 ms
-    frame_wait_s = 1 / 100 + 1 / 240
+    link_s = _link_s(window.config, 13 + CRLF)  # 151.4 ms
+    model_s = link_s + 1 / 100 + 1 / 240 + 2 * POLL_S
     lags = np.array(
         [
             applied - recorder.commands_sampled[seq]
@@ -367,33 +527,42 @@ def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
             if seq in recorder.commands_sampled
         ]
     )
-    assert lags.size >= 20
-    assert lags.min() >= link_s - 0.002
-    assert link_s <= np.median(lags) <= link_s + frame_wait_s + 0.003
-    assert np.percentile(lags, 95) <= link_s + frame_wait_s + 0.003 + 0.040
+    assert 1 <= lags.size <= window.single.metrics["link"]["uplink"]["frames_delivered"]
+    assert lags.min() >= link_s - window.lateness_s("max") - 0.002
+    assert np.median(lags) <= model_s + window.host_s("p95") + 0.002
+    assert np.percentile(lags, 95) <= model_s + window.host_s("max") + 0.002
     assert window.single.metrics["command_lag_s"]["n"] == lags.size
 
 
 def test_round_trip_is_both_directions_of_the_link(window: Window) -> None:
     """Order out and reply back, the vehicle answering at once: two idle gaps, two intrinsic
-    delays, both airtimes; the median within 6 ms (polls and host both ways), p95 within the
-    same 40 ms scheduling allowance as the command lag."""
+    delays, both airtimes and two 1-ms polls, plus the host's measured allowance for each of
+    the two crossings (p95 for the median, max for the 95th percentile, as the command lag).
+    Lower bound: the model less the run's largest lateness (the last poll stamped early)."""
     config = window.config
     order, reply = 13 + CRLF, 20 + CRLF  # move order; state reply without image chunk
-    model_s = 2 * (IDLE_S + config.intrinsic_delay_s) + config.airtime_s(order + reply)
+    model_s = _link_s(config, order) + _link_s(config, reply)
     rtt = window.single.metrics["hil"]["round_trip_s"]
-    assert rtt["n"] >= 25
-    assert model_s - 0.002 <= rtt["p50"] <= model_s + 0.006
-    assert rtt["p95"] <= model_s + 0.040
+    assert 1 <= rtt["n"] <= window.single.metrics["link"]["downlink"]["frames_delivered"]
+    assert model_s - window.lateness_s("max") - 0.002 <= rtt["p50"]
+    assert rtt["p50"] <= model_s + 2 * POLL_S + 2 * window.host_s("p95") + 0.002
+    assert rtt["p95"] <= model_s + 2 * POLL_S + 2 * window.host_s("max") + 0.002
 
 
-def test_added_latency_is_under_a_millisecond_at_the_median(window: Window) -> None:
+def test_added_latency_is_the_wait_for_the_next_poll(window: Window) -> None:
+    """Port read returned → frame handed to the node: at most one poll period plus how late
+    that poll ran (the run's measured lateness: p95 for the median, max for the maximum) and
+    0.5 ms of decoding. The absolute target (median under 1 ms on an idle machine) is a speed
+    claim, kept in benchmarks/test_hil_bench.py."""
     hil = window.single.metrics["hil"]
     added = hil["added_latency_ms"]
     up, down = window.single.metrics["link"]["uplink"], window.single.metrics["link"]["downlink"]
     assert added["n"] == up["frames_delivered"] + down["frames_delivered"]
-    assert 0.0 < added["p50"] < 1.0  # issue 7: aim median under 1 ms
-    assert added["p95"] < 5.0
+    assert 0.0 < added["p50"] <= 1e3 * (POLL_S + window.lateness_s("p95")) + 0.5
+    assert added["max"] <= 1e3 * (POLL_S + window.lateness_s("max")) + 0.5
+    late = hil["scheduler_lateness_ms"]
+    assert late["n"] >= DURATION_S / POLL_S / 2  # one sample per poll, polls run late in bursts
+    assert 0.0 <= late["p50"] <= late["p95"] <= late["max"]
     ends = hil["endpoints"]
     assert ends["vehicle"]["frames_in"] == up["frames_delivered"]
     assert ends["operator"]["bytes_in"] == ends["operator"]["adapter"]["bytes_in"] > 0
@@ -411,6 +580,12 @@ def test_garbage_on_the_line_is_counted_not_fatal(window: Window) -> None:
 
 
 def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None:
+    """The failsafe follows the orders that reached the vehicle, on the run's clock, whatever
+    the load: it holds at the first vehicle frame ≥ 1 s (``hold_after_s``) after the last order
+    was handed over, when the next one is not there by then, and is nominal again at the first
+    frame after the next one (one control frame, 1/100 s, plus a 1/240-s physics step). The
+    unplug window is found in the trace (the operator's refused frames), not on the wall clock:
+    a gap of orders spans it, the vehicle held in it and let go after it."""
     metrics = window.single.metrics
     recorder = window.single.recorder
     operator = metrics["hil"]["endpoints"]["operator"]
@@ -420,38 +595,66 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
     assert "device disconnected" in operator["last_error"]
     assert operator["frames_dropped"] >= 2  # orders sent while it was away
     assert metrics["hil"]["endpoints"]["vehicle"]["reopens"] == 0
-    # The vehicle's failsafe held after 1 s without orders, and let go when they came back.
-    start_s, end_s = window.unplug_env_s
+    hold_s, frame_s = 1.0, 1 / 100 + 1 / 240
+    trace = recorder.trace
+    orders = [e.t_s for e in trace.events if e.kind is EventKind.DELIVER and e.dst == "vehicle"]
     failsafe = [(e.t_s, e.detail) for e in recorder.events if e.kind == "failsafe"]
+    levels = [level for _, level in failsafe]
+    assert levels == ["HOLD", "NOMINAL"] * (len(levels) // 2) + ["HOLD"] * (len(levels) % 2)
+    for t, level in failsafe:
+        before = max(o for o in orders if o <= t)
+        if level == "HOLD":  # the last order's frame + 1 s, at the next frame
+            assert hold_s <= t - before <= hold_s + 2 * frame_s
+        else:  # at the frame that applies the order just handed over
+            assert t - before <= frame_s
     holds = [t for t, level in failsafe if level == "HOLD"]
-    # The last order before the unplug arrived up to one IPG (0.6 s) before it or one lag
-    # (0.2 s) after; the run's clock started up to 0.5 s (loading the vehicle) after `start`.
-    assert holds and start_s - 0.5 + 0.4 <= holds[0] <= start_s + 1.0 + 0.2
-    assert any(level == "NOMINAL" and t > holds[0] for t, level in failsafe)
-    assert metrics["events"]["failsafe"] >= 2
-    assert max(recorder.commands_applied.values()) > end_s + 1.0  # orders flow again
+    for before, after in itertools.pairwise(orders):
+        if after - before > hold_s + 2 * frame_s:  # every long gap held
+            assert any(before < t < after for t in holds)
+    # The unplug: the last order before it reached the vehicle at most the longest command
+    # lag after its start; none came before its end plus one link crossing (less the run's
+    # lateness: the hand-over is stamped early). A hold began by then + 1 s, and let go after.
+    (_, start_s), (end_s, _) = window.unplug_env_s
+    lag_s = max(a - recorder.commands_sampled[q] for q, a in recorder.commands_applied.items())
+    first_back_s = end_s + _link_s(window.config, 13 + CRLF) - window.lateness_s("max")
+    releases = [t for t, level in failsafe if level == "NOMINAL"] + [math.inf]
+    held = list(zip(holds, releases[: len(holds)], strict=True))  # (from, until)
+    assert any(
+        t <= start_s + lag_s + hold_s + 2 * frame_s and first_back_s <= r < math.inf
+        for t, r in held
+    ), (held, window.unplug_env_s, lag_s)
+    assert metrics["events"]["failsafe"] == len(failsafe) >= 2
+    assert max(recorder.commands_applied.values()) > first_back_s  # orders flow again
     assert metrics["link"]["uplink"]["per"] > 0.0  # the orders lost count
 
 
 def test_two_computers_each_write_what_they_observe(window: Window) -> None:
+    """Counts load cannot change: each child read and decoded every byte its emulator
+    delivered while it ran (never more), one reply per order received, two clocks."""
     for name in ("vehicle", "operator"):
         code, out, err = window.outputs[name]
         assert code == 0, err
         assert f"({name}, s100)" in out
     vehicle = _read(window.pair_dirs["vehicle"])
     operator = _read(window.pair_dirs["operator"])
+    ports = window.emulators[1]["ports"]
     assert vehicle["hil"]["mode"] == "vehicle" and operator["hil"]["mode"] == "operator"
     received = vehicle["link"]["uplink"]["frames_delivered"]
-    assert received >= 12  # ≈ 20 orders in 12 s, less the children's start-up skew
+    assert received >= 1
     assert vehicle["link"]["downlink"]["frames_sent"] == received  # one reply per order
     assert vehicle["link"]["uplink"]["frames_sent"] is None  # sent on the other computer
-    assert operator["link"]["downlink"]["frames_delivered"] >= 12
     assert operator["link"]["uplink"]["frames_sent"] >= received
+    vehicle_in = vehicle["hil"]["endpoints"]["vehicle"]
+    assert vehicle_in["bytes_in"] == (13 + CRLF) * received + vehicle_in["garbage_bytes"]
+    assert vehicle_in["bytes_in"] <= ports[1]["bytes_out"]
+    replies = operator["link"]["downlink"]["frames_delivered"]
+    assert replies >= 1
+    assert operator["hil"]["endpoints"]["operator"]["bytes_in"] <= ports[0]["bytes_out"]
     assert vehicle["command_lag_s"]["n"] == operator["command_lag_s"]["n"] == 0  # two clocks
     assert operator["energy_wh"] is None and vehicle["energy_wh"] > 0.0
     rows = (window.pair_dirs["vehicle"] / "series.csv").read_text().splitlines()
     assert rows[-1].split(",")[-2] == "1"  # armed: the operator's arm order got there
-    assert operator["hil"]["round_trip_s"]["n"] >= 12
+    assert 1 <= operator["hil"]["round_trip_s"]["n"] <= replies
 
 
 def test_cli_one_computer_run(window: Window) -> None:
@@ -459,7 +662,13 @@ def test_cli_one_computer_run(window: Window) -> None:
     assert code == 0, err
     assert "(both, s100)" in out and "added latency p50" in out
     metrics = _read(window.cli_dir)
+    ports = window.emulators[2]["ports"]
     assert metrics["hil"]["mode"] == "both"
-    assert metrics["link"]["uplink"]["frames_delivered"] >= 3
-    assert metrics["link"]["downlink"]["frames_delivered"] >= 3
+    up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
+    assert up["frames_delivered"] >= 1 and down["frames_delivered"] >= 1
+    vehicle_in = metrics["hil"]["endpoints"]["vehicle"]
+    assert vehicle_in["bytes_in"] == (13 + CRLF) * up["frames_delivered"]
+    assert (ports[1]["bytes_out"] - vehicle_in["bytes_in"]) % (13 + CRLF) == 0  # whole orders
+    assert vehicle_in["bytes_in"] <= ports[1]["bytes_out"]  # less those after its end
+    assert down["frames_sent"] == up["frames_delivered"]  # one reply per order
     assert (window.cli_dir / "events.csv").is_file()
