@@ -33,9 +33,6 @@ independently of hil's adapters, so each checks the other. ``run`` does not impo
 (a HIL run reaches it through serial ports) nor ``report``, ``sweep`` or ``cli``. Only
 ``testbed/vehicle/physics.py`` may import pybullet. ``sweep`` loads ``distributed`` (Dask) through
 ``importlib`` only when asked for a cluster.
-
-One exception stands, to be removed: ``run/runner.py`` may import ``report`` lazily inside
-``write_outputs`` (the plots of ``testbed run``), never at module level.
 """
 
 from __future__ import annotations
@@ -50,8 +47,6 @@ import pytest
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1] / "testbed"
 PYBULLET_USERS = {"vehicle/physics.py"}
-# (module, layer it may import, the one function the import must sit in): lazy exceptions.
-LAZY_EXCEPTIONS = {("run/runner.py", "report"): "write_outputs"}
 # Modules that break the table today; each test is xfail(strict=True) until the code is fixed.
 KNOWN_VIOLATIONS: dict[str, str] = {}
 ANYTHING = None  # a row's "anything"
@@ -190,8 +185,7 @@ def violations(relative_path: str, source: str) -> list[str]:
             found.append(f"{where} imports pybullet (only vehicle/physics.py may)")
         elif root == "testbed":
             target = layer_of_module(imp.module)
-            lazy = LAZY_EXCEPTIONS.get((relative_path, target))
-            if target in (layer, "__init__") or (lazy is not None and imp.function == lazy):
+            if target in (layer, "__init__"):
                 continue
             if target not in RULES:
                 found.append(f"{where} imports {imp.module}: no such layer in the table")
@@ -280,12 +274,10 @@ def test_checker_catches_forbidden_arrows() -> None:
     assert violations("cli/x.py", "import pybullet") != []
     assert violations("newlayer/x.py", "") != []  # a subpackage without a row
     assert violations("newroot.py", "") != []
-    # the lazy exception holds inside write_outputs of run/runner.py only
+    # run never reaches up to report, even lazily inside a function
     lazy = "def write_outputs():\n    from testbed.report.run_plots import write_plots\n"
-    assert violations("run/runner.py", lazy) == []
-    assert violations("run/runner.py", lazy.replace("write_outputs", "other")) != []
+    assert violations("run/runner.py", lazy) != []
     assert violations("run/runner.py", "from testbed.report import run_plots") != []
-    assert violations("run/nodes.py", lazy) != []
     # allowed
     assert violations("emulator/personalities/m64.py", "from .base import EOL") == []
     assert violations("emulator/personalities/m64.py", "from ..ptys import X") == []

@@ -180,7 +180,11 @@ def run_hil_command(args: argparse.Namespace) -> int:
         flush=True,
     )
     result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
-    write_outputs(result, out, plots=not args.no_plots)
+    write_outputs(result, out)
+    if not args.no_plots:
+        from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
+
+        write_run_plots(result, out)
     print(format_hil_summary(result.metrics, out))
     return 0
 

@@ -50,7 +50,11 @@ def _run_scenario(args: argparse.Namespace) -> int:
         out = Path("runs") / f"{scenario.id}-{stamp}"
     check_out_dir(out)
     result = run_scenario(scenario, seed=args.seed)
-    write_outputs(result, out, plots=not args.no_plots)
+    write_outputs(result, out)
+    if not args.no_plots:
+        from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
+
+        write_run_plots(result, out)
     print(format_summary(result.metrics, out))
     return EXIT_OK
 

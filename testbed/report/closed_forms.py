@@ -21,11 +21,11 @@ from testbed.protocol import (
     Move,
     frame_overhead,
 )
-from testbed.run.metrics import aoi_periodic_closed_form
 
 __all__ = [
     "ORDER_FRAME_BYTES",
     "REPLY_FRAME_BYTES",
+    "aoi_periodic_closed_form",
     "closed_form_age_s",
     "closed_form_images_per_minute",
     "closed_form_per",
@@ -82,6 +82,14 @@ def closed_form_per(ber: np.ndarray | float, frame_bytes: float) -> np.ndarray:
     return np.asarray(-np.expm1(log_survival), dtype=float)  # expm1: no 1 − (≈1) cancellation
 
 
+def aoi_periodic_closed_form(period_s: float, delivery_probability: float, delay_s: float) -> float:
+    """Mean age of periodic updates with independent losses: ``D + T(2 − q)/(2q)`` [s]."""
+    q = delivery_probability
+    if not 0.0 < q <= 1.0:
+        raise ValueError(f"delivery probability must be in (0, 1], got {q}")
+    return delay_s + period_s * (2.0 - q) / (2.0 * q)
+
+
 def closed_form_age_s(
     ber: np.ndarray | float,
     period_s: float,
@@ -95,7 +103,7 @@ def closed_form_age_s(
     ``delay_s`` after the sticks were sampled; a lost one leaves the previous command in force
     until the next delivery, so the gaps between applications are ``K·T`` with ``K`` geometric.
     The renewal-reward argument of :mod:`testbed.run.metrics` gives ``E[age] = D + T(2 − q)/(2q)``
-    (:func:`~testbed.run.metrics.aoi_periodic_closed_form`); at BER 0 it is ``D + T/2``.
+    (:func:`aoi_periodic_closed_form`); at BER 0 it is ``D + T/2``.
 
     Args:
         ber: bit error rate(s), each in [0, 1).

@@ -30,11 +30,19 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from testbed.report.figures import no_data, save
+from testbed.report.images import plot_image_strip
 from testbed.report.timeline import TIMELINE_WINDOW_S, plot_timeline
 from testbed.run.metrics import signal_lag_s
 from testbed.run.recorder import NodeEvent, Recorder
+from testbed.run.runner import RunResult
 
-__all__ = ["plot_attitude_errors", "plot_speeds", "plot_state", "write_plots"]
+__all__ = [
+    "plot_attitude_errors",
+    "plot_speeds",
+    "plot_state",
+    "write_plots",
+    "write_run_plots",
+]
 
 
 def _intervals(t: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
@@ -340,3 +348,27 @@ def write_plots(
         path = out_dir / "attitude_errors.png"
         paths.append(plot_attitude_errors(series, path, title=title, settle_s=settle_s))
     return paths
+
+
+def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
+    """The plots of one run (:func:`write_plots`, and the image strip of image runs), titled
+    with its scenario and seed; the files written."""
+    scenario = result.scenario
+    title = f"{scenario.id} (seed {result.seed})"
+    written = write_plots(
+        result.recorder,
+        out_dir,
+        title=title,
+        attitude_experiment=scenario.pilot.kind == "attitude",
+        settle_s=scenario.metrics.settle_s,
+    )
+    if scenario.images.enabled:
+        written.append(
+            plot_image_strip(
+                result.recorder.images,
+                out_dir / "images.png",
+                title=title,
+                count=scenario.images.strip_images,
+            )
+        )
+    return written

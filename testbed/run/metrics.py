@@ -30,7 +30,6 @@ import numpy as np
 
 __all__ = [
     "age_of_information",
-    "aoi_periodic_closed_form",
     "distribution",
     "mean_ci95_half_width",
     "signal_lag_s",
@@ -130,14 +129,6 @@ def age_of_information(
     index = np.searchsorted(starts, grid, side="right") - 1
     ages = grid - sample_times[index]
     return {"mean": area / covered, "p95": float(np.percentile(ages, 95))}
-
-
-def aoi_periodic_closed_form(period_s: float, delivery_probability: float, delay_s: float) -> float:
-    """Mean age of periodic updates with independent losses: ``D + T(2 − q)/(2q)`` [s]."""
-    q = delivery_probability
-    if not 0.0 < q <= 1.0:
-        raise ValueError(f"delivery probability must be in (0, 1], got {q}")
-    return delay_s + period_s * (2.0 - q) / (2.0 * q)
 
 
 def signal_lag_s(

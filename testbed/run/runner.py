@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import simpy
 
-from testbed.channel import EventKind, Medium, Trace
+from testbed.channel import Medium, Trace, direction_counts
 from testbed.common.components import ControlMode
 from testbed.ecs import Phase
 from testbed.operator.station import OperatorStation, SessionPlan
@@ -266,57 +266,25 @@ def tally_images(
 def _link_direction(
     trace: Trace, src: str, dst: str, decoded: int, payload_bytes: int, sim_s: float
 ) -> dict[str, Any]:
-    """Per-direction frame counts from the trace; delivered = frames the receiver decoded.
+    """Per-direction frame counts from the trace (:func:`testbed.channel.direction_counts`:
+    a frame counts once, by its worst packet); delivered = frames the receiver decoded.
 
-    A frame sent as several packets counts once, by its worst packet: collided, then lost in an
-    outage, then out of range, then corrupted (the order
-    :func:`testbed.report.run_plots.frame_outcomes`
-    uses too). ``per`` = 1 − delivered / settled, over the frames whose every packet had reached
-    the receiver (or been lost) when the run ended: a frame still queued or on the air at the end
+    ``per`` = 1 − delivered / settled, over the frames whose every packet had reached the
+    receiver (or been lost) when the run ended: a frame still queued or on the air at the end
     is neither delivered nor lost.
     """
-    sent = dropped = 0
-    sizes: list[int] = []
-    packets_sent: dict[int, int] = {}
-    packets_settled: dict[int, int] = {}
-    outcomes = {EventKind.DELIVER, EventKind.CORRUPT, EventKind.COLLIDE}
-    outcomes |= {EventKind.OUTAGE, EventKind.OUT_OF_RANGE}
-    lost: dict[EventKind, set[int]] = {
-        EventKind.COLLIDE: set(),
-        EventKind.OUTAGE: set(),
-        EventKind.CORRUPT: set(),
-        EventKind.OUT_OF_RANGE: set(),
-    }
-    for event in trace.events:
-        if event.src != src:
-            continue
-        if event.kind is EventKind.ENQUEUE:
-            sent += 1
-            sizes.append(event.size_bytes)
-        elif event.kind is EventKind.DROP:
-            dropped += 1
-        elif event.kind is EventKind.TX_START:
-            packets_sent[event.frame_id] = packets_sent.get(event.frame_id, 0) + 1
-        elif event.dst == dst and event.kind in outcomes:
-            packets_settled[event.frame_id] = packets_settled.get(event.frame_id, 0) + 1
-            if event.kind in lost:
-                lost[event.kind].add(event.frame_id)
-    collided = lost[EventKind.COLLIDE]
-    outage = lost[EventKind.OUTAGE] - collided
-    out_of_range = lost[EventKind.OUT_OF_RANGE] - collided - outage
-    corrupted = lost[EventKind.CORRUPT] - collided - outage - out_of_range
-    settled = sum(1 for f, n in packets_sent.items() if packets_settled.get(f, 0) >= n)
+    counts = direction_counts(trace.events, src, dst)
     return {
-        "frames_sent": sent,
+        "frames_sent": counts.frames_sent,
         "frames_delivered": decoded,
-        "frames_corrupted": len(corrupted),
-        "frames_collided": len(collided),
-        "frames_dropped": dropped,
-        "frames_outage": len(outage),
-        "frames_out_of_range": len(out_of_range),
-        "per": 1.0 - decoded / settled if settled else math.nan,
+        "frames_corrupted": counts.frames_corrupted,
+        "frames_collided": counts.frames_collided,
+        "frames_dropped": counts.frames_dropped,
+        "frames_outage": counts.frames_outage,
+        "frames_out_of_range": counts.frames_out_of_range,
+        "per": 1.0 - decoded / counts.frames_settled if counts.frames_settled else math.nan,
         "goodput_bps": 8.0 * payload_bytes / sim_s,
-        "mean_frame_bytes": float(np.mean(sizes)) if sizes else math.nan,
+        "mean_frame_bytes": counts.mean_frame_bytes,
     }
 
 
@@ -422,8 +390,9 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-def write_outputs(result: RunResult, out_dir: Path, *, plots: bool = True) -> list[Path]:
-    """Write ``metrics.json``, ``events.csv``, ``series.csv`` and (optionally) the plots.
+def write_outputs(result: RunResult, out_dir: Path) -> list[Path]:
+    """Write ``metrics.json``, ``events.csv`` and ``series.csv`` (the plots are
+    :func:`testbed.report.run_plots.write_run_plots`'s).
 
     Returns:
         The files written.
@@ -441,26 +410,4 @@ def write_outputs(result: RunResult, out_dir: Path, *, plots: bool = True) -> li
         for row in rows:
             handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
     written = [metrics_path, events_path, series_path]
-    if plots:
-        from testbed.report.run_plots import write_plots  # matplotlib only when plotting
-
-        scenario = result.scenario
-        written += write_plots(
-            result.recorder,
-            out_dir,
-            title=f"{scenario.id} (seed {result.seed})",
-            attitude_experiment=scenario.pilot.kind == "attitude",
-            settle_s=scenario.metrics.settle_s,
-        )
-        if scenario.images.enabled:
-            from testbed.report.images import plot_image_strip
-
-            written.append(
-                plot_image_strip(
-                    result.recorder.images,
-                    out_dir / "images.png",
-                    title=f"{scenario.id} (seed {result.seed})",
-                    count=scenario.images.strip_images,
-                )
-            )
     return written

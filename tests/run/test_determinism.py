@@ -39,7 +39,7 @@ SHORTENING: dict[str, list[str]] = {
 def run_and_write(name: str, out: Path, seed: int | None = None) -> dict[str, bytes]:
     """Run the shortened scenario ``name`` and return its written outputs, wall clock removed."""
     scenario = load_scenario(name, SHORTENING.get(name, DEFAULT_SHORTENING))
-    write_outputs(run_scenario(scenario, seed=seed), out, plots=False)
+    write_outputs(run_scenario(scenario, seed=seed), out)
     files = {file: (out / file).read_bytes() for file in OUTPUTS}
     lines = files["metrics.json"].splitlines(keepends=True)
     kept = [line for line in lines if not line.lstrip().startswith(_quoted(WALL_CLOCK_KEYS))]

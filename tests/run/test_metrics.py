@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from testbed.report.closed_forms import aoi_periodic_closed_form
 from testbed.run.metrics import (
     age_of_information,
-    aoi_periodic_closed_form,
     distribution,
     signal_lag_s,
     summary,

@@ -15,7 +15,7 @@ import pytest
 
 from testbed.channel import load_link_config
 from testbed.protocol import encode_frame
-from testbed.run.metrics import aoi_periodic_closed_form
+from testbed.report.closed_forms import aoi_periodic_closed_form
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import load_scenario
 
@@ -132,7 +132,7 @@ def test_metrics_json_is_strict_json(tmp_path: Any) -> None:
     from testbed.run.runner import write_outputs
 
     result = run("ecs-yaw-4h-v1", "duration_s=5", "metrics.settle_s=1")
-    written = write_outputs(result, tmp_path, plots=False)
+    written = write_outputs(result, tmp_path)
     metrics = json.loads((tmp_path / "metrics.json").read_text(), parse_constant=_reject)
     assert metrics["command_lag_s"]["n"] == 0 and metrics["command_lag_s"]["mean"] is None
     assert {p.name for p in written} == {"metrics.json", "events.csv", "series.csv"}
