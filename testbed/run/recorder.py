@@ -25,7 +25,7 @@ from testbed.channel import Trace
 from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
-from testbed.run.image_log import ImageLog
+from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -27,16 +26,12 @@ from testbed.channel import Medium, Trace, direction_counts
 from testbed.common.components import ControlMode
 from testbed.ecs import Phase
 from testbed.operator.station import OperatorStation, SessionPlan
-from testbed.operator.video import ImageConsole
-from testbed.protocol import ImageSettings
-from testbed.run.image_config import ImagesSection
-from testbed.run.image_log import image_metrics
+from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.metrics import age_of_information, distribution, signal_lag_s, summary
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import SERIES_COLUMNS, Recorder, VehicleObserver
 from testbed.run.scenario import Scenario
 from testbed.vehicle.vehicle import Vehicle
-from testbed.vehicle.video import CodedImage, ImageSource
 
 __all__ = [
     "RunResult",
@@ -74,51 +69,6 @@ class RunResult:
     recorder: Recorder
 
 
-def _image_source(images: ImagesSection) -> Callable[..., ImageSource]:
-    """Builds the vehicle's image source on its camera (``VehicleNode(image_source=...)``)."""
-
-    def build(vehicle: Vehicle, on_image: Callable[[CodedImage], None]) -> ImageSource:
-        def capture() -> tuple[float, np.ndarray] | None:
-            image = vehicle.capture_image()
-            return None if image is None else (image.time_s, image.pixels)
-
-        camera = vehicle.config.camera
-        return ImageSource(
-            capture,
-            width_px=camera.width_px,
-            height_px=camera.height_px,
-            chunk_bytes=images.chunk_bytes,
-            selective_repeat=images.selective_repeat,
-            on_image=on_image,
-        )
-
-    return build
-
-
-def _settings_schedule(images: ImagesSection) -> list[tuple[float, ImageSettings]]:
-    """The operator's ``ImageSettings`` orders: the section's at 0 s, then each change."""
-    budget, roi, shift = images.budget_bytes, images.roi, images.roi_shift
-    schedule: list[tuple[float, ImageSettings]] = []
-    for t_s, change in [(0.0, None), *((c.t_s, c) for c in images.changes)]:
-        if change is not None:
-            budget = budget if change.budget_bytes is None else change.budget_bytes
-            roi = roi if change.roi is None else change.roi
-            shift = shift if change.roi_shift is None else change.roi_shift
-        x0, y0, x1, y1 = roi if roi else (0, 0, 0, 0)
-        schedule.append((t_s, ImageSettings(x0, y0, x1, y1, shift if roi else 0, True, budget)))
-    return schedule
-
-
-def _image_console(images: ImagesSection) -> ImageConsole | None:
-    if not images.enabled:
-        return None
-    return ImageConsole(
-        chunk_bytes=images.chunk_bytes,
-        selective_repeat=images.selective_repeat,
-        schedule=_settings_schedule(images),
-    )
-
-
 def make_vehicle_node(
     env: simpy.Environment,
     scenario: Scenario,
@@ -139,7 +89,7 @@ def make_vehicle_node(
         downlink_rate_hz=link.downlink_rate_hz,
         recorder=recorder,
         snapshot_period_s=link.snapshot_period_s,
-        image_source=_image_source(scenario.images) if scenario.images.enabled else None,
+        image_source=image_source_factory(scenario.images) if scenario.images.enabled else None,
     )
     vehicle = node.vehicle
     observer = VehicleObserver(
@@ -187,7 +137,7 @@ def make_operator_node(
         recorder=recorder,
         reply_odometry_s=reply_odometry_s,
         snapshot_period_s=link.snapshot_period_s,
-        console=_image_console(scenario.images),
+        console=image_console(scenario.images),
     )
 
 

@@ -54,7 +54,7 @@ from testbed.config import (
     parse_override,
 )
 from testbed.operator.pilots import AttitudePilot, Pilot, ScriptedPilot, SineTerm
-from testbed.run.image_config import ImagesSection
+from testbed.run.images import ImagesSection
 from testbed.vehicle.hydrodynamics import known_models
 from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
 from testbed.vehicle.vehicle import VehicleConfig
