@@ -1,0 +1,309 @@
+"""The sections of a scenario file, each a frozen dataclass that checks its own values:
+``[link]`` options (:class:`LinkSection`), ``[operator]``, ``[pilot]`` (the pilot's settings;
+the pilots themselves live in :mod:`testbed.operator.pilots`), ``[faults]`` and ``[metrics]``.
+A failed check raises :class:`~testbed.config.FieldError` naming the field; the loader
+(:mod:`testbed.run.scenario`) turns it into the one-line error naming the file and dotted key.
+``[vehicle]`` is :class:`~testbed.vehicle.vehicle.VehicleConfig`, ``[images]``
+:class:`~testbed.run.images.ImagesSection`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from testbed.channel import (
+    TELEROBOTICS_2018,
+    TELEROBOTICS_2019,
+    TELEROBOTICS_2021,
+    Fixed,
+    IpgPolicy,
+    LinkConfig,
+)
+from testbed.config import check
+from testbed.operator.pilots import AttitudePilot, Pilot, ScriptedPilot, SineTerm
+
+__all__ = [
+    "FaultsSection",
+    "LinkOutage",
+    "LinkSection",
+    "MetricsSection",
+    "OperatorSection",
+    "PilotSection",
+    "SineTerm",
+    "ThrusterFault",
+    "check_finite",
+    "check_non_negative",
+    "check_positive",
+]
+
+_IPG_CONSTANTS: dict[str, IpgPolicy] = {
+    "telerobotics-2018": TELEROBOTICS_2018,
+    "telerobotics-2019": TELEROBOTICS_2019,
+    "telerobotics-2021": TELEROBOTICS_2021,
+}
+
+
+def check_finite(value: float, key: str) -> None:
+    """Field check: ``value`` is finite."""
+    check(math.isfinite(value), key, f"must be finite, got {value}")
+
+
+def check_positive(value: float, key: str) -> None:
+    """Field check: ``value`` is finite and > 0."""
+    check(value > 0.0 and math.isfinite(value), key, f"must be > 0 and finite, got {value}")
+
+
+def check_non_negative(value: float, key: str) -> None:
+    """Field check: ``value`` is finite and ≥ 0."""
+    check(value >= 0.0 and math.isfinite(value), key, f"must be ≥ 0 and finite, got {value}")
+
+
+# --- sections ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class LinkSection:
+    """The link between operator and vehicle.
+
+    Attributes:
+        preset: channel preset name (:func:`testbed.channel.preset_names`).
+        channel: the preset with every other key of the ``[link]`` table applied over it.
+        codec: ``"teleop"`` (the paper's compact orders and replies) or ``"changeset"`` (the ECS
+            paper's full change-set sync).
+        mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
+            (each node sends at its own rate).
+        ipg: the token master's inter-packet-gap policy.
+        ipg_s: the gap [s] when ``ipg == "fixed"``, > 0.
+        uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or
+            ``codec == "changeset"``.
+        downlink_rate_hz: vehicle send rate [Hz], same condition.
+        snapshot_period_s: change-set codec: every this many seconds a node sends its full
+            owned state instead of the changes alone, so a peer that lost a payload resyncs
+            [s]; 0 = never.
+        operator_position_ned_m: (3,) the operator's modem [m], world NED; the vehicle's modem
+            moves with the vehicle.
+    """
+
+    preset: str = "s100"
+    channel: LinkConfig
+    codec: Literal["teleop", "changeset"] = "teleop"
+    mac: Literal["token", "free"] = "token"
+    ipg: Literal["fixed", "telerobotics-2018", "telerobotics-2019", "telerobotics-2021"] = (
+        "telerobotics-2021"
+    )
+    ipg_s: float = 0.6
+    uplink_rate_hz: float = 50.0
+    downlink_rate_hz: float = 100.0
+    snapshot_period_s: float = 5.0
+    operator_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        check_positive(self.ipg_s, "ipg_s")
+        check(
+            self.snapshot_period_s >= 0.0 and math.isfinite(self.snapshot_period_s),
+            "snapshot_period_s",
+            f"must be a finite number ≥ 0, got {self.snapshot_period_s}",
+        )
+        check_positive(self.uplink_rate_hz, "uplink_rate_hz")
+        check_positive(self.downlink_rate_hz, "downlink_rate_hz")
+        for i, value in enumerate(self.operator_position_ned_m):
+            check_finite(value, f"operator_position_ned_m[{i}]")
+
+    @property
+    def ipg_policy(self) -> IpgPolicy:
+        """The token master's gap policy: ``Fixed(ipg_s)`` or a ``TELEROBOTICS_*`` constant."""
+        if self.ipg == "fixed":
+            return Fixed(self.ipg_s)
+        return _IPG_CONSTANTS[self.ipg]
+
+    @property
+    def rates_used(self) -> bool:
+        """Whether the nodes send at ``uplink_rate_hz`` / ``downlink_rate_hz``."""
+        return self.mac == "free" or self.codec == "changeset"
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorSection:
+    """What the operator requests at start.
+
+    Attributes:
+        mode: control mode requested at start.
+        arm_at_s: when the operator requests arming [s], ≥ 0.
+        depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only);
+            None = hold the depth at arming.
+        precision: precision (fine) stick mode.
+    """
+
+    mode: Literal["manual", "stabilize", "depth_hold"] = "depth_hold"
+    arm_at_s: float = 0.0
+    depth_m: float | None = None
+    precision: bool = False
+
+    def __post_init__(self) -> None:
+        check_non_negative(self.arm_at_s, "arm_at_s")
+        if self.depth_m is not None:
+            check_non_negative(self.depth_m, "depth_m")
+            check(
+                self.mode == "depth_hold",
+                "depth_m",
+                f"only used when mode = 'depth_hold', got mode {self.mode!r}",
+            )
+
+
+_STICK_AXES = ("x", "y", "z", "yaw")
+_ATTITUDE_AMPLITUDES = ("roll_amplitude_deg", "pitch_amplitude_deg", "yaw_amplitude_deg")
+
+
+@dataclass(frozen=True, slots=True)
+class PilotSection:
+    """The scripted operator's settings: smooth stick signals or oscillating attitude setpoints
+    (the pilots themselves are :class:`~testbed.operator.pilots.ScriptedPilot` and
+    :class:`~testbed.operator.pilots.AttitudePilot`; :meth:`pilot` builds the one configured).
+
+    ``kind = "scripted"``: each stick is ``clip(Σ terms, −1, 1)`` of the time ``τ = t − start_s``
+    since the pilot started, zero before (Centelles et al., Fig. 5: a few slow sinusoids per
+    axis). ``kind = "attitude"``: the ECS paper's experiment, no sticks; roll, pitch and yaw
+    setpoints ``A · sin(2π τ / T)`` [deg], sent as AttitudeSetpoint ``setpoint_rate_hz`` times
+    a second. Each kind rejects the other's non-zero settings.
+
+    Attributes:
+        kind: ``"scripted"`` or ``"attitude"``.
+        start_s: when the pilot starts [s], ≥ 0.
+        x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms.
+        roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| ≤ 89.9.
+        yaw_amplitude_deg: yaw setpoint amplitude [deg], |A| ≤ 180.
+        roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], > 0.
+        setpoint_rate_hz: how often the operator updates the setpoint [Hz], > 0.
+    """
+
+    kind: Literal["scripted", "attitude"] = "scripted"
+    start_s: float = 5.0
+    x: tuple[SineTerm, ...] = ()
+    y: tuple[SineTerm, ...] = ()
+    z: tuple[SineTerm, ...] = ()
+    yaw: tuple[SineTerm, ...] = ()
+    roll_amplitude_deg: float = 0.0
+    roll_period_s: float = 20.0
+    pitch_amplitude_deg: float = 0.0
+    pitch_period_s: float = 30.0
+    yaw_amplitude_deg: float = 0.0
+    yaw_period_s: float = 25.0
+    setpoint_rate_hz: float = 10.0
+
+    def __post_init__(self) -> None:
+        check_non_negative(self.start_s, "start_s")
+        for name, limit in zip(_ATTITUDE_AMPLITUDES, (89.9, 89.9, 180.0), strict=True):
+            value = getattr(self, name)
+            check(abs(value) <= limit, name, f"must be in [-{limit:g}, {limit:g}], got {value}")
+        for name in ("roll_period_s", "pitch_period_s", "yaw_period_s", "setpoint_rate_hz"):
+            check_positive(getattr(self, name), name)
+        used_by, unused = (
+            ("attitude", _ATTITUDE_AMPLITUDES)
+            if self.kind == "scripted"
+            else ("scripted", _STICK_AXES)
+        )
+        for name in unused:
+            check(not getattr(self, name), name, f"only used when kind = {used_by!r}")
+
+    def pilot(self) -> Pilot:
+        """The pilot this section configures (:mod:`testbed.operator.pilots`)."""
+        if self.kind == "attitude":
+            return AttitudePilot(
+                self.start_s,
+                self.roll_amplitude_deg,
+                self.roll_period_s,
+                self.pitch_amplitude_deg,
+                self.pitch_period_s,
+                self.yaw_amplitude_deg,
+                self.yaw_period_s,
+            )
+        return ScriptedPilot(self.start_s, self.x, self.y, self.z, self.yaw)
+
+
+@dataclass(frozen=True, slots=True)
+class ThrusterFault:
+    """A thruster failure from time ``t_s`` on (``Vehicle.fail_thruster``).
+
+    Attributes:
+        t_s: when it fails [s], in [0, duration_s).
+        thruster: a thruster name of the scenario's layout.
+        mode: ``"dead"`` (no force), ``"stuck"`` (holds ``value`` [N]) or ``"degraded"``
+            (force scaled by ``value`` in [0, 1]).
+        value: the stuck force [N] or degraded factor; must stay 0 for ``"dead"``.
+    """
+
+    t_s: float
+    thruster: str
+    mode: Literal["dead", "stuck", "degraded"]
+    value: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_non_negative(self.t_s, "t_s")
+        check(bool(self.thruster), "thruster", "must not be empty")
+        check_finite(self.value, "value")
+        if self.mode == "dead":
+            check(self.value == 0.0, "value", "not used when mode = 'dead' (leave it out)")
+        if self.mode == "degraded":
+            check(0.0 <= self.value <= 1.0, "value", f"must be in [0, 1], got {self.value}")
+
+
+@dataclass(frozen=True, slots=True)
+class LinkOutage:
+    """A window [start_s, end_s) in which nothing is delivered in either direction.
+
+    Attributes:
+        start_s: window start [s], ≥ 0.
+        end_s: window end [s], > start_s and ≤ the scenario's duration.
+    """
+
+    start_s: float
+    end_s: float
+
+    def __post_init__(self) -> None:
+        check_non_negative(self.start_s, "start_s")
+        check(
+            self.end_s > self.start_s and math.isfinite(self.end_s),
+            "end_s",
+            f"must be > start_s ({self.start_s}), got {self.end_s}",
+        )
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the window [s]."""
+        return self.end_s - self.start_s
+
+
+@dataclass(frozen=True, slots=True)
+class FaultsSection:
+    """Scheduled faults: thruster failures and link outages (sorted, not overlapping)."""
+
+    thrusters: tuple[ThrusterFault, ...] = ()
+    link_outages: tuple[LinkOutage, ...] = ()
+
+    def __post_init__(self) -> None:
+        for i in range(1, len(self.link_outages)):
+            previous, outage = self.link_outages[i - 1], self.link_outages[i]
+            check(
+                outage.start_s >= previous.end_s,
+                f"link_outages[{i}].start_s",
+                f"must be ≥ the previous window's end_s ({previous.end_s}), got {outage.start_s}",
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class MetricsSection:
+    """What the recorder samples and the metrics leave out.
+
+    Attributes:
+        settle_s: samples before this time [s] are left out of error statistics.
+        sample_rate_hz: time-series recording rate [Hz] for plots and tracking metrics.
+    """
+
+    settle_s: float = 10.0
+    sample_rate_hz: float = 20.0
+
+    def __post_init__(self) -> None:
+        check_non_negative(self.settle_s, "settle_s")
+        check_positive(self.sample_rate_hz, "sample_rate_hz")
