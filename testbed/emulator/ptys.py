@@ -237,10 +237,10 @@ class ModemEmulator:
         thread against its real-time schedule (deliveries are written as late); ``reader``, each
         burst closed by the reader against the instant its line went idle for ``idle_s`` (or its
         byte count was reached: 0). Each ``{p50, p95, max, mean, n}``, NaN (``n`` 0) before any
-        sample. Read it after :meth:`close` (or accept a snapshot that is already stale)."""
+        sample. A snapshot: read it again after more traffic."""
         return {
-            "simulation": _summary_ms(list(self._sim_lateness_ns)),
-            "reader": _summary_ms(list(self._reader_lateness_ns)),
+            "simulation": _summary_ms(list(self._sim_lateness_ns.copy())),
+            "reader": _summary_ms(list(self._reader_lateness_ns.copy())),
         }
 
     @property
