@@ -22,6 +22,7 @@ from testbed.channel.mac import (
     Fixed,
     FromFrameSize,
     IpgPolicy,
+    TokenSlave,
     run_periodic_sender,
     run_token_master,
     run_token_slave,
@@ -175,3 +176,30 @@ def test_periodic_sender_timing_and_misuse() -> None:
     assert [d.t_tx_start_s for d in b.drain()] == [1.0, 4.0, 7.0, 10.0]
     with pytest.raises(ValueError):
         next(run_periodic_sender(env, lambda: a.send(b"x"), 0.0))
+
+
+def test_token_slave_answers_each_valid_frame_at_once_and_only_those() -> None:
+    sent: list[bytes] = []
+
+    def reply(payload: bytes) -> bytes | None:
+        return None if payload == b"quiet" else b"re:" + payload
+
+    slave = TokenSlave(reply, sent.append)
+    for payload in (b"a", b"quiet", b"b"):
+        slave.on_frame(payload)
+    assert sent == [b"re:a", b"re:b"]
+
+
+def test_master_sizes_each_gap_on_the_slot_it_just_used() -> None:
+    env = simpy.Environment()
+    sizes = iter([13, 60, 5])
+    starts: list[float] = []
+
+    def slot() -> int:
+        starts.append(env.now)
+        return next(sizes)
+
+    env.process(run_token_master(env, slot, TELEROBOTICS_2021, count=3))
+    env.run()
+    # max(L, 13)·8/175 after each slot: 13 B → 0.594 s, then 60 B → 2.743 s
+    assert starts == pytest.approx([0.0, 13 * 8 / 175, 13 * 8 / 175 + 60 * 8 / 175])

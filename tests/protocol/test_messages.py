@@ -13,19 +13,23 @@ from testbed.protocol import (
     DEFAULT_CHUNK_SIZE,
     MAX_CHUNK_SIZE,
     STATE_SIZE,
+    DisableKeepHeading,
     GoTo,
     HoldChannel,
     ImageSettings,
+    KeepHeading,
     MalformedPayload,
     Mode,
     Move,
     NoOrder,
     OperatorMessage,
+    OrderIncoming,
     VehicleMessage,
     VehicleState,
     decode_operator_message,
     decode_vehicle_message,
     encode_frame,
+    order_type_of,
 )
 from tests.strategies import orders
 
@@ -315,3 +319,20 @@ def test_fuzz_decoders_with_mutated_valid_payloads() -> None:
                 decoded += 1
                 assert result.encode() == data
     assert decoded > 10_000  # many single-bit flips still parse, and re-encode identically
+
+
+def test_order_type_of_reads_the_header_nibble_without_the_body() -> None:
+    by_hand = {  # REFERENCE §1.3: the order type codes of the telerobotics protocol
+        0: NoOrder,
+        1: Move,
+        2: KeepHeading,
+        3: HoldChannel,
+        4: ImageSettings,
+        5: DisableKeepHeading,
+        6: GoTo,
+        7: OrderIncoming,
+    }
+    for code, cls in by_hand.items():
+        assert order_type_of(bytes((0x80, 0xC0 | code))) is cls  # flags set, body absent
+    assert order_type_of(bytes((0, 8))) is None  # codes 8..15 name no order
+    assert order_type_of(b"\x01") is None and order_type_of(b"") is None
