@@ -486,7 +486,11 @@ def test_unknown_modem_is_a_value_error() -> None:
 
 def test_hil_run_over_emulated_evologics_modems() -> None:
     """``run_hil`` (testbed hil) for 5 s with both nodes on EvoLogics personalities: orders
-    reach the vehicle and state returns, every 0.5 s (fixed gap), nothing rejected."""
+    reach the vehicle and state returns, every 0.5 s (fixed gap, on the run's clock: 10 orders
+    whatever the load), nothing rejected. Counts load cannot change: every order is delivered
+    but the one possibly in flight at the end and those the emulated link lost to collisions
+    (a reply delayed past the token margin by a loaded host), and each reaches the vehicle's
+    personality as one instant message."""
     from testbed.run.realtime import run_hil
     from testbed.run.scenario import load_scenario
 
@@ -501,11 +505,16 @@ def test_hil_run_over_emulated_evologics_modems() -> None:
             "vehicle": open_endpoint(PortSettings(path_b, "evologics", "vehicle")),
         }
         result = run_hil(scenario, endpoints, duration_s=5.0, modem="evologics")
+        emulator.close()  # final counters
         counts = emulator.personality_counters
+        collided = [modem.counters.rx_collided for modem in emulator.modems]
         assert emulator.error is None
     up, down = result.metrics["link"]["uplink"], result.metrics["link"]["downlink"]
-    assert up["frames_delivered"] >= 8 and down["frames_delivered"] >= 8  # ≈ 10 each in 5 s
-    assert up["frames_sent"] - up["frames_delivered"] <= 1  # at most the last one in flight
+    assert up["frames_sent"] == 10  # one per 0.5 s of the run's clock
+    assert up["frames_sent"] - up["frames_delivered"] <= 1 + collided[1]  # + the last in flight
+    assert up["frames_delivered"] >= 1 and down["frames_delivered"] >= 1
+    assert down["frames_sent"] == up["frames_delivered"]  # one reply per order
+    assert down["frames_sent"] - down["frames_delivered"] <= 1 + collided[0]
     assert result.metrics["frames_rejected"] == {"uplink": 0, "downlink": 0}
     assert result.recorder.series()["armed"][-1] == 1.0  # the arm request travelled as an order
     assert counts is not None

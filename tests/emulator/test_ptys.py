@@ -65,8 +65,8 @@ def test_frame_crosses_both_ways_after_the_model_latency(
         assert FrameDecoder().feed(got) == [Frame(bytes([k]) * 40)]
         model_s = fast.intrinsic_delay_s + fast.airtime_s(len(frame))  # 20 + 19.2 ms
         assert model_s <= latency_s <= model_s + lateness.allowance_s(emulator)
-    emulator.close()  # joins its threads: the counters are final (a delivery is read on the
-    counters_a, counters_b = emulator.counters  # port before its bytes are counted)
+    emulator.close()  # joins its threads: a delivery can be read before its bytes are counted
+    counters_a, counters_b = emulator.counters
     assert (counters_a.bursts, counters_b.bursts) == (2, 1)
     assert (counters_a.deliveries, counters_b.deliveries) == (1, 2)
     assert counters_b.bytes_out == counters_a.bytes_in == 2 * len(frame)
