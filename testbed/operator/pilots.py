@@ -130,7 +130,8 @@ class ScriptedPilot:
 @dataclass(frozen=True, slots=True)
 class AttitudePilot:
     """The ECS paper's attitude experiment: no sticks; roll, pitch and yaw setpoints
-    ``A · sin(2π τ / T)`` [deg] of ``τ = t − start_s``, zero before the start.
+    ``A · sin(2π τ / T)`` [deg] of ``τ = t − start_s``, zero before the start (the defaults
+    live in the scenario's pilot section).
 
     Attributes:
         start_s: when the pilot starts [s].
@@ -138,13 +139,13 @@ class AttitudePilot:
         roll_period_s, pitch_period_s, yaw_period_s: periods ``T`` [s], > 0.
     """
 
-    start_s: float = 0.0
-    roll_amplitude_deg: float = 0.0
-    roll_period_s: float = 20.0
-    pitch_amplitude_deg: float = 0.0
-    pitch_period_s: float = 30.0
-    yaw_amplitude_deg: float = 0.0
-    yaw_period_s: float = 25.0
+    start_s: float
+    roll_amplitude_deg: float
+    roll_period_s: float
+    pitch_amplitude_deg: float
+    pitch_period_s: float
+    yaw_amplitude_deg: float
+    yaw_period_s: float
 
     def attitude_deg(self, t_s: float) -> tuple[float, float, float]:
         """Roll, pitch and yaw setpoint [deg] at ``t_s`` [s] (zero before start)."""
