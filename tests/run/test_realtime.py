@@ -1,7 +1,7 @@
 """``testbed.run.realtime``: the nodes in real time over serial ports, end to end over the emulator.
 
-One real-time window of about 20 s runs three things at once (the default run's only long
-test, shared by the tests below through a module fixture):
+One real-time window of about 20 s runs these at once (the default run's only long test,
+shared by the tests below through a module fixture):
 
 * in this process, ``run_hil`` with both nodes on the two ports of a modem emulator (s100
   preset, BER 0), the operator's port unplugged from 8 s to 10 s (a port factory that fails),
@@ -9,15 +9,24 @@ test, shared by the tests below through a module fixture):
 * in two child processes, ``testbed hil vehicle`` and ``testbed hil operator`` on the two ports
   of a second emulator (two computers);
 * in a third child, ``testbed hil --operator-port … --vehicle-port …`` on a third emulator
-  (the one-computer CLI path).
+  (the one-computer CLI path);
+* in this process, a timing probe (:class:`LinkProbe`) on a fourth emulator;
+* the four emulators in a child process of their own (:data:`EMULATORS`), as real modems are
+  outside the computer, reporting their counters and scheduler lateness when they stop.
 
 The run in this process starts once every child has said its port is open (a 2-core machine
 importing numpy and pybullet in three children would otherwise starve its first seconds).
 
 Truth is the channel model's closed form: a frame written on an emulator port arrives after
 the idle gap that closes the burst (3 ms), the intrinsic delay and the airtime of the frame and
-its CR LF (REFERENCE §1.10: every S100 packet ends in CR LF). Fast unit tests of the frame
-ledger and the modem shape use a plain simpy environment and fake endpoints.
+its CR LF (REFERENCE §1.10: every S100 packet ends in CR LF). What a host adds on top depends
+on its load (the default run must pass with two busy processes on both cores), so no bound is
+a fixed allowance: latency bounds are the model plus the scheduler lateness measured in the same
+window (the run's ``hil.scheduler_lateness_ms``, the emulators' own, and the probe's excess over
+the model on the same kind of path), and the rest are counts load cannot change (frames, bytes
+and collisions at the emulator, the failsafe's rule on the run's clock). Speed targets live in
+benchmarks/test_hil_bench.py. Fast unit tests of the frame ledger and the modem shape use a plain
+simpy environment and fake endpoints.
 """
 
 from __future__ import annotations
@@ -583,9 +592,14 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
     """The failsafe follows the orders that reached the vehicle, on the run's clock, whatever
     the load: it holds at the first vehicle frame ≥ 1 s (``hold_after_s``) after the last order
     was handed over, when the next one is not there by then, and is nominal again at the first
-    frame after the next one (one control frame, 1/100 s, plus a 1/240-s physics step). The
-    unplug window is found in the trace (the operator's refused frames), not on the wall clock:
-    a gap of orders spans it, the vehicle held in it and let go after it."""
+    frame after the next one (one control frame, 1/100 s, plus a 1/240-s physics step), once
+    armed. Every hold and release is checked against the orders handed over (the trace), so
+    orders a loaded host delayed or the link lost (collisions) explain any hold outside the
+    unplug. The unplug is placed on the run's clock between the earliest and latest instants
+    the clock can have started: the last order before it arrives at most the longest command
+    lag after its start, and none after it before its end plus one link crossing (less the
+    run's largest lateness: hand-overs are stamped early); a hold began by the first + 1 s,
+    and was let go after the second."""
     metrics = window.single.metrics
     recorder = window.single.recorder
     operator = metrics["hil"]["endpoints"]["operator"]
@@ -608,9 +622,11 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
         else:  # at the frame that applies the order just handed over
             assert t - before <= frame_s
     holds = [t for t, level in failsafe if level == "HOLD"]
+    series = recorder.series()  # sampled every 1/50 s: the vehicle holds only once armed
+    armed_s = float(series["t_s"][series["armed"] == 1.0][0]) - frame_s - 1 / 50
     for before, after in itertools.pairwise(orders):
-        if after - before > hold_s + 2 * frame_s:  # every long gap held
-            assert any(before < t < after for t in holds)
+        if before >= armed_s and after - before > hold_s + 2 * frame_s:  # long gaps held
+            assert any(before < t < after for t in holds), (before, after, failsafe)
     # The unplug: the last order before it reached the vehicle at most the longest command
     # lag after its start; none came before its end plus one link crossing (less the run's
     # lateness: the hand-over is stamped early). A hold began by then + 1 s, and let go after.
