@@ -570,7 +570,8 @@ def test_added_latency_is_the_wait_for_the_next_poll(window: Window) -> None:
     assert 0.0 < added["p50"] <= 1e3 * (POLL_S + window.lateness_s("p95")) + 0.5
     assert added["max"] <= 1e3 * (POLL_S + window.lateness_s("max")) + 0.5
     late = hil["scheduler_lateness_ms"]
-    assert late["n"] >= DURATION_S / POLL_S / 2  # one sample per poll, polls run late in bursts
+    assert abs(late["n"] - DURATION_S / POLL_S) <= 1  # one per poll of the run's clock: late
+    # polls are caught up, not skipped, so their number does not depend on the load
     assert 0.0 <= late["p50"] <= late["p95"] <= late["max"]
     ends = hil["endpoints"]
     assert ends["vehicle"]["frames_in"] == up["frames_delivered"]
