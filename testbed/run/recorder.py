@@ -171,6 +171,14 @@ class Recorder:
         table = np.array(self.rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
         return {name: table[:, k] for k, name in enumerate(SERIES_COLUMNS)}
 
+    def write_series_csv(self, path: Path) -> None:
+        """Write the series rows as CSV: a header of :data:`SERIES_COLUMNS`, values to 6
+        significant digits."""
+        with path.open("w", encoding="utf-8") as handle:
+            handle.write(",".join(SERIES_COLUMNS) + "\n")
+            for row in self.rows:
+                handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
+
     def write_events_csv(self, path: Path) -> None:
         """Write every link and node event, in time order, as CSV.
 

@@ -29,7 +29,7 @@ from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.metrics import age_of_information, distribution, signal_lag_s, summary
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
-from testbed.run.recorder import SERIES_COLUMNS, Recorder, VehicleObserver
+from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.scenario import Scenario
 from testbed.vehicle.vehicle import Vehicle
 
@@ -354,10 +354,6 @@ def write_outputs(result: RunResult, out_dir: Path) -> list[Path]:
     events_path = out_dir / "events.csv"
     result.recorder.write_events_csv(events_path)
     series_path = out_dir / "series.csv"
-    rows = result.recorder.rows
-    with series_path.open("w", encoding="utf-8") as handle:
-        handle.write(",".join(SERIES_COLUMNS) + "\n")
-        for row in rows:
-            handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
+    result.recorder.write_series_csv(series_path)
     written = [metrics_path, events_path, series_path]
     return written
