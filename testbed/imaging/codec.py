@@ -18,11 +18,17 @@ complete, keeping what that step's available bits say. A significant coefficient
 3/8 of the interval its known bits leave (wavelet magnitudes are denser at the low end; the
 midpoint measured the same PSNR but let refinement bits lower it slightly more often).
 
-Remote data never raises here: a stream whose header is short or invalid decodes to a mid-grey
-image of the ``shape`` the caller expects, or to an empty (0, 0) array if none was given.
+Remote data never raises here: a stream whose header is short or invalid, or claims more than
+``max_pixels`` (default ``MAX_PIXELS``, 1024 x 1024), decodes to a mid-grey image of the ``shape``
+the caller expects, or to an empty (0, 0) array if none was given. The decoder's work follows the
+data, not the header: no image-sized array exists before the header passes the size limit, a
+header with no coded bit (or none that makes a coefficient significant) is the flat image without
+the transform, and each step that carries coefficients reads at least one coded bit.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -165,47 +171,138 @@ def _encode_bits(
     return out.bits()
 
 
-def decode(data: bytes, shape: tuple[int, int] | None = None) -> NDArray[np.uint8]:
+MAX_PIXELS = MAX_SIDE * MAX_SIDE
+"""Default largest image ``decode`` builds [px]: 1024 x 1024, every size the header can state and
+every camera size the testbed allows (``CameraConfig``: 8..1024 px per side)."""
+
+OK = "ok"
+INVALID = "invalid"
+TOO_LARGE = "too_large"
+
+
+@dataclass(slots=True)
+class DecodeWork:
+    """What one ``decode`` call did; pass one in to have it filled (all counts from zero).
+
+    Attributes:
+        status: ``OK``, ``INVALID`` (short or invalid header) or ``TOO_LARGE`` (the header
+            claims more than ``max_pixels``); the last two return the "nothing" image.
+        pixels: pixels of the image the header claims (0 if it could not be read).
+        body_bits: coded bits after the header.
+        bits_read: coded bits the schedule consumed (<= body_bits).
+        planes: bit planes whose steps carried coefficients (<= bits_read).
+        steps: coding steps run that carried coefficients; each reads at least one bit, so
+            ``steps <= bits_read``.
+        coefficients: coefficients those steps carried (sum of their lengths).
+        transform: whether the inverse wavelet transform ran (not when no coefficient is
+            significant: the image is then exactly flat mid-grey).
+    """
+
+    status: str = ""
+    pixels: int = 0
+    body_bits: int = 0
+    bits_read: int = 0
+    planes: int = 0
+    steps: int = 0
+    coefficients: int = 0
+    transform: bool = False
+
+
+def _nothing(shape: tuple[int, int] | None) -> NDArray[np.uint8]:
+    """What an unreadable stream decodes to: mid-grey of ``shape``, or a (0, 0) array."""
+    if shape is None:
+        return np.zeros((0, 0), dtype=np.uint8)
+    return np.full(shape, 128, dtype=np.uint8)
+
+
+def decode(
+    data: bytes,
+    shape: tuple[int, int] | None = None,
+    *,
+    max_pixels: int = MAX_PIXELS,
+    work: DecodeWork | None = None,
+) -> NDArray[np.uint8]:
     """Decode a stream or any prefix of one to the best image its bytes allow.
+
+    The work is bounded by the data and by ``max_pixels``, never by the header alone: nothing
+    the size of the image is allocated before the header's width x height passes
+    ``max_pixels``; with no coded bit after the header (or none that makes a coefficient
+    significant) the result is the flat mid-grey image, built without the transform; the
+    schedule stops at the first step the data does not complete, and each bit plane it enters
+    consumes at least one coded bit.
 
     Args:
         data: the stream, possibly truncated or corrupted.
-        shape: (height, width) [px] to return as mid-grey if the header is short or invalid.
+        shape: (height, width) [px] to return as mid-grey if the header is short, invalid or
+            claims more than ``max_pixels``.
+        max_pixels: largest width x height [px] to decode (default ``MAX_PIXELS``, 1024 x
+            1024); a header claiming more decodes like an invalid one.
+        work: if given, filled with what the call did (see ``DecodeWork``).
 
     Returns:
         (height, width) uint8 image; mid-grey (128) of ``shape`` if the header cannot be read
-        and a shape was given, else an empty (0, 0) array. Never raises on bad data.
+        or is too large and a shape was given, else an empty (0, 0) array. Never raises on
+        bad data.
+
+    Raises:
+        ValueError: if ``max_pixels`` < 1 (local misuse).
     """
-    hdr = parse_header(bytes(data))
+    if max_pixels < 1:
+        raise ValueError(f"max_pixels must be >= 1, got {max_pixels}")
+    work = DecodeWork() if work is None else work
+    raw = bytes(data)
+    hdr = parse_header(raw)
     if hdr is None:
-        if shape is None:
-            return np.zeros((0, 0), dtype=np.uint8)
-        return np.full(shape, 128, dtype=np.uint8)
+        work.status = INVALID
+        return _nothing(shape)
+    work.pixels = hdr.width * hdr.height
+    if work.pixels > max_pixels:
+        work.status = TOO_LARGE
+        return _nothing(shape)
+    work.status = OK
+    body = raw[hdr.size :]
+    work.body_bits = 8 * len(body)
+    if not body or hdr.planes == 0:  # no coded bit: every coefficient is zero
+        return np.full((hdr.height, hdr.width), 128, dtype=np.uint8)
     lay = layout(hdr.height, hdr.width, hdr.levels)
-    rec = _decode_coefficients(bytes(data[hdr.size :]), lay, hdr.planes)
+    rec = _decode_coefficients(body, lay, hdr.planes, work)
+    if rec is None:  # nothing significant: the transform of zeros is exactly 0
+        return np.full((hdr.height, hdr.width), 128, dtype=np.uint8)
     if hdr.roi is not None:
         inside = roi_mask(lay, hdr.roi)
         rec = np.where(inside, rec / float(1 << hdr.roi_shift), rec)
+    work.transform = True
     pixels = inverse(rec, lay) + _OFFSET
     return np.clip(np.round(pixels), 0, 255).astype(np.uint8)
 
 
-def _decode_coefficients(body: bytes, lay: Layout, planes: int) -> NDArray[np.float64]:
-    """(n,) coefficients rebuilt from the coded bits, at 3/8 of the interval still open."""
+def _decode_coefficients(
+    body: bytes, lay: Layout, planes: int, work: DecodeWork
+) -> NDArray[np.float64] | None:
+    """(n,) coefficients rebuilt from the coded bits, at 3/8 of the interval still open; None
+    if no coefficient became significant (all are zero)."""
     n = lay.size
     stream = Reader(body)
-    mag = np.zeros(n, dtype=np.int64)
-    low = np.full(n, planes, dtype=np.int64)  # lowest plane known for significant coefficients
+    # Magnitudes have at most 31 bits (MAX_PLANES), planes fit a byte: 5 B per coefficient.
+    mag = np.zeros(n, dtype=np.int32)
+    low = np.full(n, planes, dtype=np.int8)  # lowest plane known for significant coefficients
     neg = np.zeros(n, dtype=bool)
     state = State.empty(lay)
     adapt: dict[int, int] = {}
+    plane = planes
     for step in steps(state, lay, planes):
         p = step.plane
         idx = step.idx
+        if idx.size:  # an empty step reads nothing
+            work.steps += 1
+            work.coefficients += idx.size
+            if p != plane:
+                plane = p
+                work.planes += 1
         if step.kind == REF:
             rbits = stream.raw(idx.size)
             part = idx[: rbits.size]
-            mag[part] |= rbits.astype(np.int64) << p
+            mag[part] |= rbits.astype(np.int32) << p
             low[part] = p
             complete = rbits.size == idx.size
         else:
@@ -221,5 +318,11 @@ def _decode_coefficients(body: bytes, lay: Layout, planes: int) -> NDArray[np.fl
                 state.desc_sig[hit] = True
         if not complete or stream.left == 0:
             break
-    value = np.where(state.sig, mag + 0.375 * np.left_shift(1, low), 0.0)
-    return np.where(neg, -value, value)
+    work.bits_read = stream.pos
+    found = np.flatnonzero(state.sig)
+    if not found.size:
+        return None
+    value = mag[found].astype(np.int64) + 0.375 * np.left_shift(1, low[found].astype(np.int64))
+    out = np.zeros(n)
+    out[found] = np.where(neg[found], -value, value)
+    return out

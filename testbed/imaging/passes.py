@@ -89,25 +89,74 @@ def near_map(sig: NDArray[np.bool_], lay: Layout) -> NDArray[np.bool_]:
     return out
 
 
+def _near_group(sig0: NDArray[np.bool_], lay: Layout, g: int) -> NDArray[np.bool_]:
+    """``near_map(sig0, lay)[bounds[g]:bounds[g + 1]]``, computed for group g alone."""
+    a, b = lay.bounds[g], lay.bounds[g + 1]
+    out = np.empty(b - a, dtype=bool)
+    first = 0 if g == 0 else 1 + 3 * (g - 1)
+    pos = a
+    for rows, cols in lay.shapes[first : first + (1 if g == 0 else 3)]:
+        band = sig0[pos : pos + rows * cols].reshape(rows, cols)
+        pad = np.zeros((rows + 2, cols + 2), dtype=bool)
+        pad[1:-1, 1:-1] = band
+        acc = pad[:-2, :-2] | pad[:-2, 1:-1] | pad[:-2, 2:] | pad[1:-1, :-2]
+        acc |= pad[1:-1, 2:] | pad[2:, :-2] | pad[2:, 1:-1] | pad[2:, 2:]
+        out[pos - a : pos - a + rows * cols] = acc.ravel()
+        pos += rows * cols
+    if g:
+        out |= sig0[lay.parent[a:b]]
+    return out
+
+
 def steps(state: State, lay: Layout, planes: int) -> Iterator[Step]:
-    """The coding steps, top plane first; ``state`` must be updated before each resumption."""
+    """The coding steps, top plane first; ``state`` must be updated before each resumption.
+
+    The work follows what is open, not the image size: a group whose parents have no
+    significant descendant set yet has no active coefficients and yields its steps empty
+    without being scanned, and the neighbour map of a group is computed only once it has
+    active coefficients (from the significance at the start of the plane, as ``near_map``).
+    """
     bounds = lay.bounds
     ngroups = len(bounds) - 1
     parent = lay.parent
+    none = np.zeros(0, dtype=np.int64)
+
+    def active_of(g: int) -> NDArray[np.bool_] | None:
+        """Active coefficients of group g (None if there are none)."""
+        a, b = bounds[g], bounds[g + 1]
+        if g == 0:
+            return np.ones(b - a, dtype=bool)
+        if not state.desc_sig[bounds[g - 1] : a].any():
+            return None
+        found: NDArray[np.bool_] = state.desc_sig[parent[a:b]]
+        return found
+
     for p in range(planes - 1, -1, -1):
-        near = near_map(state.sig, lay)
-        before = np.flatnonzero(state.sig)
+        sig0 = state.sig.copy()
+        near: dict[int, NDArray[np.bool_]] = {}
+        before = np.flatnonzero(sig0)
         for g in range(ngroups):
             a, b = bounds[g], bounds[g + 1]
-            active = state.desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
-            cand = active & ~state.sig[a:b] & near[a:b]
+            active = active_of(g)
+            if active is None:
+                yield Step(SIG, 4 * g, p, none)
+                if g < ngroups - 1:
+                    yield Step(DESC, 4 * g + 1, p, none)
+                continue
+            near[g] = _near_group(sig0, lay, g)
+            cand = active & ~state.sig[a:b] & near[g]
             yield Step(SIG, 4 * g, p, a + np.flatnonzero(cand))
             if g < ngroups - 1:
                 open_sets = active & ~state.desc_sig[a:b]
                 yield Step(DESC, 4 * g + 1, p, a + np.flatnonzero(open_sets))
         for g in range(ngroups):
             a, b = bounds[g], bounds[g + 1]
-            active = state.desc_sig[parent[a:b]] if g else np.ones(b - a, dtype=bool)
-            cand = active & ~state.sig[a:b] & ~near[a:b]
+            active = active_of(g)
+            if active is None:
+                yield Step(SIG, 4 * g + 2, p, none)
+                continue
+            if g not in near:
+                near[g] = _near_group(sig0, lay, g)
+            cand = active & ~state.sig[a:b] & ~near[g]
             yield Step(SIG, 4 * g + 2, p, a + np.flatnonzero(cand))
         yield Step(REF, -1, p, before)

@@ -186,21 +186,33 @@ def _size(n: int, level: int) -> int:
     return n
 
 
+_SUPPORT_BLOCK = 1 << 14  # [samples] per block of unit coefficients in _axis_support
+
+
 @lru_cache(maxsize=64)
 def _axis_support(n: int, levels: int, lo: int, hi: int) -> tuple[NDArray[np.bool_], ...]:
     """Per level j = 1..levels: (low, high) masks of the 1D coefficients whose synthesis basis
     function touches samples lo..hi (inclusive) of an axis of n samples, flattened as
     (low_1, high_1, low_2, high_2, ...)."""
     out: list[NDArray[np.bool_]] = []
+    # Unit coefficients in column blocks of about _SUPPORT_BLOCK samples of the axis: each
+    # column is synthesised on its own, so the block only bounds the memory (O(n), not O(n^2)).
+    block = max(1, _SUPPORT_BLOCK // n)
     for j in range(1, levels + 1):
         size = _size(n, j)
         for kind in (0, 1):
-            unit = np.eye(size)
-            zero = np.zeros((size, size))
-            sig = _synthesise(*((unit, zero) if kind == 0 else (zero, unit)), _size(n, j - 1))
-            for level in range(j - 1, 0, -1):
-                sig = _synthesise(sig, np.zeros_like(sig), _size(n, level - 1))
-            out.append(np.any(np.abs(sig[lo : hi + 1]) > 1e-12, axis=0))
+            touched = np.zeros(size, dtype=bool)
+            for c0 in range(0, size, block):
+                cols = min(block, size - c0)
+                unit = np.zeros((size, cols))
+                unit[c0 + np.arange(cols), np.arange(cols)] = 1.0
+                zero = np.zeros((size, cols))
+                pair = (unit, zero) if kind == 0 else (zero, unit)
+                sig = _synthesise(*pair, _size(n, j - 1))
+                for level in range(j - 1, 0, -1):
+                    sig = _synthesise(sig, np.zeros_like(sig), _size(n, level - 1))
+                touched[c0 : c0 + cols] = np.any(np.abs(sig[lo : hi + 1]) > 1e-12, axis=0)
+            out.append(touched)
     return tuple(out)
 
 

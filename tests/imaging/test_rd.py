@@ -24,7 +24,7 @@ BUDGETS = (300, 600, 1200, 2400)
 
 def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
     mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return 10.0 * np.log10(255.0**2 / mse)
+    return float(10.0 * np.log10(255.0**2 / mse))
 
 
 def jpeg2000_at(img: np.ndarray, budget: int) -> tuple[int, float]:
