@@ -8,17 +8,21 @@ is both safe and meaningful. Tests measure it instead, in the same process and a
 
 * the emulator's own instrumentation, ``ModemEmulator.scheduler_lateness_ms`` (how late its
   simulation thread's polls and its reader's burst closes ran);
-* :class:`WakeProbe`, a thread asleep 1 ms at a time, recording how late it wakes: the lateness
-  (CPU and GIL) any other thread of this process meets when it is woken, which is what the
-  threads that cannot be instrumented from a test (pyserial's, the transports') see.
+* :class:`WakeProbe`, a thread passing a byte through a PTY of its own every 1 ms and recording
+  how long it takes and how late its sleeps end: the lateness (CPU, GIL, the kernel's PTY
+  work) that the threads which cannot be instrumented from a test (pyserial's, the
+  transports') meet on each crossing of a PTY.
 
 :meth:`Lateness.allowance_s` turns them into the bound a test adds to the model.
 """
 
 from __future__ import annotations
 
+import os
+import select
 import threading
 import time
+import tty
 from collections.abc import Iterator
 
 import pytest
@@ -35,7 +39,11 @@ an idle machine; 5 ms leaves room without hiding a real delay)."""
 
 
 class WakeProbe:
-    """A thread that sleeps ``period_s`` at a time and records how late it woke [s]."""
+    """A thread that, every ``period_s``, writes one byte into a pseudo-terminal of its own and
+    waits for it on the other side, recording how long that took, and how late each of its
+    sleeps ended [s]: the lateness a thread of this process meets when it is woken, and what
+    the kernel adds to moving bytes through a PTY (its flip-buffer work runs on a kernel worker
+    that a loaded machine also delays), both on the path of every emulated frame."""
 
     def __init__(self, period_s: float = 0.001) -> None:
         self._period_s = period_s
@@ -44,10 +52,21 @@ class WakeProbe:
         self._thread = threading.Thread(target=self._run, name="wake-probe", daemon=True)
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            due = time.monotonic() + self._period_s
-            time.sleep(self._period_s)
-            self.late_s.append(max(0.0, time.monotonic() - due))
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        try:
+            while not self._stop.is_set():
+                t0 = time.monotonic()
+                os.write(slave, b"x")
+                select.select([master], [], [], 1.0)
+                os.read(master, 64)
+                self.late_s.append(time.monotonic() - t0)
+                due = time.monotonic() + self._period_s
+                time.sleep(self._period_s)
+                self.late_s.append(max(0.0, time.monotonic() - due))
+        finally:
+            os.close(master)
+            os.close(slave)
 
     def start(self) -> None:
         self._thread.start()
