@@ -294,8 +294,9 @@ until its stdin closes, then prints each one's port and modem counters and sched
 
 class LinkProbe:
     """Measures, while the window runs, how much longer than the model a frame takes to cross
-    an emulated link under this machine's load: a thread in this process writes a 15-B frame
-    on port A of the fourth emulator, reads it on port B (pyserial, as the transports do) and
+    an emulated link under this machine's load: a thread in this process sends a frame through
+    an s100 endpoint on port A of the fourth emulator and waits for it on an endpoint on port B
+    (the run's own transports, adapters and threads: writer, PTYs, emulator, reader, queue),
     records the time taken less the model (idle gap + intrinsic delay + airtime), then waits
     ``gap_s`` and records how late that wait ended. The excess is the scheduler lateness the
     run's frames meet on the same path (transport threads, GIL, PTYs, the emulator's threads),
@@ -305,10 +306,11 @@ class LinkProbe:
     record except for the part of it before the probe's frame was written, which is at most
     one crossing (:attr:`model_s`) or one wait: :meth:`worst_s` adds that."""
 
-    FRAME = encode_frame(b"probe frame") + b"\r\n"  # 15 B, the size of an order and its CR LF
+    PAYLOAD = b"probe!!"  # a 13-B WAFrame, 15 B with its CR LF: the size of an order
 
     def __init__(self, paths: tuple[str, str], config: LinkConfig, gap_s: float = 0.1) -> None:
-        self.model_s = IDLE_S + config.intrinsic_delay_s + config.airtime_s(len(self.FRAME))
+        size = len(encode_frame(self.PAYLOAD)) + CRLF
+        self.model_s = IDLE_S + config.intrinsic_delay_s + config.airtime_s(size)
         self.excess_s: list[float] = []
         self.wait_late_s: list[float] = [0.0]
         self.lost = 0
@@ -318,19 +320,26 @@ class LinkProbe:
         self._thread = threading.Thread(target=self._run, name="link-probe", daemon=True)
 
     def _run(self) -> None:
-        with serial.Serial(self._paths[0]) as a, serial.Serial(self._paths[1], timeout=5) as b:
+        a = open_endpoint(PortSettings(self._paths[0], "s100", "operator"))
+        b = open_endpoint(PortSettings(self._paths[1], "s100", "vehicle"))
+        frame = encode_frame(self.PAYLOAD)
+        try:
             while not self._stop.is_set():
                 t0 = time.monotonic()
-                a.write(self.FRAME)
-                got = b.read(len(self.FRAME))
-                if got == self.FRAME:
+                a.send(frame)
+                if b.wait(5.0) == [Frame(self.PAYLOAD)]:
                     self.excess_s.append(time.monotonic() - t0 - self.model_s)
                 else:
                     self.lost += 1
-                    b.reset_input_buffer()
-                due = time.monotonic() + self._gap_s
-                if not self._stop.wait(self._gap_s):
-                    self.wait_late_s.append(max(0.0, time.monotonic() - due))
+                self._pause()
+        finally:
+            a.close()
+            b.close()
+
+    def _pause(self) -> None:
+        due = time.monotonic() + self._gap_s
+        if not self._stop.wait(self._gap_s):
+            self.wait_late_s.append(max(0.0, time.monotonic() - due))
 
     def __enter__(self) -> LinkProbe:
         self._thread.start()
