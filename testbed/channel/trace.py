@@ -1,7 +1,8 @@
 """Typed link events: what happened to every frame, when, where.
 
-The medium appends one :class:`LinkEvent` per happening (a list append, nothing more) to an
-optional :class:`Trace`; later stages (the recorder, the paper's Fig. 4 timeline) read it. Events
+The medium records one :class:`LinkEvent` per happening (a tuple appended, nothing more) to an
+optional :class:`Trace`, which keeps them as compact columns (33 B per event); later stages (the
+recorder, the paper's Fig. 4 timeline) read it. Events
 are recorded when the medium decides them, so a ``TX_END`` is recorded at its transmission's start
 with its future time: use :meth:`Trace.in_time_order` for a timeline.
 
@@ -23,9 +24,10 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Iterable, Iterator
+from array import array
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, overload
 
 import numpy as np
 
@@ -37,6 +39,8 @@ __all__ = [
     "FrameOutcome",
     "LinkEvent",
     "Trace",
+    "TraceColumns",
+    "TraceEvents",
     "Transmission",
     "direction_counts",
     "frame_outcomes",
@@ -99,18 +103,92 @@ class LinkEvent(NamedTuple):
     bit_errors: int = 0
 
 
+_CHUNK = 4096
+"""Events held as tuples before they go to the columns (one transpose per chunk)."""
+
+_KIND_BY_CODE: tuple[EventKind, ...] = tuple(EventKind)
+_KIND_CODE: dict[EventKind, int] = {kind: code for code, kind in enumerate(_KIND_BY_CODE)}
+
+
+class TraceColumns(NamedTuple):
+    """Read-only NumPy views of a :class:`Trace`'s columns, one entry per event in recording
+    order (:meth:`Trace.columns`). ``kind`` holds codes into :attr:`kinds`, ``src``/``dst``
+    codes into :attr:`names`.
+
+    The views share the trace's buffers: drop them before recording more events (the buffers
+    cannot grow while a view of them exists).
+    """
+
+    t_s: np.ndarray
+    kind: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    frame_id: np.ndarray
+    part: np.ndarray
+    size_bytes: np.ndarray
+    bit_errors: np.ndarray
+    kinds: tuple[EventKind, ...]
+    names: tuple[str, ...]
+
+    def code_of(self, kind: EventKind) -> int:
+        """The code of ``kind`` in :attr:`kind`."""
+        return _KIND_CODE[kind]
+
+
 class Trace:
-    """Append-only list of :class:`LinkEvent`, optionally limited to some kinds.
+    """Append-only record of :class:`LinkEvent`, optionally limited to some kinds.
+
+    Held as compact columns (``array.array``: time 8 B, kind 1 B, src and dst 2 B each as
+    indices into the node names seen, frame id 8 B, part, size and bit errors 4 B each:
+    33 B per event) rather than one tuple per event (≈ 200 B). :attr:`events` is a read-only
+    sequence view that builds the :class:`LinkEvent` on demand; :meth:`columns` gives NumPy
+    views for vectorised readers.
 
     Args:
         kinds: record only these kinds (e.g. losses only, to keep long runs cheap); all if None.
     """
 
-    __slots__ = ("_kinds", "events")
+    __slots__ = (
+        "_bits",
+        "_dst",
+        "_frame",
+        "_kind",
+        "_kinds",
+        "_name_code",
+        "_names",
+        "_part",
+        "_pending",
+        "_size",
+        "_src",
+        "_t",
+    )
 
     def __init__(self, kinds: Iterable[EventKind] | None = None) -> None:
-        self.events: list[LinkEvent] = []
         self._kinds = frozenset(EventKind) if kinds is None else frozenset(kinds)
+        self._pending: list[tuple[float, EventKind, str, str, int, int, int, int]] = []
+        self._names: list[str] = []
+        self._name_code: dict[str, int] = {}
+        self._t = array("d")
+        self._kind = array("B")
+        self._src = array("H")
+        self._dst = array("H")
+        self._frame = array("q")
+        self._part = array("i")
+        self._size = array("i")
+        self._bits = array("i")
+
+    @classmethod
+    def of(cls, events: Iterable[LinkEvent]) -> Trace:
+        """A trace holding ``events`` (a :class:`Trace`, or its :attr:`events` view, is returned
+        as it is)."""
+        if isinstance(events, Trace):
+            return events
+        if isinstance(events, TraceEvents):
+            return events.trace
+        trace = cls()
+        for event in events:
+            trace.record(*event)
+        return trace
 
     def record(
         self,
@@ -125,24 +203,155 @@ class Trace:
     ) -> None:
         """Append one event (if its kind is traced)."""
         if kind in self._kinds:
-            self.events.append(
-                LinkEvent(t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors)
+            pending = self._pending
+            pending.append((t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors))
+            if len(pending) >= _CHUNK:
+                self._flush()
+
+    def _code(self, name: str) -> int:
+        code = self._name_code.get(name)
+        if code is None:
+            code = self._name_code[name] = len(self._names)
+            self._names.append(name)
+        return code
+
+    def _flush(self) -> None:
+        """Move the pending tuples to the columns."""
+        pending = self._pending
+        if not pending:
+            return
+        t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors = zip(*pending, strict=True)
+        self._t.extend(t_s)
+        self._kind.extend([_KIND_CODE[k] for k in kind])
+        self._src.extend([self._code(n) for n in src])
+        self._dst.extend([self._code(n) for n in dst])
+        self._frame.extend(frame_id)
+        self._part.extend(part)
+        self._size.extend(size_bytes)
+        self._bits.extend(bit_errors)
+        pending.clear()
+
+    @property
+    def events(self) -> TraceEvents:
+        """The recorded events in recording order (a read-only sequence view)."""
+        return TraceEvents(self)
+
+    def columns(self) -> TraceColumns:
+        """NumPy views of the columns (see :class:`TraceColumns`)."""
+        self._flush()
+        return TraceColumns(
+            np.frombuffer(self._t, dtype=np.float64),
+            np.frombuffer(self._kind, dtype=np.uint8),
+            np.frombuffer(self._src, dtype=np.uint16),
+            np.frombuffer(self._dst, dtype=np.uint16),
+            np.frombuffer(self._frame, dtype=np.int64),
+            np.frombuffer(self._part, dtype=np.int32),
+            np.frombuffer(self._size, dtype=np.int32),
+            np.frombuffer(self._bits, dtype=np.int32),
+            _KIND_BY_CODE,
+            tuple(self._names),
+        )
+
+    def name_code(self, name: str) -> int | None:
+        """The code of node ``name`` in :attr:`TraceColumns.names`; None if never recorded."""
+        self._flush()
+        return self._name_code.get(name)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the columns (the pending tuples not counted)."""
+        columns = (self._t, self._kind, self._src, self._dst, self._frame, self._part)
+        return sum(c.itemsize * len(c) for c in (*columns, self._size, self._bits))
+
+    def _slice(self, start: int, stop: int) -> list[LinkEvent]:
+        """Events ``start:stop`` (``0 ≤ start ≤ stop ≤ len``) built as :class:`LinkEvent`."""
+        self._flush()
+        names = self._names
+        return [
+            LinkEvent(t, _KIND_BY_CODE[k], names[s], names[d], f, p, n, b)
+            for t, k, s, d, f, p, n, b in zip(
+                self._t[start:stop],
+                self._kind[start:stop],
+                self._src[start:stop],
+                self._dst[start:stop],
+                self._frame[start:stop],
+                self._part[start:stop],
+                self._size[start:stop],
+                self._bits[start:stop],
+                strict=True,
             )
+        ]
 
     def of_kind(self, *kinds: EventKind) -> list[LinkEvent]:
         """The recorded events of the given kinds, in recording order."""
         wanted = frozenset(kinds)
-        return [e for e in self.events if e.kind in wanted]
+        return [e for e in self if e.kind in wanted]
 
     def in_time_order(self) -> list[LinkEvent]:
         """All recorded events sorted by time (stable: equal times keep recording order)."""
-        return sorted(self.events, key=lambda e: e.t_s)
+        order = np.argsort(self.columns().t_s, kind="stable")
+        events = self._slice(0, len(self))
+        return [events[i] for i in order.tolist()]
 
     def __len__(self) -> int:
-        return len(self.events)
+        return len(self._t) + len(self._pending)
 
     def __iter__(self) -> Iterator[LinkEvent]:
-        return iter(self.events)
+        self._flush()
+        start = 0
+        while start < len(self):
+            stop = min(start + _CHUNK, len(self))
+            yield from self._slice(start, stop)
+            start = stop
+
+
+class TraceEvents(Sequence[LinkEvent]):
+    """Read-only sequence view of a :class:`Trace`'s events (:attr:`Trace.events`); equal to
+    any sequence of the same events."""
+
+    __slots__ = ("_trace",)
+
+    def __init__(self, trace: Trace) -> None:
+        self._trace = trace
+
+    @property
+    def trace(self) -> Trace:
+        """The trace viewed."""
+        return self._trace
+
+    def __len__(self) -> int:
+        return len(self._trace)
+
+    @overload
+    def __getitem__(self, index: int) -> LinkEvent: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[LinkEvent]: ...
+
+    def __getitem__(self, index: int | slice) -> LinkEvent | list[LinkEvent]:
+        n = len(self._trace)
+        if isinstance(index, slice):
+            start, stop, step = index.indices(n)
+            if step == 1:
+                return self._trace._slice(start, max(start, stop))
+            return [self[i] for i in range(start, stop, step)]
+        i = index + n if index < 0 else index
+        if not 0 <= i < n:
+            raise IndexError("trace event index out of range")
+        return self._trace._slice(i, i + 1)[0]
+
+    def __iter__(self) -> Iterator[LinkEvent]:
+        return iter(self._trace)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Sequence) or isinstance(other, str | bytes):
+            return NotImplemented
+        return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"<{len(self)} link events>"
 
 
 # --- what became of each frame --------------------------------------------------------------
@@ -186,6 +395,14 @@ RECEPTION_OUTCOMES: dict[EventKind, FrameOutcome] = {
     EventKind.OUT_OF_RANGE: FrameOutcome.OUT_OF_RANGE,
 }
 """The reception event kinds (one per copy that reaches a receiver) and the outcome each means."""
+_RECEPTION_RANK = np.array(
+    [
+        _RANK[RECEPTION_OUTCOMES[kind]] if kind in RECEPTION_OUTCOMES else len(_SEVERITY)
+        for kind in _KIND_BY_CODE
+    ],
+    dtype=np.int64,
+)
+"""Kind code → rank of its reception outcome (``len(_SEVERITY)`` for the other kinds)."""
 
 
 def worst_outcome(outcomes: Iterable[FrameOutcome]) -> FrameOutcome:
@@ -339,36 +556,45 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
     Returns:
         The counts.
     """
-    sent = dropped = 0
-    sizes: list[int] = []
-    packets_sent: dict[int, int] = {}
-    packets_settled: dict[int, int] = {}
-    worst: dict[int, FrameOutcome] = {}
-    for event in events:
-        if event.src != src:
-            continue
-        if event.kind is EventKind.ENQUEUE:
-            sent += 1
-            sizes.append(event.size_bytes)
-        elif event.kind is EventKind.DROP:
-            dropped += 1
-        elif event.kind is EventKind.TX_START:
-            packets_sent[event.frame_id] = packets_sent.get(event.frame_id, 0) + 1
-        elif event.dst == dst and event.kind in RECEPTION_OUTCOMES:
-            frame_id = event.frame_id
-            packets_settled[frame_id] = packets_settled.get(frame_id, 0) + 1
-            outcome = RECEPTION_OUTCOMES[event.kind]
-            held = worst.get(frame_id)
-            worst[frame_id] = outcome if held is None else worst_outcome((held, outcome))
-    lost = list(worst.values())
-    settled = sum(1 for f, n in packets_sent.items() if packets_settled.get(f, 0) >= n)
+    trace = Trace.of(events)
+    columns = trace.columns()
+    src_code, dst_code = trace.name_code(src), trace.name_code(dst)
+    if src_code is None:
+        return DirectionCounts(0, 0, 0, 0, 0, 0, 0, math.nan)
+    mine = columns.src == src_code
+    kind = columns.kind
+    enqueued = mine & (kind == _KIND_CODE[EventKind.ENQUEUE])
+    sent = int(np.count_nonzero(enqueued))
+    sizes = columns.size_bytes[enqueued].astype(np.int64)
+    dropped = int(np.count_nonzero(mine & (kind == _KIND_CODE[EventKind.DROP])))
+    started = columns.frame_id[mine & (kind == _KIND_CODE[EventKind.TX_START])]
+    if dst_code is None:
+        received = np.zeros(len(kind), dtype=bool)
+    else:
+        received = mine & (columns.dst == dst_code) & (_RECEPTION_RANK[kind] < len(_SEVERITY))
+    # per frame: packets sent, reception events and the worst of their outcomes
+    frames_sent, packets_sent = np.unique(started, return_counts=True)
+    frames_heard, where, packets_settled = np.unique(
+        columns.frame_id[received], return_inverse=True, return_counts=True
+    )
+    worst = np.full(len(frames_heard), len(_SEVERITY), dtype=np.int64)
+    np.minimum.at(worst, where, _RECEPTION_RANK[kind[received]])
+    at = np.searchsorted(frames_heard, frames_sent)
+    heard = at < len(frames_heard)
+    heard[heard] = frames_heard[at[heard]] == frames_sent[heard]
+    settled_packets = np.zeros(len(frames_sent), dtype=np.int64)
+    settled_packets[heard] = packets_settled[at[heard]]
+
+    def lost(outcome: FrameOutcome) -> int:
+        return int(np.count_nonzero(worst == _RANK[outcome]))
+
     return DirectionCounts(
         frames_sent=sent,
         frames_dropped=dropped,
-        frames_collided=lost.count(FrameOutcome.COLLIDED),
-        frames_outage=lost.count(FrameOutcome.OUTAGE),
-        frames_out_of_range=lost.count(FrameOutcome.OUT_OF_RANGE),
-        frames_corrupted=lost.count(FrameOutcome.CORRUPTED),
-        frames_settled=settled,
-        mean_frame_bytes=float(np.mean(sizes)) if sizes else math.nan,
+        frames_collided=lost(FrameOutcome.COLLIDED),
+        frames_outage=lost(FrameOutcome.OUTAGE),
+        frames_out_of_range=lost(FrameOutcome.OUT_OF_RANGE),
+        frames_corrupted=lost(FrameOutcome.CORRUPTED),
+        frames_settled=int(np.count_nonzero(settled_packets >= packets_sent)),
+        mean_frame_bytes=float(np.mean(sizes)) if sent else math.nan,
     )

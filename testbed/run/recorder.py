@@ -1,8 +1,11 @@
 """What one run records: link events, command and state updates, and vehicle time series.
 
-The runner's nodes append to a :class:`Recorder` as the run goes (plain list appends, nothing
+The runner's nodes append to a :class:`Recorder` as the run goes (plain appends, nothing
 computed); :mod:`testbed.run.metrics` and :mod:`testbed.report.run_plots` read it
-afterwards. The recorder is
+afterwards. Link events and series rows are held as compact columns
+(:class:`~testbed.channel.Trace`, :class:`SeriesRows`), so a long run's memory grows by ≈ 33 B
+per link event and 8 B per series value, and the CSV files are written row by row from them.
+The recorder is
 the simulation's ground truth: it knows things the nodes cannot (when the sticks carried by a
 frame were really sampled, the physics pose), and nodes never read it.
 
@@ -15,11 +18,13 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable, Sequence
+from array import array
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from testbed.channel import Trace
 from testbed.common.geometry import attitude_error, euler_from_quat
@@ -29,7 +34,7 @@ from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
-__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder", "VehicleObserver"]
+__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder", "SeriesRows", "VehicleObserver"]
 
 OPERATOR = "operator"
 VEHICLE = "vehicle"
@@ -117,6 +122,55 @@ class VehicleObserver:
         return row
 
 
+class SeriesRows:
+    """Append-only series rows of a fixed width, held in one flat ``array('d')`` (8 B per
+    value) rather than as tuples of floats (≈ 30 B per value).
+
+    Iterating gives the rows back as tuples of floats; ``np.asarray(rows)`` is the
+    ``(len, width)`` table.
+
+    Args:
+        width: values per row.
+        rows: rows to start with.
+    """
+
+    __slots__ = ("_values", "width")
+
+    def __init__(self, width: int = len(SERIES_COLUMNS), rows: Iterable[Sequence[float]] = ()):
+        self.width = width
+        self._values = array("d")
+        for row in rows:
+            self.append(row)
+
+    def append(self, row: Sequence[float]) -> None:
+        """Append one row of :attr:`width` values."""
+        if len(row) != self.width:
+            raise ValueError(f"a series row has {self.width} values, got {len(row)}")
+        self._values.extend(row)
+
+    def __len__(self) -> int:
+        return len(self._values) // self.width
+
+    def __iter__(self) -> Iterator[tuple[float, ...]]:
+        width = self.width
+        values = self._values
+        chunk = width * 1024
+        for start in range(0, len(values), chunk):
+            flat = values[start : start + chunk].tolist()
+            for k in range(0, len(flat), width):
+                yield tuple(flat[k : k + width])
+
+    def __array__(self, dtype: npt.DTypeLike | None = None, copy: bool | None = None) -> np.ndarray:
+        return np.array(self._values, dtype=np.float64 if dtype is None else dtype).reshape(
+            -1, self.width
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the values."""
+        return self._values.itemsize * len(self._values)
+
+
 @dataclass(frozen=True, slots=True)
 class NodeEvent:
     """Something a node did, for the event file: arming, a fault, a failsafe change."""
@@ -146,7 +200,8 @@ class Recorder:
         frames_rejected: link direction → payloads that decoded as frames but were refused by
             the codec (garbled past the CRC, or written by the wrong side).
         events: node events in time order.
-        rows: series rows (see :data:`SERIES_COLUMNS`).
+        rows: series rows (see :data:`SERIES_COLUMNS`): a :class:`SeriesRows`, or any list of
+            row tuples.
         images: images captured, sent and received (image feedback runs).
     """
 
@@ -159,7 +214,7 @@ class Recorder:
     frames_decoded: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     frames_rejected: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     events: list[NodeEvent] = field(default_factory=list)
-    rows: list[tuple[float, ...]] = field(default_factory=list)
+    rows: SeriesRows | list[tuple[float, ...]] = field(default_factory=SeriesRows)
     images: ImageLog = field(default_factory=ImageLog)
 
     def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:
@@ -168,7 +223,7 @@ class Recorder:
 
     def series(self) -> dict[str, np.ndarray]:
         """The series as one array per column."""
-        table = np.array(self.rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
+        table = np.asarray(self.rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
         return {name: table[:, k] for k, name in enumerate(SERIES_COLUMNS)}
 
     def write_series_csv(self, path: Path) -> None:
@@ -183,21 +238,54 @@ class Recorder:
         """Write every link and node event, in time order, as CSV.
 
         Columns: ``t_s, source, kind, src, dst, frame_id, part, size_bytes, bit_errors, detail``;
-        ``source`` is ``link`` or the node's name.
+        ``source`` is ``link`` or the node's name. Equal times keep recording order, link events
+        before node events. Written row by row from the trace's columns (the memory it takes
+        is one index per link event).
         """
-        rows: list[tuple[float, int, list[str]]] = []
-        for order, e in enumerate(self.trace.events):
-            fields = [f"{e.t_s:.9f}", "link", str(e.kind), e.src, e.dst, str(e.frame_id)]
-            fields += [str(e.part), str(e.size_bytes), str(e.bit_errors), ""]
-            rows.append((e.t_s, order, fields))
-        base = len(rows)
-        for order, n in enumerate(self.events):
-            fields = [f"{n.t_s:.9f}", n.node, n.kind, "", "", "", "", "", "", n.detail]
-            rows.append((n.t_s, base + order, fields))
-        rows.sort(key=lambda r: (r[0], r[1]))
         header = ["t_s", "source", "kind", "src", "dst", "frame_id", "part", "size_bytes"]
         header += ["bit_errors", "detail"]
         with path.open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(header)
-            writer.writerows(fields for _, _, fields in rows)
+            writer.writerows(self._event_rows())
+
+    def _event_rows(self) -> Iterator[list[object]]:
+        """The rows of :meth:`write_events_csv`, in time order."""
+        nodes = sorted(self.events, key=lambda n: n.t_s)  # stable: recording order on ties
+        node_rows = iter(nodes)
+        node = next(node_rows, None)
+        columns = self.trace.columns()
+        order = np.argsort(columns.t_s, kind="stable")
+        kinds = [str(kind) for kind in columns.kinds]
+        names = columns.names
+        for start in range(0, len(order), _WRITE_CHUNK):
+            at = order[start : start + _WRITE_CHUNK]
+            chunk = zip(
+                columns.t_s[at].tolist(),
+                columns.kind[at].tolist(),
+                columns.src[at].tolist(),
+                columns.dst[at].tolist(),
+                columns.frame_id[at].tolist(),
+                columns.part[at].tolist(),
+                columns.size_bytes[at].tolist(),
+                columns.bit_errors[at].tolist(),
+                strict=True,
+            )
+            for t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors in chunk:
+                while node is not None and node.t_s < t_s:  # equal times: link first
+                    yield _node_row(node)
+                    node = next(node_rows, None)
+                fields: list[object] = [f"{t_s:.9f}", "link", kinds[kind], names[src], names[dst]]
+                fields += [frame_id, part, size_bytes, bit_errors, ""]
+                yield fields
+        while node is not None:
+            yield _node_row(node)
+            node = next(node_rows, None)
+
+
+_WRITE_CHUNK = 16384
+"""Link events formatted at a time by :meth:`Recorder.write_events_csv`."""
+
+
+def _node_row(n: NodeEvent) -> list[object]:
+    return [f"{n.t_s:.9f}", n.node, n.kind, "", "", "", "", "", "", n.detail]

@@ -1,0 +1,179 @@
+"""The recorder's files and its memory: events.csv in time order, series.csv round trip, and the
+bytes a link event and a series row take (testbed.run.recorder, testbed.channel.trace)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from testbed.channel import EventKind, LinkEvent, Trace
+from testbed.run.recorder import SERIES_COLUMNS, Recorder, SeriesRows
+
+K = EventKind
+OP, VEH, ALL = "operator", "vehicle", "*"
+
+BYTES_PER_EVENT_BOUND = 40
+"""Link events: 33 B of columns each, plus the columns' over-allocation."""
+BYTES_PER_SERIES_VALUE_BOUND = 9.0
+"""Series rows: one 8-B double per value, plus over-allocation."""
+
+
+def read_rows(path: Path) -> list[list[str]]:
+    with path.open(newline="", encoding="utf-8") as handle:
+        return list(csv.reader(handle))
+
+
+def test_events_csv_is_in_time_order_with_recording_order_breaking_ties(tmp_path: Path) -> None:
+    rec = Recorder()
+    rec.trace.record(1.0, K.ENQUEUE, OP, ALL, 0, 0, 20)
+    rec.trace.record(1.0, K.TX_START, OP, ALL, 0, 0, 20)
+    rec.trace.record(1.5, K.TX_END, OP, ALL, 0, 0, 20)  # recorded at its start, a future time
+    rec.trace.record(1.2, K.ENQUEUE, VEH, ALL, 1, 0, 30)
+    rec.trace.record(1.5, K.DELIVER, OP, VEH, 0, 0, 20)  # same time as the tx_end: after it
+    rec.trace.record(1.5, K.CORRUPT, VEH, OP, 1, 2, 30, 7)
+    rec.trace.record(0.5, K.DROP, VEH, ALL, 2, 0, 30)  # out of order
+    rec.event(1.5, VEH, "failsafe", "HOLD")  # same time as link events: after them
+    rec.event(0.0, "scenario", "outage", 'until 2, then "more"')  # quoted by csv
+    rec.event(1.5, VEH, "armed")
+
+    path = tmp_path / "events.csv"
+    rec.write_events_csv(path)
+    rows = read_rows(path)
+
+    assert rows[0] == ["t_s", "source", "kind", "src", "dst", "frame_id", "part", "size_bytes",
+                       "bit_errors", "detail"]  # fmt: skip
+    assert [r[:3] for r in rows[1:]] == [
+        ["0.000000000", "scenario", "outage"],
+        ["0.500000000", "link", "drop"],
+        ["1.000000000", "link", "enqueue"],
+        ["1.000000000", "link", "tx_start"],
+        ["1.200000000", "link", "enqueue"],
+        ["1.500000000", "link", "tx_end"],
+        ["1.500000000", "link", "deliver"],
+        ["1.500000000", "link", "corrupt"],
+        ["1.500000000", VEH, "failsafe"],
+        ["1.500000000", VEH, "armed"],
+    ]
+    assert rows[8] == ["1.500000000", "link", "corrupt", VEH, OP, "1", "2", "30", "7", ""]
+    assert rows[1] == ["0.000000000", "scenario", "outage", "", "", "", "", "", "",
+                       "until 2, then \"more\""]  # fmt: skip
+    text = path.read_text(encoding="utf-8")
+    assert text.splitlines()[1] == '0.000000000,scenario,outage,,,,,,,"until 2, then ""more"""'
+    assert text.endswith("\n") and "\r" not in text
+
+
+def test_events_csv_of_an_empty_recorder_is_its_header(tmp_path: Path) -> None:
+    path = tmp_path / "events.csv"
+    Recorder().write_events_csv(path)
+    assert len(read_rows(path)) == 1
+
+
+def test_events_csv_across_write_chunks_stays_in_time_order(tmp_path: Path) -> None:
+    rec = Recorder()
+    rng = np.random.default_rng(3)
+    times = np.round(rng.uniform(0.0, 10.0, 40_000), 3)  # many equal times
+    for i, t_s in enumerate(times.tolist()):
+        rec.trace.record(t_s, K.DELIVER, OP, VEH, i, 0, 20)
+    for t_s in (0.0, 5.0, 10.0, 11.0):
+        rec.event(t_s, VEH, "mark")
+    path = tmp_path / "events.csv"
+    rec.write_events_csv(path)
+    rows = read_rows(path)[1:]
+    expected = sorted(
+        [(t, 0, i, "link") for i, t in enumerate(times.tolist())]
+        + [(t, 1, i, VEH) for i, t in enumerate((0.0, 5.0, 10.0, 11.0))]
+    )
+    assert [(r[1], r[5]) for r in rows] == [
+        (source, str(i) if source == "link" else "") for _, _, i, source in expected
+    ]
+
+
+def test_series_csv_round_trips(tmp_path: Path) -> None:
+    rec = Recorder()
+    rng = np.random.default_rng(1)
+    table = rng.normal(0.0, 100.0, (50, len(SERIES_COLUMNS)))
+    table[3, 5] = math.nan
+    for row in table:
+        rec.rows.append(tuple(row.tolist()))
+    path = tmp_path / "series.csv"
+    rec.write_series_csv(path)
+    rows = read_rows(path)
+    assert rows[0] == list(SERIES_COLUMNS)
+    back = np.array(rows[1:], dtype=float)
+    assert np.allclose(back, table, rtol=1e-5, equal_nan=True)  # 6 significant digits
+    assert [",".join(f"{v:.6g}" for v in row) for row in table.tolist()] == [
+        ",".join(r) for r in rows[1:]
+    ]
+    series = rec.series()
+    assert np.array_equal(series["t_s"], table[:, 0])
+    assert np.array_equal(np.asarray(rec.rows), table, equal_nan=True)
+
+
+def test_series_rows_give_back_their_tuples_and_refuse_a_wrong_width() -> None:
+    rows = SeriesRows(3, [(1.0, 2.0, 3.0)])
+    rows.append((4.0, 5.0, 6.0))
+    assert list(rows) == [(1.0, 2.0, 3.0), (4.0, 5.0, 6.0)] and len(rows) == 2
+    with pytest.raises(ValueError, match="3 values"):
+        rows.append((1.0, 2.0))
+
+
+def test_a_recorder_with_a_plain_list_of_rows_writes_the_same_file(tmp_path: Path) -> None:
+    table = [tuple(float(k + i) for k in range(len(SERIES_COLUMNS))) for i in range(5)]
+    compact, plain = Recorder(), Recorder(rows=list(table))
+    for row in table:
+        compact.rows.append(row)
+    compact.write_series_csv(tmp_path / "a.csv")
+    plain.write_series_csv(tmp_path / "b.csv")
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+    assert np.array_equal(compact.series()["cmd_x"], plain.series()["cmd_x"])
+
+
+def test_trace_events_view_builds_the_recorded_events() -> None:
+    trace = Trace()
+    events = [LinkEvent(0.1 * i, K.DELIVER, OP, VEH, i, i % 3, 20 + i, i % 2) for i in range(9999)]
+    for event in events:
+        trace.record(*event)
+    assert trace.events == events and list(trace) == events and len(trace.events) == 9999
+    assert trace.events[-1] == events[-1] and trace.events[4096:4100] == events[4096:4100]
+    assert trace.events[::1000] == events[::1000]
+    assert trace.events[5].kind is K.DELIVER
+
+
+def test_a_million_link_events_take_under_the_bound_per_event() -> None:
+    n = 1_000_000
+    tracemalloc.start()
+    try:
+        before, _ = tracemalloc.get_traced_memory()
+        trace = Trace()
+        record = trace.record
+        for i in range(n):
+            record(i * 1e-3, K.DELIVER, OP, VEH, i, 0, 60)
+        trace.columns()  # the last pending events moved to the columns
+        after, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(trace) == n
+    assert trace.nbytes == 33 * n
+    assert (after - before) / n < BYTES_PER_EVENT_BOUND
+
+
+def test_series_rows_take_under_the_bound_per_value() -> None:
+    n = 100_000
+    width = len(SERIES_COLUMNS)
+    row = tuple(float(k) for k in range(width))
+    tracemalloc.start()
+    try:
+        before, _ = tracemalloc.get_traced_memory()
+        rows = SeriesRows()
+        for _ in range(n):
+            rows.append(row)
+        after, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert rows.nbytes == 8 * width * n
+    assert (after - before) / (n * width) < BYTES_PER_SERIES_VALUE_BOUND
