@@ -13,13 +13,16 @@ command runs, so ``testbed --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 from collections.abc import Sequence
+from types import FrameType
 
 from testbed.cli.emulator import add_modem_emulator_parser
 from testbed.cli.hil import add_hil_parser
 from testbed.cli.link import add_link_parser
-from testbed.cli.options import EXIT_OK, EXIT_USAGE, Parser
+from testbed.cli.options import EXIT_OK, EXIT_USAGE, Parser, Terminated, exit_code_of
 from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
 from testbed.cli.sweep import add_plot_parser, add_sweep_parser
 from testbed.config import ConfigError
@@ -41,10 +44,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    del signum, frame
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI. Returns the process exit code (0 ok, 2 bad input)."""
+    """Run the CLI. Returns the process exit code: 0 ok, 2 bad input, 130 Ctrl-C, 143 SIGTERM.
+
+    SIGTERM is raised as :class:`~testbed.cli.options.Terminated` (a ``KeyboardInterrupt``), so
+    a command keeps what it finished the same way for both. A command that has something to
+    keep says so in its own one line; an interrupt it does not handle ends with
+    ``testbed: interrupted`` and nothing more.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         code: int = args.handler(args)
     except ConfigError as err:
@@ -53,4 +70,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. `testbed run | head`: the reader left, nothing to report
         sys.stderr.close()
         return EXIT_OK
+    except KeyboardInterrupt as interrupt:
+        print("testbed: interrupted", file=sys.stderr)
+        return exit_code_of(interrupt)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return code

@@ -10,18 +10,36 @@ from typing import NoReturn, TypeAlias
 from testbed.config import ConfigError
 
 __all__ = [
+    "EXIT_INTERRUPTED",
     "EXIT_OK",
+    "EXIT_TERMINATED",
     "EXIT_USAGE",
     "Parser",
     "Subparsers",
+    "Terminated",
     "add_set_option",
     "check_distance",
     "check_out_dir",
     "check_seed",
+    "exit_code_of",
 ]
 
 EXIT_OK = 0
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+"""Ended by SIGINT (Ctrl-C): 128 + 2, as shells report it."""
+EXIT_TERMINATED = 143
+"""Ended by SIGTERM: 128 + 15."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is (the CLI installs the handler): a
+    ``KeyboardInterrupt``, so everything that keeps its work on Ctrl-C keeps it on SIGTERM."""
+
+
+def exit_code_of(interrupt: KeyboardInterrupt) -> int:
+    """130 for Ctrl-C, 143 for SIGTERM."""
+    return EXIT_TERMINATED if isinstance(interrupt, Terminated) else EXIT_INTERRUPTED
 
 
 class Parser(argparse.ArgumentParser):

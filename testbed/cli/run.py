@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir, check_seed
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_seed, exit_code_of
 
 __all__ = ["add_run_parser", "add_scenarios_parser", "format_summary"]
 
@@ -32,6 +33,11 @@ def add_run_parser(sub: Subparsers) -> None:
         "--out", type=Path, default=None, help="output directory (default: runs/<id>-<time>/)"
     )
     run.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    run.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a non-empty --out, replacing the results there",
+    )
     run.set_defaults(handler=_run_scenario)
 
 
@@ -39,7 +45,8 @@ def _run_scenario(args: argparse.Namespace) -> int:
     """Handler of ``testbed run``: load, simulate, write, summarise."""
     import time
 
-    from testbed.run.runner import run_scenario, write_outputs
+    from testbed.run.outputs import prepare_out_dir, write_run
+    from testbed.run.runner import run_scenario
     from testbed.run.scenario import load_scenario
 
     check_seed(args.seed)
@@ -48,13 +55,22 @@ def _run_scenario(args: argparse.Namespace) -> int:
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
-    check_out_dir(out)
+    prepare_out_dir(out, force=args.force)
     result = run_scenario(scenario, seed=args.seed)
-    write_outputs(result, out)
-    if not args.no_plots:
+    plots = None
+    if not args.no_plots and result.stopped is None:
         from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
 
-        write_run_plots(result, out)
+        plots = write_run_plots
+    write_run(result, out, plots=plots)
+    if result.stopped is not None:
+        reached = result.metrics["sim_s"]
+        print(
+            f"testbed: interrupted at t = {reached:.1f} s of {scenario.duration_s:g} s; "
+            f"partial results in {out}",
+            file=sys.stderr,
+        )
+        return exit_code_of(result.stopped)
     print(format_summary(result.metrics, out))
     return EXIT_OK
 

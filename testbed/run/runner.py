@@ -61,12 +61,16 @@ class RunResult:
         seed: the seed used.
         metrics: the ``metrics.json`` content.
         recorder: everything recorded (for plots and further analysis).
+        stopped: the interrupt (Ctrl-C, or SIGTERM raised as a ``KeyboardInterrupt``
+            subclass) that ended the run before its end, or None; the metrics then cover
+            the ``sim_s`` reached.
     """
 
     scenario: Scenario
     seed: int
     metrics: dict[str, Any]
     recorder: Recorder
+    stopped: KeyboardInterrupt | None = None
 
 
 def make_vehicle_node(
@@ -175,8 +179,11 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     env.process(vehicle_node.run())
     env.process(operator_node.run())
     start = time.perf_counter()
+    stopped: KeyboardInterrupt | None = None
     try:
         env.run(until=scenario.duration_s)
+    except KeyboardInterrupt as interrupt:  # keep what ran: the caller writes it, marked
+        stopped = interrupt
     finally:
         vehicle.close()
     wall_s = time.perf_counter() - start
@@ -185,7 +192,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         scenario,
         seed,
         recorder,
-        sim_s=scenario.duration_s,
+        sim_s=scenario.duration_s if stopped is None else float(env.now),
         wall_s=wall_s,
         energy_wh=vehicle_node.energy_wh,
         payload_bytes={
@@ -193,7 +200,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
             "downlink": operator_node.port.payload_bytes,
         },
     )
-    return RunResult(scenario, seed, metrics, recorder)
+    return RunResult(scenario, seed, metrics, recorder, stopped)
 
 
 def tally_images(
@@ -233,7 +240,7 @@ def _link_direction(
         "frames_outage": counts.frames_outage,
         "frames_out_of_range": counts.frames_out_of_range,
         "per": 1.0 - decoded / counts.frames_settled if counts.frames_settled else math.nan,
-        "goodput_bps": 8.0 * payload_bytes / sim_s,
+        "goodput_bps": 8.0 * payload_bytes / sim_s if sim_s > 0.0 else math.nan,
         "mean_frame_bytes": counts.mean_frame_bytes,
     }
 
@@ -284,8 +291,11 @@ def compute_metrics(
     for axis in ("roll", "pitch", "yaw"):
         values = series[f"err_{axis}_deg"][after]
         attitude[axis] = distribution(values[~np.isnan(values)])
-    command_age = age_of_information(recorder.command_updates, settle, sim_s)
-    odometry_age = age_of_information(recorder.odometry_updates, settle, sim_s)
+    if sim_s > settle:
+        command_age = age_of_information(recorder.command_updates, settle, sim_s)
+        odometry_age = age_of_information(recorder.odometry_updates, settle, sim_s)
+    else:  # a run ended early, before its settling time: nothing to average
+        command_age = odometry_age = {"mean": math.nan, "p95": math.nan}
     metrics: dict[str, Any] = {
         "scenario": scenario.id,
         "seed": seed,

@@ -1,0 +1,135 @@
+"""A run's results directory, written so that what is there is never mixed or silently partial.
+
+:func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and
+writable, not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
+``events.csv``, ``series.csv`` and the plots, each under a temporary name renamed into place,
+and ``metrics.json`` **last**, carrying ``"complete"`` (true for a run that reached its end,
+false for one ended early by Ctrl-C or SIGTERM, whose ``sim_s`` says how far it got) and
+``"files"``, the sibling files of this run with their sizes. A directory without
+``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json`` names
+exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
+anything else is written, and the previous run's files that this run does not write again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from testbed.config import ConfigError
+from testbed.run.runner import RunResult
+
+__all__ = ["METRICS_FILE", "json_ready", "prepare_out_dir", "write_json_atomic", "write_run"]
+
+METRICS_FILE = "metrics.json"
+_TMP_PREFIX = ".tmp-"
+
+PlotWriter = Callable[[RunResult, Path], list[Path]]
+"""Writes a run's plots into a directory, returns the files written."""
+
+
+def prepare_out_dir(out: Path, *, force: bool = False) -> None:
+    """Check and create ``--out`` before any work: a directory that can be written, empty
+    unless ``force``.
+
+    Raises:
+        ConfigError: ``out`` is a file, cannot be created or written, or is a non-empty
+            directory and ``force`` is false (one line naming ``--out``).
+    """
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=_TMP_PREFIX):
+            pass
+    except OSError as err:
+        raise ConfigError(f"--out: {out}: cannot write there ({err.strerror or err})") from None
+    if not force and any(out.iterdir()):
+        raise ConfigError(f"--out: {out} is not empty (use --force to replace its results)")
+
+
+def json_ready(value: Any) -> Any:
+    """NaN and infinities become null (strict JSON); containers are converted recursively."""
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_ready(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _replace_from(write: Callable[[Path], object], path: Path) -> Path:
+    """Write through ``write(tmp)`` to a temporary name beside ``path``, then rename."""
+    tmp = path.with_name(f"{_TMP_PREFIX}{path.name}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+    return path
+
+
+def write_json_atomic(path: Path, document: dict[str, Any]) -> Path:
+    """``document`` as indented strict JSON at ``path``, by write-and-rename."""
+    text = json.dumps(json_ready(document), indent=2, allow_nan=False) + "\n"
+    return _replace_from(lambda tmp: tmp.write_text(text, encoding="utf-8"), path)
+
+
+def _previous_files(out_dir: Path) -> list[str]:
+    """The files a previous ``metrics.json`` in ``out_dir`` listed (none if unreadable)."""
+    try:
+        files = json.loads((out_dir / METRICS_FILE).read_text(encoding="utf-8")).get("files", {})
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [name for name in files if isinstance(name, str) and "/" not in name]
+
+
+def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = None) -> list[Path]:
+    """Write one run's results into ``out_dir`` (see the module docstring).
+
+    Args:
+        result: the run, finished or ended early (``result.stopped``).
+        out_dir: the results directory (checked by :func:`prepare_out_dir` beforehand).
+        plots: writes the plots into a directory (e.g.
+            :func:`testbed.report.run_plots.write_run_plots`); None for no plots.
+
+    Returns:
+        The files written, ``metrics.json`` last.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    previous = _previous_files(out_dir)
+    with contextlib.suppress(FileNotFoundError):
+        (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
+    recorder = result.recorder
+    written = [
+        _replace_from(recorder.write_events_csv, out_dir / "events.csv"),
+        _replace_from(recorder.write_series_csv, out_dir / "series.csv"),
+    ]
+    if plots is not None:
+        staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
+        try:
+            for made in plots(result, staging):
+                target = out_dir / made.name
+                os.replace(made, target)
+                written.append(target)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    names = {path.name for path in written}
+    for stale in previous:
+        if stale not in names and stale != METRICS_FILE:
+            with contextlib.suppress(OSError):
+                (out_dir / stale).unlink()
+    document = dict(result.metrics)
+    document["complete"] = result.stopped is None
+    document["files"] = {path.name: path.stat().st_size for path in written}
+    written.append(write_json_atomic(out_dir / METRICS_FILE, document))
+    return written

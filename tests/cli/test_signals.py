@@ -1,0 +1,134 @@
+"""`testbed run` as a real process: Ctrl-C and SIGTERM keep a marked partial result, kill -9
+while writing never leaves a mixed or silently partial set, and a bad --out fails before work.
+
+Each run is a child process of this test (``python -m testbed``); signals are real. A run is
+signalled once it has shown it is simulating (its results directory exists, made before the
+simulation starts); the waits are bounded by generous multiples of what the work needs, polled,
+never slept blindly.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+LONG = ["--set", "duration_s=100000"]  # hours of wall time: only a signal ends it
+WAIT_S = 120.0
+
+
+def start(args: list[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "testbed", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def wait_for(condition: object, what: str) -> None:
+    deadline = time.monotonic() + WAIT_S
+    while not condition():  # type: ignore[operator]
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def check_set(out: Path) -> dict[str, object]:
+    """The directory's metrics.json names exactly the files beside it, with their sizes."""
+    metrics = json.loads((out / "metrics.json").read_text())
+    files = metrics["files"]
+    assert isinstance(files, dict)
+    on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
+    assert on_disk == files
+    return metrics
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_keeps_a_marked_partial_result(
+    tmp_path: Path, sig: signal.Signals, code: int
+) -> None:
+    out = tmp_path / "run"
+    proc = start(["run", *LONG, "--no-plots", "--out", str(out)])
+    wait_for(out.exists, "the results directory")
+    time.sleep(1.0)  # let it simulate a little (any amount will do)
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=WAIT_S)
+    assert proc.returncode == code
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed: interrupted at t = "), stderr
+    assert lines[0].endswith(f"of 100000 s; partial results in {out}")
+    assert stdout == ""
+    metrics = check_set(out)
+    assert metrics["complete"] is False
+    reached = float(lines[0].split("t = ")[1].split(" s")[0])
+    assert 0.0 < metrics["sim_s"] < 100000.0  # type: ignore[operator]
+    assert metrics["sim_s"] == pytest.approx(reached, abs=0.05)
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}  # type: ignore[arg-type]
+
+
+def test_kill_while_writing_never_leaves_a_mixed_set(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    # A first complete run, then a second into the same directory killed while it writes:
+    # what is left is either no metrics.json (no result) or a set it describes exactly.
+    first = subprocess.run(
+        [sys.executable, "-m", "testbed", "run", "--no-plots", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+        check=True,
+    )
+    assert first.returncode == 0
+    assert check_set(out)["complete"] is True
+    proc = start(["run", "--seed", "2", "--no-plots", "--force", "--out", str(out)])
+    # the writer removes the old metrics.json first; kill as soon as it is gone
+    gone = lambda: not (out / "metrics.json").exists() or proc.poll() is not None  # noqa: E731
+    wait_for(gone, "the old metrics.json to go")
+    proc.kill()
+    proc.communicate(timeout=WAIT_S)
+    assert proc.returncode in (-signal.SIGKILL, 0)
+    if (out / "metrics.json").exists():  # it finished before the kill: a whole new set
+        assert check_set(out)["seed"] == 2
+    # a third run with --force makes a complete set of its own whatever was left
+    args = ["run", "--seed", "3", "--no-plots", "--force", "--out", str(out)]
+    again = subprocess.run(
+        [sys.executable, "-m", "testbed", *args],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+    )
+    assert again.returncode == 0, again.stderr
+    metrics = check_set(out)
+    assert metrics["complete"] is True and metrics["seed"] == 3
+    assert not [p for p in out.iterdir() if p.name.startswith(".tmp-")]
+
+
+@pytest.mark.parametrize(
+    ("out", "words"),
+    [
+        ("afile/sub", "cannot write there"),
+        ("afile", "exists and is not a directory"),
+        ("full", "is not empty (use --force"),
+        ("/proc/testbed-out", "cannot write there"),
+    ],
+)
+def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> None:
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "old.txt").write_text("x")
+    # a run of 100000 s would take hours: returning at all shows nothing was simulated
+    done = subprocess.run(
+        [sys.executable, "-m", "testbed", "run", *LONG, "--out", str(tmp_path / out)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+    )
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and done.stderr.startswith("testbed: error: --out: ")
+    assert words in done.stderr
+    assert (tmp_path / "full" / "old.txt").read_text() == "x"
