@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_distance, check_seed
+from testbed.cli.options import (
+    EXIT_OK,
+    Subparsers,
+    add_set_option,
+    check_distance,
+    check_seed,
+    exit_code_of,
+)
 from testbed.config import ConfigError
 
 __all__ = ["add_modem_emulator_parser"]
@@ -53,7 +60,6 @@ def add_modem_emulator_parser(sub: Subparsers) -> None:
 
 def _run_modem_emulator(args: argparse.Namespace) -> int:
     """Handler of ``testbed modem-emulator``: print the two paths, run, report counters."""
-    import contextlib
     import math
     import threading
 
@@ -63,8 +69,11 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
     if not (args.time_factor > 0.0 and math.isfinite(args.time_factor)):
         raise ConfigError(f"--time-factor: must be > 0, got {args.time_factor}")
     check_distance(args.distance)
-    if args.duration is not None and not args.duration >= 0.0:
-        raise ConfigError(f"--duration: must be ≥ 0 s, got {args.duration}")
+    if args.duration is not None and not (args.duration >= 0.0 and math.isfinite(args.duration)):
+        raise ConfigError(
+            f"--duration: must be a finite time ≥ 0 s (omit it to run until Ctrl-C), "
+            f"got {args.duration}"
+        )
     check_seed(args.seed)
     config = load_link_config(args.preset, args.overrides)
     with ModemEmulator(
@@ -74,20 +83,26 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
         distance_m=args.distance,
         modem=args.modem,
     ) as emulator:
-        path_a, path_b = emulator.paths
-        print(f"A {path_a}\nB {path_b}", flush=True)
-        print(
-            f"testbed: {config.name} link, {config.bitrate_bps:g} bit/s, intrinsic delay "
-            f"{1000 * config.intrinsic_delay_s:.1f} ms, BER {config.ber:g}, "
-            f"{args.modem} modems; Ctrl-C stops",
-            file=sys.stderr,
-        )
-        with contextlib.suppress(KeyboardInterrupt):
+        stopped: KeyboardInterrupt | None = None
+        try:  # Ctrl-C (or SIGTERM) is how it usually ends, at any moment from here on
+            path_a, path_b = emulator.paths
+            print(f"A {path_a}\nB {path_b}", flush=True)
+            print(
+                f"testbed: {config.name} link, {config.bitrate_bps:g} bit/s, intrinsic delay "
+                f"{1000 * config.intrinsic_delay_s:.1f} ms, BER {config.ber:g}, "
+                f"{args.modem} modems; Ctrl-C stops",
+                file=sys.stderr,
+            )
             threading.Event().wait(args.duration)
+        except KeyboardInterrupt as interrupt:
+            stopped = interrupt
         for name, counters in zip("AB", emulator.counters, strict=True):
             print(f"testbed: port {name}: {counters}", file=sys.stderr)
         modem_counters = emulator.personality_counters
         if modem_counters is not None:
             for name, counts in zip("AB", modem_counters, strict=True):
                 print(f"testbed: {args.modem} modem {name}: {counts}", file=sys.stderr)
+    if stopped is not None:
+        print("testbed: interrupted; the emulator closed its ports", file=sys.stderr)
+        return exit_code_of(stopped)
     return EXIT_OK

@@ -132,3 +132,33 @@ def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> 
     assert done.stderr.count("\n") == 1 and done.stderr.startswith("testbed: error: --out: ")
     assert words in done.stderr
     assert (tmp_path / "full" / "old.txt").read_text() == "x"
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_link_and_modem_emulator_end_with_one_line(sig: signal.Signals, code: int) -> None:
+    # the emulator runs until a signal; the probe of 10^9 frames would take days
+    for args, last in (
+        (["modem-emulator"], "testbed: interrupted; the emulator closed its ports"),
+        (["link", "--frames", "1000000000"], "testbed: interrupted"),
+    ):
+        proc = start(args)
+        if args[0] == "modem-emulator":
+            assert proc.stdout is not None and proc.stdout.readline().startswith("A /dev/pts/")
+        else:
+            time.sleep(1.0)
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=WAIT_S)
+        assert proc.returncode == code, stderr
+        assert stderr.strip().splitlines()[-1] == last
+        assert "Traceback" not in stderr
+
+
+def test_modem_emulator_rejects_an_endless_duration_in_one_line() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "testbed", "modem-emulator", "--duration", "inf"],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+    )
+    assert done.returncode == 2 and done.stderr.count("\n") == 1
+    assert done.stderr.startswith("testbed: error: --duration: must be a finite time")
