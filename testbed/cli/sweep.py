@@ -3,12 +3,57 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
+import signal
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir
 from testbed.config import ConfigError
 
 __all__ = ["add_plot_parser", "add_sweep_parser"]
+
+EXIT_SIGINT = 128 + signal.SIGINT  # 130, as a shell reports a Ctrl-C
+EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
+
+
+class _Terminated(BaseException):
+    """SIGTERM during a sweep (not an Exception: nothing on the way catches it)."""
+
+
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    raise _Terminated
+
+
+@contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """For the duration of the sweep, SIGTERM raises :class:`_Terminated` (main thread)."""
+    old = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def check_writable_dir(out: Path, option: str = "--out") -> None:
+    """``out`` is a writable directory, or can be created: its nearest existing ancestor is a
+    writable directory. Else :class:`ConfigError` (checked before any work)."""
+    check_out_dir(out)
+    if out.is_dir():
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ConfigError(f"{option}: {out} is not writable")
+        return
+    parent = out.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ConfigError(f"{option}: cannot create {out}: {parent} is a file")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"{option}: cannot create {out}: {parent} is not writable")
 
 
 def add_sweep_parser(sub: Subparsers) -> None:
@@ -42,16 +87,75 @@ def add_sweep_parser(sub: Subparsers) -> None:
     sweep.set_defaults(handler=_run_sweep)
 
 
+def _resume_command(args: argparse.Namespace, out: Path) -> str:
+    argv = ["testbed", "sweep", args.sweep]
+    for override in args.overrides:
+        argv += ["--set", override]
+    if args.workers is not None:
+        argv += ["--workers", str(args.workers)]
+    if args.dask is not None:
+        argv += ["--dask", args.dask]
+    return shlex.join([*argv, "--out", str(out), "--resume"])
+
+
+def _interrupted_line(args: argparse.Namespace, out: Path | None, total: int | None) -> str:
+    """The one line of an interrupted sweep: how far it got, where the journal is, how to
+    go on."""
+    from testbed.sweep import read_journal
+
+    journal = out / "runs.jsonl" if out is not None else None
+    if out is None or total is None or journal is None or not (out / "sweep.json").exists():
+        return "testbed: interrupted before the first run; nothing written"
+    try:
+        done = len({(r["point"], r["seed"]) for r in read_journal(journal)})
+    except (ConfigError, OSError, KeyError, TypeError):
+        done = 0
+    return (
+        f"testbed: interrupted after {done} of {total} runs; journal kept in {out}; "
+        f"resume with: {_resume_command(args, out)}"
+    )
+
+
 def _run_sweep(args: argparse.Namespace) -> int:
-    """Handler of ``testbed sweep``: load and check the sweep, run it, summarise."""
+    """Handler of ``testbed sweep``: check the options and every grid point, run, summarise.
+
+    SIGINT (KeyboardInterrupt) and SIGTERM (a handler installed for the sweep) stop the
+    workers, keep the journal and the tables of the runs that finished, print one line and
+    return 130 / 143.
+    """
+    out: Path | None = args.out
+    total: int | None = None
+    try:
+        with _sigterm_raises():
+            try:
+                return _sweep(args)
+            finally:
+                out, total = getattr(args, "_out", out), getattr(args, "_total", None)
+    except KeyboardInterrupt:
+        print(_interrupted_line(args, out, total), file=sys.stderr, flush=True)
+        return EXIT_SIGINT
+    except _Terminated:
+        print(_interrupted_line(args, out, total), file=sys.stderr, flush=True)
+        return EXIT_SIGTERM
+
+
+def _sweep(args: argparse.Namespace) -> int:
     from testbed.sweep import format_summary, load_sweep, run_sweep
+    from testbed.sweep.backends import check_dask_address
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: must be ≥ 1, got {args.workers}")
+    if args.dask is not None:
+        check_dask_address(args.dask)
     if args.workers is not None and args.dask not in (None, "local"):
         raise ConfigError("--workers: a remote --dask cluster brings its own workers")
-    sweep = load_sweep(args.sweep, args.overrides)
+    if args.out is not None:
+        _check_sweep_out(args.out, args.resume)
+    sweep = load_sweep(args.sweep, args.overrides, stream=sys.stderr)
     out = args.out if args.out is not None else Path("sweeps") / sweep.id
+    if args.out is None:
+        _check_sweep_out(out, args.resume)
+    args._out, args._total = out, len(sweep.points) * len(sweep.seeds)
     summary = run_sweep(sweep, out, workers=args.workers, dask=args.dask, resume=args.resume)
     print(format_summary(sweep, summary))
     if any(key.rsplit(".", 1)[-1] == "ber" for key, _ in sweep.axes):
@@ -60,6 +164,15 @@ def _run_sweep(args: argparse.Namespace) -> int:
         paths = plot_ber_sweep(out / "results.csv", out)
         print(f"  plots: {', '.join(path.name for path in paths)}")
     return EXIT_OK if not summary.failed else 1
+
+
+def _check_sweep_out(out: Path, resume: bool) -> None:
+    """``--out`` of a sweep: creatable and writable; with ``--resume``, an existing sweep."""
+    if resume and not out.exists():
+        raise ConfigError(f"--resume: {out} does not exist; drop --resume to start the sweep there")
+    if resume and out.is_dir() and not (out / "sweep.json").exists():
+        raise ConfigError(f"--resume: {out} holds no sweep (no sweep.json)")
+    check_writable_dir(out)
 
 
 def add_plot_parser(sub: Subparsers) -> None:
@@ -81,12 +194,34 @@ def add_plot_parser(sub: Subparsers) -> None:
     plot.set_defaults(handler=_run_plot)
 
 
+def plot_out_path(out: Path) -> Path:
+    """``testbed plot --out``: the PNG path actually written (``.png`` added to a name without
+    an extension), checked before any work: the extension, and a creatable, writable parent.
+
+    Raises:
+        ConfigError: another extension, a parent that is a file or not writable.
+    """
+    if out.suffix == "":
+        out = out.with_name(out.name + ".png")
+    if out.suffix.lower() != ".png":
+        raise ConfigError(f"--out: {out}: unsupported extension {out.suffix!r} (writes .png)")
+    if out.is_dir():
+        raise ConfigError(f"--out: {out} is a directory")
+    if out.exists() and not os.access(out, os.W_OK):
+        raise ConfigError(f"--out: {out} is not writable")
+    check_writable_dir(out.absolute().parent, "--out")
+    return out
+
+
 def _run_plot(args: argparse.Namespace) -> int:
-    """Handler of ``testbed plot``: check the columns, draw, print the path."""
+    """Handler of ``testbed plot``: check --out and the file, draw, print the path written."""
     from testbed.report.sweep_plots import default_plot_name, plot_pair
+    from testbed.report.sweep_results import check_results_file
 
     out = args.out
     if out is None:
         out = args.results.parent / default_plot_name(args.x, args.y)
+    out = plot_out_path(out)
+    check_results_file(args.results)
     print(plot_pair(args.results, args.x, args.y, args.hue, out))
     return EXIT_OK

@@ -424,5 +424,7 @@ def plot_pair(
     ax.set_title(f"{y} vs {x} — {results.path.parent.name} ({len(results.rows)} runs ok)")
     footnote(fig, "dots: runs; " + _BARS_NOTE)
     out = Path(out_path)
+    if out.suffix == "":  # what matplotlib would write: the returned path is the real one
+        out = out.with_name(out.name + ".png")
     out.parent.mkdir(parents=True, exist_ok=True)
     return save(fig, out)

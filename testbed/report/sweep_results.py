@@ -17,7 +17,7 @@ import numpy as np
 
 from testbed.config import ConfigError
 
-__all__ = ["Results", "read_results", "short_key"]
+__all__ = ["Results", "check_results_file", "read_results", "short_key"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,21 +74,58 @@ def short_key(key: str) -> str:
     return key.rsplit(".", 1)[-1]
 
 
+_NOT_RESULTS = "not a results.csv of testbed sweep"
+
+
+def check_results_file(results_csv: Path | str) -> None:
+    """Cheap check before any work: the file can be read and starts with the ``point, seed``
+    head of a results.csv (its first line only).
+
+    Raises:
+        ConfigError: missing, a directory, unreadable, binary (NUL bytes, not UTF-8), or
+            another head.
+    """
+    path = Path(results_csv)
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a directory, not a results.csv")
+    try:
+        with path.open("rb") as handle:
+            head = handle.readline(1 << 16)
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: {_NOT_RESULTS} (binary, not UTF-8 text)") from None
+    if "\0" in text or not text.startswith("point,seed,"):
+        raise ConfigError(f"{path}: {_NOT_RESULTS} (no point, seed, status head)")
+
+
 def read_results(results_csv: Path | str) -> Results:
     """Read a sweep's ``results.csv``.
 
     Raises:
-        ConfigError: a missing file, or one without the ``point, seed, …, status, error`` head.
+        ConfigError: a missing file, a binary or garbled one (not UTF-8, NUL bytes, rows the
+            CSV reader rejects, rows longer than the head), or one without the
+            ``point, seed, …, status, error`` head.
     """
     path = Path(results_csv)
     try:
         with path.open(encoding="utf-8", newline="") as handle:
             reader = csv.DictReader(handle)
             columns = tuple(reader.fieldnames or ())
-            rows = tuple(row for row in reader if row.get("status") == "ok")
+            all_rows = list(reader)
     except OSError as err:
         raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: {_NOT_RESULTS} (binary, not UTF-8 text)") from None
+    except csv.Error as err:
+        raise ConfigError(f"{path}: {_NOT_RESULTS} (line {reader.line_num}: {err})") from None
     if columns[:2] != ("point", "seed") or "status" not in columns:
-        raise ConfigError(f"{path}: not a results.csv of testbed sweep (no point, seed, status)")
+        raise ConfigError(f"{path}: {_NOT_RESULTS} (no point, seed, status)")
+    for number, row in enumerate(all_rows, start=2):
+        if None in row:  # more cells than columns: DictReader keeps them under None
+            raise ConfigError(f"{path}: {_NOT_RESULTS} (row {number} has more cells than the head)")
+    rows = tuple(row for row in all_rows if row.get("status") == "ok")
     grid = columns[2 : columns.index("status")]
     return Results(path, columns, grid, rows)

@@ -4,10 +4,29 @@
 ``dask.distributed`` cluster (an address, or ``"local"`` for a ``LocalCluster``) and yields a
 :class:`RunOutcome` per run as runs finish, in any order. A run that raises becomes a failed
 outcome with its error: a backend never stops for one run.
+
+Workers die with the sweep (no orphans under PID 1, tests/sweep/test_signals.py):
+
+- every local worker process (pool workers, and the LocalCluster's worker processes through
+  the :mod:`testbed.sweep.worker_setup` preload) asks the kernel for SIGKILL when its parent
+  dies (``prctl(PR_SET_PDEATHSIG)``, Linux), then checks that the parent did not die before;
+- they are started with SIGINT blocked (the mask is inherited across spawn), so a Ctrl-C to
+  the terminal's process group reaches the sweep only, which stops them itself;
+- closing the outcome generator before the end (an interrupt) kills the pool's workers or
+  closes the cluster instead of waiting for the runs in progress.
+
+The multiprocessing resource tracker needs nothing: it exits when the last process holding
+its pipe (the sweep and its workers) is gone.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import re
+import signal
+import sys
+import threading
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -19,7 +38,16 @@ from testbed.sweep.spec import RunSpec
 if TYPE_CHECKING:
     from testbed.run.scenario import Scenario
 
-__all__ = ["EXCLUDED_METRICS", "SCENARIO_KEYS", "RunOutcome", "execute_run", "outcomes"]
+__all__ = [
+    "EXCLUDED_METRICS",
+    "SCENARIO_KEYS",
+    "RunOutcome",
+    "check_dask_address",
+    "die_with_parent",
+    "execute_run",
+    "outcomes",
+    "sigint_blocked",
+]
 
 EXCLUDED_METRICS = ("scenario", "seed", "wall_s", "rtf")
 """``metrics.json`` keys left out of result rows: already in the row, or wall-clock dependent."""
@@ -67,19 +95,97 @@ def execute_run(spec: RunSpec) -> RunOutcome:
         return RunOutcome(spec.point, spec.seed, None, message)
 
 
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+PARENT_PID_ENV = "TESTBED_SWEEP_PARENT_PID"
+"""Environment variable holding the sweep's PID for the LocalCluster workers' preload."""
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """In a worker: get SIGKILL when the parent dies (Linux), and exit if it already has.
+
+    ``PR_SET_PDEATHSIG`` fires when the thread that started this process ends: the pool's
+    workers are started by the sweep's main thread, the LocalCluster's by its event-loop
+    thread, both living as long as the sweep needs them. Elsewhere a no-op (dask's own
+    parent-pipe watch still applies there).
+    """
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent_pid:  # the parent died before the prctl: nobody will signal us
+        os._exit(1)
+
+
+def _pool_worker_init(parent_pid: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
+    die_with_parent(parent_pid)
+
+
+@contextlib.contextmanager
+def sigint_blocked() -> Iterator[None]:
+    """Block SIGINT in this thread while processes and threads are started inside: they
+    inherit the mask, so a Ctrl-C to the process group does not reach the workers (a SIGINT
+    to this process stays pending and is raised on leaving). Only on the main thread."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(
+        signal, "pthread_sigmask"
+    ):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _pool_outcomes(specs: Sequence[RunSpec], workers: int) -> Iterator[RunOutcome]:
-    """Run on a local process pool (spawned interpreters); yield outcomes as they finish."""
+    """Run on a local process pool (spawned interpreters); yield outcomes as they finish.
+
+    Closed before the end (an interrupt), it kills the workers rather than waiting for the
+    runs in progress."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     context = multiprocessing.get_context("spawn")
-    executor = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    finished = False
+    with sigint_blocked():  # the executor's workers and manager thread inherit the mask
+        executor = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=context,
+            initializer=_pool_worker_init,
+            initargs=(os.getpid(),),
+        )
     try:
-        futures = [executor.submit(execute_run, spec) for spec in specs]
+        with sigint_blocked():
+            futures = [executor.submit(execute_run, spec) for spec in specs]
         for future in as_completed(futures):
             yield future.result()
+        finished = True
     finally:
+        if not finished:
+            # ProcessPoolExecutor has no public terminate (3.14 adds terminate_workers)
+            processes = dict(getattr(executor, "_processes", None) or {})
+            for process in processes.values():
+                with contextlib.suppress(OSError, ValueError):
+                    process.kill()
+            for process in processes.values():
+                with contextlib.suppress(OSError, ValueError, AssertionError):
+                    process.join()
         executor.shutdown(wait=True, cancel_futures=True)
+
+
+_DASK_ADDRESS = re.compile(
+    r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[\w.-]+):\d{1,5}$"
+)
+
+
+def check_dask_address(address: str) -> None:
+    """``--dask``: ``local`` or ``[scheme://]host:port``; else :class:`ConfigError`."""
+    if address != "local" and _DASK_ADDRESS.match(address) is None:
+        raise ConfigError(
+            f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {address!r}"
+        )
 
 
 def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iterator[RunOutcome]:
@@ -92,29 +198,52 @@ def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iter
     Client, LocalCluster = distributed.Client, distributed.LocalCluster  # noqa: N806  # classes
     as_completed = distributed.as_completed
 
+    check_dask_address(address)
     cluster = None
+    finished = False
     if address == "local":
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        )
-        client = Client(cluster)
+        os.environ[PARENT_PID_ENV] = str(os.getpid())  # read by the preload in each worker
+        # the event-loop thread that starts the worker processes inherits the blocked SIGINT,
+        # and so do they; the preload makes them die with this process
+        with sigint_blocked():
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+                preload=["testbed.sweep.worker_setup"],
+            )
+            client = Client(cluster)
     else:
         try:
             client = Client(address, timeout=10)
-        except OSError as err:
-            raise ConfigError(f"--dask: cannot reach {address}: {err}") from None
+        except Exception as err:  # OSError, TimeoutError, ValueError: one line, not a trace
+            message = " ".join(str(err).split()) or type(err).__name__
+            raise ConfigError(f"--dask: cannot reach {address}: {message}") from None
     try:
         futures = [client.submit(execute_run, spec, pure=False) for spec in specs]
         for future in as_completed(futures):
             yield future.result()
+        finished = True
     finally:
-        client.close()
+        if cluster is not None and not finished:
+            _kill_local_workers(cluster)
+        with contextlib.suppress(Exception):
+            client.close(timeout=10)
         if cluster is not None:
-            cluster.close()
+            with contextlib.suppress(Exception):
+                cluster.close(timeout=10)
+
+
+def _kill_local_workers(cluster: Any) -> None:
+    """Interrupted: SIGKILL the LocalCluster's worker processes (runs in progress are lost
+    anyway), so that closing does not wait for them."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(getattr(nanny, "process", None), "pid", None)
+        if pid:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def outcomes(specs: Sequence[RunSpec], workers: int, dask: str | None) -> Iterator[RunOutcome]:

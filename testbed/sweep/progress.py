@@ -17,18 +17,24 @@ class Progress:
         done: runs finished before this invocation (a resumed sweep).
         stream: where the progress goes.
         label: what the line names (the sweep id).
+        unit: what is counted (``runs``; ``grid points`` while a sweep is checked, where
+            nothing fails: no failed count).
     """
 
-    def __init__(self, total: int, done: int, stream: TextIO, label: str) -> None:
+    def __init__(
+        self, total: int, done: int, stream: TextIO, label: str, unit: str = "runs"
+    ) -> None:
         self.total, self.done, self.failed = total, done, 0
-        self.stream, self.label = stream, label
+        self.stream, self.label, self.unit = stream, label, unit
         self.start = self.last = time.monotonic()
         self.first_done = done
         self.bar = None
         if stream.isatty():
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total, initial=done, unit="run", file=stream, desc=label)
+            self.bar = tqdm(
+                total=total, initial=done, unit=unit.rstrip("s"), file=stream, desc=label
+            )
 
     def update(self, failed: bool, *, interval_s: float = 1.0) -> None:
         """Count one finished run (``failed`` or not); print a line if ``interval_s`` [s] has
@@ -39,19 +45,22 @@ class Progress:
             self.bar.update(1)
             return
         now = time.monotonic()
-        if now - self.last < interval_s and self.done < self.total:
-            return
+        last_one = self.done >= self.total
+        if now - self.last < interval_s and not (last_one and self.unit == "runs"):
+            return  # the last run always gets a line; a quick check of the grid none
         self.last = now
         rate = (self.done - self.first_done) / max(now - self.start, 1e-9)
         eta = (self.total - self.done) / rate if rate > 0 else math.inf
+        failures = f" ({self.failed} failed)" if self.unit == "runs" else ""
         print(
-            f"{self.label}: {self.done}/{self.total} runs ({self.failed} failed), "
-            f"{rate:.2f} runs/s, ETA {eta:.0f} s",
+            f"{self.label}: {self.done}/{self.total} {self.unit}{failures}, "
+            f"{rate:.2f} {self.unit}/s, ETA {eta:.0f} s",
             file=self.stream,
             flush=True,
         )
 
     def close(self) -> None:
-        """Close the bar (if any)."""
+        """Close the bar (if any); closing twice is harmless."""
         if self.bar is not None:
             self.bar.close()
+            self.bar = None

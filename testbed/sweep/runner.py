@@ -4,21 +4,32 @@
 (point, seed) already in the journal, runs the rest on a backend, appends finished runs to the
 journal in batches and rewrites ``results.csv`` and ``aggregate.csv``. :func:`format_summary`
 is the few lines a person reads afterwards.
+
+Interrupted (KeyboardInterrupt, or any other exception such as the CLI's SIGTERM one), it stops
+the backend's workers, writes the runs that finished to the journal, regenerates both tables
+from the journal and re-raises: ``--resume`` then runs exactly the missing (point, seed)s.
+Before the first run it checks that every aggregated metric is one a run produces
+(:func:`check_metrics`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import os
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
 from testbed.config import ConfigError
 from testbed.sweep.aggregate import aggregate_rows
-from testbed.sweep.backends import outcomes
+from testbed.sweep.backends import execute_run, outcomes
 from testbed.sweep.journal import (
     append_rows,
     csv_text,
@@ -28,9 +39,12 @@ from testbed.sweep.journal import (
     write_atomic,
 )
 from testbed.sweep.progress import Progress
-from testbed.sweep.spec import Sweep, describe_point, expand
+from testbed.sweep.spec import RunSpec, Sweep, describe_point, expand, toml_literal
 
-__all__ = ["SweepSummary", "format_summary", "run_sweep"]
+__all__ = ["SweepSummary", "check_metrics", "format_summary", "run_sweep"]
+
+DRY_RUN_S = 1.0
+"""Simulated length of the dry run that lists the metric keys of a run [s]."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +96,9 @@ def run_sweep(
             raise ConfigError(f"--out: {out} already holds a sweep (add --resume to continue)")
         if manifest.read_text(encoding="utf-8") != identity:
             raise ConfigError(f"--resume: {out} holds a different sweep than {sweep.source}")
+    elif resume:
+        what = "does not exist" if not out.exists() else "holds no sweep (no sweep.json)"
+        raise ConfigError(f"--resume: {out} {what}; drop --resume to start the sweep there")
     elif out.exists() and not out.is_dir():
         raise ConfigError(f"--out: {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
@@ -89,6 +106,8 @@ def run_sweep(
     rows = read_journal(journal, repair=True)
     done = {(r["point"], r["seed"]) for r in rows}
     specs = [s for s in expand(sweep) if (s.point, s.seed) not in done]
+    if specs:
+        check_metrics(sweep)
     points = sweep.points
     total = len(points) * len(sweep.seeds)
     progress = Progress(total, total - len(specs), stream, sweep.id)
@@ -105,8 +124,16 @@ def run_sweep(
         write_atomic(out / "results.csv", results_csv(sweep, rows))
         last_flush = time.monotonic()
 
+    def write_aggregate() -> None:
+        table = aggregate_rows(sweep, rows)
+        columns: dict[str, None] = {}
+        for entry in table:
+            columns.update(dict.fromkeys(entry))
+        write_atomic(out / "aggregate.csv", csv_text(list(columns), table))
+
+    stream_of = outcomes(specs, workers, dask) if specs else iter(())
     try:
-        for outcome in outcomes(specs, workers, dask) if specs else ():
+        for outcome in stream_of:
             status = "ok" if outcome.metrics is not None else "failed"
             pending.append(
                 {"point": outcome.point, "seed": outcome.seed, **points[outcome.point]}
@@ -116,19 +143,87 @@ def run_sweep(
                 flush()
             progress.update(outcome.metrics is None)
         flush()
+    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or broken: keep what finished
+        with _interrupts_ignored():
+            close = getattr(stream_of, "close", None)
+            if close is not None:
+                close()  # stops the workers (a generator's finally)
+            progress.close()
+            flush()
+            write_aggregate()
+        raise
     finally:
         progress.close()
-    table = aggregate_rows(sweep, rows)
-    columns: dict[str, None] = {}
-    for entry in table:
-        columns.update(dict.fromkeys(entry))
-    write_atomic(out / "aggregate.csv", csv_text(list(columns), table))
+    write_aggregate()
     failed = tuple(
         (r["point"], r["seed"], describe_point(points[r["point"]]), r["error"])
         for r in sorted_unique(rows)
         if r["status"] != "ok"
     )
     return SweepSummary(total, len(specs), failed, time.monotonic() - start, out)
+
+
+@contextlib.contextmanager
+def _interrupts_ignored() -> Iterator[None]:
+    """SIGINT and SIGTERM ignored inside (on the main thread): a second Ctrl-C must not cut
+    the journal's last write or leave workers behind."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def _metric_keys(spec: RunSpec) -> set[str] | None:
+    """The flattened metric keys one run produces, or None if it fails."""
+    result = execute_run(spec)
+    return None if result.metrics is None else set(result.metrics)
+
+
+def check_metrics(sweep: Sweep) -> None:
+    """Check, before any run, that every metric of ``sweep.metrics`` is one a run produces.
+
+    The key set comes from a dry run of the first grid point of :data:`DRY_RUN_S` simulated
+    seconds (≈ 0.1 s). Only when a metric is missing there (or that point cannot run that
+    short) does it look further, before rejecting: the first point at its own duration, then
+    the first point with each non-numeric grid value in turn (a grid over ``images.enabled``
+    or a layout changes which metrics exist; numbers do not). A point whose run fails is left
+    to the sweep, which records the failure.
+
+    Raises:
+        ConfigError: a metric no probed run produces, listing the known ones.
+    """
+    first = expand(dataclasses.replace(sweep, seeds=sweep.seeds[:1]))[0]
+    short = (f"duration_s={DRY_RUN_S!r}", "metrics.settle_s=0.0")
+    probes = [dataclasses.replace(first, overrides=(*first.overrides, *short)), first]
+    base = [key for key, _ in sweep.axes]
+    for key, values in sweep.axes:
+        for value in values:
+            if not isinstance(value, int | float) or isinstance(value, bool):
+                point = dict(sweep.points[0]) | {key: value}
+                overrides = tuple(f"{k}={toml_literal(point[k])}" for k in base)
+                probes.append(
+                    dataclasses.replace(first, overrides=(*sweep.overrides, *overrides, *short))
+                )
+    known: set[str] = set(base)  # rows carry the grid values too
+    ran = False
+    for probe in probes:
+        keys = _metric_keys(probe)
+        if keys is None:
+            continue
+        ran = True
+        known |= keys
+        if all(name in known for name in sweep.metrics):
+            return
+    if not ran:
+        return
+    missing = next(name for name in sweep.metrics if name not in known)
+    listed = ", ".join(sorted(known))
+    raise ConfigError(f"{sweep.source}: metrics: unknown metric {missing!r} (known: {listed})")
 
 
 def format_summary(sweep: Sweep, summary: SweepSummary) -> str:

@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TextIO
 
 import numpy as np
 
@@ -29,6 +29,7 @@ __all__ = [
     "RangeSpec",
     "RunSpec",
     "Sweep",
+    "check_points",
     "describe_point",
     "expand",
     "load_sweep",
@@ -201,13 +202,17 @@ def _flatten_table(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]
     return flat
 
 
-def load_sweep(name_or_path: str, overrides: Sequence[str] = ()) -> Sweep:
+def load_sweep(
+    name_or_path: str, overrides: Sequence[str] = (), *, stream: TextIO | None = None
+) -> Sweep:
     """Load a packaged sweep by id, or a sweep file by path, and check every point loads.
 
     Args:
         name_or_path: a packaged id (:func:`sweep_names`) or a ``.toml`` path. A relative
             ``scenario`` path in the file is taken relative to the file.
         overrides: ``KEY=VALUE`` scenario overrides (the CLI's ``--set``) for every run.
+        stream: where the progress of the grid check goes (a bar on a terminal, else a line
+            every second once it takes longer than that); None: no progress.
 
     Raises:
         ConfigError: one line naming the file and key: missing file, malformed TOML, unknown or
@@ -263,12 +268,57 @@ def load_sweep(name_or_path: str, overrides: Sequence[str] = ()) -> Sweep:
         source=source,
     )
     load_scenario(sweep.scenario, sweep.overrides)  # the base alone: its errors name --set
-    for point in sweep.points:
-        try:
-            load_scenario(sweep.scenario, (*sweep.overrides, *_point_overrides(point)))
-        except ConfigError as err:
-            raise ConfigError(f"{source}: grid point {describe_point(point)}: {err}") from None
+    check_points(sweep, stream)
     return sweep
+
+
+def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
+    """Load the scenario of every grid point through the scenario loader, before any run.
+
+    First each axis value on its own (the other axes at their first value), so that a bad value
+    of a large grid fails at once, named by its key and value; then every remaining point, in
+    grid order: the loader has cross-key rules (``link.ipg_s`` needs ``link.ipg = 'fixed'``,
+    times must be < ``duration_s``, images need the camera and token MAC...), so a point made of
+    values that are fine one by one may still not load. Each point is loaded once.
+
+    Raises:
+        ConfigError: ``<source>: grid point key=value, ...: <the loader's one line>``.
+    """
+    from testbed.run.scenario import load_scenario
+    from testbed.sweep.progress import Progress
+
+    keys = [key for key, _ in sweep.axes]
+    literals = [tuple(toml_literal(v) for v in values) for _, values in sweep.axes]
+    total = math.prod(len(values) for values in literals)
+    progress = None
+    if stream is not None:
+        progress = Progress(total, 0, stream, f"{sweep.id}: checking", unit="grid points")
+    checked: set[tuple[int, ...]] = set()
+
+    def check_one(index: tuple[int, ...]) -> None:
+        point = tuple(f"{keys[a]}={literals[a][i]}" for a, i in enumerate(index))
+        try:
+            load_scenario(sweep.scenario, (*sweep.overrides, *point))
+        except ConfigError as err:
+            if progress is not None:
+                progress.close()
+            raise ConfigError(f"{sweep.source}: grid point {', '.join(point)}: {err}") from None
+        checked.add(index)
+        if progress is not None:
+            progress.update(False)
+
+    try:
+        for axis, values in enumerate(literals):  # one value at a time
+            for i in range(len(values)):
+                index = tuple(i if a == axis else 0 for a in range(len(keys)))
+                if index not in checked:
+                    check_one(index)
+        for index in itertools.product(*(range(len(v)) for v in literals)):  # every point
+            if index not in checked:
+                check_one(index)
+    finally:
+        if progress is not None:
+            progress.close()
 
 
 def _point_overrides(point: Mapping[str, Any]) -> tuple[str, ...]:

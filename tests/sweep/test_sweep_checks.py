@@ -1,0 +1,201 @@
+"""``testbed sweep`` and ``testbed plot``: bad input is one line and exit 2, before any work."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from testbed.cli.main import main
+from testbed.sweep import load_sweep
+from testbed.sweep.spec import check_points
+
+SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
+SWEEP = """\
+schema = 1
+id = "checks-v1"
+description = "d"
+scenario = "s100-teleop-v1"
+metrics = {metrics}
+[grid]
+{grid}
+"""
+
+
+def _sweep(folder: Path, grid: str = '"link.ber" = [0.0, 1e-3]', metrics: str = "[]") -> Path:
+    path = folder / "checks.toml"
+    path.write_text(SWEEP.format(grid=grid, metrics=metrics), encoding="utf-8")
+    return path
+
+
+def _one_line(capsys: pytest.CaptureFixture[str], fragment: str) -> None:
+    err = capsys.readouterr().err
+    assert fragment in err and err.count("\n") == 1 and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    [
+        (["--dask", "not-an-address"], "--dask: expected 'local' or a scheduler address"),
+        (["--dask", "tcp://host"], "--dask: expected 'local'"),
+        (["--resume"], "does not exist; drop --resume"),
+    ],
+)
+def test_bad_options_exit_2_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], fragment: str
+) -> None:
+    out = tmp_path / "out"
+    assert main(["sweep", str(_sweep(tmp_path)), *SHORT, *argv, "--out", str(out)]) == 2
+    _one_line(capsys, fragment)
+    assert not out.exists()
+
+
+def test_an_unreachable_scheduler_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--dask", "tcp://127.0.0.1:9"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    _one_line(capsys, "--dask: cannot reach tcp://127.0.0.1:9")
+
+
+def test_resume_of_a_folder_without_a_sweep_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "empty").mkdir()
+    argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--out", str(tmp_path / "empty"), "--resume"]
+    assert main(argv) == 2
+    _one_line(capsys, "holds no sweep")
+
+
+def test_out_must_be_creatable_and_writable(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _sweep(tmp_path)
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert main(["sweep", str(path), *SHORT, "--out", str(afile)]) == 2
+    _one_line(capsys, "exists and is not a directory")
+    assert main(["sweep", str(path), *SHORT, "--out", str(afile / "sub" / "out")]) == 2
+    _one_line(capsys, "is a file")
+    if os.geteuid() != 0:  # root writes anywhere
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        assert main(["sweep", str(path), *SHORT, "--out", str(locked / "out")]) == 2
+        _one_line(capsys, "is not writable")
+
+
+def test_an_unknown_metric_fails_before_the_first_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _sweep(tmp_path, metrics='["command_age_s.mean", "no.such.metric"]')
+    out = tmp_path / "out"
+    assert main(["sweep", str(path), *SHORT, "--workers", "1", "--out", str(out)]) == 2
+    _one_line(capsys, "metrics: unknown metric 'no.such.metric' (known: ")
+    assert not (out / "runs.jsonl").exists()  # no run was made
+
+
+def test_a_grid_point_bad_only_in_combination_fails_before_the_first_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # every value loads on its own; link.ipg_s with link.ipg = telerobotics-2018 does not
+    grid = '"link.ipg" = ["fixed", "telerobotics-2018"]\n"link.ipg_s" = [0.6, 1.2]'
+    out = tmp_path / "out"
+    assert main(["sweep", str(_sweep(tmp_path, grid)), *SHORT, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert 'grid point link.ipg="telerobotics-2018", link.ipg_s=0.6:' in err, err
+    assert "link.ipg_s: only used when link.ipg = 'fixed'" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_a_bad_value_of_a_large_grid_is_named_at_once(tmp_path: Path) -> None:
+    """A 200,000-point grid whose last value of the first axis is bad: found by the one-value
+    pass (≈ 600 loads), not after the whole product."""
+    ber = ", ".join(repr(i * 1e-6) for i in range(199)) + ", 2.0"
+    gaps = ", ".join(repr(0.5 + i * 0.001) for i in range(1000))
+    path = _sweep(tmp_path, f'"link.ber" = [{ber}]\n"link.ipg_s" = [{gaps}]')
+    start = time.process_time()
+    with pytest.raises(Exception, match=r"grid point link.ber=2.0, link.ipg_s=0.5: --set"):
+        load_sweep(str(path), ['link.ipg="fixed"'])
+    per_load = (time.process_time() - start) / 1200
+    assert per_load > 0.0
+
+
+def test_checking_prints_progress_and_loads_each_point_once(tmp_path: Path) -> None:
+    import io
+
+    path = _sweep(tmp_path, '"link.ber" = [0.0, 1e-4, 1e-3]\n"link.ipg_s" = [0.6, 1.2]')
+    sweep = load_sweep(str(path), ['link.ipg="fixed"'])
+    stream = io.StringIO()
+    check_points(sweep, stream)  # 6 points, checked in well under the 1-s progress interval
+    assert stream.getvalue() == ""
+
+
+# --- testbed plot ----------------------------------------------------------------------------
+
+
+def _results(folder: Path) -> Path:
+    path = folder / "results.csv"
+    path.write_text(
+        "point,seed,link.ber,status,error,m\n0,0,0.0,ok,,1.0\n1,0,0.001,ok,,2.0\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("content", "fragment"),
+    [
+        (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe", "binary, not UTF-8"),
+        (b"point,seed,status\x00,error\n", "not a results.csv"),
+        (b"hello,world\n1,2\n", "not a results.csv"),
+    ],
+)
+def test_plot_of_a_binary_or_garbled_file_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: bytes, fragment: str
+) -> None:
+    path = tmp_path / "results.csv"
+    path.write_bytes(content)
+    assert main(["plot", str(path), "--x", "link.ber", "--y", "m"]) == 2
+    _one_line(capsys, fragment)
+
+
+def test_plot_of_rows_longer_than_the_head_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "results.csv"
+    path.write_text("point,seed,status,error,m\n0,0,ok,,1.0,9,9\n", encoding="utf-8")
+    assert main(["plot", str(path), "--x", "seed", "--y", "m"]) == 2
+    _one_line(capsys, "more cells than the head")
+
+
+@pytest.mark.parametrize(
+    ("out", "fragment"),
+    [
+        ("p.xyz", "unsupported extension '.xyz'"),
+        ("afile/p.png", "exists and is not a directory"),
+        ("adir", "is a directory"),
+    ],
+)
+def test_plot_bad_out_exits_2_before_reading(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], out: str, fragment: str
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir.png").mkdir()
+    target = tmp_path / out
+    argv = ["plot", str(tmp_path / "missing.csv"), "--x", "link.ber", "--y", "m"]
+    assert main([*argv, "--out", str(target)]) == 2  # --out is checked first
+    _one_line(capsys, fragment)
+
+
+def test_plot_without_an_extension_prints_the_png_it_wrote(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _results(tmp_path)
+    argv = ["plot", str(path), "--x", "link.ber", "--y", "m", "--out", str(tmp_path / "noext")]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out.strip()
+    assert printed == str(tmp_path / "noext.png")
+    assert Path(printed).read_bytes().startswith(b"\x89PNG")
+    assert not (tmp_path / "noext").exists()
