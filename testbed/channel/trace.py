@@ -1,7 +1,7 @@
 """Typed link events: what happened to every frame, when, where.
 
 The medium records one :class:`LinkEvent` per happening (a tuple appended, nothing more) to an
-optional :class:`Trace`, which keeps them as compact columns (33 B per event); later stages (the
+optional :class:`Trace`, which keeps them as compact columns (21 B per event); later stages (the
 recorder, the paper's Fig. 4 timeline) read it. Events
 are recorded when the medium decides them, so a ``TX_END`` is recorded at its transmission's start
 with its future time: use :meth:`Trace.in_time_order` for a timeline.
@@ -135,12 +135,34 @@ class TraceColumns(NamedTuple):
         return _KIND_CODE[kind]
 
 
+_WIDER = {"B": "H", "H": "q", "h": "i", "i": "q"}
+"""Integer column type → the next wider one, taken when a value does not fit."""
+
+
+def _extend(column: array[int], values: Sequence[int]) -> array[int]:
+    """``column`` with ``values`` appended: the same array, or a wider copy if one of them does
+    not fit its type."""
+    try:
+        column.extend(array(column.typecode, values))
+    except OverflowError:
+        wider = _WIDER.get(column.typecode)
+        if wider is None:
+            raise
+        return _extend(array(wider, column), values)
+    return column
+
+
+def _view(column: array[int]) -> np.ndarray:
+    return np.frombuffer(column, dtype=np.dtype(column.typecode))
+
+
 class Trace:
     """Append-only record of :class:`LinkEvent`, optionally limited to some kinds.
 
-    Held as compact columns (``array.array``: time 8 B, kind 1 B, src and dst 2 B each as
-    indices into the node names seen, frame id 8 B, part, size and bit errors 4 B each:
-    33 B per event) rather than one tuple per event (≈ 200 B). :attr:`events` is a read-only
+    Held as compact columns (``array.array``) rather than one tuple per event (≈ 200 B): time
+    8 B, kind 1 B, src and dst 1 B each (indices into the node names seen), frame id 4 B, part,
+    size and bit errors 2 B each — 21 B per event; an integer column widens (to 8 B at most)
+    when a value does not fit. :attr:`events` is a read-only
     sequence view that builds the :class:`LinkEvent` on demand; :meth:`columns` gives NumPy
     views for vectorised readers.
 
@@ -170,12 +192,12 @@ class Trace:
         self._name_code: dict[str, int] = {}
         self._t = array("d")
         self._kind = array("B")
-        self._src = array("H")
-        self._dst = array("H")
-        self._frame = array("q")
-        self._part = array("i")
-        self._size = array("i")
-        self._bits = array("i")
+        self._src = array("B")
+        self._dst = array("B")
+        self._frame = array("i")
+        self._part = array("h")
+        self._size = array("h")
+        self._bits = array("h")
 
     @classmethod
     def of(cls, events: Iterable[LinkEvent]) -> Trace:
@@ -223,12 +245,12 @@ class Trace:
         t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors = zip(*pending, strict=True)
         self._t.extend(t_s)
         self._kind.extend([_KIND_CODE[k] for k in kind])
-        self._src.extend([self._code(n) for n in src])
-        self._dst.extend([self._code(n) for n in dst])
-        self._frame.extend(frame_id)
-        self._part.extend(part)
-        self._size.extend(size_bytes)
-        self._bits.extend(bit_errors)
+        self._src = _extend(self._src, [self._code(n) for n in src])
+        self._dst = _extend(self._dst, [self._code(n) for n in dst])
+        self._frame = _extend(self._frame, frame_id)
+        self._part = _extend(self._part, part)
+        self._size = _extend(self._size, size_bytes)
+        self._bits = _extend(self._bits, bit_errors)
         pending.clear()
 
     @property
@@ -242,12 +264,12 @@ class Trace:
         return TraceColumns(
             np.frombuffer(self._t, dtype=np.float64),
             np.frombuffer(self._kind, dtype=np.uint8),
-            np.frombuffer(self._src, dtype=np.uint16),
-            np.frombuffer(self._dst, dtype=np.uint16),
-            np.frombuffer(self._frame, dtype=np.int64),
-            np.frombuffer(self._part, dtype=np.int32),
-            np.frombuffer(self._size, dtype=np.int32),
-            np.frombuffer(self._bits, dtype=np.int32),
+            _view(self._src),
+            _view(self._dst),
+            _view(self._frame),
+            _view(self._part),
+            _view(self._size),
+            _view(self._bits),
             _KIND_BY_CODE,
             tuple(self._names),
         )

@@ -3,8 +3,9 @@
 The runner's nodes append to a :class:`Recorder` as the run goes (plain appends, nothing
 computed); :mod:`testbed.run.metrics` and :mod:`testbed.report.run_plots` read it
 afterwards. Link events and series rows are held as compact columns
-(:class:`~testbed.channel.Trace`, :class:`SeriesRows`), so a long run's memory grows by ≈ 33 B
-per link event and 8 B per series value, and the CSV files are written row by row from them.
+(:class:`~testbed.channel.Trace`, :class:`SeriesRows`, :class:`FloatPairs`), so a long run's
+memory grows by ≈ 21 B per link event, 8 B per series value and 16 B per command or odometry
+update; the CSV files are written row by row from them.
 The recorder is
 the simulation's ground truth: it knows things the nodes cannot (when the sticks carried by a
 frame were really sampled, the physics pose), and nodes never read it.
@@ -22,6 +23,7 @@ from array import array
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +36,14 @@ from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
-__all__ = ["SERIES_COLUMNS", "NodeEvent", "Recorder", "SeriesRows", "VehicleObserver"]
+__all__ = [
+    "SERIES_COLUMNS",
+    "FloatPairs",
+    "NodeEvent",
+    "Recorder",
+    "SeriesRows",
+    "VehicleObserver",
+]
 
 OPERATOR = "operator"
 VEHICLE = "vehicle"
@@ -122,7 +131,7 @@ class VehicleObserver:
         return row
 
 
-class SeriesRows:
+class SeriesRows(Sequence[tuple[float, ...]]):
     """Append-only series rows of a fixed width, held in one flat ``array('d')`` (8 B per
     value) rather than as tuples of floats (≈ 30 B per value).
 
@@ -151,6 +160,20 @@ class SeriesRows:
     def __len__(self) -> int:
         return len(self._values) // self.width
 
+    @overload
+    def __getitem__(self, index: int) -> tuple[float, ...]: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[tuple[float, ...]]: ...
+
+    def __getitem__(self, index: int | slice) -> tuple[float, ...] | list[tuple[float, ...]]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        i = index + len(self) if index < 0 else index
+        if not 0 <= i < len(self):
+            raise IndexError("series row index out of range")
+        return tuple(self._values[i * self.width : (i + 1) * self.width])
+
     def __iter__(self) -> Iterator[tuple[float, ...]]:
         width = self.width
         values = self._values
@@ -169,6 +192,61 @@ class SeriesRows:
     def nbytes(self) -> int:
         """Bytes held by the values."""
         return self._values.itemsize * len(self._values)
+
+
+class FloatPairs(Sequence[tuple[float, float]]):
+    """Append-only ``(a, b)`` float pairs in one flat ``array('d')`` (16 B per pair rather than
+    ≈ 110 B as a tuple of floats in a list); iterating gives them back as tuples.
+
+    Args:
+        pairs: pairs to start with.
+    """
+
+    __slots__ = ("_values",)
+
+    def __init__(self, pairs: Iterable[tuple[float, float]] = ()) -> None:
+        self._values = array("d")
+        for pair in pairs:
+            self.append(pair)
+
+    def append(self, pair: tuple[float, float]) -> None:
+        """Append one pair."""
+        a, b = pair
+        self._values.append(a)
+        self._values.append(b)
+
+    def __len__(self) -> int:
+        return len(self._values) // 2
+
+    @overload
+    def __getitem__(self, index: int) -> tuple[float, float]: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[tuple[float, float]]: ...
+
+    def __getitem__(self, index: int | slice) -> tuple[float, float] | list[tuple[float, float]]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        i = index + len(self) if index < 0 else index
+        if not 0 <= i < len(self):
+            raise IndexError("pair index out of range")
+        return self._values[2 * i], self._values[2 * i + 1]
+
+    def __iter__(self) -> Iterator[tuple[float, float]]:
+        values = self._values
+        for start in range(0, len(values), 8192):
+            flat = values[start : start + 8192].tolist()
+            yield from zip(flat[::2], flat[1::2], strict=True)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Sequence) or isinstance(other, str | bytes):
+            return NotImplemented
+        return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"FloatPairs({list(self)!r})"
 
 
 @dataclass(frozen=True, slots=True)
@@ -209,8 +287,8 @@ class Recorder:
     commands_sampled: dict[int, float] = field(default_factory=dict)
     commands_applied: dict[int, float] = field(default_factory=dict)
     uplink_commands: dict[int, tuple[int, float]] = field(default_factory=dict)
-    command_updates: list[tuple[float, float]] = field(default_factory=list)
-    odometry_updates: list[tuple[float, float]] = field(default_factory=list)
+    command_updates: FloatPairs = field(default_factory=FloatPairs)
+    odometry_updates: FloatPairs = field(default_factory=FloatPairs)
     frames_decoded: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     frames_rejected: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     events: list[NodeEvent] = field(default_factory=list)
@@ -255,11 +333,9 @@ class Recorder:
         node_rows = iter(nodes)
         node = next(node_rows, None)
         columns = self.trace.columns()
-        order = np.argsort(columns.t_s, kind="stable")
         kinds = [str(kind) for kind in columns.kinds]
         names = columns.names
-        for start in range(0, len(order), _WRITE_CHUNK):
-            at = order[start : start + _WRITE_CHUNK]
+        for at in _time_order_chunks(columns.t_s):
             chunk = zip(
                 columns.t_s[at].tolist(),
                 columns.kind[at].tolist(),
@@ -283,8 +359,28 @@ class Recorder:
             node = next(node_rows, None)
 
 
-_WRITE_CHUNK = 16384
-"""Link events formatted at a time by :meth:`Recorder.write_events_csv`."""
+_WRITE_CHUNK = 65536
+"""About how many link events :meth:`Recorder.write_events_csv` sorts and formats at a time."""
+
+
+def _time_order_chunks(t_s: np.ndarray) -> Iterator[np.ndarray]:
+    """The indices of ``t_s`` in time order (stable: equal times keep their order), in
+    consecutive chunks of successive time windows of ≈ :data:`_WRITE_CHUNK` events on average:
+    no index over all events is ever held. Times that are not finite come last."""
+    n = len(t_s)
+    finite = np.isfinite(t_s)
+    n_finite = int(np.count_nonzero(finite))
+    if n_finite:
+        lo = float(np.min(t_s, initial=np.inf, where=finite))
+        hi = float(np.max(t_s, initial=-np.inf, where=finite))
+        windows = max(1, -(-n_finite // _WRITE_CHUNK))
+        edges = np.linspace(lo, hi, windows + 1)
+        for k in range(windows):
+            upper = t_s <= hi if k == windows - 1 else t_s < edges[k + 1]
+            at = np.flatnonzero(upper & (t_s >= edges[k]))
+            yield at[np.argsort(t_s[at], kind="stable")]
+    if n_finite < n:
+        yield np.flatnonzero(~finite)
 
 
 def _node_row(n: NodeEvent) -> list[object]:

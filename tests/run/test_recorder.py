@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from testbed.channel import EventKind, LinkEvent, Trace
-from testbed.run.recorder import SERIES_COLUMNS, Recorder, SeriesRows
+from testbed.run.recorder import SERIES_COLUMNS, FloatPairs, Recorder, SeriesRows
 
 K = EventKind
 OP, VEH, ALL = "operator", "vehicle", "*"
 
-BYTES_PER_EVENT_BOUND = 40
-"""Link events: 33 B of columns each, plus the columns' over-allocation."""
+BYTES_PER_EVENT_BOUND = 24
+"""Link events: 21 B of columns each, plus the columns' over-allocation."""
 BYTES_PER_SERIES_VALUE_BOUND = 9.0
 """Series rows: one 8-B double per value, plus over-allocation."""
 
@@ -158,7 +158,7 @@ def test_a_million_link_events_take_under_the_bound_per_event() -> None:
     finally:
         tracemalloc.stop()
     assert len(trace) == n
-    assert trace.nbytes == 33 * n
+    assert trace.nbytes == 21 * n  # frame ids below 2**31, sizes below 2**15
     assert (after - before) / n < BYTES_PER_EVENT_BOUND
 
 
@@ -177,3 +177,28 @@ def test_series_rows_take_under_the_bound_per_value() -> None:
         tracemalloc.stop()
     assert rows.nbytes == 8 * width * n
     assert (after - before) / (n * width) < BYTES_PER_SERIES_VALUE_BOUND
+
+
+def test_trace_columns_widen_for_values_that_do_not_fit() -> None:
+    trace = Trace()
+    events = [LinkEvent(0.0, K.DELIVER, OP, VEH, 0, 0, 20)]
+    events += [LinkEvent(1.0, K.CORRUPT, OP, VEH, -1, 1, 40_000, 70_000)]  # past int16
+    events += [LinkEvent(2.0, K.DELIVER, OP, VEH, 2**40, 2**33, 20)]  # past int32
+    events += [LinkEvent(3.0, K.ENQUEUE, f"node{i}", ALL, i, 0, 20) for i in range(300)]
+    for event in events:
+        trace.record(*event)
+    assert list(trace) == events
+    columns = trace.columns()
+    assert columns.frame_id.dtype == np.int64 and columns.src.dtype == np.uint16
+    with pytest.raises(OverflowError):
+        Trace.of([LinkEvent(0.0, K.DELIVER, OP, VEH, 2**63, 0, 20)]).columns()
+
+
+def test_float_pairs_give_back_their_tuples() -> None:
+    pairs = FloatPairs([(1.0, 2.0)])
+    for i in range(10_000):
+        pairs.append((float(i), i + 0.5))
+    assert len(pairs) == 10_001 and pairs[0] == (1.0, 2.0) and pairs[-1] == (9999.0, 9999.5)
+    assert list(pairs)[1:3] == [(0.0, 0.5), (1.0, 1.5)] == pairs[1:3]
+    assert pairs == [(1.0, 2.0), *((float(i), i + 0.5) for i in range(10_000))]
+    assert Recorder().command_updates == []
