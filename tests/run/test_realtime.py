@@ -587,13 +587,18 @@ def test_round_trip_is_both_directions_of_the_link(window: Window) -> None:
     """Order out and reply back, the vehicle answering at once: two idle gaps, two intrinsic
     delays, both airtimes and two 1-ms polls, plus the host's measured allowance for each of
     the two crossings (p95 for the median, max for the 95th percentile, as the command lag).
-    Lower bound: the model less the run's largest lateness (the last poll stamped early)."""
+    Lower bound: the model less the run's largest lateness (the last poll stamped early),
+    unless the measured host delays can push a reply past the next order."""
     config = window.config
     order, reply = 13 + CRLF, 20 + CRLF  # move order; state reply without image chunk
     model_s = _link_s(config, order) + _link_s(config, reply)
     rtt = window.single.metrics["hil"]["round_trip_s"]
     assert 1 <= rtt["n"] <= window.single.metrics["link"]["downlink"]["frames_delivered"]
-    assert model_s - window.lateness_s("max") - 0.002 <= rtt["p50"]
+    # A reply later than one IPG is paired with the next order (the metric's token-passing
+    # rule), so the lower bound holds only when the measured host delays cannot make one so.
+    late_replies = model_s + 2 * POLL_S + 2 * window.host_s("max") >= IPG_S
+    lower_s = 0.0 if late_replies else model_s - window.lateness_s("max") - 0.002
+    assert lower_s <= rtt["p50"]
     assert rtt["p50"] <= model_s + 2 * POLL_S + 2 * window.host_s("p95") + 0.002
     assert rtt["p95"] <= model_s + 2 * POLL_S + 2 * window.host_s("max") + 0.002
 
