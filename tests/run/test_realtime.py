@@ -450,7 +450,8 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
     assert emulator.returncode == 0, err
     reports: list[dict[str, Any]] = json.loads(out.splitlines()[-1])
     assert [report["error"] for report in reports] == [None] * 4
-    assert len(probe.excess_s) >= 20
+    assert len(probe.excess_s) >= 5  # ≈ 80 on an idle machine; few on a loaded one (its p95 is
+    # then close to its max: the allowance only grows)
     yield Window(
         config,
         result,
