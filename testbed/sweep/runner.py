@@ -117,10 +117,11 @@ def run_sweep(
 
     def flush() -> None:
         nonlocal last_flush
-        if pending:
-            append_rows(journal, pending)
-            rows.extend(pending)
-            pending.clear()
+        with _interrupts_deferred():  # a signal between the write and the bookkeeping would
+            if pending:  # write the rows twice
+                append_rows(journal, pending)
+                rows.extend(pending)
+                pending.clear()
         write_atomic(out / "results.csv", results_csv(sweep, rows))
         last_flush = time.monotonic()
 
@@ -176,6 +177,19 @@ def _interrupts_ignored() -> Iterator[None]:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM blocked inside (this thread), delivered on leaving."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _metric_keys(spec: RunSpec) -> set[str] | None:
