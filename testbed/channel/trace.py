@@ -42,8 +42,12 @@ __all__ = [
     "TraceColumns",
     "TraceEvents",
     "Transmission",
+    "TransmissionColumns",
     "direction_counts",
+    "frame_outcome_columns",
     "frame_outcomes",
+    "outcome_of_rank",
+    "transmission_columns",
     "transmissions",
     "worst_outcome",
 ]
@@ -433,17 +437,62 @@ def worst_outcome(outcomes: Iterable[FrameOutcome]) -> FrameOutcome:
     return min(outcomes, key=_RANK.__getitem__, default=FrameOutcome.PENDING)
 
 
-def _part_outcomes(events: Iterable[LinkEvent]) -> dict[tuple[int, int], FrameOutcome]:
-    """(frame_id, part) → worst reception outcome over its receivers."""
-    parts: dict[tuple[int, int], FrameOutcome] = {}
-    for e in events:
-        outcome = RECEPTION_OUTCOMES.get(e.kind)
-        if outcome is None:
-            continue
-        key = (e.frame_id, e.part)
-        held = parts.get(key)
-        parts[key] = outcome if held is None else worst_outcome((held, outcome))
-    return parts
+def _keys(*columns: np.ndarray) -> np.ndarray:
+    """Rows of ``columns`` as one structured array (sortable, for :func:`np.unique`)."""
+    keys = np.empty(len(columns[0]), dtype=[(f"k{i}", np.int64) for i in range(len(columns))])
+    for i, column in enumerate(columns):
+        keys[f"k{i}"] = column
+    return keys
+
+
+def _lookup(table: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of ``keys`` in the sorted unique ``table`` and whether each is there."""
+    at = np.searchsorted(table, keys)
+    found = at < len(table)
+    found[found] = table[at[found]] == keys[found]
+    return at, found
+
+
+_NO_RANK = len(_SEVERITY)
+
+
+def _part_ranks(columns: TraceColumns) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique (frame_id, part) keys of the reception events and the rank of the worst
+    reception outcome of each, over its receivers."""
+    ranks = _RECEPTION_RANK[columns.kind]
+    received = ranks < _NO_RANK
+    parts, where = np.unique(
+        _keys(columns.frame_id[received], columns.part[received]), return_inverse=True
+    )
+    worst = np.full(len(parts), _NO_RANK, dtype=np.int64)
+    np.minimum.at(worst, where.reshape(-1), ranks[received])
+    return parts, worst
+
+
+def frame_outcome_columns(events: Iterable[LinkEvent]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`frame_outcomes` as arrays: the frame ids in order of first appearance and the
+    rank of each one's outcome in ``_SEVERITY`` (see :func:`outcome_of_rank`)."""
+    columns = Trace.of(events).columns()
+    kind = columns.kind
+    parts, part_rank = _part_ranks(columns)
+    on_air = (kind != _KIND_CODE[EventKind.ENQUEUE]) & (kind != _KIND_CODE[EventKind.DROP])
+    seen = np.unique(_keys(columns.frame_id[on_air], columns.part[on_air]))
+    at, found = _lookup(parts, seen)
+    seen_rank = np.full(len(seen), _RANK[FrameOutcome.PENDING], dtype=np.int64)
+    seen_rank[found] = part_rank[at[found]]
+    frames, first = np.unique(columns.frame_id, return_index=True)
+    rank = np.full(len(frames), _NO_RANK, dtype=np.int64)
+    np.minimum.at(rank, np.searchsorted(frames, seen["k0"]), seen_rank)
+    rank[rank == _NO_RANK] = _RANK[FrameOutcome.PENDING]  # no packet on the air
+    dropped = np.unique(columns.frame_id[kind == _KIND_CODE[EventKind.DROP]])
+    rank[np.searchsorted(frames, dropped)] = _RANK[FrameOutcome.DROPPED]
+    order = np.argsort(first, kind="stable")
+    return frames[order], rank[order]
+
+
+def outcome_of_rank(rank: int) -> FrameOutcome:
+    """The outcome of a rank of :func:`frame_outcome_columns` or :class:`TransmissionColumns`."""
+    return _SEVERITY[rank]
 
 
 def frame_outcomes(events: Iterable[LinkEvent]) -> dict[int, FrameOutcome]:
@@ -458,26 +507,11 @@ def frame_outcomes(events: Iterable[LinkEvent]) -> dict[int, FrameOutcome]:
         events: link events (a :class:`Trace` or any iterable of them).
 
     Returns:
-        Frame id → outcome, for every frame id seen in ``events``.
+        Frame id → outcome, for every frame id seen in ``events`` (in order of first
+        appearance).
     """
-    events = list(events)
-    received = _part_outcomes(events)
-    seen: dict[int, set[int]] = {}
-    dropped: set[int] = set()
-    for e in events:
-        seen.setdefault(e.frame_id, set())
-        if e.kind is EventKind.DROP:
-            dropped.add(e.frame_id)
-        elif e.kind is not EventKind.ENQUEUE:
-            seen[e.frame_id].add(e.part)
-    outcomes: dict[int, FrameOutcome] = {}
-    for frame_id, parts in seen.items():
-        if frame_id in dropped:
-            outcomes[frame_id] = FrameOutcome.DROPPED
-        else:
-            per_part = (received.get((frame_id, p), FrameOutcome.PENDING) for p in parts)
-            outcomes[frame_id] = worst_outcome(per_part)
-    return outcomes
+    frames, rank = frame_outcome_columns(events)
+    return {f: _SEVERITY[r] for f, r in zip(frames.tolist(), rank.tolist(), strict=True)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -503,6 +537,74 @@ class Transmission:
     outcome: FrameOutcome
 
 
+@dataclass(frozen=True, slots=True)
+class TransmissionColumns:
+    """:func:`transmissions` as arrays, one entry per packet in order of start time
+    (:func:`transmission_columns`); ``src`` holds codes into ``names``, ``outcome`` ranks
+    (:func:`outcome_of_rank`)."""
+
+    src: np.ndarray
+    frame_id: np.ndarray
+    part: np.ndarray
+    start_s: np.ndarray
+    end_s: np.ndarray
+    size_bytes: np.ndarray
+    outcome: np.ndarray
+    names: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.start_s)
+
+    def take(self, at: slice | np.ndarray) -> list[Transmission]:
+        """The transmissions at ``at`` (a slice or an index array) as :class:`Transmission`."""
+        names = self.names
+        return [
+            Transmission(names[s], f, p, t0, t1, n, _SEVERITY[o])
+            for s, f, p, t0, t1, n, o in zip(
+                self.src[at].tolist(),
+                self.frame_id[at].tolist(),
+                self.part[at].tolist(),
+                self.start_s[at].tolist(),
+                self.end_s[at].tolist(),
+                self.size_bytes[at].tolist(),
+                self.outcome[at].tolist(),
+                strict=True,
+            )
+        ]
+
+
+def transmission_columns(events: Iterable[LinkEvent]) -> TransmissionColumns:
+    """:func:`transmissions` as arrays (no object per packet)."""
+    columns = Trace.of(events).columns()
+    kind = columns.kind
+    starts = kind == _KIND_CODE[EventKind.TX_START]
+    ends = kind == _KIND_CODE[EventKind.TX_END]
+    end_keys = _keys(columns.src[ends], columns.frame_id[ends], columns.part[ends])[::-1]
+    end_table, last = np.unique(end_keys, return_index=True)  # the last tx_end of each packet
+    end_t = columns.t_s[ends][::-1][last]
+    src, frame_id, part = columns.src[starts], columns.frame_id[starts], columns.part[starts]
+    start_s = columns.t_s[starts]
+    at, found = _lookup(end_table, _keys(src, frame_id, part))
+    end_s = start_s.copy()
+    end_s[found] = end_t[at[found]]
+    parts, part_rank = _part_ranks(columns)
+    at, found = _lookup(parts, _keys(frame_id, part))
+    outcome = np.full(len(start_s), _RANK[FrameOutcome.PENDING], dtype=np.int64)
+    outcome[found] = part_rank[at[found]]
+    order = np.argsort(start_s, kind="stable")
+    size_bytes = columns.size_bytes[starts]
+    return TransmissionColumns(
+        src[order],
+        frame_id[order],
+        part[order],
+        start_s[order],
+        end_s[order],
+        size_bytes[order],
+        outcome[order],
+        columns.names,
+    )
+
+
 def transmissions(events: Iterable[LinkEvent]) -> list[Transmission]:
     """Pair every ``tx_start`` with its ``tx_end`` and the packet's reception outcome.
 
@@ -514,18 +616,7 @@ def transmissions(events: Iterable[LinkEvent]) -> list[Transmission]:
     Returns:
         The transmissions in order of start time.
     """
-    events = list(events)
-    received = _part_outcomes(events)
-    ends = {(e.src, e.frame_id, e.part): e.t_s for e in events if e.kind is EventKind.TX_END}
-    out = []
-    for e in events:
-        if e.kind is not EventKind.TX_START:
-            continue
-        end_s = ends.get((e.src, e.frame_id, e.part), e.t_s)
-        outcome = received.get((e.frame_id, e.part), FrameOutcome.PENDING)
-        out.append(Transmission(e.src, e.frame_id, e.part, e.t_s, end_s, e.size_bytes, outcome))
-    out.sort(key=lambda x: x.start_s)
-    return out
+    return transmission_columns(events).take(slice(None))
 
 
 # --- per-direction counts ---------------------------------------------------------------------

@@ -9,9 +9,11 @@ dropped frames are crosses. Long runs show a window from the first transmission
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import math
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.colors import to_rgb
@@ -24,9 +26,14 @@ from testbed.channel import (
     EventKind,
     FrameOutcome,
     LinkEvent,
+    Trace,
     Transmission,
-    frame_outcomes,
-    transmissions,
+)
+from testbed.channel.trace import (
+    TransmissionColumns,
+    frame_outcome_columns,
+    outcome_of_rank,
+    transmission_columns,
 )
 from testbed.report.figures import no_data, note, save
 
@@ -50,11 +57,12 @@ _DROP_COLOUR = "tab:red"
 _NODE_ORDER = ("operator", "vehicle")
 
 
-def _row_title(src: str, dsts: set[str], outcomes: list[FrameOutcome]) -> str:
+def _row_title(src: str, dsts: set[str], outcomes: Mapping[FrameOutcome, int]) -> str:
     arrow = f"{src} → {', '.join(sorted(dsts)) or '?'}"
-    counts = {o: outcomes.count(o) for o in FrameOutcome if outcomes.count(o)}
+    counts = {o: outcomes.get(o, 0) for o in FrameOutcome if outcomes.get(o, 0)}
     tally = ", ".join(f"{n} {o.value.replace('_', ' ')}" for o, n in counts.items())
-    return f"{arrow}:  {len(outcomes)} frames in the run ({tally})" if outcomes else arrow
+    total = sum(counts.values())
+    return f"{arrow}:  {total} frames in the run ({tally})" if total else arrow
 
 
 def _draw_row(ax: Axes, sent: list[Transmission], dropped: list[LinkEvent]) -> set[FrameOutcome]:
@@ -104,7 +112,7 @@ def _legend_handle(outcome: FrameOutcome) -> Patch | Line2D:
 
 
 def timeline_window(
-    sent: Sequence[Transmission],
+    sent: Sequence[Transmission] | TransmissionColumns,
     *,
     window_s: float = TIMELINE_WINDOW_S,
     max_packets: int = TIMELINE_MAX_PACKETS,
@@ -115,20 +123,23 @@ def timeline_window(
     first transmission beyond ``max_packets``, and never past the last transmission's end.
 
     Args:
-        sent: the transmissions, in order of start time (:func:`transmissions`).
+        sent: the transmissions, in order of start time (:func:`transmissions`, or
+            :func:`~testbed.channel.trace.transmission_columns`).
         window_s: longest window [s].
         max_packets: most transmissions starting in the window.
 
     Returns:
         ``(t0, t1)`` [s]; ``(0.0, 0.0)`` when nothing was sent.
     """
-    if not sent:
+    if not len(sent):
         return 0.0, 0.0
-    t0 = sent[0].start_s
-    t1 = min(max(x.end_s for x in sent), t0 + window_s)
-    if len(sent) > max_packets:
-        t1 = min(t1, sent[max_packets].start_s)  # the first packet left out starts here
-    return t0, t1
+    if isinstance(sent, TransmissionColumns):
+        t0, t_end = float(sent.start_s[0]), float(sent.end_s.max())
+        cut = float(sent.start_s[max_packets]) if len(sent) > max_packets else math.inf
+    else:
+        t0, t_end = sent[0].start_s, max(x.end_s for x in sent)
+        cut = sent[max_packets].start_s if len(sent) > max_packets else math.inf
+    return t0, min(t_end, t0 + window_s, cut)  # cut: where the first packet left out starts
 
 
 def plot_timeline(
@@ -164,29 +175,32 @@ def plot_timeline(
         raise ValueError(f"window_s must be > 0, got {window_s}")
     if max_packets < 1:
         raise ValueError(f"max_packets must be ≥ 1, got {max_packets}")
-    events = list(events)
-    sent = transmissions(events)
-    outcomes = frame_outcomes(events)
-    drops = [e for e in events if e.kind is EventKind.DROP]
-    src_of = {e.frame_id: e.src for e in events}
-    dsts: dict[str, set[str]] = {}
-    for e in events:
-        dsts.setdefault(e.src, set())
-        if e.kind in RECEPTION_OUTCOMES:
-            dsts[e.src].add(e.dst)
+    trace = Trace.of(events)
+    sent = transmission_columns(trace)  # arrays: only the window's packets become objects
+    frames, ranks = frame_outcome_columns(trace)
+    columns = trace.columns()
+    names = columns.names
+    _, last = np.unique(columns.frame_id[::-1], return_index=True)  # by frame id
+    src_of = columns.src[::-1][last]  # each frame's sender (its last event's src)
+    rank_of = ranks[np.argsort(frames, kind="stable")]  # each frame's outcome, by frame id
+    received = np.isin(columns.kind, [columns.code_of(k) for k in RECEPTION_OUTCOMES])
+    heard = np.unique(columns.src[received].astype(np.int64) << 32 | columns.dst[received])
+    dsts: dict[str, set[str]] = {names[c]: set() for c in np.unique(columns.src).tolist()}
+    for pair in heard.tolist():
+        dsts[names[pair >> 32]].add(names[pair & 0xFFFFFFFF])
     known = [n for n in _NODE_ORDER if n in dsts]  # operator's row first, then vehicle's
     rows = known + sorted(set(dsts) - set(known)) or list(_NODE_ORDER)
 
     fig = Figure(figsize=(12.0, 2.2 + 2.3 * len(rows)), layout="constrained")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
-    if not sent:
+    if not len(sent):
         fig.suptitle(f"{title}\nlink timeline")
         for ax in axes:
             no_data(ax, "no transmissions recorded")
         return save(fig, path)
 
     t0, t1 = timeline_window(sent, window_s=window_s, max_packets=max_packets)
-    t_last = max(x.end_s for x in sent)
+    t_last = float(sent.end_s.max())
     if t1 < t_last:
         span = f"first {t1 - t0:.3g} s of {t_last - t0:.3g} s of link activity, from t = {t0:.2f} s"
     else:
@@ -194,12 +208,17 @@ def plot_timeline(
     fig.suptitle(f"{title}\nlink timeline (PDUs per direction): {span}")
 
     drawn: set[FrameOutcome] = set()
+    drop = columns.kind == columns.code_of(EventKind.DROP)
+    in_window = drop & (columns.t_s >= t0) & (columns.t_s <= t1)
     for ax, src in zip(axes, rows, strict=True):
-        mine = [x for x in sent if x.src == src and x.end_s >= t0 and x.start_s <= t1]
-        lost = [e for e in drops if e.src == src and t0 <= e.t_s <= t1]
+        code = names.index(src) if src in names else -1
+        shown = (sent.src == code) & (sent.end_s >= t0) & (sent.start_s <= t1)
+        mine = sent.take(np.flatnonzero(shown))
+        lost = [trace.events[i] for i in np.flatnonzero(in_window & (columns.src == code)).tolist()]
         drawn |= _draw_row(ax, mine, lost)
-        row_outcomes = [o for f, o in sorted(outcomes.items()) if src_of.get(f) == src]
-        ax.set_title(_row_title(src, dsts.get(src, set()), row_outcomes), loc="left", fontsize=10)
+        tally = np.bincount(rank_of[src_of == code], minlength=len(FrameOutcome))
+        counts = {outcome_of_rank(r): n for r, n in enumerate(tally.tolist()) if n}
+        ax.set_title(_row_title(src, dsts.get(src, set()), counts), loc="left", fontsize=10)
     margin = 0.01 * max(t1 - t0, 1e-3)
     axes[-1].set_xlim(t0 - margin, t1 + margin)
     axes[-1].set_xlabel("simulated time [s]")
