@@ -29,6 +29,8 @@ __all__ = [
     "apply_overrides",
     "build",
     "check",
+    "check_range",
+    "check_ranges",
     "load_toml",
     "parse_override",
 ]
@@ -56,6 +58,65 @@ def check(condition: bool, key: str, message: str) -> None:
     """Raise :class:`FieldError` for ``key`` with ``message`` unless ``condition`` holds."""
     if not condition:
         raise FieldError(key, message)
+
+
+def _bound(value: float) -> str:
+    return f"{value:g}"
+
+
+def check_range(
+    value: float,
+    key: str,
+    low: float,
+    high: float,
+    unit: str = "",
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    allow_inf: bool = False,
+) -> None:
+    """Field check: ``value`` is a finite number in the interval from ``low`` to ``high``.
+
+    The interval is closed unless ``low_open`` / ``high_open``; ``high = math.inf`` leaves it
+    unbounded above (the value must still be finite). With ``allow_inf``, ``+inf`` is accepted
+    too (fields where it means "no limit"). NaN is always rejected. The message is one line,
+    e.g. ``must be in [12, 20] V, got 25``.
+
+    Raises:
+        FieldError: for ``key``.
+    """
+    if allow_inf and value == math.inf:
+        return
+    ok = (
+        math.isfinite(value)
+        and (low < value if low_open else low <= value)
+        and (value < high if high_open else value <= high)
+    )
+    if ok:
+        return
+    suffix = f" {unit}" if unit else ""
+    if math.isinf(high):
+        finite = "" if allow_inf else " and finite"
+        interval = f"{'>' if low_open else '≥'} {_bound(low)}{suffix}{finite}"
+    else:
+        left = "(" if low_open else "["
+        right = ")" if high_open else "]"
+        interval = f"in {left}{_bound(low)}, {_bound(high)}{right}{suffix}"
+    extra = " (or inf)" if allow_inf and not math.isinf(high) else ""
+    raise FieldError(key, f"must be {interval}{extra}, got {value}")
+
+
+def check_ranges(
+    values: Iterable[float],
+    key: str,
+    low: float,
+    high: float,
+    unit: str = "",
+    **options: bool,
+) -> None:
+    """:func:`check_range` on each element of a tuple field (keys ``key[0]``, ``key[1]``, …)."""
+    for i, value in enumerate(values):
+        check_range(value, f"{key}[{i}]", low, high, unit, **options)
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
@@ -141,8 +202,7 @@ def build(
 def _build_dataclass(cls: type[Any], data: Any, source: str, prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: {prefix.rstrip('.') or '<root>'}: expected a table")
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    hints = typing.get_type_hints(cls)
+    fields, hints = _schema(cls)
     unknown = sorted(set(data) - set(fields))
     if unknown:
         known = ", ".join(sorted(fields))
@@ -160,6 +220,20 @@ def _build_dataclass(cls: type[Any], data: Any, source: str, prefix: str) -> Any
         return cls(**kwargs)
     except FieldError as err:
         raise ConfigError(f"{source}: {prefix}{err.key}: {err.message}") from None
+
+
+_Schema = tuple[dict[str, "dataclasses.Field[Any]"], dict[str, Any]]
+_SCHEMAS: dict[type[Any], _Schema] = {}
+
+
+def _schema(cls: type[Any]) -> _Schema:
+    """The init fields of dataclass ``cls`` by name and its resolved type hints (cached:
+    resolving the string annotations dominates the cost of a build)."""
+    schema = _SCHEMAS.get(cls)
+    if schema is None:
+        fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+        schema = _SCHEMAS[cls] = (fields, typing.get_type_hints(cls))
+    return schema
 
 
 def _convert(tp: Any, value: Any, source: str, key: str) -> Any:

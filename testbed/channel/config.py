@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from typing import Literal
 
-from testbed.config import ConfigError, apply_overrides, build, check, load_toml
+from testbed.config import ConfigError, apply_overrides, build, check, check_range, load_toml
 
 __all__ = [
     "GilbertElliott",
@@ -36,8 +36,20 @@ _PRESET_PACKAGE = "testbed.channel"
 _PRESET_DIR = "presets"
 
 
+MAX_DELAY_S = 60.0
+"""Largest accepted fixed delay or gap [s] (intrinsic delay, fixed propagation, queue gap)."""
+BITRATE_RANGE_BPS = (1.0, 1.0e10)
+"""Accepted bitrates [bit/s]: 1 bit/s to 10 Gbit/s."""
+SPEED_RANGE_MPS = (1.0, 1.0e9)
+"""Accepted signal speeds [m/s]: acoustic (≈ 1500) to RF (≈ 3e8)."""
+MAX_BUFFER_BYTES = 1_000_000_000
+"""Largest accepted transmit FIFO [B]."""
+MAX_PACKET_BYTES = 65535
+"""Largest accepted fixed packet size [B]."""
+
+
 def _probability(value: float, key: str) -> None:
-    check(0.0 <= value <= 1.0, key, f"must be in [0, 1], got {value}")
+    check_range(value, key, 0.0, 1.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,20 +57,16 @@ class Propagation:
     """Propagation delay ``fixed_s + distance_m / speed_mps`` (dccomms_ros minPropTime + inc·d).
 
     Attributes:
-        fixed_s: distance-independent part [s], ≥ 0.
-        speed_mps: signal speed [m/s], > 0: ≈ 3e8 for RF, ≈ 1500 for acoustic links.
+        fixed_s: distance-independent part [s], in [0, 60].
+        speed_mps: signal speed [m/s], in [1, 1e9]: ≈ 3e8 for RF, ≈ 1500 for acoustic links.
     """
 
     fixed_s: float = 0.0
     speed_mps: float = 3.0e8
 
     def __post_init__(self) -> None:
-        check(
-            self.fixed_s >= 0.0 and math.isfinite(self.fixed_s),
-            "fixed_s",
-            f"must be ≥ 0, got {self.fixed_s}",
-        )
-        check(self.speed_mps > 0.0, "speed_mps", f"must be > 0, got {self.speed_mps}")
+        check_range(self.fixed_s, "fixed_s", 0.0, MAX_DELAY_S, "s")
+        check_range(self.speed_mps, "speed_mps", *SPEED_RANGE_MPS, "m/s")
 
     def delay_s(self, distance_m: float) -> float:
         """Propagation delay [s] over ``distance_m`` [m]."""
@@ -119,21 +127,27 @@ class LinkConfig:
     chain), so the independent part alone gives a per-bit flip probability of
     1 − (1 − ber)(1 − min(1, ber_per_m · d)).
 
+    Every number is checked against its domain at construction (docs/channel.md lists them).
+
     Attributes:
-        bitrate_bps: bitrate on the air [bit/s], > 0; airtime of L bytes is 8·L / bitrate.
-        intrinsic_delay_s: modem latency before the first bit [s]; the device counts as
-            transmitting during it (dccomms_ros intrinsicDelay).
+        bitrate_bps: bitrate on the air [bit/s], in [1, 1e10]; airtime of L bytes is
+            8·L / bitrate.
+        intrinsic_delay_s: modem latency before the first bit [s], in [0, 60]; the device
+            counts as transmitting during it (dccomms_ros intrinsicDelay).
         propagation: propagation delay model.
         duplex: ``"half"`` (one channel: a node cannot receive while transmitting and defers its
             queue while receiving) or ``"full"`` (transmit and receive independent).
-        tx_buffer_bytes: transmit FIFO capacity [B]; a frame that would overflow it is dropped.
-        queue_gap_s: idle gap between consecutive transmissions from the FIFO [s] (dccomms 100 µs).
-        packet_bytes: 0 to send frames whole; > 0 to cut each frame into packets of this many
-            bytes (the last zero-padded), each a separate transmission with its own delay.
-        max_range_m: beyond this distance [m] nothing is received (nor interferes).
+        tx_buffer_bytes: transmit FIFO capacity [B], in [1, 1e9]; a frame that would overflow
+            it is dropped.
+        queue_gap_s: idle gap between consecutive transmissions from the FIFO [s], in [0, 60]
+            (dccomms 100 µs).
+        packet_bytes: 0 to send frames whole; 1..65535 to cut each frame into packets of this
+            many bytes (the last zero-padded), each a separate transmission with its own delay.
+        max_range_m: beyond this distance [m] nothing is received (nor interferes); > 0,
+            ``inf`` = unlimited.
         ber: independent bit error probability, in [0, 1].
         ber_per_m: range-dependent bit error probability per metre [1/m] (dccomms ``k*m``),
-            capped at 1.
+            in [0, 1]; the product with the distance is capped at 1.
         burst: Gilbert–Elliott burst error model.
         name: preset name, for reports.
     """
@@ -152,32 +166,24 @@ class LinkConfig:
     name: str = "custom"
 
     def __post_init__(self) -> None:
+        check_range(self.bitrate_bps, "bitrate_bps", *BITRATE_RANGE_BPS, "bit/s")
+        check_range(self.intrinsic_delay_s, "intrinsic_delay_s", 0.0, MAX_DELAY_S, "s")
         check(
-            self.bitrate_bps > 0.0 and math.isfinite(self.bitrate_bps),
-            "bitrate_bps",
-            f"must be > 0 and finite, got {self.bitrate_bps}",
+            1 <= self.tx_buffer_bytes <= MAX_BUFFER_BYTES,
+            "tx_buffer_bytes",
+            f"must be in [1, {MAX_BUFFER_BYTES}] B, got {self.tx_buffer_bytes}",
         )
+        check_range(self.queue_gap_s, "queue_gap_s", 0.0, MAX_DELAY_S, "s")
         check(
-            self.intrinsic_delay_s >= 0.0 and math.isfinite(self.intrinsic_delay_s),
-            "intrinsic_delay_s",
-            f"must be ≥ 0, got {self.intrinsic_delay_s}",
+            0 <= self.packet_bytes <= MAX_PACKET_BYTES,
+            "packet_bytes",
+            f"must be in [0, {MAX_PACKET_BYTES}] B, got {self.packet_bytes}",
         )
-        check(
-            self.tx_buffer_bytes >= 1, "tx_buffer_bytes", f"must be ≥ 1, got {self.tx_buffer_bytes}"
+        check_range(
+            self.max_range_m, "max_range_m", 0.0, math.inf, "m", low_open=True, allow_inf=True
         )
-        check(
-            self.queue_gap_s >= 0.0 and math.isfinite(self.queue_gap_s),
-            "queue_gap_s",
-            f"must be ≥ 0, got {self.queue_gap_s}",
-        )
-        check(self.packet_bytes >= 0, "packet_bytes", f"must be ≥ 0, got {self.packet_bytes}")
-        check(self.max_range_m > 0.0, "max_range_m", f"must be > 0, got {self.max_range_m}")
         _probability(self.ber, "ber")
-        check(
-            self.ber_per_m >= 0.0 and math.isfinite(self.ber_per_m),
-            "ber_per_m",
-            f"must be ≥ 0, got {self.ber_per_m}",
-        )
+        check_range(self.ber_per_m, "ber_per_m", 0.0, 1.0, "1/m")
 
     def airtime_s(self, n_bytes: int) -> float:
         """Time on the air of ``n_bytes`` [s], 8·n / bitrate (one packet or whole frame)."""

@@ -104,7 +104,8 @@ class ImagesSection:
         roi: region of interest [x0, y0, x1, y1] (inclusive pixels) or () for none.
         roi_shift: bit planes the region is raised by (Maxshift), 0..15.
         changes: settings the operator sends later, in time order.
-        strip_images: images shown in the run's ``images.png`` strip (captured over received).
+        strip_images: images shown in the run's ``images.png`` strip (captured over received),
+            0..100.
     """
 
     enabled: bool = False
@@ -128,7 +129,11 @@ class ImagesSection:
         )
         _check_roi(self.roi)
         check(0 <= self.roi_shift <= 15, "roi_shift", f"must be 0..15, got {self.roi_shift}")
-        check(self.strip_images >= 0, "strip_images", f"must be ≥ 0, got {self.strip_images}")
+        check(
+            0 <= self.strip_images <= 100,
+            "strip_images",
+            f"must be 0..100, got {self.strip_images}",
+        )
         for i, change in enumerate(self.changes):
             if change.budget_bytes is not None:
                 check(

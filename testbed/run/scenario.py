@@ -44,11 +44,13 @@ from testbed.config import (
     apply_overrides,
     build,
     check,
+    check_range,
     load_toml,
     parse_override,
 )
 from testbed.run.images import ImagesSection
 from testbed.run.sections import (
+    MAX_DURATION_S,
     FaultsSection,
     LinkOutage,
     LinkSection,
@@ -57,13 +59,15 @@ from testbed.run.sections import (
     PilotSection,
     SineTerm,
     ThrusterFault,
-    check_positive,
 )
 from testbed.vehicle.hydrodynamics import known_models
 from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
 from testbed.vehicle.vehicle import VehicleConfig
 
 __all__ = [
+    "MAX_DURATION_S",
+    "MAX_PHYSICS_STEPS",
+    "MAX_SERIES_ROWS",
     "SCHEMA_VERSION",
     "FaultsSection",
     "LinkOutage",
@@ -81,6 +85,14 @@ __all__ = [
 SCHEMA_VERSION = 1
 """The only scenario schema version this loader reads."""
 
+MAX_PHYSICS_STEPS = 100_000_000
+"""Most physics steps a run may take (``duration_s / vehicle.physics_dt_s``): ≈ 1.3 h of wall
+time at the ≈ 45 µs a step (with its share of the frames) costs on s100-teleop-v1. The
+default step (1/240 s) allows the whole :data:`MAX_DURATION_S`."""
+MAX_SERIES_ROWS = 10_000_000
+"""Most series rows a run may record (``duration_s × min(metrics.sample_rate_hz,
+vehicle.control_rate_hz)``, a row at most once a frame): ≈ 2.6 GB at 32 columns × 8 B."""
+
 _ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
 _PACKAGE = "testbed"
 _SCENARIO_DIR = "scenarios"
@@ -94,7 +106,9 @@ class Scenario:
         id: versioned id, ``^[a-z0-9-]+-v[0-9]+$`` (``s100-teleop-v1``).
         description: one line for listings and reports.
         schema: scenario schema version; only :data:`SCHEMA_VERSION` is accepted.
-        duration_s: simulated time [s], > 0.
+        duration_s: simulated time [s], in (0, :data:`MAX_DURATION_S`] (one day), with at
+            most :data:`MAX_PHYSICS_STEPS` physics steps and :data:`MAX_SERIES_ROWS` series
+            rows.
         seed: default seed, ≥ 0.
         link, vehicle, operator, pilot, faults, metrics, images: the sections.
         source: where it was loaded from (a path or ``package:<id>``), for messages; not a
@@ -126,8 +140,9 @@ class Scenario:
             "schema",
             f"unsupported schema version {self.schema} (supported: {SCHEMA_VERSION})",
         )
-        check_positive(self.duration_s, "duration_s")
+        check_range(self.duration_s, "duration_s", 0.0, MAX_DURATION_S, "s", low_open=True)
         check(self.seed >= 0, "seed", f"must be ≥ 0, got {self.seed}")
+        self._check_budget()
         end = self.duration_s
         for i, fault in enumerate(self.faults.thrusters):
             check(fault.t_s < end, f"faults.thrusters[{i}].t_s", f"must be < duration_s ({end})")
@@ -148,6 +163,25 @@ class Scenario:
             self.pilot.kind != "attitude" or self.operator.mode != "manual",
             "operator.mode",
             "the attitude pilot needs 'stabilize' or 'depth_hold', got 'manual'",
+        )
+
+    def _check_budget(self) -> None:
+        """The run's size is bounded, so every accepted scenario finishes."""
+        vehicle = self.vehicle
+        steps = self.duration_s / vehicle.physics_dt_s
+        check(
+            steps <= MAX_PHYSICS_STEPS,
+            "duration_s",
+            f"{self.duration_s:g} s at vehicle.physics_dt_s = {vehicle.physics_dt_s:g} s is "
+            f"{steps:.3g} physics steps, more than the {MAX_PHYSICS_STEPS:.0e} allowed",
+        )
+        rate = min(self.metrics.sample_rate_hz, vehicle.control_rate_hz)
+        rows = self.duration_s * rate
+        check(
+            rows <= MAX_SERIES_ROWS,
+            "metrics.sample_rate_hz",
+            f"{rate:g} Hz over duration_s = {self.duration_s:g} s is {rows:.3g} series rows, "
+            f"more than the {MAX_SERIES_ROWS:.0e} allowed",
         )
 
     def _check_images(self) -> None:

@@ -21,10 +21,11 @@ from testbed.channel import (
     IpgPolicy,
     LinkConfig,
 )
-from testbed.config import check
+from testbed.config import check, check_range, check_ranges
 from testbed.operator.pilots import AttitudePilot, Pilot, ScriptedPilot, SineTerm
 
 __all__ = [
+    "MAX_DURATION_S",
     "FaultsSection",
     "LinkOutage",
     "LinkSection",
@@ -36,6 +37,8 @@ __all__ = [
     "check_finite",
     "check_non_negative",
     "check_positive",
+    "check_rate",
+    "check_time",
 ]
 
 _IPG_CONSTANTS: dict[str, IpgPolicy] = {
@@ -43,6 +46,35 @@ _IPG_CONSTANTS: dict[str, IpgPolicy] = {
     "telerobotics-2019": TELEROBOTICS_2019,
     "telerobotics-2021": TELEROBOTICS_2021,
 }
+
+
+MAX_DURATION_S = 86400.0
+"""Longest accepted scenario [s] (one simulated day) and so the bound of every time in one:
+s100-teleop-v1 runs at ≈ 90× real time, so a day takes ≈ 16 min of wall time and its 20 Hz
+series holds 1.7 M rows (≈ 0.45 GB)."""
+RATE_RANGE_HZ = (1e-3, 1000.0)
+"""Accepted send, setpoint and recording rates [Hz]: at most one event a millisecond, at least
+one every ≈ 17 min."""
+MAX_OPERATOR_DISTANCE_M = 10000.0
+"""Largest accepted ``|coordinate|`` [m] of the operator's modem."""
+MAX_GAP_S = 60.0
+"""Largest accepted fixed inter-packet gap [s]."""
+PERIOD_RANGE_S = (0.01, 1.0e6)
+"""Accepted periods [s] of pilot sine terms and attitude setpoints."""
+MAX_DEPTH_M = 1000.0
+"""Deepest accepted depth setpoint [m]."""
+MAX_STUCK_FORCE_N = 100.0
+"""Largest accepted ``|value|`` of a stuck thruster [N]: above the T200's 65.9 N at 20 V."""
+
+
+def check_time(value: float, key: str) -> None:
+    """Field check: ``value`` is a time in a run, in [0, :data:`MAX_DURATION_S`] s."""
+    check_range(value, key, 0.0, MAX_DURATION_S, "s")
+
+
+def check_rate(value: float, key: str) -> None:
+    """Field check: ``value`` is a rate in :data:`RATE_RANGE_HZ`."""
+    check_range(value, key, *RATE_RANGE_HZ, "Hz")
 
 
 def check_finite(value: float, key: str) -> None:
@@ -75,15 +107,15 @@ class LinkSection:
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
             (each node sends at its own rate).
         ipg: the token master's inter-packet-gap policy.
-        ipg_s: the gap [s] when ``ipg == "fixed"``, > 0.
+        ipg_s: the gap [s] when ``ipg == "fixed"``, in (0, 60].
         uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or
-            ``codec == "changeset"``.
-        downlink_rate_hz: vehicle send rate [Hz], same condition.
+            ``codec == "changeset"``, in [1e-3, 1000].
+        downlink_rate_hz: vehicle send rate [Hz], same condition and domain.
         snapshot_period_s: change-set codec: every this many seconds a node sends its full
             owned state instead of the changes alone, so a peer that lost a payload resyncs
-            [s]; 0 = never.
-        operator_position_ned_m: (3,) the operator's modem [m], world NED; the vehicle's modem
-            moves with the vehicle.
+            [s], in [0, 86400]; 0 = never.
+        operator_position_ned_m: (3,) the operator's modem [m], world NED, each in
+            [−1e4, 1e4]; the vehicle's modem moves with the vehicle.
     """
 
     preset: str = "s100"
@@ -100,16 +132,12 @@ class LinkSection:
     operator_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        check_positive(self.ipg_s, "ipg_s")
-        check(
-            self.snapshot_period_s >= 0.0 and math.isfinite(self.snapshot_period_s),
-            "snapshot_period_s",
-            f"must be a finite number ≥ 0, got {self.snapshot_period_s}",
-        )
-        check_positive(self.uplink_rate_hz, "uplink_rate_hz")
-        check_positive(self.downlink_rate_hz, "downlink_rate_hz")
-        for i, value in enumerate(self.operator_position_ned_m):
-            check_finite(value, f"operator_position_ned_m[{i}]")
+        check_range(self.ipg_s, "ipg_s", 0.0, MAX_GAP_S, "s", low_open=True)
+        check_time(self.snapshot_period_s, "snapshot_period_s")
+        check_rate(self.uplink_rate_hz, "uplink_rate_hz")
+        check_rate(self.downlink_rate_hz, "downlink_rate_hz")
+        limit = MAX_OPERATOR_DISTANCE_M
+        check_ranges(self.operator_position_ned_m, "operator_position_ned_m", -limit, limit, "m")
 
     @property
     def ipg_policy(self) -> IpgPolicy:
@@ -130,9 +158,9 @@ class OperatorSection:
 
     Attributes:
         mode: control mode requested at start.
-        arm_at_s: when the operator requests arming [s], ≥ 0.
-        depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only);
-            None = hold the depth at arming.
+        arm_at_s: when the operator requests arming [s], in [0, duration_s).
+        depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only), in
+            [0, 1000]; None = hold the depth at arming.
         precision: precision (fine) stick mode.
     """
 
@@ -142,9 +170,9 @@ class OperatorSection:
     precision: bool = False
 
     def __post_init__(self) -> None:
-        check_non_negative(self.arm_at_s, "arm_at_s")
+        check_time(self.arm_at_s, "arm_at_s")
         if self.depth_m is not None:
-            check_non_negative(self.depth_m, "depth_m")
+            check_range(self.depth_m, "depth_m", 0.0, MAX_DEPTH_M, "m")
             check(
                 self.mode == "depth_hold",
                 "depth_m",
@@ -170,12 +198,13 @@ class PilotSection:
 
     Attributes:
         kind: ``"scripted"`` or ``"attitude"``.
-        start_s: when the pilot starts [s], ≥ 0.
-        x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms.
+        start_s: when the pilot starts [s], in [0, duration_s).
+        x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms (amplitude in [−1, 1],
+            period in [0.01, 1e6] s, phase in [−2π, 2π] rad).
         roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| ≤ 89.9.
         yaw_amplitude_deg: yaw setpoint amplitude [deg], |A| ≤ 180.
-        roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], > 0.
-        setpoint_rate_hz: how often the operator updates the setpoint [Hz], > 0.
+        roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], in [0.01, 1e6].
+        setpoint_rate_hz: how often the operator updates the setpoint [Hz], in [1e-3, 1000].
     """
 
     kind: Literal["scripted", "attitude"] = "scripted"
@@ -193,12 +222,17 @@ class PilotSection:
     setpoint_rate_hz: float = 10.0
 
     def __post_init__(self) -> None:
-        check_non_negative(self.start_s, "start_s")
+        check_time(self.start_s, "start_s")
+        for axis in _STICK_AXES:
+            for i, term in enumerate(getattr(self, axis)):
+                check_range(term.period_s, f"{axis}[{i}].period_s", *PERIOD_RANGE_S, "s")
+                bound = 2.0 * math.pi
+                check_range(term.phase_rad, f"{axis}[{i}].phase_rad", -bound, bound, "rad")
         for name, limit in zip(_ATTITUDE_AMPLITUDES, (89.9, 89.9, 180.0), strict=True):
-            value = getattr(self, name)
-            check(abs(value) <= limit, name, f"must be in [-{limit:g}, {limit:g}], got {value}")
-        for name in ("roll_period_s", "pitch_period_s", "yaw_period_s", "setpoint_rate_hz"):
-            check_positive(getattr(self, name), name)
+            check_range(getattr(self, name), name, -limit, limit, "deg")
+        for name in ("roll_period_s", "pitch_period_s", "yaw_period_s"):
+            check_range(getattr(self, name), name, *PERIOD_RANGE_S, "s")
+        check_rate(self.setpoint_rate_hz, "setpoint_rate_hz")
         used_by, unused = (
             ("attitude", _ATTITUDE_AMPLITUDES)
             if self.kind == "scripted"
@@ -231,7 +265,8 @@ class ThrusterFault:
         thruster: a thruster name of the scenario's layout.
         mode: ``"dead"`` (no force), ``"stuck"`` (holds ``value`` [N]) or ``"degraded"``
             (force scaled by ``value`` in [0, 1]).
-        value: the stuck force [N] or degraded factor; must stay 0 for ``"dead"``.
+        value: the stuck force [N], in [−100, 100], or degraded factor; must stay 0 for
+            ``"dead"``.
     """
 
     t_s: float
@@ -240,9 +275,10 @@ class ThrusterFault:
     value: float = 0.0
 
     def __post_init__(self) -> None:
-        check_non_negative(self.t_s, "t_s")
+        check_time(self.t_s, "t_s")
         check(bool(self.thruster), "thruster", "must not be empty")
-        check_finite(self.value, "value")
+        limit = MAX_STUCK_FORCE_N
+        check_range(self.value, "value", -limit, limit)
         if self.mode == "dead":
             check(self.value == 0.0, "value", "not used when mode = 'dead' (leave it out)")
         if self.mode == "degraded":
@@ -262,9 +298,10 @@ class LinkOutage:
     end_s: float
 
     def __post_init__(self) -> None:
-        check_non_negative(self.start_s, "start_s")
+        check_time(self.start_s, "start_s")
+        check_time(self.end_s, "end_s")
         check(
-            self.end_s > self.start_s and math.isfinite(self.end_s),
+            self.end_s > self.start_s,
             "end_s",
             f"must be > start_s ({self.start_s}), got {self.end_s}",
         )
@@ -297,13 +334,15 @@ class MetricsSection:
     """What the recorder samples and the metrics leave out.
 
     Attributes:
-        settle_s: samples before this time [s] are left out of error statistics.
-        sample_rate_hz: time-series recording rate [Hz] for plots and tracking metrics.
+        settle_s: samples before this time [s] are left out of error statistics; in
+            [0, duration_s).
+        sample_rate_hz: time-series recording rate [Hz] for plots and tracking metrics, in
+            [1e-3, 1000] (a row at most once a control frame).
     """
 
     settle_s: float = 10.0
     sample_rate_hz: float = 20.0
 
     def __post_init__(self) -> None:
-        check_non_negative(self.settle_s, "settle_s")
-        check_positive(self.sample_rate_hz, "sample_rate_hz")
+        check_time(self.settle_s, "settle_s")
+        check_rate(self.sample_rate_hz, "sample_rate_hz")

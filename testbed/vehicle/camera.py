@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common.geometry import quat_rotate
-from testbed.config import check
+from testbed.config import check, check_range, check_ranges
 
 __all__ = [
     "CameraConfig",
@@ -62,17 +62,19 @@ class CameraConfig:
         width_px: image width [px], 8–1024 (the image-settings ROI addresses 10 bits).
         height_px: image height [px], 8–1024.
         vertical_fov_deg: vertical field of view [deg], in (0, 180).
-        max_rate_hz: highest capture rate [Hz]; captures closer than ``1/max_rate_hz`` apart
-            are refused (:meth:`testbed.vehicle.vehicle.Vehicle.capture_image` returns None).
-        mount_position_m: (3,) optical centre in the body [m], FRD, from CO.
+        max_rate_hz: highest capture rate [Hz], in [1e-3, 1000]; captures closer than
+            ``1/max_rate_hz`` apart are refused
+            (:meth:`testbed.vehicle.vehicle.Vehicle.capture_image` returns None).
+        mount_position_m: (3,) optical centre in the body [m], FRD, from CO; each in [−10, 10].
         mount_pitch_deg: tilt of the optical axis below the body's forward axis [deg]
             (0 = looking straight ahead, positive = down), in [−90, 90].
-        near_m: near clipping plane [m], > 0.
-        far_m: far clipping plane [m], > near.
-        attenuation_per_m: water's attenuation coefficient c [1/m], ≥ 0 (0 = clear air).
+        near_m: near clipping plane [m], in [1e-3, 10].
+        far_m: far clipping plane [m], > near, ≤ 1000.
+        attenuation_per_m: water's attenuation coefficient c [1/m], in [0, 100] (0 = clear
+            air).
         water_grey: grey level of water seen at infinite range, 0–255.
         noise_std_grey: standard deviation of additive Gaussian sensor noise [grey levels],
-            ≥ 0; drawn from the generator given to the capture (0 = none).
+            in [0, 255]; drawn from the generator given to the capture (0 = none).
         supersampling: k, 1–4: each pixel averages k × k rendered samples (the renderer
             samples textures at nearest texels; k = 1 aliases fine tile joints into moiré).
     """
@@ -97,26 +99,19 @@ class CameraConfig:
             check(8 <= value <= 1024, key, f"must be in [8, 1024] px, got {value}")
         fov = self.vertical_fov_deg
         check(0.0 < fov < 180.0, "vertical_fov_deg", f"must be in (0, 180), got {fov}")
-        check(self.max_rate_hz > 0.0, "max_rate_hz", f"must be > 0, got {self.max_rate_hz}")
+        check_range(self.max_rate_hz, "max_rate_hz", 1e-3, 1000.0, "Hz")
+        check_ranges(self.mount_position_m, "mount_position_m", -10.0, 10.0, "m")
+        check_range(self.mount_pitch_deg, "mount_pitch_deg", -90.0, 90.0, "deg")
+        check_range(self.near_m, "near_m", 1e-3, 10.0, "m")
+        check_range(self.far_m, "far_m", 0.0, 1000.0, "m", low_open=True)
         check(
-            all(math.isfinite(c) for c in self.mount_position_m),
-            "mount_position_m",
-            f"must be finite, got {self.mount_position_m}",
-        )
-        pitch = self.mount_pitch_deg
-        check(-90.0 <= pitch <= 90.0, "mount_pitch_deg", f"must be in [-90, 90], got {pitch}")
-        check(self.near_m > 0.0, "near_m", f"must be > 0, got {self.near_m}")
-        check(
-            math.isfinite(self.far_m) and self.far_m > self.near_m,
+            self.far_m > self.near_m,
             "far_m",
-            f"must be finite and > near_m ({self.near_m}), got {self.far_m}",
+            f"must be > near_m ({self.near_m}), got {self.far_m}",
         )
-        c = self.attenuation_per_m
-        check(math.isfinite(c) and c >= 0.0, "attenuation_per_m", f"must be >= 0, got {c}")
-        grey = self.water_grey
-        check(0.0 <= grey <= 255.0, "water_grey", f"must be in [0, 255], got {grey}")
-        noise = self.noise_std_grey
-        check(math.isfinite(noise) and noise >= 0, "noise_std_grey", f"must be >= 0, got {noise}")
+        check_range(self.attenuation_per_m, "attenuation_per_m", 0.0, 100.0, "1/m")
+        check_range(self.water_grey, "water_grey", 0.0, 255.0)
+        check_range(self.noise_std_grey, "noise_std_grey", 0.0, 255.0)
         k = self.supersampling
         check(1 <= k <= 4, "supersampling", f"must be in [1, 4], got {k}")
 

@@ -34,7 +34,7 @@ from testbed.common.geometry import (
     quat_rotate_inverse,
     yaw_only,
 )
-from testbed.config import check
+from testbed.config import check, check_range, check_ranges
 
 __all__ = [
     "PID",
@@ -56,20 +56,32 @@ _DEG_PER_RAD = 180.0 / math.pi
 # PID
 
 
+MAX_PID_GAIN = 1e6
+"""Largest accepted kp, ki, kd (loop units): ≥ 10⁴× the packaged gains, far past any stable
+loop, small enough that gain × error stays finite."""
+MAX_PID_LIMIT = 1e9
+"""Largest finite accepted ``max_integral``, ``max_output``, ``i_zone``; beyond it use ``inf``."""
+
+
 @dataclass(frozen=True, slots=True)
 class PidGains:
     """Gains and limits of one PID loop (units follow the loop: error unit → output unit).
 
+    Domains (checked at construction): the gains are finite, in [0, 1e6]; ``max_integral``,
+    ``max_output`` and ``i_zone`` in (0, 1e9] or ``inf``; ``derivative_tau_s`` in [0, 10] s;
+    ``tracking_time_s`` in [1e-3, 100] s.
+
     Attributes:
-        kp, ki, kd: proportional, integral [1/s] and derivative [s] gains.
-        max_integral: clamp on the integral state (error·s), as mate-rov's ``maxI``.
+        kp, ki, kd: proportional, integral [1/s] and derivative [s] gains, ≥ 0.
+        max_integral: clamp on the integral state (error·s), as mate-rov's ``maxI``
+            (``inf`` = none).
         max_output: clamp on the output (``inf`` = none).
         i_zone: the integral is cleared while ``|error| >= i_zone`` (``inf`` = never).
         derivative_tau_s: time constant of the first-order low-pass on the derivative (0 = none).
         anti_windup: ``"clamp"`` (integral clamp only), ``"conditional"`` (stop integrating
             while the output saturates in the direction of the error) or
             ``"back_calculation"`` (bleed the integral by the saturation excess).
-        tracking_time_s: back-calculation tracking time constant.
+        tracking_time_s: back-calculation tracking time constant [s].
     """
 
     kp: float = 0.0
@@ -83,11 +95,14 @@ class PidGains:
     tracking_time_s: float = 0.1
 
     def __post_init__(self) -> None:
+        for name in ("kp", "ki", "kd"):
+            check_range(getattr(self, name), name, 0.0, MAX_PID_GAIN)
         for name in ("max_integral", "max_output", "i_zone"):
-            value = getattr(self, name)
-            check(value > 0, name, f"must be > 0, got {value}")
-        check(self.derivative_tau_s >= 0, "derivative_tau_s", "must be >= 0")
-        check(self.tracking_time_s > 0, "tracking_time_s", "must be > 0")
+            check_range(
+                getattr(self, name), name, 0.0, MAX_PID_LIMIT, low_open=True, allow_inf=True
+            )
+        check_range(self.derivative_tau_s, "derivative_tau_s", 0.0, 10.0, "s")
+        check_range(self.tracking_time_s, "tracking_time_s", 1e-3, 100.0, "s")
 
 
 class PID:
@@ -294,11 +309,26 @@ class DepthController:
 # Pilot interface
 
 
+MAX_PILOT_GAIN = 10.0
+"""Largest accepted stick scale and per-axis pilot gain (dimensionless: a fraction of the
+allocator's axis maximum; above 1 the stick saturates the axis early)."""
+_PILOT_AXIS_GAINS = (
+    "translation",
+    "depth_hold_translation",
+    "depth_hold_translation_precision",
+    "torque",
+    "attitude_hold_torque",
+)
+
+
 @dataclass(frozen=True, slots=True)
 class PilotGains:
     """Stick shaping and per-axis gains (mate-rov pilot interface, REFERENCE §3.6).
 
     Axis order everywhere: surge, sway, heave, roll, pitch, yaw.
+
+    Domains: scales and per-axis gains in [0, 10]; ``dead_zone`` in [0, 1);
+    ``depth_trim_m_s`` in [0, 5] m/s; attitude trim rates in [0, 10] rad/s.
 
     Attributes:
         normal_scale, precision_scale: ``s`` in ``u = sign(x)|x|³·s``.
@@ -334,9 +364,14 @@ class PilotGains:
     )
 
     def __post_init__(self) -> None:
-        check(0.0 <= self.dead_zone < 1.0, "dead_zone", "must be in [0, 1)")
-        check(self.normal_scale >= 0, "normal_scale", "must be >= 0")
-        check(self.precision_scale >= 0, "precision_scale", "must be >= 0")
+        check_range(self.dead_zone, "dead_zone", 0.0, 1.0, high_open=True)
+        check_range(self.normal_scale, "normal_scale", 0.0, MAX_PILOT_GAIN)
+        check_range(self.precision_scale, "precision_scale", 0.0, MAX_PILOT_GAIN)
+        for name in _PILOT_AXIS_GAINS:
+            check_ranges(getattr(self, name), name, 0.0, MAX_PILOT_GAIN)
+        check_ranges(self.depth_trim_m_s, "depth_trim_m_s", 0.0, 5.0, "m/s")
+        for name in ("attitude_trim_rad_s", "attitude_trim_precision_rad_s"):
+            check_ranges(getattr(self, name), name, 0.0, 10.0, "rad/s")
 
 
 def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
@@ -396,9 +431,16 @@ def pilot_wrench(
 # Failsafe
 
 
+MAX_FAILSAFE_AGE_S = 86400.0
+"""Largest accepted failsafe command age [s]: one day, the longest scenario."""
+
+
 @dataclass(frozen=True, slots=True)
 class FailsafeConfig:
     """Vehicle-side failsafe on stale operator commands.
+
+    Domains: both ages in (0, 86400] s (a day: longer than any run), surface after hold;
+    ``ascent_rate_m_s`` in (0, 10] m/s; ``surfaced_depth_m`` in [0, 10] m.
 
     Attributes:
         hold_after_s: command age at which the vehicle holds depth and heading (sticks zeroed).
@@ -414,14 +456,17 @@ class FailsafeConfig:
     surfaced_depth_m: float = 0.15
 
     def __post_init__(self) -> None:
-        check(self.hold_after_s > 0, "hold_after_s", f"must be > 0, got {self.hold_after_s}")
+        check_range(self.hold_after_s, "hold_after_s", 0.0, MAX_FAILSAFE_AGE_S, "s", low_open=True)
+        check_range(
+            self.surface_after_s, "surface_after_s", 0.0, MAX_FAILSAFE_AGE_S, "s", low_open=True
+        )
         check(
             self.surface_after_s > self.hold_after_s,
             "surface_after_s",
             f"must be > hold_after_s ({self.hold_after_s}), got {self.surface_after_s}",
         )
-        check(self.ascent_rate_m_s > 0, "ascent_rate_m_s", "must be > 0")
-        check(self.surfaced_depth_m >= 0, "surfaced_depth_m", "must be >= 0")
+        check_range(self.ascent_rate_m_s, "ascent_rate_m_s", 0.0, 10.0, "m/s", low_open=True)
+        check_range(self.surfaced_depth_m, "surfaced_depth_m", 0.0, 10.0, "m")
 
 
 def failsafe_level(command_age_s: float, config: FailsafeConfig) -> Literal[0, 1, 2]:

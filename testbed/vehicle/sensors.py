@@ -28,7 +28,7 @@ import numpy as np
 
 from testbed.common.components import DepthReading, ImuReading, PositionReading
 from testbed.common.geometry import Quaternion, quat_multiply
-from testbed.config import check
+from testbed.config import check_range
 
 __all__ = [
     "DepthReading",
@@ -47,6 +47,20 @@ __all__ = [
 STANDARD_GRAVITY_M_S2 = 9.80665
 SEA_LEVEL_PA = 101325.0
 ARDUSUB_PA_PER_M = 9800.0  # ArduSub's ρg for specific gravity 1
+
+SENSOR_RATE_RANGE_HZ = (0.01, 10000.0)
+"""Accepted sensor output rates [Hz]; the sensors are polled once per control frame, so a rate
+above the control rate gives a reading every frame."""
+WATER_DENSITY_RANGE_KG_M3 = (900.0, 1100.0)
+"""Accepted water densities [kg/m³]: fresh water (≈ 1000) to the densest sea water (≈ 1050)."""
+SPEC_GRAV_RANGE = (0.9, 1.1)
+"""Accepted firmware specific gravities (ArduSub's BARO_SPEC_GRAV: 1.0 fresh, 1.024 salt)."""
+SURFACE_PRESSURE_RANGE_PA = (5.0e4, 1.5e5)
+"""Accepted surface pressures [Pa]: a lake at ≈ 5 km altitude up to well above sea level."""
+
+
+def _check_rate(rate_hz: float) -> None:
+    check_range(rate_hz, "rate_hz", *SENSOR_RATE_RANGE_HZ, "Hz")
 
 
 def baro_pressure_pa(
@@ -121,6 +135,10 @@ class _Clock:
 class ImuConfig:
     """IMU/AHRS output model.
 
+    Domains: ``rate_hz`` in [0.01, 10000] Hz; ``attitude_noise_rad`` in [0, 1] rad;
+    ``heading_noise_rad`` in [0, π] rad; ``gyro_noise_rad_s`` in [0, 10] rad/s;
+    ``correlation_time_s`` in [0, 3600] s.
+
     Attributes:
         rate_hz: output rate [Hz].
         attitude_noise_rad: roll/pitch error [rad], 1σ.
@@ -136,10 +154,11 @@ class ImuConfig:
     correlation_time_s: float = 0.0
 
     def __post_init__(self) -> None:
-        check(self.rate_hz > 0, "rate_hz", f"must be > 0, got {self.rate_hz}")
-        for name in ("attitude_noise_rad", "heading_noise_rad", "gyro_noise_rad_s"):
-            check(getattr(self, name) >= 0, name, "must be >= 0")
-        check(self.correlation_time_s >= 0, "correlation_time_s", "must be >= 0")
+        _check_rate(self.rate_hz)
+        check_range(self.attitude_noise_rad, "attitude_noise_rad", 0.0, 1.0, "rad")
+        check_range(self.heading_noise_rad, "heading_noise_rad", 0.0, math.pi, "rad")
+        check_range(self.gyro_noise_rad_s, "gyro_noise_rad_s", 0.0, 10.0, "rad/s")
+        check_range(self.correlation_time_s, "correlation_time_s", 0.0, 3600.0, "s")
 
 
 class Imu:
@@ -203,6 +222,10 @@ class Imu:
 class DepthSensorConfig:
     """Pressure depth sensor (MS5837-30BA-like; 0.2 mbar resolution ≈ 2 mm).
 
+    Domains: ``rate_hz`` in [0.01, 10000] Hz; ``noise_pa`` in [0, 1e5] Pa (≈ 10 m of
+    water); ``water_density_kg_m3`` in [900, 1100]; ``spec_grav`` in [0.9, 1.1];
+    ``surface_pressure_pa`` in [5e4, 1.5e5] Pa.
+
     Attributes:
         rate_hz: output rate [Hz].
         noise_pa: pressure noise [Pa], 1σ (20 Pa ≈ 2 mm of water).
@@ -218,11 +241,15 @@ class DepthSensorConfig:
     surface_pressure_pa: float = SEA_LEVEL_PA
 
     def __post_init__(self) -> None:
-        check(self.rate_hz > 0, "rate_hz", f"must be > 0, got {self.rate_hz}")
-        check(self.noise_pa >= 0, "noise_pa", "must be >= 0")
-        check(self.water_density_kg_m3 > 0, "water_density_kg_m3", "must be > 0")
-        check(self.spec_grav > 0, "spec_grav", "must be > 0")
-        check(self.surface_pressure_pa > 0, "surface_pressure_pa", "must be > 0")
+        _check_rate(self.rate_hz)
+        check_range(self.noise_pa, "noise_pa", 0.0, 1.0e5, "Pa")
+        check_range(
+            self.water_density_kg_m3, "water_density_kg_m3", *WATER_DENSITY_RANGE_KG_M3, "kg/m³"
+        )
+        check_range(self.spec_grav, "spec_grav", *SPEC_GRAV_RANGE)
+        check_range(
+            self.surface_pressure_pa, "surface_pressure_pa", *SURFACE_PRESSURE_RANGE_PA, "Pa"
+        )
 
 
 class DepthSensor:
@@ -258,6 +285,8 @@ class DepthSensor:
 class PositionFixConfig:
     """Motion-capture-like position fix.
 
+    Domains: ``rate_hz`` in [0.01, 10000] Hz; ``noise_m`` in [0, 100] m.
+
     Attributes:
         rate_hz: output rate [Hz].
         noise_m: position noise per axis [m], 1σ.
@@ -267,8 +296,8 @@ class PositionFixConfig:
     noise_m: float = 0.005
 
     def __post_init__(self) -> None:
-        check(self.rate_hz > 0, "rate_hz", f"must be > 0, got {self.rate_hz}")
-        check(self.noise_m >= 0, "noise_m", "must be >= 0")
+        _check_rate(self.rate_hz)
+        check_range(self.noise_m, "noise_m", 0.0, 100.0, "m")
 
 
 class PositionFix:

@@ -26,6 +26,7 @@ __all__ = [
     "DEAD_BAND_US",
     "NEUTRAL_PWM_US",
     "PUBLISHED_MAXIMA",
+    "SUPPLY_VOLTAGE_RANGE_V",
     "T200",
     "ZERO_FORCE_N",
     "InterpTable",
@@ -46,6 +47,9 @@ PUBLISHED_MAXIMA: tuple[tuple[float, float, float], ...] = (
     (20.0, 65.9, 49.4),
 )
 """Blue Robotics' T200 maxima per supply: (voltage [V], max forward [N], max reverse [N])."""
+
+SUPPLY_VOLTAGE_RANGE_V = (PUBLISHED_MAXIMA[0][0], PUBLISHED_MAXIMA[-1][0])
+"""Supply voltages [V] the scaled table covers, (12, 20): :meth:`T200.from_table`'s domain."""
 
 ZERO_FORCE_N = 1e-9
 """Half-width [N] of the force gap across which the inverse table crosses the dead band."""

@@ -36,7 +36,7 @@ from typing import Any, Literal
 import numpy as np
 
 from testbed.common.geometry import Quaternion
-from testbed.config import build, check, load_toml
+from testbed.config import build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.camera import CameraConfig, CapturedImage, camera_pose, underwater_grey
@@ -84,6 +84,7 @@ from testbed.vehicle.systems import (
     build_schedule,
     wrench_of,
 )
+from testbed.vehicle.t200 import SUPPLY_VOLTAGE_RANGE_V
 from testbed.vehicle.thrusters import (
     SPIN_UP_TIME_CONSTANT_S,
     T200,
@@ -114,6 +115,17 @@ DEPTH_GAINS = PidGains(
 """mate-rov-2025 depth loop (m → N) with kd raised from 1.5 to 40 N·s/m and filtered (0.1 s)."""
 
 
+MAX_DEPTH_FEEDFORWARD_N = 1000.0
+"""Largest accepted ``|depth_feedforward_n|`` [N]: beyond the heave force of any layout."""
+CONTROL_RATE_RANGE_HZ = (1.0, 1000.0)
+"""Accepted ECS frame rates [Hz] (mate-rov: 100); the physics step must not exceed the period."""
+PHYSICS_DT_RANGE_S = (1e-4, 0.1)
+"""Accepted physics steps [s] (default 1/240): below 0.1 ms a day-long run would take ≈ 10⁹
+steps; above 0.1 s the explicit integration of a 0.02 s thruster lag is meaningless."""
+MAX_POSITION_M = 10000.0
+"""Largest accepted ``|coordinate|`` [m] of a start position."""
+
+
 def _default_gains() -> ControlGains:
     return ControlGains()
 
@@ -126,7 +138,8 @@ class ControlGains:
     Defaults: mate-rov-2025's table (REFERENCE §3.6) for yaw; roll and pitch retuned for the
     simulated plant's weak righting moment, and the depth derivative raised and filtered (the
     published kd 1.5 N·s/m leaves the ≈26 kg heave mode almost undamped). Each constant's
-    docstring gives the reason.
+    docstring gives the reason. ``depth_feedforward_n`` [N, + down] is a constant heave force
+    added to the depth loop's output, in [−1000, 1000] N.
     """
 
     roll: PidGains = ROLL_GAINS
@@ -134,6 +147,10 @@ class ControlGains:
     yaw: PidGains = YAW_GAINS
     depth: PidGains = DEPTH_GAINS
     depth_feedforward_n: float = 0.0
+
+    def __post_init__(self) -> None:
+        limit = MAX_DEPTH_FEEDFORWARD_N
+        check_range(self.depth_feedforward_n, "depth_feedforward_n", -limit, limit, "N")
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,23 +166,29 @@ class SensorsConfig:
 class VehicleConfig:
     """One simulated vehicle.
 
+    Every number is checked at construction against its domain (below, and in the nested
+    configs' docstrings); docs/vehicle.md lists them all.
+
     Attributes:
         model: hydrodynamic model name (``testbed/vehicle/data/models``).
         thrusters: thruster layout name (``testbed/vehicle/data/thrusters``).
-        control_rate_hz: ECS frame rate [Hz] (mate-rov: 100).
-        physics_dt_s: physics step [s].
+        control_rate_hz: ECS frame rate [Hz] (mate-rov: 100), in [1, 1000].
+        physics_dt_s: physics step [s], in [1e-4, 0.1] and ≤ the control period.
         allocation: ``"pinv"`` (the ECS paper's T⁺) or ``"lsq"`` (bounded least squares).
-        current_limit_a: total current budget [A]; None = the layout's budget.
-        slew_limit_n_per_s: per-thruster force slew limit [N/s]; None = the layout's.
-        supply_voltage_v: thruster supply voltage [V] for the T200 table.
-        thruster_time_constant_s: plant spin-up lag [s].
+        current_limit_a: total current budget [A], in (0, 1e4]; None = the layout's budget.
+        slew_limit_n_per_s: per-thruster force slew limit [N/s], in (0, 1e6]; None = the
+            layout's.
+        supply_voltage_v: thruster supply voltage [V] for the T200 table, in [12, 20] (the
+            published range the table is scaled over, :data:`SUPPLY_VOLTAGE_RANGE_V`).
+        thruster_time_constant_s: plant spin-up lag [s], in [0, 10].
         gains: closed-loop gains.
         pilot: stick shaping and gains.
         failsafe: stale-command failsafe.
         sensors: sensor models.
         current: water current.
-        start_position_ned_m: (3,) initial body-origin position [m], NED.
-        start_euler_rad: (3,) initial roll, pitch, yaw [rad].
+        start_position_ned_m: (3,) initial body-origin position [m], NED, each in
+            [−1e4, 1e4].
+        start_euler_rad: (3,) initial roll, pitch, yaw [rad], each in [−π, π].
         camera: the forward camera (disabled by default); when enabled, the physics client
             also holds the pool's scenery (visual only: the dynamics are the same).
     """
@@ -189,18 +212,25 @@ class VehicleConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
 
     def __post_init__(self) -> None:
-        check(self.control_rate_hz > 0, "control_rate_hz", "must be > 0")
-        check(self.physics_dt_s > 0, "physics_dt_s", "must be > 0")
+        check_range(self.control_rate_hz, "control_rate_hz", *CONTROL_RATE_RANGE_HZ, "Hz")
+        check_range(self.physics_dt_s, "physics_dt_s", *PHYSICS_DT_RANGE_S, "s")
         check(
             self.physics_dt_s <= 1.0 / self.control_rate_hz,
             "physics_dt_s",
-            "must not exceed the control period",
+            f"must not exceed the control period (1/control_rate_hz = "
+            f"{1.0 / self.control_rate_hz:g} s), got {self.physics_dt_s:g}",
         )
         if self.current_limit_a is not None:
-            check(self.current_limit_a > 0, "current_limit_a", "must be > 0")
+            check_range(self.current_limit_a, "current_limit_a", 0.0, 1.0e4, "A", low_open=True)
         if self.slew_limit_n_per_s is not None:
-            check(self.slew_limit_n_per_s > 0, "slew_limit_n_per_s", "must be > 0")
-        check(self.thruster_time_constant_s >= 0, "thruster_time_constant_s", "must be >= 0")
+            check_range(
+                self.slew_limit_n_per_s, "slew_limit_n_per_s", 0.0, 1.0e6, "N/s", low_open=True
+            )
+        check_range(self.supply_voltage_v, "supply_voltage_v", *SUPPLY_VOLTAGE_RANGE_V, "V")
+        check_range(self.thruster_time_constant_s, "thruster_time_constant_s", 0.0, 10.0, "s")
+        limit = MAX_POSITION_M
+        check_ranges(self.start_position_ned_m, "start_position_ned_m", -limit, limit, "m")
+        check_ranges(self.start_euler_rad, "start_euler_rad", -math.pi, math.pi, "rad")
 
 
 def load_vehicle_config(

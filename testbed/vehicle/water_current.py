@@ -12,11 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from testbed.config import check
+from testbed.config import check, check_range, check_ranges
 
 __all__ = ["CurrentProcess", "WaterCurrent"]
 
 Vec3 = tuple[float, float, float]
+
+MAX_CURRENT_SPEED_MPS = 5.0
+"""Largest accepted mean current speed [m/s]: the fastest tidal races; a BlueROV2 manages ≈ 1."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,6 +29,10 @@ class WaterCurrent:
     Each NED component of the variation is a first-order Gauss–Markov process
     ẋ = −x/T + w (Fossen 2011, §8.3), sampled exactly every ``update_period_s`` and held in
     between, so the current is irrotational and piecewise constant in NED.
+
+    Domains: ``velocity_ned_mps`` finite with speed ≤ 5 m/s (the fastest tidal races);
+    ``variation_std_mps`` in [0, 1] m/s per component; ``time_constant_s`` in (0, 86400] s;
+    ``update_period_s`` in [1e-3, 3600] s.
 
     Attributes:
         velocity_ned_mps: (3,) mean water velocity [m/s], NED.
@@ -40,18 +47,17 @@ class WaterCurrent:
     update_period_s: float = 0.5
 
     def __post_init__(self) -> None:
-        for i, value in enumerate(self.variation_std_mps):
-            check(value >= 0.0, f"variation_std_mps[{i}]", f"must be ≥ 0, got {value}")
+        limit = MAX_CURRENT_SPEED_MPS
+        check_ranges(self.velocity_ned_mps, "velocity_ned_mps", -limit, limit, "m/s")
+        speed = math.hypot(*self.velocity_ned_mps)
         check(
-            self.time_constant_s > 0.0,
-            "time_constant_s",
-            f"must be > 0, got {self.time_constant_s}",
+            speed <= limit,
+            "velocity_ned_mps",
+            f"speed must be ≤ {limit:g} m/s, got {speed:g} m/s",
         )
-        check(
-            self.update_period_s > 0.0,
-            "update_period_s",
-            f"must be > 0, got {self.update_period_s}",
-        )
+        check_ranges(self.variation_std_mps, "variation_std_mps", 0.0, 1.0, "m/s")
+        check_range(self.time_constant_s, "time_constant_s", 0.0, 86400.0, "s", low_open=True)
+        check_range(self.update_period_s, "update_period_s", 1e-3, 3600.0, "s")
 
     @property
     def varies(self) -> bool:
