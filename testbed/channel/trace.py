@@ -27,7 +27,7 @@ import math
 from array import array
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, overload
+from typing import Any, NamedTuple, overload
 
 import numpy as np
 
@@ -119,8 +119,7 @@ class TraceColumns(NamedTuple):
     order (:meth:`Trace.columns`). ``kind`` holds codes into :attr:`kinds`, ``src``/``dst``
     codes into :attr:`names`.
 
-    The views share the trace's buffers: drop them before recording more events (the buffers
-    cannot grow while a view of them exists).
+    The views share the trace's buffers (no copy); events recorded later are not in them.
     """
 
     t_s: np.ndarray
@@ -143,12 +142,20 @@ _WIDER = {"B": "H", "H": "q", "h": "i", "i": "q"}
 """Integer column type → the next wider one, taken when a value does not fit."""
 
 
-def _extend(column: array[int], values: Sequence[int]) -> array[int]:
-    """``column`` with ``values`` appended: the same array, or a wider copy if one of them does
-    not fit its type."""
+def _extend(column: array[Any], values: Sequence[Any]) -> array[Any]:
+    """``column`` with ``values`` appended: the same array, or a copy if a NumPy view of it is
+    held (:meth:`Trace.columns`; the view keeps the values it saw), or a wider copy if one of
+    the values does not fit its type."""
     try:
-        column.extend(array(column.typecode, values))
-    except OverflowError:
+        if column.typecode == "d":
+            column.extend(values)
+        elif column.typecode == "B":
+            column.frombytes(bytes(values))  # faster than array("B", ...); ValueError past 255
+        else:
+            column.extend(array(column.typecode, values))
+    except BufferError:
+        return _extend(array(column.typecode, column), values)
+    except (OverflowError, ValueError):
         wider = _WIDER.get(column.typecode)
         if wider is None:
             raise
@@ -246,11 +253,20 @@ class Trace:
         pending = self._pending
         if not pending:
             return
-        t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors = zip(*pending, strict=True)
-        self._t.extend(t_s)
-        self._kind.extend([_KIND_CODE[k] for k in kind])
-        self._src = _extend(self._src, [self._code(n) for n in src])
-        self._dst = _extend(self._dst, [self._code(n) for n in dst])
+        t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors = zip(*pending)  # noqa: B905 (all of 8)
+        codes = self._name_code
+        try:
+            src_codes = list(map(codes.__getitem__, src))
+            dst_codes = list(map(codes.__getitem__, dst))
+        except KeyError:  # a new name: give every name of the chunk its code, in order
+            for name in dict.fromkeys((*src, *dst)):
+                self._code(name)
+            src_codes = list(map(codes.__getitem__, src))
+            dst_codes = list(map(codes.__getitem__, dst))
+        self._t = _extend(self._t, t_s)
+        self._kind = _extend(self._kind, bytes(map(_KIND_CODE.__getitem__, kind)))
+        self._src = _extend(self._src, src_codes)
+        self._dst = _extend(self._dst, dst_codes)
         self._frame = _extend(self._frame, frame_id)
         self._part = _extend(self._part, part)
         self._size = _extend(self._size, size_bytes)
@@ -429,6 +445,8 @@ _RECEPTION_RANK = np.array(
     dtype=np.int64,
 )
 """Kind code → rank of its reception outcome (``len(_SEVERITY)`` for the other kinds)."""
+_IS_RECEPTION = np.array([kind in RECEPTION_OUTCOMES for kind in _KIND_BY_CODE])
+"""Kind code → whether it is a reception kind."""
 
 
 def worst_outcome(outcomes: Iterable[FrameOutcome]) -> FrameOutcome:
@@ -459,13 +477,13 @@ _NO_RANK = len(_SEVERITY)
 def _part_ranks(columns: TraceColumns) -> tuple[np.ndarray, np.ndarray]:
     """Sorted unique (frame_id, part) keys of the reception events and the rank of the worst
     reception outcome of each, over its receivers."""
-    ranks = _RECEPTION_RANK[columns.kind]
-    received = ranks < _NO_RANK
+    received = _IS_RECEPTION[columns.kind]
+    ranks = _RECEPTION_RANK[columns.kind[received]]
     parts, where = np.unique(
         _keys(columns.frame_id[received], columns.part[received]), return_inverse=True
     )
     worst = np.full(len(parts), _NO_RANK, dtype=np.int64)
-    np.minimum.at(worst, where.reshape(-1), ranks[received])
+    np.minimum.at(worst, where.reshape(-1), ranks)
     return parts, worst
 
 
@@ -674,29 +692,38 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
     src_code, dst_code = trace.name_code(src), trace.name_code(dst)
     if src_code is None:
         return DirectionCounts(0, 0, 0, 0, 0, 0, 0, math.nan)
+    # masks of one byte per event and copies of the few events concerned: no array of
+    # 8 B per event, so that counting a long run takes little memory on top of its trace
     mine = columns.src == src_code
     kind = columns.kind
     enqueued = mine & (kind == _KIND_CODE[EventKind.ENQUEUE])
     sent = int(np.count_nonzero(enqueued))
     sizes = columns.size_bytes[enqueued].astype(np.int64)
+    del enqueued
     dropped = int(np.count_nonzero(mine & (kind == _KIND_CODE[EventKind.DROP])))
     started = columns.frame_id[mine & (kind == _KIND_CODE[EventKind.TX_START])]
-    if dst_code is None:
-        received = np.zeros(len(kind), dtype=bool)
-    else:
-        received = mine & (columns.dst == dst_code) & (_RECEPTION_RANK[kind] < len(_SEVERITY))
-    # per frame: packets sent, reception events and the worst of their outcomes
     frames_sent, packets_sent = np.unique(started, return_counts=True)
-    frames_heard, where, packets_settled = np.unique(
-        columns.frame_id[received], return_inverse=True, return_counts=True
-    )
-    worst = np.full(len(frames_heard), len(_SEVERITY), dtype=np.int64)
-    np.minimum.at(worst, where, _RECEPTION_RANK[kind[received]])
+    del started
+    if dst_code is None:
+        mine[:] = False
+    else:
+        mine &= columns.dst == dst_code
+        mine &= _IS_RECEPTION[kind]
+    # the receptions sorted by (frame, rank): each frame's first is its worst outcome
+    heard = columns.frame_id[mine].astype(np.int64) << 3
+    heard |= _RECEPTION_RANK[kind[mine]]
+    del mine
+    heard.sort()
+    first = np.flatnonzero(np.diff(heard >> 3, prepend=np.int64(-(2**62))))
+    frames_heard = heard[first] >> 3
+    worst = heard[first] & 7
+    packets_settled = np.diff(first, append=len(heard))
+    del heard
     at = np.searchsorted(frames_heard, frames_sent)
-    heard = at < len(frames_heard)
-    heard[heard] = frames_heard[at[heard]] == frames_sent[heard]
+    found = at < len(frames_heard)
+    found[found] = frames_heard[at[found]] == frames_sent[found]
     settled_packets = np.zeros(len(frames_sent), dtype=np.int64)
-    settled_packets[heard] = packets_settled[at[heard]]
+    settled_packets[found] = packets_settled[at[found]]
 
     def lost(outcome: FrameOutcome) -> int:
         return int(np.count_nonzero(worst == _RANK[outcome]))

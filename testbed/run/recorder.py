@@ -155,7 +155,18 @@ class SeriesRows(Sequence[tuple[float, ...]]):
         """Append one row of :attr:`width` values."""
         if len(row) != self.width:
             raise ValueError(f"a series row has {self.width} values, got {len(row)}")
-        self._values.extend(row)
+        try:
+            self._values.extend(row)
+        except BufferError:  # a view of the values is held (:meth:`table`): grow a copy
+            self._values = array("d", self._values)
+            self._values.extend(row)
+
+    def table(self) -> np.ndarray:
+        """The rows as a read-only ``(len, width)`` array sharing the buffer (no copy); rows
+        appended later are not in it."""
+        view = np.frombuffer(self._values, dtype=np.float64).reshape(-1, self.width)
+        view.flags.writeable = False
+        return view
 
     def __len__(self) -> int:
         return len(self._values) // self.width
@@ -300,8 +311,12 @@ class Recorder:
         self.events.append(NodeEvent(t_s, node, kind, detail))
 
     def series(self) -> dict[str, np.ndarray]:
-        """The series as one array per column."""
-        table = np.asarray(self.rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
+        """The series as one array per column (read-only views of the rows, no copy)."""
+        rows = self.rows
+        if isinstance(rows, SeriesRows) and rows.width == len(SERIES_COLUMNS):
+            table = rows.table()  # no copy
+        else:
+            table = np.asarray(rows, dtype=float).reshape(-1, len(SERIES_COLUMNS))
         return {name: table[:, k] for k, name in enumerate(SERIES_COLUMNS)}
 
     def write_series_csv(self, path: Path) -> None:
