@@ -13,13 +13,22 @@ The real-time run that puts the nodes on these endpoints is :mod:`testbed.run.re
 nodes and scenarios, so it lives above this layer).
 
 The bytes written are the frames the simulation would have carried; the receiver runs the same
-:class:`~testbed.protocol.FrameDecoder`. Imports only :mod:`testbed.protocol`, pyserial and the
-standard library.
+:class:`~testbed.protocol.FrameDecoder`, which gives up a mis-framed candidate at the end of
+each received packet as the simulator does (:mod:`~testbed.hil.transport`). Imports only
+:mod:`testbed.protocol`, pyserial and the standard library.
 """
 
 from __future__ import annotations
 
-from .adapters import S100_MAX_STATUS_LEN, S100_MAX_WRITE, Adapter, RawAdapter, S100Adapter, Write
+from .adapters import (
+    S100_MAX_STATUS_LEN,
+    S100_MAX_WRITE,
+    Adapter,
+    RawAdapter,
+    S100Adapter,
+    Segment,
+    Write,
+)
 from .endpoint import (
     DEFAULT_BAUD,
     MODEM_KINDS,
@@ -39,6 +48,7 @@ from .transport import (
     SerialTransport,
     TcpTransport,
     Transport,
+    packet_gap_s,
 )
 
 __all__ = [
@@ -59,6 +69,7 @@ __all__ = [
     "RawAdapter",
     "Received",
     "S100Adapter",
+    "Segment",
     "SerialTransport",
     "TcpTransport",
     "Transport",
@@ -69,5 +80,6 @@ __all__ = [
     "m64_sentence",
     "make_adapter",
     "open_endpoint",
+    "packet_gap_s",
     "parse_received_message",
 ]

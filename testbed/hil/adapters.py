@@ -10,6 +10,17 @@ I/O and never reads a clock:
   (status lines, replies, command framing) is removed and counted. Remote data never raises;
   a garbled modem sentence is a counter, and stray bytes are passed on for the frame decoder to
   count as garbage.
+* :meth:`Adapter.receive` is :meth:`~Adapter.feed` cut into :class:`Segment` values that say
+  where a received modem message (a *packet*) ends, and :meth:`Adapter.idle` is what the
+  transport calls when the line has been idle for a packet gap. The frame decoder gives up a
+  mis-framed candidate (a corrupted length byte claiming more than arrived) at a packet end,
+  as the simulated modem's receiver does at the end of each transmission.
+
+Packet boundaries by modem: a byte-transparent modem (:class:`RawAdapter`,
+:class:`S100Adapter`) has no message framing on its serial side, so a packet ends when the line
+goes idle (:meth:`~Adapter.idle`, detected by the transport); the EvoLogics and M64 adapters
+mark the end of the last received message of each frame (their own modules say how) and ignore
+idle time, since the messages of one frame may be seconds apart.
 
 This module holds the :class:`Adapter` protocol, :class:`RawAdapter` (a byte-transparent cable
 or socket) and :class:`S100Adapter` (WFS Seatooth S100, REFERENCE §1.10). The EvoLogics and
@@ -30,6 +41,7 @@ __all__ = [
     "Adapter",
     "RawAdapter",
     "S100Adapter",
+    "Segment",
     "Write",
 ]
 
@@ -57,6 +69,20 @@ class Write:
     hold_s: float = 0.0
 
 
+@dataclass(frozen=True, slots=True)
+class Segment:
+    """Payload-stream bytes from the adapter, and whether a received packet ends after them.
+
+    Attributes:
+        data: bytes for the frame decoder (may be empty when only ``end`` is news).
+        end: True if the modem's received message (packet) ends after ``data``: the frame
+            decoder then gives up a candidate still incomplete (see the module docstring).
+    """
+
+    data: bytes
+    end: bool = False
+
+
 class Adapter(Protocol):
     """What a transport needs from a modem adapter."""
 
@@ -66,6 +92,17 @@ class Adapter(Protocol):
 
     def feed(self, data: bytes) -> bytes:
         """Received port bytes in; payload-stream bytes (for the frame decoder) out."""
+        ...
+
+    def receive(self, data: bytes) -> list[Segment]:
+        """:meth:`feed`, with the ends of received packets marked (the bytes joined are what
+        :meth:`feed` returns)."""
+        ...
+
+    def idle(self) -> list[Segment]:
+        """The line has been idle for a packet gap: what that ends (a transparent modem: the
+        packet, and bytes held for a possible status line); empty for an adapter whose modem
+        frames its messages."""
         ...
 
     def counters(self) -> dict[str, int]:
@@ -106,6 +143,14 @@ class RawAdapter:
         self.bytes_in += len(data)
         return bytes(data)
 
+    def receive(self, data: bytes) -> list[Segment]:
+        """``data`` unchanged; a cable marks no packet end (the idle line does)."""
+        return [Segment(bytes(data))] if self.feed(data) else []
+
+    def idle(self) -> list[Segment]:
+        """The idle line ends the packet."""
+        return [Segment(b"", end=True)]
+
     def counters(self) -> dict[str, int]:
         """``{"bytes_in": …}``."""
         return {"bytes_in": self.bytes_in}
@@ -123,8 +168,9 @@ class S100Adapter:
     overruns (the S100Stream rule). With ``rtscts=True`` the frame and CR LF are one write and
     the port's hardware flow control paces it.
 
-    Receiving: the modem injects status lines ``+++<printable text>`` CR LF (at most 200 chars)
-    anywhere in the stream; they are removed, counted and the last one kept. A ``+++`` not
+    Receiving: a packet ends when the line goes idle (:meth:`idle`), the serial side having no
+    message framing. The modem injects status lines ``+++<printable text>`` CR LF (at most 200
+    chars) anywhere in the stream; they are removed, counted and the last one kept. A ``+++`` not
     followed by printable text and CR LF within 200 chars is data. The CR LF that ends each of
     our frames is removed: the adapter follows the frame header (preamble and length byte) in
     the outgoing stream to know where a frame ends. Every other byte is passed on, so a
@@ -228,6 +274,25 @@ class S100Adapter:
             self._track(b)
             i += 1
         return bytes(out)
+
+    def receive(self, data: bytes) -> list[Segment]:
+        """:meth:`feed`; the end of a packet is the idle line's (:meth:`idle`)."""
+        stream = self.feed(data)
+        return [Segment(stream)] if stream else []
+
+    def idle(self) -> list[Segment]:
+        """The line is idle: the packet has ended. Bytes held for a status line that did not
+        come (``+``, ``++``, ``+++`` and printable text without CR LF) are data after all; a
+        lone CR held after a frame is its terminator, the LF lost. The header tracking starts
+        afresh (a corrupted length byte stops at the packet's end)."""
+        held, self._held = self._held, b""
+        if self._expect_crlf and held.startswith(b"\r"):
+            self.terminators += 1
+            held = held[1:]
+        self._expect_crlf = False
+        self._remaining = 0
+        self._tail.clear()
+        return [Segment(held, end=True)]
 
     def _status_line(self, buf: bytes, i: int) -> int | None:
         """At a ``+``: the index after a complete status line, None to wait, 0 if data."""

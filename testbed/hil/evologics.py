@@ -10,12 +10,22 @@ has a timestamp for the ack field; ``RECVPBM`` has no ack field); their data is 
 of the body by its length, so commas in the data do not matter. Bytes outside the wrappers are
 burst data from a peer in transparent mode and are passed on as payload stream.
 
+Packet boundary (:meth:`EvoLogicsAdapter.receive`): a frame is one instant message, or several
+when longer than 64 B, so the end of a frame's *last* message ends the packet: a message shorter
+than 64 B (the sender cuts frames into 64-B pieces, the last one shorter or full), or the message
+that completes the length the frame's first message announced (its preamble and length byte).
+A message starting a new frame while the previous one is still short of its length ends that one
+first (its last message was lost). Idle time is no boundary: the messages of one frame are an
+acoustic slot apart.
+
 No I/O, no clock. Remote garbage never raises.
 """
 
 from __future__ import annotations
 
-from .adapters import Write, is_printable
+from testbed.protocol import START_BYTE, frame_overhead
+
+from .adapters import Segment, Write, is_printable
 
 __all__ = ["SENDIM_MAX", "EvoLogicsAdapter", "parse_received_message"]
 
@@ -73,6 +83,7 @@ class EvoLogicsAdapter:
         line_end: terminator of the commands we send.
         local_address: this modem's acoustic address (1..254), set with ``AT!AL`` on open; None
             leaves the modem's own setting.
+        preamble_len: preamble length of our frames (1 or 3), to follow frames across messages.
 
     Attributes:
         messages_in: instant messages received (RECVIM, RECVIMS, RECVPBM).
@@ -84,12 +95,16 @@ class EvoLogicsAdapter:
         bytes_in: bytes received [B].
 
     Raises:
-        ValueError: address out of range.
+        ValueError: address out of range, bad ``preamble_len``.
     """
 
     __slots__ = (
         "_buf",
         "_flag",
+        "_out",
+        "_preamble",
+        "_remaining",
+        "_segments",
         "bytes_in",
         "event_counts",
         "garbage_bytes",
@@ -110,7 +125,9 @@ class EvoLogicsAdapter:
         message_hold_s: float = 0.0,
         line_end: bytes = b"\n",
         local_address: int | None = None,
+        preamble_len: int = 3,
     ) -> None:
+        frame_overhead(preamble_len)  # validates preamble_len
         if not 1 <= remote_address <= 254:
             raise ValueError(f"remote_address must be in 1..254, got {remote_address!r}")
         if local_address is not None and not 1 <= local_address <= 254:
@@ -123,6 +140,10 @@ class EvoLogicsAdapter:
         self.message_hold_s = float(message_hold_s)
         self.line_end = bytes(line_end)
         self._buf = bytearray()
+        self._preamble = bytes([START_BYTE]) * preamble_len
+        self._remaining = 0
+        self._out = bytearray()
+        self._segments: list[Segment] = []
         self.messages_in = 0
         self.event_counts: dict[str, int] = {}
         self.parse_errors = 0
@@ -157,10 +178,19 @@ class EvoLogicsAdapter:
 
     def feed(self, data: bytes) -> bytes:
         """Parse wrapped events; return received message data and transparent bytes."""
+        return b"".join(segment.data for segment in self.receive(data))
+
+    def idle(self) -> list[Segment]:
+        """Nothing: the modem frames its messages (see the module's packet boundary)."""
+        return []
+
+    def receive(self, data: bytes) -> list[Segment]:
+        """:meth:`feed`, cut after the last message of each frame (the module's packet
+        boundary)."""
         self.bytes_in += len(data)
         buf = self._buf
         buf += data
-        out = bytearray()
+        out = self._out
         pos = 0
         while True:
             i = buf.find(_ESCAPE, pos)
@@ -178,7 +208,30 @@ class EvoLogicsAdapter:
                 break
             pos = end
         del buf[:pos]
-        return bytes(out)
+        if out:
+            self._segments.append(Segment(bytes(out)))
+            out.clear()
+        segments, self._segments = self._segments, []
+        return segments
+
+    def _end_packet(self) -> None:
+        """A packet ends after the payload stream so far."""
+        self._segments.append(Segment(bytes(self._out), end=True))
+        self._out.clear()
+
+    def _message(self, data: bytes) -> None:
+        """One received instant message's data: into the stream, and the packet boundary."""
+        plen = len(self._preamble)
+        starts = data.startswith(self._preamble) and len(data) > plen
+        if starts and self._remaining:
+            self._end_packet()  # the previous frame's last message was lost
+        if starts:
+            self._remaining = plen + 1 + data[plen] + 2
+        self._remaining = max(0, self._remaining - len(data))
+        self._out += data
+        if len(data) < SENDIM_MAX or not self._remaining:
+            self._remaining = 0
+            self._end_packet()
 
     def _wrapped(self, buf: bytearray, i: int, out: bytearray) -> int | None:
         """Parse ``+++AT<cmd>:<len>:<body>`` CR LF at ``i``; the index after it, None to wait."""
@@ -221,7 +274,7 @@ class EvoLogicsAdapter:
         if received is not None:
             self.messages_in += 1
             self._count(received[0].decode("ascii"))
-            out += received[2]
+            self._message(received[2])
             return
         if body.startswith(tuple(_RECEIVE_FIELDS)):
             self.parse_errors += 1

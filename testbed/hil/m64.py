@@ -13,6 +13,15 @@ know where the frame ends and drops the padding after it. A packet starting with
 preamble always starts a new frame, so a lost packet costs only the frame it belonged to; all
 non-padding bytes go to the frame decoder, which rejects the damaged frame by its CRC.
 
+Packet boundary (:meth:`M64Adapter.receive`): one frame is several 8-byte packets, seconds
+apart, so the end of a modem *message* is the end of the frame's last packet, not of each
+packet: the packet that completes the length its first packet announced, a packet that is not
+part of a frame the adapter follows, and, before a packet that starts a new frame, the previous
+frame if it is still short of its length (its last packets were lost). A frame decoder that
+is still waiting for bytes there holds a mis-framed candidate (a corrupted length byte, whose
+claim the adapter followed too): it gives it up instead of holding the next frames for the
+packets its false length claims. Idle time is no boundary.
+
 No I/O, no clock. Remote garbage never raises.
 """
 
@@ -22,7 +31,7 @@ from collections.abc import Sequence
 
 from testbed.protocol import START_BYTE, frame_overhead
 
-from .adapters import Write, is_printable
+from .adapters import Segment, Write, is_printable
 
 __all__ = [
     "CRC8_CHECK_VALUE",
@@ -115,8 +124,10 @@ class M64Adapter:
 
     __slots__ = (
         "_buf",
+        "_out",
         "_preamble",
         "_remaining",
+        "_segments",
         "acks",
         "bytes_in",
         "channel",
@@ -156,6 +167,8 @@ class M64Adapter:
         self._preamble = bytes([START_BYTE]) * preamble_len
         self._buf = bytearray()
         self._remaining = 0
+        self._out = bytearray()
+        self._segments: list[Segment] = []
         self.packets_in = 0
         self.crc_errors = 0
         self.parse_errors = 0
@@ -194,10 +207,19 @@ class M64Adapter:
 
     def feed(self, data: bytes) -> bytes:
         """Parse sentences; return the reassembled frame bytes of received packets."""
+        return b"".join(segment.data for segment in self.receive(data))
+
+    def idle(self) -> list[Segment]:
+        """Nothing: packets, not idle time, mark the end of a frame (module docstring)."""
+        return []
+
+    def receive(self, data: bytes) -> list[Segment]:
+        """:meth:`feed`, cut after the last packet of each frame (the module's packet
+        boundary)."""
         self.bytes_in += len(data)
         buf = self._buf
         buf += data
-        out = bytearray()
+        out = self._out
         pos = 0
         n = len(buf)
         while pos < n:
@@ -216,7 +238,16 @@ class M64Adapter:
                 break
             pos = end
         del buf[:pos]
-        return bytes(out)
+        if out:
+            self._segments.append(Segment(bytes(out)))
+            out.clear()
+        segments, self._segments = self._segments, []
+        return segments
+
+    def _end_packet(self) -> None:
+        """A modem message ends after the payload stream so far."""
+        self._segments.append(Segment(bytes(self._out), end=True))
+        self._out.clear()
 
     def _sentence(self, buf: bytearray, start: int, out: bytearray) -> int | None:
         """Parse the sentence at ``start``; the index after it, or None to wait for bytes."""
@@ -311,14 +342,19 @@ class M64Adapter:
         """Append one received packet to the payload stream, dropping frame padding."""
         plen = len(self._preamble)
         if packet.startswith(self._preamble) and len(packet) > plen:
+            if self._remaining:
+                self._end_packet()  # the frame before lost its last packets
             self._remaining = plen + 1 + packet[plen] + 2
         if not self._remaining:
             out += packet  # not part of a frame we can follow: the frame decoder judges it
+            self._end_packet()
             return
         take = min(self._remaining, len(packet))
         out += packet[:take]
         self._remaining -= take
         self.padding_bytes += len(packet) - take
+        if not self._remaining:
+            self._end_packet()
 
     def counters(self) -> dict[str, int]:
         """Packets, CRC and parse errors, garbage, padding, acks, nacks, replies, bytes in."""

@@ -3,10 +3,10 @@
 A transport owns two threads and never blocks its caller:
 
 * the **reader** reads the port, passes the bytes through the modem adapter
-  (:meth:`Adapter.feed <testbed.hil.adapters.Adapter.feed>`) and puts the payload stream on
-  :attr:`Transport.inbox` (a :class:`queue.Queue` of :class:`Received`), stamped with the time
-  the read returned; an optional ``on_bytes`` callback then wakes whoever waits (e.g. a
-  real-time simpy loop);
+  (:meth:`Adapter.receive <testbed.hil.adapters.Adapter.receive>`) and puts the payload stream
+  on :attr:`Transport.inbox` (a :class:`queue.Queue` of :class:`Received`), stamped with the
+  time the read returned and marked where a received packet ends; an optional ``on_bytes``
+  callback then wakes whoever waits (e.g. a real-time simpy loop);
 * the **writer** takes frames queued by :meth:`Transport.send` and writes the adapter's chunks,
   holding after each as the adapter asks (air-rate pacing).
 
@@ -24,7 +24,21 @@ simpy side calls :meth:`LinkEndpoint.poll` (non-blocking) and gets frame events,
 :meth:`LinkEndpoint.deliver` to have each frame handed to a callback as it is decoded, and the
 software's own latency (port read returned → frame handed over) is recorded per frame.
 
-The adapter's ``feed`` runs on the reader thread and ``writes`` on the writer thread only.
+Packet boundaries: the stream decoder gives up a mis-framed candidate (a corrupted length byte
+claiming more bytes than came) at the end of each received packet, as the simulated modem's
+receiver does at the end of each transmission (``LinkPort._receive``), so the intact frames
+behind it are not held for the bytes its false length claims. Where a packet ends is the
+adapter's to say (:class:`~testbed.hil.adapters.Segment`): the end of a modem's received message
+(EvoLogics instant messages, M64 packets: the last one of each frame), or, for a
+byte-transparent modem, the line going idle: once the reader has read nothing for
+``packet_gap_s`` after the last bytes (default :func:`packet_gap_s`, the larger of 20 ms and 4
+byte times), it calls :meth:`Adapter.idle <testbed.hil.adapters.Adapter.idle>`. The gap is
+observed, never inferred: only a read that returned nothing ends one, so a reader thread
+delayed by a loaded machine can make a boundary late, never early. The flush changes nothing
+for a stream of intact frames (the decoder holds nothing at a packet's end).
+
+The adapter's ``receive`` and ``idle`` run on the reader thread and ``writes`` on the writer
+thread only.
 
 Size: :class:`Transport` (threads, reopen with backoff, counters) is most of the module; the
 serial and TCP subclasses only open, read and write, so it stays whole, a little over 500 lines.
@@ -56,6 +70,7 @@ __all__ = [
     "SerialTransport",
     "TcpTransport",
     "Transport",
+    "packet_gap_s",
 ]
 
 PORT_ERRORS: tuple[type[Exception], ...] = (OSError, AttributeError, TypeError, ValueError)
@@ -65,18 +80,34 @@ file descriptor."""
 
 _MAX_READ = 4096
 
+MIN_PACKET_GAP_S = 0.02
+"""Shortest idle time that ends a packet on a byte-transparent modem's line [s]. A USB serial
+adapter hands bytes to the host in bursts (an FTDI chip's latency timer is 16 ms by default),
+so a packet still arriving can leave the host without a byte for that long; 20 ms is above it,
+and far below the gap between two orders (0.594 s on the S100)."""
+
+
+def packet_gap_s(baudrate: int) -> float:
+    """Idle time that ends a received packet on a byte-transparent line [s]: the larger of
+    :data:`MIN_PACKET_GAP_S` and 4 byte times (10 bits each) at ``baudrate``."""
+    return max(MIN_PACKET_GAP_S, 40.0 / baudrate)
+
 
 @dataclass(frozen=True, slots=True)
 class Received:
     """Payload-stream bytes from one port read.
 
     Attributes:
-        data: bytes for the frame decoder (modem chatter already removed).
-        read_ns: :func:`time.perf_counter_ns` when the port read returned [ns].
+        data: bytes for the frame decoder (modem chatter already removed; may be empty when
+            only ``end`` is news).
+        read_ns: :func:`time.perf_counter_ns` when the port read returned (or, for the end of
+            a packet seen as an idle line, when the reader saw it) [ns].
+        end: a received packet ends after ``data`` (module docstring: packet boundaries).
     """
 
     data: bytes
     read_ns: int
+    end: bool = False
 
 
 class PortLike(Protocol):
@@ -106,6 +137,9 @@ class Transport:
         backoff_initial_s: first wait before reopening a failed port [s].
         backoff_max_s: longest wait between reopen attempts [s].
         max_pending_frames: frames :meth:`send` may queue; more are dropped and counted.
+        packet_gap_s: idle time after the last bytes read that ends a packet on a transparent
+            line [s] (module docstring); a subclass's reads must return empty within about
+            this long when nothing arrives.
 
     Attributes:
         inbox: received payload stream, in order.
@@ -120,7 +154,10 @@ class Transport:
         backoff_initial_s: float = 0.05,
         backoff_max_s: float = 2.0,
         max_pending_frames: int = 64,
+        packet_gap_s: float = MIN_PACKET_GAP_S,
     ) -> None:
+        if not packet_gap_s > 0:
+            raise ValueError(f"packet_gap_s must be > 0, got {packet_gap_s!r}")
         if not 0 < backoff_initial_s <= backoff_max_s:
             raise ValueError(
                 f"need 0 < backoff_initial_s <= backoff_max_s, got "
@@ -129,6 +166,7 @@ class Transport:
         if max_pending_frames < 1:
             raise ValueError(f"max_pending_frames must be >= 1, got {max_pending_frames!r}")
         self.adapter = adapter
+        self.packet_gap_s = float(packet_gap_s)
         self.inbox: queue.Queue[Received] = queue.Queue()
         self.connected = threading.Event()
         self._on_bytes = on_bytes
@@ -149,6 +187,7 @@ class Transport:
         self.bytes_out = 0
         self.callback_errors = 0
         self.setup_writes = 0
+        self.packet_ends = 0
 
     def _start(self, name: str) -> None:
         port = self._open()
@@ -206,6 +245,7 @@ class Transport:
             "bytes_out": self.bytes_out,
             "callback_errors": self.callback_errors,
             "setup_writes": self.setup_writes,
+            "packet_ends": self.packet_ends,
         }
         counts.update({f"adapter_{k}": v for k, v in self.adapter.counters().items()})
         return counts
@@ -266,8 +306,25 @@ class Transport:
         self.connected.clear()
         self._safe_close(port)
 
+    def _queue(self, segments: list[Any], read_ns: int) -> None:
+        """Put the adapter's segments on the inbox (empty ones only for a packet end), then
+        wake the consumer."""
+        queued = False
+        for segment in segments:
+            if segment.data or segment.end:
+                self.inbox.put(Received(segment.data, read_ns, segment.end))
+                self.packet_ends += segment.end
+                queued = True
+        if queued and self._on_bytes is not None:
+            try:
+                self._on_bytes()
+            except Exception:
+                self.callback_errors += 1
+
     def _read_loop(self) -> None:
         backoff = self._backoff_initial_s
+        last_data_s = 0.0
+        in_packet = False  # bytes read since the line was last seen idle
         while not self._stop.is_set():
             port = self._port
             if port is None:
@@ -296,17 +353,16 @@ class Transport:
                     self._fail(port, exc)
                 continue
             if not data:
+                # an empty read: nothing arrived since the last bytes were read
+                if in_packet and time.monotonic() - last_data_s >= self.packet_gap_s:
+                    in_packet = False
+                    self._queue(self.adapter.idle(), time.perf_counter_ns())
                 continue
             read_ns = time.perf_counter_ns()
+            last_data_s = time.monotonic()
+            in_packet = True
             self.bytes_in += len(data)
-            stream = self.adapter.feed(data)
-            if stream:
-                self.inbox.put(Received(stream, read_ns))
-                if self._on_bytes is not None:
-                    try:
-                        self._on_bytes()
-                    except Exception:
-                        self.callback_errors += 1
+            self._queue(self.adapter.receive(data), read_ns)
 
     def _write_loop(self) -> None:
         next_ok = 0.0
@@ -344,13 +400,16 @@ class SerialTransport(Transport):
         baudrate: port speed [bit/s].
         on_bytes: see :class:`Transport`.
         rtscts: RTS/CTS hardware flow control (pair it with ``S100Adapter(rtscts=True)``).
-        read_timeout_s: how long a read waits for a first byte [s]; bounds how fast
-            :meth:`close` returns, not latency (a read returns on its first byte).
+        read_timeout_s: how long a read waits for a first byte [s]; None = the packet gap, so
+            an idle line ends a packet as soon as it has been idle that long. Bounds how fast
+            :meth:`close` returns and when an idle line is seen, not latency (a read returns on
+            its first byte).
         write_timeout_s: a write blocked longer than this (flow control stuck) counts as a
             port error [s].
         port_factory: opens the port (tests inject fakes); defaults to
             :func:`serial.serial_for_url` with the settings above.
-        **kwargs: :class:`Transport` options (backoff, queue size).
+        **kwargs: :class:`Transport` options (backoff, queue size, ``packet_gap_s``: default
+            :func:`packet_gap_s` at ``baudrate``).
 
     Raises:
         serial.SerialException: the port cannot be opened the first time.
@@ -364,13 +423,15 @@ class SerialTransport(Transport):
         baudrate: int,
         on_bytes: Callable[[], None] | None = None,
         rtscts: bool = False,
-        read_timeout_s: float = 0.05,
+        read_timeout_s: float | None = None,
         write_timeout_s: float = 2.0,
         port_factory: Callable[[], PortLike] | None = None,
         **kwargs: Any,
     ) -> None:
+        kwargs.setdefault("packet_gap_s", packet_gap_s(baudrate))
         super().__init__(adapter, on_bytes=on_bytes, **kwargs)
         self.url = url
+        timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
         if port_factory is None:
 
             def port_factory() -> PortLike:
@@ -378,7 +439,7 @@ class SerialTransport(Transport):
                     url,
                     baudrate=baudrate,
                     rtscts=rtscts,
-                    timeout=read_timeout_s,
+                    timeout=timeout_s,
                     write_timeout=write_timeout_s,
                 )
                 return port
@@ -410,7 +471,8 @@ class TcpTransport(Transport):
         port: TCP port.
         adapter: the modem adapter.
         on_bytes: see :class:`Transport`.
-        read_timeout_s: how long a receive waits [s] (bounds :meth:`close`, not latency).
+        read_timeout_s: how long a receive waits [s] (bounds :meth:`close` and when an idle
+            line is seen, not latency); None = the packet gap.
         connect_timeout_s: connection attempt timeout [s].
         **kwargs: :class:`Transport` options.
 
@@ -425,13 +487,13 @@ class TcpTransport(Transport):
         adapter: Adapter,
         *,
         on_bytes: Callable[[], None] | None = None,
-        read_timeout_s: float = 0.05,
+        read_timeout_s: float | None = None,
         connect_timeout_s: float = 2.0,
         **kwargs: Any,
     ) -> None:
         super().__init__(adapter, on_bytes=on_bytes, **kwargs)
         self.address = (host, port)
-        self._read_timeout_s = read_timeout_s
+        self._read_timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
         self._connect_timeout_s = connect_timeout_s
         self._start(f"tcp:{host}:{port}")
 
@@ -462,8 +524,12 @@ class LinkEndpoint:
         decoder: the frame decoder (default: WAFrame settings).
         max_latency_samples: latency samples kept (the newest) [frames].
 
+    The decoder gives up a candidate still incomplete at the end of each received packet
+    (:attr:`Received.end`; module docstring: packet boundaries).
+
     Attributes:
-        latencies_ns: per delivered frame, port read returned → frame handed over [ns].
+        latencies_ns: per delivered frame, port read returned → frame handed over [ns]
+            (for a frame freed by a packet's end, from when that end was seen).
         frames_in: frames decoded [frames].
         corrupt_frames: frame candidates the decoder rejected (bad CRC, oversize, truncated).
     """
@@ -531,22 +597,31 @@ class LinkEndpoint:
                 received = inbox.get_nowait()
             except queue.Empty:
                 return handed
-            for event in self.decoder.feed(received.data):
+            for event in self._events(received):
                 if isinstance(event, Frame):
                     self.frames_in += 1
                     self.latencies_ns.append(time.perf_counter_ns() - received.read_ns)
                     handed += 1
                     handler(event)
-                else:
-                    self.corrupt_frames += 1
+
+    def _events(self, received: Received) -> list[FrameEvent]:
+        """Feed one :class:`Received` to the decoder; at the end of a packet give up a candidate
+        still incomplete (module docstring: packet boundaries). Counts corrupt candidates."""
+        decoder = self.decoder
+        events = decoder.feed(received.data)
+        if received.end and decoder.pending_bytes:
+            # A whole packet has arrived: a candidate still incomplete had a corrupted length
+            # byte; waiting for its claimed length would hold the good frames behind it.
+            events += decoder.flush()
+        self.corrupt_frames += sum(not isinstance(event, Frame) for event in events)
+        return events
 
     def _decode(self, received: Received, events: list[FrameEvent]) -> None:
-        new = self.decoder.feed(received.data)
+        new = self._events(received)
         if new:
             now_ns = time.perf_counter_ns()
             frames = sum(isinstance(event, Frame) for event in new)
             self.frames_in += frames
-            self.corrupt_frames += len(new) - frames
             self.latencies_ns.extend(now_ns - received.read_ns for _ in range(frames))
             events.extend(new)
 
