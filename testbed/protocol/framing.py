@@ -23,8 +23,12 @@ only local misuse (a bad argument) raises :class:`ValueError`. Decoder rules:
   the decoder waits for the whole claimed frame and checks the CRC: a match is a
   :class:`Frame`, a mismatch is ``BAD_CRC``.
 * **Resynchronisation.** After *any* failed candidate the hunt resumes at the byte after the
-  failed start byte, never after the claimed length. One flipped length byte therefore cannot
-  swallow the good frames behind it (they are found once the bogus candidate has failed).
+  failed start byte, never after the claimed length, so the good frames behind a flipped length
+  byte are found once the bogus candidate has failed. That failure is a CRC-16 check, not a
+  certainty: about once in 2^16 mis-framed candidates the CRC matches by chance, the decoder
+  delivers a false frame and, if the candidate reached past the corrupted frame, skips the
+  frames it covers. Measured rate and derivation: docs/protocol.md, "Resynchronisation
+  guarantee". A :meth:`FrameDecoder.flush` between packets confines that loss to the packet.
 * **Latency of a bogus length.** A length byte corrupted upwards makes the decoder wait until
   the claimed number of bytes has arrived before it can reject the candidate, so the frames
   behind it are delivered late (but in order). There is no clock here: a node that wants to give
