@@ -8,14 +8,23 @@ Usage (any pyserial URL as a port: ``/dev/ttyUSB0``, ``socket://host:9200``, ``r
 
 The first form runs the operator and the simulated vehicle on this computer, each on its own
 modem (the paper's Fig. 4a); the other two run one node each, for two computers. Options:
-``--set K=V`` (repeatable), ``--seed``, ``--duration S``, ``--out DIR``, ``--baud``,
-``--rtscts``, ``--m64-channel``, ``--no-plots``. Outputs are those of ``testbed run``
-(``metrics.json``, ``events.csv``, ``series.csv``, plots) plus the ``hil`` section of
-``metrics.json`` (see :func:`testbed.run.realtime.hil_metrics`).
+``--set K=V`` (repeatable), ``--seed``, ``--duration S``, ``--out DIR``, ``--force``,
+``--baud``, ``--rtscts``, ``--m64-channel``, ``--no-plots``. Outputs are those of ``testbed run``
+(``metrics.json``, ``events.csv``, ``series.csv``, plots), written as ``testbed run`` writes
+them (:func:`testbed.run.outputs.write_run`: ``metrics.json`` last, with ``"complete"`` and
+``"files"``), plus the ``hil`` section of ``metrics.json`` (see
+:func:`testbed.run.realtime.hil_metrics`).
 
-A user's mistake prints one line naming the option and exits 2 (the CLI's
-:class:`~testbed.config.ConfigError` path). This module is wired into :mod:`testbed.cli.main`; heavy
-imports happen only when the command runs.
+``--out`` is checked before any port is opened (creatable, writable, empty unless
+``--force``). Ctrl-C or SIGTERM ends a session at any time, even before ``metrics.settle_s``:
+what ran is written, marked ``"complete": false`` with the ``sim_s`` reached (no plots), and
+the command ends with one line, ``testbed: interrupted at t = … s of … s; partial results in
+DIR``, and exit code 130 (SIGINT) or 143 (SIGTERM).
+
+A user's mistake (a bad option, a port that cannot be opened, e.g. ``bogus://x``) prints one
+line naming the option and exits 2 (the CLI's :class:`~testbed.config.ConfigError` path).
+This module is wired into :mod:`testbed.cli.main`; heavy imports happen only when the command
+runs.
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers, check_out_dir, check_seed
+from testbed.cli.options import EXIT_OK, Subparsers, check_seed, exit_code_of
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -97,6 +106,11 @@ def add_hil_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", type=Path, default=None, help="output directory (default: runs/hil-…)"
     )
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a non-empty --out, replacing the results there",
+    )
     parser.set_defaults(handler=run_hil_command)
 
 
@@ -137,11 +151,13 @@ def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
 
 def run_hil_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
-    from testbed.hil import PortSettings, open_endpoint
+    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+    from testbed.run.outputs import prepare_out_dir, write_run
     from testbed.run.realtime import run_hil
-    from testbed.run.runner import write_outputs
     from testbed.run.scenario import load_scenario
 
+    # pyserial: OSError (no such port), ValueError (unknown URL scheme), KeyError (bad option)…
+    open_errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
     mode, scenario_name = _words(args.words)
     ports = _ports(args, mode)
     if args.baud is not None and args.baud <= 0:
@@ -160,15 +176,16 @@ def run_hil_command(args: argparse.Namespace) -> int:
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
-    check_out_dir(out)
+    prepare_out_dir(out, force=args.force)  # before any port is opened or any time is spent
     endpoints: dict[str, Any] = {}
     try:
         for role, (option, url) in ports.items():
             settings = PortSettings(url, args.modem, role, args.baud, args.rtscts, args.m64_channel)
             try:
                 endpoints[role] = open_endpoint(settings)
-            except OSError as err:
-                raise ConfigError(f"{option}: cannot open {url}: {err}") from None
+            except open_errors as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise ConfigError(f"{option}: cannot open {url}: {reason}") from None
     except BaseException:
         for endpoint in endpoints.values():
             endpoint.close()
@@ -180,13 +197,22 @@ def run_hil_command(args: argparse.Namespace) -> int:
         flush=True,
     )
     result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
-    write_outputs(result, out)
-    if not args.no_plots:
+    plots = None
+    if not args.no_plots and result.stopped is None:
         from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
 
-        write_run_plots(result, out)
+        plots = write_run_plots
+    write_run(result, out, plots=plots)
+    if result.stopped is not None:
+        reached = result.metrics["sim_s"]
+        print(
+            f"testbed: interrupted at t = {reached:.1f} s of {duration:g} s; "
+            f"partial results in {out}",
+            file=sys.stderr,
+        )
+        return exit_code_of(result.stopped)
     print(format_hil_summary(result.metrics, out))
-    return 0
+    return EXIT_OK
 
 
 def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:

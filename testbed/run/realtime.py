@@ -291,13 +291,15 @@ def run_hil(
             node whose peer runs on another computer. Closed when the run ends (or fails).
         seed: overrides the scenario's seed (vehicle sensors and current).
         duration_s: run length [s of wall-clock time], > ``metrics.settle_s``; None = the
-            scenario's. Ctrl-C (KeyboardInterrupt) after ``metrics.settle_s`` ends the run
-            early with its results.
+            scenario's. Ctrl-C or SIGTERM (a ``KeyboardInterrupt``) ends the run early at any
+            time, even before ``metrics.settle_s``: the result then has ``stopped`` set and its
+            metrics cover the ``sim_s`` reached (those needing the settled window are NaN).
         poll_s: period at which received frames are handed to the nodes [s].
         modem: the modem kind, for the record (``metrics.json`` ``hil.modem``).
 
     Returns:
-        The metrics (:func:`hil_metrics`) and the recording.
+        The metrics (:func:`hil_metrics`) and the recording; ``stopped`` is the interrupt that
+        ended the run early, or None.
 
     Raises:
         ValueError: no endpoint, an unknown role, a duration not beyond the scenario's
@@ -339,6 +341,9 @@ def run_hil(
     }
     vehicle_node: VehicleNode | None = None
     operator_node: OperatorNode | None = None
+    lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+    stopped: KeyboardInterrupt | None = None
+    start: float | None = None
     try:
         if "vehicle" in modems:
             rng = np.random.default_rng(vehicle_seed)
@@ -348,22 +353,19 @@ def run_hil(
             replies = {} if vehicle_node is None else vehicle_node.reply_odometry_s
             operator_node = make_operator_node(env, scenario, modems["operator"], recorder, replies)
             env.process(operator_node.run())
-        lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
         env.process(run_poll(env, list(modems.values()), poll_s, lateness_ns))
         env.sync()  # start the clock now, after the vehicle's physics has loaded
         start = time.perf_counter()
-        try:
-            env.run(until=duration)
-        except KeyboardInterrupt:  # Ctrl-C ends a long session early, keeping its results
-            if env.now <= settle_s:
-                raise
-            duration = env.now
-        wall_s = time.perf_counter() - start
+        env.run(until=duration)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C or SIGTERM: keep what ran, marked partial
+        stopped = interrupt
     finally:
+        wall_s = 0.0 if start is None else time.perf_counter() - start
         if vehicle_node is not None:
             vehicle_node.vehicle.close()
         for endpoint in endpoints.values():
             endpoint.close()
+    reached = duration if stopped is None else float(env.now)
     tally_images(recorder, vehicle_node, operator_node)
     metrics = hil_metrics(
         scenario,
@@ -371,7 +373,7 @@ def run_hil(
         recorder,
         modems,
         ledger,
-        duration_s=duration,
+        duration_s=reached,
         wall_s=wall_s,
         vehicle_node=vehicle_node,
         operator_node=operator_node,
@@ -379,7 +381,7 @@ def run_hil(
         modem=modem,
         lateness_ns=lateness_ns,
     )
-    return RunResult(scenario, seed, metrics, recorder)
+    return RunResult(scenario, seed, metrics, recorder, stopped)
 
 
 def _peer(role: str) -> str:
@@ -412,6 +414,11 @@ def hil_metrics(
     ``mean_frame_bytes``. ``frames_collided`` and ``frames_out_of_range`` are null: only the
     simulator's trace knows why a frame vanished on the air. A count that needs the end not
     running here is null too, and so is ``per`` unless both nodes run here.
+
+    ``duration_s`` is the time the run reached (``sim_s``): less than asked for a run ended
+    early by Ctrl-C or SIGTERM, possibly ≤ ``metrics.settle_s`` or 0; what needs the settled
+    window (ages, tracking, attitude errors) or a positive duration (goodput) is then NaN
+    (null in ``metrics.json``), never an exception.
 
     With one node here (two computers), what needs both ends' clocks or frame ids is null:
     ``command_lag_s``, ``command_age_s``, ``odometry_age_s`` and ``signal_lag_s``; and at the
@@ -496,7 +503,9 @@ def _direction(
         "frames_outage": outage if both else nan,
         "frames_out_of_range": nan,
         "per": 1.0 - delivered / settled if both and settled else nan,
-        "goodput_bps": 8.0 * payload_bytes / duration_s if receiver is not None else nan,
+        "goodput_bps": (
+            8.0 * payload_bytes / duration_s if receiver is not None and duration_s > 0 else nan
+        ),
         "mean_frame_bytes": (
             sender.bytes_offered / sender.frames_offered
             if sender is not None and sender.frames_offered
