@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -48,9 +49,9 @@ def ports() -> Iterator[tuple[str, str]]:
         emulator.communicate(timeout=WAIT_S)
 
 
-def check_set(out: Path) -> dict[str, object]:
+def check_set(out: Path) -> dict[str, Any]:
     """The directory's metrics.json names exactly the files beside it, with their sizes."""
-    metrics = json.loads((out / "metrics.json").read_text())
+    metrics: dict[str, Any] = json.loads((out / "metrics.json").read_text())
     files = metrics["files"]
     assert isinstance(files, dict)
     on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
@@ -79,11 +80,11 @@ def test_interrupt_before_settling_keeps_a_marked_partial_result(
     metrics = check_set(out)
     assert metrics["complete"] is False
     reached = float(lines[0].split("t = ")[1].split(" s")[0])
-    assert 0.0 < metrics["sim_s"] < 30.0  # type: ignore[operator]  # before settle_s
+    assert 0.0 < metrics["sim_s"] < 30.0  # before settle_s
     assert metrics["sim_s"] == pytest.approx(reached, abs=0.05)
-    assert set(metrics["files"]) == {"events.csv", "series.csv"}  # type: ignore[arg-type]
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}
     assert metrics["command_age_s"] == {"mean": None, "p95": None}  # needs the settled window
-    assert metrics["hil"]["mode"] == "both"  # type: ignore[index]
+    assert metrics["hil"]["mode"] == "both"
 
 
 @pytest.mark.parametrize(
