@@ -110,8 +110,9 @@ def test_parse_received_message_variants() -> None:
         [b"3", b"1", b"2", b"ack", b"10", b"-40", b"180", b"0.0"],
         b"a,b",
     )
-    assert parse_received_message(b"RECVIMS,2,1,2,123456,10,-40,180,0.0,xy")[2] == b"xy"
-    assert parse_received_message(b"RECVPBM,2,1,2,10,-40,180,0.0,xy")[2] == b"xy"
+    for body in (b"RECVIMS,2,1,2,123456,10,-40,180,0.0,xy", b"RECVPBM,2,1,2,10,-40,180,0.0,xy"):
+        parsed = parse_received_message(body)
+        assert parsed is not None and parsed[2] == b"xy"
     assert parse_received_message(b"RECVIM,4,1,2,ack,10,-40,180,0.0,a,b") is None
     assert parse_received_message(b"RECVIM,3,1,2,10,-40,180,0.0,a,b") is None
     assert parse_received_message(b"DELIVEREDIM,3") is None
