@@ -21,9 +21,10 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
-from testbed.config import check
+from testbed.config import check, check_range
 
 __all__ = [
+    "PERIOD_RANGE_S",
     "AttitudePilot",
     "Pilot",
     "PilotSample",
@@ -36,6 +37,9 @@ Sticks = tuple[float, float, float, float, float, float]
 """(6,) stick positions in [−1, 1]: surge, sway, heave (+ down), roll, pitch, yaw."""
 
 _NO_STICKS: Sticks = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+PERIOD_RANGE_S = (0.01, 1.0e6)
+"""Accepted periods [s] of stick sine terms and attitude setpoints."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,8 +70,8 @@ class SineTerm:
 
     Attributes:
         amplitude: stick units, |a| ≤ 1.
-        period_s: period [s], > 0.
-        phase_rad: phase [rad] at the pilot's start.
+        period_s: period [s], in :data:`PERIOD_RANGE_S`.
+        phase_rad: phase [rad] at the pilot's start, in [−2π, 2π].
     """
 
     amplitude: float
@@ -76,12 +80,8 @@ class SineTerm:
 
     def __post_init__(self) -> None:
         check(abs(self.amplitude) <= 1.0, "amplitude", f"must be in [-1, 1], got {self.amplitude}")
-        check(
-            math.isfinite(self.period_s) and self.period_s > 0.0,
-            "period_s",
-            f"must be > 0 and finite, got {self.period_s}",
-        )
-        check(math.isfinite(self.phase_rad), "phase_rad", f"must be finite, got {self.phase_rad}")
+        check_range(self.period_s, "period_s", *PERIOD_RANGE_S, "s")
+        check_range(self.phase_rad, "phase_rad", -2.0 * math.pi, 2.0 * math.pi, "rad")
 
     def at(self, tau_s: float) -> float:
         """The term's value at ``tau_s`` [s] after the pilot's start."""

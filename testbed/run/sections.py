@@ -22,7 +22,7 @@ from testbed.channel import (
     LinkConfig,
 )
 from testbed.config import check, check_range, check_ranges
-from testbed.operator.pilots import AttitudePilot, Pilot, ScriptedPilot, SineTerm
+from testbed.operator.pilots import PERIOD_RANGE_S, AttitudePilot, Pilot, ScriptedPilot, SineTerm
 
 __all__ = [
     "MAX_DURATION_S",
@@ -59,8 +59,6 @@ MAX_OPERATOR_DISTANCE_M = 10000.0
 """Largest accepted ``|coordinate|`` [m] of the operator's modem."""
 MAX_GAP_S = 60.0
 """Largest accepted fixed inter-packet gap [s]."""
-PERIOD_RANGE_S = (0.01, 1.0e6)
-"""Accepted periods [s] of pilot sine terms and attitude setpoints."""
 MAX_DEPTH_M = 1000.0
 """Deepest accepted depth setpoint [m]."""
 MAX_STUCK_FORCE_N = 100.0
@@ -223,11 +221,6 @@ class PilotSection:
 
     def __post_init__(self) -> None:
         check_time(self.start_s, "start_s")
-        for axis in _STICK_AXES:
-            for i, term in enumerate(getattr(self, axis)):
-                check_range(term.period_s, f"{axis}[{i}].period_s", *PERIOD_RANGE_S, "s")
-                bound = 2.0 * math.pi
-                check_range(term.phase_rad, f"{axis}[{i}].phase_rad", -bound, bound, "rad")
         for name, limit in zip(_ATTITUDE_AMPLITUDES, (89.9, 89.9, 180.0), strict=True):
             check_range(getattr(self, name), name, -limit, limit, "deg")
         for name in ("roll_period_s", "pitch_period_s", "yaw_period_s"):

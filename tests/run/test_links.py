@@ -46,9 +46,9 @@ def vehicle() -> Iterator[Vehicle]:
 
 
 def station() -> OperatorStation:
-    """A station whose pilot holds surge 0.5 and yaw −0.25 from t = 0."""
+    """A station whose pilot holds surge 0.6 and yaw −0.3 from t = 0 (a period of 1e6 s)."""
     pilot = ScriptedPilot(
-        0.0, x=(SineTerm(0.5, 1e9, np.pi / 2),), yaw=(SineTerm(-0.25, 1e9, np.pi / 2),)
+        0.0, x=(SineTerm(0.6, 1e6, np.pi / 2),), yaw=(SineTerm(-0.3, 1e6, np.pi / 2),)
     )
     return OperatorStation(pilot, SessionPlan(arm_at_s=100.0))
 
@@ -71,8 +71,8 @@ def test_teleop_order_reaches_the_vehicle_mirror(vehicle: Vehicle) -> None:
     command = vehicle.world.get(vehicle.operator_entity, MovementCommand)
     assert command is not None
     # Move carries each axis as an int8, ±127 = full stick (REFERENCE §1.3):
-    # 0.5 → 64 (63.5 rounded half to even), −0.25 → −32 (−31.75 rounded)
-    assert command.sticks == pytest.approx((64 / 127, 0.0, 0.0, 0.0, 0.0, -32 / 127))
+    # 0.6 → round(76.2) = 76, −0.3 → round(−38.1) = −38
+    assert command.sticks == pytest.approx((76 / 127, 0.0, 0.0, 0.0, 0.0, -38 / 127))
 
 
 def test_teleop_answer_is_a_reply_the_operator_applies(vehicle: Vehicle) -> None:
