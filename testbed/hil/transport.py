@@ -608,11 +608,7 @@ class LinkEndpoint:
         """Feed one :class:`Received` to the decoder; at the end of a packet give up a candidate
         still incomplete (module docstring: packet boundaries). Counts corrupt candidates."""
         decoder = self.decoder
-        events = decoder.feed(received.data)
-        if received.end and decoder.pending_bytes:
-            # A whole packet has arrived: a candidate still incomplete had a corrupted length
-            # byte; waiting for its claimed length would hold the good frames behind it.
-            events += decoder.flush()
+        events = decoder.feed_packet(received.data, packet_end=received.end)
         self.corrupt_frames += sum(not isinstance(event, Frame) for event in events)
         return events
 

@@ -281,6 +281,29 @@ class FrameDecoder:
             del buf[: self._scan(buf, events)]
         return events
 
+    def feed_packet(
+        self, data: bytes | bytearray | memoryview, *, packet_end: bool
+    ) -> list[Frame | CorruptFrame]:
+        """:meth:`feed` the bytes of (part of) a modem packet; at its end, :meth:`flush`.
+
+        A candidate still incomplete when a whole packet has arrived had its length byte
+        corrupted: waiting for the length it claims would hold the good frames behind it for
+        many packets, so it is given up at the packet boundary. The simulated link and the
+        hardware-in-the-loop endpoints both decode through this one rule.
+
+        Args:
+            data: received bytes, in any chunking.
+            packet_end: these bytes end a modem packet (the last part of a transmission, an
+                idle gap on a transparent line, a modem's end of message).
+
+        Returns:
+            Events in stream order.
+        """
+        events = self.feed(data)
+        if packet_end and self._buf:
+            events += self.flush()
+        return events
+
     def flush(self) -> list[Frame | CorruptFrame]:
         """The sender has gone quiet: give up on pending candidates and decode what follows.
 

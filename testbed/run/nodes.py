@@ -87,12 +87,8 @@ class LinkPort:
         modem.on_receive = self._receive
 
     def _receive(self, delivery: Delivery) -> None:
-        events = self.decoder.feed(delivery.data)
-        if delivery.part == delivery.parts - 1 and self.decoder.pending_bytes:
-            # The modem delivered a whole transmission: a candidate still incomplete now had a
-            # corrupted length byte, and waiting for its claimed length would hold the good
-            # frames behind it for many transmissions. Give it up at the packet boundary.
-            events += self.decoder.flush()
+        last = delivery.part == delivery.parts - 1  # a whole transmission has arrived
+        events = self.decoder.feed_packet(delivery.data, packet_end=last)
         for item in events:
             if isinstance(item, Frame):
                 self._recorder.frames_decoded[self._direction] += 1

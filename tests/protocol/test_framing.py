@@ -476,3 +476,17 @@ def test_fuzz_100k_inputs_never_raise_and_keep_invariants() -> None:
             assert (events, decoder.garbage_bytes) == expected
     assert frames_seen > count // 4  # the mutated streams still carried plenty of good frames
     assert reasons == set(CorruptReason)  # every rejection path was exercised
+
+
+def test_packet_end_gives_up_a_candidate_whose_length_byte_was_corrupted() -> None:
+    good = encode_frame(b"next order")
+    bad = bytearray(encode_frame(b"order"))
+    bad[DEFAULT_PREAMBLE_LEN] = 200  # claims 200 B: would swallow what follows
+    for packet_end, expected in ((False, []), (True, [Frame(b"next order")])):
+        decoder = FrameDecoder()
+        events = decoder.feed_packet(bytes(bad) + good, packet_end=packet_end)
+        assert [e for e in events if isinstance(e, Frame)] == expected
+    # a packet that ends cleanly leaves nothing to give up
+    decoder = FrameDecoder()
+    assert decoder.feed_packet(good, packet_end=True) == [Frame(b"next order")]
+    assert decoder.pending_bytes == 0 and decoder.corrupt == 0
