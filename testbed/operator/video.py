@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from testbed.imaging import decode
+from testbed.imaging import MAX_PIXELS, decode
 from testbed.protocol import AssemblyEvent, ImageAssembler, ImageSettings, VehicleMessage
 
 __all__ = ["ImageConsole"]
@@ -28,6 +28,9 @@ class ImageConsole:
         chunk_bytes: image bytes per reply [B], as the vehicle uses.
         selective_repeat: the transfer mode (both ends must agree).
         schedule: (time [s], settings) to send, in time order; the first is usually at 0.
+        max_pixels: the largest image (width × height) it will decode — the camera's size when
+            known; a stream whose header claims more decodes to nothing
+            (:func:`testbed.imaging.decode`), so garbled headers cost no work.
 
     Attributes:
         chunks_received: replies that carried image data.
@@ -42,7 +45,9 @@ class ImageConsole:
         chunk_bytes: int = 40,
         selective_repeat: bool = True,
         schedule: Sequence[tuple[float, ImageSettings]] = (),
+        max_pixels: int = MAX_PIXELS,
     ) -> None:
+        self._max_pixels = max_pixels
         self.assembler = ImageAssembler(chunk_bytes, selective_repeat=selective_repeat)
         self._schedule = list(schedule)
         self._pending: ImageSettings | None = None
@@ -99,7 +104,7 @@ class ImageConsole:
         if event is AssemblyEvent.COMPLETED:
             self.completed = self.assembler.last_image
             if self.completed is not None:
-                self.completed_view = decode(self.completed)
+                self.completed_view = decode(self.completed, max_pixels=self._max_pixels)
         return event
 
     @property
@@ -113,6 +118,6 @@ class ImageConsole:
         if not prefix:
             return self.completed_view
         if self._partial is None or self._partial[0] != len(prefix):
-            self._partial = (len(prefix), decode(prefix))
+            self._partial = (len(prefix), decode(prefix, max_pixels=self._max_pixels))
         picture = self._partial[1]
         return picture if picture.size else self.completed_view

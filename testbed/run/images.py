@@ -185,14 +185,16 @@ def settings_schedule(images: ImagesSection) -> list[tuple[float, ImageSettings]
     return schedule
 
 
-def image_console(images: ImagesSection) -> ImageConsole | None:
-    """The operator's image console for the section, or None when images are off."""
+def image_console(images: ImagesSection, max_pixels: int) -> ImageConsole | None:
+    """The operator's image console for the section (decoding images of at most
+    ``max_pixels``, the camera's width × height), or None when images are off."""
     if not images.enabled:
         return None
     return ImageConsole(
         chunk_bytes=images.chunk_bytes,
         selective_repeat=images.selective_repeat,
         schedule=settings_schedule(images),
+        max_pixels=max_pixels,
     )
 
 

@@ -141,7 +141,9 @@ def make_operator_node(
         recorder=recorder,
         reply_odometry_s=reply_odometry_s,
         snapshot_period_s=link.snapshot_period_s,
-        console=image_console(scenario.images),
+        console=image_console(
+            scenario.images, scenario.vehicle.camera.width_px * scenario.vehicle.camera.height_px
+        ),
     )
 
 

@@ -82,3 +82,19 @@ def test_settings_are_resent_until_a_reply_acknowledges_them() -> None:
     assert (console.settings_sent, console.settings_acknowledged) == (3, 1)
     assert console.settings_due(29.9) is None
     assert console.settings_due(30.0) == later
+
+
+def test_an_image_larger_than_the_console_allows_decodes_to_nothing() -> None:
+    image = pool_scene(160, 120, np.random.default_rng(1))
+    encoded = encode(image, 200)
+    for max_pixels, shape in ((160 * 120, (120, 160)), (160 * 120 - 1, (0, 0))):
+        sender = ImageSender(40)
+        console = ImageConsole(chunk_bytes=40, max_pixels=max_pixels)
+        event = None
+        while event is not AssemblyEvent.COMPLETED:
+            sender.on_request(*console.request())
+            if sender.wants_image:
+                sender.load(encoded)
+            event = console.on_reply(reply(sender.next_chunk()))
+        assert console.completed == encoded  # the bytes arrive either way
+        assert console.completed_view is not None and console.completed_view.shape == shape
