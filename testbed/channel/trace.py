@@ -699,6 +699,8 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
     enqueued = mine & (kind == _KIND_CODE[EventKind.ENQUEUE])
     sent = int(np.count_nonzero(enqueued))
     sizes = columns.size_bytes[enqueued].astype(np.int64)
+    mean_frame_bytes = float(np.mean(sizes)) if sent else math.nan
+    del sizes
     del enqueued
     dropped = int(np.count_nonzero(mine & (kind == _KIND_CODE[EventKind.DROP])))
     started = columns.frame_id[mine & (kind == _KIND_CODE[EventKind.TX_START])]
@@ -710,15 +712,18 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
         mine &= columns.dst == dst_code
         mine &= _IS_RECEPTION[kind]
     # the receptions sorted by (frame, rank): each frame's first is its worst outcome
-    heard = columns.frame_id[mine].astype(np.int64) << 3
+    heard = columns.frame_id[mine].astype(np.int64)
+    heard <<= 3
     heard |= _RECEPTION_RANK[kind[mine]]
     del mine
     heard.sort()
-    first = np.flatnonzero(np.diff(heard >> 3, prepend=np.int64(-(2**62))))
-    frames_heard = heard[first] >> 3
-    worst = heard[first] & 7
+    worst_all = (heard & 7).astype(np.int8)
+    heard >>= 3  # frame ids
+    first = np.flatnonzero(np.diff(heard, prepend=np.int64(-(2**62))))
+    frames_heard = heard[first]
+    worst = worst_all[first]
     packets_settled = np.diff(first, append=len(heard))
-    del heard
+    del heard, worst_all
     at = np.searchsorted(frames_heard, frames_sent)
     found = at < len(frames_heard)
     found[found] = frames_heard[at[found]] == frames_sent[found]
@@ -736,5 +741,5 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
         frames_out_of_range=lost(FrameOutcome.OUT_OF_RANGE),
         frames_corrupted=lost(FrameOutcome.CORRUPTED),
         frames_settled=int(np.count_nonzero(settled_packets >= packets_sent)),
-        mean_frame_bytes=float(np.mean(sizes)) if sent else math.nan,
+        mean_frame_bytes=mean_frame_bytes,
     )

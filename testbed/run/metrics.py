@@ -24,6 +24,7 @@ With no loss (``q = 1``) this is ``D + T/2``.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 
 import numpy as np
@@ -104,29 +105,40 @@ def age_of_information(
     """
     if t1_s <= t0_s:
         raise ValueError(f"empty window [{t0_s}, {t1_s}]")
-    held: list[tuple[float, float]] = []  # (from_s, sampled_s) segments, newest sample wins
+    # (from_s, sampled_s) segments, newest sample wins; flat float arrays (16 B a segment)
+    starts: array[float] = array("d")
+    samples: array[float] = array("d")
     newest = -math.inf
     for applied_s, sampled_s in updates:
         if sampled_s <= newest:
             continue
         newest = sampled_s
         start = max(applied_s, t0_s)
-        if held and start <= held[-1][0]:
-            held[-1] = (held[-1][0], sampled_s)  # several updates at once: the newest counts
-        elif start < t1_s or not held or applied_s <= t0_s:
-            held.append((start, sampled_s))
-    held = [seg for seg in held if seg[0] < t1_s]
-    if not held:
+        if starts and start <= starts[-1]:
+            samples[-1] = sampled_s  # several updates at once: the newest counts
+        elif start < t1_s or not starts or applied_s <= t0_s:
+            starts.append(start)
+            samples.append(sampled_s)
+    keep = np.frombuffer(starts, dtype=np.float64) < t1_s
+    begin = np.frombuffer(starts, dtype=np.float64)[keep]
+    sample_times = np.frombuffer(samples, dtype=np.float64)[keep]
+    del starts, samples
+    if not begin.size:
         return {"mean": math.inf, "p95": math.inf}
+    end = np.append(begin[1:], t1_s)
     area = 0.0
-    for k, (start, sampled_s) in enumerate(held):
-        end = held[k + 1][0] if k + 1 < len(held) else t1_s
-        area += 0.5 * ((end - sampled_s) ** 2 - (start - sampled_s) ** 2)
-    covered = t1_s - held[0][0]
-    grid = np.arange(held[0][0], t1_s, grid_s)
-    starts = np.array([s for s, _ in held])
-    sample_times = np.array([s for _, s in held])
-    index = np.searchsorted(starts, grid, side="right") - 1
+    for k in range(0, begin.size, 4096):  # in Python floats, a chunk at a time
+        chunk = zip(
+            begin[k : k + 4096].tolist(),
+            end[k : k + 4096].tolist(),
+            sample_times[k : k + 4096].tolist(),
+            strict=True,
+        )
+        for start, stop, sampled_s in chunk:
+            area += 0.5 * ((stop - sampled_s) ** 2 - (start - sampled_s) ** 2)
+    covered = t1_s - float(begin[0])
+    grid = np.arange(float(begin[0]), t1_s, grid_s)
+    index = np.searchsorted(begin, grid, side="right") - 1
     ages = grid - sample_times[index]
     return {"mean": area / covered, "p95": float(np.percentile(ages, 95))}
 

@@ -350,32 +350,42 @@ class Recorder:
         columns = self.trace.columns()
         kinds = [str(kind) for kind in columns.kinds]
         names = columns.names
-        for at in _time_order_chunks(columns.t_s):
-            chunk = zip(
-                columns.t_s[at].tolist(),
-                columns.kind[at].tolist(),
-                columns.src[at].tolist(),
-                columns.dst[at].tolist(),
-                columns.frame_id[at].tolist(),
-                columns.part[at].tolist(),
-                columns.size_bytes[at].tolist(),
-                columns.bit_errors[at].tolist(),
-                strict=True,
-            )
-            for t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors in chunk:
-                while node is not None and node.t_s < t_s:  # equal times: link first
-                    yield _node_row(node)
-                    node = next(node_rows, None)
-                fields: list[object] = [f"{t_s:.9f}", "link", kinds[kind], names[src], names[dst]]
-                fields += [frame_id, part, size_bytes, bit_errors, ""]
-                yield fields
+        for window in _time_order_chunks(columns.t_s):
+            for start in range(0, len(window), _FORMAT_CHUNK):
+                at = window[start : start + _FORMAT_CHUNK]
+                chunk = zip(
+                    columns.t_s[at].tolist(),
+                    columns.kind[at].tolist(),
+                    columns.src[at].tolist(),
+                    columns.dst[at].tolist(),
+                    columns.frame_id[at].tolist(),
+                    columns.part[at].tolist(),
+                    columns.size_bytes[at].tolist(),
+                    columns.bit_errors[at].tolist(),
+                    strict=True,
+                )
+                for t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors in chunk:
+                    while node is not None and node.t_s < t_s:  # equal times: link first
+                        yield _node_row(node)
+                        node = next(node_rows, None)
+                    fields: list[object] = [
+                        f"{t_s:.9f}",
+                        "link",
+                        kinds[kind],
+                        names[src],
+                        names[dst],
+                    ]
+                    fields += [frame_id, part, size_bytes, bit_errors, ""]
+                    yield fields
         while node is not None:
             yield _node_row(node)
             node = next(node_rows, None)
 
 
-_WRITE_CHUNK = 65536
-"""About how many link events :meth:`Recorder.write_events_csv` sorts and formats at a time."""
+_WRITE_CHUNK = 262144
+"""About how many link events :meth:`Recorder.write_events_csv` sorts at a time."""
+_FORMAT_CHUNK = 8192
+"""How many link events it turns into Python values at a time."""
 
 
 def _time_order_chunks(t_s: np.ndarray) -> Iterator[np.ndarray]:
