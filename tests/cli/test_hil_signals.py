@@ -20,6 +20,8 @@ from typing import Any
 
 import pytest
 
+from tests.processes import default_sigint
+
 WAIT_S = 120.0
 LONG = ["--duration", "100000", "--set", "metrics.settle_s=30"]
 """Hours of wall time, settling for 30 s: a signal after ~2 s ends it before settle_s."""
@@ -32,6 +34,7 @@ def start(args: list[str]) -> subprocess.Popen[str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,
     )
 
 

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import pytest
 
-LONG = ["--set", "duration_s=100000"]  # hours of wall time: only a signal ends it
+from tests.processes import default_sigint
+
+LONG = ["--set", "duration_s=86400"]  # a simulated day, minutes of wall time: a signal ends it
 WAIT_S = 120.0
 
 
@@ -28,12 +30,15 @@ def start(args: list[str]) -> subprocess.Popen[str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,
     )
 
 
-def wait_for(condition: object, what: str) -> None:
+def wait_for(condition: object, what: str, proc: subprocess.Popen[str] | None = None) -> None:
     deadline = time.monotonic() + WAIT_S
     while not condition():  # type: ignore[operator]
+        if proc is not None and proc.poll() is not None:
+            raise AssertionError(f"the run ended ({proc.returncode}) before {what}")
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.05)
@@ -55,19 +60,19 @@ def test_interrupt_keeps_a_marked_partial_result(
 ) -> None:
     out = tmp_path / "run"
     proc = start(["run", *LONG, "--no-plots", "--out", str(out)])
-    wait_for(out.exists, "the results directory")
+    wait_for(out.exists, "the results directory", proc)
     time.sleep(1.0)  # let it simulate a little (any amount will do)
     proc.send_signal(sig)
     stdout, stderr = proc.communicate(timeout=WAIT_S)
     assert proc.returncode == code
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("testbed: interrupted at t = "), stderr
-    assert lines[0].endswith(f"of 100000 s; partial results in {out}")
+    assert lines[0].endswith(f"of 86400 s; partial results in {out}")
     assert stdout == ""
     metrics = check_set(out)
     assert metrics["complete"] is False
     reached = float(lines[0].split("t = ")[1].split(" s")[0])
-    assert 0.0 < metrics["sim_s"] < 100000.0  # type: ignore[operator]
+    assert 0.0 < metrics["sim_s"] < 86400.0  # type: ignore[operator]
     assert metrics["sim_s"] == pytest.approx(reached, abs=0.05)
     assert set(metrics["files"]) == {"events.csv", "series.csv"}  # type: ignore[arg-type]
 
@@ -121,7 +126,7 @@ def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> 
     (tmp_path / "afile").write_text("x")
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "old.txt").write_text("x")
-    # a run of 100000 s would take hours: returning at all shows nothing was simulated
+    # a simulated day takes many minutes: returning at once shows nothing was simulated
     done = subprocess.run(
         [sys.executable, "-m", "testbed", "run", *LONG, "--out", str(tmp_path / out)],
         capture_output=True,

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from testbed.sweep import read_journal
+from tests.processes import default_sigint
 
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
 SWEEP = """\
@@ -105,6 +106,7 @@ class Sweep:
             stderr=subprocess.PIPE,
             text=True,
             start_new_session=True,
+            preexec_fn=default_sigint,
         )
         journal = self.out / "runs.jsonl"
         # the first recorded run: bounded by a generous multiple of nothing yet known, so poll
