@@ -61,6 +61,7 @@ from testbed.run.sections import (
     ThrusterFault,
 )
 from testbed.vehicle.hydrodynamics import known_models
+from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
 from testbed.vehicle.vehicle import VehicleConfig
 
@@ -323,9 +324,16 @@ def _from_data(
     images = build(ImagesSection, top.images, source=where, prefix="images.")
     if faults.thrusters:
         names = [t.name for t in load_thruster_config(vehicle.thrusters).thrusters]
+        low, high = T200.from_table(vehicle.supply_voltage_v).force_limits_n
         for i, fault in enumerate(faults.thrusters):
             key = f"faults.thrusters[{i}].thruster"
             _check_name(fault.thruster, names, where, key, "thruster", f" of {vehicle.thrusters}")
+            if fault.mode == "stuck" and not low <= fault.value <= high:
+                raise ConfigError(
+                    f"{where}: faults.thrusters[{i}].value: a stuck T200 at "
+                    f"{vehicle.supply_voltage_v:g} V holds [{low:g}, {high:g}] N, "
+                    f"got {fault.value:g}"
+                )
     try:
         return Scenario(
             id=top.id,

@@ -379,6 +379,10 @@ def test_ipg_policies() -> None:
         ("pilot.x=[{amplitude=1.5, period_s=3}]", "--set: pilot.x[0].amplitude: must be in"),
         ("pilot.x=[{amplitude=0.5, period_s=0}]", "--set: pilot.x[0].period_s: must be in [0.01,"),
         ("pilot.kind=attitude", "--set: pilot.x: only used when kind = 'scripted'"),
+        (  # within the static domain, beyond what a T200 at the scenario's supply can hold
+            'faults.thrusters=[{t_s=2.0, thruster="VerticalLeft", mode="stuck", value=90.0}]',
+            "--set: faults.thrusters[0].value: a stuck T200 at 12 V holds [",
+        ),
         ("metrics.sample_rate_hz=0", "--set: metrics.sample_rate_hz: must be in [0.001, 1000] Hz"),
         ("metrics.settle_s=200", "--set: metrics.settle_s: must be < duration_s"),
         ("id=Bad_Id", "--set: id: must match"),

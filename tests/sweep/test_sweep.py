@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -314,25 +315,38 @@ def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(tmp_path: Path) -
 
 
 def test_a_failing_point_is_recorded_and_the_sweep_completes(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """Every bad value is refused at load now, so a run that raises is made here: the runner
+    fails for BER > 0 and the runs execute in this process (the backends' worker function,
+    :func:`execute_run`, unchanged)."""
     path = tmp_path / "fail.toml"
     path.write_text(
         'schema = 1\nid = "fail-v1"\ndescription = "d"\nscenario = "s100-teleop-v1"\n'
-        'metrics = ["link.uplink.per"]\n[grid]\n"link.ber" = [0.0, 1e-3]\n'
-        '"faults.thrusters" = [[], [{t_s = 2.0, thruster = "VerticalLeft", mode = "stuck", '
-        "value = 1e6}]]\n",
+        'metrics = ["link.uplink.per"]\nseeds = [0, 1]\n[grid]\n"link.ber" = [0.0, 1e-3]\n',
         encoding="utf-8",
     )
+    real = run_scenario
+
+    def flaky(scenario: Any, *, seed: int | None = None) -> Any:
+        if scenario.link.channel.ber > 0.0:
+            raise ValueError("stuck force must be within\n[-1, 1] N")
+        return real(scenario, seed=seed)
+
+    monkeypatch.setattr("testbed.run.runner.run_scenario", flaky)
+    monkeypatch.setattr(
+        "testbed.sweep.runner.outcomes",
+        lambda specs, workers, dask: (execute_run(spec) for spec in specs),
+    )
     out = tmp_path / "out"
-    assert main(["sweep", str(path), *SHORT, "--workers", "2", "--out", str(out)]) == 1
+    assert main(["sweep", str(path), *SHORT, "--out", str(out)]) == 1
     rows = _rows(out / "results.csv")
-    assert [r["status"] for r in rows] == ["ok", "failed", "ok", "failed"]
-    failed = rows[1]
-    assert failed["error"].startswith("ValueError: stuck force must be within")
+    assert [r["status"] for r in rows] == ["ok", "ok", "failed", "failed"]
+    failed = rows[2]
+    assert failed["error"] == "ValueError: stuck force must be within [-1, 1] N"  # one line
     assert failed["link.uplink.per"] == ""  # no metrics for a failed run, and no partial row
     stdout = capsys.readouterr().out
     assert "4 runs, 2 failed" in stdout
-    assert stdout.count("FAILED point") == 2 and "FAILED point 3 seed 0" in stdout
+    assert stdout.count("FAILED point") == 2 and "FAILED point 1 seed 1" in stdout
     aggregate = _rows(out / "aggregate.csv")
-    assert [(a["n_ok"], a["n_failed"]) for a in aggregate] == [("1", "0"), ("0", "1")] * 2
+    assert [(a["n_ok"], a["n_failed"]) for a in aggregate] == [("2", "0"), ("0", "2")]
