@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import EXIT_OK, Subparsers, check_seed, exit_code_of
+from testbed.cli.options import Subparsers, check_seed
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -151,8 +151,9 @@ def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
 
 def run_hil_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
+    from testbed.cli.run import finish_run
     from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
-    from testbed.run.outputs import prepare_out_dir, write_run
+    from testbed.run.outputs import prepare_out_dir
     from testbed.run.realtime import run_hil
     from testbed.run.scenario import load_scenario
 
@@ -197,22 +198,9 @@ def run_hil_command(args: argparse.Namespace) -> int:
         flush=True,
     )
     result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
-    plots = None
-    if not args.no_plots and result.stopped is None:
-        from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
-
-        plots = write_run_plots
-    write_run(result, out, plots=plots)
-    if result.stopped is not None:
-        reached = result.metrics["sim_s"]
-        print(
-            f"testbed: interrupted at t = {reached:.1f} s of {duration:g} s; "
-            f"partial results in {out}",
-            file=sys.stderr,
-        )
-        return exit_code_of(result.stopped)
-    print(format_hil_summary(result.metrics, out))
-    return EXIT_OK
+    return finish_run(
+        result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
+    )
 
 
 def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_seed, exit_code_of
 
-__all__ = ["add_run_parser", "add_scenarios_parser", "format_summary"]
+if TYPE_CHECKING:
+    from testbed.run.runner import RunResult
+
+__all__ = ["add_run_parser", "add_scenarios_parser", "finish_run", "format_summary"]
 
 
 def add_run_parser(sub: Subparsers) -> None:
@@ -45,7 +49,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
     """Handler of ``testbed run``: load, simulate, write, summarise."""
     import time
 
-    from testbed.run.outputs import prepare_out_dir, write_run
+    from testbed.run.outputs import prepare_out_dir
     from testbed.run.runner import run_scenario
     from testbed.run.scenario import load_scenario
 
@@ -57,21 +61,44 @@ def _run_scenario(args: argparse.Namespace) -> int:
         out = Path("runs") / f"{scenario.id}-{stamp}"
     prepare_out_dir(out, force=args.force)
     result = run_scenario(scenario, seed=args.seed)
-    plots = None
-    if not args.no_plots and result.stopped is None:
+    return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
+
+
+def finish_run(
+    result: RunResult,
+    out: Path,
+    *,
+    plots: bool,
+    planned_s: float,
+    summary: Callable[[dict[str, Any], Path], str] | None = None,
+) -> int:
+    """Write a finished or interrupted run (``testbed run`` and ``testbed hil``) and say so:
+    the summary on stdout, or for an interrupted run one line on stderr and 130/143.
+
+    Args:
+        result: the run.
+        out: its results directory (checked before the run).
+        plots: write the plots (never for an interrupted run: what ran is kept, fast).
+        planned_s: the run's planned duration [s], for the interrupted line.
+        summary: formats the summary (default :func:`format_summary`).
+    """
+    from testbed.run.outputs import write_run
+
+    writer = None
+    if plots and result.stopped is None:
         from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
 
-        plots = write_run_plots
-    write_run(result, out, plots=plots)
+        writer = write_run_plots
+    write_run(result, out, plots=writer)
     if result.stopped is not None:
         reached = result.metrics["sim_s"]
         print(
-            f"testbed: interrupted at t = {reached:.1f} s of {scenario.duration_s:g} s; "
+            f"testbed: interrupted at t = {reached:.1f} s of {planned_s:g} s; "
             f"partial results in {out}",
             file=sys.stderr,
         )
         return exit_code_of(result.stopped)
-    print(format_summary(result.metrics, out))
+    print((summary or format_summary)(result.metrics, out))
     return EXIT_OK
 
 
