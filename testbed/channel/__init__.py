@@ -31,20 +31,18 @@ from .mac import (
     run_token_slave,
 )
 from .medium import Delivery, Medium, Modem, ModemCounters, Position
-from .probe import ProbeResult, run_probe
-from .trace import (
+from .outcomes import (
     RECEPTION_OUTCOMES,
     DirectionCounts,
-    EventKind,
     FrameOutcome,
-    LinkEvent,
-    Trace,
     Transmission,
     direction_counts,
     frame_outcomes,
     transmissions,
     worst_outcome,
 )
+from .probe import ProbeResult, run_probe
+from .trace import EventKind, LinkEvent, Trace
 
 __all__ = [
     "RECEPTION_OUTCOMES",

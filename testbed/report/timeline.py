@@ -29,7 +29,7 @@ from testbed.channel import (
     Trace,
     Transmission,
 )
-from testbed.channel.trace import (
+from testbed.channel.outcomes import (
     TransmissionColumns,
     frame_outcome_columns,
     outcome_of_rank,

@@ -19,6 +19,9 @@ Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading
 physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it (observers
 of a run, such as the recorder, read it too, from outside the schedule's control path).
 Controller objects and the allocator are mutable resources; components stay frozen values.
+
+Size: over the 500-line guideline, kept whole: the systems run in this order in one frame and
+share these resources; split, the frame's order would be read across files.
 """
 
 from __future__ import annotations
