@@ -150,6 +150,16 @@ def run_sweep(
             if close is not None:
                 close()  # stops the workers (a generator's finally)
             progress.close()
+            # The journal on disk is the truth: an interrupt can land inside a flush, after
+            # its write and before its bookkeeping (a signal already taken by Python is not
+            # held back by the mask), so append only the finished rows it does not hold yet.
+            on_disk = read_journal(journal, repair=True)
+            written = {(r["point"], r["seed"]) for r in on_disk}
+            rest = [r for r in pending if (r["point"], r["seed"]) not in written]
+            if rest:
+                append_rows(journal, rest)
+            rows[:] = on_disk + rest
+            pending.clear()
             flush()
             write_aggregate()
         raise
