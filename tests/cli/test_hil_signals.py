@@ -84,7 +84,7 @@ def test_interrupt_before_settling_keeps_a_marked_partial_result(
     assert metrics["complete"] is False
     reached = float(lines[0].split("t = ")[1].split(" s")[0])
     assert 0.0 < metrics["sim_s"] < 30.0  # before settle_s
-    assert metrics["sim_s"] == pytest.approx(reached, abs=0.05)
+    assert metrics["sim_s"] == pytest.approx(reached, abs=0.05 + 1e-9)  # the line rounds to 0.1 s
     assert set(metrics["files"]) == {"events.csv", "series.csv"}
     assert metrics["command_age_s"] == {"mean": None, "p95": None}  # needs the settled window
     assert metrics["hil"]["mode"] == "both"
