@@ -83,6 +83,34 @@ class Segment:
     end: bool = False
 
 
+class SegmentStream:
+    """The payload-stream bytes an adapter gathers while it parses, cut into
+    segments (:class:`Segment`) where a received packet ends.
+
+    Attributes:
+        out: bytes gathered since the last segment (append to it while parsing).
+    """
+
+    __slots__ = ("_segments", "out")
+
+    def __init__(self) -> None:
+        self.out = bytearray()
+        self._segments: list[Segment] = []
+
+    def end_packet(self) -> None:
+        """A received packet ends after the bytes gathered so far."""
+        self._segments.append(Segment(bytes(self.out), end=True))
+        self.out.clear()
+
+    def take(self) -> list[Segment]:
+        """The segments since the last call, the bytes gathered since the last end included."""
+        if self.out:
+            self._segments.append(Segment(bytes(self.out)))
+            self.out.clear()
+        segments, self._segments = self._segments, []
+        return segments
+
+
 class Adapter(Protocol):
     """What a transport needs from a modem adapter."""
 

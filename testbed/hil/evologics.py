@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from testbed.protocol import START_BYTE, frame_overhead
 
-from .adapters import Segment, Write, is_printable
+from .adapters import Segment, SegmentStream, Write, is_printable
 
 __all__ = ["SENDIM_MAX", "EvoLogicsAdapter", "parse_received_message"]
 
@@ -101,10 +101,9 @@ class EvoLogicsAdapter:
     __slots__ = (
         "_buf",
         "_flag",
-        "_out",
         "_preamble",
         "_remaining",
-        "_segments",
+        "_stream",
         "bytes_in",
         "event_counts",
         "garbage_bytes",
@@ -142,8 +141,7 @@ class EvoLogicsAdapter:
         self._buf = bytearray()
         self._preamble = bytes([START_BYTE]) * preamble_len
         self._remaining = 0
-        self._out = bytearray()
-        self._segments: list[Segment] = []
+        self._stream = SegmentStream()
         self.messages_in = 0
         self.event_counts: dict[str, int] = {}
         self.parse_errors = 0
@@ -190,7 +188,7 @@ class EvoLogicsAdapter:
         self.bytes_in += len(data)
         buf = self._buf
         buf += data
-        out = self._out
+        out = self._stream.out
         pos = 0
         while True:
             i = buf.find(_ESCAPE, pos)
@@ -208,16 +206,11 @@ class EvoLogicsAdapter:
                 break
             pos = end
         del buf[:pos]
-        if out:
-            self._segments.append(Segment(bytes(out)))
-            out.clear()
-        segments, self._segments = self._segments, []
-        return segments
+        return self._stream.take()
 
     def _end_packet(self) -> None:
         """A packet ends after the payload stream so far."""
-        self._segments.append(Segment(bytes(self._out), end=True))
-        self._out.clear()
+        self._stream.end_packet()
 
     def _message(self, data: bytes) -> None:
         """One received instant message's data: into the stream, and the packet boundary."""
@@ -228,7 +221,7 @@ class EvoLogicsAdapter:
         if starts:
             self._remaining = plen + 1 + data[plen] + 2
         self._remaining = max(0, self._remaining - len(data))
-        self._out += data
+        self._stream.out += data
         if len(data) < SENDIM_MAX or not self._remaining:
             self._remaining = 0
             self._end_packet()

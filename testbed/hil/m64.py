@@ -31,7 +31,7 @@ from collections.abc import Sequence
 
 from testbed.protocol import START_BYTE, frame_overhead
 
-from .adapters import Segment, Write, is_printable
+from .adapters import Segment, SegmentStream, Write, is_printable
 
 __all__ = [
     "CRC8_CHECK_VALUE",
@@ -124,10 +124,9 @@ class M64Adapter:
 
     __slots__ = (
         "_buf",
-        "_out",
         "_preamble",
         "_remaining",
-        "_segments",
+        "_stream",
         "acks",
         "bytes_in",
         "channel",
@@ -167,8 +166,7 @@ class M64Adapter:
         self._preamble = bytes([START_BYTE]) * preamble_len
         self._buf = bytearray()
         self._remaining = 0
-        self._out = bytearray()
-        self._segments: list[Segment] = []
+        self._stream = SegmentStream()
         self.packets_in = 0
         self.crc_errors = 0
         self.parse_errors = 0
@@ -219,7 +217,7 @@ class M64Adapter:
         self.bytes_in += len(data)
         buf = self._buf
         buf += data
-        out = self._out
+        out = self._stream.out
         pos = 0
         n = len(buf)
         while pos < n:
@@ -238,16 +236,11 @@ class M64Adapter:
                 break
             pos = end
         del buf[:pos]
-        if out:
-            self._segments.append(Segment(bytes(out)))
-            out.clear()
-        segments, self._segments = self._segments, []
-        return segments
+        return self._stream.take()
 
     def _end_packet(self) -> None:
         """A modem message ends after the payload stream so far."""
-        self._segments.append(Segment(bytes(self._out), end=True))
-        self._out.clear()
+        self._stream.end_packet()
 
     def _sentence(self, buf: bytearray, start: int, out: bytearray) -> int | None:
         """Parse the sentence at ``start``; the index after it, or None to wait for bytes."""
