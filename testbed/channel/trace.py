@@ -31,6 +31,7 @@ __all__ = [
     "KIND_CODE",
     "EventKind",
     "LinkEvent",
+    "ListEquality",
     "Trace",
     "TraceColumns",
     "TraceEvents",
@@ -331,7 +332,21 @@ class Trace:
             start = stop
 
 
-class TraceEvents(Sequence[LinkEvent]):
+class ListEquality(Sequence[Any]):
+    """A read-only sequence view that compares equal to any sequence of equal items (a list
+    included), as the list it stands for would; unhashable, like a list."""
+
+    __slots__ = ()
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Sequence) or isinstance(other, str | bytes):
+            return NotImplemented
+        return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+class TraceEvents(ListEquality, Sequence[LinkEvent]):
     """Read-only sequence view of a :class:`Trace`'s events (:attr:`Trace.events`); equal to
     any sequence of the same events."""
 
@@ -368,13 +383,6 @@ class TraceEvents(Sequence[LinkEvent]):
 
     def __iter__(self) -> Iterator[LinkEvent]:
         return iter(self._trace)
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Sequence) or isinstance(other, str | bytes):
-            return NotImplemented
-        return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
-
-    __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         return f"<{len(self)} link events>"

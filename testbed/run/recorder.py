@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from testbed.channel import Trace
+from testbed.channel.trace import ListEquality
 from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
@@ -205,7 +206,7 @@ class SeriesRows(Sequence[tuple[float, ...]]):
         return self._values.itemsize * len(self._values)
 
 
-class FloatPairs(Sequence[tuple[float, float]]):
+class FloatPairs(ListEquality, Sequence[tuple[float, float]]):
     """Append-only ``(a, b)`` float pairs in one flat ``array('d')`` (16 B per pair rather than
     ≈ 110 B as a tuple of floats in a list); iterating gives them back as tuples.
 
@@ -248,13 +249,6 @@ class FloatPairs(Sequence[tuple[float, float]]):
         for start in range(0, len(values), 8192):
             flat = values[start : start + 8192].tolist()
             yield from zip(flat[::2], flat[1::2], strict=True)
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Sequence) or isinstance(other, str | bytes):
-            return NotImplemented
-        return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
-
-    __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         return f"FloatPairs({list(self)!r})"
