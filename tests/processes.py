@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import signal
+from pathlib import Path
+from typing import Any
 
 
 def default_sigint() -> None:
@@ -14,3 +17,14 @@ def default_sigint() -> None:
     the test runner was launched.
     """
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def check_set(out: Path) -> dict[str, Any]:
+    """The results directory's metrics.json names exactly the files beside it, with their
+    sizes (a complete or a marked partial set, never a mixed one); its content."""
+    metrics: dict[str, Any] = json.loads((out / "metrics.json").read_text())
+    files = metrics["files"]
+    assert isinstance(files, dict)
+    on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
+    assert on_disk == files
+    return metrics

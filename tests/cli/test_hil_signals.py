@@ -16,11 +16,10 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from tests.processes import default_sigint
+from tests.processes import check_set, default_sigint
 
 WAIT_S = 120.0
 LONG = ["--duration", "100000", "--set", "metrics.settle_s=30"]
@@ -50,16 +49,6 @@ def ports() -> Iterator[tuple[str, str]]:
     finally:
         emulator.send_signal(signal.SIGINT)
         emulator.communicate(timeout=WAIT_S)
-
-
-def check_set(out: Path) -> dict[str, Any]:
-    """The directory's metrics.json names exactly the files beside it, with their sizes."""
-    metrics: dict[str, Any] = json.loads((out / "metrics.json").read_text())
-    files = metrics["files"]
-    assert isinstance(files, dict)
-    on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
-    assert on_disk == files
-    return metrics
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])

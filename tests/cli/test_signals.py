@@ -9,7 +9,6 @@ never slept blindly.
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.processes import default_sigint
+from tests.processes import check_set, default_sigint
 
 LONG = ["--set", "duration_s=86400"]  # a simulated day, minutes of wall time: a signal ends it
 WAIT_S = 120.0
@@ -42,16 +41,6 @@ def wait_for(condition: object, what: str, proc: subprocess.Popen[str] | None = 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.05)
-
-
-def check_set(out: Path) -> dict[str, object]:
-    """The directory's metrics.json names exactly the files beside it, with their sizes."""
-    metrics = json.loads((out / "metrics.json").read_text())
-    files = metrics["files"]
-    assert isinstance(files, dict)
-    on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
-    assert on_disk == files
-    return metrics
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
