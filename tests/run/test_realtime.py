@@ -51,7 +51,7 @@ import simpy
 
 import testbed
 from testbed.channel import Delivery, EventKind, LinkConfig, Trace, load_link_config
-from testbed.hil import PortSettings, open_endpoint
+from testbed.hil import LinkEndpoint, PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
 from testbed.run.realtime import POLL_S, FrameLedger, HilModem, run_hil
 from testbed.run.runner import RunResult, write_outputs
@@ -231,11 +231,20 @@ NOISE = b"\x00\xffline noise\x00"
 """What the operator's modem blurts out when it is plugged back in (no 0x55, no ``+++``)."""
 
 
-def _unplugged_factory(url: str, window: tuple[float, float]) -> Callable[[], UnpluggedPort]:
+def _unplugged_factory(
+    url: str, window: tuple[float, float], attempts: list[tuple[float, bool]]
+) -> Callable[[], UnpluggedPort]:
+    """A port factory for the transport that fails inside ``window``; each call is appended to
+    ``attempts`` as (monotonic instant, opened)."""
     opened: list[UnpluggedPort] = []
 
     def factory() -> UnpluggedPort:
-        UnpluggedPort.check(window)
+        try:
+            UnpluggedPort.check(window)
+        except serial.SerialException:
+            attempts.append((time.monotonic(), False))
+            raise
+        attempts.append((time.monotonic(), True))
         port = UnpluggedPort(url, window)
         if opened:  # plugged back in: line noise goes out before any frame
             port.write(NOISE)
@@ -335,14 +344,25 @@ class LinkProbe:
             while not self._stop.is_set():
                 t0 = time.monotonic()
                 a.send(frame)
-                if b.wait(5.0) == [Frame(self.PAYLOAD)]:
-                    self.excess_s.append(time.monotonic() - t0 - self.model_s)
-                else:
-                    self.lost += 1
+                self._await(b, t0)
                 self._pause()
         finally:
             a.close()
             b.close()
+
+    def _await(self, b: LinkEndpoint, t0: float) -> None:
+        """Wait for the probe's frame however long the host stalls it (a stall longer than any
+        fixed timeout is the one the bounds most need); stopped while waiting, record the time
+        waited so far, a lower bound of that crossing's excess."""
+        while not self._stop.is_set():
+            frames = b.wait(0.25)
+            if frames:
+                if frames == [Frame(self.PAYLOAD)]:
+                    self.excess_s.append(time.monotonic() - t0 - self.model_s)
+                else:
+                    self.lost += 1
+                return
+        self.excess_s.append(time.monotonic() - t0 - self.model_s)
 
     def _pause(self) -> None:
         due = time.monotonic() + self._gap_s
@@ -386,6 +406,10 @@ class Window:
     """Per emulator (single run, two computers, CLI, probe): ``ports`` and ``modems`` counters
     (A then B) and ``scheduler_lateness_ms``."""
     probe: LinkProbe
+    port_opens: list[tuple[float, bool]]
+    """Each call of the operator port's factory: (monotonic instant, opened)."""
+    unplug_monotonic: tuple[float, float]
+    """The unplug window on the monotonic clock [s]."""
 
     def lateness_s(self, key: str) -> float:
         """The run's measured scheduler lateness (``hil.scheduler_lateness_ms[key]``) [s]."""
@@ -398,10 +422,30 @@ class Window:
         met (:meth:`LinkProbe.worst_s`) plus the run's largest lateness. A frame exceeds the p95
         allowance with probability ≤ 5 % + 5 % (union bound), so a median of many exceeds it
         never; no frame exceeds the max allowance unless its stall was on a thread the probe's
-        path does not share."""
+        path does not share. Each also adds the same statistic of the lateness the run's own
+        emulator measured on its two threads (:meth:`emulator_s`): the probe crosses another
+        emulator in that process, and a stall can fall between its crossings."""
         if which == "p95":
-            return self.probe.quantile(0.95) + self.lateness_s("p95")
-        return self.probe.worst_s() + self.lateness_s("max")
+            return self.probe.quantile(0.95) + self.lateness_s("p95") + self.emulator_s("p95")
+        return self.probe.worst_s() + self.lateness_s("max") + self.emulator_s("max")
+
+    def describe(self) -> str:
+        """The measured allowances, for an assertion's message (a failure on a loaded machine
+        must say which measurement fell short)."""
+        return (
+            f"probe p95/worst {self.probe.quantile(0.95):.3f}/{self.probe.worst_s():.3f} s "
+            f"({len(self.probe.excess_s)} crossings, {self.probe.lost} lost), run lateness "
+            f"p95/max {self.lateness_s('p95'):.3f}/{self.lateness_s('max'):.3f} s, emulator "
+            f"p95/max {self.emulator_s('p95'):.3f}/{self.emulator_s('max'):.3f} s"
+        )
+
+    def emulator_s(self, key: str) -> float:
+        """Scheduler lateness the single run's emulator measured [s]: its reader's (a burst
+        enters the link that late) plus its simulation thread's (a delivery is written that
+        late), statistic ``key`` of each; 0 for a thread with no sample."""
+        late = self.emulators[0]["scheduler_lateness_ms"]
+        values = [late[thread][key] for thread in ("reader", "simulation")]
+        return sum(0.0 if v is None or math.isnan(v) else max(0.0, v) for v in values) / 1e3
 
 
 @pytest.fixture(scope="module")
@@ -431,9 +475,10 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
             child.stderr.readline()
         t0 = time.monotonic()
         unplug = (t0 + UNPLUG_S[0], t0 + UNPLUG_S[1])
+        attempts: list[tuple[float, bool]] = []
         operator = open_endpoint(
             PortSettings(single[0], "s100", "operator"),
-            port_factory=_unplugged_factory(single[0], unplug),
+            port_factory=_unplugged_factory(single[0], unplug, attempts),
             backoff_initial_s=0.05,
             backoff_max_s=0.25,
         )
@@ -473,6 +518,8 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         outputs,
         reports,
         probe,
+        attempts,
+        unplug,
     )
 
 
@@ -528,7 +575,7 @@ def test_orders_reach_the_vehicle_and_state_returns(window: Window) -> None:
     # stall; none lost without a collision.
     assert lost_on_air.is_integer()
     assert modems[1]["rx_collided"] <= lost_on_air
-    assert (lost_on_air == 0) == (modems[1]["rx_collided"] == 0)
+    assert (lost_on_air == 0) == (modems[1]["rx_collided"] == 0), window.emulators[0]
     unhanded = _unhanded(
         window, ends["vehicle"]["bytes_in"], len(NOISE), up["frames_delivered"], order
     )
@@ -589,8 +636,8 @@ def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
     )
     assert 1 <= lags.size <= window.single.metrics["link"]["uplink"]["frames_delivered"]
     assert lags.min() >= link_s - window.lateness_s("max") - 0.002
-    assert np.median(lags) <= model_s + window.host_s("p95") + 0.002
-    assert np.percentile(lags, 95) <= model_s + window.host_s("max") + 0.002
+    assert np.median(lags) <= model_s + window.host_s("p95") + 0.002, window.describe()
+    assert np.percentile(lags, 95) <= model_s + window.host_s("max") + 0.002, window.describe()
     assert window.single.metrics["command_lag_s"]["n"] == lags.size
 
 
@@ -610,8 +657,8 @@ def test_round_trip_is_both_directions_of_the_link(window: Window) -> None:
     late_replies = model_s + 2 * POLL_S + 2 * window.host_s("max") >= IPG_S
     lower_s = 0.0 if late_replies else model_s - window.lateness_s("max") - 0.002
     assert lower_s <= rtt["p50"]
-    assert rtt["p50"] <= model_s + 2 * POLL_S + 2 * window.host_s("p95") + 0.002
-    assert rtt["p95"] <= model_s + 2 * POLL_S + 2 * window.host_s("max") + 0.002
+    assert rtt["p50"] <= model_s + 2 * POLL_S + 2 * window.host_s("p95") + 0.002, window.describe()
+    assert rtt["p95"] <= model_s + 2 * POLL_S + 2 * window.host_s("max") + 0.002, window.describe()
 
 
 def test_added_latency_is_the_wait_for_the_next_poll(window: Window) -> None:
@@ -665,7 +712,16 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
     operator = metrics["hil"]["endpoints"]["operator"]
     assert operator["port_errors"] >= 1
     assert operator["reopens"] >= 1 and metrics["hil"]["reopens"] >= 1
-    assert operator["reopen_failures"] >= 1  # the port stayed away for a while
+    # The transport retried until the port was back: its failed reopens are the factory's
+    # failed calls, all inside the unplug, then one that opened at or after its end (how many
+    # fail depends on when the loaded host first noticed the port gone, not the rule).
+    opens = window.port_opens
+    assert operator["reopen_failures"] == sum(not ok for _, ok in opens[1:])
+    assert all(
+        window.unplug_monotonic[0] <= t < window.unplug_monotonic[1] for t, ok in opens if not ok
+    )
+    assert opens[0][1] and opens[-1][1] and opens[-1][0] >= window.unplug_monotonic[1]
+    assert operator["reopens"] == sum(ok for _, ok in opens[1:])
     assert "device disconnected" in operator["last_error"]
     assert operator["frames_dropped"] >= 2  # orders sent while it was away
     assert metrics["hil"]["endpoints"]["vehicle"]["reopens"] == 0
