@@ -22,8 +22,10 @@ Pure numpy and math: this module must never import pybullet.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from importlib import resources
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -69,6 +71,13 @@ class HydroModel:
         quadratic_damping: (X_u|u|, Y_v|v|, Z_w|w|, K_p|p|, M_q|q|, N_r|r|), ≤ 0 [N·s²/m², N·m·s²].
         hull_size_m: (length, width, height) of the collision box centred on CO [m]; the height
             also sets how buoyancy fades as the hull crosses the free surface.
+        added_mass_coriolis: which added-mass Coriolis-centripetal matrix C_A(ν_r) the model
+            uses (docs/vehicle.md): ``"full"``, Fossen's C_A from the anisotropic M_A, Munk
+            moments included (e.g. −(Z_ẇ − X_u̇)·u·w in pitch); ``"isotropic"``, C_A built from
+            the mean of X_u̇, Y_v̇, Z_ẇ (and the rotational terms as given), so the Munk moments
+            vanish, as with Stonefish's isotropic added mass; ``"off"``, C_A = 0, as bluerov2_gz,
+            Blue and Gazebo's ``disable_coriolis``. M_A stays in the mass matrix in all three,
+            and each C_A is skew-symmetric (it does no work).
     """
 
     name: str
@@ -83,6 +92,7 @@ class HydroModel:
     linear_damping: Vec6
     quadratic_damping: Vec6
     hull_size_m: Vec3
+    added_mass_coriolis: Literal["full", "isotropic", "off"] = "full"
 
     def __post_init__(self) -> None:
         check(self.mass_kg > 0.0, "mass_kg", f"must be > 0, got {self.mass_kg}")
@@ -139,8 +149,16 @@ def known_models() -> list[str]:
     )
 
 
-def load_model(name: str = "bluerov2") -> HydroModel:
+def load_model(
+    name: str = "bluerov2",
+    *,
+    added_mass_coriolis: Literal["full", "isotropic", "off"] | None = None,
+) -> HydroModel:
     """Load a packaged vehicle model by name.
+
+    Args:
+        name: the model (``testbed/vehicle/data/models/NAME.toml``).
+        added_mass_coriolis: overrides the file's :attr:`HydroModel.added_mass_coriolis`.
 
     Raises:
         ConfigError: unknown name (the message lists the known ones) or a bad file.
@@ -150,7 +168,10 @@ def load_model(name: str = "bluerov2") -> HydroModel:
         raise ConfigError(f"unknown vehicle model {name!r} (known: {', '.join(known)})")
     entry = _models_dir().joinpath(f"{name}.toml")
     with resources.as_file(entry) as path:
-        return build(HydroModel, load_toml(path), source=str(path))
+        model = build(HydroModel, load_toml(path), source=str(path))
+    if added_mass_coriolis is not None:
+        model = dataclasses.replace(model, added_mass_coriolis=added_mass_coriolis)
+    return model
 
 
 # --- kinematics ------------------------------------------------------------------------------

@@ -181,6 +181,10 @@ class VehicleConfig:
         current_limit_a: total current budget [A], in (0, 1e4]; None = the layout's budget.
         slew_limit_n_per_s: per-thruster force slew limit [N/s], in (0, 1e6]; None = the
             layout's.
+        added_mass_coriolis: the model's added-mass Coriolis option, overriding its file's
+            (``"full"``, ``"isotropic"`` or ``"off"``: see
+            :attr:`~testbed.vehicle.hydrodynamics.HydroModel.added_mass_coriolis`); None keeps
+            the model's own.
         supply_voltage_v: thruster supply voltage [V] for the T200 table, in [12, 20] (the
             published range the table is scaled over, :data:`SUPPLY_VOLTAGE_RANGE_V`).
         thruster_time_constant_s: plant spin-up lag [s], in [0, 10].
@@ -203,6 +207,7 @@ class VehicleConfig:
     allocation: Literal["pinv", "lsq"] = "pinv"
     current_limit_a: float | None = None
     slew_limit_n_per_s: float | None = None
+    added_mass_coriolis: Literal["full", "isotropic", "off"] | None = None
     supply_voltage_v: float = 12.0
     thruster_time_constant_s: float = SPIN_UP_TIME_CONSTANT_S
     gains: ControlGains = field(default_factory=_default_gains)
@@ -287,7 +292,7 @@ class Vehicle:
         self._matrix = np.array(thruster_config.matrix, dtype=float)
         n = self._matrix.shape[1]
         self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
-        self.model = load_model(config.model)
+        self.model = load_model(config.model, added_mass_coriolis=config.added_mass_coriolis)
         self.physics = Physics(
             self.model,
             dt_s=config.physics_dt_s,
