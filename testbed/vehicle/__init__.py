@@ -5,9 +5,9 @@ See DESIGN.md.
 Modules (import them directly; this package imports nothing, so ``import testbed.vehicle``
 stays cheap and never loads pybullet):
 
-* ``hydrodynamics``: Fossen's 6-DOF model (``HydroModel``, ``load_model``, the force law),
-  pure numpy; ``scalar_dynamics``: the same law generated as straight-line float code (the hot
-  path); ``water_current``: the current (``WaterCurrent``, ``CurrentProcess``).
+* ``hydrodynamics``: Fossen's 6-DOF model (``HydroModel``, ``load_model``) and its equation of
+  motion, written once and compiled by numba (``fossen_acceleration``); ``water_current``: the
+  current (``WaterCurrent``, ``CurrentProcess``).
 * ``physics``: the plant (``Physics``, ``PoolScene``, ``simulate_open_loop``), the only module
   in the project that imports pybullet.
 * ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle.

@@ -1,4 +1,4 @@
-"""Fossen's 6-DOF vehicle model: its parameters and the force law (the numpy reference).
+"""Fossen's 6-DOF vehicle model: its parameters and its equation of motion, written once.
 
 The equation of motion (Fossen 2011, body frame, relative velocity ν_r = ν − ν_c)::
 
@@ -10,14 +10,15 @@ frame; ``inertia_kg_m2`` are the principal moments about the CoG (body-aligned a
 M_RB about CO carries the m·S(r_g) coupling and the parallel-axis term. The applied wrench is
 given about the CoG (thruster allocation works about the centre of mass) and moved to CO here.
 
-Two paths compute the same accelerations: the numpy reference functions here (clear matrices,
-used by tests) and :func:`testbed.vehicle.scalar_dynamics.make_scalar_dynamics`, straight-line
-Python over floats generated once per model, which the pybullet stepping loop calls 240 times per
-simulated second. Tests hold the two to 1e-10. The water current (ν_c) is
-:mod:`testbed.vehicle.water_current`; :class:`WaterCurrent` is re-exported here for the callers
-that import it with the model. Rotations are :mod:`testbed.common.geometry`.
+:func:`fossen_acceleration` is the one implementation of the right-hand side, compiled by numba
+(cached to disk: the first process compiles it in about a second, later ones load it): the
+pybullet stepping loop (:mod:`testbed.vehicle.physics`) calls it from its own compiled step, and
+:func:`body_acceleration` is its array interface. Tests check it against Fossen's matrices
+written out independently in the tests (tests/vehicle/fossen_matrices.py), an integration by
+scipy, and closed forms. The water current (ν_c) is :mod:`testbed.vehicle.water_current`;
+:class:`WaterCurrent` is re-exported here for the callers that import it with the model.
 
-Pure numpy and math: this module must never import pybullet.
+numpy, numba and math: this module must never import pybullet.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 from importlib import resources
 from typing import Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -37,15 +39,12 @@ __all__ = [
     "HydroModel",
     "WaterCurrent",
     "body_acceleration",
-    "coriolis_added_mass",
-    "coriolis_rigid_body",
-    "damping_matrix",
+    "coefficients",
+    "fossen_acceleration",
     "known_models",
     "load_model",
-    "restoring_forces",
     "skew",
     "submerged_fraction",
-    "wrench_about_origin",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -183,90 +182,154 @@ def skew(a: ArrayLike) -> FloatArray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-# --- forces -------------------------------------------------------------
+# --- the equation of motion ---------------------------------------------------------------------
+#
+# One implementation of the right-hand side, compiled by numba (cached on disk beside this
+# module): the pybullet stepping loop calls it from its own compiled step (240 times per
+# simulated second) and :func:`body_acceleration` from Python. Its coefficients travel as one
+# float64 array (one argument to unbox per call) laid out by :func:`coefficients`.
+
+_MASS, _WEIGHT, _BUOYANCY = 0, 1, 2
+_COG, _COB = 3, 6  # r_g, r_b (3 each)
+_INERTIA = 9  # I_o about CO, row-major (9)
+_ADDED = 18  # −diag(M_A): positive added masses (6)
+_CORIOLIS = 24  # the diagonal C_A(ν_r) is built from (6), see HydroModel.added_mass_coriolis
+_LINEAR, _QUADRATIC = 30, 36  # Fossen's damping derivatives, ≤ 0 (6 each)
+_MASS_INVERSE = 42  # (M_RB + M_A)⁻¹, row-major (36)
+_N_COEFFICIENTS = 78
 
 
-def coriolis_rigid_body(model: HydroModel, nu: ArrayLike) -> FloatArray:
-    """(6, 6) C_RB(ν) about CO, linear-velocity-independent form (Fossen 2011, eq. 3.60).
-
-    Args:
-        model: the vehicle.
-        nu: (6,) body velocity [u v w p q r] at CO [m/s, rad/s], FRD.
-    """
-    omega = np.asarray(nu, dtype=float)[3:]
-    m = model.mass_kg
-    s_w = skew(omega)
-    s_g = skew(model.cog_m)
-    return np.block(
-        [
-            [m * s_w, -m * s_w @ s_g],
-            [m * s_g @ s_w, -skew(model.inertia_origin @ omega)],
-        ]
-    )
-
-
-def coriolis_added_mass(model: HydroModel, nu_r: ArrayLike) -> FloatArray:
-    """(6, 6) C_A(ν_r) for a diagonal M_A (Fossen 2011, eq. 6.43), includes the Munk moment.
-
-    Args:
-        model: the vehicle.
-        nu_r: (6,) body velocity relative to the water [m/s, rad/s], FRD.
-    """
-    a = model.added_mass_matrix @ np.asarray(nu_r, dtype=float)
-    s_lin = skew(a[:3])
-    return np.block([[np.zeros((3, 3)), -s_lin], [-s_lin, -skew(a[3:])]])
+def coefficients(model: HydroModel) -> FloatArray:
+    """The model's coefficients as the kernels read them (read-only float64 array)."""
+    added = [-a for a in model.added_mass]
+    if model.added_mass_coriolis == "full":
+        coriolis = added
+    elif model.added_mass_coriolis == "isotropic":
+        mean = sum(added[:3]) / 3.0
+        coriolis = [mean, mean, mean, *added[3:]]
+    else:
+        coriolis = [0.0] * 6
+    values = [
+        model.mass_kg,
+        model.weight_n,
+        model.buoyancy_n,
+        *model.cog_m,
+        *model.cob_m,
+        *model.inertia_origin.ravel().tolist(),
+        *added,
+        *coriolis,
+        *model.linear_damping,
+        *model.quadratic_damping,
+        *np.linalg.inv(model.mass_matrix).ravel().tolist(),
+    ]
+    array = np.array(values, dtype=np.float64)
+    assert array.shape == (_N_COEFFICIENTS,)
+    array.setflags(write=False)
+    return array
 
 
-def damping_matrix(model: HydroModel, nu_r: ArrayLike) -> FloatArray:
-    """(6, 6) D(ν_r) = −diag(X_u … N_r) − diag(X_u|u| … N_r|r|)·diag(|ν_r|), positive.
+@numba.njit(cache=True)
+def fossen_acceleration(
+    c: FloatArray,
+    nu: Vec6,
+    down: Vec3,
+    current_body: Vec3,
+    scale: float,
+    wrench: Vec6,
+) -> Vec6:  # pragma: no cover - compiled (tests call it through numba)
+    """ν̇ at CO from (M_RB + M_A)ν̇ = τ − C_RB(ν)ν − C_A(ν_r)ν_r − D(ν_r)ν_r − g(η) + M_A·ν̇_c.
 
-    Args:
-        model: the vehicle.
-        nu_r: (6,) body velocity relative to the water [m/s, rad/s], FRD.
-    """
-    linear = -np.asarray(model.linear_damping)
-    quadratic = -np.asarray(model.quadratic_damping) * np.abs(np.asarray(nu_r, dtype=float))
-    return np.diag(linear + quadratic)
-
-
-def restoring_forces(
-    model: HydroModel, rotation: ArrayLike, buoyancy_scale: float = 1.0
-) -> FloatArray:
-    """(6,) g(η): weight W at r_g, buoyancy B at r_b, both world-vertical (Fossen 2011, eq. 4.6).
-
-    g(η) is on the left of the equation of motion: the wrench on the body is −g(η).
-
-    Args:
-        model: the vehicle.
-        rotation: (3, 3) R, body FRD → NED.
-        buoyancy_scale: submerged fraction of the hull (1 fully under water).
-    """
-    down_body = np.asarray(rotation, dtype=float).T @ np.array([0.0, 0.0, 1.0])
-    f_g = model.weight_n * down_body
-    f_b = -model.buoyancy_n * buoyancy_scale * down_body
-    moment = np.cross(model.cog_m, f_g) + np.cross(model.cob_m, f_b)
-    return -np.concatenate([f_g + f_b, moment])
-
-
-def wrench_about_origin(model: HydroModel, wrench_cog: ArrayLike) -> FloatArray:
-    """(6,) the body wrench about CO equivalent to ``wrench_cog`` about the CoG: M_o = M_g + r_g×F.
+    Fossen 2011: C_RB in its linear-velocity-independent form about CO (eq. 3.60), written
+    out as m·ω×v_g and m·r_g×(ω×v) + ω×(I_o·ω); C_A(ν_r) of a diagonal added mass (eq. 6.43),
+    −C_A·ν_r = [a₁×ω; a₁×v_r + a₂×ω] with a = diag(coriolis)·ν_r; D diagonal, linear plus
+    quadratic; g(η) weight W at r_g and buoyancy B·scale at r_b along the world vertical. The
+    current is constant in NED (irrotational), so its body derivative is ν̇_c = [v_c×ω; 0].
 
     Args:
-        model: the vehicle.
-        wrench_cog: (6,) body wrench [N, N·m], FRD, moments about the CoG.
+        c: the model's :func:`coefficients`.
+        nu: body velocity (u, v, w, p, q, r) at CO [m/s, rad/s], FRD.
+        down: the world's down direction in the body, Rᵀ·(0, 0, 1) (unit), FRD.
+        current_body: water velocity in the body [m/s], FRD.
+        scale: submerged fraction of the hull, in [0, 1].
+        wrench: applied body wrench (X, Y, Z, K, M, N) [N, N·m], FRD, moments about the CoG.
+
+    Returns:
+        (u̇, v̇, ẇ, ṗ, q̇, ṙ), body-frame derivatives of ν [m/s², rad/s²].
     """
-    tau = np.asarray(wrench_cog, dtype=float)
-    return np.concatenate([tau[:3], tau[3:] + np.cross(model.cog_m, tau[:3])])
-
-
-def submerged_fraction(depth_cob_m: float, hull_height_m: float) -> float:
-    """Fraction of the hull under water, linear while the hull crosses the surface (z = 0).
-
-    Args:
-        depth_cob_m: NED z of the centre of buoyancy [m] (positive under water).
-        hull_height_m: hull height [m].
-    """
-    return min(1.0, max(0.0, 0.5 + depth_cob_m / hull_height_m))
+    u, v, w, p, q, r = nu
+    gx, gy, gz = down
+    uc, vc, wc = current_body
+    fx, fy, fz, mx, my, mz = wrench
+    m = c[_MASS]
+    xg, yg, zg = c[_COG], c[_COG + 1], c[_COG + 2]
+    ur, vr, wr = u - uc, v - vc, w - wc
+    # −C_RB(ν)ν: −m·ω×v_g (v_g = v + ω×r_g) and −m·r_g×(ω×v) − ω×(I_o·ω)
+    ugx, ugy, ugz = u + q * zg - r * yg, v + r * xg - p * zg, w + p * yg - q * xg
+    t0 = -m * (q * ugz - r * ugy)
+    t1 = -m * (r * ugx - p * ugz)
+    t2 = -m * (p * ugy - q * ugx)
+    ox, oy, oz = q * w - r * v, r * u - p * w, p * v - q * u  # ω×v
+    t3 = -m * (yg * oz - zg * oy)
+    t4 = -m * (zg * ox - xg * oz)
+    t5 = -m * (xg * oy - yg * ox)
+    i = _INERTIA
+    hx = c[i] * p + c[i + 1] * q + c[i + 2] * r
+    hy = c[i + 3] * p + c[i + 4] * q + c[i + 5] * r
+    hz = c[i + 6] * p + c[i + 7] * q + c[i + 8] * r
+    t3 -= q * hz - r * hy
+    t4 -= r * hx - p * hz
+    t5 -= p * hy - q * hx
+    # −C_A(ν_r)ν_r = [a₁×ω; a₁×v_r + a₂×ω]
+    k = _CORIOLIS
+    ax, ay, az = c[k] * ur, c[k + 1] * vr, c[k + 2] * wr
+    bx, by, bz = c[k + 3] * p, c[k + 4] * q, c[k + 5] * r
+    t0 += ay * r - az * q
+    t1 += az * p - ax * r
+    t2 += ax * q - ay * p
+    t3 += ay * wr - az * vr + by * r - bz * q
+    t4 += az * ur - ax * wr + bz * p - bx * r
+    t5 += ax * vr - ay * ur + bx * q - by * p
+    # −D(ν_r)ν_r (the derivatives are ≤ 0)
+    lin, quad = _LINEAR, _QUADRATIC
+    t0 += (c[lin] + c[quad] * abs(ur)) * ur
+    t1 += (c[lin + 1] + c[quad + 1] * abs(vr)) * vr
+    t2 += (c[lin + 2] + c[quad + 2] * abs(wr)) * wr
+    t3 += (c[lin + 3] + c[quad + 3] * abs(p)) * p
+    t4 += (c[lin + 4] + c[quad + 4] * abs(q)) * q
+    t5 += (c[lin + 5] + c[quad + 5] * abs(r)) * r
+    # −g(η) = [(W − B·s)·down; (W·r_g − B·s·r_b)×down]
+    weight, buoyancy = c[_WEIGHT], c[_BUOYANCY] * scale
+    net = weight - buoyancy
+    t0 += net * gx
+    t1 += net * gy
+    t2 += net * gz
+    lx = weight * xg - buoyancy * c[_COB]
+    ly = weight * yg - buoyancy * c[_COB + 1]
+    lz = weight * zg - buoyancy * c[_COB + 2]
+    t3 += ly * gz - lz * gy
+    t4 += lz * gx - lx * gz
+    t5 += lx * gy - ly * gx
+    # τ about CO: the force, and the moment about the CoG plus r_g×F
+    t0 += fx
+    t1 += fy
+    t2 += fz
+    t3 += mx + yg * fz - zg * fy
+    t4 += my + zg * fx - xg * fz
+    t5 += mz + xg * fy - yg * fx
+    # + M_A·ν̇_c, ν̇_c = [v_c×ω; 0]
+    a = _ADDED
+    t0 += c[a] * (vc * r - wc * q)
+    t1 += c[a + 1] * (wc * p - uc * r)
+    t2 += c[a + 2] * (uc * q - vc * p)
+    # ν̇ = M⁻¹·τ
+    tau = (t0, t1, t2, t3, t4, t5)
+    out = [0.0] * 6
+    for row in range(6):
+        total = 0.0
+        for col in range(6):
+            total += c[_MASS_INVERSE + 6 * row + col] * tau[col]
+        out[row] = total
+    return (out[0], out[1], out[2], out[3], out[4], out[5])
 
 
 def body_acceleration(
@@ -277,10 +340,7 @@ def body_acceleration(
     current_ned: ArrayLike = (0.0, 0.0, 0.0),
     buoyancy_scale: float = 1.0,
 ) -> FloatArray:
-    """(6,) ν̇ at CO from (M_RB + M_A)ν̇ = τ − C_RB(ν)ν − C_A(ν_r)ν_r − D(ν_r)ν_r − g(η) + M_A·ν̇_c.
-
-    The current is constant in NED (irrotational); its body-frame derivative as the vehicle
-    turns is ν̇_c = [−ω × v_c; 0].
+    """(6,) ν̇ at CO: :func:`fossen_acceleration` for arrays (tests, analysis, plots).
 
     Args:
         model: the vehicle.
@@ -293,19 +353,32 @@ def body_acceleration(
     Returns:
         (6,) [u̇ v̇ ẇ ṗ q̇ ṙ], body-frame derivatives of the body velocity [m/s², rad/s²].
     """
-    nu = np.asarray(nu, dtype=float)
-    rot = np.asarray(rotation, dtype=float)
-    current_body = rot.T @ np.asarray(current_ned, dtype=float)
-    nu_c = np.concatenate([current_body, np.zeros(3)])
-    nu_r = nu - nu_c
-    nu_c_dot = np.concatenate([-np.cross(nu[3:], current_body), np.zeros(3)])
-    rhs = (
-        wrench_about_origin(model, wrench_cog)
-        - coriolis_rigid_body(model, nu) @ nu
-        - coriolis_added_mass(model, nu_r) @ nu_r
-        - damping_matrix(model, nu_r) @ nu_r
-        - restoring_forces(model, rot, buoyancy_scale)
-        + model.added_mass_matrix @ nu_c_dot
+    rot = np.asarray(rotation, dtype=np.float64)
+    u, v, w, p, q, r = _floats(nu)
+    gx, gy, gz = _floats(rot[2])
+    uc, vc, wc = _floats(rot.T @ np.asarray(current_ned, dtype=np.float64))
+    fx, fy, fz, mx, my, mz = _floats(wrench_cog)
+    result = fossen_acceleration(
+        coefficients(model),
+        (u, v, w, p, q, r),
+        (gx, gy, gz),
+        (uc, vc, wc),
+        float(buoyancy_scale),
+        (fx, fy, fz, mx, my, mz),
     )
-    result: FloatArray = np.linalg.solve(model.mass_matrix, rhs)
-    return result
+    return np.array(result)
+
+
+def _floats(values: ArrayLike) -> list[float]:
+    """``values`` as Python floats (one compiled signature for every caller)."""
+    return [float(x) for x in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def submerged_fraction(depth_cob_m: float, hull_height_m: float) -> float:
+    """Fraction of the hull under water, linear while the hull crosses the surface (z = 0).
+
+    Args:
+        depth_cob_m: NED z of the centre of buoyancy [m] (positive under water).
+        hull_height_m: hull height [m].
+    """
+    return min(1.0, max(0.0, 0.5 + depth_cob_m / hull_height_m))

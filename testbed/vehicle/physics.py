@@ -12,7 +12,8 @@ transport term ω×v_g and the torque puts back ω×I_gω.
 pybullet's body frame is placed at the CoG: its base position *is* the centre of mass, so there
 is no inertial-frame offset to get wrong, and the hydrodynamic origin CO sits at −r_g from it.
 M = M_RB + M_A about CO is then general (r_g ≠ 0 couples surge–pitch and sway–roll); its inverse
-is computed once (see :func:`testbed.vehicle.scalar_dynamics.make_scalar_dynamics`).
+is computed once (:func:`testbed.vehicle.hydrodynamics.coefficients`); each step's arithmetic
+is one compiled function, :func:`_pybullet_wrench`.
 
 Frames: this module is the only place that knows pybullet is z-up. pybullet's world is NED
 rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
@@ -38,14 +39,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
 from testbed.config import check
 from testbed.vehicle.camera import CameraConfig, CameraPose
-from testbed.vehicle.hydrodynamics import HydroModel, load_model
-from testbed.vehicle.scalar_dynamics import make_scalar_dynamics
+from testbed.vehicle.hydrodynamics import HydroModel, coefficients, fossen_acceleration, load_model
 from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
 from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
@@ -223,7 +224,6 @@ class Physics:
         self._current_process = CurrentProcess(self.current, rng)
         self._current_ned = self._current_process.velocity_ned
         self._current_varies = self.current.varies
-        self._current_on = self._current_varies or any(c != 0.0 for c in self._current_ned)
         self._next_current_update_s = self.current.update_period_s
         self._start_position = tuple(float(c) for c in start_position_ned)
         self._start_euler = tuple(float(c) for c in start_euler_rad)
@@ -369,10 +369,12 @@ class Physics:
         Args:
             wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
         """
+        fx, fy, fz, mx, my, mz = wrench_body  # as floats (+ 0.0): one compiled signature
+        wrench = (fx + 0.0, fy + 0.0, fz + 0.0, mx + 0.0, my + 0.0, mz + 0.0)
         raw = self._raw
         self._raw = None
         self._floats = None
-        self._nu_dot = self._advance(wrench_body, self._current_ned, raw)
+        self._nu_dot = self._advance(wrench, self._current_ned, raw)
         self._steps += 1
         self._cached = None
         if self._current_varies and self._steps * self.dt_s >= self._next_current_update_s:
@@ -380,24 +382,23 @@ class Physics:
             self._current_ned = self._current_process.advance(self.current.update_period_s)
 
     def state(self) -> BodyState:
-        """The state now (read from pybullet on first call after a step, then cached)."""
+        """The state now as a :class:`BodyState` (arrays, Euler angles): :meth:`state_floats`
+        with the Euler angles of its attitude and the last step's ν̇, cached until the next step."""
         if self._cached is None:
-            t, position, quat, euler, nu = self._sample()
+            t, position, quat, nu = self.state_floats()
             self._cached = BodyState(
                 time_s=t,
                 position_ned=_frozen(position),
                 quaternion_wxyz=_frozen(quat),
-                euler_rad=_frozen(euler),
+                euler_rad=_frozen(euler_from_quat(quat)),
                 nu=_frozen(nu),
                 nu_dot=_frozen(self._nu_dot),
             )
         return self._cached
 
     def state_floats(self) -> tuple[float, Vec3, Quat, Vec6]:
-        """The state now as plain floats, for per-frame use: no arrays, no Euler angles.
-
-        The same values as :meth:`state` (bit for bit), at a fraction of its cost; the pybullet
-        reads it makes are reused by the next :meth:`step`.
+        """The state now as plain floats, for per-frame use; the pybullet reads it makes are
+        reused by the next :meth:`step`.
 
         Returns:
             ``(time_s, position_ned, quaternion_wxyz, nu)``: time [s]; (3,) position of CO [m],
@@ -482,8 +483,9 @@ class Physics:
 
     # --- internals ---------------------------------------------------------------------------
 
-    def _make_stepper(self) -> Callable[[Sequence[float] | FloatArray, Vec3, _Raw | None], Vec6]:
-        """The per-step work as one closure over plain floats (attribute lookups cost here)."""
+    def _make_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
+        """One step: pybullet's reads, the compiled :func:`_pybullet_wrench`, force, torque and
+        pybullet's step (attribute lookups bound once: this runs 240 times a simulated second)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
         apply_force = pybullet.applyExternalForce
@@ -491,99 +493,29 @@ class Physics:
         step_simulation = pybullet.stepSimulation
         matrix_from_quaternion = pybullet.getMatrixFromQuaternion
         link_frame = pybullet.LINK_FRAME
-        ndarray = np.ndarray
         cid, body = self.client_id, self.body_id
-        dynamics = make_scalar_dynamics(self.model, with_current=self._current_on)
-        current_on = self._current_on
-        m = self.model.mass_kg
-        ixx, iyy, izz = self.model.inertia_kg_m2
-        izz_iyy, ixx_izz, iyy_ixx = izz - iyy, ixx - izz, iyy - ixx
-        xg, yg, zg = self.model.cog_m
-        dbx, dby, dbz = (b - g for b, g in zip(self.model.cob_m, self.model.cog_m, strict=True))
-        inv_height = 1.0 / self.model.hull_size_m[2]
+        model = self.model
+        fossen = coefficients(model)
+        rigid = (
+            model.mass_kg,
+            *model.inertia_kg_m2,
+            *model.cog_m,
+            *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
+            1.0 / model.hull_size_m[2],
+        )
 
-        def advance(
-            wrench_body: Sequence[float] | FloatArray, current_ned: Vec3, raw: _Raw | None
-        ) -> Vec6:
-            if isinstance(wrench_body, ndarray):  # numpy scalars are slow in float arithmetic
-                wrench_body = wrench_body.tolist()
-            fx, fy, fz, mx, my, mz = wrench_body
+        def advance(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
             if raw is None:
-                (_, _, pz), orientation = get_pose(body, cid)
-                (vx, vy, vz), (wx, wy, wz) = get_velocity(body, cid)
-            else:  # read since the last step (by state_floats or _sample): still current
-                (_, _, pz), orientation, (vx, vy, vz), (wx, wy, wz) = raw
-            # R: pybullet body FLU → world (N, −E, −D); R_ned = diag(1, −1, −1)·R·diag(1, −1, −1).
-            r00, r01, r02, r10, r11, r12, r20, r21, r22 = matrix_from_quaternion(orientation)
-            # Body FLU velocities Rᵀ·v, then FRD = (x, −y, −z).
-            ug = r00 * vx + r10 * vy + r20 * vz
-            vg = -(r01 * vx + r11 * vy + r21 * vz)
-            wg = -(r02 * vx + r12 * vy + r22 * vz)
-            p = r00 * wx + r10 * wy + r20 * wz
-            q = -(r01 * wx + r11 * wy + r21 * wz)
-            r = -(r02 * wx + r12 * wy + r22 * wz)
-            # NED "down" in the body, the last row of R_ned.
-            gx, gy, gz = -r20, r21, r22
-            if current_on:
-                cn, ce, cd = current_ned
-                uc = r00 * cn - r10 * ce - r20 * cd
-                vc = -(r01 * cn - r11 * ce - r21 * cd)
-                wc = -(r02 * cn - r12 * ce - r22 * cd)
-            else:
-                uc = vc = wc = 0.0
-            # Submerged fraction from the CoB's depth (the CoG's is −pz).
-            scale = 0.5 + (gx * dbx + gy * dby + gz * dbz - pz) * inv_height
-            if scale > 1.0:
-                scale = 1.0
-            elif scale < 0.0:
-                scale = 0.0
-            nu_dot = dynamics(
-                ug - q * zg + r * yg,
-                vg - r * xg + p * zg,
-                wg - p * yg + q * xg,
-                p,
-                q,
-                r,
-                gx,
-                gy,
-                gz,
-                uc,
-                vc,
-                wc,
-                scale,
-                fx,
-                fy,
-                fz,
-                mx,
-                my,
-                mz,
+                (_, _, height), orientation = get_pose(body, cid)
+                linear, angular = get_velocity(body, cid)
+            else:  # read since the last step (by state_floats): still current
+                (_, _, height), orientation, linear, angular = raw
+            rotation = matrix_from_quaternion(orientation)
+            force, torque, nu_dot = _pybullet_wrench(
+                fossen, rigid, height, rotation, linear, angular, wrench_body, current_ned
             )
-            du, dv, dw, dp, dq, dr = nu_dot
-            # Body force for a_g = v̇_o + ω̇×r_g + ω×v_g; torque I_g·ω̇ + ω×I_g·ω, since
-            # pybullet subtracts ω×Iω itself. FRD → FLU: (x, −y, −z).
-            apply_force(
-                body,
-                -1,
-                (
-                    m * (du + dq * zg - dr * yg + q * wg - r * vg),
-                    -m * (dv + dr * xg - dp * zg + r * ug - p * wg),
-                    -m * (dw + dp * yg - dq * xg + p * vg - q * ug),
-                ),
-                _ZERO3,
-                link_frame,
-                cid,
-            )
-            apply_torque(
-                body,
-                -1,
-                (
-                    ixx * dp + izz_iyy * q * r,
-                    -iyy * dq - ixx_izz * r * p,
-                    -izz * dr - iyy_ixx * p * q,
-                ),
-                link_frame,
-                cid,
-            )
+            apply_force(body, -1, force, _ZERO3, link_frame, cid)
+            apply_torque(body, -1, torque, link_frame, cid)
             step_simulation(cid)
             return nu_dot
 
@@ -601,22 +533,10 @@ class Physics:
         lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
         return (pos, orn, lin, ang)
 
-    def _sample(self) -> tuple[float, Vec3, tuple[float, ...], Vec3, tuple[float, ...]]:
-        """(time, CO position NED, quaternion wxyz, euler, ν at CO) as plain floats."""
-        raw = self._raw
-        if raw is None:
-            raw = self._raw = self._read()
-        position, quat, nu = _state_of(raw, self._cog)
-        return self._steps * self.dt_s, position, quat, euler_from_quat(quat), nu
-
 
 def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
-    """(CO position NED, quaternion wxyz, ν at CO) from pybullet's reads, as plain floats.
-
-    Written out in scalars (this runs every frame); the arithmetic is exactly that of
-    :func:`quaternion_pybullet_to_ned`, :func:`~testbed.common.geometry.rotation_matrix` and
-    :func:`~testbed.common.geometry.rotate`.
-    """
+    """(CO position NED, quaternion wxyz, ν at CO) from pybullet's reads, as plain floats
+    (the attitude's rotation from :func:`~testbed.common.geometry.rotation_matrix`)."""
     (px, py, pz), (ox, oy, oz, ow), (lx, ly, lz), (ax, ay, az) = raw
     w, x, y, z = float(ow), float(ox), -float(oy), -float(oz)
     # R (body FRD → NED) of (w, x, y, z)
@@ -639,6 +559,73 @@ def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
     r = r02 * wn + r12 * we + r22 * wd
     nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
     return position, (w, x, y, z), nu
+
+
+@numba.njit(cache=True)
+def _pybullet_wrench(
+    fossen: FloatArray,
+    rigid: tuple[float, ...],
+    height: float,
+    rotation: tuple[float, ...],
+    linear: Vec3,
+    angular: Vec3,
+    wrench: Vec6,
+    current_ned: Vec3,
+) -> tuple[Vec3, Vec3, Vec6]:  # pragma: no cover - compiled (tests call it through Physics)
+    """The body force and torque that give pybullet's rigid body Fossen's acceleration.
+
+    From pybullet's state (the CoG's height z-up, R body FLU → world as its row-major matrix,
+    the CoG's world velocity and the world angular velocity), the body velocity at CO, the
+    down direction and the current in the body FRD and the submerged fraction go to
+    :func:`~testbed.vehicle.hydrodynamics.fossen_acceleration`; its ν̇ becomes the force
+    m·(v̇_o + ω̇×r_g + ω×v_g) and the torque I_g·ω̇ + ω×I_g·ω (pybullet subtracts ω×I_g·ω
+    itself), in the body FLU frame (x, −y, −z of FRD).
+
+    Args:
+        fossen: the model's :func:`~testbed.vehicle.hydrodynamics.coefficients`.
+        rigid: (m, Ixx, Iyy, Izz, r_g (3), r_b − r_g (3), 1/hull height) [kg, kg·m², m, 1/m].
+        height: pybullet's base (CoG) z, up [m].
+        rotation: pybullet's ``getMatrixFromQuaternion`` of the base orientation (9).
+        linear: the CoG's velocity, pybullet's world [m/s].
+        angular: angular velocity, pybullet's world [rad/s].
+        wrench: applied body wrench [N, N·m], FRD, about the CoG.
+        current_ned: water velocity [m/s], NED.
+
+    Returns:
+        (force, torque) in the body FLU frame [N, N·m], and ν̇ at CO (FRD) [m/s², rad/s²].
+    """
+    m, ixx, iyy, izz, xg, yg, zg, dbx, dby, dbz, inv_height = rigid
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
+    vx, vy, vz = linear
+    wx, wy, wz = angular
+    # R_ned = diag(1, −1, −1)·R·diag(1, −1, −1): body FLU velocities Rᵀ·v, then FRD (x, −y, −z)
+    ug = r00 * vx + r10 * vy + r20 * vz
+    vg = -(r01 * vx + r11 * vy + r21 * vz)
+    wg = -(r02 * vx + r12 * vy + r22 * vz)
+    p = r00 * wx + r10 * wy + r20 * wz
+    q = -(r01 * wx + r11 * wy + r21 * wz)
+    r = -(r02 * wx + r12 * wy + r22 * wz)
+    gx, gy, gz = -r20, r21, r22  # NED down in the body: the last row of R_ned
+    cn, ce, cd = current_ned
+    uc = r00 * cn - r10 * ce - r20 * cd
+    vc = -(r01 * cn - r11 * ce - r21 * cd)
+    wc = -(r02 * cn - r12 * ce - r22 * cd)
+    # submerged fraction from the CoB's depth (the CoG's is −height)
+    scale = min(1.0, max(0.0, 0.5 + (gx * dbx + gy * dby + gz * dbz - height) * inv_height))
+    nu = (ug - q * zg + r * yg, vg - r * xg + p * zg, wg - p * yg + q * xg, p, q, r)
+    nu_dot = fossen_acceleration(fossen, nu, (gx, gy, gz), (uc, vc, wc), scale, wrench)
+    du, dv, dw, dp, dq, dr = nu_dot
+    force = (
+        m * (du + dq * zg - dr * yg + q * wg - r * vg),
+        -m * (dv + dr * xg - dp * zg + r * ug - p * wg),
+        -m * (dw + dp * yg - dq * xg + p * vg - q * ug),
+    )
+    torque = (
+        ixx * dp + (izz - iyy) * q * r,
+        -iyy * dq - (ixx - izz) * r * p,
+        -izz * dr - (iyy - ixx) * p * q,
+    )
+    return force, torque, nu_dot
 
 
 def _disconnect(client_id: int) -> None:
@@ -671,13 +658,13 @@ def simulate_open_loop(
     n_steps = round(duration_s / dt_s)
     samples = []
     with Physics(load_model(model), dt_s=dt_s, start_position_ned=(0.0, 0.0, start_depth_m)) as sim:
-        samples.append(sim._sample())
+        samples.append(sim.state_floats())
         for _ in range(n_steps):
             sim.step(wrench)
-            samples.append(sim._sample())
+            samples.append(sim.state_floats())
     return OpenLoopResult(
         t=np.array([s[0] for s in samples]),
         position_ned=np.array([s[1] for s in samples]),
-        euler_rad=np.array([s[3] for s in samples]),
-        nu=np.array([s[4] for s in samples]),
+        euler_rad=np.array([euler_from_quat(s[2]) for s in samples]),
+        nu=np.array([s[3] for s in samples]),
     )

@@ -1,4 +1,5 @@
-"""Fossen model terms against first principles, published figures and each other (no pybullet)."""
+"""Fossen model terms against first principles, published figures and Fossen's matrices (no
+pybullet): the compiled right-hand side against tests/vehicle/fossen_matrices.py."""
 
 from __future__ import annotations
 
@@ -13,17 +14,21 @@ from testbed.config import ConfigError, build
 from testbed.vehicle.hydrodynamics import (
     HydroModel,
     body_acceleration,
+    known_models,
+    load_model,
+    submerged_fraction,
+)
+from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
+from tests.vehicle import fossen_matrices
+from tests.vehicle.fossen_matrices import (
     coriolis_added_mass,
     coriolis_rigid_body,
     damping_matrix,
-    known_models,
-    load_model,
     restoring_forces,
-    submerged_fraction,
     wrench_about_origin,
 )
-from testbed.vehicle.scalar_dynamics import make_scalar_dynamics
-from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
+
+OPTIONS = ("full", "isotropic", "off")
 
 
 @pytest.fixture(scope="module")
@@ -151,11 +156,11 @@ def test_at_rest_the_vehicle_accelerates_up_with_added_mass(wu: HydroModel) -> N
     assert nu_dot == pytest.approx([0.0, 0.0, expected, 0.0, 0.0, 0.0], abs=1e-15)
 
 
+@pytest.mark.parametrize("option", OPTIONS)
 @pytest.mark.parametrize("name", ["bluerov2", "bluerov2-heavy", "off-centre"])
-def test_scalar_path_matches_the_numpy_reference(name: str) -> None:
+def test_compiled_equation_matches_fossens_matrices(name: str, option: str) -> None:
     model = off_centre(load_model("bluerov2")) if name == "off-centre" else load_model(name)
-    fast = make_scalar_dynamics(model)
-    fast_still = make_scalar_dynamics(model, with_current=False)
+    model = dataclasses.replace(model, added_mass_coriolis=option)
     rng = np.random.default_rng(4)
     for _ in range(100):
         nu = rng.normal(scale=0.5, size=6)
@@ -163,12 +168,28 @@ def test_scalar_path_matches_the_numpy_reference(name: str) -> None:
         wrench = rng.normal(scale=10.0, size=6)
         current_ned = rng.normal(scale=0.3, size=3)
         scale = float(rng.uniform(0.0, 1.0))
-        expected = body_acceleration(model, nu, rot, wrench, current_ned, scale)
-        current_body = rot.T @ current_ned
-        got = fast(*nu, *rot[2], *current_body, scale, *wrench)
+        expected = fossen_matrices.body_acceleration(model, nu, rot, wrench, current_ned, scale)
+        got = body_acceleration(model, nu, rot, wrench, current_ned, scale)
         assert np.allclose(got, expected, rtol=1e-10, atol=1e-12)
-        still = body_acceleration(model, nu, rot, wrench, (0.0, 0.0, 0.0), scale)
-        assert np.allclose(fast_still(*nu, *rot[2], 0.0, 0.0, 0.0, scale, *wrench), still)
+
+
+@pytest.mark.parametrize("option", OPTIONS)
+def test_munk_moment_is_there_only_with_the_full_added_mass_coriolis(
+    wu: HydroModel, option: str
+) -> None:
+    """Forward and down at (u, w) = (1, 0.5) m/s, level, no rotation: the pitch moment on the
+    body is the Munk moment (X_u̇ − Z_ẇ)·u·w (Fossen's −C_A·ν_r) with ``"full"``, and nothing
+    otherwise. The
+    moment is M·ν̇ from the compiled equation, less the weight's and buoyancy's (zero level)
+    and the damping's (none in pitch at q = 0)."""
+    model = dataclasses.replace(wu, added_mass_coriolis=option)
+    nu = np.array([1.0, 0.0, 0.5, 0.0, 0.0, 0.0])
+    nu_dot = body_acceleration(model, nu, np.eye(3), np.zeros(6))
+    moment = (model.mass_matrix @ nu_dot)[4]
+    munk = (wu.added_mass[0] - wu.added_mass[2]) * nu[0] * nu[2]
+    expected = {"full": munk, "isotropic": 0.0, "off": 0.0}[option]
+    assert moment == pytest.approx(expected, abs=1e-12)
+    assert (moment > 0.0) == (option == "full")  # full: nose up, broadside to the flow
 
 
 def test_submerged_fraction_fades_across_the_surface() -> None:

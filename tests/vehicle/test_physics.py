@@ -18,12 +18,7 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from testbed.common.geometry import quat_from_euler
-from testbed.vehicle.hydrodynamics import (
-    HydroModel,
-    body_acceleration,
-    load_model,
-    submerged_fraction,
-)
+from testbed.vehicle.hydrodynamics import HydroModel, load_model, submerged_fraction
 from testbed.vehicle.physics import (
     Physics,
     PoolScene,
@@ -34,6 +29,7 @@ from testbed.vehicle.physics import (
     simulate_open_loop,
 )
 from testbed.vehicle.water_current import WaterCurrent
+from tests.vehicle.fossen_matrices import body_acceleration
 
 DT_S = 1.0 / 240.0
 
@@ -300,7 +296,7 @@ def integrate_reference(
     euler0: tuple[float, float, float],
     current_ned: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> np.ndarray:
-    """(13,) [position NED, quaternion, ν] at ``duration_s`` by scipy on the numpy reference."""
+    """(13,) [position NED, quaternion, ν] at ``duration_s`` by scipy on Fossen's matrices."""
 
     def rhs(_t: float, y: np.ndarray) -> np.ndarray:
         q = y[3:7] / np.linalg.norm(y[3:7])
@@ -327,10 +323,19 @@ def integrate_reference(
     return np.asarray(sol.y[:, -1])
 
 
-@pytest.mark.parametrize("name", ["bluerov2", "bluerov2-heavy"])
-def test_tumbling_manoeuvre_matches_a_6dof_integration(name: str) -> None:
-    """Every coupling at once (spin, r_g, unequal inertia, current): pybullet vs scipy."""
-    model = load_model(name)
+@pytest.mark.parametrize(
+    ("name", "option"),
+    [
+        ("bluerov2", "full"),
+        ("bluerov2-heavy", "full"),
+        ("bluerov2", "isotropic"),
+        ("bluerov2", "off"),
+    ],
+)
+def test_tumbling_manoeuvre_matches_a_6dof_integration(name: str, option: str) -> None:
+    """Every coupling at once (spin, r_g, unequal inertia, current): pybullet vs scipy on
+    Fossen's matrices, for each added-mass Coriolis option."""
+    model = load_model(name, added_mass_coriolis=option)  # type: ignore[arg-type]
     wrench = [8.0, -6.0, 10.0, 0.6, -0.5, 0.8]
     nu0 = (0.2, -0.1, 0.1, 1.5, -1.0, 2.0)
     euler0 = (0.3, -0.2, 0.5)
