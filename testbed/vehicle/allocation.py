@@ -22,10 +22,11 @@ T and T⁺ is recomputed; a stuck thruster's constant wrench is subtracted from 
 its current from the budget; a degraded thruster's column is scaled by its factor. The axis
 maxima (how far the vehicle can push along each axis, for pilot scaling) are recomputed.
 
-This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` is the plant.
+The arithmetic of steps 1-4 is one compiled implementation (:mod:`.thrust_kernels`), called
+by :meth:`Allocator.step` (the per-frame path) and so by :meth:`Allocator.allocate`, and by the
+axis-maxima probe; this class holds the configuration, validation and the lsq solve.
 
-Size: one concept, one class; the allocation steps share the allocator's reconfigurable state
-(T, T⁺, limits, stuck offsets, axis maxima), so the module stays whole, over 500 lines.
+This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` is the plant.
 """
 
 from __future__ import annotations
@@ -37,7 +38,18 @@ from typing import Literal
 
 import numpy as np
 
-from testbed.vehicle.t200 import T200, InterpTable
+from testbed.vehicle.t200 import T200
+from testbed.vehicle.thrust_kernels import (
+    FORCES,
+    PREVIOUS,
+    PWM_OFFSET,
+    PWM_SIGN,
+    STUCK,
+    current_scale,
+    limit_forces,
+    pinv_forces,
+    total_current,
+)
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.thrusters import FaultMode, ThrusterFault
 
@@ -66,8 +78,6 @@ AXIS_DIRECTION_TOLERANCE = 0.05
 
 _LSQ_REGULARISATION = 1e-4
 """Weight of ‖f‖ in the lsq objective, to pick the least-effort solution among equals."""
-
-_MAX_ITERATIONS = 100
 
 AllocationMethod = Literal["pinv", "lsq"]
 
@@ -150,24 +160,18 @@ class Allocator:
         self._n = config.n_thrusters
         self._names = config.names
         self._matrix = config.matrix
+        n = self._n
+        # the T200's (2, k) tables and one (3, n) row set per thruster: the kernels' layouts
+        self._current_table = t200.current_table
+        self._pwm_table = t200.inverse_table
+        self._thrusters = np.zeros((3, n))
         ccw = config.ccw_mask
-        # pwm = sign * cw_pulse + offset, per thruster
-        self._pwm_sign = [-1.0 if c else 1.0 for c in ccw.tolist()]
-        self._pwm_offset = [3000.0 if c else 0.0 for c in ccw.tolist()]
-        self._force_axis = t200.force_axis_n
-        self._current_axis = t200.current_axis_a
-        self._current_table = InterpTable(t200.force_axis_n, t200.current_axis_a)
-        # I(F) falls to 0 A at 0 N and rises on both sides (so Σ I(f_i) ≤ n·max I(f_i), which
-        # lets the per-frame path skip a current sum that cannot bind); checked, not assumed
-        currents = t200.current_axis_a
-        zero = int(np.searchsorted(t200.force_axis_n, 0.0))
-        self._current_monotone = bool(
-            np.all(np.diff(currents[: zero + 1]) <= 0) and np.all(np.diff(currents[zero:]) >= 0)
-        )
-        self._pwm_table = InterpTable(t200.inverse_force_n, t200.inverse_pwm_us)
+        self._thrusters[PWM_SIGN] = np.where(ccw, -1.0, 1.0)  # pwm = sign · pulse + offset
+        self._thrusters[PWM_OFFSET] = np.where(ccw, 3000.0, 0.0)
+        self._work = np.zeros((4, n))
+        self._output = self._work[:3]
+        self._output.setflags(write=False)  # a read-only view; the kernels write the base
         self._f_lo, self._f_hi = t200.force_limits_n
-        self._inv_hi = 1.0 / self._f_hi
-        self._inv_lo = 1.0 / self._f_lo  # negative: f_lo < 0
         self._current_limit_a = _positive(
             config.current_budget_a if current_limit_a is None else current_limit_a,
             "current_limit_a",
@@ -177,7 +181,6 @@ class Allocator:
             "slew_limit_n_per_s",
         )
         self._failures: dict[int, ThrusterFault] = {}
-        self._previous = [0.0] * self._n
         self._axis_maxima: np.ndarray | None = None
         self._rebuild()
 
@@ -257,14 +260,14 @@ class Allocator:
 
     def reset(self) -> None:
         """Forget the previous command (the slew limit starts again from 0 N)."""
-        self._previous = [0.0] * self._n
+        self._work[PREVIOUS] = 0.0
 
     # ----------------------------------------------------------------- allocation
 
     def allocate(
         self, wrench: Sequence[float] | np.ndarray, dt_s: float | None = None
     ) -> ThrusterCommand:
-        """Thruster commands for a requested body wrench.
+        """Thruster commands for a requested body wrench (:meth:`step`, packaged).
 
         Args:
             wrench: (6,) requested body wrench [N, N·m], FRD, rows X Y Z K M N.
@@ -276,99 +279,66 @@ class Allocator:
         Raises:
             ValueError: wrench not 6 finite numbers, or dt_s not > 0.
         """
-        forces, pwm, currents, scale = self._allocate(wrench, dt_s)
-        f = np.array(forces)
-        achieved = self._matrix_eff @ f
-        arrays = (f, np.array(pwm), np.array(currents), achieved)
+        scale = self.step(wrench, dt_s)
+        forces, pwm, currents = (row.copy() for row in self._work[:3])
+        achieved = self._matrix_eff @ forces
+        arrays = (forces, pwm, currents, achieved)
         for array in arrays:
             array.setflags(write=False)
         return ThrusterCommand(*arrays, scale)
 
-    def allocate_floats(
-        self, wrench: Sequence[float] | np.ndarray, dt_s: float | None = None
-    ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], float]:
-        """:meth:`allocate` as plain floats, without the achieved wrench (the per-frame path).
+    def step(self, wrench: Sequence[float] | np.ndarray, dt_s: float | None = None) -> float:
+        """Allocate a requested body wrench; the commands are left in :attr:`output`.
+
+        The allocation itself (the per-frame path; :meth:`allocate` packages its result): f =
+        T⁺(m − m_stuck) (:func:`~testbed.vehicle.thrust_kernels.pinv_forces`), the bounded
+        least-squares solution instead when ``method="lsq"`` and T⁺m saturates, then
+        saturation, current and slew limits, stuck forces, PWM and currents
+        (:func:`~testbed.vehicle.thrust_kernels.limit_forces`).
 
         Args:
-            wrench: (6,) requested body wrench [N, N·m], FRD.
+            wrench: (6,) requested body wrench [N, N·m], FRD, rows X Y Z K M N.
             dt_s: time since the previous command [s]; when given, the slew limit applies.
 
         Returns:
-            ``(forces_n, pwm_us, currents_a, scale)``, equal to those of :meth:`allocate`.
+            The common factor applied for saturation × current limit (see
+            :attr:`ThrusterCommand.scale`).
 
         Raises:
-            ValueError: as :meth:`allocate`.
-        """
-        forces, pwm, currents, scale = self._allocate(wrench, dt_s)
-        return tuple(forces), tuple(pwm), tuple(currents), scale
-
-    def _allocate(
-        self, wrench: Sequence[float] | np.ndarray, dt_s: float | None
-    ) -> tuple[list[float], list[float], list[float], float]:
-        """The allocation in Python floats: numpy only for T⁺m (and the rare limit searches).
-
-        On 4-8 thrusters, numpy's per-call overhead costs more than the arithmetic; the float
-        operations here are those numpy did, element by element, so the results are the same.
+            ValueError: wrench not 6 finite numbers, or dt_s not > 0.
         """
         m = np.asarray(wrench, dtype=np.float64)
         if m.shape != (6,):
             raise ValueError(f"wrench must have shape (6,), got {m.shape}")
-        if self._any_stuck:
-            m = m - self._stuck_wrench
-        f: list[float] = (self._pinv @ m).tolist()
-        if not math.isfinite(sum(f)):  # any nan/inf in m reaches every f_i
-            raise ValueError(f"wrench must be finite, got {np.asarray(wrench).tolist()}")
-        scale = 1.0
-        f_max, f_min = max(f), min(f)
-        worst = max(f_max * self._inv_hi, f_min * self._inv_lo)
-        if worst > 1.0:
-            if self.method == "lsq":
-                f = self._solve_lsq(m).tolist()
-            else:
-                scale = 1.0 / worst
-                f = [v * scale for v in f]
-            f_max, f_min = max(f), min(f)
-        current_of = self._current_table.many
-        cap = self._cap_active
-        currents: list[float] | None = None
-        low_ok, high_ok = self._within_cap_band
-        if dt_s is None or not (low_ok <= f_min and f_max <= high_ok):
-            currents = current_of(f)
-            total = sum(currents)
-            if total > cap:
-                alpha = self._current_scale(np.array(f), cap, 1.0, total)
-                scale *= alpha
-                f = [v * alpha for v in f]
-                currents = current_of(f)
-        if dt_s is not None:
-            if not dt_s > 0.0:
-                raise ValueError(f"dt_s must be > 0, got {dt_s}")
-            step = self._slew * dt_s
-            low = -step
-            # p + clip(f - p, -step, step), per thruster
-            slewed = [
-                p + (step if (d := v - p) > step else low if d < low else d)
-                for v, p in zip(f, self._previous, strict=True)
-            ]
-            if currents is None or slewed != f:  # else they are the currents of f already
-                currents = current_of(slewed)
-            f = slewed  # (== f may still differ from it in the sign of a zero)
-            total = sum(currents)
-            if total > cap:
-                alpha = self._current_scale(np.array(f), cap, 1.0, total)
-                f = [v * alpha for v in f]
-                currents = current_of(f)
-        assert currents is not None  # computed above whenever dt_s is None
-        self._previous = f
-        if self._any_stuck:
-            f = [v + s for v, s in zip(f, self._stuck_force_list, strict=True)]
-            currents = [c + s for c, s in zip(currents, self._stuck_current_list, strict=True)]
-        pulses = self._pwm_table.many(f)
-        pwm = [
-            pulse * sign + offset
-            for pulse, sign, offset in zip(pulses, self._pwm_sign, self._pwm_offset, strict=True)
-        ]
-        return f, pwm, currents, scale
+        if dt_s is None:
+            slew_step = -1.0
+        elif dt_s > 0.0:
+            slew_step = self._slew * dt_s
+        else:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        work = self._work
+        worst = pinv_forces(m, self._stuck_wrench, self._pinv, self._f_lo, self._f_hi, work[FORCES])
+        if worst != worst:
+            raise ValueError(f"wrench must be finite, got {m.tolist()}")
+        if worst > 1.0 and self.method == "lsq":
+            work[FORCES] = self._solve_lsq(m - self._stuck_wrench)
+            worst = 1.0
+        return limit_forces(
+            work,
+            worst,
+            slew_step,
+            self._cap_active,
+            CURRENT_TOLERANCE_A,
+            self._thrusters,
+            self._current_table,
+            self._pwm_table,
+        )
+
+    @property
+    def output(self) -> np.ndarray:
+        """(3, n) the last :meth:`step`'s commands: forces [N], PWM [µs], currents [A] (a
+        read-only view, overwritten by the next step)."""
+        return self._output
 
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.
@@ -392,18 +362,26 @@ class Allocator:
         """
         if self._axis_maxima is None:
             maxima = np.zeros((2, 6))
+            no_offset = np.zeros(6)
+            f = np.zeros(self._n)
             for row, sign in enumerate((1.0, -1.0)):
                 for k in range(6):
                     probe = np.zeros(6)
                     probe[k] = sign * AXIS_PROBE
-                    f = self._pinv @ probe
+                    worst = pinv_forces(probe, no_offset, self._pinv, self._f_lo, self._f_hi, f)
                     along = probe[k] * float(self._matrix_eff[k] @ f)  # F·F_req or τ·τ_req
-                    worst = max(f.max() * self._inv_hi, f.min() * self._inv_lo)
                     if along <= 0.0 or worst <= 0.0:
                         continue
                     if abs(math.sqrt(along) - AXIS_PROBE) > AXIS_DIRECTION_TOLERANCE:
                         continue
-                    alpha = self._current_scale(f, self._cap_active, 1.0 / worst)
+                    alpha = current_scale(
+                        f,
+                        self._current_table,
+                        self._cap_active,
+                        1.0 / worst,
+                        -1.0,
+                        CURRENT_TOLERANCE_A,
+                    )
                     maxima[row, k] = AXIS_PROBE * alpha
             maxima.setflags(write=False)
             self._axis_maxima = maxima
@@ -446,45 +424,17 @@ class Allocator:
         solve = self._matrix_eff * commandable
         pinv, self._rank = pseudoinverse(solve)
         pinv[~commandable] = 0.0  # exact zeros, not SVD round-off
-        self._pinv = pinv
+        self._pinv = np.ascontiguousarray(pinv)
         self._columns = np.flatnonzero(commandable)
         self._lsq_matrix = np.vstack(
             [solve[:, self._columns], _LSQ_REGULARISATION * np.eye(self._columns.size)]
         )
-        self._any_stuck = bool(np.any(stuck_forces != 0.0))
-        self._stuck_forces = stuck_forces
         self._stuck_wrench = self._matrix_eff @ stuck_forces
-        self._stuck_currents = np.where(
-            stuck_forces != 0.0, np.interp(stuck_forces, self._force_axis, self._current_axis), 0.0
-        )
-        self._stuck_force_list = stuck_forces.tolist()
-        self._stuck_current_list = self._stuck_currents.tolist()
-        self._cap_active = self._current_limit_a - float(self._stuck_currents.sum())
-        self._within_cap_band = self._cap_band()
-        self._previous = (np.array(self._previous) * commandable).tolist()
+        self._thrusters[STUCK] = stuck_forces
+        stuck_current = total_current(stuck_forces, 1.0, self._current_table)  # 0 A at 0 N
+        self._cap_active = self._current_limit_a - stuck_current
+        self._work[PREVIOUS] *= commandable
         self._axis_maxima = None
-
-    def _cap_band(self) -> tuple[float, float]:
-        """(low, high) forces [N] within which n thrusters surely stay under the current cap.
-
-        With I rising in |F| on both sides of 0 N, forces all in [low, high] draw at most
-        n·max(I(low), I(high)); the band's ends are table rows with I ≤ cap / (n·(1 + 1e-9)) (the
-        margin covers the rounding of the float sum). Lets the per-frame path skip a
-        current sum that cannot bind. An empty band (nothing skipped) when I is not so shaped.
-        """
-        forces, currents = self._force_axis.tolist(), self._current_axis.tolist()
-        empty = (math.inf, -math.inf)
-        if not self._current_monotone or 0.0 not in forces:
-            return empty
-        budget = self._cap_active / (self._n * (1.0 + 1e-9))
-        low = high = forces.index(0.0)
-        if not currents[low] <= budget:
-            return empty
-        while low > 0 and currents[low - 1] <= budget:
-            low -= 1
-        while high + 1 < len(forces) and currents[high + 1] <= budget:
-            high += 1
-        return (forces[low], forces[high])
 
     def _solve_lsq(self, m: np.ndarray) -> np.ndarray:
         """Bounded least squares: min ‖T f - m‖ (+ a 1e-4 ‖f‖ tie-break) on the force limits."""
@@ -496,52 +446,6 @@ class Allocator:
         f = np.zeros(self._n)
         f[self._columns] = np.clip(result.x, self._f_lo, self._f_hi)
         return f
-
-    def _current_scale(
-        self, f: np.ndarray, cap_a: float, alpha_max: float, current_at_max_a: float | None = None
-    ) -> float:
-        """Largest α in [0, alpha_max] with Σ I(α f) ≤ cap_a, to within CURRENT_TOLERANCE_A.
-
-        Σ I(α f) is piecewise linear and non-decreasing in α (the current envelope is monotone
-        in |F|) and 0 at α = 0. The first guess assumes I ∝ |F|^1.5 (momentum theory: power ∝
-        thrust^1.5); Illinois regula falsi then refines inside the bracket. The returned α
-        always satisfies the budget (typically 2-4 evaluations).
-
-        Args:
-            f: (n,) forces [N] to scale.
-            cap_a: the budget [A].
-            alpha_max: the largest admissible α (saturation).
-            current_at_max_a: Σ I(alpha_max f) if already known.
-        """
-        axis_f, axis_i = self._force_axis, self._current_axis
-        if cap_a <= 0.0:
-            return 0.0
-        g_hi: float = (
-            sum(np.interp(alpha_max * f, axis_f, axis_i).tolist())
-            if current_at_max_a is None
-            else current_at_max_a
-        )
-        if g_hi <= cap_a:
-            return alpha_max
-        a_lo, g_lo, a_hi = 0.0, 0.0, alpha_max
-        a: float = alpha_max * (cap_a / g_hi) ** (2.0 / 3.0)
-        side = 0
-        for _ in range(_MAX_ITERATIONS):
-            g: float = sum(np.interp(a * f, axis_f, axis_i).tolist())
-            if g <= cap_a:
-                if cap_a - g <= CURRENT_TOLERANCE_A:
-                    return a
-                a_lo, g_lo = a, g
-                if side < 0:  # Illinois: the same end moved twice, halve the other's residual
-                    g_hi = cap_a + 0.5 * (g_hi - cap_a)
-                side = -1
-            else:
-                a_hi, g_hi = a, g
-                if side > 0:
-                    g_lo = cap_a - 0.5 * (cap_a - g_lo)
-                side = 1
-            a = a_lo + (cap_a - g_lo) * (a_hi - a_lo) / (g_hi - g_lo)
-        return a_lo
 
 
 def _positive(value: float, name: str) -> float:

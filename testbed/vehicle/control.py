@@ -45,6 +45,9 @@ __all__ = [
     "PidGains",
     "PilotGains",
     "failsafe_level",
+    "level_to_body",
+    "pilot_level_wrench",
+    "pilot_trims",
     "pilot_wrench",
     "shape_stick",
 ]
@@ -386,6 +389,51 @@ def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
     return x * x * x * scale  # the cube keeps the sign
 
 
+def pilot_level_wrench(
+    sticks: Sequence[float],
+    axis_maxima: Sequence[float],
+    *,
+    gains: PilotGains,
+    precision: bool = False,
+    depth_hold: bool = False,
+    attitude_hold: bool = False,
+) -> Wrench:
+    """The pilot's force/torque intent before attitude enters: :func:`pilot_wrench` at level.
+
+    It depends on the sticks and the mode only (a cache of it holds while they do, at the
+    operator's rate rather than the control rate). In depth hold its force is in the yaw-only
+    (level) frame, to be rotated into the body by :func:`level_to_body`; otherwise it is the
+    body wrench itself.
+
+    Args:
+        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
+        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m] (0 for an axis the thruster
+            layout cannot produce).
+        gains: shaping and gains.
+        precision: precision mode (smaller scale; no heave force in depth hold).
+        depth_hold: depth hold is active.
+        attitude_hold: attitude hold is active.
+
+    Returns:
+        (6,) wrench (X, Y, Z, K, M, N) [N, N·m]: force in the level frame (depth hold) or the
+        body frame, torque in the body frame, FRD.
+    """
+    scale = gains.precision_scale if precision else gains.normal_scale
+    dz = gains.dead_zone
+    u = [shape_stick(sticks[k], scale, dz) * axis_maxima[k] for k in range(6)]
+    if depth_hold:
+        tg = gains.depth_hold_translation_precision if precision else gains.depth_hold_translation
+    else:
+        tg = gains.translation
+    rg = gains.attitude_hold_torque if attitude_hold else gains.torque
+    return (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
+
+
+def level_to_body(force: Vec3, attitude: Quaternion) -> Vec3:
+    """A force in the yaw-only (level) frame of ``attitude`` (body → NED), in the body frame."""
+    return quat_rotate(quat_multiply(quat_conjugate(attitude), yaw_only(attitude)), force)
+
+
 def pilot_wrench(
     sticks: Sequence[float],
     axis_maxima: Sequence[float],
@@ -396,14 +444,15 @@ def pilot_wrench(
     depth_hold: bool = False,
     attitude_hold: bool = False,
 ) -> Wrench:
-    """The pilot's force/torque intent from stick positions.
+    """The pilot's force/torque intent from stick positions, in the body frame.
+
+    :func:`pilot_level_wrench`, its force rotated into the body in depth hold, where
+    translation is commanded in the yaw-only (level) frame (:func:`level_to_body`).
 
     Args:
         sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
-        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m] (0 for an axis the thruster
-            layout cannot produce).
-        attitude: (4,) measured attitude, body → NED; used in depth hold, where translation is
-            commanded in the yaw-only (level) frame and rotated into the body.
+        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m].
+        attitude: (4,) measured attitude, body → NED; used in depth hold only.
         gains: shaping and gains.
         precision: precision mode (smaller scale; no heave force in depth hold).
         depth_hold: depth hold is active.
@@ -412,19 +461,42 @@ def pilot_wrench(
     Returns:
         (6,) body wrench (X, Y, Z, K, M, N) [N, N·m], FRD.
     """
-    scale = gains.precision_scale if precision else gains.normal_scale
+    wrench = pilot_level_wrench(
+        sticks,
+        axis_maxima,
+        gains=gains,
+        precision=precision,
+        depth_hold=depth_hold,
+        attitude_hold=attitude_hold,
+    )
+    if not depth_hold:
+        return wrench
+    fx, fy, fz = level_to_body((wrench[0], wrench[1], wrench[2]), attitude)
+    return (fx, fy, fz, wrench[3], wrench[4], wrench[5])
+
+
+def pilot_trims(
+    sticks: Sequence[float], *, gains: PilotGains, precision: bool = False
+) -> tuple[float, float, float, float]:
+    """How fast the sticks move the hold targets: ``shape(x) · rate`` at full-stick rates.
+
+    Args:
+        sticks: (6,) stick positions in [−1, 1].
+        gains: the trim rates (``depth_trim_m_s``, ``attitude_trim[_precision]_rad_s``).
+        precision: precision mode (the smaller rates).
+
+    Returns:
+        (depth [m/s, + down] from heave, roll, pitch, yaw [rad/s] about the target's body axes
+        (roll, pitch) and world down (yaw)).
+    """
     dz = gains.dead_zone
-    u = [shape_stick(sticks[k], scale, dz) * axis_maxima[k] for k in range(6)]
-    if depth_hold:
-        tg = gains.depth_hold_translation_precision if precision else gains.depth_hold_translation
-    else:
-        tg = gains.translation
-    force: Vec3 = (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2])
-    if depth_hold:
-        level_to_body = quat_multiply(quat_conjugate(attitude), yaw_only(attitude))
-        force = quat_rotate(level_to_body, force)
-    rg = gains.attitude_hold_torque if attitude_hold else gains.torque
-    return (force[0], force[1], force[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
+    rates = gains.attitude_trim_precision_rad_s if precision else gains.attitude_trim_rad_s
+    return (
+        shape_stick(sticks[2], 1.0, dz) * gains.depth_trim_m_s[1 if precision else 0],
+        shape_stick(sticks[3], 1.0, dz) * rates[0],
+        shape_stick(sticks[4], 1.0, dz) * rates[1],
+        shape_stick(sticks[5], 1.0, dz) * rates[2],
+    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -29,19 +29,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+
+import numpy as np
 
 from testbed.common.geometry import (
     Quaternion,
-    Vec3,
-    quat_conjugate,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
-    quat_rotate,
     yaw_only,
 )
 from testbed.ecs import Entity, Phase, Schedule, System, World
+from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.components import (
     ActiveMode,
     AppliedWrench,
@@ -69,10 +68,13 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PilotGains,
     failsafe_level,
-    pilot_wrench,
-    shape_stick,
+    level_to_body,
+    pilot_level_wrench,
+    pilot_trims,
 )
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
+from testbed.vehicle.thrust_kernels import interval_wrench
+from testbed.vehicle.thrusters import ThrusterDynamics
 
 __all__ = [
     "Actuation",
@@ -138,13 +140,14 @@ class PowerMeter:
 
     Attributes:
         supply_voltage_v: the thrusters' supply [V].
-        current_of: (n,) thruster forces [N] → total current [A] (the T200 model's).
+        current_of: (n,) float64 thruster forces [N] → total current [A] (the T200 model's,
+            :meth:`~testbed.vehicle.t200.T200.total_current_a`).
         current_a: total current of this frame's actual forces [A].
         energy_j: energy drawn since the start [J], ``Σ current · voltage · dt``.
     """
 
     supply_voltage_v: float
-    current_of: Callable[[Sequence[float]], float]
+    current_of: Callable[[np.ndarray], float]
     current_a: float = 0.0
     energy_j: float = 0.0
 
@@ -183,7 +186,8 @@ class Controllers:
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
-        shaped: the pilot interface's values for the current sticks and mode (a cache).
+        shaped: the pilot interface's level wrench and trims for the current sticks and mode
+            (a cache: sticks change at the operator's rate, frames run at the control rate).
     """
 
     vehicle: Entity
@@ -196,7 +200,7 @@ class Controllers:
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
-    shaped: _ShapedSticks | None = None
+    shaped: _PilotCache | None = None
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -210,44 +214,37 @@ class Actuation:
     """The allocator, the thruster plant and the wrench handed to the physics.
 
     Attributes:
-        allocator: an object with ``allocate_floats(wrench, dt_s)`` returning
-            ``(forces_n, pwm_us, currents_a, scale)`` (see
-            :meth:`~testbed.vehicle.allocation.Allocator.allocate_floats`), and ``reset()``.
-        dynamics: the plant's thrusters:
-            ``step_floats(commanded_forces (n,), dt_s) -> actual (n,)`` with a first-order lag
-            of ``time_constant_s`` (plus faults).
-        matrix_columns: per thruster, its (6,) column of the *physical* ``T`` (the plant's
-            geometry, whatever the allocator believes).
+        allocator: the controller's allocation (:meth:`~.Allocator.step` per frame).
+        dynamics: the plant's thrusters (first-order lag of ``time_constant_s``, faults).
+        matrix: (6, n) the *physical* configuration ``T`` [N, N·m per N], body FRD (the
+            plant's geometry, whatever the allocator believes).
         interval_s: time until the next frame [s] (the plant holds the command that long);
             set by the vehicle before each frame.
-        commanded_forces_n: (n,) forces commanded this frame (0 when disarmed).
-        commanded_pwm_us: (n,) the matching PWM [µs] (1500 when disarmed).
-        actual_forces_n: (n,) the thrusters' actual forces at the end of the interval.
-        requested: (6,) the summed intents of this frame.
+        commanded_forces_n: (n,) forces commanded this frame [N] (0 when disarmed).
+        actual_forces_n: (n,) the thrusters' actual forces at the end of the interval [N].
+        requested: (6,) the summed intents of this frame [N, N·m].
         plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
         mean_weight: ``((interval_s, time_constant_s), c)``, the last weight of the interval's
             mean force (see :func:`actuate_thrusters`), kept while both stay the same.
     """
 
-    allocator: Any
-    dynamics: Any
-    matrix_columns: tuple[tuple[float, ...], ...]
+    allocator: Allocator
+    dynamics: ThrusterDynamics
+    matrix: np.ndarray
     interval_s: float = 0.01
-    commanded_forces_n: tuple[float, ...] = ()
-    commanded_pwm_us: tuple[float, ...] = ()
-    actual_forces_n: tuple[float, ...] = ()
+    commanded_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    actual_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     requested: Wrench6 = ZERO6
     plant_wrench: Wrench6 = ZERO6
     mean_weight: tuple[tuple[float, float], float] = ((math.nan, math.nan), 0.5)
 
     def __post_init__(self) -> None:
-        n = len(self.matrix_columns)
-        if not self.commanded_forces_n:
-            self.commanded_forces_n = (0.0,) * n
-        if not self.commanded_pwm_us:
-            self.commanded_pwm_us = (1500.0,) * n
-        if not self.actual_forces_n:
-            self.actual_forces_n = (0.0,) * n
+        self.matrix = np.ascontiguousarray(self.matrix, dtype=np.float64)
+        n = self.matrix.shape[1]
+        if self.commanded_forces_n.size == 0:
+            self.commanded_forces_n = np.zeros(n)
+        if self.actual_forces_n.size == 0:
+            self.actual_forces_n = np.zeros(n)
 
 
 # -------------------------------------------------------------------------------- helpers
@@ -401,36 +398,30 @@ def run_pilot_interface(world: World) -> None:
         return
     vehicle = ctl.vehicle
     depth_hold, attitude_hold = flags.depth_hold, flags.attitude_hold
-    shaped = ctl.shaped
-    if (
-        shaped is None
-        or shaped.sticks is not sticks
-        or shaped.modes != (flags.precision, depth_hold, attitude_hold)
-        or shaped.axis_maxima is not ctl.axis_maxima
-        or shaped.gains is not ctl.pilot
-    ):
-        shaped = ctl.shaped = _ShapedSticks(ctl, sticks)
+    cache = ctl.shaped
+    if cache is None or not cache.holds(ctl, sticks):
+        cache = ctl.shaped = _PilotCache(ctl, sticks)
     if depth_hold:  # translation in the level (yaw-only) frame, rotated into the body
         imu = world.get(vehicle, ImuReading)
-        attitude = LEVEL if imu is None else imu.quaternion_wxyz
-        level_to_body = quat_multiply(quat_conjugate(attitude), yaw_only(attitude))
-        fx, fy, fz = quat_rotate(level_to_body, shaped.force)
-        tx, ty, tz = shaped.torque
-        _set_intent(world, ctl, "pilot", (fx, fy, fz, tx, ty, tz))
+        w = cache.wrench
+        fx, fy, fz = level_to_body(
+            (w[0], w[1], w[2]), LEVEL if imu is None else imu.quaternion_wxyz
+        )
+        _set_intent(world, ctl, "pilot", (fx, fy, fz, w[3], w[4], w[5]))
     else:
-        world.set(ctl.intents["pilot"], shaped.intent)
+        world.set(ctl.intents["pilot"], cache.intent)
     if not (depth_hold or attitude_hold):
         return
     targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
     depth_m, q = targets.depth_m, targets.quaternion_wxyz
     dt = world.resource(SimClock).dt_s
+    depth_rate, roll_rate, pitch_rate, yaw_rate = cache.trims
     if depth_hold:
-        depth_m = max(0.0, depth_m + shaped.depth_trim * dt)
+        depth_m = max(0.0, depth_m + depth_rate * dt)
     if attitude_hold:
-        roll_trim, pitch_trim, yaw_trim = shaped.attitude_trims
-        roll = roll_trim * dt
-        pitch = pitch_trim * dt
-        yaw = yaw_trim * dt
+        roll = roll_rate * dt
+        pitch = pitch_rate * dt
+        yaw = yaw_rate * dt
         if roll or pitch:  # about the target's own body axes
             angle = math.hypot(roll, pitch)
             q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
@@ -440,72 +431,39 @@ def run_pilot_interface(world: World) -> None:
     world.set(vehicle, ControlTargets(depth_m, q))
 
 
-class _ShapedSticks:
-    """What the pilot interface derives from one set of sticks in one mode (kept while the
-    sticks, the mode, the axis maxima and the gains stay the same: sticks change at the
-    operator's rate, frames run at the control rate).
+class _PilotCache:
+    """:func:`~testbed.vehicle.control.pilot_level_wrench` and
+    :func:`~testbed.vehicle.control.pilot_trims` of one set of sticks in one mode, kept while
+    the sticks (the same object), the mode, the axis maxima and the gains stay the same."""
 
-    The arithmetic is :func:`~testbed.vehicle.control.pilot_wrench`'s and the trims' own,
-    operation for operation, so the results are identical; only the repetition is saved.
-    """
-
-    __slots__ = (
-        "attitude_trims",
-        "axis_maxima",
-        "depth_trim",
-        "force",
-        "gains",
-        "intent",
-        "modes",
-        "sticks",
-        "torque",
-    )
+    __slots__ = ("axis_maxima", "gains", "intent", "modes", "sticks", "trims", "wrench")
 
     def __init__(self, ctl: Controllers, sticks: tuple[float, ...]) -> None:
         flags = ctl.flags
-        precision, depth_hold, attitude_hold = (
-            flags.precision,
-            flags.depth_hold,
-            flags.attitude_hold,
-        )
-        gains = ctl.pilot
         self.sticks = sticks
-        self.modes = (precision, depth_hold, attitude_hold)
+        self.modes = (flags.precision, flags.depth_hold, flags.attitude_hold)
         self.axis_maxima = ctl.axis_maxima
-        self.gains = gains
-        # pilot_wrench, without the rotation into the body (per frame, from the IMU)
-        wrench = pilot_wrench(
+        self.gains = gains = ctl.pilot
+        w = pilot_level_wrench(
             sticks,
             ctl.axis_maxima,
-            LEVEL,
             gains=gains,
-            precision=precision,
-            depth_hold=False,
-            attitude_hold=attitude_hold,
+            precision=flags.precision,
+            depth_hold=flags.depth_hold,
+            attitude_hold=flags.attitude_hold,
         )
-        scale = gains.precision_scale if precision else gains.normal_scale
-        dz = gains.dead_zone
-        if depth_hold:  # pilot_wrench's depth-hold force gains, still in the level frame
-            u = [shape_stick(sticks[k], scale, dz) * ctl.axis_maxima[k] for k in range(3)]
-            tg = (
-                gains.depth_hold_translation_precision
-                if precision
-                else gains.depth_hold_translation
-            )
-            self.force: Vec3 = (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2])
-        else:
-            self.force = (wrench[0], wrench[1], wrench[2])
-        self.torque: Vec3 = (wrench[3], wrench[4], wrench[5])
-        self.intent = ForceIntent("pilot", wrench)
-        # trim rates at these sticks: shape · rate (× dt per frame)
-        self.depth_trim = (
-            shape_stick(sticks[2], 1.0, dz) * gains.depth_trim_m_s[1 if precision else 0]
-        )
-        rates = gains.attitude_trim_precision_rad_s if precision else gains.attitude_trim_rad_s
-        self.attitude_trims: Vec3 = (
-            shape_stick(sticks[3], 1.0, dz) * rates[0],
-            shape_stick(sticks[4], 1.0, dz) * rates[1],
-            shape_stick(sticks[5], 1.0, dz) * rates[2],
+        self.wrench: Wrench6 = w
+        self.intent = ForceIntent("pilot", w)  # the body intent outside depth hold
+        self.trims = pilot_trims(sticks, gains=gains, precision=flags.precision)
+
+    def holds(self, ctl: Controllers, sticks: tuple[float, ...]) -> bool:
+        """Whether this cache is of these sticks in the present mode, maxima and gains."""
+        flags = ctl.flags
+        return (
+            self.sticks is sticks
+            and self.modes == (flags.precision, flags.depth_hold, flags.attitude_hold)
+            and self.axis_maxima is ctl.axis_maxima
+            and self.gains is ctl.pilot
         )
 
 
@@ -551,15 +509,13 @@ def control_attitude(world: World) -> None:
 
 def allocate_thrust(world: World) -> None:
     """Σ force intents → allocator → per-thruster commands (all off when disarmed)."""
-    clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     act = world.resource(Actuation)
-    n = len(act.matrix_columns)
     if not ctl.flags.armed:
         act.allocator.reset()  # re-arming slews up from 0 N
+        n = act.matrix.shape[1]
         act.requested = ZERO6
-        act.commanded_forces_n = (0.0,) * n
-        act.commanded_pwm_us = (1500.0,) * n
+        act.commanded_forces_n = np.zeros(n)
         world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
         return
     x = y = z = k = m = nn = 0.0
@@ -571,11 +527,13 @@ def allocate_thrust(world: World) -> None:
         k += w[3]
         m += w[4]
         nn += w[5]
-    act.requested = (x, y, z, k, m, nn)
-    forces, pwm, currents, scale = act.allocator.allocate_floats(act.requested, clock.dt_s)
-    act.commanded_forces_n = forces
-    act.commanded_pwm_us = pwm
-    world.set(ctl.vehicle, ThrusterOutput(forces, pwm, currents, scale))
+    requested = act.requested = (x, y, z, k, m, nn)
+    allocator = act.allocator
+    scale = allocator.step(requested, world.resource(SimClock).dt_s)
+    output = allocator.output
+    act.commanded_forces_n = output[0].copy()
+    forces, pwm, currents = output.tolist()
+    world.set(ctl.vehicle, ThrusterOutput(tuple(forces), tuple(pwm), tuple(currents), scale))
 
 
 # ---------------------------------------------------------------------------- POST_UPDATE
@@ -591,23 +549,23 @@ def actuate_thrusters(world: World) -> None:
     ``F1`` over ``h`` averages ``F0 + (F1 − F0)·(1/(1 − e) − τ/h)``. Faulty thrusters are
     whatever the plant makes them; the wrench is ``T @ mean actual forces``, not the request.
     """
-    ctl = world.resource(Controllers)
     act = world.resource(Actuation)
     h = act.interval_s
     f0 = act.actual_forces_n
-    f1 = act.dynamics.step_floats(act.commanded_forces_n, h)
-    tau = act.dynamics.time_constant_s
-    key = (h, tau)
+    dynamics = act.dynamics
+    f1 = dynamics.step(act.commanded_forces_n, h)
+    key = (h, dynamics.time_constant_s)
     if act.mean_weight[0] == key:  # the interval is almost always the same
         c = act.mean_weight[1]
     else:
+        tau = key[1]
         e = math.exp(-h / tau) if tau > 0.0 else 0.0
         c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
         act.mean_weight = (key, c)
     act.actual_forces_n = f1
-    mean = [a + (b - a) * c for a, b in zip(f0, f1, strict=True)]
-    act.plant_wrench = wrench_of(mean, act.matrix_columns)
-    world.set(ctl.vehicle, AppliedWrench(act.requested, act.plant_wrench))
+    act.plant_wrench = interval_wrench(act.matrix, f0, f1, c)
+    vehicle = world.resource(Controllers).vehicle
+    world.set(vehicle, AppliedWrench(act.requested, act.plant_wrench))
 
 
 def meter_power(world: World) -> None:
@@ -619,18 +577,9 @@ def meter_power(world: World) -> None:
     meter.energy_j += current * meter.supply_voltage_v * world.resource(SimClock).dt_s
 
 
-def wrench_of(forces_n: Sequence[float], columns: Sequence[Sequence[float]]) -> Wrench6:
-    """``T @ forces`` as a (6,) tuple [N, N·m], body FRD (scalar loop: n is small)."""
-    x = y = z = k = m = n = 0.0
-    for f, col in zip(forces_n, columns, strict=True):
-        if f:
-            x += f * col[0]
-            y += f * col[1]
-            z += f * col[2]
-            k += f * col[3]
-            m += f * col[4]
-            n += f * col[5]
-    return (x, y, z, k, m, n)
+def wrench_of(forces_n: np.ndarray, matrix: np.ndarray) -> Wrench6:
+    """``T @ forces`` as a (6,) tuple [N, N·m], body FRD, for (n,) forces and (6, n) T."""
+    return interval_wrench(matrix, forces_n, forces_n, 0.0)
 
 
 # ------------------------------------------------------------------------------ schedule

@@ -4,9 +4,10 @@
 ``data/t200_12v.csv``, credited there) linearly, as the ECS paper's lookup tables do. Forces are
 signed [N]: positive is the propeller's stronger "forward" thrust along the thruster's
 ``direction``, negative the weaker reverse thrust. A CW propeller takes the table's PWM as is; a
-CCW (reversed) propeller mirrors it about neutral, pwm -> 3000 - pwm. :class:`InterpTable` and
-:func:`numpy_sum` evaluate the tables on plain floats bit for bit as numpy would (the per-frame
-path). The plant side (spin-up lag, faults) is :mod:`testbed.vehicle.thrusters`.
+CCW (reversed) propeller mirrors it about neutral, pwm -> 3000 - pwm. Every lookup, here and in
+the allocator's kernels, is :func:`~testbed.vehicle.thrust_kernels.lookup` on one of three
+(2, k) tables (:attr:`T200.pwm_table`, :attr:`T200.inverse_table`, :attr:`T200.current_table`).
+The plant side (spin-up lag, faults) is :mod:`testbed.vehicle.thrusters`.
 """
 
 from __future__ import annotations
@@ -14,12 +15,11 @@ from __future__ import annotations
 import csv
 import functools
 import io
-from bisect import bisect_right
-from collections.abc import Sequence
 from importlib import resources
 
 import numpy as np
 
+from testbed.vehicle.thrust_kernels import lookup, lookup_many, total_current
 from testbed.vehicle.thruster_config import Handedness
 
 __all__ = [
@@ -29,8 +29,6 @@ __all__ = [
     "SUPPLY_VOLTAGE_RANGE_V",
     "T200",
     "ZERO_FORCE_N",
-    "InterpTable",
-    "numpy_sum",
 ]
 
 NEUTRAL_PWM_US = 1500.0
@@ -97,15 +95,11 @@ class T200:
     """
 
     __slots__ = (
-        "_current_axis_a",
         "_current_table",
-        "_force_axis_n",
-        "_inverse_force_n",
-        "_inverse_pwm_us",
+        "_inverse_table",
         "_max_forward_n",
         "_max_reverse_n",
-        "_pwm_axis_us",
-        "_pwm_force_n",
+        "_pwm_table",
         "voltage_v",
     )
 
@@ -130,8 +124,10 @@ class T200:
         # PWM -> force: the table as published, dead band expanded to its edges.
         lo, hi = DEAD_BAND_US
         below, above = pwm < lo, pwm > hi
-        self._pwm_axis_us = _frozen(np.concatenate([pwm[below], [lo, hi], pwm[above]]))
-        self._pwm_force_n = _frozen(np.concatenate([force[below], [0.0, 0.0], force[above]]))
+        self._pwm_table = _table(
+            np.concatenate([pwm[below], [lo, hi], pwm[above]]),
+            np.concatenate([force[below], [0.0, 0.0], force[above]]),
+        )
 
         # Force -> PWM / current: the monotone envelope, walking outward from neutral.
         fwd = _outward_envelope(force[i0 + 1 :])
@@ -145,13 +141,14 @@ class T200:
         rev_force = force[:i0][::-1][rev]
         rev_current = current[:i0][::-1][rev]
         # Force -> PWM: ascending force, crossing the dead band between -/+ZERO_FORCE_N.
-        self._inverse_force_n = _frozen(
-            np.concatenate([rev_force[::-1], [-ZERO_FORCE_N, ZERO_FORCE_N], fwd_force])
+        self._inverse_table = _table(
+            np.concatenate([rev_force[::-1], [-ZERO_FORCE_N, ZERO_FORCE_N], fwd_force]),
+            np.concatenate([rev_pwm[::-1], [lo, hi], fwd_pwm]),
         )
-        self._inverse_pwm_us = _frozen(np.concatenate([rev_pwm[::-1], [lo, hi], fwd_pwm]))
-        self._force_axis_n = _frozen(np.concatenate([rev_force[::-1], [0.0], fwd_force]))
-        self._current_axis_a = _frozen(np.concatenate([rev_current[::-1], [0.0], fwd_current]))
-        self._current_table = InterpTable(self._force_axis_n, self._current_axis_a)
+        self._current_table = _table(
+            np.concatenate([rev_force[::-1], [0.0], fwd_force]),
+            np.concatenate([rev_current[::-1], [0.0], fwd_current]),
+        )
         self._max_forward_n = float(fwd_force[-1])
         self._max_reverse_n = float(-rev_force[-1])
 
@@ -171,8 +168,10 @@ class T200:
                 f"T200 voltage must be in [{volts[0]}, {volts[-1]}] V, got {voltage_v}"
             )
         pwm, force, current = _packaged_table()
-        k_fwd = float(np.interp(voltage_v, volts, [r[1] for r in PUBLISHED_MAXIMA])) / 36.4
-        k_rev = float(np.interp(voltage_v, volts, [r[2] for r in PUBLISHED_MAXIMA])) / 28.6
+        forward = _table(np.array(volts), np.array([r[1] for r in PUBLISHED_MAXIMA]))
+        reverse = _table(np.array(volts), np.array([r[2] for r in PUBLISHED_MAXIMA]))
+        k_fwd = lookup(float(voltage_v), forward) / 36.4
+        k_rev = lookup(float(voltage_v), reverse) / 28.6
         scale = np.where(pwm > NEUTRAL_PWM_US, k_fwd, np.where(pwm < NEUTRAL_PWM_US, k_rev, 1.0))
         return cls(pwm, force * scale, current * scale, voltage_v=voltage_v)
 
@@ -194,41 +193,60 @@ class T200:
     @property
     def max_current_a(self) -> float:
         """Largest current on the monotone envelope [A] (17.08 at 12 V)."""
-        return float(self._current_axis_a.max())
+        return float(self._current_table[1].max())
+
+    @property
+    def pwm_table(self) -> np.ndarray:
+        """(2, k) PWM [µs] → force [N] of a CW propeller, dead band expanded (read-only)."""
+        return self._pwm_table
+
+    @property
+    def inverse_table(self) -> np.ndarray:
+        """(2, k) force [N] → CW PWM [µs] on the monotone envelope (read-only)."""
+        return self._inverse_table
+
+    @property
+    def current_table(self) -> np.ndarray:
+        """(2, k) force [N] → current [A] on the monotone envelope, 0 A at 0 N (read-only)."""
+        return self._current_table
 
     @property
     def inverse_force_n(self) -> np.ndarray:
         """(k,) strictly increasing forces [N] of the force -> PWM table (read-only)."""
-        return self._inverse_force_n
+        row: np.ndarray = self._inverse_table[0]
+        return row
 
     @property
     def inverse_pwm_us(self) -> np.ndarray:
         """(k,) CW PWM pulse [µs] at each of :attr:`inverse_force_n` (read-only)."""
-        return self._inverse_pwm_us
+        row: np.ndarray = self._inverse_table[1]
+        return row
 
     @property
     def force_axis_n(self) -> np.ndarray:
         """(k,) strictly increasing signed forces [N] of the monotone envelope (read-only)."""
-        return self._force_axis_n
+        row: np.ndarray = self._current_table[0]
+        return row
 
     @property
     def current_axis_a(self) -> np.ndarray:
         """(k,) current [A] at each of :attr:`force_axis_n` (read-only); 0 A at 0 N."""
-        return self._current_axis_a
+        row: np.ndarray = self._current_table[1]
+        return row
 
     def force_for_pwm(self, pwm_us: float, handedness: Handedness = "cw") -> float:
         """Force [N] a thruster produces at PWM pulse ``pwm_us`` [µs]."""
         pulse = 3000.0 - pwm_us if handedness == "ccw" else pwm_us
-        return float(np.interp(pulse, self._pwm_axis_us, self._pwm_force_n))
+        return lookup(float(pulse), self._pwm_table)
 
     def pwm_for_force(self, force_n: float, handedness: Handedness = "cw") -> float:
         """PWM pulse [µs] that commands ``force_n`` [N], saturating at the envelope's ends."""
-        pulse = float(np.interp(force_n, self._inverse_force_n, self._inverse_pwm_us))
+        pulse = lookup(float(force_n), self._inverse_table)
         return 3000.0 - pulse if handedness == "ccw" else pulse
 
     def current_for_force(self, force_n: float) -> float:
         """Current [A] drawn to produce ``force_n`` [N] (saturates at the envelope's ends)."""
-        return float(np.interp(force_n, self._force_axis_n, self._current_axis_a))
+        return lookup(float(force_n), self._current_table)
 
     def forces_for_pwms(self, pwms_us: np.ndarray, ccw: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`force_for_pwm`: (n,) forces [N] for (n,) pulses [µs].
@@ -237,9 +255,8 @@ class T200:
             pwms_us: (n,) PWM pulses [µs].
             ccw: (n,) bool, True for counter-clockwise propellers.
         """
-        pulse = np.where(ccw, 3000.0 - np.asarray(pwms_us, dtype=np.float64), pwms_us)
-        forces: np.ndarray = np.interp(pulse, self._pwm_axis_us, self._pwm_force_n)
-        return forces
+        pwms = np.asarray(pwms_us, dtype=np.float64)
+        return _lookup_array(np.where(ccw, 3000.0 - pwms, pwms), self._pwm_table)
 
     def pwms_for_forces(self, forces_n: np.ndarray, ccw: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`pwm_for_force`: (n,) pulses [µs] for (n,) forces [N].
@@ -248,22 +265,17 @@ class T200:
             forces_n: (n,) signed forces [N].
             ccw: (n,) bool, True for counter-clockwise propellers.
         """
-        pulse = np.interp(forces_n, self._inverse_force_n, self._inverse_pwm_us)
+        pulse = _lookup_array(forces_n, self._inverse_table)
         pwms: np.ndarray = np.where(ccw, 3000.0 - pulse, pulse)
         return pwms
 
     def currents_for_forces(self, forces_n: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`current_for_force`: (n,) currents [A] for (n,) forces [N]."""
-        currents: np.ndarray = np.interp(forces_n, self._force_axis_n, self._current_axis_a)
-        return currents
+        return _lookup_array(forces_n, self._current_table)
 
-    def total_current_floats(self, forces_n: Sequence[float]) -> float:
-        """Σ current [A] for (n,) forces [N], on plain floats (the per-frame path).
-
-        Bit for bit ``float(currents_for_forces(np.asarray(forces_n)).sum())``: the same
-        interpolation (:class:`InterpTable`) and numpy's summation order (:func:`numpy_sum`).
-        """
-        return numpy_sum(self._current_table.many(forces_n))
+    def total_current_a(self, forces_n: np.ndarray) -> float:
+        """Σ current [A] drawn by (n,) float64 forces [N] (the power meter's, per frame)."""
+        return total_current(forces_n, 1.0, self._current_table)
 
     def __repr__(self) -> str:
         return (
@@ -278,6 +290,19 @@ def _outward_envelope(magnitudes: np.ndarray) -> np.ndarray:
     keep = np.ones(magnitudes.size, dtype=bool)
     keep[1:] = magnitudes[1:] > best[:-1]
     return np.flatnonzero(keep)
+
+
+def _table(xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """A read-only (2, k) lookup table: abscissae (strictly increasing) over values."""
+    return _frozen(np.vstack([xs, ys]))
+
+
+def _lookup_array(values: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """:func:`~testbed.vehicle.thrust_kernels.lookup` at every element of ``values``."""
+    xs = np.ascontiguousarray(values, dtype=np.float64)
+    out = np.empty(xs.shape)
+    lookup_many(xs.reshape(-1), table, out.reshape(-1))
+    return out
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
@@ -298,73 +323,3 @@ def _packaged_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         _frozen(np.array([float(r[key]) for r in rows])) for key in ("pwm", "force", "current")
     )
     return pwm, force, current
-
-
-class InterpTable:
-    """A piecewise-linear table evaluated on Python floats exactly as ``np.interp`` does.
-
-    ``np.interp`` on x in [xp[j], xp[j+1]) returns ``fp[j]`` when ``x == xp[j]``, else
-    ``slope_j·(x − xp[j]) + fp[j]`` with ``slope_j = (fp[j+1] − fp[j]) / (xp[j+1] − xp[j])``,
-    and the end values outside; this reproduces it bit for bit (xp strictly increasing).
-    """
-
-    __slots__ = ("_fp", "_slopes", "_xp")
-
-    def __init__(self, xp: np.ndarray, fp: np.ndarray) -> None:
-        self._xp: list[float] = xp.tolist()
-        self._fp: list[float] = fp.tolist()
-        x, y = self._xp, self._fp
-        self._slopes = [(y[j + 1] - y[j]) / (x[j + 1] - x[j]) for j in range(len(x) - 1)]
-
-    def many(self, values: Sequence[float]) -> list[float]:
-        """The table at each of ``values`` (finite floats)."""
-        xp, fp, slopes = self._xp, self._fp, self._slopes
-        x_first, x_last = xp[0], xp[-1]
-        f_first, f_last = fp[0], fp[-1]
-        # one comprehension (this runs several times per frame): the end values outside
-        # the table; inside, segment j with xp[j] <= x < xp[j + 1]
-        return [
-            f_first
-            if x <= x_first
-            else f_last
-            if x >= x_last
-            else fp[j]
-            if (x_j := xp[(j := bisect_right(xp, x) - 1)]) == x
-            else slopes[j] * (x - x_j) + fp[j]
-            for x in values
-        ]
-
-
-def numpy_sum(values: Sequence[float]) -> float:
-    """``float(np.sum(values))`` for a float64 vector, on plain floats, bit for bit.
-
-    numpy adds a contiguous vector pairwise: fewer than 8 values in order from 0.0; up to 128
-    in 8 interleaved partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)),
-    then the remainder in order. Longer vectors (never per frame here) go to numpy itself.
-    """
-    n = len(values)
-    if n < 8:
-        total = 0.0
-        for v in values:
-            total += v
-        return total
-    if n > 128:
-        return float(np.sum(np.asarray(values, dtype=np.float64)))
-    r0, r1, r2, r3, r4, r5, r6, r7 = values[:8]
-    i = 8
-    end = n - n % 8
-    while i < end:
-        r0 += values[i]
-        r1 += values[i + 1]
-        r2 += values[i + 2]
-        r3 += values[i + 3]
-        r4 += values[i + 4]
-        r5 += values[i + 5]
-        r6 += values[i + 6]
-        r7 += values[i + 7]
-        i += 8
-    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        total += values[i]
-        i += 1
-    return total

@@ -1,7 +1,7 @@
 """Thrusters on the plant side: spin-up lag and plant faults.
 
-The T200's force ⇄ PWM ⇄ current lookup (:class:`T200`, its constants, :class:`InterpTable`,
-:func:`numpy_sum`) lives in ``t200.py`` and is re-exported here.
+The T200's force ⇄ PWM ⇄ current lookup (:class:`T200` and its constants) lives in ``t200.py``
+and is re-exported here.
 
 :class:`ThrusterDynamics` is the plant side: a first-order spin-up lag per thruster and the
 faults the plant applies (dead, stuck, degraded), whether or not the allocator knows of them.
@@ -14,7 +14,6 @@ Allocation lives in ``allocation.py``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -26,9 +25,8 @@ from testbed.vehicle.t200 import (
     PUBLISHED_MAXIMA,
     T200,
     ZERO_FORCE_N,
-    InterpTable,
-    numpy_sum,
 )
+from testbed.vehicle.thrust_kernels import lag_step
 from testbed.vehicle.thruster_config import (
     Handedness,
     ThrusterConfig,
@@ -48,7 +46,6 @@ __all__ = [
     "ZERO_FORCE_N",
     "FaultMode",
     "Handedness",
-    "InterpTable",
     "ThrusterConfig",
     "ThrusterDynamics",
     "ThrusterFault",
@@ -56,7 +53,6 @@ __all__ = [
     "known_thruster_configs",
     "load_thruster_config",
     "mate_rov_to_frd",
-    "numpy_sum",
     "read_thruster_config",
 ]
 
@@ -129,19 +125,18 @@ class ThrusterDynamics:
             raise ValueError(f"time_constant_s must be >= 0, got {time_constant_s}")
         self.n_thrusters = n_thrusters
         self.time_constant_s = float(time_constant_s)
-        # Plain float lists, not arrays: stepped once per frame for 4-8 thrusters, where
-        # numpy's per-call overhead costs more than the arithmetic (same IEEE results).
-        self._forces = [0.0] * n_thrusters
+        self._forces = np.zeros(n_thrusters)
         self._faults: dict[int, ThrusterFault] = {}
-        self._gain = [1.0] * n_thrusters  # command multiplier: 0 dead, factor degraded
-        self._held: dict[int, float] = {}  # dead or stuck: output overridden by this force
+        self._gain = np.ones(n_thrusters)  # command multiplier: 0 dead, factor degraded
+        self._held = np.full(n_thrusters, math.nan)  # dead or stuck: the force it gives, else NaN
+        self._blend = (math.nan, math.nan, 1.0)  # (dt_s, τ, 1 - exp(-dt/τ)) of the last step
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
     @property
     def forces_n(self) -> np.ndarray:
         """(n,) current actual forces [N] (a copy)."""
-        return np.array(self._forces)
+        return self._forces.copy()
 
     @property
     def faults(self) -> dict[int, ThrusterFault]:
@@ -153,9 +148,8 @@ class ThrusterDynamics:
         forces = np.zeros(self.n_thrusters) if forces_n is None else np.asarray(forces_n, float)
         if forces.shape != (self.n_thrusters,):
             raise ValueError(f"forces_n must have shape ({self.n_thrusters},), got {forces.shape}")
-        self._forces = forces.tolist()
-        for index, force in self._held.items():
-            self._forces[index] = force
+        held = self._held
+        self._forces = np.where(np.isnan(held), forces, held)
 
     def set_fault(self, index: int, mode: FaultMode, value: float | None = None) -> None:
         """Fail thruster ``index``.
@@ -171,14 +165,14 @@ class ThrusterDynamics:
         """
         self._check_index(index)
         if mode == "stuck" and value is None:
-            value = self._forces[index]
+            value = float(self._forces[index])
         if mode == "degraded" and value is None:
             raise ValueError("a degraded fault needs its factor as value")
         fault = ThrusterFault(mode, 0.0 if value is None or mode == "dead" else float(value))
         self._faults[index] = fault
         self._gain[index] = fault.value if mode == "degraded" else 1.0
         if mode == "degraded":
-            self._held.pop(index, None)
+            self._held[index] = math.nan
         else:
             held = self._held[index] = fault.value if mode == "stuck" else 0.0
             self._forces[index] = held
@@ -190,7 +184,7 @@ class ThrusterDynamics:
             self._check_index(i)
             self._faults.pop(i, None)
             self._gain[i] = 1.0
-            self._held.pop(i, None)
+            self._held[i] = math.nan
 
     def step(self, commanded_forces_n: np.ndarray, dt_s: float) -> np.ndarray:
         """Advance ``dt_s`` seconds with the command held; return the (n,) actual forces [N].
@@ -198,6 +192,9 @@ class ThrusterDynamics:
         Args:
             commanded_forces_n: (n,) commanded forces [N] (e.g. ``ThrusterCommand.forces_n``).
             dt_s: step length [s], >= 0.
+
+        Returns:
+            A new (n,) array (the previous one is not modified).
 
         Raises:
             ValueError: wrong shape or negative dt_s.
@@ -207,35 +204,17 @@ class ThrusterDynamics:
             raise ValueError(
                 f"commanded_forces_n must have shape ({self.n_thrusters},), got {command.shape}"
             )
-        return np.array(self.step_floats(command.tolist(), dt_s))
-
-    def step_floats(self, commanded_forces_n: Sequence[float], dt_s: float) -> tuple[float, ...]:
-        """:meth:`step` on plain floats: the same forces, as a tuple (the per-frame path).
-
-        Args:
-            commanded_forces_n: (n,) commanded forces [N].
-            dt_s: step length [s], >= 0.
-
-        Raises:
-            ValueError: wrong length or negative dt_s.
-        """
-        if len(commanded_forces_n) != self.n_thrusters:
-            raise ValueError(
-                f"commanded_forces_n must have shape ({self.n_thrusters},), "
-                f"got ({len(commanded_forces_n)},)"
-            )
-        if not dt_s >= 0.0:
-            raise ValueError(f"dt_s must be >= 0, got {dt_s}")
         tau = self.time_constant_s
-        blend = 1.0 if tau == 0.0 else -math.expm1(-dt_s / tau)
-        forces = [
-            f + (c * g - f) * blend
-            for f, c, g in zip(self._forces, commanded_forces_n, self._gain, strict=True)
-        ]
-        for index, force in self._held.items():
-            forces[index] = force
+        last_dt, last_tau, blend = self._blend
+        if dt_s != last_dt or tau != last_tau:  # the frame interval is almost always the same
+            if not dt_s >= 0.0:
+                raise ValueError(f"dt_s must be >= 0, got {dt_s}")
+            blend = 1.0 if tau == 0.0 else -math.expm1(-dt_s / tau)
+            self._blend = (dt_s, tau, blend)
+        forces = self._forces.copy()
+        lag_step(forces, command, self._gain, self._held, blend)
         self._forces = forces
-        return tuple(forces)
+        return forces
 
     def _check_index(self, index: int) -> None:
         if not 0 <= index < self.n_thrusters:

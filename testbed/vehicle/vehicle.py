@@ -64,7 +64,8 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
     PilotGains,
-    shape_stick,
+    pilot_level_wrench,
+    pilot_trims,
 )
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
@@ -337,11 +338,10 @@ class Vehicle:
         for source in ("pilot", "depth", "attitude"):
             zero = ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
             self.controllers.intents[source] = world.spawn(zero)
-        columns = tuple(tuple(float(v) for v in col) for col in self._matrix.T)
-        self.actuation = Actuation(self.allocator, self.dynamics, columns)
+        self.actuation = Actuation(self.allocator, self.dynamics, self._matrix)
         self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
         self.truth = PlantTruth()
-        self.power = PowerMeter(config.supply_voltage_v, t200.total_current_floats)
+        self.power = PowerMeter(config.supply_voltage_v, t200.total_current_a)
         resources = (self.clock, self.truth, self.sensors, self.controllers, self.actuation)
         for resource in (*resources, self.power):
             world.insert_resource(resource)
@@ -428,17 +428,15 @@ class Vehicle:
         """
         ctl = self.controllers
         flags = ctl.flags
-        pilot = ctl.pilot
-        dz = pilot.dead_zone
-        scale = pilot.precision_scale if flags.precision else pilot.normal_scale
-        if flags.depth_hold:
-            gains = (
-                pilot.depth_hold_translation_precision
-                if flags.precision
-                else pilot.depth_hold_translation
-            )
-        else:
-            gains = pilot.translation
+        wrench = pilot_level_wrench(
+            sticks,
+            ctl.axis_maxima,
+            gains=ctl.pilot,
+            precision=flags.precision,
+            depth_hold=flags.depth_hold,
+            attitude_hold=flags.attitude_hold,
+        )
+        depth_rate, _, _, yaw_rate = pilot_trims(sticks, gains=ctl.pilot, precision=flags.precision)
         model = self.model
 
         def steady(axis: int, force: float) -> float:
@@ -453,20 +451,10 @@ class Vehicle:
                 speed = magnitude / linear if linear > 0.0 else 0.0
             return math.copysign(speed, force)
 
-        forces = [shape_stick(sticks[k], scale, dz) * ctl.axis_maxima[k] for k in range(6)]
-        u = steady(0, forces[0] * gains[0])
-        v = steady(1, forces[1] * gains[1])
-        if flags.depth_hold:
-            rate = pilot.depth_trim_m_s[1 if flags.precision else 0]
-            w = shape_stick(sticks[2], 1.0, dz) * rate
-        else:
-            w = steady(2, forces[2] * gains[2])
-        if flags.attitude_hold:
-            precise = flags.precision
-            trims = pilot.attitude_trim_precision_rad_s if precise else pilot.attitude_trim_rad_s
-            r = shape_stick(sticks[5], 1.0, dz) * trims[2]
-        else:
-            r = steady(5, forces[5] * pilot.torque[2])
+        u = steady(0, wrench[0])
+        v = steady(1, wrench[1])
+        w = depth_rate if flags.depth_hold else steady(2, wrench[2])
+        r = yaw_rate if flags.attitude_hold else steady(5, wrench[5])
         return (u, v, w, r)
 
     def capture_image(self) -> CapturedImage | None:
@@ -609,8 +597,8 @@ class Vehicle:
         # a fault between frames takes effect at once: the rest of the interval applies the
         # plant's forces as they now are (a dead or stuck thruster changes instantly)
         act = self.actuation
-        act.actual_forces_n = tuple(self.dynamics.forces_n.tolist())
-        act.plant_wrench = wrench_of(act.actual_forces_n, act.matrix_columns)
+        act.actual_forces_n = self.dynamics.forces_n
+        act.plant_wrench = wrench_of(act.actual_forces_n, act.matrix)
 
     def _refresh_maxima(self) -> None:
         self.controllers.axis_maxima = tuple(float(v) for v in self.allocator.axis_maxima())

@@ -18,6 +18,7 @@ from testbed.vehicle.control import (
     PidGains,
     PilotGains,
     failsafe_level,
+    pilot_trims,
     pilot_wrench,
     shape_stick,
 )
@@ -202,6 +203,19 @@ def test_depth_hold_translation_uses_the_yaw_only_frame() -> None:
         precision=True,
     )
     np.testing.assert_allclose(precise[:3], 0.0, atol=1e-12)
+
+
+def test_pilot_trims_are_cubic_stick_times_the_full_stick_rates() -> None:
+    gains = PilotGains()
+    sticks = (0.0, 0.0, 0.5, -1.0, 0.04, 0.5)  # pitch inside the 0.05 dead zone
+    depth, roll, pitch, yaw = pilot_trims(sticks, gains=gains)
+    assert depth == pytest.approx(0.125 * 0.3)  # 0.5³ of 0.3 m/s
+    assert roll == pytest.approx(-math.radians(35.0))
+    assert pitch == 0.0
+    assert yaw == pytest.approx(0.125 * math.radians(100.0))
+    precise = pilot_trims(sticks, gains=gains, precision=True)
+    assert precise[0] == pytest.approx(0.125 * 0.2)
+    assert precise[3] == pytest.approx(0.125 * math.radians(60.0))
 
 
 # -------------------------------------------------------------------------- failsafe

@@ -201,6 +201,14 @@ def test_other_voltages_scale_to_the_published_maxima(
 def test_voltage_between_rows_interpolates_and_outside_is_rejected() -> None:
     t13 = T200.from_table(13.0)
     assert t13.max_forward_n == pytest.approx(0.5 * (36.4 + 44.4) * 36.3951 / 36.4)
+    # The BlueROV2's 4S battery, 14.8 V nominal: 40 % of the way from the published 14 V
+    # maxima (44.4 / 34.5 N) to the 16 V ones (51.4 / 39.9 N): 47.2 / 36.66 N published-scale.
+    battery = T200.from_table(14.8)
+    assert battery.max_forward_n == pytest.approx(47.2 * 36.3951 / 36.4, rel=1e-12)
+    assert battery.max_reverse_n == pytest.approx(36.66 * 28.6452 / 28.6, rel=1e-12)
+    t14, t16 = T200.from_table(14.0), T200.from_table(16.0)
+    assert t14.max_forward_n < battery.max_forward_n < t16.max_forward_n
+    assert t14.max_current_a < battery.max_current_a < t16.max_current_a
     with pytest.raises(ValueError, match="voltage"):
         T200.from_table(11.0)
     with pytest.raises(ValueError, match="voltage"):
@@ -300,35 +308,19 @@ def test_dynamics_rejects_misuse() -> None:
         ThrusterDynamics(2, time_constant_s=-1.0)
 
 
-# -- float fast paths (the vehicle frame uses them instead of numpy) -------------------------
+# ----------------------------------------------------------------------------- total current
 
 
-def test_interp_table_reproduces_np_interp_bit_for_bit() -> None:
-    from testbed.vehicle.thrusters import InterpTable
-
-    rng = np.random.default_rng(5)
-    xp = np.sort(rng.uniform(-30.0, 40.0, 60))
-    fp = rng.uniform(0.0, 17.0, 60)
-    table = InterpTable(xp, fp)
-    probes = np.concatenate([rng.uniform(-40.0, 50.0, 5000), xp, [xp[0], xp[-1], 0.0, -0.0]])
-    got = table.many(probes.tolist())
-    assert np.array_equal(np.array(got), np.interp(probes, xp, fp))
-
-
-@pytest.mark.parametrize("n", [1, 2, 5, 6, 8, 9, 17, 39])
-def test_numpy_sum_adds_in_numpys_order(n: int) -> None:
-    from testbed.vehicle.thrusters import numpy_sum
-
-    rng = np.random.default_rng(n)
-    for _ in range(500):
-        values = rng.normal(0.0, 10.0, n) * 10.0 ** rng.integers(-8, 8, n)
-        assert numpy_sum(values.tolist()) == float(np.sum(values))
-
-
-def test_total_current_floats_equals_the_vectorised_sum() -> None:
-    t200 = T200.from_table()
-    rng = np.random.default_rng(9)
-    for _ in range(200):
-        forces = rng.uniform(-35.0, 40.0, 8)
-        expected = float(t200.currents_for_forces(forces).sum())
-        assert t200.total_current_floats(forces.tolist()) == expected
+def test_total_current_is_the_sum_of_the_table_currents() -> None:
+    # Forward rows 1700 and 1704 µs and reverse rows 1300 and 1296 µs, read here from the CSV:
+    # each row's own force draws its own current, and a force a third of the way between two
+    # rows draws the current a third of the way between theirs (linear interpolation).
+    by_pwm = {row["pwm"]: row for row in ROWS}
+    forces, expected = [], 0.0
+    for a, b in ((1700.0, 1704.0), (1300.0, 1296.0)):
+        ra, rb = by_pwm[a], by_pwm[b]
+        forces += [ra["force"], ra["force"] + (rb["force"] - ra["force"]) / 3.0]
+        expected += ra["current"] + ra["current"] + (rb["current"] - ra["current"]) / 3.0
+    forces += [0.0, 100.0]  # 0 A at rest; beyond the table the forward maximum's 16.74 A
+    expected += 0.0 + 16.74
+    assert T.total_current_a(np.array(forces)) == pytest.approx(expected, rel=1e-12)
