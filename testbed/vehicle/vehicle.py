@@ -187,7 +187,8 @@ class VehicleConfig:
             :attr:`~testbed.vehicle.hydrodynamics.HydroModel.added_mass_coriolis`); None keeps
             the model's own.
         supply_voltage_v: thruster supply voltage [V] for the T200 table, in [12, 20] (the
-            published range the table is scaled over, :data:`SUPPLY_VOLTAGE_RANGE_V`).
+            published range the table is scaled over, :data:`SUPPLY_VOLTAGE_RANGE_V`);
+            default 14.8 V, the nominal voltage of the BlueROV2's 4S lithium battery.
         thruster_time_constant_s: plant spin-up lag [s], in [0, 10].
         gains: closed-loop gains.
         pilot: stick shaping and gains.
@@ -209,7 +210,7 @@ class VehicleConfig:
     current_limit_a: float | None = None
     slew_limit_n_per_s: float | None = None
     added_mass_coriolis: Literal["full", "isotropic", "off"] | None = None
-    supply_voltage_v: float = 12.0
+    supply_voltage_v: float = 14.8
     thruster_time_constant_s: float = SPIN_UP_TIME_CONSTANT_S
     gains: ControlGains = field(default_factory=_default_gains)
     pilot: PilotGains = field(default_factory=PilotGains)
