@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from testbed.vehicle.allocation import CURRENT_TOLERANCE_A, Allocator, pseudoinverse
+from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.thrusters import T200, ThrusterDynamics, load_thruster_config
 
 T = T200.from_table()
@@ -22,6 +24,13 @@ UNLIMITED_A = 1e6
 
 def allocator(name: str, **kwargs: object) -> Allocator:
     return Allocator(load_thruster_config(name), T, **kwargs)  # type: ignore[arg-type]
+
+
+def source_layout(name: str) -> ThrusterConfig:
+    """A packaged layout with its source's own centre of mass (its origin), not the one the
+    file chooses: mate-rov's standard BlueROV2 and von Benzon's Heavy put it at their origin,
+    the packaged files at the CoG under the horizontal thrust line (see their comments)."""
+    return dataclasses.replace(load_thruster_config(name), center_of_mass_m=(0.0, 0.0, 0.0))
 
 
 def unit_forces(n: int) -> st.SearchStrategy[np.ndarray]:
@@ -126,7 +135,9 @@ REFERENCE_MAXIMA = {
 
 @pytest.mark.parametrize(("name", "budget"), list(REFERENCE_MAXIMA))
 def test_axis_maxima_reproduce_the_reference_table(name: str, budget: float) -> None:
-    signed = allocator(name, current_limit_a=budget).axis_maxima_signed()
+    # mate-rov's figures, for its own geometry: the CoM at its origin
+    layout = source_layout(name)
+    signed = Allocator(layout, T, current_limit_a=budget).axis_maxima_signed()
     ours = [signed[row, k] for row, k in MATE_AXES]
     assert ours == pytest.approx(REFERENCE_MAXIMA[(name, budget)], abs=0.065)
 
@@ -185,10 +196,15 @@ def test_heavy_reproduces_the_ardusub_vectored_6dof_pattern(axis: str) -> None:
     expected = VECTORED_6DOF[[MOTOR_OF_COLUMN[c] for c in group], column]
     assert output / np.abs(output).max() == pytest.approx(expected, abs=1e-9)
     others = VERTICAL if group is HORIZONTAL else HORIZONTAL
-    coupling = np.abs(f[others]).max() / np.abs(f[group]).max()
-    # REFERENCE §4.8 (derived): T⁺ also drives the verticals at ±0.5 for surge and ±0.275 for
-    # sway, cancelling the pitch/roll moment of horizontals 8.5 cm below the CoM; ArduSub
-    # leaves that to its attitude loop. Every other axis stays in its own group.
+    # The packaged Heavy has its CoG in the horizontals' plane, as ArduSub's mixer assumes:
+    # every axis stays in its own group.
+    assert np.abs(f[others]).max() <= 1e-9 * np.abs(f[group]).max()
+    # REFERENCE §4.8 (derived): with von Benzon's CoG, 8.5 cm above the horizontals, T⁺ also
+    # drives the verticals at ±0.5 for surge and ±0.275 for sway, cancelling the horizontals'
+    # pitch/roll moment; ArduSub leaves that to its attitude loop.
+    source = Allocator(source_layout("bluerov2-heavy"), T, current_limit_a=UNLIMITED_A)
+    f_source = source.allocate(request).forces_n
+    coupling = np.abs(f_source[others]).max() / np.abs(f_source[group]).max()
     expected_coupling = {"forward": 0.5, "lateral": 0.275}.get(axis, 0.0)
     assert coupling == pytest.approx(expected_coupling, abs=0.002)
 
@@ -299,7 +315,8 @@ def test_dead_thruster_is_removed_and_requests_still_reproduced() -> None:
 
 
 def test_dead_lateral_on_the_standard_vehicle_equals_ecs_3h() -> None:
-    standard = allocator("bluerov2")
+    # ecs-3h is mate-rov's standard layout less one lateral, with mate-rov's CoM
+    standard = Allocator(source_layout("bluerov2"), T)
     standard.set_failure(2, "dead")  # LateralBackLeft
     three = allocator("ecs-3h")
     keep = [standard.config.index_of(n) for n in three.config.names]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -170,11 +171,20 @@ WU_HEAVY_TCM = np.array(
 
 
 def test_heavy_matches_the_wu_tcm_up_to_vertical_direction_signs() -> None:
-    t = load_thruster_config("bluerov2-heavy").matrix
+    packaged = load_thruster_config("bluerov2-heavy")
+    # Wu's TCM takes moments about von Benzon's origin; the packaged file puts the CoM 8.5 cm
+    # lower, in the horizontals' plane (its comment gives why).
+    source = dataclasses.replace(packaged, center_of_mass_m=(0.0, 0.0, 0.0))
+    t = source.matrix
     # Wu points T6 and T7 down; here every vertical points up, so those columns flip.
     signs = np.array([1, 1, 1, 1, 1, -1, -1, 1])
     assert t == pytest.approx(WU_HEAVY_TCM * signs, abs=6e-4)
     assert np.linalg.cond(t) == pytest.approx(8.4, abs=0.05)  # REFERENCE §4.8
+    # Moving the CoM by c changes only the moments: (p - c) x d = p x d - c x d.
+    shift = np.cross(np.asarray(packaged.center_of_mass_m), t[:3].T).T
+    assert packaged.matrix == pytest.approx(np.vstack([t[:3], t[3:] - shift]), abs=1e-12)
+    # with the CoM in their plane the horizontals give no roll or pitch (ArduSub's mixer)
+    assert packaged.matrix[3:5, :4] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_heavy_numbering_follows_ardusub_servo_order() -> None:

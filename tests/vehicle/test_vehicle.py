@@ -162,8 +162,10 @@ def test_heading_step_settles() -> None:
 
 def test_surge_stick_reaches_the_drag_limited_speed() -> None:
     # half surge stick in depth hold: a level-frame force 0.5³·0.8·X_max; at steady state the
-    # body-x balance is Wu's damping 4.03 u + 18.18 u|u| = τ_x − (W − B) sin θ (Fossen's
-    # restoring term; the laterals sit below the CoM, so thrust pitches the vehicle up)
+    # body-x balance is the model's damping d_l u + d_q u|u| = τ_x − (W − B) sin θ (Fossen's
+    # restoring term); the horizontal thrust line passes through CO, where the drag acts
+    # (data/thrusters/bluerov2.toml), so thrust and drag form no couple: the vehicle stays
+    # level
     model = load_model("bluerov2")
     with make(sensors=QUIET, start_position_ned_m=(0.0, 0.0, 1.0)) as v:
         hold(v, 1.0)
@@ -175,7 +177,7 @@ def test_surge_stick_reaches_the_drag_limited_speed() -> None:
             0.125 * 0.8 * v.controllers.axis_maxima[0], rel=0.03
         )
         pitch = state.euler_rad[1]
-        assert math.degrees(pitch) > 3.0
+        assert abs(math.degrees(pitch)) < 1.0
         drive = achieved[0] - (model.weight_n - model.buoyancy_n) * math.sin(pitch)
         a, b = -model.quadratic_damping[0], -model.linear_damping[0]
         expected = (-b + math.sqrt(b * b + 4 * a * drive)) / (2 * a)
