@@ -19,7 +19,7 @@ imports count as the absolute names they resolve to.
 | operator | common, ecs, protocol, imaging, config             | numpy                           |
 | hil      | protocol, config                                   | numpy, serial                   |
 | emulator | channel, protocol, config                          | numpy, simpy, serial            |
-| mavlink  | common, ecs, protocol, config                      | numpy, pymavlink                |
+| mavlink  | common, ecs, protocol, hil, config                 | numpy, pymavlink                |
 | run      | vehicle, operator, hil, mavlink, channel and below | numpy, scipy, simpy             |
 | report   | run and below                                      | matplotlib, numpy               |
 | sweep    | run and below                                      | numpy, scipy, distributed, tqdm |
@@ -27,7 +27,8 @@ imports count as the absolute names they resolve to.
 | __init__ | -                                                  | -                               |
 | __main__ | cli                                                | -                               |
 
-``common`` is the ECS paper's shared library: the components both nodes replicate and the link
+``mavlink`` reaches ``hil`` for its serial transport only, and never ``vehicle``: it pilots a
+world through ``common``'s components. ``common`` is the ECS paper's shared library: the components both nodes replicate and the link
 codecs that carry them. ``emulator`` does not import ``hil``: its modem personalities are written
 independently of hil's adapters, so each checks the other. ``run`` does not import ``emulator``
 (a HIL run reaches it through serial ports) nor ``report``, ``sweep`` or ``cli``. Only

@@ -1,0 +1,36 @@
+"""MAVLink: the simulated vehicle speaks ArduSub, so a real ground station drives it.
+
+* :mod:`~testbed.mavlink.endpoint` — :class:`VehicleEndpoint`, the sans-IO ArduSub-compatible
+  core (fed bytes and the time, returns packets per :class:`Channel`), a pilot of an ECS world;
+  its request handlers in :mod:`~testbed.mavlink.commands`, its failsafes in
+  :mod:`~testbed.mavlink.failsafe`, its stream rates in :mod:`~testbed.mavlink.streams`.
+* :mod:`~testbed.mavlink.telemetry` — the vehicle's components as ArduSub's telemetry.
+* :mod:`~testbed.mavlink.ardusub` — ArduSub's numbers: modes, heartbeat flags, stream groups,
+  MANUAL_CONTROL scaling.
+* :mod:`~testbed.mavlink.params` — the parameter table (``data/ardusub_params.csv``).
+* :mod:`~testbed.mavlink.wire` — pymavlink's ``ardupilotmega`` dialect as a bytes codec.
+* :mod:`~testbed.mavlink.links` — UDP, TCP and serial links with reader threads.
+
+The real-time run that puts a vehicle behind the endpoint is :mod:`testbed.run.mavlink_run`.
+Imports: ``common``, ``ecs``, ``hil`` (serial transport), pymavlink and the standard library.
+"""
+
+from __future__ import annotations
+
+from .endpoint import OUTBOX_LIMIT, Channel, EndpointOptions, VehicleEndpoint
+from .params import Param, ParamTable, load_params
+from .telemetry import HOME_LAT_LON_DEG, VehicleSnapshot
+from .wire import MavlinkWire
+
+__all__ = [
+    "HOME_LAT_LON_DEG",
+    "OUTBOX_LIMIT",
+    "Channel",
+    "EndpointOptions",
+    "MavlinkWire",
+    "Param",
+    "ParamTable",
+    "VehicleEndpoint",
+    "VehicleSnapshot",
+    "load_params",
+]

@@ -1,0 +1,429 @@
+"""The endpoint's request handlers: commands, modes, parameters, mission, streams, time sync.
+
+Each ``on_<message>(endpoint, channel, message, now_s, arrived_s)`` answers on the channel the
+request came on (PARAM_VALUE after a PARAM_SET, like STATUSTEXT, goes to every channel).
+COMMAND_LONG and COMMAND_INT share one table (:data:`COMMANDS`): arm/disarm (400), DO_SET_MODE
+(176), SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510), REQUEST_MESSAGE (512),
+REQUEST_AUTOPILOT_CAPABILITIES (520); anything else is acknowledged UNSUPPORTED. Commands are
+not gated on the sender's system id (ArduSub's are not), only on the target.
+
+Mode policy (ArduSub ``Sub::set_mode``): MANUAL 19, STABILIZE 0 and ALT_HOLD 2 are accepted
+and requested of the vehicle; every other number is refused with MAV_RESULT_FAILED and the
+warning "Flight mode change failed" — ArduSub's answer for AUTO, GUIDED, CIRCLE and POSHOLD
+without a position estimate and for unknown numbers. ACRO, SURFACE, MOTOR_DETECT and SURFTRAK
+exist in ArduSub but not in the simulator, and a position fix does not change the answer:
+the simulator has no position-holding mode.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.mavlink.ardusub import (
+    FIRMWARE_VERSION,
+    FLIGHT_SW_VERSION,
+    GIT_HASH,
+    MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    SIMULATED_MODES,
+)
+from testbed.mavlink.telemetry import MESSAGE_IDS
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+
+__all__ = [
+    "CAPABILITIES",
+    "COMMANDS",
+    "autopilot_version",
+    "on_command_int",
+    "on_command_long",
+    "on_mission_request_list",
+    "on_param_request_list",
+    "on_param_request_read",
+    "on_param_set",
+    "on_request_data_stream",
+    "on_set_mode",
+    "on_timesync",
+    "send_params",
+    "set_mode",
+]
+
+CAPABILITIES = (
+    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+"""AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do)."""
+_NAMES_BY_ID = {msg_id: name for name, msg_id in MESSAGE_IDS.items()}
+_ACCEPTED: int = mav.MAV_RESULT_ACCEPTED
+_FAILED: int = mav.MAV_RESULT_FAILED
+_UNSUPPORTED: int = mav.MAV_RESULT_UNSUPPORTED
+_DENIED: int = mav.MAV_RESULT_DENIED
+
+
+def _text(value: object) -> str:
+    """A char[] field as pymavlink gives it (str or bytes), NULs stripped."""
+    if isinstance(value, bytes):
+        value = value.decode("ascii", "replace")
+    return str(value).split("\x00", 1)[0]
+
+
+def autopilot_version(endpoint: VehicleEndpoint) -> mav.MAVLink_message:
+    """AUTOPILOT_VERSION: ArduSub :data:`~.ardusub.FIRMWARE_VERSION`, MAVLink 2."""
+    del endpoint
+    hash_bytes = list(GIT_HASH[:8].ljust(8, b"0"))
+    return mav.MAVLink_autopilot_version_message(
+        CAPABILITIES,
+        FLIGHT_SW_VERSION,
+        0,
+        0,
+        0,
+        hash_bytes,
+        [0] * 8,
+        [0] * 8,
+        0,
+        0,
+        0,
+        [0] * 18,
+    )
+
+
+def _ack(
+    endpoint: VehicleEndpoint, channel: Channel, message: mav.MAVLink_message, cmd: int, result: int
+) -> None:
+    endpoint.queue(
+        channel,
+        mav.MAVLink_command_ack_message(
+            cmd, result, 0, 0, message.get_srcSystem(), message.get_srcComponent()
+        ),
+    )
+
+
+def set_mode(endpoint: VehicleEndpoint, custom_mode: int) -> int:
+    """Request ArduSub mode ``custom_mode``; the MAV_RESULT (module docstring)."""
+    mode = SIMULATED_MODES.get(custom_mode)
+    if mode is None:
+        endpoint.reject("mode_refused")
+        endpoint.statustext(mav.MAV_SEVERITY_WARNING, "Flight mode change failed")
+        return _FAILED
+    endpoint.request_mode(mode)
+    return _ACCEPTED
+
+
+def _arm(endpoint: VehicleEndpoint, p: tuple[float, ...], now_s: float) -> int:
+    if p[0] == 1.0:
+        endpoint.request_arm(True, now_s)
+        return _ACCEPTED
+    if p[0] == 0.0:
+        endpoint.request_arm(False, now_s)
+        return _ACCEPTED
+    return _UNSUPPORTED
+
+
+def _do_set_mode(endpoint: VehicleEndpoint, p: tuple[float, ...], now_s: float) -> int:
+    del now_s
+    if not (math.isfinite(p[0]) and math.isfinite(p[1])) or not int(p[0]) & 1:
+        return _FAILED
+    return set_mode(endpoint, int(p[1]))
+
+
+def _send_by_id(endpoint: VehicleEndpoint, channel: Channel, msg_id: int) -> int:
+    if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+        endpoint.queue(channel, autopilot_version(endpoint))
+        return _ACCEPTED
+    name = _NAMES_BY_ID.get(msg_id)
+    if name is None:
+        return _UNSUPPORTED
+    endpoint.queue(channel, endpoint.message(name))
+    return _ACCEPTED
+
+
+def _cmd_arm(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del c
+    return _arm(e, p, now_s)
+
+
+def _cmd_set_mode(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del c
+    return _do_set_mode(e, p, now_s)
+
+
+def _cmd_request_message(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del now_s
+    if not math.isfinite(p[0]) or not 0 <= p[0] < 2**24:
+        return _DENIED
+    return _send_by_id(e, c, int(p[0]))
+
+
+def _cmd_capabilities(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del p, now_s
+    return _send_by_id(e, c, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+
+
+def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del now_s
+    name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
+    if name is None or not c.streams.set_interval(name, p[1]):
+        return _UNSUPPORTED
+    return _ACCEPTED
+
+
+def _cmd_get_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del now_s
+    name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
+    if name is None:
+        return _UNSUPPORTED
+    e.queue(c, mav.MAVLink_message_interval_message(int(p[0]), c.streams.interval_us(name)))
+    return _ACCEPTED
+
+
+COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float], int]] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: _cmd_arm,
+    mav.MAV_CMD_DO_SET_MODE: _cmd_set_mode,
+    mav.MAV_CMD_REQUEST_MESSAGE: _cmd_request_message,
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _cmd_capabilities,
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_set_interval,
+    mav.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
+}
+"""MAV_CMD → handler returning the MAV_RESULT to acknowledge."""
+
+
+def _command(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    params: tuple[float, ...],
+    now_s: float,
+) -> None:
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    cmd = int(message.command)
+    handler = COMMANDS.get(cmd)
+    if handler is None:
+        endpoint.reject("unsupported_command")
+        _ack(endpoint, channel, message, cmd, _UNSUPPORTED)
+        return
+    endpoint.accepted += 1
+    _ack(endpoint, channel, message, cmd, handler(endpoint, channel, params, now_s))
+
+
+def on_command_long(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """COMMAND_LONG → :data:`COMMANDS`, acknowledged."""
+    del arrived_s
+    params = tuple(float(getattr(message, f"param{k}")) for k in range(1, 8))
+    _command(endpoint, channel, message, params, now_s)
+
+
+def on_command_int(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """COMMAND_INT → :data:`COMMANDS` (param1–4; x, y, z as params 5–7), acknowledged."""
+    del arrived_s
+    params = tuple(float(getattr(message, f"param{k}")) for k in range(1, 5))
+    params += (float(message.x), float(message.y), float(message.z))
+    _command(endpoint, channel, message, params, now_s)
+
+
+def on_set_mode(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """SET_MODE (custom mode flag required) → COMMAND_ACK for DO_SET_MODE, as ArduPilot."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system):
+        return
+    endpoint.accepted += 1
+    if not int(message.base_mode) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        result = _FAILED
+    else:
+        result = set_mode(endpoint, int(message.custom_mode))
+    _ack(endpoint, channel, message, mav.MAV_CMD_DO_SET_MODE, result)
+
+
+# --------------------------------------------------------------------------- parameters
+
+
+def _param_value(endpoint: VehicleEndpoint, index: int) -> mav.MAVLink_message | None:
+    entry = endpoint.params.entry(index)
+    if entry is None:
+        return None
+    param, value = entry
+    return mav.MAVLink_param_value_message(
+        param.name.encode(), value, param.mav_type, len(endpoint.params), index
+    )
+
+
+def on_param_request_list(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """Start (or restart) the channel's parameter download; ArduPilot's banner first."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    endpoint.accepted += 1
+    major, minor, patch = FIRMWARE_VERSION
+    endpoint.statustext(
+        mav.MAV_SEVERITY_INFO, f"ArduSub V{major}.{minor}.{patch} ({GIT_HASH.decode()})"
+    )
+    frame = int(endpoint.params["FRAME_CONFIG"])
+    endpoint.statustext(mav.MAV_SEVERITY_INFO, f"Frame: {_FRAMES.get(frame, 'CUSTOM')}")
+    channel.param_cursor = 0
+
+
+_FRAMES = {
+    0: "BLUEROV1",
+    1: "VECTORED",
+    2: "VECTORED_6DOF",
+    3: "VECTORED_6DOF_90",
+    4: "SIMPLEROV_3",
+    5: "SIMPLEROV_4",
+    6: "SIMPLEROV_5",
+    7: "CUSTOM",
+}
+
+
+def send_params(endpoint: VehicleEndpoint, channel: Channel) -> None:
+    """Queue the next PARAM_VALUEs of a download in progress (paced per update)."""
+    cursor = channel.param_cursor
+    if cursor is None:
+        return
+    end = min(len(endpoint.params), cursor + endpoint.options.params_per_update)
+    for index in range(cursor, end):
+        message = _param_value(endpoint, index)
+        if message is not None:
+            endpoint.queue(channel, message)
+    channel.param_cursor = None if end >= len(endpoint.params) else end
+
+
+def on_param_request_read(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """PARAM_VALUE of one parameter, by index (≥ 0) or by name; unknown ones unanswered."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    index: int | None = int(message.param_index)
+    if index is None or index < 0:
+        index = endpoint.params.index_of(_text(message.param_id))
+    reply = None if index is None else _param_value(endpoint, index)
+    if reply is None:
+        endpoint.reject("unknown_param")
+        return
+    endpoint.accepted += 1
+    endpoint.queue(channel, reply)
+
+
+def on_param_set(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """Set a parameter; the new value goes to every channel. A refused value of a known
+    parameter is answered with the unchanged value; an unknown name is not answered."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    name = _text(message.param_id)
+    index = endpoint.params.set(name, float(message.param_value))
+    if index is None:
+        endpoint.reject("param_refused")
+        known = endpoint.params.index_of(name)
+        reply = None if known is None else _param_value(endpoint, known)
+        if reply is not None:
+            endpoint.queue(channel, reply)
+        return
+    endpoint.accepted += 1
+    if name in ("JS_GAIN_DEFAULT", "JS_GAIN_MIN", "JS_GAIN_MAX"):
+        p = endpoint.params
+        endpoint.gain = min(max(p["JS_GAIN_DEFAULT"], p["JS_GAIN_MIN"]), p["JS_GAIN_MAX"])
+    reply = _param_value(endpoint, index)
+    if reply is not None:
+        endpoint.broadcast(reply)
+
+
+# ------------------------------------------------------------------- mission, streams, time
+
+
+def on_mission_request_list(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """MISSION_COUNT 0: the simulated vehicle holds no mission, fence or rally points."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    endpoint.accepted += 1
+    mission_type = int(getattr(message, "mission_type", 0) or 0)
+    endpoint.queue(
+        channel,
+        mav.MAVLink_mission_count_message(
+            message.get_srcSystem(), message.get_srcComponent(), 0, mission_type
+        ),
+    )
+
+
+def on_request_data_stream(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """REQUEST_DATA_STREAM: a group's rate on this channel (start_stop 0 stops it)."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    rate = float(message.req_message_rate) if int(message.start_stop) else 0.0
+    if not channel.streams.set_group(int(message.req_stream_id), rate):
+        endpoint.reject("unknown_stream")
+        return
+    endpoint.accepted += 1
+
+
+def on_timesync(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """TIMESYNC request (tc1 0) → reply with tc1 = our time [ns] and the request's ts1."""
+    del arrived_s
+    endpoint.accepted += 1
+    if int(message.tc1) != 0:
+        return  # a reply to a request we never send
+    endpoint.queue(channel, mav.MAVLink_timesync_message(round(now_s * 1e9), int(message.ts1)))

@@ -1,0 +1,431 @@
+"""The ArduSub-compatible vehicle endpoint: a sans-IO MAVLink core that pilots an ECS world.
+
+:class:`VehicleEndpoint` is fed bytes and the time (:meth:`~VehicleEndpoint.receive`) and asked
+for what is due (:meth:`~VehicleEndpoint.update`); each :class:`Channel` (one per ground-station
+link) holds its own parser, stream rates and outbox of encoded packets (:meth:`Channel.take`).
+It has no socket and no clock of its own.
+
+It is a **pilot** of the world it is given, not a second control stack: it writes only the
+operator-owned components (:class:`~testbed.common.components.MovementCommand`,
+``ArmRequest``, ``ModeRequest``, ``DepthSetpoint``) on the ``intents`` entity and reads the
+vehicle-owned ones on the ``vehicle`` entity (:mod:`testbed.mavlink.telemetry`). On the vehicle
+those are the vehicle's own entities; a shore-side gateway gives it the operator station's world
+(intents it owns, the vehicle state it mirrors) and the same handling serves the ground station.
+
+What it speaks (ArduSub 4.5 as seen by QGroundControl and MAVProxy, REFERENCE.md §4): system
+1 component 1, MAVLink 2; HEARTBEAT at 1 Hz; AUTOPILOT_VERSION on REQUEST_MESSAGE or
+REQUEST_AUTOPILOT_CAPABILITIES; the parameter protocol over :class:`~.params.ParamTable`;
+MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arming
+(COMMAND_LONG 400), modes by SET_MODE or DO_SET_MODE with COMMAND_ACK (MANUAL, STABILIZE,
+ALT_HOLD fly; every other mode is refused with MAV_RESULT_FAILED — the simulator has no
+position-hold, guided or surface mode, with or without a position fix); MANUAL_CONTROL and
+RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on MAV_GCS_SYSID and SYSID_THISMAV (what
+fails the gate is dropped silently and counted); the pilot-input and GCS failsafes of the FS_*
+parameters (:mod:`testbed.mavlink.failsafe`).
+
+Remote garbage is counted, never raised (:attr:`VehicleEndpoint.rejected` by reason); outboxes
+are bounded (:data:`OUTBOX_LIMIT`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.common.components import (
+    ArmRequest,
+    ControlMode,
+    DepthSetpoint,
+    ModeRequest,
+    MovementCommand,
+)
+from testbed.ecs import Entity, Origin, World
+from testbed.mavlink import commands
+from testbed.mavlink.ardusub import RcInput, manual_control_pwm, sticks_from_rc
+from testbed.mavlink.failsafe import FailsafeMonitor
+from testbed.mavlink.params import ParamTable
+from testbed.mavlink.streams import StreamSchedule
+from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
+from testbed.mavlink.wire import MavlinkWire
+
+__all__ = ["OUTBOX_LIMIT", "Channel", "EndpointOptions", "Handler", "VehicleEndpoint"]
+
+OUTBOX_LIMIT = 1024
+"""Packets a channel's outbox holds at most; more are dropped and counted (``outbox_full``)."""
+_INT16_UNUSED = 32767
+"""MANUAL_CONTROL's INT16_MAX: the axis is not sent."""
+_BUTTON_MODES = {1: 19, 2: 2, 3: 0}
+"""ArduSub's default buttons: 1 MANUAL, 2 DEPTH HOLD, 3 STABILIZE (4 disarm, 6 arm, 11/12
+gain − / +)."""
+
+
+Handler = Callable[["VehicleEndpoint", "Channel", mav.MAVLink_message, float, float], None]
+"""A message handler: (endpoint, channel, message, now [s], arrival [s])."""
+
+
+@dataclass(frozen=True, slots=True)
+class EndpointOptions:
+    """How the endpoint presents the vehicle.
+
+    Attributes:
+        battery_voltage_v: battery voltage reported [V] (the thrusters' supply).
+        param_overrides: boot values replacing the table's (``FRAME_CONFIG`` of the layout,
+            ``BARO_SPEC_GRAV`` of the depth sensor…).
+        origin: the origin of the endpoint's writes (REMOTE on the vehicle, as a peer's
+            intents arrive; LOCAL in a gateway's operator world).
+        params_per_update: PARAM_VALUEs a channel sends per :meth:`VehicleEndpoint.update`
+            during a parameter download (ArduPilot paces them by link bandwidth).
+    """
+
+    battery_voltage_v: float = 14.8
+    param_overrides: dict[str, float] = field(default_factory=dict)
+    origin: Origin = Origin.REMOTE
+    params_per_update: int = 20
+
+
+class Channel:
+    """One ground-station link: its codec, stream rates, outbox and pending parameter list."""
+
+    def __init__(self, name: str, wire: MavlinkWire, streams: StreamSchedule) -> None:
+        self.name = name
+        self.wire = wire
+        self.streams = streams
+        self.outbox: list[bytes] = []
+        self.param_cursor: int | None = None
+        self.dropped = 0
+
+    def take(self) -> list[bytes]:
+        """The encoded packets queued since the last call, in order."""
+        out, self.outbox = self.outbox, []
+        return out
+
+
+class VehicleEndpoint:
+    """The MAVLink face of one vehicle (module docstring).
+
+    Args:
+        world: the world it pilots.
+        vehicle: the entity holding the vehicle-owned state.
+        intents: the entity it writes the operator-owned intents on.
+        options: presentation options.
+
+    Attributes:
+        params: the live parameter table.
+        received: parsed messages by type.
+        accepted: messages acted on.
+        rejected: what was dropped, by reason (wire errors, gating, bad fields, unhandled).
+        sent: packets queued, by message type.
+        pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted.
+    """
+
+    def __init__(
+        self, world: World, vehicle: Entity, intents: Entity, options: EndpointOptions
+    ) -> None:
+        self.world = world
+        self.vehicle = vehicle
+        self.intents = intents
+        self.options = options
+        self.params = ParamTable(overrides=options.param_overrides)
+        self.channels: list[Channel] = []
+        self.received: Counter[str] = Counter()
+        self.accepted = 0
+        self.rejected: Counter[str] = Counter()
+        self.sent: Counter[str] = Counter()
+        self.pilot_inputs = 0
+        self.rc = RcInput()
+        self.gain = self.params["JS_GAIN_DEFAULT"]
+        self.failsafe = FailsafeMonitor()
+        self._velocity = VelocityEstimator()
+        self._seq = 0
+        self._arm_seq = 0
+        self._buttons = 0
+        self._consumed_ah = 0.0
+        self._last_update_s: float | None = None
+        self._next_heartbeat_s = 0.0
+        self._snapshot: VehicleSnapshot | None = None
+        cls = type(self)
+        self._handlers: dict[str, Handler] = {
+            "HEARTBEAT": cls._on_heartbeat,
+            "MANUAL_CONTROL": cls._on_manual_control,
+            "RC_CHANNELS_OVERRIDE": cls._on_rc_override,
+            "COMMAND_LONG": commands.on_command_long,
+            "COMMAND_INT": commands.on_command_int,
+            "SET_MODE": commands.on_set_mode,
+            "PARAM_REQUEST_LIST": commands.on_param_request_list,
+            "PARAM_REQUEST_READ": commands.on_param_request_read,
+            "PARAM_SET": commands.on_param_set,
+            "MISSION_REQUEST_LIST": commands.on_mission_request_list,
+            "REQUEST_DATA_STREAM": commands.on_request_data_stream,
+            "TIMESYNC": commands.on_timesync,
+        }
+
+    # ----------------------------------------------------------------------- channels
+
+    @property
+    def system_id(self) -> int:
+        """SYSID_THISMAV."""
+        return int(self.params["SYSID_THISMAV"])
+
+    @property
+    def gcs_system_id(self) -> int:
+        """MAV_GCS_SYSID: the only system whose pilot input is accepted."""
+        return int(self.params["MAV_GCS_SYSID"])
+
+    def open_channel(self, name: str) -> Channel:
+        """A new link, streaming at the SR0_* rates until the ground station asks otherwise."""
+        channel = Channel(name, MavlinkWire(self.system_id, 1), StreamSchedule.from_params(self))
+        self.channels.append(channel)
+        return channel
+
+    def queue(self, channel: Channel, message: mav.MAVLink_message) -> None:
+        """Encode ``message`` onto ``channel`` (dropped and counted if its outbox is full)."""
+        if len(channel.outbox) >= OUTBOX_LIMIT:
+            channel.dropped += 1
+            self.rejected["outbox_full"] += 1
+            return
+        channel.wire.system_id = self.system_id
+        channel.outbox.append(channel.wire.encode(message))
+        self.sent[message.get_type()] += 1
+
+    def broadcast(self, message: mav.MAVLink_message) -> None:
+        """Queue ``message`` on every channel."""
+        for channel in self.channels:
+            self.queue(channel, message)
+
+    def statustext(self, severity: int, text: str) -> None:
+        """STATUSTEXT on every channel (≤ 50 characters)."""
+        self.broadcast(mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
+
+    # ------------------------------------------------------------------------ receive
+
+    def receive(
+        self, channel: Channel, data: bytes, now_s: float, arrived_s: float | None = None
+    ) -> int:
+        """Parse ``data`` from ``channel`` and act on every message in it.
+
+        Args:
+            channel: the link it came on.
+            data: any bytes (pieces of packets continue across calls).
+            now_s: the world's time [s].
+            arrived_s: when the bytes arrived, on the world's clock [s] (the sample time of the
+                pilot input they carry); default ``now_s``.
+
+        Returns:
+            Pilot-input packets accepted from ``data``.
+        """
+        decoded = channel.wire.decode(data)
+        self.rejected.update(decoded.bad)
+        before = self.pilot_inputs
+        arrived = now_s if arrived_s is None else arrived_s
+        for message in decoded.messages:
+            kind = message.get_type()
+            self.received[kind] += 1
+            handler = self._handlers.get(kind)
+            if handler is None:
+                self.rejected["unhandled"] += 1
+                continue
+            try:
+                handler(self, channel, message, now_s, arrived)
+            except (ValueError, OverflowError, TypeError):  # a field pymavlink let through
+                self.rejected["bad_field"] += 1
+        return self.pilot_inputs - before
+
+    def reject(self, reason: str) -> None:
+        """Count a dropped message."""
+        self.rejected[reason] += 1
+
+    def for_us(self, target_system: int, target_component: int | None = None) -> bool:
+        """Whether a target (0 = broadcast) names this vehicle's autopilot; counts misses."""
+        ok = target_system in (0, self.system_id) and target_component in (None, 0, 1)
+        if not ok:
+            self.rejected["wrong_target"] += 1
+        return ok
+
+    def _from_gcs(self, message: mav.MAVLink_message) -> bool:
+        if message.get_srcSystem() != self.gcs_system_id:
+            self.rejected["wrong_sysid"] += 1
+            return False
+        return True
+
+    def _on_heartbeat(
+        self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
+    ) -> None:
+        del channel, arrived_s
+        self.accepted += 1
+        if message.get_srcSystem() == self.gcs_system_id:
+            self._gcs_seen(now_s)
+
+    def _gcs_seen(self, now_s: float) -> None:
+        if self.failsafe.gcs_seen(now_s):
+            self.statustext(mav.MAV_SEVERITY_INFO, "GCS heartbeat regained")
+
+    def _on_manual_control(
+        self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
+    ) -> None:
+        del channel
+        if not self._from_gcs(message) or not self.for_us(message.target):
+            return
+        axes = []
+        for name, low in (("x", -1000), ("y", -1000), ("z", 0), ("r", -1000)):
+            value = int(getattr(message, name))
+            if value == _INT16_UNUSED:
+                value = 500 if name == "z" else 0
+            elif not low <= value <= 1000:
+                self.rejected["clamped_axis"] += 1  # acted on, clamped
+                value = max(low, min(1000, value))
+            axes.append(value)
+        x, y, z, r = axes
+        pwm = manual_control_pwm(
+            x, y, z, r, gain=self.gain, throttle_gain=self.params["JS_THR_GAIN"]
+        )
+        channels = self.rc.channels
+        for number, value in pwm.items():
+            channels[number - 1] = value
+        extensions = int(getattr(message, "enabled_extensions", 0) or 0)
+        channels[0] = _extension_pwm(message, "s") if extensions & 1 else 1500
+        channels[1] = _extension_pwm(message, "t") if extensions & 2 else 1500
+        self._on_buttons(int(message.buttons) & 0xFFFF, now_s)
+        self._pilot_input(now_s, arrived_s)
+
+    def _on_rc_override(
+        self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
+    ) -> None:
+        del channel
+        if not self._from_gcs(message) or not self.for_us(
+            message.target_system, message.target_component
+        ):
+            return
+        channels = self.rc.channels
+        for number in range(1, 19):
+            value = int(getattr(message, f"chan{number}_raw", 65535))
+            if value in (65535, 65534) or (number > 8 and value == 0):
+                continue  # ignore this channel (MAVLink 2 semantics)
+            channels[number - 1] = 1500 if value == 0 and number <= 6 else value
+        self._pilot_input(now_s, arrived_s)
+
+    def _pilot_input(self, now_s: float, arrived_s: float) -> None:
+        """An accepted stick packet: a new MovementCommand, the timers refreshed."""
+        self.accepted += 1
+        self.pilot_inputs += 1
+        self._gcs_seen(now_s)
+        self.failsafe.pilot_seen(now_s)
+        self.write_sticks(arrived_s)
+
+    def write_sticks(self, sampled_s: float) -> None:
+        """Write the RC inputs as the next MovementCommand."""
+        self._seq += 1
+        self.write(MovementCommand(self._seq, sampled_s, sticks_from_rc(self.rc.channels)))
+
+    def _on_buttons(self, buttons: int, now_s: float) -> None:
+        pressed = buttons & ~self._buttons
+        self._buttons = buttons
+        if not pressed:
+            return
+        for button, mode in _BUTTON_MODES.items():
+            if pressed & (1 << button):
+                commands.set_mode(self, mode)
+        if pressed & (1 << 4):
+            self.request_arm(False, now_s)
+        if pressed & (1 << 6):
+            self.request_arm(True, now_s)
+        steps = max(1, int(self.params["JS_GAIN_STEPS"]))
+        low, high = self.params["JS_GAIN_MIN"], self.params["JS_GAIN_MAX"]
+        step = (high - low) / max(1, steps - 1)
+        if pressed & (1 << 11):
+            self.gain = max(low, self.gain - step)
+        if pressed & (1 << 12):
+            self.gain = min(high, self.gain + step)
+
+    # ----------------------------------------------------------------------- intents
+
+    def write(self, component: object) -> None:
+        """Write an operator-owned component on the intents entity."""
+        self.world.set(self.intents, component, origin=self.options.origin)
+
+    def request_arm(self, armed: bool, now_s: float) -> None:
+        """Ask the vehicle to arm or disarm (a new request each time)."""
+        self._arm_seq += 1
+        self.write(ArmRequest(armed, self._arm_seq))
+        del now_s  # ArduSub's pilot-input timer runs from the last input, not from arming
+
+    def request_mode(self, mode: ControlMode) -> None:
+        """Ask the vehicle for a simulated mode."""
+        self.write(ModeRequest(mode))
+
+    def request_depth(self, depth_m: float) -> None:
+        """Set the depth target [m, positive down]."""
+        self.write(DepthSetpoint(depth_m))
+
+    # ------------------------------------------------------------------------ update
+
+    def snapshot(self, now_s: float) -> VehicleSnapshot:
+        """The vehicle as the telemetry reports it now."""
+        capacity_ah = self.params["BATT_CAPACITY"] / 1000.0
+        remaining = max(0, min(100, round(100.0 * (1.0 - self._consumed_ah / capacity_ah))))
+        snapshot = read_vehicle(
+            self.world,
+            self.vehicle,
+            time_s=now_s,
+            velocity=self._velocity,
+            voltage_v=self.options.battery_voltage_v,
+            remaining_pct=remaining,
+            rc_channels=tuple(self.rc.channels),
+            throttle=(self.rc.channels[2] - 1100) / 800.0,
+            gain=self.gain,
+            critical=self.failsafe.active,
+        )
+        self._snapshot = snapshot
+        return snapshot
+
+    def update(self, now_s: float) -> None:
+        """Run the failsafes and queue what is due on every channel at ``now_s`` [s]."""
+        snapshot = self.snapshot(now_s)
+        if self._last_update_s is not None and now_s > self._last_update_s:
+            self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
+        self._last_update_s = now_s
+        self.failsafe.check(self, snapshot, now_s)
+        heartbeat = now_s >= self._next_heartbeat_s
+        if heartbeat:
+            self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
+            self.broadcast(BUILDERS["HEARTBEAT"](self.snapshot(now_s)))
+        for channel in self.channels:
+            for name in channel.streams.due(now_s):
+                self.queue(channel, self.message(name, snapshot))
+            commands.send_params(self, channel)
+
+    def message(self, name: str, snapshot: VehicleSnapshot | None = None) -> mav.MAVLink_message:
+        """The telemetry message ``name`` (a :data:`~.telemetry.BUILDERS` key or
+        ``NAMED_VALUE_FLOAT``) for ``snapshot`` (default: the last one)."""
+        s = snapshot or self._snapshot or self.snapshot(0.0)
+        if name == "NAMED_VALUE_FLOAT":
+            return mav.MAVLink_named_value_float_message(s.time_boot_ms, b"PilotGain", s.gain)
+        return BUILDERS[name](s)
+
+    def counters(self) -> dict[str, object]:
+        """Everything counted, for metrics."""
+        return {
+            "received": dict(sorted(self.received.items())),
+            "accepted": self.accepted,
+            "rejected": dict(sorted(self.rejected.items())),
+            "sent": dict(sorted(self.sent.items())),
+            "pilot_inputs": self.pilot_inputs,
+            "param_sets": {
+                "accepted": self.params.sets_accepted,
+                "refused": self.params.sets_refused,
+            },
+            "failsafes": dict(self.failsafe.triggered),
+            "bytes_in": sum(c.wire.bytes_in for c in self.channels),
+            "bytes_out": sum(c.wire.bytes_out for c in self.channels),
+        }
+
+
+def _extension_pwm(message: mav.MAVLink_message, name: str) -> int:
+    """Pitch (s) or roll (t) extension: value + 1500, unscaled, clamped to 1100..1900 [µs]."""
+    value = int(getattr(message, name, 0) or 0)
+    if value == _INT16_UNUSED or not math.isfinite(value):
+        return 1500
+    return max(1100, min(1900, 1500 + value))

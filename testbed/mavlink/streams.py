@@ -1,0 +1,118 @@
+"""Telemetry stream rates of one channel: REQUEST_DATA_STREAM groups and per-message intervals.
+
+A channel starts at the SR0_* parameter rates (ArduPilot's per-link stream rates, so a ground
+station that asks for nothing still gets telemetry); REQUEST_DATA_STREAM sets a whole group
+(:data:`~testbed.mavlink.ardusub.STREAM_GROUPS`; stream 0 = all), SET_MESSAGE_INTERVAL one
+message (−1 off, 0 back to its group's rate). Rates are capped at :data:`MAX_RATE_HZ` (the
+endpoint runs once per vehicle frame, 100 Hz). Due times advance by whole intervals and skip
+ahead after a stall, so a late run never sends a burst. No I/O, no clock.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+from testbed.mavlink.ardusub import STREAM_GROUPS
+
+__all__ = ["GROUP_PARAMS", "MAX_RATE_HZ", "StreamSchedule"]
+
+MAX_RATE_HZ = 50.0
+"""Fastest telemetry rate served [Hz]."""
+GROUP_PARAMS = {
+    1: "SR0_RAW_SENS",
+    2: "SR0_EXT_STAT",
+    3: "SR0_RC_CHAN",
+    6: "SR0_POSITION",
+    10: "SR0_EXTRA1",
+    11: "SR0_EXTRA2",
+    12: "SR0_EXTRA3",
+}
+"""Stream group → the parameter holding its boot rate [Hz]."""
+_GROUP_OF = {name: group for group, names in STREAM_GROUPS.items() for name in names}
+
+
+class _HasParams(Protocol):
+    @property
+    def params(self) -> _Params: ...
+
+
+class _Params(Protocol):
+    def __getitem__(self, name: str) -> float: ...
+
+
+class StreamSchedule:
+    """Which telemetry messages a channel sends, how often, and when each is next due.
+
+    Args:
+        group_rates_hz: boot rate of each stream group [Hz] (0 = off).
+    """
+
+    def __init__(self, group_rates_hz: dict[int, float]) -> None:
+        self._defaults = {
+            name: _interval(group_rates_hz.get(group, 0.0)) for name, group in _GROUP_OF.items()
+        }
+        self.interval_s: dict[str, float] = dict(self._defaults)
+        self._next_s: dict[str, float] = {}
+
+    @classmethod
+    def from_params(cls, owner: _HasParams) -> StreamSchedule:
+        """The SR0_* rates of ``owner.params``."""
+        return cls({group: owner.params[name] for group, name in GROUP_PARAMS.items()})
+
+    def set_group(self, stream_id: int, rate_hz: float) -> bool:
+        """REQUEST_DATA_STREAM: every message of group ``stream_id`` (0 = all) at ``rate_hz``
+        (≤ 0: off). Returns False for an unknown group."""
+        if stream_id != 0 and stream_id not in STREAM_GROUPS:
+            return False
+        groups = STREAM_GROUPS if stream_id == 0 else {stream_id: STREAM_GROUPS[stream_id]}
+        for names in groups.values():
+            for name in names:
+                self._set(name, _interval(rate_hz))
+        return True
+
+    def set_interval(self, name: str, interval_us: float) -> bool:
+        """SET_MESSAGE_INTERVAL: −1 off, 0 the group's default, else every ``interval_us``
+        [µs] (capped at :data:`MAX_RATE_HZ`). Returns False for a message not streamed or a
+        non-finite interval."""
+        if name not in self._defaults or not math.isfinite(interval_us):
+            return False
+        if interval_us < 0:
+            self._set(name, 0.0)
+        elif interval_us == 0:
+            self._set(name, self._defaults[name])
+        else:
+            self._set(name, max(interval_us * 1e-6, 1.0 / MAX_RATE_HZ))
+        return True
+
+    def interval_us(self, name: str) -> int:
+        """GET_MESSAGE_INTERVAL's answer: the interval [µs], −1 when off, 0 if not streamed."""
+        if name not in self.interval_s:
+            return 0
+        interval = self.interval_s[name]
+        return -1 if interval == 0 else round(interval * 1e6)
+
+    def _set(self, name: str, interval_s: float) -> None:
+        self.interval_s[name] = interval_s
+        self._next_s.pop(name, None)
+
+    def due(self, now_s: float) -> list[str]:
+        """The messages due at ``now_s`` [s] (each then scheduled one interval on)."""
+        out: list[str] = []
+        for name, interval in self.interval_s.items():
+            if interval <= 0:
+                continue
+            next_s = self._next_s.get(name)
+            if next_s is not None and now_s < next_s - 1e-9:
+                continue
+            out.append(name)
+            nxt = now_s + interval if next_s is None else next_s + interval
+            self._next_s[name] = nxt if nxt > now_s else now_s + interval
+        return out
+
+
+def _interval(rate_hz: float) -> float:
+    """Rate [Hz] → interval [s] (0 = off), capped at :data:`MAX_RATE_HZ`."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        return 0.0
+    return 1.0 / min(rate_hz, MAX_RATE_HZ)

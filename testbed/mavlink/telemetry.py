@@ -1,0 +1,356 @@
+"""Telemetry: the vehicle's ECS components as ArduSub's MAVLink messages.
+
+:func:`read_vehicle` takes one :class:`VehicleSnapshot` of what the vehicle owns and publishes
+(:class:`~testbed.common.components.ImuReading`, ``DepthReading``, ``Odometry``, ``Armed``,
+``ActiveMode``, ``ThrusterOutput``, ``PositionReading``) from a world; it reads components
+only, so a shore-side gateway reading the operator's mirrored copies gets the same messages.
+:data:`BUILDERS` maps each telemetry message name to a function of the snapshot that returns the
+pymavlink message (``ardupilotmega`` dialect). :class:`VelocityEstimator` differentiates the
+reported position, as the vehicle reports no velocity of its own.
+
+Conventions (REFERENCE.md §4.3): world NED, body FRD. Depth is positive down in the
+components and negative below the surface on the wire (VFR_HUD.alt [m], GLOBAL_POSITION_INT
+alt and relative_alt [mm], with the home at 0 m AMSL); LOCAL_POSITION_NED.z is depth [m].
+GLOBAL_POSITION_INT lat/lon are the home plus the NED offset (flat earth, WGS-84 radius).
+SCALED_PRESSURE2 is the external depth sensor (press_abs [hPa], temperature [cdegC]);
+SCALED_PRESSURE the enclosure's barometer (fixed 1013.25 hPa, 25 °C: not simulated).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.common.components import (
+    ActiveMode,
+    Armed,
+    DepthReading,
+    ImuReading,
+    Odometry,
+    PositionReading,
+    ThrusterOutput,
+)
+from testbed.common.geometry import euler_from_quat
+from testbed.ecs import Entity, World
+from testbed.mavlink.ardusub import base_mode
+
+__all__ = [
+    "BUILDERS",
+    "EARTH_RADIUS_M",
+    "HOME_LAT_LON_DEG",
+    "MESSAGE_IDS",
+    "VehicleSnapshot",
+    "VelocityEstimator",
+    "read_vehicle",
+]
+
+HOME_LAT_LON_DEG = (39.9945, -0.0686)
+"""Fixed home [deg]: the harbour of Castelló, where Centelles et al. tested (any fixed point
+would do; QGC needs one to draw the vehicle)."""
+EARTH_RADIUS_M = 6378137.0
+WATER_TEMPERATURE_CDEG = 1500
+"""Reported water temperature [cdegC] (15 °C; the simulator has no temperature)."""
+_SENSORS = (
+    mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mav.MAV_SYS_STATUS_SENSOR_BATTERY
+)
+"""SYS_STATUS sensor bits present, enabled and healthy (pressure = the depth sensor)."""
+
+
+@dataclass(slots=True)
+class VelocityEstimator:
+    """NED velocity [m/s] from successive positions: finite differences, low-passed.
+
+    Args:
+        time_constant_s: first-order filter time constant [s].
+    """
+
+    time_constant_s: float = 0.3
+    velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    _last: tuple[float, tuple[float, float, float]] | None = field(default=None, repr=False)
+
+    def update(self, t_s: float, position_ned_m: tuple[float, float, float]) -> None:
+        """Fold in the position at ``t_s`` [s] (ignored unless newer than the last)."""
+        last = self._last
+        if last is not None and t_s <= last[0]:
+            return
+        self._last = (t_s, position_ned_m)
+        if last is None:
+            return
+        dt = t_s - last[0]
+        alpha = dt / (self.time_constant_s + dt)
+        self.velocity_ned_m_s = tuple(  # type: ignore[assignment]  # 3 in, 3 out
+            v + alpha * ((p - q) / dt - v)
+            for v, p, q in zip(self.velocity_ned_m_s, position_ned_m, last[1], strict=True)
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleSnapshot:
+    """What the telemetry says at one instant.
+
+    Attributes:
+        time_s: vehicle time [s] (``time_boot_ms`` = 1000 × it).
+        armed: the vehicle's armed state.
+        custom_mode: ArduSub mode number.
+        quaternion_wxyz: attitude, body → NED.
+        rates_rad_s: (p, q, r) body rates [rad/s], FRD.
+        depth_m: depth [m, positive down].
+        pressure_pa: external (depth sensor) absolute pressure [Pa].
+        position_ned_m: (3,) position [m], NED (x, y 0 without a position fix).
+        velocity_ned_m_s: (3,) velocity [m/s], NED (estimated from the position).
+        pwm_us: per-thruster pulse widths [µs] (empty before the first allocation).
+        current_a: total thruster current [A].
+        voltage_v: battery voltage [V].
+        remaining_pct: battery remaining [%].
+        rc_channels: (18,) RC inputs [µs], 0 = none.
+        throttle: heave command as ArduSub's throttle, 0..1 (0.5 neutral).
+        gain: the joystick gain.
+        critical: a failsafe is active (heartbeat system_status CRITICAL).
+        has_position: the vehicle has a position fix.
+    """
+
+    time_s: float
+    armed: bool
+    custom_mode: int
+    quaternion_wxyz: tuple[float, float, float, float]
+    rates_rad_s: tuple[float, float, float]
+    depth_m: float
+    pressure_pa: float
+    position_ned_m: tuple[float, float, float]
+    velocity_ned_m_s: tuple[float, float, float]
+    pwm_us: tuple[float, ...]
+    current_a: float
+    voltage_v: float
+    remaining_pct: int
+    rc_channels: tuple[int, ...]
+    throttle: float
+    gain: float
+    critical: bool
+    has_position: bool
+
+    @property
+    def time_boot_ms(self) -> int:
+        return int(self.time_s * 1000.0) & 0xFFFFFFFF
+
+    @property
+    def time_usec(self) -> int:
+        return int(self.time_s * 1e6)
+
+    @property
+    def euler_rad(self) -> tuple[float, float, float]:
+        """(roll, pitch, yaw) [rad], yaw in (−π, π]."""
+        return euler_from_quat(self.quaternion_wxyz)
+
+    @property
+    def heading_deg(self) -> float:
+        """Heading [deg] in [0, 360)."""
+        return math.degrees(self.euler_rad[2]) % 360.0
+
+
+def read_vehicle(
+    world: World,
+    vehicle: Entity,
+    *,
+    time_s: float,
+    velocity: VelocityEstimator,
+    **fields: object,
+) -> VehicleSnapshot:
+    """Snapshot the vehicle-owned components of ``vehicle``; ``fields`` gives the rest
+    (``custom_mode`` when the active mode is not one the simulator names, ``voltage_v``,
+    ``remaining_pct``, ``rc_channels``, ``throttle``, ``gain``, ``critical``)."""
+    imu = world.get(vehicle, ImuReading)
+    depth = world.get(vehicle, DepthReading)
+    odometry = world.get(vehicle, Odometry)
+    armed = world.get(vehicle, Armed)
+    mode = world.get(vehicle, ActiveMode)
+    output = world.get(vehicle, ThrusterOutput)
+    q = (1.0, 0.0, 0.0, 0.0) if imu is None else imu.quaternion_wxyz
+    position = (0.0, 0.0, 0.0) if odometry is None else odometry.position_ned_m
+    if depth is not None:
+        position = (position[0], position[1], depth.depth_m)
+    velocity.update(time_s if odometry is None else odometry.sampled_s, position)
+    return VehicleSnapshot(
+        time_s=time_s,
+        armed=armed is not None and armed.armed,
+        custom_mode=int(mode.mode) if mode is not None else 19,
+        quaternion_wxyz=q,
+        rates_rad_s=(0.0, 0.0, 0.0) if imu is None else imu.rates_rad_s,
+        depth_m=position[2],
+        pressure_pa=101325.0 if depth is None else depth.pressure_pa,
+        position_ned_m=position,
+        velocity_ned_m_s=velocity.velocity_ned_m_s,
+        pwm_us=() if output is None else output.pwm_us,
+        current_a=0.0 if output is None else float(sum(output.currents_a)),
+        has_position=world.has(vehicle, PositionReading),
+        **fields,  # type: ignore[arg-type]  # the caller's remaining fields, checked by name
+    )
+
+
+def _i16(value: float) -> int:
+    return max(-32768, min(32767, round(value)))
+
+
+def _heartbeat(s: VehicleSnapshot) -> mav.MAVLink_message:
+    status = (
+        mav.MAV_STATE_CRITICAL
+        if s.critical
+        else mav.MAV_STATE_ACTIVE
+        if s.armed
+        else mav.MAV_STATE_STANDBY
+    )
+    return mav.MAVLink_heartbeat_message(
+        mav.MAV_TYPE_SUBMARINE,
+        mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode(s.custom_mode, s.armed),
+        s.custom_mode,
+        status,
+        3,
+    )
+
+
+def _attitude(s: VehicleSnapshot) -> mav.MAVLink_message:
+    roll, pitch, yaw = s.euler_rad
+    p, q, r = s.rates_rad_s
+    return mav.MAVLink_attitude_message(s.time_boot_ms, roll, pitch, yaw, p, q, r)
+
+
+def _attitude_quaternion(s: VehicleSnapshot) -> mav.MAVLink_message:
+    w, x, y, z = s.quaternion_wxyz
+    p, q, r = s.rates_rad_s
+    return mav.MAVLink_attitude_quaternion_message(
+        s.time_boot_ms, w, x, y, z, p, q, r, [0.0, 0.0, 0.0, 0.0]
+    )
+
+
+def _vfr_hud(s: VehicleSnapshot) -> mav.MAVLink_message:
+    vn, ve, vd = s.velocity_ned_m_s
+    speed = math.hypot(vn, ve)
+    throttle = round(100.0 * s.throttle)
+    return mav.MAVLink_vfr_hud_message(
+        speed, speed, round(s.heading_deg) % 360, throttle, -s.depth_m, -vd
+    )
+
+
+def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
+    lat0, lon0 = HOME_LAT_LON_DEG
+    north, east, down = s.position_ned_m
+    lat = lat0 + math.degrees(north / EARTH_RADIUS_M)
+    lon = lon0 + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+    vn, ve, vd = s.velocity_ned_m_s
+    return mav.MAVLink_global_position_int_message(
+        s.time_boot_ms,
+        round(lat * 1e7),
+        round(lon * 1e7),
+        round(-down * 1000.0),
+        round(-down * 1000.0),
+        _i16(vn * 100.0),
+        _i16(ve * 100.0),
+        _i16(vd * 100.0),
+        round(s.heading_deg * 100.0) % 36000,
+    )
+
+
+def _local_position_ned(s: VehicleSnapshot) -> mav.MAVLink_message:
+    x, y, z = s.position_ned_m
+    vx, vy, vz = s.velocity_ned_m_s
+    return mav.MAVLink_local_position_ned_message(s.time_boot_ms, x, y, z, vx, vy, vz)
+
+
+def _scaled_pressure(s: VehicleSnapshot) -> mav.MAVLink_message:
+    return mav.MAVLink_scaled_pressure_message(s.time_boot_ms, 1013.25, 0.0, 2500, 0)
+
+
+def _scaled_pressure2(s: VehicleSnapshot) -> mav.MAVLink_message:
+    return mav.MAVLink_scaled_pressure2_message(
+        s.time_boot_ms, s.pressure_pa / 100.0, 0.0, WATER_TEMPERATURE_CDEG, 0
+    )
+
+
+def _raw_imu(s: VehicleSnapshot) -> mav.MAVLink_message:
+    p, q, r = s.rates_rad_s
+    return mav.MAVLink_raw_imu_message(
+        s.time_usec, 0, 0, -1000, _i16(p * 1000), _i16(q * 1000), _i16(r * 1000), 0, 0, 0, 0, 0
+    )
+
+
+def _sys_status(s: VehicleSnapshot) -> mav.MAVLink_message:
+    return mav.MAVLink_sys_status_message(
+        _SENSORS,
+        _SENSORS,
+        _SENSORS,
+        100,
+        round(s.voltage_v * 1000.0),
+        _i16(s.current_a * 100.0),
+        s.remaining_pct,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+    )
+
+
+def _battery_status(s: VehicleSnapshot) -> mav.MAVLink_message:
+    cells = [round(s.voltage_v * 1000.0)] + [65535] * 9
+    return mav.MAVLink_battery_status_message(
+        0,
+        mav.MAV_BATTERY_FUNCTION_ALL,
+        mav.MAV_BATTERY_TYPE_LION,
+        32767,
+        cells,
+        _i16(s.current_a * 100.0),
+        -1,
+        -1,
+        s.remaining_pct,
+    )
+
+
+def _system_time(s: VehicleSnapshot) -> mav.MAVLink_message:
+    return mav.MAVLink_system_time_message(0, s.time_boot_ms)
+
+
+def _servo_output_raw(s: VehicleSnapshot) -> mav.MAVLink_message:
+    pwm = [round(p) for p in s.pwm_us[:16]]
+    pwm += [0] * (16 - len(pwm))
+    return mav.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *pwm)
+
+
+def _rc_channels(s: VehicleSnapshot) -> mav.MAVLink_message:
+    channels = list(s.rc_channels[:18])
+    return mav.MAVLink_rc_channels_message(s.time_boot_ms, 11, *channels, 255)
+
+
+BUILDERS: dict[str, Callable[[VehicleSnapshot], mav.MAVLink_message]] = {
+    "HEARTBEAT": _heartbeat,
+    "ATTITUDE": _attitude,
+    "ATTITUDE_QUATERNION": _attitude_quaternion,
+    "VFR_HUD": _vfr_hud,
+    "GLOBAL_POSITION_INT": _global_position_int,
+    "LOCAL_POSITION_NED": _local_position_ned,
+    "SCALED_PRESSURE": _scaled_pressure,
+    "SCALED_PRESSURE2": _scaled_pressure2,
+    "RAW_IMU": _raw_imu,
+    "SYS_STATUS": _sys_status,
+    "BATTERY_STATUS": _battery_status,
+    "SYSTEM_TIME": _system_time,
+    "SERVO_OUTPUT_RAW": _servo_output_raw,
+    "RC_CHANNELS": _rc_channels,
+}
+"""Telemetry message name → builder. NAMED_VALUE_FLOAT, STATUSTEXT and the replies are the
+endpoint's (:mod:`testbed.mavlink.endpoint`)."""
+MESSAGE_IDS = {
+    name: getattr(mav, f"MAVLINK_MSG_ID_{name}") for name in (*BUILDERS, "NAMED_VALUE_FLOAT")
+}
+"""Telemetry message name → MAVLink id (for SET_MESSAGE_INTERVAL)."""
