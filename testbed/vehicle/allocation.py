@@ -45,6 +45,7 @@ from testbed.vehicle.thrust_kernels import (
     PWM_OFFSET,
     PWM_SIGN,
     STUCK,
+    allocate_pinv,
     current_scale,
     limit_forces,
     pinv_forces,
@@ -294,7 +295,8 @@ class Allocator:
         T⁺(m − m_stuck) (:func:`~testbed.vehicle.thrust_kernels.pinv_forces`), the bounded
         least-squares solution instead when ``method="lsq"`` and T⁺m saturates, then
         saturation, current and slew limits, stuck forces, PWM and currents
-        (:func:`~testbed.vehicle.thrust_kernels.limit_forces`).
+        (:func:`~testbed.vehicle.thrust_kernels.limit_forces`); for ``"pinv"`` the two in one
+        compiled call (:func:`~testbed.vehicle.thrust_kernels.allocate_pinv`).
 
         Args:
             wrench: (6,) requested body wrench [N, N·m], FRD, rows X Y Z K M N.
@@ -317,10 +319,28 @@ class Allocator:
         else:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         work = self._work
+        if self.method == "pinv":  # the common case, one compiled call
+            scale = allocate_pinv(
+                m,
+                self._stuck_wrench,
+                self._pinv,
+                self._f_lo,
+                self._f_hi,
+                slew_step,
+                self._cap_active,
+                CURRENT_TOLERANCE_A,
+                work,
+                self._thrusters,
+                self._current_table,
+                self._pwm_table,
+            )
+            if scale != scale:
+                raise ValueError(f"wrench must be finite, got {m.tolist()}")
+            return scale
         worst = pinv_forces(m, self._stuck_wrench, self._pinv, self._f_lo, self._f_hi, work[FORCES])
         if worst != worst:
             raise ValueError(f"wrench must be finite, got {m.tolist()}")
-        if worst > 1.0 and self.method == "lsq":
+        if worst > 1.0:
             work[FORCES] = self._solve_lsq(m - self._stuck_wrench)
             worst = 1.0
         return limit_forces(

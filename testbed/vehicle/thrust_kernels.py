@@ -41,6 +41,7 @@ __all__ = [
     "PWM_OFFSET",
     "PWM_SIGN",
     "STUCK",
+    "allocate_pinv",
     "current_scale",
     "interval_wrench",
     "lag_step",
@@ -258,6 +259,32 @@ def limit_forces(
         pwm[i] = thrusters[PWM_SIGN, i] * lookup(f[i], pwm_table) + thrusters[PWM_OFFSET, i]
         currents[i] = lookup(f[i], current_table)
     return scale
+
+
+@numba.njit(cache=True)
+def allocate_pinv(
+    wrench: np.ndarray,
+    offset: np.ndarray,
+    pinv: np.ndarray,
+    f_lo: float,
+    f_hi: float,
+    slew_step_n: float,
+    cap_a: float,
+    tolerance_a: float,
+    work: np.ndarray,
+    thrusters: np.ndarray,
+    current_table: np.ndarray,
+    pwm_table: np.ndarray,
+) -> float:  # pragma: no cover - compiled
+    """The ECS paper's allocation in one call: :func:`pinv_forces` into ``work[FORCES]``, then
+    :func:`limit_forces` (the arguments are theirs). Returns the scale, NaN for a wrench that
+    is not finite (``work`` then holds nothing of use)."""
+    worst = pinv_forces(wrench, offset, pinv, f_lo, f_hi, work[FORCES])
+    if worst != worst:
+        return math.nan
+    return limit_forces(
+        work, worst, slew_step_n, cap_a, tolerance_a, thrusters, current_table, pwm_table
+    )
 
 
 @numba.njit(cache=True)
