@@ -180,7 +180,7 @@ class Imu:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
+        return self._clock.due(time_s)
 
     def sample(
         self, time_s: float, quaternion_wxyz: Quaternion, rates_rad_s: Sequence[float]
@@ -264,17 +264,18 @@ class DepthSensor:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
+        return self._clock.due(time_s)
 
     def sample(self, time_s: float, depth_m: float) -> DepthReading:
         """Measure the true depth [m, positive down] now (and schedule the next reading)."""
         self._clock.advance(time_s)
         cfg = self.config
         surface = cfg.surface_pressure_pa
-        # baro_pressure_pa and baro_depth_m written out (per frame), same operations
-        pressure = surface + cfg.water_density_kg_m3 * STANDARD_GRAVITY_M_S2 * max(depth_m, 0.0)
+        pressure = baro_pressure_pa(
+            depth_m, water_density_kg_m3=cfg.water_density_kg_m3, surface_pressure_pa=surface
+        )
         pressure += cfg.noise_pa * self._normals.take()
-        depth = (pressure - surface) / (ARDUSUB_PA_PER_M * cfg.spec_grav)
+        depth = baro_depth_m(pressure, spec_grav=cfg.spec_grav, surface_pressure_pa=surface)
         return DepthReading(time_s, pressure, depth)
 
 
@@ -312,7 +313,7 @@ class PositionFix:
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
-        return time_s >= self._clock.next_s - 1e-9  # _Clock.due, inline (polled every frame)
+        return self._clock.due(time_s)
 
     def sample(self, time_s: float, position_ned_m: Sequence[float]) -> PositionReading:
         """Measure the true (3,) NED position [m] now (and schedule the next reading)."""
