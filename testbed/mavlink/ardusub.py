@@ -167,4 +167,4 @@ def sticks_from_rc(channels: list[int]) -> tuple[float, float, float, float, flo
             return 0.0
         return _clamp((pwm - NEUTRAL_PWM) / _PWM_HALF_RANGE, -1.0, 1.0)
 
-    return (axis(5), axis(6), -axis(3), axis(2), axis(1), axis(4))
+    return (axis(5), axis(6), 0.0 - axis(3) + 0.0, axis(2), axis(1), axis(4))

@@ -102,6 +102,8 @@ class MavlinkWire:
         for message in parsed:
             if isinstance(message, mav.MAVLink_bad_data):
                 out.bad[bad_data_reason(str(getattr(message, "reason", "")))] += 1
+            elif isinstance(message, mav.MAVLink_unknown):  # an id outside the dialect
+                out.bad["unknown_id"] += 1
             else:
                 out.messages.append(message)
         return out

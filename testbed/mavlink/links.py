@@ -1,0 +1,298 @@
+"""Ground-station links: UDP (out and in), TCP (listening) and serial, each with a reader thread.
+
+A link's reader thread queues every datagram or read as a :class:`~testbed.hil.Received`
+(bytes and :func:`time.perf_counter_ns` when the read returned) on :attr:`inbox`; the real-time
+run drains it from its own process (nothing calls into simpy from a reader thread).
+:meth:`send` is called from the run's thread and never blocks for long (UDP ``sendto``; TCP with
+a short timeout; serial through :class:`~testbed.hil.SerialTransport`'s writer thread).
+
+URLs (MAVProxy's and ArduPilot SITL's words):
+
+* ``udpout:HOST:PORT`` — send to HOST:PORT from an ephemeral local port and take what comes
+  back (SITL's ``--out``; the default, ``udpout:127.0.0.1:14550``, is where QGroundControl and
+  MAVProxy listen);
+* ``udpin:HOST:PORT`` — listen on HOST:PORT, answer the last sender;
+* ``tcpin:HOST:PORT`` — listen for one TCP client at a time (a new one replaces the old);
+* ``serial:PORT[,BAUD]`` or a pyserial URL (``/dev/ttyUSB0``, ``socket://…``, ``loop://``) —
+  115200 baud by default.
+
+Addresses bind to 127.0.0.1 unless the URL names another host. Bad URLs raise ``ValueError``;
+ports that cannot be opened raise ``OSError`` (the CLI turns both into one line).
+"""
+
+from __future__ import annotations
+
+import queue
+import socket
+import threading
+import time
+from typing import Any, Protocol
+
+from testbed.hil import RawAdapter, Received, SerialTransport
+
+__all__ = [
+    "DEFAULT_BAUD",
+    "DEFAULT_URL",
+    "Link",
+    "SerialLink",
+    "TcpServerLink",
+    "UdpLink",
+    "open_link",
+    "parse_url",
+]
+
+DEFAULT_URL = "udpout:127.0.0.1:14550"
+DEFAULT_BAUD = 115200
+_READ_TIMEOUT_S = 0.1
+_MAX_DATAGRAM = 65535
+
+
+class Link(Protocol):
+    """What the run needs of a ground-station link."""
+
+    url: str
+    inbox: queue.Queue[Received]
+
+    def send(self, data: bytes) -> bool:
+        """Send one packet; False if it was dropped."""
+        ...
+
+    def counters(self) -> dict[str, int]:
+        """Bytes and packets in and out, drops."""
+        ...
+
+    def close(self) -> None:
+        """Stop the threads and close the port."""
+        ...
+
+
+def parse_url(url: str) -> tuple[str, str, int]:
+    """``(kind, host or port name, port number or baud)`` of a link URL.
+
+    Raises:
+        ValueError: an unknown scheme, a missing or bad port number.
+    """
+    for kind in ("udpout", "udpin", "tcpin"):
+        if url.startswith(kind + ":"):
+            host, sep, port = url[len(kind) + 1 :].rpartition(":")
+            if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+                raise ValueError(f"{url!r}: expected {kind}:HOST:PORT with a port 1..65535")
+            return kind, host or "127.0.0.1", int(port)
+    rest = url.removeprefix("serial:")
+    if not rest or (rest == url and ":" in url and "://" not in url):
+        raise ValueError(f"{url!r}: expected udpout:, udpin:, tcpin:, serial: or a pyserial URL")
+    name, _, baud = rest.partition(",")
+    if baud and (not baud.isdigit() or int(baud) <= 0):
+        raise ValueError(f"{url!r}: baud must be a positive integer, got {baud!r}")
+    return "serial", name, int(baud) if baud else DEFAULT_BAUD
+
+
+class _Counted:
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.bytes_in = 0
+        self.bytes_out = 0
+        self.packets_in = 0
+        self.packets_out = 0
+        self.dropped = 0
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+
+    def _start(self, target: Any) -> None:
+        thread = threading.Thread(target=target, name=f"mavlink:{self.url}", daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def _queue(self, data: bytes) -> None:
+        self.bytes_in += len(data)
+        self.packets_in += 1
+        self.inbox.put(Received(data, time.perf_counter_ns()))
+
+    def counters(self) -> dict[str, int]:
+        return {
+            "bytes_in": self.bytes_in,
+            "bytes_out": self.bytes_out,
+            "packets_in": self.packets_in,
+            "packets_out": self.packets_out,
+            "dropped": self.dropped,
+        }
+
+    def _join(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(timeout=2.0)
+
+
+class UdpLink(_Counted):
+    """UDP: ``udpout`` sends to a fixed peer; ``udpin`` listens and answers the last sender.
+
+    Args:
+        url: the link's URL (for the record).
+        host: peer (out) or bind (in) address.
+        port: peer (out) or bind (in) port.
+        listen: True for ``udpin``.
+    """
+
+    def __init__(self, url: str, host: str, port: int, *, listen: bool) -> None:
+        super().__init__(url)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        self._sock.settimeout(_READ_TIMEOUT_S)
+        self._peer: tuple[Any, ...] | None = None
+        try:
+            if listen:
+                self._sock.bind((host, port))
+            elif host in ("127.0.0.1", "::1", "localhost"):  # never listen beyond loopback
+                self._sock.bind(("::1" if family == socket.AF_INET6 else "127.0.0.1", 0))
+        except OSError:
+            self._sock.close()
+            raise
+        if not listen:
+            self._peer = (host, port)
+        self.local_address = self._sock.getsockname() if listen else None
+        self._start(self._read_loop)
+
+    def _read_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, sender = self._sock.recvfrom(_MAX_DATAGRAM)
+            except TimeoutError:
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    return
+                continue  # e.g. ICMP port unreachable from a peer not listening yet
+            if self.local_address is not None:
+                self._peer = sender
+            self._queue(data)
+
+    def send(self, data: bytes) -> bool:
+        peer = self._peer
+        if peer is None:
+            self.dropped += 1
+            return False
+        try:
+            self._sock.sendto(data, peer)
+        except OSError:
+            self.dropped += 1
+            return False
+        self.bytes_out += len(data)
+        self.packets_out += 1
+        return True
+
+    def close(self) -> None:
+        self._stop.set()
+        self._join()
+        self._sock.close()
+
+
+class TcpServerLink(_Counted):
+    """``tcpin``: listen on HOST:PORT; one client at a time, the newest wins."""
+
+    def __init__(self, url: str, host: str, port: int) -> None:
+        super().__init__(url)
+        self._server = socket.create_server((host, port), reuse_port=False)
+        self._server.settimeout(_READ_TIMEOUT_S)
+        self.local_address = self._server.getsockname()
+        self._client: socket.socket | None = None
+        self._lock = threading.Lock()
+        self.clients = 0
+        self._start(self._accept_loop)
+
+    def _accept_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                client, _ = self._server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            client.settimeout(_READ_TIMEOUT_S)
+            with self._lock:
+                old, self._client = self._client, client
+                self.clients += 1
+            if old is not None:
+                old.close()
+            self._start(lambda c=client: self._read_loop(c))
+
+    def _read_loop(self, client: socket.socket) -> None:
+        while not self._stop.is_set():
+            try:
+                data = client.recv(_MAX_DATAGRAM)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            if not data:
+                break
+            self._queue(data)
+        with self._lock:
+            if self._client is client:
+                self._client = None
+        client.close()
+
+    def send(self, data: bytes) -> bool:
+        with self._lock:
+            client = self._client
+        if client is None:
+            self.dropped += 1
+            return False
+        try:
+            client.sendall(data)
+        except OSError:
+            self.dropped += 1
+            return False
+        self.bytes_out += len(data)
+        self.packets_out += 1
+        return True
+
+    def close(self) -> None:
+        self._stop.set()
+        self._server.close()
+        with self._lock:
+            client, self._client = self._client, None
+        if client is not None:
+            client.close()
+        self._join()
+
+
+class SerialLink:
+    """A serial port or pyserial URL through :class:`~testbed.hil.SerialTransport` (a
+    transparent adapter: MAVLink frames itself)."""
+
+    def __init__(self, url: str, port: str, baudrate: int) -> None:
+        self.url = url
+        self.transport = SerialTransport(port, RawAdapter(), baudrate=baudrate)
+        self.inbox = self.transport.inbox
+
+    def send(self, data: bytes) -> bool:
+        return self.transport.send(data)
+
+    def counters(self) -> dict[str, int]:
+        c = self.transport.counters()
+        return {
+            "bytes_in": c.get("bytes_in", 0),
+            "bytes_out": c.get("bytes_out", 0),
+            "packets_in": 0,
+            "packets_out": c.get("frames_sent", 0),
+            "dropped": c.get("frames_dropped", 0),
+        }
+
+    def close(self) -> None:
+        self.transport.close()
+
+
+def open_link(url: str) -> Link:
+    """Open the link a URL names (module docstring).
+
+    Raises:
+        ValueError: a malformed URL.
+        OSError: the address or port cannot be opened (in use, no such device…).
+    """
+    kind, host, number = parse_url(url)
+    if kind in ("udpout", "udpin"):
+        return UdpLink(url, host, number, listen=kind == "udpin")
+    if kind == "tcpin":
+        return TcpServerLink(url, host, number)
+    return SerialLink(url, host, number)

@@ -1,0 +1,140 @@
+"""A simulated-time harness for the endpoint: a real vehicle behind it, pymavlink in front.
+
+:class:`SimGcs` builds the default scenario's :class:`~testbed.vehicle.vehicle.Vehicle` and a
+:class:`~testbed.mavlink.VehicleEndpoint` piloting it, and plays a ground station whose packets
+are encoded and decoded by pymavlink's own ``ardupilotmega`` dialect (not the testbed's
+wrapper): every step feeds the queued bytes, advances the vehicle one frame period and decodes
+what the endpoint queued. No sockets, no wall clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.mavlink import EndpointOptions, VehicleEndpoint
+from testbed.run.scenario import load_scenario
+from testbed.vehicle.vehicle import Vehicle
+
+FRAME_S = 0.01
+
+
+class _Null:
+    def write(self, data: bytes) -> None:
+        del data
+
+
+NO_VEHICLE_FAILSAFE = (
+    "vehicle.failsafe.hold_after_s=86399",
+    "vehicle.failsafe.surface_after_s=86400",
+)
+"""The vehicle's own stale-command failsafe off, as in a MAVLink run (ArduSub's FS_* rule)."""
+
+
+class SimGcs:
+    """A ground station (sysid ``sysid``) in front of an endpoint on a simulated vehicle."""
+
+    def __init__(self, sysid: int = 255, overrides: Iterable[str] = ()) -> None:
+        scenario = load_scenario("s100-teleop-v1", [*NO_VEHICLE_FAILSAFE, *overrides])
+        self.vehicle = Vehicle(scenario.vehicle, np.random.default_rng(0))
+        vehicle = self.vehicle
+        self.endpoint = VehicleEndpoint(
+            vehicle.world, vehicle.entity, vehicle.operator_entity, EndpointOptions()
+        )
+        self.channel = self.endpoint.open_channel("test")
+        self.mav = self.make_sender(sysid)
+        self._decoder = mav.MAVLink(None)
+        self._decoder.robust_parsing = True
+        self.packets: list[bytes] = []
+        self.messages: list[Any] = []
+        self._pending = bytearray()
+
+    @staticmethod
+    def make_sender(sysid: int, compid: int = 190) -> mav.MAVLink:
+        return mav.MAVLink(_Null(), srcSystem=sysid, srcComponent=compid)
+
+    def close(self) -> None:
+        self.vehicle.close()
+
+    @property
+    def now_s(self) -> float:
+        return self.vehicle.time_s
+
+    def send(self, *messages: Any, sender: mav.MAVLink | None = None) -> None:
+        """Queue messages (pymavlink message objects) for the next step."""
+        for message in messages:
+            self._pending += message.pack(sender or self.mav)
+
+    def send_bytes(self, data: bytes) -> None:
+        self._pending += data
+
+    def step(self) -> None:
+        """One frame: deliver the queued bytes, advance, collect the replies."""
+        data, self._pending = bytes(self._pending), bytearray()
+        if data:
+            self.endpoint.receive(self.channel, data, self.now_s)
+        self.vehicle.advance(self.now_s + FRAME_S)
+        self.endpoint.update(self.now_s)
+        for packet in self.channel.take():
+            self.packets.append(packet)
+            self.messages.extend(
+                m for m in self._decoder.parse_buffer(packet) or [] if m.get_type() != "BAD_DATA"
+            )
+
+    def run(self, seconds: float, each: Callable[[int], Iterable[Any]] | None = None) -> None:
+        """Step for ``seconds``; ``each(k)`` gives the messages to send at step ``k``."""
+        for k in range(round(seconds / FRAME_S)):
+            if each is not None:
+                self.send(*each(k))
+            self.step()
+
+    def of(self, kind: str) -> list[Any]:
+        return [m for m in self.messages if m.get_type() == kind]
+
+    def last(self, kind: str) -> Any:
+        found = self.of(kind)
+        assert found, f"no {kind} received"
+        return found[-1]
+
+    def clear(self) -> None:
+        self.messages.clear()
+        self.packets.clear()
+
+    # the ground station's usual messages
+
+    def heartbeat(self) -> Any:
+        return self.mav.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+
+    def sticks(self, x: int = 0, y: int = 0, z: int = 500, r: int = 0, buttons: int = 0) -> Any:
+        return self.mav.manual_control_encode(1, x, y, z, r, buttons)
+
+    def command(self, cmd: int, *params: float) -> Any:
+        p = [*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0][:7]
+        return self.mav.command_long_encode(1, 1, cmd, 0, *p)
+
+    def arm(self, armed: bool = True) -> Any:
+        return self.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if armed else 0.0)
+
+    def set_mode(self, mode: int) -> Any:
+        return self.mav.set_mode_encode(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+
+    def param_set(self, name: str, value: float) -> Any:
+        return self.mav.param_set_encode(1, 1, name.encode(), value, mav.MAV_PARAM_TYPE_REAL32)
+
+    def flying(self, x: int = 0, z: int = 500) -> Callable[[int], list[Any]]:
+        """MANUAL_CONTROL at 25 Hz (every 4th frame), a heartbeat at 1 Hz."""
+
+        def each(k: int) -> list[Any]:
+            out = [self.sticks(x=x, z=z)] if k % 4 == 0 else []
+            return out + ([self.heartbeat()] if k % 100 == 0 else [])
+
+        return each
+
+    def truth_depth_m(self) -> float:
+        return float(self.vehicle.truth.position_ned_m[2])
+
+    def truth_surge_m_s(self) -> float:
+        return float(self.vehicle.truth.velocity_m_s[0])

@@ -1,0 +1,237 @@
+"""The sans-IO endpoint against pymavlink-encoded messages, a real vehicle behind it, in
+simulated time: connect, version, parameters, modes, arming, sticks, gating, failsafes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.common.components import ActiveMode, CommandStatus, ControlMode, MovementCommand
+from testbed.mavlink.ardusub import manual_control_pwm, sticks_from_rc
+from tests.mavlink.gcs import SimGcs
+
+ACCEPTED = mav.MAV_RESULT_ACCEPTED
+FAILED = mav.MAV_RESULT_FAILED
+
+
+@pytest.fixture
+def gcs() -> Iterator[SimGcs]:
+    station = SimGcs()
+    yield station
+    station.close()
+
+
+def acks(gcs: SimGcs, cmd: int) -> list[int]:
+    return [m.result for m in gcs.of("COMMAND_ACK") if m.command == cmd]
+
+
+def test_heartbeat_is_ardusubs_from_system_1_component_1_in_mavlink2(gcs: SimGcs) -> None:
+    gcs.run(1.05)
+    beats = gcs.of("HEARTBEAT")
+    assert len(beats) == 2  # 1 Hz, the first at once
+    hb = beats[-1]
+    assert (hb.type, hb.autopilot) == (mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA)
+    assert (hb.custom_mode, hb.base_mode) == (19, 81)  # disarmed MANUAL
+    assert hb.system_status == mav.MAV_STATE_STANDBY
+    assert (hb.get_srcSystem(), hb.get_srcComponent()) == (1, 1)
+    assert all(packet[0] == 0xFD for packet in gcs.packets)  # MAVLink 2 start byte
+
+
+def test_autopilot_version_on_request_message_and_on_capabilities_request(gcs: SimGcs) -> None:
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION))
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1))
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, 397))  # component metadata: none
+    gcs.step()
+    versions = gcs.of("AUTOPILOT_VERSION")
+    assert len(versions) == 2
+    version = versions[0]
+    assert version.flight_sw_version >> 24 == 4 and version.flight_sw_version & 0xFF == 255
+    assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    assert acks(gcs, mav.MAV_CMD_REQUEST_MESSAGE) == [ACCEPTED, mav.MAV_RESULT_UNSUPPORTED]
+    assert acks(gcs, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES) == [ACCEPTED]
+
+
+def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None:
+    gcs.send(gcs.mav.param_request_list_encode(1, 1))
+    gcs.run(0.5)
+    values = gcs.of("PARAM_VALUE")
+    count = len(gcs.endpoint.params)
+    assert count > 50
+    assert sorted(v.param_index for v in values) == list(range(count))
+    assert {v.param_count for v in values} == {count}
+    by_name = {v.param_id: v.param_value for v in values}
+    assert by_name["SYSID_THISMAV"] == 1 and by_name["MAV_GCS_SYSID"] == 255
+    assert by_name["FS_PILOT_TIMEOUT"] == 3.0 and by_name["JS_GAIN_DEFAULT"] == 0.5
+    assert {"FRAME_CONFIG", "FS_GCS_ENABLE", "BARO_SPEC_GRAV", "SERVO1_FUNCTION"} <= set(by_name)
+    assert any(m.text.startswith("ArduSub V4") for m in gcs.of("STATUSTEXT"))
+    gcs.clear()
+    gcs.send(gcs.param_set("FS_GCS_ENABLE", 3))
+    gcs.send(gcs.param_set("FS_PILOT_TIMEOUT", 9.0))  # beyond ArduSub's 0.1..3: refused
+    gcs.send(gcs.param_set("NO_SUCH_PARAM", 1.0))
+    gcs.send(gcs.mav.param_request_read_encode(1, 1, b"SYSID_MYGCS", -1))  # the old name
+    gcs.send(gcs.mav.param_request_read_encode(1, 1, b"", 0))
+    gcs.step()
+    echoed = [(v.param_id, v.param_value) for v in gcs.of("PARAM_VALUE")]
+    first = gcs.endpoint.params.params[0].name
+    assert echoed == [
+        ("FS_GCS_ENABLE", 3.0),
+        ("FS_PILOT_TIMEOUT", 3.0),
+        ("MAV_GCS_SYSID", 255.0),
+        (first, 1.0),
+    ]
+    assert gcs.endpoint.params["FS_GCS_ENABLE"] == 3
+    assert gcs.endpoint.rejected["param_refused"] == 2
+
+
+def test_modes_are_acknowledged_reflected_in_the_heartbeat_and_unsimulated_ones_refused(
+    gcs: SimGcs,
+) -> None:
+    gcs.send(gcs.set_mode(0))
+    gcs.run(1.01)
+    assert acks(gcs, mav.MAV_CMD_DO_SET_MODE) == [ACCEPTED]
+    assert gcs.last("HEARTBEAT").custom_mode == 0
+    gcs.send(gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 2))  # ALT_HOLD by COMMAND_LONG
+    gcs.run(1.01)
+    assert gcs.last("HEARTBEAT").custom_mode == 2
+    active = gcs.vehicle.world.get(gcs.vehicle.entity, ActiveMode)
+    assert active is not None and active.mode is ControlMode.DEPTH_HOLD
+    gcs.clear()
+    for refused in (16, 4, 9, 5):  # POSHOLD, GUIDED: no position estimate; SURFACE; unknown
+        gcs.send(gcs.set_mode(refused))
+    gcs.send(gcs.mav.set_mode_encode(1, 0, 19))  # no custom-mode flag
+    gcs.run(1.01)
+    assert acks(gcs, mav.MAV_CMD_DO_SET_MODE) == [FAILED] * 5
+    assert gcs.last("HEARTBEAT").custom_mode == 2
+    assert any(m.text == "Flight mode change failed" for m in gcs.of("STATUSTEXT"))
+
+
+def test_arm_and_disarm_are_acknowledged_and_in_the_heartbeat(gcs: SimGcs) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(1.01, gcs.flying())
+    assert acks(gcs, mav.MAV_CMD_COMPONENT_ARM_DISARM) == [ACCEPTED]
+    hb = gcs.last("HEARTBEAT")
+    assert hb.base_mode == 209 and hb.system_status == mav.MAV_STATE_ACTIVE
+    gcs.send(gcs.arm(False))
+    gcs.run(1.01, gcs.flying())
+    assert gcs.last("HEARTBEAT").base_mode == 81
+
+
+def test_manual_control_scaling_is_ardusubs() -> None:
+    half = manual_control_pwm(1000, 0, 1000, 0, gain=0.5)
+    assert half[5] == 1700 and half[3] == 1700
+    assert manual_control_pwm(0, 0, 0, 0, gain=0.5)[3] == 1300
+    assert manual_control_pwm(0, 0, 500, 0, gain=0.5)[3] == 1500
+    full = manual_control_pwm(1000, -1000, 500, 1000, gain=1.0)
+    assert (full[5], full[6], full[4]) == (1900, 1100, 1900)
+    channels = [1500, 1500, 1700, 1500, 1700, 1500]
+    assert sticks_from_rc(channels) == (0.5, 0.0, -0.5, 0.0, 0.0, 0.0)  # heave + is down
+
+
+def test_forward_stick_drives_the_thrusters_and_the_vehicle(gcs: SimGcs) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(0.5, gcs.flying())
+    assert gcs.last("SERVO_OUTPUT_RAW").servo1_raw == 1500
+    gcs.run(4.0, gcs.flying(x=1000))
+    servo = gcs.last("SERVO_OUTPUT_RAW")
+    pulses = [getattr(servo, f"servo{k}_raw") for k in range(1, 7)]
+    assert max(abs(p - 1500) for p in pulses) > 25
+    assert gcs.truth_surge_m_s() > 0.2
+    assert gcs.last("VFR_HUD").groundspeed >= 0.0
+    gain = gcs.endpoint.gain
+    gcs.send(gcs.param_set("JS_GAIN_DEFAULT", 1.0))  # the joystick gain takes effect
+    gcs.run(0.1, gcs.flying(x=1000))
+    assert gain == 0.5 and gcs.endpoint.rc.channels[4] == 1900
+
+
+def test_alt_hold_holds_depth_where_manual_drifts(gcs: SimGcs) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    start = gcs.truth_depth_m()
+    gcs.run(8.0, gcs.flying())
+    assert abs(gcs.truth_depth_m() - start) < 0.05
+    reported = gcs.last("GLOBAL_POSITION_INT").relative_alt / 1000.0
+    assert reported == pytest.approx(-gcs.truth_depth_m(), abs=0.05)  # negative below
+    gcs.send(gcs.set_mode(19))
+    gcs.run(8.0, gcs.flying())
+    assert abs(gcs.truth_depth_m() - start) > 0.1  # positively buoyant: it rises
+
+
+def test_manual_control_from_another_system_is_ignored_and_counted(gcs: SimGcs) -> None:
+    intruder = SimGcs.make_sender(42)
+    # COMMAND_LONG is not gated on the sender (ArduSub's is not): the intruder arms
+    gcs.send(intruder.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), sender=intruder)
+    gcs.run(1.01)
+    assert gcs.last("HEARTBEAT").base_mode == 209
+
+    def intruding(k: int) -> list[object]:
+        return [intruder.manual_control_encode(1, 1000, 0, 500, 0, 0)] if k % 4 == 0 else []
+
+    for k in range(200):
+        gcs.send(*intruding(k), sender=intruder)
+        gcs.step()
+    endpoint = gcs.endpoint
+    assert endpoint.rejected["wrong_sysid"] == 50
+    assert endpoint.pilot_inputs == 0
+    vehicle = gcs.vehicle
+    command = vehicle.world.get(vehicle.operator_entity, MovementCommand)
+    assert command is None or not any(command.sticks)  # at most the failsafe's neutral
+    status = vehicle.world.get(vehicle.entity, CommandStatus)
+    assert status is None or (command is not None and status.seq == command.seq)
+    assert abs(gcs.truth_surge_m_s()) < 0.05
+    gcs.send(gcs.mav.manual_control_encode(7, 1000, 0, 500, 0, 0))  # not addressed to us
+    gcs.step()
+    assert endpoint.rejected["wrong_target"] == 1 and endpoint.pilot_inputs == 0
+
+
+@pytest.mark.parametrize(
+    ("action", "mode", "armed"), [(2, 19, False), (3, 2, True), (4, 2, True), (1, 19, True)]
+)
+def test_gcs_heartbeat_loss_acts_per_fs_gcs_enable(action: int, mode: int, armed: bool) -> None:
+    gcs = SimGcs()
+    try:
+        gcs.send(gcs.param_set("FS_PILOT_INPUT", 0), gcs.param_set("FS_GCS_ENABLE", action))
+        gcs.send(gcs.heartbeat(), gcs.arm())
+        gcs.run(3.0, gcs.flying())
+        assert gcs.last("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
+        gcs.run(4.5)  # silence: > FS_GCS_TIMEOUT (5 s) after the last contact
+        hb = gcs.last("HEARTBEAT")
+        assert bool(hb.base_mode & 128) is armed and hb.custom_mode == mode
+        assert hb.system_status == mav.MAV_STATE_CRITICAL
+        assert any("heartbeat lost" in m.text for m in gcs.of("STATUSTEXT"))
+        assert gcs.endpoint.failsafe.triggered["gcs"] == 1
+        gcs.run(1.0, gcs.flying())  # the GCS is back: cleared, the mode is not restored
+        assert gcs.last("HEARTBEAT").custom_mode == mode
+        assert not gcs.endpoint.failsafe.gcs
+    finally:
+        gcs.close()
+
+
+@pytest.mark.parametrize("contact", [True, False])
+def test_gcs_failsafe_off_when_disabled_or_before_first_contact(contact: bool) -> None:
+    gcs = SimGcs()
+    try:
+        gcs.send(gcs.param_set("FS_PILOT_INPUT", 0))
+        if contact:  # a heartbeat, but the failsafe is off
+            gcs.send(gcs.param_set("FS_GCS_ENABLE", 0), gcs.heartbeat())
+        gcs.send(gcs.arm())  # a command is no contact
+        gcs.run(8.0)
+        assert gcs.last("HEARTBEAT").base_mode == 209
+        assert gcs.endpoint.failsafe.triggered["gcs"] == 0
+    finally:
+        gcs.close()
+
+
+def test_pilot_input_loss_disarms_after_fs_pilot_timeout(gcs: SimGcs) -> None:
+    gcs.send(gcs.param_set("FS_PILOT_TIMEOUT", 1.0), gcs.heartbeat(), gcs.arm())
+    gcs.run(2.0, gcs.flying(x=500))
+    assert gcs.last("HEARTBEAT").base_mode == 209
+    gcs.clear()
+    for k in range(150):  # heartbeats go on, sticks stop
+        gcs.send(*([gcs.heartbeat()] if k % 50 == 0 else []))
+        gcs.step()
+    assert gcs.last("HEARTBEAT").base_mode == 81
+    assert [m.text for m in gcs.of("STATUSTEXT")] == ["Lost manual control"]
+    command = gcs.vehicle.world.get(gcs.vehicle.operator_entity, MovementCommand)
+    assert command is not None and not any(command.sticks)  # neutral
