@@ -281,12 +281,12 @@ class Allocator:
             ValueError: wrench not 6 finite numbers, or dt_s not > 0.
         """
         scale = self.step(wrench, dt_s)
-        forces, pwm, currents = (row.copy() for row in self._work[:3])
+        rows = self._work[:3].copy()
+        rows.setflags(write=False)  # and so are the row views below
+        forces, pwm, currents = rows
         achieved = self._matrix_eff @ forces
-        arrays = (forces, pwm, currents, achieved)
-        for array in arrays:
-            array.setflags(write=False)
-        return ThrusterCommand(*arrays, scale)
+        achieved.setflags(write=False)
+        return ThrusterCommand(forces, pwm, currents, achieved, scale)
 
     def step(self, wrench: Sequence[float] | np.ndarray, dt_s: float | None = None) -> float:
         """Allocate a requested body wrench; the commands are left in :attr:`output`.
