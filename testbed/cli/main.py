@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|hil|scenarios``.
+"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|hil|mavlink|scenarios``.
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -6,8 +6,8 @@ file) prints one line to stderr and returns exit code 2, never a traceback.
 
 This module holds the parser, the dispatch and the error handling; each subcommand group has its
 own module (:mod:`~testbed.cli.run`, :mod:`~testbed.cli.link`, :mod:`~testbed.cli.sweep`,
-:mod:`~testbed.cli.emulator`, :mod:`~testbed.cli.hil`), whose heavy imports happen only when the
-command runs, so ``testbed --help`` stays fast.
+:mod:`~testbed.cli.emulator`, :mod:`~testbed.cli.hil`, :mod:`~testbed.cli.mavlink`), whose
+heavy imports happen only when the command runs, so ``testbed --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from types import FrameType
 from testbed.cli.emulator import add_modem_emulator_parser
 from testbed.cli.hil import add_hil_parser
 from testbed.cli.link import add_link_parser
+from testbed.cli.mavlink import add_mavlink_parser
 from testbed.cli.options import EXIT_OK, EXIT_USAGE, Parser, Terminated, exit_code_of
 from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
 from testbed.cli.sweep import add_plot_parser, add_sweep_parser
@@ -40,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_plot_parser(sub)
     add_modem_emulator_parser(sub)
     add_hil_parser(sub)
+    add_mavlink_parser(sub)
     add_scenarios_parser(sub)
     return parser
 

@@ -1,0 +1,273 @@
+"""A real ground station drives the simulated vehicle: the vehicle in real time, MAVLink its pilot.
+
+:func:`run_mavlink` runs the scenario's vehicle (built as :func:`~testbed.run.runner.run_scenario`
+builds it, thruster faults and the recorder's observer included) under
+``simpy.rt.RealtimeEnvironment(strict=False)``, with a
+:class:`~testbed.mavlink.VehicleEndpoint` as its pilot on one or more ground-station links
+(:mod:`testbed.mavlink.links`: UDP, TCP, serial). There is no operator node and no narrow link:
+the ground station is the operator, directly (the gateway through the narrow link is a later
+step).
+
+Each vehicle frame (:class:`MavlinkVehicleNode`): PRE_UPDATE drains every link's reader queue
+into the endpoint (which writes the operator-owned intents on the vehicle's operator entity);
+POST_UPDATE, after the thrusters were commanded, runs the endpoint's failsafes and telemetry and
+hands its packets to the links. Nothing calls into simpy from a reader thread.
+
+The vehicle's own stale-command failsafe (``vehicle.failsafe``) is switched off for the run
+(its timeouts set to a day): ArduSub's FS_PILOT_* and FS_GCS_* parameters govern a MAVLink
+vehicle instead (:mod:`testbed.mavlink.failsafe`).
+
+Measured (``metrics.json`` ``mavlink``): ``gcs_to_thruster_ms`` — from the reader thread's read
+of a datagram holding accepted pilot input to the end of the frame that commanded the thrusters
+from it; ``scheduler_lateness_ms`` — how late each frame ran against its real-time schedule
+(:func:`~testbed.run.realtime.rt_lateness_ns`); ``frame_compute_ms`` — each frame's own time
+(ingest to publish). A packet read just after a frame drained its queue waits for the next
+frame, so the latency's bound is two frame periods plus the frame's lateness and compute time,
+whatever the machine's load. The recorder's command lag is the same path on the simulated clock
+(arrival → applying frame); the ground station's own sampling instant is not on the wire.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Generator, Sequence
+from typing import Any
+
+import numpy as np
+import simpy
+import simpy.rt
+
+from testbed.channel import Trace
+from testbed.ecs import Phase, World
+from testbed.hil import latency_summary_ms
+from testbed.mavlink import EndpointOptions, VehicleEndpoint
+from testbed.mavlink.ardusub import sticks_from_rc
+from testbed.mavlink.links import Link
+from testbed.operator.pilots import PilotSample
+from testbed.run.realtime import rt_lateness_ns
+from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.runner import RunResult, compute_metrics
+from testbed.run.scenario import Scenario
+from testbed.vehicle.systems import SimClock
+from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+
+__all__ = [
+    "FRAME_CONFIGS",
+    "MavlinkVehicleNode",
+    "mavlink_metrics",
+    "mavlink_vehicle_config",
+    "run_mavlink",
+]
+
+FRAME_CONFIGS = {"bluerov2": 1, "bluerov2-heavy": 2}
+"""Thruster layout → ArduSub FRAME_CONFIG (Vectored, Vectored_6DOF); others 7 (custom)."""
+_DAY_S = 86400.0
+_SAMPLES = 200_000
+
+
+class _EndpointPilot:
+    """The recorder's view of the pilot: the sticks the endpoint last received."""
+
+    def __init__(self, endpoint: VehicleEndpoint) -> None:
+        self._endpoint = endpoint
+
+    def sample(self, t_s: float) -> PilotSample:
+        del t_s
+        return PilotSample(sticks_from_rc(self._endpoint.rc.channels))
+
+
+def mavlink_vehicle_config(config: VehicleConfig) -> VehicleConfig:
+    """``config`` with its stale-command failsafe off (module docstring)."""
+    failsafe = dataclasses.replace(
+        config.failsafe, hold_after_s=_DAY_S - 1.0, surface_after_s=_DAY_S
+    )
+    return dataclasses.replace(config, failsafe=failsafe)
+
+
+class MavlinkVehicleNode:
+    """The vehicle with the endpoint as its pilot, in (real) simpy time.
+
+    Args:
+        env: the environment (real time in :func:`run_mavlink`; any in tests).
+        scenario: the scenario (its vehicle, faults and metrics settings).
+        rng: the vehicle's generator.
+        links: the ground-station links (one endpoint channel each).
+        recorder: ground-truth sink.
+        stop: ends the node's process at the next frame once set (from any thread).
+    """
+
+    def __init__(
+        self,
+        env: simpy.Environment,
+        scenario: Scenario,
+        rng: np.random.Generator,
+        links: Sequence[Link],
+        recorder: Recorder,
+        stop: threading.Event | None = None,
+    ) -> None:
+        self.env = env
+        self._stop = stop
+        self.recorder = recorder
+        config = mavlink_vehicle_config(scenario.vehicle)
+        self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
+        vehicle = self.vehicle
+        overrides = {
+            "FRAME_CONFIG": float(FRAME_CONFIGS.get(config.thrusters, 7)),
+            "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
+        }
+        options = EndpointOptions(config.supply_voltage_v, overrides)
+        self.endpoint = VehicleEndpoint(
+            vehicle.world, vehicle.entity, vehicle.operator_entity, options
+        )
+        self.links = list(links)
+        self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
+        observer = VehicleObserver(
+            recorder,
+            _EndpointPilot(self.endpoint),
+            vehicle.reference_velocity,
+            scenario.metrics.sample_rate_hz,
+        )
+        vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
+        for fault in scenario.faults.thrusters:
+
+            def fail(_: simpy.Event, fault: Any = fault) -> None:
+                vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
+                recorder.event(
+                    env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}"
+                )
+
+            env.timeout(fault.t_s).callbacks.append(fail)
+        self.gcs_to_thruster_ns: deque[int] = deque(maxlen=_SAMPLES)
+        self.lateness_ns: deque[int] = deque(maxlen=_SAMPLES)
+        self.compute_ns: deque[int] = deque(maxlen=_SAMPLES)
+        self._frame_reads: list[int] = []
+        self._ingest_ns = 0
+
+    def run(self) -> Generator[simpy.Event, Any, None]:
+        """simpy process: each vehicle frame at its own instant, physics in between."""
+        env = self.env
+        vehicle = self.vehicle
+        stop = self._stop
+        while stop is None or not stop.is_set():
+            t_frame = vehicle.next_frame_s
+            if t_frame > env.now:
+                yield env.timeout(t_frame - env.now)
+            vehicle.advance(t_frame + 0.5 * vehicle.physics.dt_s)
+
+    def _ingest(self, world: World) -> None:
+        """PRE_UPDATE: every packet the links' reader threads queued, into the endpoint."""
+        now = world.resource(SimClock).time_s
+        env = self.env
+        if isinstance(env, simpy.rt.RealtimeEnvironment):
+            self.lateness_ns.append(rt_lateness_ns(env))
+        self._ingest_ns = start = time.perf_counter_ns()
+        reads = self._frame_reads
+        reads.clear()
+        for link, channel in zip(self.links, self.channels, strict=True):
+            inbox = link.inbox
+            while not inbox.empty():
+                received = inbox.get_nowait()
+                age_s = max(0.0, (start - received.read_ns) * 1e-9)
+                arrived_s = now - age_s
+                if self.endpoint.receive(channel, received.data, now, arrived_s):
+                    reads.append(received.read_ns)
+                    self.recorder.command_updates.append((now, arrived_s))
+
+    def _publish(self, world: World) -> None:
+        """POST_UPDATE: latency of this frame's pilot input; failsafes, telemetry, sending."""
+        done = time.perf_counter_ns()
+        self.gcs_to_thruster_ns.extend(done - read for read in self._frame_reads)
+        self.compute_ns.append(done - self._ingest_ns)
+        self.endpoint.update(world.resource(SimClock).time_s)
+        for link, channel in zip(self.links, self.channels, strict=True):
+            for packet in channel.take():
+                link.send(packet)
+
+
+def run_mavlink(
+    scenario: Scenario,
+    links: Sequence[Link],
+    *,
+    seed: int | None = None,
+    duration_s: float | None = None,
+    stop: threading.Event | None = None,
+) -> RunResult:
+    """Run the scenario's vehicle in real time for ``duration_s`` [s] with the ground stations
+    on ``links`` as its pilot; the links are closed when the run ends. ``stop``, once set from
+    any thread, ends the run at the next frame (a complete run of the time reached).
+
+    Ctrl-C or SIGTERM (a ``KeyboardInterrupt``) ends it early: ``stopped`` is set and the
+    metrics cover the ``sim_s`` reached.
+
+    Raises:
+        ValueError: no link, or a duration not > 0.
+    """
+    duration = scenario.duration_s if duration_s is None else duration_s
+    if not links or not (math.isfinite(duration) and duration > 0.0):
+        for link in links:
+            link.close()
+        raise ValueError(f"need a link and a duration > 0 s, got {len(links)}, {duration}")
+    seed = scenario.seed if seed is None else seed
+    _, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
+    env = simpy.rt.RealtimeEnvironment(factor=1.0, strict=False)
+    recorder = Recorder(trace=Trace())
+    node: MavlinkVehicleNode | None = None
+    stopped: KeyboardInterrupt | None = None
+    start: float | None = None
+    try:
+        node = MavlinkVehicleNode(
+            env, scenario, np.random.default_rng(vehicle_seed), links, recorder
+        )
+        env.process(node.run())
+        env.sync()  # start the clock now, after pybullet has loaded
+        start = time.perf_counter()
+        env.run(until=duration)
+    except KeyboardInterrupt as interrupt:
+        stopped = interrupt
+    finally:
+        wall_s = 0.0 if start is None else time.perf_counter() - start
+        if node is not None:
+            node.vehicle.close()
+        for link in links:
+            link.close()
+    reached = float(env.now)  # the duration, unless interrupted or stopped
+    metrics = compute_metrics(
+        scenario,
+        seed,
+        recorder,
+        sim_s=reached,
+        wall_s=wall_s,
+        energy_wh=math.nan if node is None else node.vehicle.power.energy_j / 3600.0,
+        payload_bytes={"uplink": 0, "downlink": 0},
+    )
+    if node is not None:
+        metrics["mavlink"] = mavlink_metrics(node, reached)
+    return RunResult(scenario, seed, metrics, recorder, stopped)
+
+
+def mavlink_metrics(node: MavlinkVehicleNode, duration_s: float) -> dict[str, Any]:
+    """The ``mavlink`` section of ``metrics.json``.
+
+    Keys: the endpoint's counters (``received`` and ``sent`` by message type, ``accepted``,
+    ``rejected`` by reason, ``pilot_inputs``, ``param_sets``, ``failsafes``, ``bytes_in``,
+    ``bytes_out``); ``telemetry_hz`` (packets sent per second, by type); ``links`` (per URL:
+    bytes and packets in and out, drops); ``gcs_to_thruster_ms``, ``scheduler_lateness_ms``
+    and ``frame_compute_ms`` (``p50``, ``p95``, ``max``, ``mean``, ``n``; module docstring);
+    ``frame_period_s``.
+    """
+    endpoint = node.endpoint
+    counters: dict[str, Any] = endpoint.counters()
+    sent: dict[str, int] = counters["sent"]
+    counters["telemetry_hz"] = {
+        name: count / duration_s if duration_s > 0 else math.nan for name, count in sent.items()
+    }
+    counters["links"] = {link.url: link.counters() for link in node.links}
+    counters["gcs_to_thruster_ms"] = latency_summary_ms(node.gcs_to_thruster_ns)
+    counters["scheduler_lateness_ms"] = latency_summary_ms(node.lateness_ns)
+    counters["frame_compute_ms"] = latency_summary_ms(node.compute_ns)
+    counters["frame_period_s"] = 1.0 / node.vehicle.config.control_rate_hz
+    return counters
