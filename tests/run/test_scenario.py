@@ -381,7 +381,7 @@ def test_ipg_policies() -> None:
         ("pilot.kind=attitude", "--set: pilot.x: only used when kind = 'scripted'"),
         (  # within the static domain, beyond what a T200 at the scenario's supply can hold
             'faults.thrusters=[{t_s=2.0, thruster="VerticalLeft", mode="stuck", value=90.0}]',
-            "--set: faults.thrusters[0].value: a stuck T200 at 12 V holds [",
+            "--set: faults.thrusters[0].value: a stuck T200 at 14.8 V holds [",
         ),
         ("metrics.sample_rate_hz=0", "--set: metrics.sample_rate_hz: must be in [0.001, 1000] Hz"),
         ("metrics.settle_s=200", "--set: metrics.settle_s: must be < duration_s"),
