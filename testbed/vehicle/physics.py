@@ -410,7 +410,10 @@ class Physics:
             raw = self._raw
             if raw is None:
                 raw = self._raw = self._read()
-            floats = self._floats = (self._steps * self.dt_s, *_state_of(raw, self._cog))
+            position, orientation, linear, angular = raw
+            rotation = pybullet.getMatrixFromQuaternion(orientation)
+            state = _pybullet_state(self._cog, position, orientation, rotation, linear, angular)
+            floats = self._floats = (self._steps * self.dt_s, *state)
         return floats
 
     def add_scenery(self, scenery: Scenery) -> None:
@@ -534,31 +537,57 @@ class Physics:
         return (pos, orn, lin, ang)
 
 
-def _state_of(raw: _Raw, cog: Sequence[float]) -> tuple[Vec3, Quat, Vec6]:
-    """(CO position NED, quaternion wxyz, ν at CO) from pybullet's reads, as plain floats
-    (the attitude's rotation from :func:`~testbed.common.geometry.rotation_matrix`)."""
-    (px, py, pz), (ox, oy, oz, ow), (lx, ly, lz), (ax, ay, az) = raw
-    w, x, y, z = float(ow), float(ox), -float(oy), -float(oz)
-    # R (body FRD → NED) of (w, x, y, z)
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_matrix((w, x, y, z))
-    xg, yg, zg = cog
-    # CoG in NED, minus R·r_g
-    position = (
-        float(px) - (r00 * xg + r01 * yg + r02 * zg),
-        -float(py) - (r10 * xg + r11 * yg + r12 * zg),
-        -float(pz) - (r20 * xg + r21 * yg + r22 * zg),
+@numba.njit(cache=True)
+def _body_velocity(
+    rotation: tuple[float, ...], linear: Vec3, angular: Vec3
+) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
+    """pybullet's world velocities in the body FRD: R_ned = diag(1, −1, −1)·R·diag(1, −1, −1),
+    so body FLU velocities are Rᵀ·v and FRD is (x, −y, −z) of those.
+
+    Args:
+        rotation: pybullet's ``getMatrixFromQuaternion`` of the base orientation (row-major 9).
+        linear: the CoG's velocity, pybullet's world [m/s].
+        angular: angular velocity, pybullet's world [rad/s].
+
+    Returns:
+        (u_g, v_g, w_g, p, q, r): the CoG's velocity and the rates in the body FRD.
+    """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
+    vx, vy, vz = linear
+    wx, wy, wz = angular
+    return (
+        r00 * vx + r10 * vy + r20 * vz,
+        -(r01 * vx + r11 * vy + r21 * vz),
+        -(r02 * vx + r12 * vy + r22 * vz),
+        r00 * wx + r10 * wy + r20 * wz,
+        -(r01 * wx + r11 * wy + r21 * wz),
+        -(r02 * wx + r12 * wy + r22 * wz),
     )
-    # Rᵀ·v for the CoG velocity and the rates, both from pybullet's world → NED
-    vn, ve, vd = float(lx), -float(ly), -float(lz)
-    ug = r00 * vn + r10 * ve + r20 * vd
-    vg = r01 * vn + r11 * ve + r21 * vd
-    wg = r02 * vn + r12 * ve + r22 * vd
-    wn, we, wd = float(ax), -float(ay), -float(az)
-    p = r00 * wn + r10 * we + r20 * wd
-    q = r01 * wn + r11 * we + r21 * wd
-    r = r02 * wn + r12 * we + r22 * wd
+
+
+@numba.njit(cache=True)
+def _pybullet_state(
+    cog: Vec3,
+    position: Vec3,
+    orientation: tuple[float, float, float, float],
+    rotation: tuple[float, ...],
+    linear: Vec3,
+    angular: Vec3,
+) -> tuple[Vec3, Quat, Vec6]:  # pragma: no cover - compiled (tests call it through Physics)
+    """(CO position NED, attitude quaternion wxyz body FRD → NED, ν at CO FRD) from pybullet's
+    reads of the base (the CoG): position and orientation (x, y, z, w), its matrix, and the
+    world velocities. CO is at −r_g from the CoG: position = p_g − R_ned·r_g."""
+    xg, yg, zg = cog
+    px, py, pz = position
+    ox, oy, oz, ow = orientation
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
+    # R_ned·r_g with R_ned = diag(1, −1, −1)·R·diag(1, −1, −1)
+    north = px - (r00 * xg - r01 * yg - r02 * zg)
+    east = -py - (-r10 * xg + r11 * yg + r12 * zg)
+    down = -pz - (-r20 * xg + r21 * yg + r22 * zg)
+    ug, vg, wg, p, q, r = _body_velocity(rotation, linear, angular)
     nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
-    return position, (w, x, y, z), nu
+    return (north, east, down), (ow, ox, -oy, -oz), nu
 
 
 @numba.njit(cache=True)
@@ -596,15 +625,7 @@ def _pybullet_wrench(
     """
     m, ixx, iyy, izz, xg, yg, zg, dbx, dby, dbz, inv_height = rigid
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
-    vx, vy, vz = linear
-    wx, wy, wz = angular
-    # R_ned = diag(1, −1, −1)·R·diag(1, −1, −1): body FLU velocities Rᵀ·v, then FRD (x, −y, −z)
-    ug = r00 * vx + r10 * vy + r20 * vz
-    vg = -(r01 * vx + r11 * vy + r21 * vz)
-    wg = -(r02 * vx + r12 * vy + r22 * vz)
-    p = r00 * wx + r10 * wy + r20 * wz
-    q = -(r01 * wx + r11 * wy + r21 * wz)
-    r = -(r02 * wx + r12 * wy + r22 * wz)
+    ug, vg, wg, p, q, r = _body_velocity(rotation, linear, angular)
     gx, gy, gz = -r20, r21, r22  # NED down in the body: the last row of R_ned
     cn, ce, cd = current_ned
     uc = r00 * cn - r10 * ce - r20 * cd
