@@ -92,7 +92,7 @@ FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 Quat = tuple[float, float, float, float]
-_Raw = tuple[Sequence[float], Sequence[float], Sequence[float], Sequence[float]]
+_Raw = tuple[Vec3, tuple[float, float, float, float], Vec3, Vec3]
 """pybullet's (position, orientation xyzw, linear velocity, angular velocity), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
 
