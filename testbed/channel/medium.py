@@ -35,7 +35,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple, cast
+from typing import NamedTuple
 
 import numpy as np
 import simpy
@@ -267,6 +267,8 @@ class Modem:
         self._buffer_bytes = config.tx_buffer_bytes
         self._packet_bytes = config.packet_bytes
         self._errors = BitErrors(config.burst, rng)
+        self._clean = not config.burst.enabled
+        """No burst chain: a copy with no independent error probability arrives clean."""
         self._fifo: deque[_Queued] = deque()
         self._fifo_bytes = 0
         self._tx_start_s = -math.inf
@@ -404,7 +406,7 @@ class Modem:
         self._receptions.append(rec)
 
     def _finish_reception(self, event: simpy.Event) -> None:
-        rec = cast(_Reception, event.value)
+        rec: _Reception = event.value  # type: ignore[assignment]  # the Timeout carries it
         self._receptions.remove(rec)
         frame_id, part, parts, data = rec.entry
         trace = self._medium.trace
@@ -422,7 +424,10 @@ class Modem:
                 kind = EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
             return
-        data, n_errors = self._errors.corrupt(data, rec.p_independent)
+        if self._clean and rec.p_independent <= 0.0:
+            n_errors = 0  # nothing can flip a bit (the error model draws nothing either)
+        else:
+            data, n_errors = self._errors.corrupt(data, rec.p_independent)
         if n_errors:
             counters.rx_corrupted += 1
             counters.rx_bit_errors += n_errors

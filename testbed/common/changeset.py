@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import enum
 import struct
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -72,11 +72,12 @@ from testbed.ecs import (
     ComponentRegistry,
     Entity,
     Origin,
+    RawChange,
     Registration,
     Replicate,
     Side,
     World,
-    replicated_changes,
+    replicated_entries,
 )
 from testbed.protocol import MAX_PAYLOAD, MalformedPayload
 
@@ -172,6 +173,8 @@ class _TypeInfo:
 # A parsed entry: kind code, sender entity id, type (None for a despawn), value (or None).
 _Entry = tuple[int, int, _TypeInfo | None, object]
 _Parsed = tuple[Side, int, list[_Entry]]
+# What a receiver did with a payload: the fields of an ApplyResult, in order.
+_Outcome = tuple["ApplyStatus", int | None, int, int, int, str]
 
 
 class ChangeSetCodec:
@@ -239,7 +242,13 @@ class ChangeSetCodec:
                 not fit one entry (the type is named), or one its field codec cannot encode.
             KeyError: a type id that is not registered.
         """
-        side_code = _SIDE_CODES[side]
+        return self._encode_entries(_raw_changes(changes), _SIDE_CODES[side], first_sequence)
+
+    def _encode_entries(
+        self, changes: Iterable[RawChange], side_code: int, first_sequence: int
+    ) -> list[bytes]:
+        """:meth:`encode` of changes in :func:`~testbed.ecs.replicated_entries`' form (the
+        sender's hot path: no :class:`~testbed.ecs.Change` objects)."""
         limit = self.max_payload - HEADER_SIZE
         max_value = self.max_value_size
         types = self._types
@@ -248,26 +257,21 @@ class ChangeSetCodec:
         payloads: list[bytes] = []
         body: list[bytes] = []
         used = 0
-        for change in changes:
-            entity = change.entity
+        for entity, type_id, kind, _, value, _ in changes:
             if not 0 <= entity <= _U32_MAX:
                 raise ValueError(f"entity id {entity} does not fit the u32 of a change-set entry")
-            kind = change.kind
             if kind is despawned:
                 entry = pack_despawned(_DESPAWNED, entity)
             else:
-                type_id = change.type_id
-                if type_id is None:
-                    raise ValueError(f"{kind.name} change without a type id: {change!r}")
                 info = types.get(type_id) or self._info(type_id)
                 if kind is removed:
                     entry = pack_removed(_REMOVED_CODE, entity, type_id)
                 else:
-                    value = info.encode(change.value)
-                    if len(value) > max_value:
-                        raise ValueError(self._too_big(info.cls, len(value)))
+                    data = info.encode(value)
+                    if len(data) > max_value:
+                        raise ValueError(self._too_big(info.cls, len(data)))
                     code = _ADDED if kind is added else _CHANGED
-                    entry = pack_valued(code, entity, type_id, len(value)) + value
+                    entry = pack_valued(code, entity, type_id, len(data)) + data
             if body and (used + len(entry) > limit or len(body) == MAX_ENTRIES):
                 payloads.append(_payload(side_code, first_sequence + len(payloads), body))
                 body = []
@@ -368,6 +372,21 @@ def _payload(side_code: int, sequence: int, body: list[bytes]) -> bytes:
     return header + b"".join(body)
 
 
+def _raw_changes(changes: Iterable[Change]) -> Iterator[RawChange]:
+    """``changes`` in :func:`~testbed.ecs.replicated_entries`' tuple form, checked one by one
+    as the encoder reaches them."""
+    for change in changes:
+        kind = change.kind
+        type_id = change.type_id
+        if kind is not ChangeKind.DESPAWNED and type_id is None:
+            if not 0 <= change.entity <= _U32_MAX:  # the encoder's first check, as before
+                raise ValueError(
+                    f"entity id {change.entity} does not fit the u32 of a change-set entry"
+                )
+            raise ValueError(f"{kind.name} change without a type id: {change!r}")
+        yield (change.entity, type_id or 0, kind, None, change.value, change.tick)
+
+
 class ChangeSetSender:
     """Outbound replication of one node: what ``side`` owns and changed, as payloads.
 
@@ -383,7 +402,17 @@ class ChangeSetSender:
         TypeError: ``side`` is not a :class:`~testbed.ecs.Side`.
     """
 
-    __slots__ = ("_codec", "_registry", "_sequence", "_side", "_since", "_world")
+    __slots__ = (
+        "_codec",
+        "_owned",
+        "_owned_of",
+        "_registry",
+        "_sequence",
+        "_side",
+        "_side_code",
+        "_since",
+        "_world",
+    )
 
     def __init__(
         self,
@@ -404,6 +433,9 @@ class ChangeSetSender:
                 self._codec.check_fits(entry)
         self._since = 0
         self._sequence = 0
+        self._side_code = _SIDE_CODES[side]
+        self._owned: list[Registration] = []
+        self._owned_of = -1  # registry size the owned list was made at (-1: not yet)
 
     @property
     def last_polled_tick(self) -> int:
@@ -427,8 +459,8 @@ class ChangeSetSender:
         """
         world = self._world
         now = world.tick
-        changes = replicated_changes(world, self._since, self._registry, side=self._side)
-        payloads = self._emit(changes)
+        changes = replicated_entries(world, self._since, self._owned_types())
+        payloads = self._emit(changes) if changes else []
         self._since = now
         world.advance()
         return payloads
@@ -439,11 +471,19 @@ class ChangeSetSender:
         Also repeats the despawns and removals still in the world's removal log, so a resync
         clears mirrors whose despawn was lost. Does not move the poll mark.
         """
-        changes = replicated_changes(self._world, 0, self._registry, side=self._side)
-        return self._emit(changes)
+        return self._emit(replicated_entries(self._world, 0, self._owned_types()))
 
-    def _emit(self, changes: list[Change]) -> list[bytes]:
-        payloads = self._codec.encode(changes, self._side, self._sequence)
+    def _owned_types(self) -> list[Registration]:
+        """The registered types this side owns, in type-id order (remade if the registry grew:
+        it only ever grows)."""
+        registry = self._registry
+        if len(registry) != self._owned_of:
+            self._owned = [entry for entry in registry if entry.owner is self._side]
+            self._owned_of = len(registry)
+        return self._owned
+
+    def _emit(self, changes: list[RawChange]) -> list[bytes]:
+        payloads = self._codec._encode_entries(changes, self._side_code, self._sequence)
         self._sequence = (self._sequence + len(payloads)) % _SEQUENCE_MOD
         return payloads
 
@@ -571,28 +611,56 @@ class ChangeSetReceiver:
         Raises:
             TypeError: ``payload`` is not bytes-like (local misuse).
         """
+        return ApplyResult(*self._receive(payload))
+
+    def apply_all(self, payloads: Iterable[bytes]) -> int:
+        """:meth:`apply` each payload in order (the same counts and effects) without building
+        the results; returns how many were not applied (rejected or malformed).
+
+        Raises:
+            TypeError: a payload is not bytes-like (local misuse).
+        """
+        refused = 0
+        applied = ApplyStatus.APPLIED
+        for payload in payloads:
+            if self._receive(payload)[0] is not applied:
+                refused += 1
+        return refused
+
+    def _receive(self, payload: bytes) -> _Outcome:
+        """Decode, check, count and (if allowed) apply one payload: :class:`ApplyResult`'s
+        fields in order."""
         if not isinstance(payload, bytes | bytearray | memoryview):
             raise TypeError(f"payload must be bytes, got {type(payload).__qualname__}")
         parsed = self._codec._parse(bytes(payload))  # same module: the tuple fast path
         if isinstance(parsed, MalformedPayload):
             self.malformed += 1
-            return ApplyResult(ApplyStatus.MALFORMED, None, reason=parsed.reason)
+            return (ApplyStatus.MALFORMED, None, 0, 0, 0, parsed.reason)
         side, sequence, entries = parsed
         lost = self._track(sequence)
-        reason = self._ownership_violation(side, entries)
-        if reason:
+        if side is self._side:
+            reason = f"payload claims to come from this node's own side ({side.name})"
             self.rejected_ownership += 1
-            return ApplyResult(ApplyStatus.REJECTED_OWNERSHIP, sequence, lost=lost, reason=reason)
+            return (ApplyStatus.REJECTED_OWNERSHIP, sequence, 0, 0, lost, reason)
         mirrors = self._mirrors
-        new = {entity for code, entity, _, _ in entries if code <= _CHANGED} - mirrors.keys()
-        if len(mirrors) + len(new) > self._max_entities:
+        new: set[int] | None = None
+        for code, entity, info, _ in entries:
+            if info is not None and info.owner is not side:
+                reason = f"{side.name} may not write {info.cls.__qualname__}"
+                self.rejected_ownership += 1
+                return (ApplyStatus.REJECTED_OWNERSHIP, sequence, 0, 0, lost, reason)
+            if code <= _CHANGED and entity not in mirrors:
+                if new is None:
+                    new = set()
+                new.add(entity)
+        if new is not None and len(mirrors) + len(new) > self._max_entities:
             self.rejected_capacity += 1
             reason = f"{len(new)} new entities would pass the bound of {self._max_entities}"
-            return ApplyResult(ApplyStatus.REJECTED_CAPACITY, sequence, lost=lost, reason=reason)
+            return (ApplyStatus.REJECTED_CAPACITY, sequence, 0, 0, lost, reason)
         spawned = self._write(entries)
         self.payloads_applied += 1
         self.entries_applied += len(entries)
-        return ApplyResult(ApplyStatus.APPLIED, sequence, len(entries), spawned, lost)
+        return (ApplyStatus.APPLIED, sequence, len(entries), spawned, lost, "")
 
     def _track(self, sequence: int) -> int:
         """Update the sequence expectation; return the gap before ``sequence``."""
@@ -606,14 +674,6 @@ class ChangeSetReceiver:
             return 0
         self.lost_payloads += gap
         return gap
-
-    def _ownership_violation(self, side: Side, entries: list[_Entry]) -> str:
-        if side is self._side:
-            return f"payload claims to come from this node's own side ({side.name})"
-        for _, _, info, _ in entries:
-            if info is not None and info.owner is not side:
-                return f"{side.name} may not write {info.cls.__qualname__}"
-        return ""
 
     def _write(self, entries: list[_Entry]) -> int:
         """Apply parsed, checked entries in order; return the mirrors spawned."""

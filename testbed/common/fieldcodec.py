@@ -250,9 +250,13 @@ class _Composite(_Node):
         children: the item (or field) layouts, in order.
         parts: the value → its child values (a tuple), checking the shape.
         make: child values → the value.
+        flat_ops, build_ops: how each child is flattened and built (:func:`_flat_op`,
+            :func:`_build_op`), compiled once.
+        segments: for a variable composite, runs of fixed children (one struct each) and
+            single variable ones.
     """
 
-    __slots__ = ("children", "make", "parts", "segments", "steps")
+    __slots__ = ("build_ops", "children", "flat_ops", "make", "parts", "segments")
 
     def __init__(
         self,
@@ -268,18 +272,16 @@ class _Composite(_Node):
         self.children = tuple(children)
         self.parts = parts
         self.make = make
-        self.segments = _segments(self.children)
-        self.steps = tuple(_Step(child) for child in self.children)
+        self.flat_ops = tuple(_flat_op(c) if c.fixed else (_CALL, 0, c.flatten) for c in children)
+        self.build_ops = tuple(_build_op(c) if c.fixed else (_CALL, 0, c.build) for c in children)
+        self.segments = _segments(self)
 
     def flatten(self, value: Any, out: list[Any]) -> None:
-        for step, part in zip(self.steps, self.parts(value), strict=True):
-            step.flatten(part, out)
+        _flatten_parts(self.flat_ops, self.parts(value), out)
 
     def build(self, values: Sequence[Any], i: int) -> Any:
-        args = []
-        for step in self.steps:
-            args.append(step.build(values, i))
-            i += step.width
+        args: list[Any] = []
+        _build_parts(self.build_ops, values, i, args)
         return self.make(*args)
 
     def write(self, value: Any, out: bytearray) -> None:
@@ -287,86 +289,113 @@ class _Composite(_Node):
             _Node.write(self, value, out)
             return
         parts = self.parts(value)
-        for start, stop, packer in self.segments:
-            if packer is None:
+        for start, stop, run in self.segments:
+            if run is None:
                 self.children[start].write(parts[start], out)
             else:
                 flat: list[Any] = []
-                for step, part in zip(self.steps[start:stop], parts[start:stop], strict=True):
-                    step.flatten(part, flat)
-                out += packer[0].pack(*flat)
+                _flatten_parts(run.flat_ops, parts[start:stop], flat)
+                out += run.pack(*flat)
 
     def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
         if self.fixed:
             return _Node.read(self, buf, pos)
         args: list[Any] = []
-        for start, stop, packer in self.segments:
-            if packer is None:
+        for start, _, run in self.segments:
+            if run is None:
                 value, pos = self.children[start].read(buf, pos)
                 args.append(value)
             else:
-                unpacker = packer[1]
-                values = unpacker.unpack_from(buf, pos)
-                pos += unpacker.size
-                i = 0
-                for step in self.steps[start:stop]:
-                    args.append(step.build(values, i))
-                    i += step.width
+                values = run.unpack_from(buf, pos)
+                pos += run.size
+                _build_parts(run.build_ops, values, 0, args)
         return self.make(*args), pos
 
 
-class _Step:
-    """How a composite flattens and builds one fixed child, with the common cases inlined.
+_APPEND, _SPREAD, _CALL = 0, 1, 2
+"""How a composite flattens (or builds) one fixed child: the value is its own primitive, the
+value is a tuple of plain items spread into (sliced from) the flat form, or the child's own
+``flatten``/``build`` is called."""
 
-    Plain scalars are appended and read as they are; a fixed tuple of plain items is spread
-    into the flat form (after a shape check) and read back as one slice; anything else goes
-    through the child's own ``flatten``/``build``.
-    """
+_FlatOp = tuple[int, int, Callable[[Any, list[Any]], None]]
+_BuildOp = tuple[int, int, Callable[[Sequence[Any], int], Any]]
 
-    __slots__ = ("build", "child", "flatten", "width")
 
-    def __init__(self, child: _Node) -> None:
-        self.child = child
-        self.width = child.width
-        spread = isinstance(child, _Composite) and child.make is _make_tuple
-        items = child.children if isinstance(child, _Composite) else ()
-        self.flatten: Callable[[Any, list[Any]], None]
-        self.build: Callable[[Sequence[Any], int], Any]
-        if child.plain_out:
-            self.flatten = _append
-        elif child.fixed and spread and all(c.plain_out for c in items):
-            self.flatten = self._spread
+def _flat_op(child: _Node) -> _FlatOp:
+    if child.plain_out:
+        return (_APPEND, 1, child.flatten)
+    if _plain_tuple(child, "plain_out"):
+        return (_SPREAD, child.width, child.flatten)
+    return (_CALL, child.width, child.flatten)
+
+
+def _build_op(child: _Node) -> _BuildOp:
+    if child.plain_in:
+        return (_APPEND, 1, child.build)
+    if _plain_tuple(child, "plain_in"):
+        return (_SPREAD, child.width, child.build)
+    return (_CALL, child.width, child.build)
+
+
+def _plain_tuple(child: _Node, plain: str) -> bool:
+    """Whether ``child`` is a fixed tuple whose items are all plain (``plain_out``/``plain_in``)."""
+    return (
+        isinstance(child, _Composite)
+        and child.fixed
+        and child.make is _make_tuple
+        and all(getattr(c, plain) for c in child.children)
+    )
+
+
+def _flatten_parts(ops: Sequence[_FlatOp], parts: Sequence[Any], out: list[Any]) -> None:
+    """Append the flat primitives of ``parts`` (one per op) to ``out``: one loop, no call per
+    plain scalar or plain tuple."""
+    for (kind, width, flatten), part in zip(ops, parts, strict=True):
+        if kind == _APPEND:
+            out.append(part)
+        elif kind == _SPREAD:
+            if type(part) is not tuple or len(part) != width:
+                raise TypeError(f"expected a tuple of {width} items, got {part!r}")
+            out += part
         else:
-            self.flatten = child.flatten
-        if child.plain_in:
-            self.build = _index
-        elif child.fixed and spread and all(c.plain_in for c in items):
-            self.build = self._slice
+            flatten(part, out)
+
+
+def _build_parts(ops: Sequence[_BuildOp], values: Sequence[Any], i: int, args: list[Any]) -> None:
+    """Append the values built from ``values[i:]`` (one per op) to ``args``."""
+    for kind, width, build in ops:
+        if kind == _APPEND:
+            args.append(values[i])
+        elif kind == _SPREAD:
+            args.append(values[i : i + width])
         else:
-            self.build = child.build
-
-    def _spread(self, value: Any, out: list[Any]) -> None:
-        if type(value) is not tuple or len(value) != self.width:
-            raise TypeError(f"expected a tuple of {self.width} items, got {value!r}")
-        out.extend(value)
-
-    def _slice(self, values: Sequence[Any], i: int) -> Any:
-        return tuple(values[i : i + self.width])
+            args.append(build(values, i))
+        i += width
 
 
-def _append(value: Any, out: list[Any]) -> None:
-    out.append(value)
+class _Run:
+    """A run of consecutive fixed children of a variable composite: one struct each way."""
+
+    __slots__ = ("build_ops", "flat_ops", "pack", "size", "unpack_from")
+
+    def __init__(self, composite: _Composite, start: int, stop: int) -> None:
+        run = composite.children[start:stop]
+        self.pack = struct.Struct(">" + "".join(c.pack_fmt for c in run)).pack
+        unpack = struct.Struct(">" + "".join(c.unpack_fmt for c in run))
+        self.unpack_from = unpack.unpack_from
+        self.size = unpack.size
+        self.flat_ops = composite.flat_ops[start:stop]
+        self.build_ops = composite.build_ops[start:stop]
 
 
-def _index(values: Sequence[Any], i: int) -> Any:
-    return values[i]
+_Segment = tuple[int, int, _Run | None]
 
 
-_Segment = tuple[int, int, tuple[struct.Struct, struct.Struct] | None]
-
-
-def _segments(children: Sequence[_Node]) -> tuple[_Segment, ...]:
+def _segments(composite: _Composite) -> tuple[_Segment, ...]:
     """Runs of consecutive fixed children (one pack/unpack struct each) and single variable ones."""
+    children = composite.children
+    if composite.fixed:
+        return ()
     segments: list[_Segment] = []
     i = 0
     while i < len(children):
@@ -377,10 +406,7 @@ def _segments(children: Sequence[_Node]) -> tuple[_Segment, ...]:
         stop = i
         while stop < len(children) and children[stop].fixed:
             stop += 1
-        run = children[i:stop]
-        pack = struct.Struct(">" + "".join(c.pack_fmt for c in run))
-        unpack = struct.Struct(">" + "".join(c.unpack_fmt for c in run))
-        segments.append((i, stop, (pack, unpack)))
+        segments.append((i, stop, _Run(composite, i, stop)))
         i = stop
     return tuple(segments)
 
@@ -554,7 +580,17 @@ class FieldCodec:
         fixed_size: the size of every encoded value [B], or None for a variable layout.
     """
 
-    __slots__ = ("_decode", "_encode", "_pack", "_root", "_unpack", "cls", "fixed_size")
+    __slots__ = (
+        "_build_ops",
+        "_flat_ops",
+        "_pack",
+        "_parts",
+        "_root",
+        "_unpack",
+        "_variable",
+        "cls",
+        "fixed_size",
+    )
 
     def __init__(self, cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None) -> None:
         """Compile the layout of ``cls`` (see :func:`compile_codec`)."""
@@ -570,16 +606,17 @@ class FieldCodec:
         self.fixed_size: int | None = root.size if root.fixed else None
         self._pack = struct.Struct(">" + root.pack_fmt).pack
         self._unpack = struct.Struct(">" + root.unpack_fmt).unpack
-        # The common layouts get their own straight-line paths.
-        self._encode: Callable[[Any], bytes]
-        self._decode: Callable[[Buffer], Any]
-        if not root.fixed:
-            self._encode, self._decode = self._encode_variable, self._decode_variable
-            return
-        plain_out = all(c.plain_out for c in root.children)  # only int/float/bool fields
-        plain_in = all(c.plain_in for c in root.children)  # only int/float fields
-        self._encode = self._encode_plain if plain_out else self._encode_fixed
-        self._decode = self._decode_plain if plain_in else self._decode_fixed
+        # The common layouts get their own straight-line paths, chosen here once: plain (only
+        # int/float fields out, only int/float in: one struct call and the constructor), fixed
+        # (one struct call, the children flattened/built by their compiled ops) or variable.
+        self._parts = root.parts
+        self._flat_ops: tuple[_FlatOp, ...] | None = root.flat_ops
+        self._build_ops: tuple[_BuildOp, ...] | None = root.build_ops
+        self._variable = not root.fixed
+        if root.fixed and all(c.plain_out for c in root.children):
+            self._flat_ops = None
+        if root.fixed and all(c.plain_in for c in root.children):
+            self._build_ops = None
 
     def encode(self, value: Any) -> bytes:
         """The bytes of ``value`` (an instance of :attr:`cls`).
@@ -589,7 +626,16 @@ class FieldCodec:
                 or tuple longer than a u16 count, lone surrogate in a string…), naming the type.
         """
         try:
-            return self._encode(value)
+            if self._variable:
+                out = bytearray()
+                self._root.write(value, out)
+                return bytes(out)
+            ops = self._flat_ops
+            if ops is None:
+                return self._pack(*self._parts(value))
+            flat: list[Any] = []
+            _flatten_parts(ops, self._parts(value), flat)
+            return self._pack(*flat)
         except _ENCODE_ERRORS as err:
             raise ValueError(f"cannot encode {self.cls.__qualname__}: {err}") from err
 
@@ -602,30 +648,18 @@ class FieldCodec:
                 value the component's constructor rejects).
         """
         try:
-            return self._decode(data)
+            if self._variable:
+                return self._decode_variable(data)
+            ops = self._build_ops
+            if ops is None:
+                return self.cls(*self._unpack(data))
+            args: list[Any] = []
+            _build_parts(ops, self._unpack(data), 0, args)
+            return self.cls(*args)
         except FieldDecodeError:
             raise
         except _DECODE_ERRORS as err:
             raise FieldDecodeError(f"{self.cls.__qualname__}: {err}") from None
-
-    def _encode_plain(self, value: Any) -> bytes:
-        return self._pack(*self._root.parts(value))
-
-    def _encode_fixed(self, value: Any) -> bytes:
-        flat: list[Any] = []
-        self._root.flatten(value, flat)
-        return self._pack(*flat)
-
-    def _encode_variable(self, value: Any) -> bytes:
-        out = bytearray()
-        self._root.write(value, out)
-        return bytes(out)
-
-    def _decode_plain(self, data: Buffer) -> Any:
-        return self.cls(*self._unpack(data))
-
-    def _decode_fixed(self, data: Buffer) -> Any:
-        return self._root.build(self._unpack(data), 0)
 
     def _decode_variable(self, data: Buffer) -> Any:
         value, end = self._root.read(data, 0)

@@ -15,9 +15,11 @@ from testbed.ecs.registry import (
     Change,
     ChangeKind,
     ComponentRegistry,
+    RawChange,
     Registration,
     Side,
     replicated_changes,
+    replicated_entries,
 )
 from testbed.ecs.schedule import Phase, Schedule, System
 from testbed.ecs.world import Entity, Origin, Removal, Replicate, World, check_component_type
@@ -29,6 +31,7 @@ __all__ = [
     "Entity",
     "Origin",
     "Phase",
+    "RawChange",
     "Registration",
     "Removal",
     "Replicate",
@@ -38,4 +41,5 @@ __all__ = [
     "World",
     "check_component_type",
     "replicated_changes",
+    "replicated_entries",
 ]

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import operator
 import types
 import typing
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,15 +29,18 @@ __all__ = [
     "Change",
     "ChangeKind",
     "ComponentRegistry",
+    "RawChange",
     "Registration",
     "Replicate",
     "Side",
     "replicated_changes",
+    "replicated_entries",
 ]
 
 TYPE_ID_MIN = 1
 TYPE_ID_MAX = 65535
 _SCALARS: tuple[type[Any], ...] = (bool, int, float, str, bytes)
+LOCAL = Origin.LOCAL
 
 
 class Side(enum.Enum):
@@ -275,47 +279,83 @@ def replicated_changes(
         Changes ordered by entity, then type id (a despawn alone for its entity).
     """
     entries = [e for e in registry if side is None or e.owner is side]
-    changes: list[Change] = []
-    # entities whose marker is new here: the peer has never seen them (rare after the start)
-    fresh = {e for e, _ in world.query1(Replicate, added=True, since=since, origin=Origin.LOCAL)}
+    return [
+        Change(entity, kind, None if entry is None else entry.cls, type_id or None, value, tick)
+        for entity, type_id, kind, entry, value, tick in replicated_entries(world, since, entries)
+    ]
+
+
+RawChange = tuple[Entity, int, ChangeKind, Registration | None, object, int]
+"""One change as :func:`replicated_entries` lists it: entity, type id (0 for a despawn), kind,
+registration (None for a despawn), value (None unless added or changed), tick."""
+
+_RAW_ORDER = operator.itemgetter(0, 1)
+
+
+def replicated_entries(
+    world: World, since: int, entries: Sequence[Registration]
+) -> list[RawChange]:
+    """:func:`replicated_changes` of the types ``entries`` as plain tuples (:data:`RawChange`),
+    in the same order: the one implementation of the rule, for senders that poll every frame.
+
+    Columns whose newest change is not after ``since`` are skipped unread, and so is the removal
+    log when nothing was removed after ``since``.
+    """
+    changes: list[RawChange] = []
     # Same package as the world: read its columns and slots directly (this runs every frame of
-    # every replicating node); a column whose newest change is not after ``since`` is skipped.
+    # every replicating node).
     columns = world._columns
+    marker = columns.get(Replicate)
+    if marker is None:
+        return changes  # no entity ever carried the marker: nothing replicates
+    marked = marker.slots
+    # entities whose marker is new here: the peer has never seen them (rare after the start)
+    fresh: set[Entity] | tuple[()] = ()
+    if marker.added_max > since:
+        fresh = {e for e, _ in world.query1(Replicate, added=True, since=since, origin=LOCAL)}
+    added, changed = ChangeKind.ADDED, ChangeKind.CHANGED
     for entry in entries:
-        component = entry.cls
-        column = columns.get(component)
+        column = columns.get(entry.cls)
         if column is None or (not fresh and column.changed_max <= since):
             continue
+        type_id = entry.type_id
         for entity, slot in column.pairs():
             value = slot.value
-            if value is GONE or not world.has(entity, Replicate):
+            if value is GONE or entity not in marked:
                 continue
-            if entity in fresh:
-                kind = ChangeKind.ADDED
-            elif slot.changed <= since or slot.origin is not Origin.LOCAL:
+            if fresh and entity in fresh:
+                kind = added
+            elif slot.changed <= since or slot.origin is not LOCAL:
                 continue
             elif slot.added > since:
-                kind = ChangeKind.ADDED
+                kind = added
             else:
-                kind = ChangeKind.CHANGED
-            changes.append(Change(entity, kind, component, entry.type_id, value, slot.changed))
-    owned = {e.cls: e.type_id for e in entries}
+                kind = changed
+            changes.append((entity, type_id, kind, entry, value, slot.changed))
+    log = world._removals
+    if log and log[-1].tick > since:
+        _removed_entries(world, since, entries, changes)
+    if len(changes) > 1:
+        changes.sort(key=_RAW_ORDER)
+    return changes
+
+
+def _removed_entries(
+    world: World, since: int, entries: Sequence[Registration], changes: list[RawChange]
+) -> None:
+    """Append the REMOVED and DESPAWNED entries of the removal log after ``since``."""
+    owned = {e.cls: e for e in entries}
     last_removal: dict[tuple[Entity, type[Any] | None], tuple[int, bool]] = {}
     for removal in world.removals_since(since):
         if removal.component is None or removal.component in owned:
             key = (removal.entity, removal.component)
-            local = removal.origin is Origin.LOCAL and removal.replicated
+            local = removal.origin is LOCAL and removal.replicated
             last_removal[key] = (removal.tick, local)
     for (entity, cls), (tick, local) in last_removal.items():
         if not local:
             continue
         if cls is None:
-            changes.append(Change(entity, ChangeKind.DESPAWNED, None, None, None, tick))
+            changes.append((entity, 0, ChangeKind.DESPAWNED, None, None, tick))
         elif world.is_alive(entity) and not world.has(entity, cls):
-            changes.append(Change(entity, ChangeKind.REMOVED, cls, owned[cls], None, tick))
-    changes.sort(key=_change_order)
-    return changes
-
-
-def _change_order(change: Change) -> tuple[int, int]:
-    return (change.entity, 0 if change.type_id is None else change.type_id)
+            entry = owned[cls]
+            changes.append((entity, entry.type_id, ChangeKind.REMOVED, entry, None, tick))

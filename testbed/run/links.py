@@ -27,7 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
-from testbed.common.changeset import ApplyStatus, ChangeSetReceiver, ChangeSetSender
+from testbed.common.changeset import ChangeSetReceiver, ChangeSetSender
 from testbed.common.components import MovementCommand, Odometry, register_components
 from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
 from testbed.ecs import ComponentRegistry, Origin, Side, World
@@ -172,7 +172,7 @@ class ChangeSetOutbox:
 
 def _apply_changesets(receiver: ChangeSetReceiver, payloads: list[tuple[bytes, int]]) -> int:
     """Apply change-set payloads; the number refused."""
-    return sum(receiver.apply(p).status is not ApplyStatus.APPLIED for p, _ in payloads)
+    return receiver.apply_all([p for p, _ in payloads]) if payloads else 0
 
 
 # ------------------------------------------------------------------------------ vehicle side
