@@ -147,13 +147,17 @@ class MavlinkVehicleNode:
         self._frame_reads: list[int] = []
         self._ingest_ns = 0
 
-    def run(self) -> Generator[simpy.Event, Any, None]:
-        """simpy process: each vehicle frame at its own instant, physics in between."""
+    def run(self, until_s: float = math.inf) -> Generator[simpy.Event, Any, None]:
+        """simpy process: each vehicle frame at its own instant, physics in between, until
+        ``until_s`` [s] or until ``stop`` is set (checked each frame)."""
         env = self.env
         vehicle = self.vehicle
         stop = self._stop
         while stop is None or not stop.is_set():
             t_frame = vehicle.next_frame_s
+            if t_frame >= until_s:
+                yield env.timeout(max(0.0, until_s - env.now))
+                return
             if t_frame > env.now:
                 yield env.timeout(t_frame - env.now)
             vehicle.advance(t_frame + 0.5 * vehicle.physics.dt_s)
@@ -219,13 +223,12 @@ def run_mavlink(
     stopped: KeyboardInterrupt | None = None
     start: float | None = None
     try:
-        node = MavlinkVehicleNode(
-            env, scenario, np.random.default_rng(vehicle_seed), links, recorder
-        )
-        env.process(node.run())
+        rng = np.random.default_rng(vehicle_seed)
+        node = MavlinkVehicleNode(env, scenario, rng, links, recorder, stop)
+        process = env.process(node.run(duration))
         env.sync()  # start the clock now, after pybullet has loaded
         start = time.perf_counter()
-        env.run(until=duration)
+        env.run(until=process)  # the duration, or the stop event, whichever comes first
     except KeyboardInterrupt as interrupt:
         stopped = interrupt
     finally:

@@ -1,0 +1,194 @@
+"""End to end in real time: pymavlink's ``mavutil`` as the ground station on 127.0.0.1, the
+vehicle behind ``run_mavlink`` on a UDP link (SITL's ``udpout``), one short session (≈ 12 s).
+
+Bounds come from the model and what the run measured (frame period, scheduler lateness, frame
+compute time), never from wall-clock allowances; waits have generous timeouts that only a
+broken endpoint would reach.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.mavlink.links import UdpLink
+from testbed.run.mavlink_run import run_mavlink
+from testbed.run.runner import RunResult
+from testbed.run.scenario import load_scenario
+
+WAIT_S = 10.0  # only a broken endpoint waits this long
+
+
+class Session:
+    """The vehicle on a background thread; the ground station here."""
+
+    def __init__(self) -> None:
+        self.gcs = mavutil.mavlink_connection(
+            "udpin:127.0.0.1:0", source_system=255, source_component=190, dialect="ardupilotmega"
+        )
+        port = self.gcs.port.getsockname()[1]
+        self.link = UdpLink(f"udpout:127.0.0.1:{port}", "127.0.0.1", port, listen=False)
+        self.stop = threading.Event()
+        self.result: RunResult | None = None
+        self.error: BaseException | None = None
+        scenario = load_scenario("s100-teleop-v1")
+        self.thread = threading.Thread(target=self._run, args=(scenario,), daemon=True)
+        self.thread.start()
+        self._last_heartbeat = 0.0
+        self.sticks = (0, 0, 500, 0)
+        self.latest: dict[str, Any] = {}
+
+    def _run(self, scenario: Any) -> None:
+        try:
+            self.result = run_mavlink(scenario, [self.link], duration_s=120.0, stop=self.stop)
+        except BaseException as err:  # surfaced by finish()
+            self.error = err
+
+    def finish(self) -> RunResult:
+        self.stop.set()
+        self.thread.join(timeout=30.0)
+        self.gcs.close()
+        if self.error is not None:
+            raise self.error
+        assert self.result is not None
+        return self.result
+
+    def pump(self, seconds: float, *, heartbeats: bool = True, sticks: bool = True) -> None:
+        """Be a ground station for ``seconds``: 25 Hz sticks, 1 Hz heartbeat, read all."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.tick(heartbeats=heartbeats, sticks=sticks)
+            time.sleep(0.04)
+
+    def tick(self, *, heartbeats: bool = True, sticks: bool = True) -> None:
+        now = time.monotonic()
+        if heartbeats and now - self._last_heartbeat >= 1.0:
+            self.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            self._last_heartbeat = now
+        if sticks:
+            x, y, z, r = self.sticks
+            self.gcs.mav.manual_control_send(1, x, y, z, r, 0)
+        while (msg := self.gcs.recv_match(blocking=False)) is not None:
+            self.latest[msg.get_type()] = msg
+
+    def until(self, what: Callable[[], Any], **pump: bool) -> Any:
+        """Pump until ``what()`` is truthy; its value."""
+        end = time.monotonic() + WAIT_S
+        while time.monotonic() < end:
+            self.tick(**pump)
+            value = what()
+            if value:
+                return value
+            time.sleep(0.02)
+        raise AssertionError("timed out waiting for the vehicle")
+
+    def ack(self, command: int) -> int:
+        def found() -> Any:
+            msg = self.latest.pop("COMMAND_ACK", None)
+            return msg if msg is not None and msg.command == command else None
+
+        return int(self.until(found).result)
+
+    def heartbeat(self, check: Callable[[Any], bool], **pump: bool) -> Any:
+        self.latest.pop("HEARTBEAT", None)
+
+        def found() -> Any:
+            hb = self.latest.get("HEARTBEAT")
+            return hb if hb is not None and check(hb) else None
+
+        return self.until(found, **pump)
+
+
+@pytest.fixture
+def session() -> Iterator[Session]:
+    s = Session()
+    yield s
+    if s.thread.is_alive():
+        s.stop.set()
+        s.thread.join(timeout=30.0)
+
+
+def test_a_ground_station_connects_configures_flies_and_loses_contact(session: Session) -> None:
+    gcs = session.gcs
+    hb = gcs.wait_heartbeat(timeout=WAIT_S)
+    assert hb is not None and (hb.type, hb.autopilot) == (12, 3)
+    assert (hb.get_srcSystem(), hb.get_srcComponent()) == (1, 1)
+
+    gcs.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0, 0, 0)
+    version = session.until(lambda: session.latest.get("AUTOPILOT_VERSION"))
+    assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+
+    gcs.param_fetch_all()  # the full download, as pymavlink's own client does it
+    session.until(lambda: gcs.param_state and len(gcs.params) >= 90, sticks=False)
+    assert gcs.params["SYSID_THISMAV"] == 1 and gcs.params["FS_GCS_ENABLE"] == 2
+    gcs.param_set_send("FS_GCS_TIMEOUT", 1.0)  # lose the GCS sooner than ArduSub's 5 s
+    session.until(
+        lambda: (
+            (p := session.latest.get("PARAM_VALUE")) is not None
+            and p.param_id == "FS_GCS_TIMEOUT"
+            and p.param_value == 1.0
+        )
+    )
+
+    # garbage and an intruder on the same link are counted, never acted on
+    noise = bytes(b for b in os.urandom(300) if b not in (0xFD, 0xFE))  # no start bytes
+    intruder = mav.MAVLink(None, srcSystem=42, srcComponent=190)
+    bad_crc = bytearray(intruder.heartbeat_encode(6, 8, 0, 0, 4).pack(intruder))
+    bad_crc[-1] ^= 0xFF
+    gcs.write(noise + bytes(bad_crc))
+    gcs.write(intruder.manual_control_encode(1, 1000, 0, 500, 0, 0).pack(intruder) * 5)
+
+    gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+    assert session.ack(400) == mav.MAV_RESULT_ACCEPTED
+    armed = session.heartbeat(lambda hb: hb.base_mode & 128)
+    assert armed.base_mode == 209 and armed.system_status == mav.MAV_STATE_ACTIVE
+
+    session.sticks = (1000, 0, 500, 0)  # full forward
+    session.pump(3.0)
+    servo = session.latest["SERVO_OUTPUT_RAW"]
+    assert max(abs(getattr(servo, f"servo{k}_raw") - 1500) for k in range(1, 7)) > 25
+
+    session.sticks = (0, 0, 500, 0)
+    gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)  # ALT_HOLD
+    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_ACCEPTED
+    session.heartbeat(lambda hb: hb.custom_mode == 2)
+    session.pump(1.0)
+    start = session.latest["VFR_HUD"].alt
+    session.pump(2.5)
+    assert abs(session.latest["VFR_HUD"].alt - start) < 0.1  # depth held (alt < 0 below)
+
+    gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 16)  # POSHOLD: refused
+    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_FAILED
+
+    # silence: no heartbeat, no sticks, beyond FS_GCS_TIMEOUT → FS_GCS_ENABLE 2 disarms
+    lost = session.heartbeat(lambda hb: not hb.base_mode & 128, heartbeats=False, sticks=False)
+    assert lost.system_status == mav.MAV_STATE_CRITICAL
+
+    result = session.finish()
+    section = result.metrics["mavlink"]
+    assert section["failsafes"] == {"gcs": 1}
+    assert section["rejected"]["wrong_sysid"] == 5
+    assert section["rejected"]["crc"] == 1 and section["rejected"]["garbage"] >= 1
+    assert section["received"]["PARAM_REQUEST_LIST"] >= 1
+    assert section["sent"]["PARAM_VALUE"] >= len(gcs.params)
+
+    # every stick packet reached the thrusters within two frame periods, plus the lateness
+    # and compute time the run measured (a loaded machine widens the bound, not the rule)
+    latency = section["gcs_to_thruster_ms"]
+    bound_ms = (
+        2000.0 * section["frame_period_s"]
+        + section["scheduler_lateness_ms"]["max"]
+        + section["frame_compute_ms"]["max"]
+    )
+    assert latency["n"] >= 50 and latency["max"] <= bound_ms
+
+    series = result.recorder.series()
+    forward = series["rx_x"] > 0.4
+    assert forward.any() and series["u"][forward].max() > 0.2  # the vehicle moved ahead
