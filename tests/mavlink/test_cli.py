@@ -1,0 +1,55 @@
+"""``testbed mavlink``: user mistakes are one line and exit 2; a short session writes the run's
+results with the ``mavlink`` section."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import pytest
+
+from testbed.cli.main import main
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--link", "s100"], "--link: the MAVLink gateway through the narrow link is not"),
+        (["--gcs", "udpin:127.0.0.1:99999"], "--gcs: 'udpin:127.0.0.1:99999': expected"),
+        (["--gcs", "udpout:nowhere"], "--gcs: 'udpout:nowhere': expected"),
+        (["--gcs", "serial:/dev/no-such-port"], "--gcs: cannot open serial:/dev/no-such-port"),
+        (["--duration", "-1"], "--duration: must be > 0 s"),
+        (["--set", "vehicle.supply_voltage_v=99"], "vehicle.supply_voltage_v"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(["mavlink", *argv, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and message in err[0], err
+
+
+def test_a_short_session_writes_the_run_outputs_and_the_mavlink_section(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "session"
+    url = f"udpout:127.0.0.1:{free_udp_port()}"  # nobody listens: the vehicle talks alone
+    code = main(["mavlink", "--gcs", url, "--duration", "1.5", "--out", str(out), "--no-plots"])
+    assert code == 0
+    assert "mavlink s100-teleop-v1" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}
+    section = metrics["mavlink"]
+    assert section["sent"]["HEARTBEAT"] == 2  # at 0 s and 1 s
+    assert section["links"][url]["packets_out"] >= 10
+    assert section["gcs_to_thruster_ms"]["n"] == 0  # no pilot
+    assert metrics["sim_s"] == pytest.approx(1.5)
