@@ -426,4 +426,5 @@ def on_timesync(
     endpoint.accepted += 1
     if int(message.tc1) != 0:
         return  # a reply to a request we never send
-    endpoint.queue(channel, mav.MAVLink_timesync_message(round(now_s * 1e9), int(message.ts1)))
+    tc1 = max(1, round(now_s * 1e9))  # never 0, which would read as a request
+    endpoint.queue(channel, mav.MAVLink_timesync_message(tc1, int(message.ts1)))

@@ -51,6 +51,7 @@ class SimGcs:
         self.packets: list[bytes] = []
         self.messages: list[Any] = []
         self._pending = bytearray()
+        self._target_s = 0.0
 
     @staticmethod
     def make_sender(sysid: int, compid: int = 190) -> mav.MAVLink:
@@ -76,7 +77,8 @@ class SimGcs:
         data, self._pending = bytes(self._pending), bytearray()
         if data:
             self.endpoint.receive(self.channel, data, self.now_s)
-        self.vehicle.advance(self.now_s + FRAME_S)
+        self._target_s += FRAME_S  # on the 10-ms grid (the vehicle's frames land near it)
+        self.vehicle.advance(self._target_s)
         self.endpoint.update(self.now_s)
         for packet in self.channel.take():
             self.packets.append(packet)

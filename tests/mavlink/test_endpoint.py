@@ -195,7 +195,7 @@ def test_gcs_heartbeat_loss_acts_per_fs_gcs_enable(action: int, mode: int, armed
         gcs.send(gcs.heartbeat(), gcs.arm())
         gcs.run(3.0, gcs.flying())
         assert gcs.last("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
-        gcs.run(4.5)  # silence: > FS_GCS_TIMEOUT (5 s) after the last contact
+        gcs.run(6.5)  # silence: > FS_GCS_TIMEOUT (5 s) after the last contact
         hb = gcs.last("HEARTBEAT")
         assert bool(hb.base_mode & 128) is armed and hb.custom_mode == mode
         assert hb.system_status == mav.MAV_STATE_CRITICAL
@@ -235,3 +235,40 @@ def test_pilot_input_loss_disarms_after_fs_pilot_timeout(gcs: SimGcs) -> None:
     assert [m.text for m in gcs.of("STATUSTEXT")] == ["Lost manual control"]
     command = gcs.vehicle.world.get(gcs.vehicle.operator_entity, MovementCommand)
     assert command is not None and not any(command.sticks)  # neutral
+
+
+def test_mission_timesync_and_stream_control(gcs: SimGcs) -> None:
+    gcs.send(gcs.mav.mission_request_list_encode(1, 1, 0))
+    gcs.send(gcs.mav.timesync_encode(0, 123456789))
+    gcs.send(gcs.mav.request_data_stream_encode(1, 1, 0, 0, 0))  # everything off
+    gcs.send(gcs.mav.request_data_stream_encode(1, 1, mav.MAV_DATA_STREAM_EXTRA1, 20, 1))
+    gcs.send(gcs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_VFR_HUD, 200_000))
+    gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_VFR_HUD))
+    gcs.run(2.0)
+    count = gcs.last("MISSION_COUNT")
+    assert (count.count, count.target_system, count.target_component) == (0, 255, 190)
+    sync = gcs.last("TIMESYNC")
+    assert sync.ts1 == 123456789 and sync.tc1 > 0
+    assert len(gcs.of("ATTITUDE")) == 40  # 20 Hz for 2 s
+    assert len(gcs.of("VFR_HUD")) == 10  # every 200 ms
+    assert gcs.of("SYS_STATUS") == [] and gcs.of("GLOBAL_POSITION_INT") == []
+    assert gcs.last("MESSAGE_INTERVAL").interval_us == 200_000
+    assert acks(gcs, mav.MAV_CMD_SET_MESSAGE_INTERVAL) == [ACCEPTED]
+
+
+def test_rc_channels_override_is_pilot_input_too(gcs: SimGcs) -> None:
+    def override(k: int) -> list[object]:
+        if k % 4:
+            return []
+        channels = [65535, 65535, 1500, 1500, 1800, 65535, 65535, 65535]  # ch5 forward
+        return [gcs.mav.rc_channels_override_encode(1, 1, *channels)]
+
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(3.0, override)
+    command = gcs.vehicle.world.get(gcs.vehicle.operator_entity, MovementCommand)
+    assert command is not None and command.sticks[0] == 0.75
+    assert gcs.truth_surge_m_s() > 0.1
+    assert gcs.endpoint.failsafe.triggered["pilot_input"] == 0
+    assert gcs.last("RC_CHANNELS").chan5_raw == 1800
+    gains = [m.value for m in gcs.of("NAMED_VALUE_FLOAT") if m.name == "PilotGain"]
+    assert gains and gains[-1] == 0.5
