@@ -29,7 +29,7 @@ are bounded (:data:`OUTBOX_LIMIT`).
 
 from __future__ import annotations
 
-import math
+import dataclasses
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -374,7 +374,6 @@ class VehicleEndpoint:
             voltage_v=self.options.battery_voltage_v,
             remaining_pct=remaining,
             rc_channels=tuple(self.rc.channels),
-            throttle=(self.rc.channels[2] - 1100) / 800.0,
             gain=self.gain,
             critical=self.failsafe.active,
         )
@@ -388,10 +387,12 @@ class VehicleEndpoint:
             self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
         self._last_update_s = now_s
         self.failsafe.check(self, snapshot, now_s)
-        heartbeat = now_s >= self._next_heartbeat_s
-        if heartbeat:
+        if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared
+            snapshot = dataclasses.replace(snapshot, critical=self.failsafe.active)
+            self._snapshot = snapshot
+        if now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
-            self.broadcast(BUILDERS["HEARTBEAT"](self.snapshot(now_s)))
+            self.broadcast(BUILDERS["HEARTBEAT"](snapshot))
         for channel in self.channels:
             for name in channel.streams.due(now_s):
                 self.queue(channel, self.message(name, snapshot))
@@ -426,6 +427,6 @@ class VehicleEndpoint:
 def _extension_pwm(message: mav.MAVLink_message, name: str) -> int:
     """Pitch (s) or roll (t) extension: value + 1500, unscaled, clamped to 1100..1900 [µs]."""
     value = int(getattr(message, name, 0) or 0)
-    if value == _INT16_UNUSED or not math.isfinite(value):
+    if value == _INT16_UNUSED:
         return 1500
     return max(1100, min(1900, 1500 + value))

@@ -89,9 +89,11 @@ class VelocityEstimator:
             return
         dt = t_s - last[0]
         alpha = dt / (self.time_constant_s + dt)
-        self.velocity_ned_m_s = tuple(  # type: ignore[assignment]  # 3 in, 3 out
-            v + alpha * ((p - q) / dt - v)
-            for v, p, q in zip(self.velocity_ned_m_s, position_ned_m, last[1], strict=True)
+        (vn, ve, vd), (n1, e1, d1), (n0, e0, d0) = self.velocity_ned_m_s, position_ned_m, last[1]
+        self.velocity_ned_m_s = (
+            vn + alpha * ((n1 - n0) / dt - vn),
+            ve + alpha * ((e1 - e0) / dt - ve),
+            vd + alpha * ((d1 - d0) / dt - vd),
         )
 
 
@@ -164,11 +166,15 @@ def read_vehicle(
     *,
     time_s: float,
     velocity: VelocityEstimator,
-    **fields: object,
+    voltage_v: float,
+    remaining_pct: int,
+    rc_channels: tuple[int, ...],
+    gain: float,
+    critical: bool,
 ) -> VehicleSnapshot:
-    """Snapshot the vehicle-owned components of ``vehicle``; ``fields`` gives the rest
-    (``custom_mode`` when the active mode is not one the simulator names, ``voltage_v``,
-    ``remaining_pct``, ``rc_channels``, ``throttle``, ``gain``, ``critical``)."""
+    """Snapshot the vehicle-owned components of ``vehicle`` at ``time_s`` [s]; the rest is the
+    endpoint's (battery, RC inputs, gain, failsafe). ``velocity`` is folded the new position.
+    ArduSub's throttle is read from RC channel 3 (1100..1900 µs → 0..1)."""
     imu = world.get(vehicle, ImuReading)
     depth = world.get(vehicle, DepthReading)
     odometry = world.get(vehicle, Odometry)
@@ -192,8 +198,13 @@ def read_vehicle(
         velocity_ned_m_s=velocity.velocity_ned_m_s,
         pwm_us=() if output is None else output.pwm_us,
         current_a=0.0 if output is None else float(sum(output.currents_a)),
+        voltage_v=voltage_v,
+        remaining_pct=remaining_pct,
+        rc_channels=rc_channels,
+        throttle=min(1.0, max(0.0, (rc_channels[2] - 1100) / 800.0)),
+        gain=gain,
+        critical=critical,
         has_position=world.has(vehicle, PositionReading),
-        **fields,  # type: ignore[arg-type]  # the caller's remaining fields, checked by name
     )
 
 

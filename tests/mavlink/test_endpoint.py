@@ -272,3 +272,17 @@ def test_rc_channels_override_is_pilot_input_too(gcs: SimGcs) -> None:
     assert gcs.last("RC_CHANNELS").chan5_raw == 1800
     gains = [m.value for m in gcs.of("NAMED_VALUE_FLOAT") if m.name == "PilotGain"]
     assert gains and gains[-1] == 0.5
+
+
+def test_system_ids_are_parameters_that_take_effect(gcs: SimGcs) -> None:
+    gcs.send(gcs.param_set("SYSID_THISMAV", 7), gcs.param_set("MAV_GCS_SYSID", 200))
+    gcs.run(1.01)
+    assert gcs.last("HEARTBEAT").get_srcSystem() == 7
+    gcs.send(gcs.mav.manual_control_encode(7, 500, 0, 500, 0, 0))  # from 255: no longer the GCS
+    other = SimGcs.make_sender(200)
+    gcs.send(other.manual_control_encode(1, 500, 0, 500, 0, 0), sender=other)  # wrong target
+    gcs.send(other.manual_control_encode(7, 500, 0, 500, 0, 0), sender=other)  # accepted
+    gcs.step()
+    endpoint = gcs.endpoint
+    assert endpoint.rejected["wrong_sysid"] == 1 and endpoint.rejected["wrong_target"] == 1
+    assert endpoint.pilot_inputs == 1
