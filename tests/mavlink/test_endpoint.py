@@ -275,7 +275,8 @@ def test_rc_channels_override_is_pilot_input_too(gcs: SimGcs) -> None:
 
 
 def test_system_ids_are_parameters_that_take_effect(gcs: SimGcs) -> None:
-    gcs.send(gcs.param_set("SYSID_THISMAV", 7), gcs.param_set("MAV_GCS_SYSID", 200))
+    gcs.send(gcs.param_set("MAV_GCS_SYSID", 200), gcs.param_set("SYSID_THISMAV", 7))  # this order:
+    # once SYSID_THISMAV is 7, requests to system 1 are no longer ours
     gcs.run(1.01)
     assert gcs.last("HEARTBEAT").get_srcSystem() == 7
     gcs.send(gcs.mav.manual_control_encode(7, 500, 0, 500, 0, 0))  # from 255: no longer the GCS
@@ -284,5 +285,5 @@ def test_system_ids_are_parameters_that_take_effect(gcs: SimGcs) -> None:
     gcs.send(other.manual_control_encode(7, 500, 0, 500, 0, 0), sender=other)  # accepted
     gcs.step()
     endpoint = gcs.endpoint
-    assert endpoint.rejected["wrong_sysid"] == 1 and endpoint.rejected["wrong_target"] == 1
+    assert dict(endpoint.rejected) == {"wrong_sysid": 1, "wrong_target": 1}
     assert endpoint.pilot_inputs == 1
