@@ -320,15 +320,16 @@ class ChangeSetCodec:
             return MalformedPayload(f"unknown sender side {side_code}")
         types = self._types
         unpack_valued, unpack_removed = _VALUED.unpack_from, _REMOVED.unpack_from
+        valued_size = _VALUED.size
         entries: list[_Entry] = []
         pos = HEADER_SIZE
         for index in range(count):
             code = payload[pos] if pos < size else 0
             if code in (_ADDED, _CHANGED):
-                if pos + _VALUED.size > size:
+                start = pos + valued_size
+                if start > size:
                     return MalformedPayload(f"entry {index} of {count}: truncated header")
                 _, entity, type_id, length = unpack_valued(payload, pos)
-                start = pos + _VALUED.size
                 pos = start + length
                 if pos > size:
                     return MalformedPayload(f"entry {index}: value of {length} B truncated")
@@ -678,19 +679,20 @@ class ChangeSetReceiver:
     def _write(self, entries: list[_Entry]) -> int:
         """Apply parsed, checked entries in order; return the mirrors spawned."""
         world = self._world
+        alive, write = world.is_alive, world.set
         mirrors = self._mirrors
         remote = Origin.REMOTE
         spawned = 0
         for code, entity, info, value in entries:
             local = mirrors.get(entity)
-            if local is not None and not world.is_alive(local):
+            if local is not None and not alive(local):
                 del mirrors[entity]  # despawned here by a local system
                 local = None
             if code <= _CHANGED:
                 if local is None:
                     local = mirrors[entity] = world.spawn(Replicate(), origin=remote)
                     spawned += 1
-                world.set(local, value, origin=remote)
+                write(local, value, origin=remote)
             elif local is None:
                 continue  # removal or despawn of an entity never seen (or gone): nothing to do
             elif code == _DESPAWNED:
