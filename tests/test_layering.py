@@ -27,13 +27,13 @@ imports count as the absolute names they resolve to.
 | __init__ | -                                                  | -                               |
 | __main__ | cli                                                | -                               |
 
-``mavlink`` reaches ``hil`` for its serial transport only, and never ``vehicle``: it pilots a
-world through ``common``'s components. ``common`` is the ECS paper's shared library: the components both nodes replicate and the link
-codecs that carry them. ``emulator`` does not import ``hil``: its modem personalities are written
-independently of hil's adapters, so each checks the other. ``run`` does not import ``emulator``
-(a HIL run reaches it through serial ports) nor ``report``, ``sweep`` or ``cli``. Only
-``testbed/vehicle/physics.py`` may import pybullet. ``sweep`` loads ``distributed`` (Dask) through
-``importlib`` only when asked for a cluster.
+``mavlink`` reaches ``hil`` for its serial transport only, and never ``vehicle``: it pilots a world
+through ``common``'s components. ``common`` is the ECS paper's shared library: the components both
+nodes replicate and the link codecs that carry them. ``emulator`` does not import ``hil``: its modem
+personalities are written independently of hil's adapters, so each checks the other. ``run`` does
+not import ``emulator`` (a HIL run reaches it through serial ports) nor ``report``, ``sweep`` or
+``cli``. Only ``testbed/vehicle/physics.py`` may import pybullet. ``sweep`` loads ``distributed``
+(Dask) through ``importlib`` only when asked for a cluster.
 """
 
 from __future__ import annotations
