@@ -10,15 +10,15 @@ frame; ``inertia_kg_m2`` are the principal moments about the CoG (body-aligned a
 M_RB about CO carries the m·S(r_g) coupling and the parallel-axis term. The applied wrench is
 given about the CoG (thruster allocation works about the centre of mass) and moved to CO here.
 
-:func:`fossen_acceleration` is the one implementation of the right-hand side, compiled by numba
-(cached to disk: the first process compiles it in about a second, later ones load it): the
-pybullet stepping loop (:mod:`testbed.vehicle.physics`) calls it from its own compiled step, and
+:func:`~testbed.vehicle.plant_kernels.fossen_acceleration` is the one implementation of the
+right-hand side, compiled by numba (:mod:`testbed.vehicle.plant_kernels`, beside the pybullet
+step that calls it); :func:`coefficients` lays the model out for it and
 :func:`body_acceleration` is its array interface. Tests check it against Fossen's matrices
 written out independently in the tests (tests/vehicle/fossen_matrices.py), an integration by
 scipy, and closed forms. The water current (ν_c) is :mod:`testbed.vehicle.water_current`;
 :class:`WaterCurrent` is re-exported here for the callers that import it with the model.
 
-numpy, numba and math: this module must never import pybullet.
+numpy and math: this module must never import pybullet.
 """
 
 from __future__ import annotations
@@ -28,11 +28,11 @@ from dataclasses import dataclass
 from importlib import resources
 from typing import Literal
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from testbed.config import ConfigError, build, check, load_toml
+from testbed.vehicle.plant_kernels import N_COEFFICIENTS, fossen_acceleration
 from testbed.vehicle.water_current import WaterCurrent
 
 __all__ = [
@@ -40,7 +40,6 @@ __all__ = [
     "WaterCurrent",
     "body_acceleration",
     "coefficients",
-    "fossen_acceleration",
     "known_models",
     "load_model",
     "skew",
@@ -182,25 +181,11 @@ def skew(a: ArrayLike) -> FloatArray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-# --- the equation of motion ---------------------------------------------------------------------
-#
-# One implementation of the right-hand side, compiled by numba (cached on disk beside this
-# module): the pybullet stepping loop calls it from its own compiled step (240 times per
-# simulated second) and :func:`body_acceleration` from Python. Its coefficients travel as one
-# float64 array (one argument to unbox per call) laid out by :func:`coefficients`.
-
-_MASS, _WEIGHT, _BUOYANCY = 0, 1, 2
-_COG, _COB = 3, 6  # r_g, r_b (3 each)
-_INERTIA = 9  # I_o about CO, row-major (9)
-_ADDED = 18  # −diag(M_A): positive added masses (6)
-_CORIOLIS = 24  # the diagonal C_A(ν_r) is built from (6), see HydroModel.added_mass_coriolis
-_LINEAR, _QUADRATIC = 30, 36  # Fossen's damping derivatives, ≤ 0 (6 each)
-_MASS_INVERSE = 42  # (M_RB + M_A)⁻¹, row-major (36)
-_N_COEFFICIENTS = 78
-
-
 def coefficients(model: HydroModel) -> FloatArray:
-    """The model's coefficients as the kernels read them (read-only float64 array)."""
+    """The model's coefficients as :func:`~.plant_kernels.fossen_acceleration` reads them, in
+    the order of :mod:`~testbed.vehicle.plant_kernels`' offsets (read-only float64 array): m, W,
+    B, r_g, r_b, I_o (row-major), −diag(M_A), the diagonal C_A is built from (per
+    :attr:`HydroModel.added_mass_coriolis`), linear and quadratic damping, M⁻¹ (row-major)."""
     added = [-a for a in model.added_mass]
     if model.added_mass_coriolis == "full":
         coriolis = added
@@ -223,113 +208,9 @@ def coefficients(model: HydroModel) -> FloatArray:
         *np.linalg.inv(model.mass_matrix).ravel().tolist(),
     ]
     array = np.array(values, dtype=np.float64)
-    assert array.shape == (_N_COEFFICIENTS,)
+    assert array.shape == (N_COEFFICIENTS,)  # plant_kernels' layout, in its order
     array.setflags(write=False)
     return array
-
-
-@numba.njit(cache=True)
-def fossen_acceleration(
-    c: FloatArray,
-    nu: Vec6,
-    down: Vec3,
-    current_body: Vec3,
-    scale: float,
-    wrench: Vec6,
-) -> Vec6:  # pragma: no cover - compiled (tests call it through numba)
-    """ν̇ at CO from (M_RB + M_A)ν̇ = τ − C_RB(ν)ν − C_A(ν_r)ν_r − D(ν_r)ν_r − g(η) + M_A·ν̇_c.
-
-    Fossen 2011: C_RB in its linear-velocity-independent form about CO (eq. 3.60), written
-    out as m·ω×v_g and m·r_g×(ω×v) + ω×(I_o·ω); C_A(ν_r) of a diagonal added mass (eq. 6.43),
-    −C_A·ν_r = [a₁×ω; a₁×v_r + a₂×ω] with a = diag(coriolis)·ν_r; D diagonal, linear plus
-    quadratic; g(η) weight W at r_g and buoyancy B·scale at r_b along the world vertical. The
-    current is constant in NED (irrotational), so its body derivative is ν̇_c = [v_c×ω; 0].
-
-    Args:
-        c: the model's :func:`coefficients`.
-        nu: body velocity (u, v, w, p, q, r) at CO [m/s, rad/s], FRD.
-        down: the world's down direction in the body, Rᵀ·(0, 0, 1) (unit), FRD.
-        current_body: water velocity in the body [m/s], FRD.
-        scale: submerged fraction of the hull, in [0, 1].
-        wrench: applied body wrench (X, Y, Z, K, M, N) [N, N·m], FRD, moments about the CoG.
-
-    Returns:
-        (u̇, v̇, ẇ, ṗ, q̇, ṙ), body-frame derivatives of ν [m/s², rad/s²].
-    """
-    u, v, w, p, q, r = nu
-    gx, gy, gz = down
-    uc, vc, wc = current_body
-    fx, fy, fz, mx, my, mz = wrench
-    m = c[_MASS]
-    xg, yg, zg = c[_COG], c[_COG + 1], c[_COG + 2]
-    ur, vr, wr = u - uc, v - vc, w - wc
-    # −C_RB(ν)ν: −m·ω×v_g (v_g = v + ω×r_g) and −m·r_g×(ω×v) − ω×(I_o·ω)
-    ugx, ugy, ugz = u + q * zg - r * yg, v + r * xg - p * zg, w + p * yg - q * xg
-    t0 = -m * (q * ugz - r * ugy)
-    t1 = -m * (r * ugx - p * ugz)
-    t2 = -m * (p * ugy - q * ugx)
-    ox, oy, oz = q * w - r * v, r * u - p * w, p * v - q * u  # ω×v
-    t3 = -m * (yg * oz - zg * oy)
-    t4 = -m * (zg * ox - xg * oz)
-    t5 = -m * (xg * oy - yg * ox)
-    i = _INERTIA
-    hx = c[i] * p + c[i + 1] * q + c[i + 2] * r
-    hy = c[i + 3] * p + c[i + 4] * q + c[i + 5] * r
-    hz = c[i + 6] * p + c[i + 7] * q + c[i + 8] * r
-    t3 -= q * hz - r * hy
-    t4 -= r * hx - p * hz
-    t5 -= p * hy - q * hx
-    # −C_A(ν_r)ν_r = [a₁×ω; a₁×v_r + a₂×ω]
-    k = _CORIOLIS
-    ax, ay, az = c[k] * ur, c[k + 1] * vr, c[k + 2] * wr
-    bx, by, bz = c[k + 3] * p, c[k + 4] * q, c[k + 5] * r
-    t0 += ay * r - az * q
-    t1 += az * p - ax * r
-    t2 += ax * q - ay * p
-    t3 += ay * wr - az * vr + by * r - bz * q
-    t4 += az * ur - ax * wr + bz * p - bx * r
-    t5 += ax * vr - ay * ur + bx * q - by * p
-    # −D(ν_r)ν_r (the derivatives are ≤ 0)
-    lin, quad = _LINEAR, _QUADRATIC
-    t0 += (c[lin] + c[quad] * abs(ur)) * ur
-    t1 += (c[lin + 1] + c[quad + 1] * abs(vr)) * vr
-    t2 += (c[lin + 2] + c[quad + 2] * abs(wr)) * wr
-    t3 += (c[lin + 3] + c[quad + 3] * abs(p)) * p
-    t4 += (c[lin + 4] + c[quad + 4] * abs(q)) * q
-    t5 += (c[lin + 5] + c[quad + 5] * abs(r)) * r
-    # −g(η) = [(W − B·s)·down; (W·r_g − B·s·r_b)×down]
-    weight, buoyancy = c[_WEIGHT], c[_BUOYANCY] * scale
-    net = weight - buoyancy
-    t0 += net * gx
-    t1 += net * gy
-    t2 += net * gz
-    lx = weight * xg - buoyancy * c[_COB]
-    ly = weight * yg - buoyancy * c[_COB + 1]
-    lz = weight * zg - buoyancy * c[_COB + 2]
-    t3 += ly * gz - lz * gy
-    t4 += lz * gx - lx * gz
-    t5 += lx * gy - ly * gx
-    # τ about CO: the force, and the moment about the CoG plus r_g×F
-    t0 += fx
-    t1 += fy
-    t2 += fz
-    t3 += mx + yg * fz - zg * fy
-    t4 += my + zg * fx - xg * fz
-    t5 += mz + xg * fy - yg * fx
-    # + M_A·ν̇_c, ν̇_c = [v_c×ω; 0]
-    a = _ADDED
-    t0 += c[a] * (vc * r - wc * q)
-    t1 += c[a + 1] * (wc * p - uc * r)
-    t2 += c[a + 2] * (uc * q - vc * p)
-    # ν̇ = M⁻¹·τ
-    tau = (t0, t1, t2, t3, t4, t5)
-    out = [0.0] * 6
-    for row in range(6):
-        total = 0.0
-        for col in range(6):
-            total += c[_MASS_INVERSE + 6 * row + col] * tau[col]
-        out[row] = total
-    return (out[0], out[1], out[2], out[3], out[4], out[5])
 
 
 def body_acceleration(
@@ -340,7 +221,7 @@ def body_acceleration(
     current_ned: ArrayLike = (0.0, 0.0, 0.0),
     buoyancy_scale: float = 1.0,
 ) -> FloatArray:
-    """(6,) ν̇ at CO: :func:`fossen_acceleration` for arrays (tests, analysis, plots).
+    """(6,) ν̇ at CO: :func:`~.plant_kernels.fossen_acceleration` for arrays (tests, analysis).
 
     Args:
         model: the vehicle.

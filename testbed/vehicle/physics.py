@@ -13,9 +13,10 @@ pybullet's body frame is placed at the CoG: its base position *is* the centre of
 is no inertial-frame offset to get wrong, and the hydrodynamic origin CO sits at −r_g from it.
 M = M_RB + M_A about CO is then general (r_g ≠ 0 couples surge–pitch and sway–roll); its inverse
 is computed once (:func:`testbed.vehicle.hydrodynamics.coefficients`); each step's arithmetic
-is one compiled function, :func:`_pybullet_wrench`.
+is one compiled function, :func:`~.plant_kernels.pybullet_wrench`.
 
-Frames: this module is the only place that knows pybullet is z-up. pybullet's world is NED
+Frames: this module (with its compiled arithmetic, :mod:`.plant_kernels`) is the only place that
+knows pybullet is z-up. pybullet's world is NED
 rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
 rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x, y, z) maps to
 (w, x, −y, −z). Nothing outside this module imports pybullet.
@@ -39,14 +40,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
 from testbed.config import check
 from testbed.vehicle.camera import CameraConfig, CameraPose
-from testbed.vehicle.hydrodynamics import HydroModel, coefficients, fossen_acceleration, load_model
+from testbed.vehicle.hydrodynamics import HydroModel, coefficients, load_model
+from testbed.vehicle.plant_kernels import pybullet_state, pybullet_wrench
 from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
 from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
@@ -412,7 +413,7 @@ class Physics:
                 raw = self._raw = self._read()
             position, orientation, linear, angular = raw
             rotation = pybullet.getMatrixFromQuaternion(orientation)
-            state = _pybullet_state(self._cog, position, orientation, rotation, linear, angular)
+            state = pybullet_state(self._cog, position, orientation, rotation, linear, angular)
             floats = self._floats = (self._steps * self.dt_s, *state)
         return floats
 
@@ -487,8 +488,9 @@ class Physics:
     # --- internals ---------------------------------------------------------------------------
 
     def _make_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
-        """One step: pybullet's reads, the compiled :func:`_pybullet_wrench`, force, torque and
-        pybullet's step (attribute lookups bound once: this runs 240 times a simulated second)."""
+        """One step: pybullet's reads, the compiled :func:`~.plant_kernels.pybullet_wrench`,
+        force, torque and pybullet's step (attribute lookups bound once: this runs 240 times a
+        simulated second)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
         apply_force = pybullet.applyExternalForce
@@ -514,7 +516,7 @@ class Physics:
             else:  # read since the last step (by state_floats): still current
                 (_, _, height), orientation, linear, angular = raw
             rotation = matrix_from_quaternion(orientation)
-            force, torque, nu_dot = _pybullet_wrench(
+            force, torque, nu_dot = pybullet_wrench(
                 fossen, rigid, height, rotation, linear, angular, wrench_body, current_ned
             )
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
@@ -535,118 +537,6 @@ class Physics:
         pos, orn = pybullet.getBasePositionAndOrientation(self.body_id, cid)
         lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
         return (pos, orn, lin, ang)
-
-
-@numba.njit(cache=True)
-def _body_velocity(
-    rotation: tuple[float, ...], linear: Vec3, angular: Vec3
-) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
-    """pybullet's world velocities in the body FRD: R_ned = diag(1, −1, −1)·R·diag(1, −1, −1),
-    so body FLU velocities are Rᵀ·v and FRD is (x, −y, −z) of those.
-
-    Args:
-        rotation: pybullet's ``getMatrixFromQuaternion`` of the base orientation (row-major 9).
-        linear: the CoG's velocity, pybullet's world [m/s].
-        angular: angular velocity, pybullet's world [rad/s].
-
-    Returns:
-        (u_g, v_g, w_g, p, q, r): the CoG's velocity and the rates in the body FRD.
-    """
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
-    vx, vy, vz = linear
-    wx, wy, wz = angular
-    return (
-        r00 * vx + r10 * vy + r20 * vz,
-        -(r01 * vx + r11 * vy + r21 * vz),
-        -(r02 * vx + r12 * vy + r22 * vz),
-        r00 * wx + r10 * wy + r20 * wz,
-        -(r01 * wx + r11 * wy + r21 * wz),
-        -(r02 * wx + r12 * wy + r22 * wz),
-    )
-
-
-@numba.njit(cache=True)
-def _pybullet_state(
-    cog: Vec3,
-    position: Vec3,
-    orientation: tuple[float, float, float, float],
-    rotation: tuple[float, ...],
-    linear: Vec3,
-    angular: Vec3,
-) -> tuple[Vec3, Quat, Vec6]:  # pragma: no cover - compiled (tests call it through Physics)
-    """(CO position NED, attitude quaternion wxyz body FRD → NED, ν at CO FRD) from pybullet's
-    reads of the base (the CoG): position and orientation (x, y, z, w), its matrix, and the
-    world velocities. CO is at −r_g from the CoG: position = p_g − R_ned·r_g."""
-    xg, yg, zg = cog
-    px, py, pz = position
-    ox, oy, oz, ow = orientation
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
-    # R_ned·r_g with R_ned = diag(1, −1, −1)·R·diag(1, −1, −1)
-    north = px - (r00 * xg - r01 * yg - r02 * zg)
-    east = -py - (-r10 * xg + r11 * yg + r12 * zg)
-    down = -pz - (-r20 * xg + r21 * yg + r22 * zg)
-    ug, vg, wg, p, q, r = _body_velocity(rotation, linear, angular)
-    nu = (ug - (q * zg - r * yg), vg - (r * xg - p * zg), wg - (p * yg - q * xg), p, q, r)
-    return (north, east, down), (ow, ox, -oy, -oz), nu
-
-
-@numba.njit(cache=True)
-def _pybullet_wrench(
-    fossen: FloatArray,
-    rigid: tuple[float, ...],
-    height: float,
-    rotation: tuple[float, ...],
-    linear: Vec3,
-    angular: Vec3,
-    wrench: Vec6,
-    current_ned: Vec3,
-) -> tuple[Vec3, Vec3, Vec6]:  # pragma: no cover - compiled (tests call it through Physics)
-    """The body force and torque that give pybullet's rigid body Fossen's acceleration.
-
-    From pybullet's state (the CoG's height z-up, R body FLU → world as its row-major matrix,
-    the CoG's world velocity and the world angular velocity), the body velocity at CO, the
-    down direction and the current in the body FRD and the submerged fraction go to
-    :func:`~testbed.vehicle.hydrodynamics.fossen_acceleration`; its ν̇ becomes the force
-    m·(v̇_o + ω̇×r_g + ω×v_g) and the torque I_g·ω̇ + ω×I_g·ω (pybullet subtracts ω×I_g·ω
-    itself), in the body FLU frame (x, −y, −z of FRD).
-
-    Args:
-        fossen: the model's :func:`~testbed.vehicle.hydrodynamics.coefficients`.
-        rigid: (m, Ixx, Iyy, Izz, r_g (3), r_b − r_g (3), 1/hull height) [kg, kg·m², m, 1/m].
-        height: pybullet's base (CoG) z, up [m].
-        rotation: pybullet's ``getMatrixFromQuaternion`` of the base orientation (9).
-        linear: the CoG's velocity, pybullet's world [m/s].
-        angular: angular velocity, pybullet's world [rad/s].
-        wrench: applied body wrench [N, N·m], FRD, about the CoG.
-        current_ned: water velocity [m/s], NED.
-
-    Returns:
-        (force, torque) in the body FLU frame [N, N·m], and ν̇ at CO (FRD) [m/s², rad/s²].
-    """
-    m, ixx, iyy, izz, xg, yg, zg, dbx, dby, dbz, inv_height = rigid
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
-    ug, vg, wg, p, q, r = _body_velocity(rotation, linear, angular)
-    gx, gy, gz = -r20, r21, r22  # NED down in the body: the last row of R_ned
-    cn, ce, cd = current_ned
-    uc = r00 * cn - r10 * ce - r20 * cd
-    vc = -(r01 * cn - r11 * ce - r21 * cd)
-    wc = -(r02 * cn - r12 * ce - r22 * cd)
-    # submerged fraction from the CoB's depth (the CoG's is −height)
-    scale = min(1.0, max(0.0, 0.5 + (gx * dbx + gy * dby + gz * dbz - height) * inv_height))
-    nu = (ug - q * zg + r * yg, vg - r * xg + p * zg, wg - p * yg + q * xg, p, q, r)
-    nu_dot = fossen_acceleration(fossen, nu, (gx, gy, gz), (uc, vc, wc), scale, wrench)
-    du, dv, dw, dp, dq, dr = nu_dot
-    force = (
-        m * (du + dq * zg - dr * yg + q * wg - r * vg),
-        -m * (dv + dr * xg - dp * zg + r * ug - p * wg),
-        -m * (dw + dp * yg - dq * xg + p * vg - q * ug),
-    )
-    torque = (
-        ixx * dp + (izz - iyy) * q * r,
-        -iyy * dq - (ixx - izz) * r * p,
-        -izz * dr - (iyy - ixx) * p * q,
-    )
-    return force, torque, nu_dot
 
 
 def _disconnect(client_id: int) -> None:
