@@ -2,14 +2,20 @@
 
 Usage::
 
-    testbed mavlink [SCENARIO] [--gcs URL]... [--duration S] [--out DIR] [options]
+    testbed mavlink [SCENARIO] [--gcs URL]... [--link PRESET] [--operator-port P --vehicle-port P]
+                    [--duration S] [--out DIR] [options]
 
 Runs the scenario's vehicle in real time with an ArduSub-compatible MAVLink endpoint as its
-pilot (:func:`testbed.run.mavlink_run.run_mavlink`). ``--gcs`` (repeatable) names a link:
+pilot (:func:`testbed.run.mavlink_run.run_mavlink`). With ``--link PRESET`` (any channel
+preset: ``s100``, ``m64``, ``s2c``, ``tether``) both nodes run in real time over that simulated
+link with the scenario's codec and medium access, and the endpoint is a gateway on the operator
+node (:func:`testbed.run.mavlink_gateway.run_gateway`); ``--operator-port`` and
+``--vehicle-port`` (with ``--modem``, ``--baud``, ``--rtscts`` as in ``testbed hil``) put the
+two nodes' frames through real serial modems instead. ``--gcs`` (repeatable) names a link:
 ``udpout:HOST:PORT`` (default ``udpout:127.0.0.1:14550``, where QGroundControl and MAVProxy
 listen), ``udpin:HOST:PORT``, ``tcpin:HOST:PORT`` or ``serial:PORT[,BAUD]`` / a pyserial URL;
 addresses are 127.0.0.1 unless given. Options: ``--set K=V`` (repeatable), ``--seed``,
-``--force``, ``--no-plots``. ``--link`` (the narrow-link gateway) is refused: not yet.
+``--force``, ``--no-plots``.
 
 Outputs are those of ``testbed run`` (``metrics.json`` last, ``events.csv``, ``series.csv``,
 plots), plus ``metrics.json``'s ``mavlink`` section
@@ -34,6 +40,7 @@ from testbed.config import ConfigError
 __all__ = ["add_mavlink_parser", "format_mavlink_summary", "run_mavlink_command"]
 
 _DEFAULT_GCS = "udpout:127.0.0.1:14550"
+_MODEMS = ("s100", "evologics", "m64", "raw")  # = testbed.hil.MODEM_KINDS
 
 
 def add_mavlink_parser(sub: Subparsers) -> None:
@@ -64,8 +71,23 @@ def add_mavlink_parser(sub: Subparsers) -> None:
         "--duration", type=float, default=None, help="seconds to run (default: the scenario's)"
     )
     parser.add_argument(
-        "--link", default=None, help="the narrow-link gateway (not implemented yet: refused)"
+        "--link",
+        default=None,
+        metavar="PRESET",
+        help="gateway through the narrow link: both nodes in real time over this channel preset "
+        "(s100, m64, s2c, tether), MAVLink on the operator node",
     )
+    parser.add_argument(
+        "--operator-port", default=None, help="gateway over real modems: the operator's port"
+    )
+    parser.add_argument(
+        "--vehicle-port", default=None, help="gateway over real modems: the vehicle's port"
+    )
+    parser.add_argument(
+        "--modem", choices=_MODEMS, default="s100", help="modem on the ports (default: s100)"
+    )
+    parser.add_argument("--baud", type=int, default=None, help="modem port speed [bit/s]")
+    parser.add_argument("--rtscts", action="store_true", help="RTS/CTS flow control")
     add_set_option(parser, "override a scenario key, e.g. --set vehicle.thrusters=bluerov2-heavy")
     parser.add_argument("--seed", type=int, default=None, help="random seed (vehicle sensors)")
     parser.add_argument(
@@ -86,11 +108,25 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     from testbed.run.outputs import prepare_out_dir
     from testbed.run.scenario import load_scenario
 
+    ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
+    hil = any(ports.values())
+    if hil and not all(ports.values()):
+        missing = "--vehicle-port" if args.operator_port else "--operator-port"
+        raise ConfigError(f"{missing}: required with the other modem port")
+    if hil and args.operator_port == args.vehicle_port:
+        raise ConfigError("--vehicle-port: must differ from --operator-port")
+    if args.baud is not None and args.baud <= 0:
+        raise ConfigError(f"--baud: must be > 0, got {args.baud}")
+    overrides = list(args.overrides)
     if args.link is not None:
-        raise ConfigError(
-            "--link: the MAVLink gateway through the narrow link is not implemented yet; "
-            "run without --link (the ground station talks to the vehicle directly)"
-        )
+        from testbed.channel import preset_names
+
+        if args.link not in preset_names():
+            raise ConfigError(
+                f"--link: unknown preset {args.link!r}; one of {', '.join(preset_names())}"
+            )
+        overrides.insert(0, f"link.preset={args.link}")
+    gateway = args.link is not None or hil
     urls = args.gcs or [_DEFAULT_GCS]
     for url in urls:
         try:
@@ -98,7 +134,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
         except ValueError as err:
             raise ConfigError(f"--gcs: {err}") from None
     check_seed(args.seed)
-    scenario = load_scenario(args.scenario, args.overrides)
+    scenario = load_scenario(args.scenario, overrides)
     duration = scenario.duration_s if args.duration is None else args.duration
     if not (math.isfinite(duration) and duration > 0.0):
         raise ConfigError(f"--duration: must be > 0 s, got {duration:g}")
@@ -118,16 +154,59 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
         for link in links:
             link.close()
         raise
+    endpoints: dict[str, Any] = {}
+    if hil:
+        endpoints = _open_modems(args, ports, links)
+    where = ", ".join(urls)
+    if gateway:
+        via = f"{args.modem} modems" if hil else f"the {scenario.link.preset} link"
+        what = f"gateway to the vehicle through {via} ({scenario.link.codec})"
+    else:
+        what = "ArduSub vehicle (sysid 1)"
     print(
-        f"testbed: mavlink: ArduSub vehicle (sysid 1) on {', '.join(urls)}; running "
-        f"{duration:g} s, Ctrl-C ends early",
+        f"testbed: mavlink: {what} on {where}; running {duration:g} s, Ctrl-C ends early",
         file=sys.stderr,
         flush=True,
     )
-    result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
+    if gateway:
+        from testbed.run.mavlink_gateway import run_gateway
+
+        result = run_gateway(
+            scenario,
+            links,
+            seed=args.seed,
+            duration_s=duration,
+            hil=endpoints or None,
+            modem=args.modem if hil else "",
+        )
+    else:
+        result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
     return finish_run(
         result, out, plots=not args.no_plots, planned_s=duration, summary=format_mavlink_summary
     )
+
+
+def _open_modems(
+    args: argparse.Namespace, ports: dict[str, str], links: list[Any]
+) -> dict[str, Any]:
+    """The two HIL modem endpoints (on failure the links and what opened are closed)."""
+    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+
+    open_errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
+    endpoints: dict[str, Any] = {}
+    try:
+        for role, url in ports.items():
+            settings = PortSettings(url, args.modem, role, args.baud, args.rtscts)
+            try:
+                endpoints[role] = open_endpoint(settings)
+            except open_errors as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise ConfigError(f"--{role}-port: cannot open {url}: {reason}") from None
+    except BaseException:
+        for item in [*links, *endpoints.values()]:
+            item.close()
+        raise
+    return endpoints
 
 
 def format_mavlink_summary(metrics: dict[str, Any], out: Path) -> str:
@@ -149,6 +228,12 @@ def format_mavlink_summary(metrics: dict[str, Any], out: Path) -> str:
         f"  sent {sent} packets; failsafes {section['failsafes'] or 'none'}",
         f"  GCS-to-thruster p50 {ms(latency['p50'])} p95 {ms(latency['p95'])} max "
         f"{ms(latency['max'])} (n {latency['n']})",
-        f"  wrote {out}/",
     ]
+    if section.get("gateway"):
+        age = section["state_age_s"]
+        lines.append(
+            f"  vehicle state age on shore mean {ms(1000 * age['mean'])} p95 "
+            f"{ms(1000 * age['p95'])}; stale warnings {section['stale_warnings']}"
+        )
+    lines.append(f"  wrote {out}/")
     return "\n".join(lines)

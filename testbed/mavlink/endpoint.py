@@ -362,20 +362,29 @@ class VehicleEndpoint:
 
     # ------------------------------------------------------------------------ update
 
+    def state_source(self, now_s: float) -> tuple[Entity, float]:
+        """The entity holding the vehicle's state and the time [s] that state describes: here
+        the vehicle's own entity, now. A shore gateway (:mod:`testbed.mavlink.shore`) returns
+        its mirrored copy and the copy's sample time, so the telemetry carries its true age."""
+        return self.vehicle, now_s
+
     def snapshot(self, now_s: float) -> VehicleSnapshot:
-        """The vehicle as the telemetry reports it now."""
+        """The vehicle as the telemetry reports it now (the state's own time in ``time_s``,
+        the endpoint's clock in ``clock_s``)."""
         capacity_ah = self.params["BATT_CAPACITY"] / 1000.0
         remaining = max(0, min(100, round(100.0 * (1.0 - self._consumed_ah / capacity_ah))))
+        entity, state_s = self.state_source(now_s)
         snapshot = read_vehicle(
             self.world,
-            self.vehicle,
-            time_s=now_s,
+            entity,
+            time_s=state_s,
             velocity=self._velocity,
             voltage_v=self.options.battery_voltage_v,
             remaining_pct=remaining,
             rc_channels=tuple(self.rc.channels),
             gain=self.gain,
             critical=self.failsafe.active,
+            clock_s=now_s,
         )
         self._snapshot = snapshot
         return snapshot

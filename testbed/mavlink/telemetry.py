@@ -120,6 +120,9 @@ class VehicleSnapshot:
         gain: the joystick gain.
         critical: a failsafe is active (heartbeat system_status CRITICAL).
         has_position: the vehicle has a position fix.
+        clock_s: the endpoint's own time now [s] (SYSTEM_TIME); NaN = ``time_s``. A shore
+            gateway reports the state's sample time in ``time_s`` and its clock here, so a
+            ground station sees how old the state is.
     """
 
     time_s: float
@@ -140,6 +143,7 @@ class VehicleSnapshot:
     gain: float
     critical: bool
     has_position: bool
+    clock_s: float = math.nan
 
     @property
     def time_boot_ms(self) -> int:
@@ -171,17 +175,25 @@ def read_vehicle(
     rc_channels: tuple[int, ...],
     gain: float,
     critical: bool,
+    clock_s: float = math.nan,
 ) -> VehicleSnapshot:
-    """Snapshot the vehicle-owned components of ``vehicle`` at ``time_s`` [s]; the rest is the
-    endpoint's (battery, RC inputs, gain, failsafe). ``velocity`` is folded the new position.
-    ArduSub's throttle is read from RC channel 3 (1100..1900 µs → 0..1)."""
+    """Snapshot the vehicle-owned components of ``vehicle``, a state of time ``time_s`` [s]
+    read at the endpoint's ``clock_s`` [s] (NaN: the same); the rest is the endpoint's
+    (battery, RC inputs, gain, failsafe). ``velocity`` is folded the new position. Attitude:
+    the IMU's, else the odometry's (a mirrored copy on shore). ArduSub's throttle is read from
+    RC channel 3 (1100..1900 µs → 0..1)."""
     imu = world.get(vehicle, ImuReading)
     depth = world.get(vehicle, DepthReading)
     odometry = world.get(vehicle, Odometry)
     armed = world.get(vehicle, Armed)
     mode = world.get(vehicle, ActiveMode)
     output = world.get(vehicle, ThrusterOutput)
-    q = (1.0, 0.0, 0.0, 0.0) if imu is None else imu.quaternion_wxyz
+    if imu is not None:
+        q = imu.quaternion_wxyz
+    elif odometry is not None:  # a mirrored copy (shore gateway): the odometry's attitude
+        q = odometry.quaternion_wxyz
+    else:
+        q = (1.0, 0.0, 0.0, 0.0)
     position = (0.0, 0.0, 0.0) if odometry is None else odometry.position_ned_m
     if depth is not None:
         position = (position[0], position[1], depth.depth_m)
@@ -205,6 +217,7 @@ def read_vehicle(
         gain=gain,
         critical=critical,
         has_position=world.has(vehicle, PositionReading),
+        clock_s=clock_s,
     )
 
 
@@ -329,7 +342,8 @@ def _battery_status(s: VehicleSnapshot) -> mav.MAVLink_message:
 
 
 def _system_time(s: VehicleSnapshot) -> mav.MAVLink_message:
-    return mav.MAVLink_system_time_message(0, s.time_boot_ms)
+    clock_s = s.time_s if math.isnan(s.clock_s) else s.clock_s
+    return mav.MAVLink_system_time_message(0, int(clock_s * 1000.0) & 0xFFFFFFFF)
 
 
 def _servo_output_raw(s: VehicleSnapshot) -> mav.MAVLink_message:

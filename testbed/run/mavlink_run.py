@@ -58,6 +58,7 @@ from testbed.vehicle.vehicle import Vehicle, VehicleConfig
 __all__ = [
     "FRAME_CONFIGS",
     "MavlinkVehicleNode",
+    "endpoint_section",
     "mavlink_metrics",
     "mavlink_vehicle_config",
     "run_mavlink",
@@ -255,22 +256,30 @@ def run_mavlink(
 def mavlink_metrics(node: MavlinkVehicleNode, duration_s: float) -> dict[str, Any]:
     """The ``mavlink`` section of ``metrics.json``.
 
-    Keys: the endpoint's counters (``received`` and ``sent`` by message type, ``accepted``,
-    ``rejected`` by reason, ``pilot_inputs``, ``param_sets``, ``failsafes``, ``bytes_in``,
-    ``bytes_out``); ``telemetry_hz`` (packets sent per second, by type); ``links`` (per URL:
-    bytes and packets in and out, drops); ``gcs_to_thruster_ms``, ``scheduler_lateness_ms``
-    and ``frame_compute_ms`` (``p50``, ``p95``, ``max``, ``mean``, ``n``; module docstring);
+    Keys: :func:`endpoint_section`'s; ``gcs_to_thruster_ms``, ``scheduler_lateness_ms`` and
+    ``frame_compute_ms`` (``p50``, ``p95``, ``max``, ``mean``, ``n``; module docstring);
     ``frame_period_s``.
     """
-    endpoint = node.endpoint
+    counters = endpoint_section(node.endpoint, node.links, duration_s)
+    counters["gcs_to_thruster_ms"] = latency_summary_ms(node.gcs_to_thruster_ns)
+    counters["scheduler_lateness_ms"] = latency_summary_ms(node.lateness_ns)
+    counters["frame_compute_ms"] = latency_summary_ms(node.compute_ns)
+    counters["frame_period_s"] = 1.0 / node.vehicle.config.control_rate_hz
+    return counters
+
+
+def endpoint_section(
+    endpoint: VehicleEndpoint, links: Sequence[Link], duration_s: float
+) -> dict[str, Any]:
+    """An endpoint's counters for ``metrics.json``: ``received`` and ``sent`` by message type,
+    ``accepted``, ``rejected`` by reason, ``pilot_inputs``, ``param_sets``, ``failsafes``,
+    ``bytes_in``, ``bytes_out`` (:meth:`~testbed.mavlink.VehicleEndpoint.counters`);
+    ``telemetry_hz`` (packets sent per second, by type); ``links`` (per URL: bytes and packets
+    in and out, drops)."""
     counters: dict[str, Any] = endpoint.counters()
     sent: dict[str, int] = counters["sent"]
     counters["telemetry_hz"] = {
         name: count / duration_s if duration_s > 0 else math.nan for name, count in sent.items()
     }
-    counters["links"] = {link.url: link.counters() for link in node.links}
-    counters["gcs_to_thruster_ms"] = latency_summary_ms(node.gcs_to_thruster_ns)
-    counters["scheduler_lateness_ms"] = latency_summary_ms(node.lateness_ns)
-    counters["frame_compute_ms"] = latency_summary_ms(node.compute_ns)
-    counters["frame_period_s"] = 1.0 / node.vehicle.config.control_rate_hz
+    counters["links"] = {link.url: link.counters() for link in links}
     return counters

@@ -21,7 +21,8 @@ def free_udp_port() -> int:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--link", "s100"], "--link: the MAVLink gateway through the narrow link is not"),
+        (["--link", "nope"], "--link: unknown preset 'nope'"),
+        (["--operator-port", "/dev/null"], "--vehicle-port: required"),
         (["--gcs", "udpin:127.0.0.1:99999"], "--gcs: 'udpin:127.0.0.1:99999': expected"),
         (["--gcs", "udpout:nowhere"], "--gcs: 'udpout:nowhere': expected"),
         (["--gcs", "serial:/dev/no-such-port"], "--gcs: cannot open serial:/dev/no-such-port"),

@@ -1,0 +1,157 @@
+"""The narrow-link gateway's shore side: the same MAVLink endpoint, piloting the operator's world.
+
+:class:`ShoreEndpoint` is a :class:`~testbed.mavlink.VehicleEndpoint` given the operator
+station's world: the intents it writes (``MovementCommand``, ``ArmRequest``, ``ModeRequest``,
+``DepthSetpoint``) are the station's, which the node's link codec turns into orders at the
+token rate; the state it reports is the copy the codec mirrored from the vehicle's replies
+(``Odometry``, ``Armed``, ``ActiveMode``, origin REMOTE). Every MAVLink behaviour (parameters,
+modes, arming, sticks, failsafes, stream rates) is the base class's; parameters and mission
+requests are answered from the local table, so a ground station's connection never waits on the
+link.
+
+What it adds is honesty about the link (:class:`LinkFacts`):
+
+- telemetry carries the **state's** time: ``time_boot_ms`` of ATTITUDE, GLOBAL_POSITION_INT,
+  VFR_HUD's source… is the estimated sample time of the last state received (its arrival less
+  the reply's transit, ``arrival_correction_s``), SYSTEM_TIME the gateway's clock, so a ground
+  station sees stale state as stale;
+- NAMED_VALUE_FLOAT ``LinkAge`` = the state's age [s], :data:`LINK_AGE_RATE_HZ` on every link;
+- STATUSTEXT: once per link on first contact, the link's name, bitrate and state period; a
+  warning when the state is older than ``stale_after_s`` (repeated every
+  :data:`STALE_REPEAT_S`), and a notice when it is fresh again.
+
+Before the first state arrives the vehicle reads disarmed, MANUAL, at the origin, with the
+state time 0 (age = the gateway's uptime).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.common.components import Odometry
+from testbed.ecs import Entity, Origin, World
+from testbed.mavlink.endpoint import Channel, EndpointOptions, VehicleEndpoint
+
+__all__ = ["LINK_AGE_RATE_HZ", "STALE_REPEAT_S", "LinkFacts", "ShoreEndpoint"]
+
+LINK_AGE_RATE_HZ = 2.0
+"""NAMED_VALUE_FLOAT ``LinkAge`` rate [Hz]."""
+STALE_REPEAT_S = 10.0
+"""A stale-state warning is repeated this often while the state stays stale [s]."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinkFacts:
+    """What the gateway knows of the narrow link behind it (from the scenario's link model).
+
+    Attributes:
+        name: the link's name (channel preset, or the HIL modem).
+        bitrate_bps: its bitrate [bit/s].
+        state_period_s: expected time between state updates [s] (the token gap, or the
+            vehicle's send period).
+        arrival_correction_s: subtracted from the mirrored state's stamp to get its sample
+            time [s]: the reply's transit (intrinsic delay + airtime) on a codec that stamps the
+            state with its arrival (teleop), 0 on one that carries the sample time (change-set).
+        stale_after_s: state older than this [s] is reported stale (STATUSTEXT warning).
+    """
+
+    name: str
+    bitrate_bps: float
+    state_period_s: float
+    arrival_correction_s: float
+    stale_after_s: float
+
+    @property
+    def banner(self) -> str:
+        """The first-contact STATUSTEXT (≤ 50 characters)."""
+        rate = (
+            f"{self.bitrate_bps / 1000:.3g} kbit/s"
+            if self.bitrate_bps < 1e6
+            else f"{self.bitrate_bps / 1e6:.3g} Mbit/s"
+        )
+        return f"Gateway {self.name} {rate}, state/{self.state_period_s:.2g}s"[:50]
+
+
+class ShoreEndpoint(VehicleEndpoint):
+    """The vehicle's MAVLink face on shore (module docstring).
+
+    Args:
+        world: the operator station's world.
+        intents: the station's intents entity.
+        link: what the gateway knows of the link.
+        options: presentation options (``origin`` LOCAL: the station owns its intents).
+
+    Attributes:
+        link: the link facts.
+        stale_warnings: stale-state STATUSTEXT warnings sent.
+        state_age_s: the reported state's age at the last :meth:`update` [s] (inf before any
+            state arrived; ``LinkAge`` then reports the uptime).
+    """
+
+    def __init__(
+        self, world: World, intents: Entity, link: LinkFacts, options: EndpointOptions
+    ) -> None:
+        super().__init__(world, intents, intents, options)
+        self.link = link
+        self.stale_warnings = 0
+        self.state_age_s = math.inf
+        self._announced: set[int] = set()
+        self._stale = False
+        self._next_stale_warning_s = 0.0
+        self._next_age_s = 0.0
+        self._has_state = False
+
+    def state_source(self, now_s: float) -> tuple[Entity, float]:
+        """The mirrored vehicle entity and the estimated sample time of its state [s]."""
+        del now_s
+        for entity, odometry in self.world.query1(Odometry, origin=Origin.REMOTE):
+            self._has_state = True
+            return entity, odometry.sampled_s - self.link.arrival_correction_s
+        return self.intents, 0.0  # nothing mirrored yet: no vehicle components on it
+
+    def update(self, now_s: float) -> None:
+        """The base class's update, then the link's age and warnings (module docstring)."""
+        super().update(now_s)
+        snapshot = self._snapshot
+        state_s = 0.0 if snapshot is None else snapshot.time_s
+        age = max(0.0, now_s - state_s)
+        self.state_age_s = age if self._has_state else math.inf
+        for channel in self.channels:
+            if id(channel) not in self._announced and channel.wire.bytes_in > 0:
+                self._announced.add(id(channel))
+                self._text(channel, mav.MAV_SEVERITY_INFO, self.link.banner)
+        if now_s >= self._next_age_s:
+            self._next_age_s = max(self._next_age_s + 1.0 / LINK_AGE_RATE_HZ, now_s)
+            name = b"LinkAge"
+            self.broadcast(
+                mav.MAVLink_named_value_float_message(int(now_s * 1000) & 0xFFFFFFFF, name, age)
+            )
+        stale = age > self.link.stale_after_s
+        if stale and now_s >= self._next_stale_warning_s:
+            self._next_stale_warning_s = now_s + STALE_REPEAT_S
+            self.stale_warnings += 1
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"Link: vehicle state {age:.1f} s old")
+        elif not stale and self._stale:
+            self._next_stale_warning_s = 0.0
+            self.statustext(mav.MAV_SEVERITY_NOTICE, f"Link: vehicle state fresh ({age:.1f} s)")
+        self._stale = stale
+
+    def _text(self, channel: Channel, severity: int, text: str) -> None:
+        self.queue(channel, mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
+
+    def counters(self) -> dict[str, object]:
+        """The base counters, plus ``stale_warnings`` and ``link`` (the facts)."""
+        out = super().counters()
+        out["stale_warnings"] = self.stale_warnings
+        link = self.link
+        out["link"] = {
+            "name": link.name,
+            "bitrate_bps": link.bitrate_bps,
+            "state_period_s": link.state_period_s,
+            "arrival_correction_s": link.arrival_correction_s,
+            "stale_after_s": link.stale_after_s,
+        }
+        return out

@@ -1,0 +1,181 @@
+"""The MAVLink gateway through the narrow link, end to end in real time: pymavlink's ``mavutil``
+drives the simulated vehicle through the shore endpoint and the simulated s100 link (and the
+tether), and what it sees and what the run measured match the link model's closed forms.
+
+Closed forms (REFERENCE.md §1.6–1.8; docs/channel.md): a ``Move`` order is a 13-B frame, a
+state reply a 20-B frame; each crossing takes the intrinsic delay plus its airtime,
+``D_up = 85.28 + 54.7 ms``, ``D_down = 85.28 + 84.2 ms``; orders leave once per token gap
+``T = max(13, 13)·8/175 s = 0.594 s``. The newest stick read at the gateway waits at most one
+stick interval for the next slot. Every bound adds what the run measured (scheduler lateness,
+compute time, the real interval between the sticks sent), never a wall-clock allowance.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.channel import load_link_config
+from testbed.protocol import encode_frame
+from testbed.run.mavlink_gateway import GATEWAY_PERIOD_S, run_gateway
+from testbed.run.runner import RunResult
+from testbed.run.scenario import load_scenario
+from tests.mavlink.rt_session import GatewaySession
+
+S100 = load_link_config("s100")
+ORDER_BYTES, REPLY_BYTES = 13, 20  # the paper's WAFrame sizes (REFERENCE §1.6)
+D_UP_S = S100.intrinsic_delay_s + 8 * ORDER_BYTES / S100.bitrate_bps
+D_DOWN_S = S100.intrinsic_delay_s + 8 * REPLY_BYTES / S100.bitrate_bps
+GAP_S = ORDER_BYTES * 8 / 175  # telerobotics 2021-01
+FRAME_S = 0.01  # the vehicle's control period
+
+
+def _runner(*overrides: str) -> Any:
+    scenario = load_scenario("s100-teleop-v1", ["metrics.settle_s=2", *overrides])
+
+    def run(links: list[Any], stop: threading.Event) -> RunResult:
+        return run_gateway(scenario, links, duration_s=120.0, stop=stop)
+
+    return run
+
+
+@pytest.fixture
+def session() -> Iterator[GatewaySession]:
+    s = GatewaySession(_runner())
+    yield s
+    s.close()
+
+
+def test_the_paper_frame_sizes_are_the_codec_s() -> None:
+    assert len(encode_frame(bytes(7))) == ORDER_BYTES  # a Move order's payload
+    assert len(encode_frame(bytes(14))) == REPLY_BYTES  # a reply without an image chunk
+
+
+def test_a_ground_station_flies_the_vehicle_through_the_s100_link(
+    session: GatewaySession,
+) -> None:
+    gcs = session.gcs
+    hb = gcs.wait_heartbeat(timeout=15.0)
+    assert hb is not None and (hb.type, hb.autopilot, hb.get_srcSystem()) == (12, 3, 1)
+
+    # parameters come from the shore's cache: the whole table well within one token gap
+    # (through the link it would take ≥ 97 × 37 B × 8 / 1900 bit/s ≈ 15 s)
+    start = time.monotonic()
+    gcs.param_fetch_all()
+    session.until(lambda: gcs.param_state and len(gcs.params) >= 90)
+    assert time.monotonic() - start < GAP_S
+    assert gcs.params["FS_GCS_ENABLE"] == 2
+    gcs.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0, 0, 0)
+    version = session.until(lambda: session.latest.get("AUTOPILOT_VERSION"))
+    assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    banner = session.until(lambda: session.latest.get("STATUSTEXT"))
+    assert banner.text.startswith("Gateway s100 1.9 kbit/s")
+
+    # bad MAVLink into the gateway: counted, never raised, never acted on
+    noise = bytes(b for b in os.urandom(300) if b not in (0xFD, 0xFE))
+    intruder = mav.MAVLink(None, srcSystem=42, srcComponent=190)
+    bad_crc = bytearray(intruder.heartbeat_encode(6, 8, 0, 0, 4).pack(intruder))
+    bad_crc[-1] ^= 0xFF
+    gcs.write(noise + bytes(bad_crc))
+    gcs.write(intruder.manual_control_encode(1, 1000, 0, 500, 0, 0).pack(intruder) * 5)
+
+    # arming is acknowledged on shore at once; the heartbeat shows it only once the vehicle's
+    # state has come back: an order's crossing and a reply's, at the least
+    session.pump(1.0)
+    sent = time.monotonic()
+    gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+    assert session.ack(400) == mav.MAV_RESULT_ACCEPTED
+    session.heartbeat(lambda hb: hb.base_mode & 128)
+    assert time.monotonic() - sent >= D_UP_S + D_DOWN_S
+
+    gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)  # ALT_HOLD
+    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_ACCEPTED
+    session.heartbeat(lambda hb: hb.custom_mode == 2)
+    gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)  # GUIDED: refused
+    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_FAILED
+
+    session.sticks = (1000, 0, 500, 0)  # forward
+    session.pump(6.0)
+    # stale state is not dressed as fresh: the state's time is behind the gateway's clock by
+    # at least the reply's crossing, and the gateway says how old it is
+    attitude, clock = session.latest["ATTITUDE"], session.latest["SYSTEM_TIME"]
+    assert clock.time_boot_ms - attitude.time_boot_ms >= 1000 * D_DOWN_S - 1
+    ages = [m.value for _, m in session.seen["NAMED_VALUE_FLOAT"] if m.name == "LinkAge"]
+    assert len(ages) >= 10 and min(ages[-10:]) >= D_DOWN_S - 1e-3
+
+    session.sticks = (0, 0, 500, 0)
+    gcs.mav.command_long_send(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
+    assert session.ack(400) == mav.MAV_RESULT_ACCEPTED
+    session.heartbeat(lambda hb: not hb.base_mode & 128)
+    stick_gap_s = session.max_stick_gap_s()
+    result = session.finish()
+    m = result.metrics
+    section = m["mavlink"]
+    assert section["rejected"]["wrong_sysid"] == 5
+    assert section["rejected"]["crc"] == 1 and section["rejected"]["garbage"] >= 1
+
+    series = result.recorder.series()
+    forward = series["rx_x"] > 0.4
+    assert forward.any() and series["u"][forward].max() > 0.2  # it moved ahead
+    assert series["armed"].max() == 1.0 and series["armed"][-1] == 0.0
+
+    late_s = section["scheduler_lateness_ms"]["max"] / 1000.0
+    compute_s = section["gateway_compute_ms"]["max"] / 1000.0
+    # command lag (stick read at the gateway → vehicle frame applying it): one crossing, plus
+    # at most one stick interval to the slot, a gateway period and a vehicle frame
+    lag = m["command_lag_s"]
+    high = D_UP_S + stick_gap_s + GATEWAY_PERIOD_S + FRAME_S + late_s
+    assert lag["n"] >= 15
+    assert D_UP_S - late_s <= lag["p50"] <= lag["max"] <= high, (lag, high)
+    wall = section["gcs_to_thruster_ms"]
+    assert wall["n"] >= 15
+    assert 1000 * (D_UP_S - late_s) <= wall["p50"] <= wall["max"] <= 1000 * (high + compute_s)
+    # age of the command on the vehicle: E[lag] + T/2 (renewal-reward, q = 1), to within the
+    # lag's own spread over the finite window
+    window_s = m["sim_s"] - 2.0
+    tolerance = stick_gap_s + GAP_S**2 / window_s + late_s
+    assert m["command_age_s"]["mean"] == pytest.approx(lag["mean"] + GAP_S / 2, abs=tolerance)
+    # age of the vehicle state on shore: a reply's crossing + T/2, plus the state's own age
+    # when the reply left (under one vehicle frame); the age the gateway reports lags the
+    # truth by that part only
+    truth = m["odometry_age_s"]["mean"]
+    low = D_DOWN_S + GAP_S / 2 - GAP_S**2 / window_s - late_s
+    assert low <= truth <= D_DOWN_S + GAP_S / 2 + FRAME_S + tolerance
+    reported = section["state_age_s"]["mean"]
+    assert truth - FRAME_S - tolerance <= reported <= truth + tolerance
+
+
+def test_over_the_tether_the_change_set_gateway_answers_within_a_few_frames() -> None:
+    scenario = load_scenario("tether-teleop-v1", ["metrics.settle_s=1"])
+    session = GatewaySession(
+        lambda links, stop: run_gateway(scenario, links, duration_s=60.0, stop=stop)
+    )
+    try:
+        gcs = session.gcs
+        assert gcs.wait_heartbeat(timeout=15.0) is not None
+        gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        session.heartbeat(lambda hb: hb.base_mode & 128)
+        session.sticks = (1000, 0, 500, 0)
+        session.pump(3.0)
+        result = session.finish()
+    finally:
+        session.close()
+    section = result.metrics["mavlink"]
+    tether = load_link_config("tether")
+    late_s = section["scheduler_lateness_ms"]["max"] / 1000.0
+    # change-set every 10 ms at 100 Hz: a gateway period, an uplink period, the tether's
+    # crossing, a vehicle frame
+    bound_ms = 1000 * (GATEWAY_PERIOD_S + 0.01 + tether.intrinsic_delay_s + FRAME_S + late_s)
+    wall = section["gcs_to_thruster_ms"]
+    assert wall["n"] >= 30 and wall["p50"] <= bound_ms + section["gateway_compute_ms"]["max"]
+    assert section["state_age_s"]["mean"] < 0.05 + late_s
+    series = result.recorder.series()
+    assert np.nanmax(series["u"]) > 0.2 and math.isfinite(section["state_age_s"]["mean"])
