@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -173,6 +173,19 @@ class Medium:
         if start_s < 0.0 or end_s <= start_s:
             raise ValueError(f"outage window must have 0 <= start < end, got [{start_s}, {end_s})")
         self._outages.append((start_s, end_s))
+
+    def set_ber(self, ber: float) -> None:
+        """Change the independent bit error probability of transmissions that start from now on
+        (copies already on the air keep theirs); :attr:`config` follows. For live sessions
+        (:mod:`testbed.live`): a simulated run sets its link once, in its config.
+
+        Raises:
+            ValueError: ``ber`` not in [0, 1] (local misuse).
+        """
+        if not 0.0 <= ber <= 1.0:
+            raise ValueError(f"ber must be in [0, 1], got {ber}")
+        self._ber = ber
+        self.config = replace(self.config, ber=ber)
 
     def in_outage(self, start_s: float, end_s: float) -> bool:
         """Whether the interval ``[start_s, end_s]`` overlaps an outage window."""
