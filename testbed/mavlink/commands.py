@@ -428,3 +428,48 @@ def on_timesync(
         return  # a reply to a request we never send
     tc1 = max(1, round(now_s * 1e9))  # never 0, which would read as a request
     endpoint.queue(channel, mav.MAVLink_timesync_message(tc1, int(message.ts1)))
+
+
+_FTP_ACK = 128
+_FTP_NAK = 129
+_FTP_END_SESSION = frozenset({1, 2})  # TerminateSession, ResetSessions: acknowledged
+_FTP_FILE_NOT_FOUND = 10
+_FTP_PAYLOAD_BYTES = 251
+
+
+def on_file_transfer_protocol(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """MAVFTP: the simulated vehicle has no file system. Every request is answered with a NAK
+    (FileNotFound), session ends with an ACK, so a ground station that tries MAVFTP first
+    (MAVProxy's parameter download) falls back to the parameter protocol at once instead of
+    timing out."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    payload = bytes(message.payload)
+    if len(payload) < 12:
+        endpoint.reject("bad_field")
+        return
+    endpoint.accepted += 1
+    seq = (payload[0] | payload[1] << 8) + 1
+    opcode = payload[3]
+    ack = opcode in _FTP_END_SESSION
+    reply = bytearray(_FTP_PAYLOAD_BYTES)
+    reply[0:2] = (seq & 0xFFFF).to_bytes(2, "little")
+    reply[2] = payload[2]  # session
+    reply[3] = _FTP_ACK if ack else _FTP_NAK
+    reply[4] = 0 if ack else 1  # size
+    reply[5] = opcode  # req_opcode
+    if not ack:
+        reply[12] = _FTP_FILE_NOT_FOUND
+    endpoint.queue(
+        channel,
+        mav.MAVLink_file_transfer_protocol_message(
+            0, message.get_srcSystem(), message.get_srcComponent(), list(reply)
+        ),
+    )

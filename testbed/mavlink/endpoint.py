@@ -161,6 +161,7 @@ class VehicleEndpoint:
             "MISSION_REQUEST_LIST": commands.on_mission_request_list,
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
+            "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
 
     # ----------------------------------------------------------------------- channels
