@@ -23,6 +23,7 @@ imports count as the absolute names they resolve to.
 | run      | vehicle, operator, hil, mavlink, channel and below | numpy, scipy, simpy             |
 | report   | run and below                                      | matplotlib, numpy               |
 | sweep    | run and below                                      | numpy, scipy, distributed, tqdm |
+| live     | run and below                                      | numpy, simpy, starlette, uvicorn |
 | cli      | anything                                           | anything                        |
 | __init__ | -                                                  | -                               |
 | __main__ | cli                                                | -                               |

@@ -22,6 +22,7 @@ from types import FrameType
 from testbed.cli.emulator import add_modem_emulator_parser
 from testbed.cli.hil import add_hil_parser
 from testbed.cli.link import add_link_parser
+from testbed.cli.live import add_live_parser
 from testbed.cli.mavlink import add_mavlink_parser
 from testbed.cli.options import EXIT_OK, EXIT_USAGE, Parser, Terminated, exit_code_of
 from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
@@ -42,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_modem_emulator_parser(sub)
     add_hil_parser(sub)
     add_mavlink_parser(sub)
+    add_live_parser(sub)
     add_scenarios_parser(sub)
     return parser
 

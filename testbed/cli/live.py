@@ -1,0 +1,119 @@
+"""``testbed live``: a person flies the vehicle through the simulated link, in a browser.
+
+Usage::
+
+    testbed live [SCENARIO] [--set K=V] [--port 8000] [--host 127.0.0.1] [--duration S]
+                 [--seed N] [--out DIR] [--force] [--no-plots]
+
+Runs the scenario's nodes in real time (:mod:`testbed.live.session`) with a live pilot and
+serves the console on ``http://HOST:PORT/`` (:mod:`testbed.live.server`; ``--port 0`` picks a
+free port). The first line on stdout is ``testbed live: console on URL``. Default scenario:
+``s100-video-v1`` (the S100 teleop link with the camera on); its scripted pilot and scheduled
+image settings are replaced by the person at the console.
+
+Ctrl-C (or SIGTERM, or ``--duration`` reached) ends the session and writes what ``testbed run``
+writes (``metrics.json``, ``events.csv``, ``series.csv``, plots unless ``--no-plots``) with
+a ``live`` section in ``metrics.json``; a session ended by Ctrl-C is marked ``"complete":
+false`` with the ``sim_s`` it reached, and the command ends with one line,
+``testbed live: session ended at t = … s; results in DIR``, exit code 0 (SIGTERM: 143).
+
+A user's mistake (bad option, a port that cannot be bound) is one line and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from testbed.cli.options import (
+    EXIT_OK,
+    EXIT_TERMINATED,
+    Subparsers,
+    Terminated,
+    add_set_option,
+    check_seed,
+)
+from testbed.config import ConfigError
+
+__all__ = ["DEFAULT_SCENARIO", "add_live_parser"]
+
+DEFAULT_SCENARIO = "s100-video-v1"
+_MAX_DURATION_S = 86_400.0
+
+
+def add_live_parser(sub: Subparsers) -> None:
+    """``testbed live``: real-time session piloted from a browser console."""
+    live = sub.add_parser(
+        "live",
+        help="fly the vehicle yourself through the simulated link, from a browser console",
+        description="Live teleoperation: the scenario's nodes in real time over the simulated "
+        "link, piloted from a web console (keyboard or gamepad) that shows the operator's "
+        "delayed view, the physics truth and the link. Ctrl-C ends it and writes the outputs.",
+    )
+    live.add_argument(
+        "scenario",
+        nargs="?",
+        default=DEFAULT_SCENARIO,
+        help=f"packaged scenario id or a .toml path (default: {DEFAULT_SCENARIO})",
+    )
+    add_set_option(live, "override a scenario key, e.g. --set link.ber=1e-4 (repeatable)")
+    live.add_argument("--host", default="127.0.0.1", help="address to serve on (default: local)")
+    live.add_argument("--port", type=int, default=8000, help="console port (default 8000; 0: any)")
+    live.add_argument(
+        "--duration",
+        type=float,
+        default=3600.0,
+        help="session length [s] (default 3600; Ctrl-C ends it earlier)",
+    )
+    live.add_argument("--seed", type=int, default=None, help="random seed (default: scenario's)")
+    live.add_argument("--out", type=Path, default=None, help="output directory")
+    live.add_argument("--force", action="store_true", help="write into a non-empty --out")
+    live.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    live.set_defaults(handler=_run_live)
+
+
+def _run_live(args: argparse.Namespace) -> int:
+    """Handler of ``testbed live``."""
+    from testbed.live.hub import Hub
+    from testbed.live.server import ConsoleServer, bind
+    from testbed.live.session import LiveSession
+    from testbed.run.outputs import prepare_out_dir, write_run
+    from testbed.run.scenario import load_scenario
+
+    check_seed(args.seed)
+    if not 0 <= args.port <= 65535:
+        raise ConfigError(f"--port: must be 0..65535, got {args.port}")
+    if not 0.0 < args.duration <= _MAX_DURATION_S:
+        raise ConfigError(f"--duration: must be in (0, {_MAX_DURATION_S:g}] s, got {args.duration}")
+    scenario = load_scenario(args.scenario, args.overrides)
+    out = args.out or Path("runs") / f"{scenario.id}-live-{time.strftime('%Y%m%d-%H%M%S')}"
+    prepare_out_dir(out, force=args.force)
+    try:
+        sock = bind(args.host, args.port)
+    except OSError as err:
+        raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
+    hub = Hub()
+    session = LiveSession(scenario, hub, seed=args.seed, pilot=None)
+    server = ConsoleServer(hub, session.pilot, sock)
+    server.start()
+    print(f"testbed live: console on {server.url}", flush=True)
+    try:
+        result = session.run(args.duration)
+    finally:
+        server.stop()
+    plots = None
+    if not args.no_plots:
+        from testbed.report.run_plots import write_run_plots
+
+        plots = write_run_plots
+    try:
+        write_run(result, out, plots=plots)
+    except KeyboardInterrupt:  # a second Ctrl-C while plotting: the data files first
+        write_run(result, out, plots=None)
+    reached = result.metrics["sim_s"]
+    print(f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr)
+    if isinstance(result.stopped, Terminated):
+        return EXIT_TERMINATED
+    return EXIT_OK

@@ -1,0 +1,418 @@
+"""A live session: the run's nodes in real time over the simulated link, a person piloting.
+
+:func:`run_live` builds what :func:`~testbed.run.runner.run_scenario` builds — one medium with
+both modems, the vehicle node (control, camera, pybullet physics) and the operator node — but
+under ``simpy.rt.RealtimeEnvironment(strict=False)``, with a
+:class:`~testbed.operator.live_pilot.LivePilot` as the operator station's pilot and three more
+simpy processes:
+
+* the poll (every ``poll_s``, 1 ms): drains the pilot's stick queue and the :class:`Hub`'s
+  control messages and applies them (arm, mode, image settings, link changes, go-to), records
+  how late it runs (scheduler lateness, as :func:`~testbed.run.realtime.run_poll`);
+* the publisher (``publish_hz``, fixed rate): builds the console's state (operator's view,
+  truth, link) as a finished dict and hands it to the hub;
+* the run itself, until ``duration_s`` or Ctrl-C (a ``KeyboardInterrupt`` in this thread).
+
+Nothing here runs on the server's thread and nothing on the server's thread calls simpy.
+
+Live link controls (simulated link only), each recorded as a ``live`` event: bit error rate
+(:meth:`~testbed.channel.Medium.set_ber`), a fixed inter-packet gap instead of the scenario's
+policy (:class:`~testbed.live.intents.LiveIpg`), an outage from now
+(:meth:`~testbed.channel.Medium.add_outage`), and the operator–vehicle distance (the operator's
+modem is placed that far north of the vehicle; propagation delay and distance-dependent errors
+follow from the medium's model). Image coder settings: the scenario's initial ones, then the
+pilot's (its scheduled ``images.changes`` are not sent: a person is flying). A go-to point
+is refused with a notice: the teleop codec and the vehicle have no autonomy to carry it out yet.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from collections.abc import Generator
+from functools import partial
+from typing import Any, cast
+
+import numpy as np
+import simpy
+import simpy.rt
+
+from testbed.channel import IpgPolicy, Medium, Trace
+from testbed.common.components import ActiveMode, Armed, FailsafeStatus
+from testbed.common.geometry import euler_from_quat
+from testbed.ecs import Phase
+from testbed.live.hub import Hub
+from testbed.live.intents import MODES, LiveImageConsole, LiveIpg, LiveRequests
+from testbed.live.messages import (
+    Arm,
+    GoToPoint,
+    ImageRequest,
+    LinkChange,
+    Message,
+    Outage,
+    SetMode,
+)
+from testbed.live.monitor import LinkMonitor, finite_or_none, image_view, latency_ms
+from testbed.operator.live_pilot import LivePilot
+from testbed.operator.station import OperatorStation, SessionPlan
+from testbed.protocol import ImageSettings
+from testbed.run.images import image_source_factory, settings_schedule
+from testbed.run.nodes import OperatorNode, VehicleNode
+from testbed.run.realtime import rt_lateness_ns
+from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.runner import RunResult, compute_metrics, tally_images
+from testbed.run.scenario import Scenario
+from testbed.vehicle.systems import Controllers
+from testbed.vehicle.vehicle import Vehicle
+
+__all__ = ["GOTO_REFUSED", "POLL_S", "PUBLISH_HZ", "LiveSession", "run_live"]
+
+POLL_S = 0.001
+"""Period of the input poll [s]."""
+PUBLISH_HZ = 10.0
+"""Rate of the console's state [Hz]."""
+GOTO_REFUSED = "go-to refused: the vehicle has no autonomy yet (no GoTo order is sent)"
+
+_DEG = 180.0 / math.pi
+
+
+def _rpy_deg(quaternion: tuple[float, float, float, float]) -> list[float]:
+    return [round(a * _DEG, 2) for a in euler_from_quat(quaternion)]
+
+
+class LiveSession:
+    """The nodes, the link and the live hooks of one session (see the module docstring).
+
+    Args:
+        scenario: the loaded scenario (token-passing teleop link; images optional).
+        hub: the bridge to the server.
+        seed: overrides the scenario's seed.
+        pilot: the live pilot (a new one if None).
+    """
+
+    def __init__(
+        self, scenario: Scenario, hub: Hub, *, seed: int | None = None, pilot: LivePilot | None
+    ) -> None:
+        self.scenario = scenario
+        self.hub = hub
+        self.seed = scenario.seed if seed is None else seed
+        self.pilot = pilot or LivePilot()
+        link_seed, vehicle_seed = np.random.SeedSequence(self.seed).spawn(2)
+        self.env = simpy.rt.RealtimeEnvironment(factor=1.0, strict=False)
+        env = self.env
+        self.recorder = Recorder(trace=Trace())
+        link = scenario.link
+        self.medium = Medium(
+            env, link.channel, np.random.default_rng(link_seed), self.recorder.trace
+        )
+        self._distance_m: float | None = None
+        self.vehicle_node = self._vehicle_node(np.random.default_rng(vehicle_seed))
+        self.vehicle: Vehicle = self.vehicle_node.vehicle
+        self.ipg = LiveIpg(link.ipg_policy) if link.mac == "token" else None
+        self.operator_node = self._operator_node()
+        self.station = self.operator_node.station
+        self.requests = LiveRequests(self.station.entity)
+        self.station.add_system(Phase.UPDATE, self.requests)
+        self.monitor = LinkMonitor(self.recorder.trace)
+        self.lateness_ns: deque[int] = deque(maxlen=200_000)
+        self.link_changes: list[dict[str, Any]] = []
+        self._coder: ImageSettings | None = None
+
+    # ------------------------------------------------------------------------------ building
+
+    def _vehicle_node(self, rng: np.random.Generator) -> VehicleNode:
+        scenario, env, recorder = self.scenario, self.env, self.recorder
+        modem = self.medium.attach("vehicle", lambda: self.vehicle.truth.position_ned_m)
+        images = scenario.images
+        node = VehicleNode(
+            env,
+            partial(Vehicle, scenario.vehicle, rng),
+            modem,
+            codec=scenario.link.codec,
+            token=scenario.link.mac == "token",
+            downlink_rate_hz=scenario.link.downlink_rate_hz,
+            recorder=recorder,
+            snapshot_period_s=scenario.link.snapshot_period_s,
+            image_source=image_source_factory(images) if images.enabled else None,
+        )
+        vehicle = node.vehicle
+        observer = VehicleObserver(
+            recorder, self.pilot, vehicle.reference_velocity, scenario.metrics.sample_rate_hz
+        )
+        vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
+        return node
+
+    def _operator_position(self) -> tuple[float, float, float]:
+        if self._distance_m is None:
+            return self.scenario.link.operator_position_ned_m
+        x, y, z = self.vehicle.truth.position_ned_m
+        return (x + self._distance_m, y, z)
+
+    def _operator_node(self) -> OperatorNode:
+        scenario = self.scenario
+        link, images, camera = scenario.link, scenario.images, scenario.vehicle.camera
+        plan = SessionPlan(
+            mode=MODES[scenario.operator.mode],
+            arm_at_s=scenario.operator.arm_at_s,
+            depth_m=scenario.operator.depth_m,
+            precision=scenario.operator.precision,
+        )
+        console = None
+        if images.enabled:
+            console = LiveImageConsole(
+                chunk_bytes=images.chunk_bytes,
+                selective_repeat=images.selective_repeat,
+                schedule=settings_schedule(images)[:1],  # then the pilot's, not the script's
+                max_pixels=camera.width_px * camera.height_px,
+            )
+        self.image_console = console
+        return OperatorNode(
+            self.env,
+            OperatorStation(self.pilot, plan),
+            self.medium.attach("operator", self._operator_position),
+            codec=link.codec,
+            # run_token_master only asks the policy for gap_after(size): LiveIpg has it
+            ipg=cast("IpgPolicy | None", self.ipg),
+            uplink_rate_hz=link.uplink_rate_hz,
+            recorder=self.recorder,
+            reply_odometry_s=self.vehicle_node.reply_odometry_s,
+            snapshot_period_s=link.snapshot_period_s,
+            console=console,
+        )
+
+    # ------------------------------------------------------------------------------ running
+
+    def run(
+        self, duration_s: float, poll_s: float = POLL_S, publish_hz: float = PUBLISH_HZ
+    ) -> RunResult:
+        """Run until ``duration_s`` [s] or Ctrl-C; the result has ``stopped`` set if
+        interrupted (its metrics then cover the time reached)."""
+        env = self.env
+        env.process(self.vehicle_node.run())
+        env.process(self.operator_node.run())
+        env.process(self._poll(poll_s))
+        env.process(self._publisher(1.0 / publish_hz))
+        stopped: KeyboardInterrupt | None = None
+        env.sync()  # the clock starts now, after the physics has loaded
+        start = time.perf_counter()
+        try:
+            env.run(until=duration_s)
+        except KeyboardInterrupt as interrupt:
+            stopped = interrupt
+        finally:
+            wall_s = time.perf_counter() - start
+            self.vehicle.close()
+        reached = duration_s if stopped is None else float(env.now)
+        return RunResult(
+            self.scenario, self.seed, self.metrics(reached, wall_s), self.recorder, stopped
+        )
+
+    def _poll(self, period_s: float) -> Generator[simpy.Event, Any, None]:
+        env = self.env
+        while True:
+            self.lateness_ns.append(rt_lateness_ns(self.env))
+            self.pilot.drain()
+            for message, _ in self.hub.take():
+                self.apply(message)
+            self._watch_coder()
+            yield env.timeout(period_s)
+
+    def _publisher(self, period_s: float) -> Generator[simpy.Event, Any, None]:
+        env = self.env
+        while True:
+            self.hub.publish(self.state())
+            yield env.timeout(period_s)
+
+    def _event(self, kind: str, detail: str) -> None:
+        self.recorder.event(self.env.now, "live", kind, detail)
+        self.hub.note(f"{self.env.now:.1f} s: {kind} {detail}")
+
+    def apply(self, message: Message) -> None:
+        """Act on one control message from the pilot (simulation thread)."""
+        now = self.env.now
+        if isinstance(message, Arm):
+            self.requests.arm(message.armed)
+            self._event("arm_request" if message.armed else "disarm_request", "")
+        elif isinstance(message, SetMode):
+            self.requests.mode(MODES[message.mode])
+            self._event("mode_request", message.mode)
+        elif isinstance(message, ImageRequest):
+            self._image(message)
+        elif isinstance(message, Outage):
+            self.medium.add_outage(now, now + message.duration_s)
+            self._link_change("outage", message.duration_s)
+        elif isinstance(message, LinkChange):
+            if message.key == "ber":
+                self.medium.set_ber(message.value or 0.0)
+            elif message.key == "gap_s" and self.ipg is not None:
+                self.ipg.set_gap(message.value)
+            elif message.key == "distance_m":
+                self._distance_m = message.value
+            self._link_change(message.key, message.value)
+        elif isinstance(message, GoToPoint):
+            self._event("goto_refused", f"x={message.x:.2f} y={message.y:.2f} m")
+            self.hub.note(GOTO_REFUSED)
+
+    def _link_change(self, key: str, value: float | None) -> None:
+        self.link_changes.append({"t_s": self.env.now, "key": key, "value": value})
+        self._event(f"link_{key}", "scenario" if value is None else f"{value:g}")
+
+    def _image(self, message: ImageRequest) -> None:
+        if self.image_console is None:
+            self.hub.note("image settings ignored: this scenario has no images")
+            return
+        x0, y0, x1, y1 = message.roi or (0, 0, 0, 0)
+        shift = message.shift if message.roi else 0
+        settings = ImageSettings(x0, y0, x1, y1, shift, True, message.budget)
+        self.image_console.push(settings)
+        self._event("image_settings_sent", _settings_text(settings))
+
+    def _watch_coder(self) -> None:
+        """Record when the vehicle's coder takes new settings (they reached it)."""
+        images = self.vehicle_node.images
+        if images is None or images.settings == self._coder:
+            return
+        self._coder = images.settings
+        self.recorder.event(
+            self.env.now, "vehicle", "image_settings", _settings_text(images.settings)
+        )
+
+    # ------------------------------------------------------------------------------ state
+
+    def state(self) -> dict[str, Any]:
+        """The console's state now (JSON-ready, built fresh)."""
+        now = self.env.now
+        recorder = self.recorder
+        station, vehicle = self.station, self.vehicle
+        odometry = station.vehicle_odometry()
+        world = station.world
+        armed = next((a.armed for _, a in world.query1(Armed)), None)
+        mode = next((m.mode.name.lower() for _, m in world.query1(ActiveMode)), None)
+        truth = vehicle.truth
+        ctl = vehicle.world.resource(Controllers)
+        status = vehicle.world.get(ctl.vehicle, FailsafeStatus)
+        self.monitor.update()
+        lag = age = odometry_age = math.nan
+        if recorder.command_updates:
+            applied, sampled = recorder.command_updates[-1]
+            lag = applied - sampled
+            age = now - sampled
+        if recorder.odometry_updates:
+            odometry_age = now - recorder.odometry_updates[-1][1]
+        state: dict[str, Any] = {
+            "t": round(now, 3),
+            "server_ns": time.monotonic_ns(),
+            "operator": None
+            if odometry is None
+            else {
+                "pos": [round(v, 3) for v in odometry.position_ned_m],
+                "rpy": _rpy_deg(odometry.quaternion_wxyz),
+                "armed": armed,
+                "mode": mode,
+                "age_s": finite_or_none(station.vehicle_state_age_s(now)),
+            },
+            "truth": {
+                "pos": [round(v, 3) for v in truth.position_ned_m],
+                "rpy": _rpy_deg(truth.quaternion_wxyz),
+                "armed": ctl.flags.armed,
+                "failsafe": "NOMINAL" if status is None else status.level.name,
+                "sticks": [round(s, 3) for s in ctl.sticks],
+            },
+            "pilot": {
+                "sticks": [round(s, 3) for s in self.pilot.sticks],
+                "taken": self.pilot.taken,
+            },
+            "link": {
+                "uplink": self.monitor.direction("uplink", recorder.frames_decoded["uplink"]),
+                "downlink": self.monitor.direction("downlink", recorder.frames_decoded["downlink"]),
+                "command_lag_s": finite_or_none(lag),
+                "command_age_s": finite_or_none(age),
+                "odometry_age_s": finite_or_none(odometry_age),
+                "ber": self.medium.config.ber,
+                "gap_s": None if self.ipg is None else self.ipg.gap_after(13),
+                "distance_m": self._distance_m,
+                "outage": self.medium.in_outage(now, now),
+                "timeline": list(self.monitor.timeline),
+            },
+            "image": self._image_state(now),
+            "console": {
+                "inputs": self.hub.counters.as_dict(),
+                "input_latency_ms": latency_ms(list(self.pilot.latencies_ns)[-200:]),
+                "lateness_ms": latency_ms(list(self.lateness_ns)[-1000:]),
+                "notes": list(self.hub.notes),
+            },
+            "events": [[round(e.t_s, 2), e.node, e.kind, e.detail] for e in recorder.events[-8:]],
+        }
+        return state
+
+    def _image_state(self, now: float) -> dict[str, Any] | None:
+        console = self.image_console
+        images = self.vehicle_node.images
+        if console is None or images is None:
+            return None
+        current = images.current
+        coder = images.settings
+        return {
+            "view": image_view(console.view),
+            "bytes": len(console.assembler.prefix()),
+            "chunks": console.chunks_received,
+            "completed": len(self.recorder.images.received),
+            "age_s": None if current is None else round(now - current.t_s, 2),
+            "coder": {
+                "roi": [coder.x0, coder.y0, coder.x1, coder.y1],
+                "shift": coder.roi_shift,
+                "budget": coder.budget_bytes,
+            },
+        }
+
+    def metrics(self, reached_s: float, wall_s: float) -> dict[str, Any]:
+        """``metrics.json``: :func:`~testbed.run.runner.compute_metrics`'s keys and ``live``."""
+        tally_images(self.recorder, self.vehicle_node, self.operator_node)
+        metrics = compute_metrics(
+            self.scenario,
+            self.seed,
+            self.recorder,
+            sim_s=reached_s,
+            wall_s=wall_s,
+            energy_wh=self.vehicle_node.energy_wh,
+            payload_bytes={
+                "uplink": self.vehicle_node.port.payload_bytes,
+                "downlink": self.operator_node.port.payload_bytes,
+            },
+        )
+        hub = self.hub
+        metrics["live"] = {
+            "session": "live",
+            "inputs": hub.counters.as_dict(),
+            "sticks_taken": self.pilot.taken,
+            "dead_man_timeouts": self.pilot.timeouts,
+            "input_to_intent_ms": latency_ms(self.pilot.latencies_ns),
+            "browser_round_trip_ms": latency_ms(v * 1e6 for v in hub.round_trips_ms),
+            "state_to_pixels_ms": latency_ms(v * 1e6 for v in hub.pixel_latencies_ms),
+            "scheduler_lateness_ms": latency_ms(self.lateness_ns),
+            "link_changes": self.link_changes,
+            "image_settings_pushed": 0 if self.image_console is None else self.image_console.pushed,
+        }
+        return metrics
+
+
+def _settings_text(settings: ImageSettings) -> str:
+    return (
+        f"roi={settings.x0},{settings.y0},{settings.x1},{settings.y1} "
+        f"shift={settings.roi_shift} budget={settings.budget_bytes}"
+    )
+
+
+def run_live(
+    scenario: Scenario,
+    hub: Hub,
+    *,
+    seed: int | None = None,
+    duration_s: float | None = None,
+    pilot: LivePilot | None = None,
+) -> RunResult:
+    """Run a live session of ``scenario`` (see the module docstring) for ``duration_s`` [s]
+    (None: the scenario's) or until Ctrl-C."""
+    session = LiveSession(scenario, hub, seed=seed, pilot=pilot)
+    return session.run(scenario.duration_s if duration_s is None else duration_s)

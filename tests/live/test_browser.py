@@ -1,0 +1,213 @@
+"""The console in headless Chromium against a real ``testbed live`` process.
+
+One session (one process, one browser) walks through the console: keyboard sticks move the
+vehicle, an injected fake gamepad does too, the image appears and sharpens, telemetry and the
+link panel update, an ROI drag reaches the vehicle's coder as an ImageSettings order, the
+outage button triggers the vehicle's failsafe, a second tab is a read-only viewer whose
+garbage and floods are counted, and Ctrl-C writes the outputs marked as a live session. A
+screenshot of each step goes to the test's ``tmp_path``.
+
+Assertions are on the recorded state (``/state``, then ``metrics.json`` and ``events.csv``),
+never on wall-clock speed: each wait is for a condition the model must reach, with a deadline
+only as the failure bound (``_DEADLINE_S``, far beyond what the model needs: the S100 gap is
+0.6 s, the failsafe holds after 1 s without orders).
+
+Skipped, with the reason, when Playwright or a Chromium executable is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+_DEADLINE_S = 60.0
+"""Failure bound of every wait [s of wall clock]: a loaded machine runs late, never wrong."""
+
+_FAKE_GAMEPAD = """
+window.__pad = { id: "fake pad", index: 0, connected: true, mapping: "standard", timestamp: 0,
+  axes: [0, 0, 0, 0], buttons: Array.from({ length: 17 }, () => ({ pressed: false, value: 0 })) };
+navigator.getGamepads = () => [window.__pad];
+"""
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser_path() -> str:
+    pytest.importorskip("playwright.sync_api", reason="Playwright is not installed")
+    path = _chromium()
+    if path is None:
+        pytest.skip("no Chromium executable (apt-get install chromium)")
+    return path
+
+
+class Live:
+    """A running ``testbed live`` process."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        command = [sys.executable, "-m", "testbed", "live", "--port", "0", "--no-plots"]
+        command += ["--out", str(out), "--duration", "600"]
+        self.proc = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()  # blocks until the console is up (physics loaded)
+        assert line.startswith("testbed live: console on "), line + self.proc.stderr.read()
+        self.url = line.split()[-1]
+
+    def state(self) -> dict[str, Any]:
+        with urllib.request.urlopen(self.url + "state", timeout=10) as response:
+            document: dict[str, Any] = json.loads(response.read())
+        return document["state"] or {}
+
+    def wait(self, what: str, ok: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
+        deadline = time.monotonic() + _DEADLINE_S
+        while time.monotonic() < deadline:
+            assert self.proc.poll() is None, "testbed live ended: " + self.proc.stderr.read()
+            state = self.state()
+            if state and ok(state):
+                return state
+            time.sleep(0.05)
+        raise AssertionError(f"never: {what}; last state {json.dumps(self.state())[:2000]}")
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        return self.proc.wait(timeout=120)
+
+
+@pytest.fixture
+def live(tmp_path: Path, browser_path: str) -> Iterator[Live]:
+    del browser_path
+    process = Live(tmp_path / "out")
+    try:
+        yield process
+    finally:
+        if process.proc.poll() is None:
+            process.proc.kill()
+            process.proc.wait()
+
+
+def test_console_flies_the_vehicle_and_shows_the_link(
+    live: Live, browser_path: str, tmp_path: Path
+) -> None:
+    from playwright.sync_api import sync_playwright
+
+    shots = tmp_path / "screenshots"
+    shots.mkdir()
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=browser_path, args=["--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1500, "height": 900})
+        page.add_init_script(_FAKE_GAMEPAD)
+        page.goto(live.url)
+        page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+        start = live.wait(
+            "armed at the operator", lambda s: bool((s["operator"] or {}).get("armed"))
+        )
+        page.screenshot(path=shots / "01-armed.png")
+
+        # keyboard: W holds the surge stick at +0.5; the vehicle applies it and moves north
+        x0 = start["truth"]["pos"][0]
+        page.keyboard.down("KeyW")
+        live.wait("surge applied", lambda s: s["truth"]["sticks"][0] > 0.4)
+        moved = live.wait("moved north", lambda s: s["truth"]["pos"][0] > x0 + 0.05)
+        page.screenshot(path=shots / "02-keyboard.png")
+        page.keyboard.up("KeyW")
+        live.wait("surge released", lambda s: s["truth"]["sticks"][0] == 0.0)
+
+        # fake gamepad: left stick right = yaw right; the heading turns clockwise
+        yaw0 = moved["truth"]["rpy"][2]
+        page.evaluate("window.__pad.axes[0] = 0.8")
+        live.wait("yaw applied", lambda s: s["truth"]["sticks"][5] > 0.5)
+        live.wait("turned", lambda s: (s["truth"]["rpy"][2] - yaw0) % 360.0 > 5.0)
+        page.screenshot(path=shots / "03-gamepad.png")
+        page.evaluate("window.__pad.axes[0] = 0")
+        live.wait("yaw released", lambda s: s["truth"]["sticks"][5] == 0.0)
+
+        # the image appears, then sharpens as chunks arrive
+        first = live.wait("an image", lambda s: (s["image"] or {}).get("view") is not None)
+        b1, v1 = first["image"]["bytes"], first["image"]["view"]["grey"]
+        sharper = live.wait(
+            "a sharper image",
+            lambda s: s["image"]["bytes"] > b1 + 80 and s["image"]["view"]["grey"] != v1,
+        )
+        assert sharper["image"]["view"]["w"] == 160
+        page.screenshot(path=shots / "04-image.png")
+
+        # telemetry and the link panel follow the state
+        sent0 = sharper["link"]["uplink"]["sent"]
+        live.wait("more orders", lambda s: s["link"]["uplink"]["sent"] > sent0 + 1)
+        page.wait_for_function(
+            f"(() => {{ const t = document.getElementById('link').innerText;"
+            f" const m = t.match(/sent\\s+(\\d+)/); return m && Number(m[1]) > {sent0}; }})()"
+        )
+        assert "depth" in page.inner_text("#telemetry")
+
+        # ROI drag on the image → an ImageSettings order → the vehicle's coder takes it
+        box = page.locator("#image").bounding_box()
+        assert box is not None
+        page.mouse.move(box["x"] + 0.25 * box["width"], box["y"] + 0.25 * box["height"])
+        page.mouse.down()
+        page.mouse.move(box["x"] + 0.75 * box["width"], box["y"] + 0.75 * box["height"], steps=5)
+        page.mouse.up()
+        coded = live.wait("ROI at the coder", lambda s: s["image"]["coder"]["shift"] == 4)
+        x0r, y0r, x1r, y1r = coded["image"]["coder"]["roi"]
+        assert 35 <= x0r <= 45 and 25 <= y0r <= 35 and 115 <= x1r <= 125 and 85 <= y1r <= 95
+        page.screenshot(path=shots / "05-roi.png")
+
+        # a second tab is a read-only viewer; its garbage and floods are counted, not fatal
+        viewer = browser.new_page()
+        viewer.goto(live.url)
+        viewer.wait_for_function("document.getElementById('role').textContent === 'viewer'")
+        viewer.evaluate(
+            """() => { const w = new WebSocket(`ws://${location.host}/ws`);
+            w.onopen = () => { w.send("{not json"); w.send('{"t": "sticks", "x": 9, "y": 0,'
+            + ' "z": 0, "yaw": 0}'); for (let i = 0; i < 400; i++) w.send('{"t": "arm",'
+            + ' "armed": false}'); }; }"""
+        )
+        live.wait(
+            "garbage counted",
+            lambda s: (
+                s["console"]["inputs"]["malformed"] >= 1
+                and s["console"]["inputs"]["out_of_range"] >= 1
+                and s["console"]["inputs"]["flooded"] >= 1
+            ),
+        )
+        viewer.close()
+        assert live.state()["truth"]["armed"], "a viewer's disarm was obeyed"
+
+        # the outage button blacks the link out: the vehicle's failsafe holds
+        page.click("#outage")
+        live.wait("failsafe", lambda s: s["truth"]["failsafe"] != "NOMINAL")
+        page.screenshot(path=shots / "06-outage.png")
+        browser.close()
+
+    assert live.stop() == 0
+    metrics = json.loads((live.out / "metrics.json").read_text())
+    assert metrics["complete"] is False and metrics["live"]["session"] == "live"
+    assert metrics["live"]["inputs"]["accepted"] > 10
+    assert metrics["live"]["input_to_intent_ms"]["n"] > 10
+    events = (live.out / "events.csv").read_text()
+    for needed in ("image_settings_sent", "image_settings", "link_outage", "failsafe"):
+        assert needed in events
+    assert len(list(shots.iterdir())) == 6
+    if os.environ.get("TESTBED_LIVE_SHOTS"):  # keep the screenshots (docs/live-console.png)
+        shutil.copytree(shots, os.environ["TESTBED_LIVE_SHOTS"], dirs_exist_ok=True)
