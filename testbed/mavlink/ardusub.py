@@ -31,6 +31,7 @@ __all__ = [
     "STREAM_GROUPS",
     "RcInput",
     "base_mode",
+    "manual_control_from_sticks",
     "manual_control_pwm",
     "sticks_from_rc",
 ]
@@ -168,3 +169,23 @@ def sticks_from_rc(channels: list[int]) -> tuple[float, float, float, float, flo
         return _clamp((pwm - NEUTRAL_PWM) / _PWM_HALF_RANGE, -1.0, 1.0)
 
     return (axis(5), axis(6), 0.0 - axis(3) + 0.0, axis(2), axis(1), axis(4))
+
+
+def manual_control_from_sticks(
+    sticks: tuple[float, float, float, float, float, float],
+    *,
+    gain: float,
+    throttle_gain: float = 1.0,
+) -> tuple[int, int, int, int]:
+    """The MAVLink MANUAL_CONTROL axes (x, y, z, r) a ground station sends for ``sticks``
+    (surge, sway, heave + down, roll, pitch, yaw in [−1, 1]): the inverse of
+    :func:`manual_control_pwm` then :func:`sticks_from_rc` at ``gain`` (a stick beyond what
+    the gain reaches is clamped to the axis' range)."""
+    surge, sway, heave, _, _, yaw = sticks
+
+    def rpy(value: float) -> int:
+        return round(_clamp(1000.0 * value / gain, -1000.0, 1000.0))
+
+    throttle_scale = 0.8 * gain * throttle_gain
+    z = 500.0 - 400.0 * heave / throttle_scale
+    return rpy(surge), rpy(sway), round(_clamp(z, 0.0, 1000.0)), rpy(yaw)

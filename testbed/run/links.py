@@ -13,6 +13,8 @@ not carry.
 - ``changeset``: every owned, changed replicated component (the ECS paper's sync),
   :mod:`testbed.common.changeset`, sent by each node at its own rate, with a full snapshot every
   ``snapshot_period_s`` so a peer that lost a payload resyncs.
+- ``mavlink-raw``: the ground station's MAVLink packets themselves, the baseline
+  (:mod:`testbed.run.mavlink_links`).
 
 :data:`VEHICLE_LINKS` and :data:`OPERATOR_LINKS` are the only places that name the codecs; a new
 codec (raw MAVLink bytes, say) is one class per side and one entry in each.
@@ -347,6 +349,18 @@ class ChangeSetOperatorLink:
         return result
 
 
+def _mavlink_raw_vehicle(vehicle: Vehicle, **_: object) -> VehicleLink:
+    from testbed.run.mavlink_links import RawMavlinkVehicleLink  # it imports this module
+
+    return RawMavlinkVehicleLink(vehicle)
+
+
+def _mavlink_raw_operator(station: OperatorStation, **_: object) -> OperatorLink:
+    from testbed.run.mavlink_links import RawMavlinkOperatorLink
+
+    return RawMavlinkOperatorLink(station)
+
+
 VEHICLE_LINKS: dict[str, Callable[..., VehicleLink]] = {
     "teleop": lambda vehicle, *, images, downlink_rate_hz, snapshot_period_s: TeleopVehicleLink(
         vehicle, images
@@ -356,6 +370,7 @@ VEHICLE_LINKS: dict[str, Callable[..., VehicleLink]] = {
             vehicle, downlink_rate_hz=downlink_rate_hz, snapshot_period_s=snapshot_period_s
         )
     ),
+    "mavlink-raw": _mavlink_raw_vehicle,
 }
 """Vehicle codec by scenario name (``link.codec``)."""
 
@@ -364,5 +379,6 @@ OPERATOR_LINKS: dict[str, Callable[..., OperatorLink]] = {
     "changeset": lambda station, *, console, snapshot_period_s: ChangeSetOperatorLink(
         station, snapshot_period_s=snapshot_period_s
     ),
+    "mavlink-raw": _mavlink_raw_operator,
 }
 """Operator codec by scenario name (``link.codec``)."""

@@ -100,8 +100,8 @@ class LinkSection:
     Attributes:
         preset: channel preset name (:func:`testbed.channel.preset_names`).
         channel: the preset with every other key of the ``[link]`` table applied over it.
-        codec: ``"teleop"`` (the paper's compact orders and replies) or ``"changeset"`` (the ECS
-            paper's full change-set sync).
+        codec: ``"teleop"`` (the paper's compact orders and replies), ``"changeset"`` (the ECS
+            paper's full change-set sync) or ``"mavlink-raw"`` (MAVLink itself, the baseline).
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
             (each node sends at its own rate).
         ipg: the token master's inter-packet-gap policy.
@@ -118,7 +118,7 @@ class LinkSection:
 
     preset: str = "s100"
     channel: LinkConfig
-    codec: Literal["teleop", "changeset"] = "teleop"
+    codec: Literal["teleop", "changeset", "mavlink-raw"] = "teleop"
     mac: Literal["token", "free"] = "token"
     ipg: Literal["fixed", "telerobotics-2018", "telerobotics-2019", "telerobotics-2021"] = (
         "telerobotics-2021"

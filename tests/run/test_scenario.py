@@ -32,6 +32,7 @@ PACKAGED = [
     "ecs-yaw-3h-v1",
     "ecs-yaw-4h-v1",
     "m64-teleop-v1",
+    "s100-mavlink-raw-v1",
     "s100-outage-v1",
     "s100-teleop-v1",
     "s100-thruster-failure-v1",
