@@ -18,3 +18,18 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+def pytest_sessionstart(session: object) -> None:
+    """Compile (or load from numba's disk cache) the vehicle's kernels once, here, before any
+    test. On a fresh checkout the first process to fly a vehicle compiles them for a few
+    seconds; otherwise that would be whichever child process a real-time or signal test started
+    first, and its set-up would overrun the waits those tests derive from a warm start."""
+    import numpy as np
+
+    from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+
+    with Vehicle(VehicleConfig(), np.random.default_rng(0)) as vehicle:
+        vehicle.arm()
+        vehicle.command((0.5, 0.0, 0.0, 0.0, 0.0, 0.1))
+        vehicle.advance(0.1)

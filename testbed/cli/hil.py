@@ -192,12 +192,23 @@ def run_hil_command(args: argparse.Namespace) -> int:
             endpoint.close()
         raise
     where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
-    print(
-        f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, Ctrl-C ends early",
-        file=sys.stderr,
-        flush=True,
+
+    def announce() -> None:  # once the nodes are built and the real-time clock starts
+        print(
+            f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, "
+            "Ctrl-C ends early",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    result = run_hil(
+        scenario,
+        endpoints,
+        seed=args.seed,
+        duration_s=duration,
+        modem=args.modem,
+        on_start=announce,
     )
-    result = run_hil(scenario, endpoints, seed=args.seed, duration_s=duration, modem=args.modem)
     return finish_run(
         result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
     )

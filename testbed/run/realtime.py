@@ -285,6 +285,7 @@ def run_hil(
     duration_s: float | None = None,
     poll_s: float = POLL_S,
     modem: str = "",
+    on_start: Callable[[], None] | None = None,
 ) -> RunResult:
     """Run ``scenario`` in real time with its link on real ports.
 
@@ -299,6 +300,8 @@ def run_hil(
             metrics cover the ``sim_s`` reached (those needing the settled window are NaN).
         poll_s: period at which received frames are handed to the nodes [s].
         modem: the modem kind, for the record (``metrics.json`` ``hil.modem``).
+        on_start: called once the nodes are built (the vehicle's physics loaded, its kernels
+            compiled) as the real-time clock starts, e.g. to tell the user the session runs.
 
     Returns:
         The metrics (:func:`hil_metrics`) and the recording; ``stopped`` is the interrupt that
@@ -359,6 +362,8 @@ def run_hil(
         env.process(run_poll(env, list(modems.values()), poll_s, lateness_ns))
         env.sync()  # start the clock now, after the vehicle's physics has loaded
         start = time.perf_counter()
+        if on_start is not None:
+            on_start()
         env.run(until=duration)
     except KeyboardInterrupt as interrupt:  # Ctrl-C or SIGTERM: keep what ran, marked partial
         stopped = interrupt

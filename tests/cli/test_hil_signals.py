@@ -59,7 +59,7 @@ def test_interrupt_before_settling_keeps_a_marked_partial_result(
     args = ["hil", "--operator-port", ports[0], "--vehicle-port", ports[1], *LONG]
     proc = start([*args, "--out", str(out)])
     assert proc.stderr is not None
-    banner = proc.stderr.readline()  # printed once the ports are open, as the session starts
+    banner = proc.stderr.readline()  # printed once the nodes are built, as the clock starts
     assert banner.startswith("testbed: hil both: operator on "), banner
     time.sleep(2.0)
     proc.send_signal(sig)

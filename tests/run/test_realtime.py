@@ -14,8 +14,9 @@ shared by the tests below through a module fixture):
 * the four emulators in a child process of their own (:data:`EMULATORS`), as real modems are
   outside the computer, reporting their counters and scheduler lateness when they stop.
 
-The run in this process starts once every child has said its port is open (a 2-core machine
-importing numpy and pybullet in three children would otherwise starve its first seconds).
+The run in this process starts once every child has said its session runs (a 2-core machine
+importing numpy and pybullet and loading compiled kernels in three children would otherwise
+starve its first seconds).
 
 Truth is the channel model's closed form: a frame written on an emulator port arrives after
 the idle gap that closes the burst (3 ms), the intrinsic delay and the airtime of the frame and
@@ -470,8 +471,8 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
     }
     probe = LinkProbe(probe_ports, config)
     try:
-        for child in children.values():  # each says when its port is open: importing
-            assert child.stderr is not None  # numpy and pybullet is over by then
+        for child in children.values():  # each says when its nodes are built and its clock
+            assert child.stderr is not None  # starts: imports and compiled kernels are loaded
             child.stderr.readline()
         t0 = time.monotonic()
         unplug = (t0 + UNPLUG_S[0], t0 + UNPLUG_S[1])
