@@ -133,10 +133,15 @@ class AttitudePilot:
     ``A · sin(2π τ / T)`` [deg] of ``τ = t − start_s``, zero before the start (the defaults
     live in the scenario's pilot section).
 
+    The operator updates the setpoint ``update_rate_hz`` times a second and holds it in
+    between (the ECS paper's operator sent it at 40 Hz): the value at ``τ`` is the sine's at
+    ``⌊τ·rate⌋ / rate``; an infinite rate follows the sine continuously.
+
     Attributes:
         start_s: when the pilot starts [s].
         roll_amplitude_deg, pitch_amplitude_deg, yaw_amplitude_deg: amplitudes ``A`` [deg].
         roll_period_s, pitch_period_s, yaw_period_s: periods ``T`` [s], > 0.
+        update_rate_hz: how often the setpoint changes [Hz], > 0 (``math.inf``: continuously).
     """
 
     start_s: float
@@ -146,12 +151,22 @@ class AttitudePilot:
     pitch_period_s: float
     yaw_amplitude_deg: float
     yaw_period_s: float
+    update_rate_hz: float = math.inf
+
+    def __post_init__(self) -> None:
+        check(
+            self.update_rate_hz > 0.0, "update_rate_hz", f"must be > 0, got {self.update_rate_hz}"
+        )
 
     def attitude_deg(self, t_s: float) -> tuple[float, float, float]:
-        """Roll, pitch and yaw setpoint [deg] at ``t_s`` [s] (zero before start)."""
+        """Roll, pitch and yaw setpoint [deg] at ``t_s`` [s] (zero before start), as last
+        updated (see the class docstring)."""
         if t_s < self.start_s:
             return (0.0, 0.0, 0.0)
         tau = t_s - self.start_s
+        rate = self.update_rate_hz
+        if rate != math.inf:  # the last update instant; 1e-9 absorbs sums of float steps
+            tau = math.floor(tau * rate + 1e-9) / rate
         return (
             _sine(self.roll_amplitude_deg, self.roll_period_s, tau),
             _sine(self.pitch_amplitude_deg, self.pitch_period_s, tau),

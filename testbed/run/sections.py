@@ -191,8 +191,9 @@ class PilotSection:
     ``kind = "scripted"``: each stick is ``clip(Σ terms, −1, 1)`` of the time ``τ = t − start_s``
     since the pilot started, zero before (Centelles et al., Fig. 5: a few slow sinusoids per
     axis). ``kind = "attitude"``: the ECS paper's experiment, no sticks; roll, pitch and yaw
-    setpoints ``A · sin(2π τ / T)`` [deg], sent as AttitudeSetpoint ``setpoint_rate_hz`` times
-    a second. Each kind rejects the other's non-zero settings.
+    setpoints ``A · sin(2π τ / T)`` [deg], updated ``setpoint_rate_hz`` times a second and held
+    in between (the operator sends the held value as AttitudeSetpoint at its own rate). Each
+    kind rejects the other's non-zero settings.
 
     Attributes:
         kind: ``"scripted"`` or ``"attitude"``.
@@ -202,7 +203,8 @@ class PilotSection:
         roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| ≤ 89.9.
         yaw_amplitude_deg: yaw setpoint amplitude [deg], |A| ≤ 180.
         roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], in [0.01, 1e6].
-        setpoint_rate_hz: how often the operator updates the setpoint [Hz], in [1e-3, 1000].
+        setpoint_rate_hz: how often the operator updates the attitude setpoint [Hz], in
+            [1e-3, 1000] (``kind = "attitude"``).
     """
 
     kind: Literal["scripted", "attitude"] = "scripted"
@@ -245,6 +247,7 @@ class PilotSection:
                 self.pitch_period_s,
                 self.yaw_amplitude_deg,
                 self.yaw_period_s,
+                self.setpoint_rate_hz,
             )
         return ScriptedPilot(self.start_s, self.x, self.y, self.z, self.yaw)
 
