@@ -75,6 +75,8 @@ PUBLISH_HZ = 10.0
 GOTO_REFUSED = "go-to refused: the vehicle has no autonomy yet (no GoTo order is sent)"
 
 _DEG = 180.0 / math.pi
+_STICK_TOLERANCE = 0.01
+"""Applied sticks this close to the pilot's count as his (the teleop codec's step is 1/127)."""
 
 
 def _rpy_deg(quaternion: tuple[float, float, float, float]) -> list[float]:
@@ -118,6 +120,10 @@ class LiveSession:
         self.lateness_ns: deque[int] = deque(maxlen=200_000)
         self.link_changes: list[dict[str, Any]] = []
         self._coder: ImageSettings | None = None
+        self._held = self.pilot.sticks
+        self._change: tuple[float, tuple[float, ...]] | None = None
+        self.stick_lags_s: list[float] = []
+        """Per stick change the pilot made: taken in → first applied at the vehicle [s]."""
 
     # ------------------------------------------------------------------------------ building
 
@@ -216,7 +222,24 @@ class LiveSession:
             for message, _ in self.hub.take():
                 self.apply(message)
             self._watch_coder()
+            self._watch_sticks()
             yield env.timeout(period_s)
+
+    def _watch_sticks(self) -> None:
+        """End-to-end lag: a change of the pilot's sticks → the vehicle applies them (within
+        the teleop codec's 1/127 quantisation); a change superseded before it lands is not
+        counted."""
+        held = self.pilot.sticks
+        if held != self._held:
+            self._held = held
+            self._change = (self.env.now, held)
+        if self._change is None:
+            return
+        since, wanted = self._change
+        applied = self.vehicle.world.resource(Controllers).sticks
+        if all(abs(a - w) <= _STICK_TOLERANCE for a, w in zip(applied, wanted, strict=True)):
+            self.stick_lags_s.append(self.env.now - since)
+            self._change = None
 
     def _publisher(self, period_s: float) -> Generator[simpy.Event, Any, None]:
         env = self.env
@@ -391,6 +414,7 @@ class LiveSession:
             "browser_round_trip_ms": latency_ms(v * 1e6 for v in hub.round_trips_ms),
             "state_to_pixels_ms": latency_ms(v * 1e6 for v in hub.pixel_latencies_ms),
             "scheduler_lateness_ms": latency_ms(self.lateness_ns),
+            "stick_to_vehicle_ms": latency_ms(v * 1e9 for v in self.stick_lags_s),
             "link_changes": self.link_changes,
             "image_settings_pushed": 0 if self.image_console is None else self.image_console.pushed,
         }

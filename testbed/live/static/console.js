@@ -51,11 +51,20 @@ function sampleSticks() {
   return s;
 }
 
-setInterval(() => {
-  const s = sampleSticks();
+// sample at 100 Hz (the Gamepad API has no events for axes); send on change, at once on a
+// key event, and every 50 ms regardless (the server's dead man wants news)
+let lastSent = "", lastSentAt = 0;
+function tick(force) {
+  const s = sampleSticks(), text = JSON.stringify({ t: "sticks", ...s }), now = performance.now();
   $("sticks").textContent = `${fmt(s.x)} ${fmt(s.y)} ${fmt(s.z)} ${fmt(s.yaw)}`;
-  if (role === "pilot") send({ t: "sticks", ...s });
-}, 1000 / STICK_HZ);
+  if (role !== "pilot" || ws.readyState !== 1) return;
+  if (force || text !== lastSent || now - lastSentAt >= 1000 / STICK_HZ) {
+    ws.send(text); lastSent = text; lastSentAt = now;
+  }
+}
+setInterval(() => tick(false), 10);
+addEventListener("keydown", () => tick(true));
+addEventListener("keyup", () => tick(true));
 
 // clock probe: offset of the server's monotonic clock from ours (minimum-RTT sample)
 setInterval(() => send({ t: "ping", c: performance.now() }), 1000);
