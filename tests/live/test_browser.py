@@ -142,6 +142,11 @@ def test_console_flies_the_vehicle_and_shows_the_link(
         page.evaluate("window.__pad.axes[0] = 0")
         live.wait("yaw released", lambda s: s["truth"]["sticks"][5] == 0.0)
 
+        # the truth overlay: T shows the physics truth beside what the operator knows
+        page.keyboard.press("KeyT")
+        assert page.is_checked("#truth")
+        page.wait_for_function("document.querySelector('#telemetry span[style]') !== null")
+
         # the image appears, then sharpens as chunks arrive
         first = live.wait("an image", lambda s: (s["image"] or {}).get("view") is not None)
         b1, v1 = first["image"]["bytes"], first["image"]["view"]["grey"]
@@ -196,7 +201,18 @@ def test_console_flies_the_vehicle_and_shows_the_link(
 
         # the outage button blacks the link out: the vehicle's failsafe holds
         page.click("#outage")
-        live.wait("failsafe", lambda s: s["truth"]["failsafe"] != "NOMINAL")
+        blackout = live.wait("outage", lambda s: s["link"]["outage"])
+        t_out = min(e[0] for e in blackout["events"] if e[2] == "link_outage")
+        hold_s = 1.0  # the vehicle's failsafe.hold_after_s: no order for this long → HOLD
+
+        def failsafe_since_outage(s: dict[str, Any]) -> bool:
+            entered = any(
+                e[2] == "failsafe" and e[3] != "NOMINAL" and e[0] >= t_out for e in s["events"]
+            )
+            held = s["truth"]["failsafe"] != "NOMINAL" and s["t"] >= t_out + hold_s
+            return entered or held
+
+        live.wait("failsafe after the outage", failsafe_since_outage)
         page.screenshot(path=shots / "06-outage.png")
         browser.close()
 
