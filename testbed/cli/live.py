@@ -4,12 +4,17 @@ Usage::
 
     testbed live [SCENARIO] [--set K=V] [--port 8000] [--host 127.0.0.1] [--duration S]
                  [--seed N] [--out DIR] [--force] [--no-plots]
+                 [--operator-port P1 --vehicle-port P2 [--modem M]]
 
 Runs the scenario's nodes in real time (:mod:`testbed.live.session`) with a live pilot and
 serves the console on ``http://HOST:PORT/`` (:mod:`testbed.live.server`; ``--port 0`` picks a
 free port). The first line on stdout is ``testbed live: console on URL``. Default scenario:
 ``s100-video-v1`` (the S100 teleop link with the camera on); its scripted pilot and scheduled
-image settings are replaced by the person at the console.
+image settings are replaced by the person at the console. With ``--operator-port`` and
+``--vehicle-port`` (any pyserial URL, e.g. the PTYs of ``testbed modem-emulator``) the link is
+real: each node's frames go through its modem as in ``testbed hil`` (``--modem``, default
+s100), ``metrics.json`` gets ``testbed hil``'s ``hil`` section, and the console's link controls
+(BER, gap, outage, distance) are refused — they act on the simulated link only.
 
 Ctrl-C (or SIGTERM, or ``--duration`` reached) ends the session and writes what ``testbed run``
 writes (``metrics.json``, ``events.csv``, ``series.csv``, plots unless ``--no-plots``) with
@@ -26,6 +31,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from testbed.cli.options import (
     EXIT_OK,
@@ -41,6 +47,7 @@ __all__ = ["DEFAULT_SCENARIO", "add_live_parser"]
 
 DEFAULT_SCENARIO = "s100-video-v1"
 _MAX_DURATION_S = 86_400.0
+_MODEMS = ("s100", "evologics", "m64", "raw")  # = testbed.hil.MODEM_KINDS
 
 
 def add_live_parser(sub: Subparsers) -> None:
@@ -71,6 +78,9 @@ def add_live_parser(sub: Subparsers) -> None:
     live.add_argument("--out", type=Path, default=None, help="output directory")
     live.add_argument("--force", action="store_true", help="write into a non-empty --out")
     live.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    live.add_argument("--operator-port", default=None, help="HIL: the operator's modem port")
+    live.add_argument("--vehicle-port", default=None, help="HIL: the vehicle's modem port")
+    live.add_argument("--modem", choices=_MODEMS, default="s100", help="HIL: modem on the ports")
     live.set_defaults(handler=_run_live)
 
 
@@ -94,8 +104,15 @@ def _run_live(args: argparse.Namespace) -> int:
         sock = bind(args.host, args.port)
     except OSError as err:
         raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
-    hub = Hub()
-    session = LiveSession(scenario, hub, seed=args.seed, pilot=None)
+    try:
+        endpoints = _open_ports(args)
+        hub = Hub()
+        session = LiveSession(
+            scenario, hub, seed=args.seed, pilot=None, endpoints=endpoints, modem=args.modem
+        )
+    except BaseException:
+        sock.close()
+        raise
     server = ConsoleServer(hub, session.pilot, sock)
     server.start()
     print(f"testbed live: console on {server.url}", flush=True)
@@ -117,3 +134,36 @@ def _run_live(args: argparse.Namespace) -> int:
     if isinstance(result.stopped, Terminated):
         return EXIT_TERMINATED
     return EXIT_OK
+
+
+def _open_ports(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The HIL endpoints of ``--operator-port``/``--vehicle-port``, or None for the simulated
+    link; a port that cannot be opened is a :class:`ConfigError` naming its option."""
+    ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
+    if not any(ports.values()):
+        return None
+    for role, url in ports.items():
+        if not url:
+            raise ConfigError(f"--{role}-port: required with --{_other(role)}-port")
+    if args.operator_port == args.vehicle_port:
+        raise ConfigError("--vehicle-port: must differ from --operator-port")
+    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+
+    errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
+    endpoints: dict[str, Any] = {}
+    try:
+        for role, url in ports.items():
+            try:
+                endpoints[role] = open_endpoint(PortSettings(url, args.modem, role))
+            except errors as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise ConfigError(f"--{role}-port: cannot open {url}: {reason}") from None
+    except BaseException:
+        for endpoint in endpoints.values():
+            endpoint.close()
+        raise
+    return endpoints
+
+
+def _other(role: str) -> str:
+    return "vehicle" if role == "operator" else "operator"

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Generator
+from collections.abc import Generator, Mapping
 from functools import partial
 from typing import Any, cast
 
@@ -42,6 +42,7 @@ from testbed.channel import IpgPolicy, Medium, Trace
 from testbed.common.components import ActiveMode, Armed, FailsafeStatus
 from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Phase
+from testbed.hil import LinkEndpoint
 from testbed.live.hub import Hub
 from testbed.live.intents import MODES, LiveImageConsole, LiveIpg, LiveRequests
 from testbed.live.messages import (
@@ -58,8 +59,8 @@ from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
-from testbed.run.nodes import OperatorNode, VehicleNode
-from testbed.run.realtime import rt_lateness_ns
+from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
+from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.runner import RunResult, compute_metrics, tally_images
 from testbed.run.scenario import Scenario
@@ -73,6 +74,7 @@ POLL_S = 0.001
 PUBLISH_HZ = 10.0
 """Rate of the console's state [Hz]."""
 GOTO_REFUSED = "go-to refused: the vehicle has no autonomy yet (no GoTo order is sent)"
+SIMULATED_ONLY = "link controls act on the simulated link only (this session runs on HIL ports)"
 
 _DEG = 180.0 / math.pi
 _STICK_TOLERANCE = 0.01
@@ -91,10 +93,21 @@ class LiveSession:
         hub: the bridge to the server.
         seed: overrides the scenario's seed.
         pilot: the live pilot (a new one if None).
+        endpoints: ``{"operator": …, "vehicle": …}``: run the link over these serial ports
+            (hardware in the loop, :mod:`testbed.run.realtime`'s modems) instead of the
+            simulated medium; the live link controls are then refused. Closed at the end.
+        modem: the modem kind on the ports, for the record.
     """
 
     def __init__(
-        self, scenario: Scenario, hub: Hub, *, seed: int | None = None, pilot: LivePilot | None
+        self,
+        scenario: Scenario,
+        hub: Hub,
+        *,
+        seed: int | None = None,
+        pilot: LivePilot | None,
+        endpoints: Mapping[str, LinkEndpoint] | None = None,
+        modem: str = "",
     ) -> None:
         self.scenario = scenario
         self.hub = hub
@@ -105,9 +118,19 @@ class LiveSession:
         env = self.env
         self.recorder = Recorder(trace=Trace())
         link = scenario.link
-        self.medium = Medium(
-            env, link.channel, np.random.default_rng(link_seed), self.recorder.trace
-        )
+        self.medium: Medium | None = None
+        self.ledger = FrameLedger()
+        self.hil_modems: dict[str, HilModem] = {}
+        self.endpoints = dict(endpoints or {})
+        self.modem_kind = modem
+        if endpoints is None:
+            rng = np.random.default_rng(link_seed)
+            self.medium = Medium(env, link.channel, rng, self.recorder.trace)
+        else:
+            for role, peer in (("vehicle", "operator"), ("operator", "vehicle")):
+                self.hil_modems[role] = HilModem(
+                    env, role, peer, endpoints[role], trace=self.recorder.trace, ledger=self.ledger
+                )
         self._distance_m: float | None = None
         self.vehicle_node = self._vehicle_node(np.random.default_rng(vehicle_seed))
         self.vehicle: Vehicle = self.vehicle_node.vehicle
@@ -129,7 +152,7 @@ class LiveSession:
 
     def _vehicle_node(self, rng: np.random.Generator) -> VehicleNode:
         scenario, env, recorder = self.scenario, self.env, self.recorder
-        modem = self.medium.attach("vehicle", lambda: self.vehicle.truth.position_ned_m)
+        modem = self._modem("vehicle", lambda: self.vehicle.truth.position_ned_m)
         images = scenario.images
         node = VehicleNode(
             env,
@@ -148,6 +171,11 @@ class LiveSession:
         )
         vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
         return node
+
+    def _modem(self, role: str, position: Any) -> LinkModem:
+        if self.medium is None:
+            return self.hil_modems[role]
+        return self.medium.attach(role, position)
 
     def _operator_position(self) -> tuple[float, float, float]:
         if self._distance_m is None:
@@ -176,7 +204,7 @@ class LiveSession:
         return OperatorNode(
             self.env,
             OperatorStation(self.pilot, plan),
-            self.medium.attach("operator", self._operator_position),
+            self._modem("operator", self._operator_position),
             codec=link.codec,
             # run_token_master only asks the policy for gap_after(size): LiveIpg has it
             ipg=cast("IpgPolicy | None", self.ipg),
@@ -218,6 +246,8 @@ class LiveSession:
         env = self.env
         while True:
             self.lateness_ns.append(rt_lateness_ns(self.env))
+            for modem in self.hil_modems.values():
+                modem.poll()
             self.pilot.drain()
             for message, _ in self.hub.take():
                 self.apply(message)
@@ -262,10 +292,14 @@ class LiveSession:
             self._event("mode_request", message.mode)
         elif isinstance(message, ImageRequest):
             self._image(message)
+        elif isinstance(message, Outage | LinkChange) and self.medium is None:
+            self._event("link_refused", SIMULATED_ONLY)
         elif isinstance(message, Outage):
+            assert self.medium is not None
             self.medium.add_outage(now, now + message.duration_s)
             self._link_change("outage", message.duration_s)
         elif isinstance(message, LinkChange):
+            assert self.medium is not None
             if message.key == "ber":
                 self.medium.set_ber(message.value or 0.0)
             elif message.key == "gap_s" and self.ipg is not None:
@@ -352,10 +386,11 @@ class LiveSession:
                 "command_lag_s": finite_or_none(lag),
                 "command_age_s": finite_or_none(age),
                 "odometry_age_s": finite_or_none(odometry_age),
-                "ber": self.medium.config.ber,
+                "simulated": self.medium is not None,
+                "ber": None if self.medium is None else self.medium.config.ber,
                 "gap_s": None if self.ipg is None else self.ipg.gap_after(13),
                 "distance_m": self._distance_m,
-                "outage": self.medium.in_outage(now, now),
+                "outage": self.medium is not None and self.medium.in_outage(now, now),
                 "timeline": list(self.monitor.timeline),
             },
             "image": self._image_state(now),
@@ -391,19 +426,36 @@ class LiveSession:
 
     def metrics(self, reached_s: float, wall_s: float) -> dict[str, Any]:
         """``metrics.json``: :func:`~testbed.run.runner.compute_metrics`'s keys and ``live``."""
+        payload = {
+            "uplink": self.vehicle_node.port.payload_bytes,
+            "downlink": self.operator_node.port.payload_bytes,
+        }
         tally_images(self.recorder, self.vehicle_node, self.operator_node)
-        metrics = compute_metrics(
-            self.scenario,
-            self.seed,
-            self.recorder,
-            sim_s=reached_s,
-            wall_s=wall_s,
-            energy_wh=self.vehicle_node.energy_wh,
-            payload_bytes={
-                "uplink": self.vehicle_node.port.payload_bytes,
-                "downlink": self.operator_node.port.payload_bytes,
-            },
-        )
+        if self.hil_modems:
+            metrics = hil_metrics(
+                self.scenario,
+                self.seed,
+                self.recorder,
+                self.hil_modems,
+                self.ledger,
+                duration_s=reached_s,
+                wall_s=wall_s,
+                vehicle_node=self.vehicle_node,
+                operator_node=self.operator_node,
+                poll_s=POLL_S,
+                modem=self.modem_kind,
+                lateness_ns=self.lateness_ns,
+            )
+        else:
+            metrics = compute_metrics(
+                self.scenario,
+                self.seed,
+                self.recorder,
+                sim_s=reached_s,
+                wall_s=wall_s,
+                energy_wh=self.vehicle_node.energy_wh,
+                payload_bytes=payload,
+            )
         hub = self.hub
         metrics["live"] = {
             "session": "live",
