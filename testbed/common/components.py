@@ -37,6 +37,7 @@ __all__ = [
     "MovementCommand",
     "Odometry",
     "PositionReading",
+    "PositionSetpoint",
     "ThrusterOutput",
     "register_components",
 ]
@@ -44,7 +45,7 @@ __all__ = [
 
 class ControlMode(enum.IntEnum):
     """Vehicle control modes (ArduSub numbers where one exists: MANUAL 19, STABILIZE 0,
-    ALT_HOLD 2)."""
+    ALT_HOLD 2, GUIDED 4)."""
 
     MANUAL = 19
     """Sticks map to forces and torques; no closed loop."""
@@ -52,6 +53,10 @@ class ControlMode(enum.IntEnum):
     """Attitude hold; sticks trim the attitude target; translation as in manual."""
     DEPTH_HOLD = 2
     """Attitude and depth hold; heave stick trims the depth target; level-frame translation."""
+    GUIDED = 4
+    """Go to the :class:`PositionSetpoint` (needs a position fix): horizontal position loop,
+    depth and heading held; sticks ignored. Without a fix or a setpoint it holds like
+    DEPTH_HOLD."""
 
 
 class FailsafeLevel(enum.IntEnum):
@@ -103,6 +108,23 @@ class DepthSetpoint:
     """Depth target [m, positive down]; applied when it changes."""
 
     depth_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class PositionSetpoint:
+    """Go-to target for GUIDED mode, in the position fix's world NED frame.
+
+    Attributes:
+        position_ned_m: (3,) target of the body origin [m]: north, east, down (z = the depth
+            target).
+        yaw_rad: heading on the way and on arrival [rad, clockwise from north], used when
+            ``use_yaw``; otherwise the heading held when the setpoint arrived is kept.
+        use_yaw: whether ``yaw_rad`` applies.
+    """
+
+    position_ned_m: Vec3
+    yaw_rad: float = 0.0
+    use_yaw: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,6 +254,7 @@ REPLICATED: tuple[tuple[type[object], int, Side], ...] = (
     (ModeRequest, 103, Side.OPERATOR),
     (DepthSetpoint, 104, Side.OPERATOR),
     (AttitudeSetpoint, 105, Side.OPERATOR),
+    (PositionSetpoint, 106, Side.OPERATOR),
     (ImuReading, 151, Side.VEHICLE),
     (DepthReading, 152, Side.VEHICLE),
     (PositionReading, 153, Side.VEHICLE),

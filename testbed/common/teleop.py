@@ -11,7 +11,11 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     not yet reflected in the vehicle's reported state (once per request: a later disarm by the
     vehicle itself is not undone), and the requested mode; a changed :class:`AttitudeSetpoint`
     becomes a ``KeepHeading`` when its heading in whole degrees changed (only the heading
-    travels, roll and pitch setpoints cannot). Each new order toggles the order sequence bit.
+    travels, roll and pitch setpoints cannot); a changed :class:`PositionSetpoint` becomes a
+    ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
+    heading), which the vehicle flies as that setpoint in GUIDED — refused (counted
+    unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED.
+    Each new order toggles the order sequence bit.
 vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
     1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame).
@@ -38,10 +42,13 @@ from testbed.common.components import (
     ModeRequest,
     MovementCommand,
     Odometry,
+    PositionReading,
+    PositionSetpoint,
 )
 from testbed.common.geometry import euler_from_quat, quat_from_euler
 from testbed.ecs import Entity, Origin, World
 from testbed.protocol import (
+    GoTo,
     ImageSettings,
     KeepHeading,
     MalformedPayload,
@@ -67,6 +74,7 @@ _TO_WIRE = {
     ControlMode.MANUAL: Mode.MANUAL,
     ControlMode.STABILIZE: Mode.STABILIZE,
     ControlMode.DEPTH_HOLD: Mode.DEPTH_HOLD,
+    ControlMode.GUIDED: Mode.GUIDED,
 }
 _FROM_WIRE = {wire: mode for mode, wire in _TO_WIRE.items()}
 
@@ -105,7 +113,8 @@ class TeleopCounters:
     Attributes:
         applied: payloads decoded and applied.
         malformed: payloads that did not decode (garbled past the CRC, or a foreign layout).
-        unsupported: orders decoded but not supported by this vehicle (e.g. GUIDED mode, go-to).
+        unsupported: orders decoded but not supported by this vehicle (e.g. POS_HOLD, or
+            GUIDED and go-to without a position fix).
     """
 
     applied: int = 0
@@ -134,6 +143,7 @@ class TeleopOperatorEnd:
         self.order_seq_bit = False
         self._sent_attitude: AttitudeSetpoint | None = None
         self._sent_heading: KeepHeading | None = None
+        self._sent_position: PositionSetpoint | None = None
         self._settled_arm: ArmRequest | None = None
 
     def encode_order(
@@ -160,7 +170,8 @@ class TeleopOperatorEnd:
             arm = request.armed and not vehicle_armed
             disarm = not request.armed and vehicle_armed
         setpoint = world.get(intents, AttitudeSetpoint)
-        order: Move | KeepHeading | ImageSettings | None = None
+        target = world.get(intents, PositionSetpoint)
+        order: Move | KeepHeading | GoTo | ImageSettings | None = None
         if image_settings is not None and not (arm or disarm):
             order = image_settings
         elif setpoint is not None and setpoint != self._sent_attitude and not arm:
@@ -169,6 +180,9 @@ class TeleopOperatorEnd:
             heading = KeepHeading.from_degrees(yaw_deg)
             if heading != self._sent_heading:  # a roll/pitch-only change has nothing to send
                 self._sent_heading = order = heading
+        if order is None and target is not None and target != self._sent_position and not arm:
+            self._sent_position = target
+            order = self._goto(target)
         if order is None:
             command = world.get(intents, MovementCommand)
             sticks = (0.0,) * 6 if command is None else command.sticks
@@ -180,6 +194,18 @@ class TeleopOperatorEnd:
         seq_bit, cancel, first_missing = image_request
         message = OperatorMessage(seq_bit, cancel, first_missing, self.order_seq_bit, False, order)
         return message.encode()
+
+    def _goto(self, target: PositionSetpoint) -> GoTo:
+        """The GoTo order of a position setpoint (int16 cm, clamped; heading in whole degrees:
+        the setpoint's, or the vehicle's last reported one)."""
+        if target.use_yaw:
+            heading = math.degrees(target.yaw_rad)
+        else:
+            odometry = self._world.get(self.vehicle, Odometry)
+            quaternion = (1.0, 0.0, 0.0, 0.0) if odometry is None else odometry.quaternion_wxyz
+            heading = math.degrees(euler_from_quat(quaternion)[2])
+        x, y, z = (max(-32768, min(32767, round(100.0 * v))) for v in target.position_ned_m)
+        return GoTo(x, y, z, round(heading) % 360)
 
     def apply_reply(self, payload: bytes, now_s: float) -> VehicleMessage | None:
         """Apply a reply's state to the vehicle entity.
@@ -246,9 +272,10 @@ class TeleopVehicleEnd:
         order = message.order
         world = self._world
         intents = self._intents
+        has_fix = world.has(self._vehicle, PositionReading)
         if isinstance(order, Move):
             mode = mode_from_wire(order.mode)
-            if mode is None:
+            if mode is None or (mode is ControlMode.GUIDED and not has_fix):
                 self.counters.unsupported += 1
                 return False
             armed = world.get(self._vehicle, Armed)
@@ -262,6 +289,14 @@ class TeleopVehicleEnd:
             self._seq += 1
             command = MovementCommand(self._seq, now_s, (x, y, z, 0.0, 0.0, yaw))
             world.set(intents, command, origin=Origin.REMOTE)
+        elif isinstance(order, GoTo):
+            if not has_fix:
+                self.counters.unsupported += 1
+                return False
+            target = (order.x_cm / 100.0, order.y_cm / 100.0, order.z_cm / 100.0)
+            yaw = math.remainder(math.radians(order.heading % 360), math.tau)
+            world.set(intents, PositionSetpoint(target, yaw, True), origin=Origin.REMOTE)
+            world.set(intents, ModeRequest(ControlMode.GUIDED), origin=Origin.REMOTE)
         elif isinstance(order, KeepHeading):
             yaw = math.radians(order.heading_deg)
             world.set(

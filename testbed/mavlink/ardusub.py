@@ -54,8 +54,10 @@ SIMULATED_MODES = {
     19: ControlMode.MANUAL,
     0: ControlMode.STABILIZE,
     2: ControlMode.DEPTH_HOLD,
+    4: ControlMode.GUIDED,
 }
-"""The modes the simulated vehicle flies, by ArduSub number."""
+"""The modes the simulated vehicle flies, by ArduSub number (GUIDED only with a position
+estimate, :data:`POSITION_MODES`)."""
 POSITION_MODES = frozenset({3, 4, 7, 16})
 """AUTO, GUIDED, CIRCLE, POSHOLD: ArduSub refuses them without a position estimate."""
 GUIDED_MODES = frozenset({3, 4, 7, 16})

@@ -17,8 +17,9 @@ What it speaks (ArduSub 4.5 as seen by QGroundControl and MAVProxy, REFERENCE.md
 REQUEST_AUTOPILOT_CAPABILITIES; the parameter protocol over :class:`~.params.ParamTable`;
 MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arming
 (COMMAND_LONG 400), modes by SET_MODE or DO_SET_MODE with COMMAND_ACK (MANUAL, STABILIZE,
-ALT_HOLD fly; every other mode is refused with MAV_RESULT_FAILED — the simulator has no
-position-hold, guided or surface mode, with or without a position fix); MANUAL_CONTROL and
+ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_LOCAL_NED's
+position; every other mode is refused with MAV_RESULT_FAILED — the simulator has no
+position-hold, auto or surface mode); MANUAL_CONTROL and
 RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on MAV_GCS_SYSID and SYSID_THISMAV (what
 fails the gate is dropped silently and counted); the pilot-input and GCS failsafes of the FS_*
 parameters (:mod:`testbed.mavlink.failsafe`).
@@ -42,6 +43,8 @@ from testbed.common.components import (
     DepthSetpoint,
     ModeRequest,
     MovementCommand,
+    PositionReading,
+    PositionSetpoint,
 )
 from testbed.ecs import Entity, Origin, World
 from testbed.mavlink import commands
@@ -52,8 +55,17 @@ from testbed.mavlink.streams import StreamSchedule
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
 from testbed.mavlink.wire import MavlinkWire
 
-__all__ = ["OUTBOX_LIMIT", "Channel", "EndpointOptions", "Handler", "VehicleEndpoint"]
+__all__ = [
+    "OUTBOX_LIMIT",
+    "POSITION_FIX_TIMEOUT_S",
+    "Channel",
+    "EndpointOptions",
+    "Handler",
+    "VehicleEndpoint",
+]
 
+POSITION_FIX_TIMEOUT_S = 1.0
+"""A position fix older than this [s] is no position estimate (GUIDED refused)."""
 OUTBOX_LIMIT = 1024
 """Packets a channel's outbox holds at most; more are dropped and counted (``outbox_full``)."""
 _INT16_UNUSED = 32767
@@ -161,6 +173,7 @@ class VehicleEndpoint:
             "MISSION_REQUEST_LIST": commands.on_mission_request_list,
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
+            "SET_POSITION_TARGET_LOCAL_NED": commands.on_set_position_target_local_ned,
             "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
 
@@ -357,6 +370,26 @@ class VehicleEndpoint:
         """Ask the vehicle for a simulated mode."""
         self.write(ModeRequest(mode))
 
+    def has_position_estimate(self) -> bool:
+        """Whether the vehicle has a position estimate now (ArduSub's condition for GUIDED): a
+        :class:`PositionReading` on the vehicle entity no older than
+        :data:`POSITION_FIX_TIMEOUT_S` at the endpoint's last update."""
+        fix = self.world.get(self.vehicle, PositionReading)
+        if fix is None:
+            return False
+        now = self._last_update_s
+        return now is None or now - fix.time_s <= POSITION_FIX_TIMEOUT_S
+
+    def request_position(
+        self, position_ned_m: tuple[float, float, float], yaw_rad: float | None
+    ) -> None:
+        """Set GUIDED's target: NED position [m] and heading [rad] (None: keep the present)."""
+        self.write(
+            PositionSetpoint(
+                position_ned_m, 0.0 if yaw_rad is None else yaw_rad, yaw_rad is not None
+            )
+        )
+
     def request_depth(self, depth_m: float) -> None:
         """Set the depth target [m, positive down]."""
         self.write(DepthSetpoint(depth_m))
@@ -389,6 +422,10 @@ class VehicleEndpoint:
         )
         self._snapshot = snapshot
         return snapshot
+
+    def snapshot_now(self) -> VehicleSnapshot:
+        """The snapshot of the last :meth:`update` (taken now if there was none)."""
+        return self._snapshot or self.snapshot(self._last_update_s or 0.0)
 
     def update(self, now_s: float) -> None:
         """Run the failsafes and queue what is due on every channel at ``now_s`` [s]."""

@@ -2,12 +2,12 @@
 
 :class:`ShoreEndpoint` is a :class:`~testbed.mavlink.VehicleEndpoint` given the operator
 station's world: the intents it writes (``MovementCommand``, ``ArmRequest``, ``ModeRequest``,
-``DepthSetpoint``) are the station's, which the node's link codec turns into orders at the
-token rate; the state it reports is the copy the codec mirrored from the vehicle's replies
-(``Odometry``, ``Armed``, ``ActiveMode``, origin REMOTE). Every MAVLink behaviour (parameters,
-modes, arming, sticks, failsafes, stream rates) is the base class's; parameters and mission
-requests are answered from the local table, so a ground station's connection never waits on the
-link.
+``DepthSetpoint``, ``PositionSetpoint``) are the station's, which the node's link codec turns
+into orders at the token rate (a GUIDED target as one ``GoTo``); the state it reports is the
+copy the codec mirrored from the vehicle's replies (``Odometry``, ``Armed``, ``ActiveMode``,
+origin REMOTE). Every MAVLink behaviour (parameters, modes, arming, sticks, failsafes, stream
+rates, GUIDED's position target) is the base class's; parameters and mission requests are
+answered from the local table, so a ground station's connection never waits on the link.
 
 What it adds is honesty about the link (:class:`LinkFacts`):
 
@@ -56,6 +56,9 @@ class LinkFacts:
             time [s]: the reply's transit (intrinsic delay + airtime) on a codec that stamps the
             state with its arrival (teleop), 0 on one that carries the sample time (change-set).
         stale_after_s: state older than this [s] is reported stale (STATUSTEXT warning).
+        position_fix: the vehicle has a position fix (its scenario's sensors): GUIDED is
+            accepted on shore and its target sent as a ``GoTo`` (the teleop codec's state
+            carries no sign of a fix, so the gateway knows it from the vehicle's configuration).
     """
 
     name: str
@@ -63,6 +66,7 @@ class LinkFacts:
     state_period_s: float
     arrival_correction_s: float
     stale_after_s: float
+    position_fix: bool = False
 
     @property
     def banner(self) -> str:
@@ -112,6 +116,10 @@ class ShoreEndpoint(VehicleEndpoint):
             return entity, odometry.sampled_s - self.link.arrival_correction_s
         return self.intents, 0.0  # nothing mirrored yet: no vehicle components on it
 
+    def has_position_estimate(self) -> bool:
+        """Whether the vehicle behind the link has a fix (:attr:`LinkFacts.position_fix`)."""
+        return self.link.position_fix
+
     def update(self, now_s: float) -> None:
         """The base class's update, then the link's age and warnings (module docstring)."""
         super().update(now_s)
@@ -153,5 +161,6 @@ class ShoreEndpoint(VehicleEndpoint):
             "state_period_s": link.state_period_s,
             "arrival_correction_s": link.arrival_correction_s,
             "stale_after_s": link.stale_after_s,
+            "position_fix": link.position_fix,
         }
         return out

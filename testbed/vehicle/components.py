@@ -28,6 +28,7 @@ from testbed.common.components import (
     MovementCommand,
     Odometry,
     PositionReading,
+    PositionSetpoint,
     ThrusterOutput,
     register_components,
 )
@@ -52,6 +53,7 @@ __all__ = [
     "MovementCommand",
     "Odometry",
     "PositionReading",
+    "PositionSetpoint",
     "ThrusterOutput",
     "VehicleTag",
     "register_components",

@@ -6,7 +6,8 @@ Frame order (each a plain ``verb_noun(world) -> None``):
   :func:`ingest_commands` (operator intents → armed, mode, targets, command status);
 - UPDATE: :func:`supervise_failsafe` (stale commands → hold, then surface and disarm; runs
   first so every controller sees this frame's targets), :func:`run_pilot_interface`,
-  :func:`control_depth`, :func:`control_attitude` (each writes its :class:`ForceIntent`),
+  :func:`control_position` (GUIDED only), :func:`control_depth`, :func:`control_attitude`
+  (each writes its :class:`ForceIntent`),
   :func:`allocate_thrust` (Σ intents → allocator → thruster commands);
 - POST_UPDATE: :func:`actuate_thrusters` (commands → thruster plant, stepped over the interval
   to the next frame → the wrench the physics applies, ``T @ actual forces``, recorded),
@@ -15,7 +16,8 @@ Frame order (each a plain ``verb_noun(world) -> None``):
 
 A node adds its link systems around these (:func:`build_schedule`'s ``inbound``/``outbound``).
 
-Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading`); the
+Controllers read only sensor readings (:class:`ImuReading`, :class:`DepthReading`,
+:class:`PositionReading`); the
 physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` reads it (observers
 of a run, such as the recorder, read it too, from outside the schedule's control path).
 Controller objects and the allocator are mutable resources; components stay frozen values.
@@ -34,7 +36,9 @@ import numpy as np
 
 from testbed.common.geometry import (
     Quaternion,
+    euler_from_quat,
     quat_from_axis_angle,
+    quat_from_euler,
     quat_multiply,
     quat_normalize,
     yaw_only,
@@ -60,6 +64,7 @@ from testbed.vehicle.components import (
     MovementCommand,
     Odometry,
     PositionReading,
+    PositionSetpoint,
     ThrusterOutput,
 )
 from testbed.vehicle.control import (
@@ -72,6 +77,7 @@ from testbed.vehicle.control import (
     pilot_level_wrench,
     pilot_trims,
 )
+from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench
 from testbed.vehicle.thrusters import ThrusterDynamics
@@ -89,6 +95,7 @@ __all__ = [
     "build_schedule",
     "control_attitude",
     "control_depth",
+    "control_position",
     "ingest_commands",
     "meter_power",
     "publish_odometry",
@@ -101,7 +108,9 @@ __all__ = [
 Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
-_ZERO_INTENTS = {source: ForceIntent(source, ZERO6) for source in ("pilot", "depth", "attitude")}
+_ZERO_INTENTS = {
+    source: ForceIntent(source, ZERO6) for source in ("pilot", "depth", "attitude", "position")
+}
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 
 
@@ -170,6 +179,7 @@ class ControlFlags:
     attitude_hold: bool = False
     precision: bool = False
     failsafe: bool = False
+    guided: bool = False
 
 
 @dataclass(slots=True)
@@ -179,10 +189,11 @@ class Controllers:
     Attributes:
         vehicle: the vehicle's own entity (state components live there).
         attitude, depth: the closed loops.
+        position: GUIDED mode's horizontal position loop.
         pilot: stick shaping and gains.
         failsafe: command-staleness failsafe timeouts.
         axis_maxima: (6,) allocator axis maxima [N, N·m] (stick scaling; 0 disables an axis).
-        intents: the ForceIntent entity of each source (pilot, depth, attitude).
+        intents: the ForceIntent entity of each source (pilot, depth, attitude, position).
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
@@ -201,6 +212,7 @@ class Controllers:
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
     shaped: _PilotCache | None = None
+    position: PositionController = field(default_factory=PositionController)
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -266,7 +278,8 @@ def _update_flags(world: World, ctl: Controllers) -> None:
     flags.armed = _is_armed(world, vehicle)
     flags.failsafe = failsafe
     flags.precision = mode is not None and mode.precision
-    flags.depth_hold = failsafe or m is ControlMode.DEPTH_HOLD
+    flags.depth_hold = failsafe or m in (ControlMode.DEPTH_HOLD, ControlMode.GUIDED)
+    flags.guided = not failsafe and m is ControlMode.GUIDED
     flags.attitude_hold = failsafe or m is not ControlMode.MANUAL
 
 
@@ -332,7 +345,7 @@ def ingest_commands(world: World) -> None:
             # setpoints (applied below) override
             measured = _measured_targets(world, vehicle)
             targets = world.get(vehicle, ControlTargets) or measured
-            if mode.mode is ControlMode.DEPTH_HOLD:
+            if mode.mode in (ControlMode.DEPTH_HOLD, ControlMode.GUIDED):
                 targets = ControlTargets(measured.depth_m, targets.quaternion_wxyz)
             if mode.mode is not ControlMode.MANUAL:
                 targets = ControlTargets(targets.depth_m, measured.quaternion_wxyz)
@@ -392,7 +405,7 @@ def run_pilot_interface(world: World) -> None:
     """Sticks → pilot force intent; in hold modes the sticks also trim the targets."""
     ctl = world.resource(Controllers)
     flags = ctl.flags
-    sticks = ZERO6 if flags.failsafe else ctl.sticks
+    sticks = ZERO6 if flags.failsafe or flags.guided else ctl.sticks
     if not flags.armed or not any(sticks):
         _set_intent(world, ctl, "pilot", ZERO6)
         return
@@ -465,6 +478,54 @@ class _PilotCache:
             and self.axis_maxima is ctl.axis_maxima
             and self.gains is ctl.pilot
         )
+
+
+def control_position(world: World) -> None:
+    """GUIDED: the position setpoint → level-frame horizontal force intent, and its depth
+    (and heading, when it sets one) as the depth and attitude holds' targets.
+
+    Acts only armed, in GUIDED, with a :class:`PositionSetpoint`, an IMU reading and a fresh
+    :class:`PositionReading` (no older than the loop's ``fix_timeout_s``); otherwise its intent
+    is zero and the vehicle holds depth and attitude as in DEPTH_HOLD.
+    """
+    ctl = world.resource(Controllers)
+    flags = ctl.flags
+    if not (flags.guided and flags.armed):
+        ctl.position.reset()
+        _set_intent(world, ctl, "position", ZERO6)
+        return
+    vehicle = ctl.vehicle
+    now = world.resource(SimClock).time_s
+    fix = world.get(vehicle, PositionReading)
+    imu = world.get(vehicle, ImuReading)
+    setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
+    setpoint = setpoints[-1] if setpoints else None
+    loop = ctl.position
+    if (
+        setpoint is None
+        or imu is None
+        or fix is None
+        or now - fix.time_s > loop.gains.fix_timeout_s
+    ):
+        loop.reset()
+        _set_intent(world, ctl, "position", ZERO6)
+        return
+    targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
+    q = targets.quaternion_wxyz
+    if setpoint.use_yaw:
+        q = quat_from_euler(0.0, 0.0, setpoint.yaw_rad)
+    target = setpoint.position_ned_m
+    world.set(vehicle, ControlTargets(max(0.0, target[2]), q))
+    m = ctl.axis_maxima
+    fx, fy = loop.update(
+        (target[0], target[1]),
+        fix.time_s,
+        (fix.position_ned_m[0], fix.position_ned_m[1]),
+        euler_from_quat(imu.quaternion_wxyz)[2],
+        (m[0], m[1]),
+    )
+    bx, by, bz = level_to_body((fx, fy, 0.0), imu.quaternion_wxyz)
+    _set_intent(world, ctl, "position", (bx, by, bz, 0.0, 0.0, 0.0))
 
 
 def control_depth(world: World) -> None:
@@ -619,6 +680,7 @@ def build_schedule(inbound: Sequence[System] = (), outbound: Sequence[System] = 
     schedule.add(Phase.PRE_UPDATE, ingest_commands)
     schedule.add(Phase.UPDATE, supervise_failsafe)
     schedule.add(Phase.UPDATE, run_pilot_interface)
+    schedule.add(Phase.UPDATE, control_position)
     schedule.add(Phase.UPDATE, control_depth)
     schedule.add(Phase.UPDATE, control_attitude)
     schedule.add(Phase.UPDATE, allocate_thrust)

@@ -348,6 +348,10 @@ class Vehicle:
             world.insert_resource(resource)
         # operator intents written locally (scripted runs) live on their own entity
         self.operator_entity: Entity = world.spawn(Replicate(), origin=Origin.REMOTE)
+        # GUIDED's intent entity, spawned after the others so the entity ids (and the summing
+        # order) of the runs before GUIDED existed stay the same
+        zero = ForceIntent("position", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        self.controllers.intents["position"] = world.spawn(zero)
         self._seq = 0
         self._arm_seq = 0
         self._control_period_s = 1.0 / config.control_rate_hz

@@ -24,6 +24,8 @@ from testbed.common.components import (
     ModeRequest,
     MovementCommand,
     Odometry,
+    PositionReading,
+    PositionSetpoint,
 )
 from testbed.common.geometry import Quaternion
 from testbed.common.teleop import (
@@ -97,16 +99,17 @@ def order_flags(payload: bytes) -> tuple[bool, bool]:
 # ------------------------------------------------------------------------ mode mapping
 
 
-def test_modes_map_both_ways_and_the_vehicle_has_no_pos_hold_or_guided() -> None:
+def test_modes_map_both_ways_and_the_vehicle_has_no_pos_hold() -> None:
     assert mode_to_wire(ControlMode.MANUAL) is Mode.MANUAL
     assert mode_to_wire(ControlMode.STABILIZE) is Mode.STABILIZE
     assert mode_to_wire(ControlMode.DEPTH_HOLD) is Mode.DEPTH_HOLD
     # the wire codes are the 3-bit REFERENCE codes, not ArduSub's mode numbers
-    assert [int(mode_to_wire(m)) for m in ControlMode] == [0, 1, 2]
+    assert mode_to_wire(ControlMode.GUIDED) is Mode.GUIDED
+    assert [int(mode_to_wire(m)) for m in ControlMode] == [0, 1, 2, 4]
     for mode in ControlMode:
         assert mode_from_wire(mode_to_wire(mode)) is mode
     assert mode_from_wire(Mode.POS_HOLD) is None
-    assert mode_from_wire(Mode.GUIDED) is None
+    assert mode_from_wire(Mode.GUIDED) is ControlMode.GUIDED
 
 
 # ---------------------------------------------------------------------- encoding orders
@@ -428,7 +431,7 @@ def test_reply_quantisation_errors_are_bounded() -> None:
 def test_reply_in_a_mode_the_vehicle_lacks_keeps_the_last_known_mode() -> None:
     world, _, end = operator_end()
     assert end.apply_reply(reply(armed=False, mode=2), 1.0)
-    assert end.apply_reply(reply(armed=True, mode=4), 2.0)  # GUIDED
+    assert end.apply_reply(reply(armed=True, mode=3), 2.0)  # POS_HOLD
     assert world.get(end.vehicle, ActiveMode) == ActiveMode(ControlMode.DEPTH_HOLD)
     assert world.get(end.vehicle, Armed) == Armed(True)
 
@@ -616,3 +619,37 @@ def test_reply_with_a_40_byte_chunk_is_the_papers_60_byte_frame() -> None:
     assert (message.first_chunk, message.last_chunk, message.image_seq_bit) == (True, False, True)
     assert (message.chunk_index, message.chunk) == (5, bytes(range(40)))
     assert len(encode_frame(end.encode_reply())) == 20
+
+
+def test_position_setpoint_travels_as_goto_and_the_vehicle_flies_it_in_guided() -> None:
+    op_world, op_intents, op_end = operator_end()
+    op_world.set(op_intents, ModeRequest(ControlMode.GUIDED))
+    op_world.set(op_intents, PositionSetpoint((3.004, -1.006, 1.5), math.radians(-90.0), True))
+    payload = op_end.encode_order()
+    message = decode_operator_message(payload)
+    assert isinstance(message, OperatorMessage)
+    assert message.order == GoTo(300, -101, 150, 270)  # 1 cm, whole degrees mod 360
+    follow = decode_operator_message(op_end.encode_order())  # sent once: a Move follows
+    assert isinstance(follow, OperatorMessage) and isinstance(follow.order, Move)
+    assert follow.order.mode is Mode.GUIDED
+
+    world, vehicle, intents, end = vehicle_end()
+    assert end.apply_order(payload, 1.0) is False  # no position fix: refused
+    assert end.counters.unsupported == 1 and world.components(intents) == ()
+    world.set(vehicle, PositionReading(0.9, (0.0, 0.0, 1.0)))
+    assert end.apply_order(payload, 1.0) is True
+    setpoint = world.get(intents, PositionSetpoint)
+    assert setpoint is not None and setpoint.use_yaw
+    assert setpoint.position_ned_m == (3.0, -1.01, 1.5)
+    assert math.isclose(setpoint.yaw_rad, math.radians(-90.0))
+    assert world.get(intents, ModeRequest) == ModeRequest(ControlMode.GUIDED)
+    assert world.origin_of(intents, PositionSetpoint) is Origin.REMOTE
+
+
+def test_goto_without_a_heading_carries_the_vehicles_reported_heading() -> None:
+    world, intents, end = operator_end()
+    assert end.apply_reply(reply(armed=True, mode=4, heading=123), 1.0)
+    world.set(intents, PositionSetpoint((1.0, 2.0, 0.5)))
+    message = decode_operator_message(end.encode_order())
+    assert isinstance(message, OperatorMessage)
+    assert message.order == GoTo(100, 200, 50, 123)

@@ -9,6 +9,7 @@ what the endpoint queued. No sockets, no wall clock.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -35,11 +36,18 @@ NO_VEHICLE_FAILSAFE = (
 
 
 class SimGcs:
-    """A ground station (sysid ``sysid``) in front of an endpoint on a simulated vehicle."""
+    """A ground station (sysid ``sysid``) in front of an endpoint on a simulated vehicle (the
+    scenario's position fix removed unless ``position_fix``)."""
 
-    def __init__(self, sysid: int = 255, overrides: Iterable[str] = ()) -> None:
+    def __init__(
+        self, sysid: int = 255, overrides: Iterable[str] = (), *, position_fix: bool = True
+    ) -> None:
         scenario = load_scenario("s100-teleop-v1", [*NO_VEHICLE_FAILSAFE, *overrides])
-        self.vehicle = Vehicle(scenario.vehicle, np.random.default_rng(0))
+        config = scenario.vehicle
+        if not position_fix:  # the scenario's position sensor removed
+            sensors = dataclasses.replace(config.sensors, position=None)
+            config = dataclasses.replace(config, sensors=sensors)
+        self.vehicle = Vehicle(config, np.random.default_rng(0))
         vehicle = self.vehicle
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, EndpointOptions()

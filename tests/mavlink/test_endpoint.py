@@ -98,7 +98,7 @@ def test_modes_are_acknowledged_reflected_in_the_heartbeat_and_unsimulated_ones_
     active = gcs.vehicle.world.get(gcs.vehicle.entity, ActiveMode)
     assert active is not None and active.mode is ControlMode.DEPTH_HOLD
     gcs.clear()
-    for refused in (16, 4, 9, 5):  # POSHOLD, GUIDED: no position estimate; SURFACE; unknown
+    for refused in (16, 3, 9, 5):  # POSHOLD, AUTO, SURFACE: not simulated; unknown
         gcs.send(gcs.set_mode(refused))
     gcs.send(gcs.mav.set_mode_encode(1, 0, 19))  # no custom-mode flag
     gcs.run(1.01)

@@ -1,0 +1,279 @@
+"""GUIDED through the sans-IO endpoint, pymavlink as the ground station, in simulated time:
+accepted only with a position fix, SET_POSITION_TARGET_LOCAL_NED flown to within the fix's
+noise, at a bounded speed, in bounded time; judged by the physics truth, which the controller
+never reads."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from testbed.common.components import ActiveMode, ControlMode, PositionSetpoint
+from testbed.common.geometry import euler_from_quat
+from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
+from testbed.ecs import Origin
+from testbed.mavlink import EndpointOptions
+from testbed.mavlink.shore import ShoreEndpoint
+from testbed.protocol import GoTo, decode_operator_message
+from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts
+from testbed.run.scenario import load_scenario
+from testbed.vehicle.guidance import PositionGains
+from testbed.vehicle.vehicle import Vehicle
+from tests.mavlink.gcs import FRAME_S, NO_VEHICLE_FAILSAFE, SimGcs
+
+ACCEPTED = mav.MAV_RESULT_ACCEPTED
+FAILED = mav.MAV_RESULT_FAILED
+POSITION_ONLY = 0b1001_1111_1000  # x, y, z and yaw used; velocity, acceleration, yaw rate not
+YAW_IGNORE = 1024
+FIX_NOISE_M = 0.005  # s100-teleop-v1's [vehicle.sensors.position] noise_m (1σ per axis)
+TOLERANCE_M = 0.05
+"""Arrival tolerance [m], horizontal: 10σ of the fix's noise (the loop's only error source in
+still water; its gain k_v·k_p = 24 N/m turns 5 mm of noise into 0.1 N) and 1.6 % of the 3.16-m
+leg; the approach's exponential tail (time constant 1/k_p = 1.25 s) crosses it ≈ 2.9 s after
+the speed limit lets go at 0.5/k_p = 0.63 m."""
+
+
+@pytest.fixture
+def gcs() -> Iterator[SimGcs]:
+    station = SimGcs()
+    yield station
+    station.close()
+
+
+def mode_acks(gcs: SimGcs) -> list[int]:
+    return [m.result for m in gcs.of("COMMAND_ACK") if m.command == mav.MAV_CMD_DO_SET_MODE]
+
+
+def target(
+    gcs: SimGcs, frame: int, x: float, y: float, z: float, yaw: float | None = None
+) -> object:
+    mask = POSITION_ONLY | (YAW_IGNORE if yaw is None else 0)
+    return gcs.mav.set_position_target_local_ned_encode(
+        0, 1, 1, frame, mask, x, y, z, 0, 0, 0, 0, 0, 0, 0.0 if yaw is None else yaw, 0
+    )
+
+
+def test_guided_is_refused_without_a_position_fix() -> None:
+    gcs = SimGcs(position_fix=False)
+    try:
+        gcs.send(gcs.heartbeat(), gcs.arm())
+        gcs.run(1.0, gcs.flying())
+        gcs.send(gcs.set_mode(4), gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 4))
+        gcs.run(1.01, gcs.flying())
+        assert mode_acks(gcs) == [FAILED, FAILED]
+        assert gcs.last("HEARTBEAT").custom_mode == 19
+        assert any(m.text == "Flight mode change failed" for m in gcs.of("STATUSTEXT"))
+        gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, 3.0, 1.0, 1.0))
+        gcs.run(0.1, gcs.flying())
+        assert gcs.endpoint.rejected["not_guided"] == 1
+        assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    finally:
+        gcs.close()
+
+
+def test_guided_is_accepted_with_a_fix_and_flies_to_a_target_ahead_and_aside(
+    gcs: SimGcs,
+) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, 3.0, 1.0, 1.0))  # not in GUIDED: ignored
+    gcs.send(gcs.set_mode(4))
+    gcs.run(1.01, gcs.flying())
+    assert mode_acks(gcs) == [ACCEPTED, ACCEPTED]
+    assert gcs.endpoint.rejected["not_guided"] == 1
+    hb = gcs.last("HEARTBEAT")
+    assert (hb.custom_mode, hb.base_mode) == (4, 81 + 8 + 128)  # GUIDED flag, armed
+    truth = gcs.vehicle.truth
+    start = tuple(truth.position_ned_m)
+    depth = start[2]
+    heading = euler_from_quat(truth.quaternion_wxyz)[2]
+    goal = (  # 3 m ahead, 1 m to the right of the heading, same depth
+        start[0] + 3.0 * math.cos(heading) - 1.0 * math.sin(heading),
+        start[1] + 3.0 * math.sin(heading) + 1.0 * math.cos(heading),
+    )
+    gcs.send(target(gcs, mav.MAV_FRAME_BODY_OFFSET_NED, 3.0, 1.0, 0.0))
+    sent_s = gcs.now_s
+    gains = PositionGains()
+    leg = math.hypot(3.0, 1.0)
+    reached_s = None
+    top_speed = 0.0
+    errors = []
+    while gcs.now_s < sent_s + 25.0:
+        gcs.run(0.1, gcs.flying())
+        p, v = truth.position_ned_m, truth.velocity_m_s
+        error = math.hypot(p[0] - goal[0], p[1] - goal[1])
+        top_speed = max(top_speed, math.hypot(v[0], v[1]))
+        errors.append(error)
+        if reached_s is None and error < TOLERANCE_M:
+            reached_s = gcs.now_s - sent_s
+    assert reached_s is not None
+    # bounded speed: never faster than the loop's limit (+ 10 % overshoot of the velocity loop)
+    assert top_speed <= 1.1 * gains.max_speed_m_s
+    # so not before the leg at that speed, and within it at the speed reached (> 0.3 m/s)
+    # plus the tail: ln(0.63 / 0.05) / k_p ≈ 3.2 s
+    assert leg / gains.max_speed_m_s <= reached_s <= leg / 0.3 + 4.0
+    assert max(errors[-50:]) < TOLERANCE_M  # and stays: the last 5 s
+    assert abs(truth.position_ned_m[2] - depth) < 0.05  # the depth hold held the depth
+    assert abs(math.remainder(euler_from_quat(truth.quaternion_wxyz)[2] - heading, math.tau)) < (
+        math.radians(3.0)
+    )
+    reported = gcs.last("LOCAL_POSITION_NED")
+    assert math.hypot(reported.x - goal[0], reported.y - goal[1]) < TOLERANCE_M + 5 * FIX_NOISE_M
+    assert gcs.endpoint.rejected.get("unsupported_target", 0) == 0
+
+
+def test_an_absolute_target_with_a_heading_turns_and_dives_to_it(gcs: SimGcs) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    gcs.send(gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 4))
+    gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, -1.0, 1.5, 1.4, yaw=math.radians(90.0)))
+    gcs.send(
+        gcs.mav.set_position_target_local_ned_encode(  # a velocity target: unsupported
+            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b1101_1100_0111, 0, 0, 0, 0.2, 0, 0, 0, 0, 0, 0, 0
+        )
+    )
+    gcs.run(20.0, gcs.flying())
+    truth = gcs.vehicle.truth
+    p = truth.position_ned_m
+    assert math.hypot(p[0] + 1.0, p[1] - 1.5) < TOLERANCE_M
+    assert abs(p[2] - 1.4) < 0.05
+    yaw = euler_from_quat(truth.quaternion_wxyz)[2]
+    assert abs(math.degrees(yaw) - 90.0) < 3.0
+    assert gcs.endpoint.rejected["unsupported_target"] == 1
+    active = gcs.vehicle.world.get(gcs.vehicle.entity, ActiveMode)
+    assert active is not None and active.mode is ControlMode.GUIDED
+    # leaving GUIDED for ALT_HOLD lets go of the target: the position loop's intent is zero
+    gcs.send(gcs.set_mode(2))
+    gcs.run(0.5, gcs.flying())
+    loop = gcs.vehicle.controllers
+    assert not loop.flags.guided and loop.position.velocity_ne_m_s == (0.0, 0.0)
+
+
+class _Gateway:
+    """The gateway path in simulated time: pymavlink → :class:`ShoreEndpoint` on a gateway
+    station → the teleop codec's orders, one per token gap, each crossing in ``up_s`` → the
+    vehicle's teleop end on a real vehicle; its reply crosses back in ``down_s``."""
+
+    GAP_S = 0.594  # s100's token gap
+    UP_S = 0.140  # a 13-B order's crossing
+    DOWN_S = 0.170  # a 20-B reply's crossing
+
+    def __init__(self) -> None:
+        scenario = load_scenario("s100-teleop-v1", list(NO_VEHICLE_FAILSAFE))
+        self.vehicle = Vehicle(scenario.vehicle, np.random.default_rng(0))
+        self.station = GatewayStation()
+        facts = gateway_link_facts(scenario)
+        self.endpoint = ShoreEndpoint(
+            self.station.world, self.station.entity, facts, EndpointOptions(origin=Origin.LOCAL)
+        )
+        self.channel = self.endpoint.open_channel("gcs")
+        self.shore = TeleopOperatorEnd(self.station.world, self.station.entity)
+        v = self.vehicle
+        self.far = TeleopVehicleEnd(v.world, v.entity, v.operator_entity)
+        self.mav = SimGcs.make_sender(255)
+        self._decoder = mav.MAVLink(None)
+        self.messages: list[Any] = []
+        self.orders: list[object] = []
+        self._pending = bytearray()
+        self._in_flight: list[tuple[float, str, bytes]] = []
+        self._next_order_s = 0.0
+        self._t = 0.0
+        self._k = 0
+
+    def send(self, *messages: Any) -> None:
+        for message in messages:
+            self._pending += message.pack(self.mav)
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds / FRAME_S)):
+            t = self._t
+            if self._k % 4 == 0:  # sticks at 25 Hz, a heartbeat at 1 Hz
+                self.send(self.mav.manual_control_encode(1, 0, 0, 500, 0, 0))
+            if self._k % 100 == 0:
+                self.send(self.mav.heartbeat_encode(6, 8, 0, 0, 4))
+            self._k += 1
+            data, self._pending = bytes(self._pending), bytearray()
+            self.endpoint.receive(self.channel, data, t)
+            if t >= self._next_order_s:
+                self._next_order_s += self.GAP_S
+                payload = self.shore.encode_order()
+                self.orders.append(decode_operator_message(payload).order)  # type: ignore[union-attr]
+                self._in_flight.append((t + self.UP_S, "order", payload))
+            for item in [i for i in self._in_flight if i[0] <= t]:
+                self._in_flight.remove(item)
+                if item[1] == "order":
+                    self.far.apply_order(item[2], t)
+                    reply = self.far.encode_reply()
+                    self._in_flight.append((t + self.DOWN_S, "reply", reply))
+                else:
+                    self.shore.apply_reply(item[2], t)
+            self._t = t + FRAME_S
+            self.vehicle.advance(self._t)
+            self.endpoint.update(self._t)
+            for packet in self.channel.take():
+                self.messages.extend(
+                    m
+                    for m in self._decoder.parse_buffer(packet) or []
+                    if m.get_type() != "BAD_DATA"
+                )
+
+    def last(self, kind: str) -> Any:
+        return [m for m in self.messages if m.get_type() == kind][-1]
+
+
+def test_through_the_gateway_the_target_travels_as_one_goto_and_the_vehicle_flies_it() -> None:
+    gw = _Gateway()
+    try:
+        gw.send(gw.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+        gw.send(gw.mav.set_mode_encode(1, 1, 2))
+        gw.run(3.0)
+        gw.send(gw.mav.set_mode_encode(1, 1, 4))  # GUIDED: the scenario's vehicle has a fix
+        gw.run(3.0)  # two gaps: a reply answers before its order is applied
+        acks = [m.result for m in gw.messages if m.get_type() == "COMMAND_ACK"]
+        assert acks == [ACCEPTED, ACCEPTED, ACCEPTED]
+        hb = gw.last("HEARTBEAT")
+        assert (hb.custom_mode, hb.base_mode) == (4, 81 + 8 + 128)  # the vehicle's state
+        truth = gw.vehicle.truth
+        start = tuple(truth.position_ned_m)
+        heading = euler_from_quat(truth.quaternion_wxyz)[2]
+        goal = (
+            start[0] + 3.0 * math.cos(heading) - 1.0 * math.sin(heading),
+            start[1] + 3.0 * math.sin(heading) + 1.0 * math.cos(heading),
+        )
+        gw.send(
+            gw.mav.set_position_target_local_ned_encode(
+                0,
+                1,
+                1,
+                mav.MAV_FRAME_BODY_OFFSET_NED,
+                POSITION_ONLY | YAW_IGNORE,
+                3.0,
+                1.0,
+                0.0,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
+        gw.run(22.0)
+        gotos = [o for o in gw.orders if isinstance(o, GoTo)]
+        assert len(gotos) == 1  # the setpoint travels once
+        assert gw.far.counters.unsupported == 0
+        p = truth.position_ned_m
+        # the offset was taken from the reported state (1 cm, 1°, the fix's noise): + 3 cm
+        assert math.hypot(p[0] - goal[0], p[1] - goal[1]) < TOLERANCE_M + 0.03
+        assert abs(p[2] - start[2]) < 0.05
+        reported = gw.last("LOCAL_POSITION_NED")
+        assert math.hypot(reported.x - p[0], reported.y - p[1]) < 0.05  # the mirrored state
+    finally:
+        gw.vehicle.close()
