@@ -142,6 +142,21 @@ def test_console_flies_the_vehicle_and_shows_the_link(
         page.evaluate("window.__pad.axes[0] = 0")
         live.wait("yaw released", lambda s: s["truth"]["sticks"][5] == 0.0)
 
+        # gamepad buttons, ArduSub's defaults: Back disarms, Start arms, A manual, X depth hold
+        def press(button: int) -> None:
+            page.evaluate(f"window.__pad.buttons[{button}].pressed = true")
+            page.wait_for_timeout(100)  # ten samples of the page's 100-Hz poll
+            page.evaluate(f"window.__pad.buttons[{button}].pressed = false")
+
+        press(8)
+        live.wait("disarmed", lambda s: not s["truth"]["armed"])
+        press(9)
+        live.wait("armed again", lambda s: s["truth"]["armed"])
+        press(0)
+        live.wait("manual", lambda s: (s["operator"] or {}).get("mode") == "manual")
+        press(2)
+        live.wait("depth hold", lambda s: (s["operator"] or {}).get("mode") == "depth_hold")
+
         # the truth overlay: T shows the physics truth beside what the operator knows
         page.keyboard.press("KeyT")
         assert page.is_checked("#truth")
@@ -215,6 +230,8 @@ def test_console_flies_the_vehicle_and_shows_the_link(
         live.wait("failsafe after the outage", failsafe_since_outage)
         page.screenshot(path=shots / "06-outage.png")
         browser.close()
+    t_closed = live.state()["t"]
+    live.wait("the run goes on without a browser", lambda s: s["t"] > t_closed + 1.0)
 
     assert live.stop() == 0
     metrics = json.loads((live.out / "metrics.json").read_text())
