@@ -1,0 +1,80 @@
+"""LiveSession's hooks applied to a built (not running) session: the link model changes, the
+orders queue up, refusals are recorded, and the console's state is plain JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+
+import pytest
+
+from testbed.live.hub import Hub
+from testbed.live.messages import (
+    Arm,
+    GoToPoint,
+    ImageRequest,
+    LinkChange,
+    Outage,
+    SetMode,
+)
+from testbed.live.session import GOTO_REFUSED, LiveSession
+from testbed.run.scenario import load_scenario
+
+
+@pytest.fixture(scope="module")
+def session() -> Iterator[LiveSession]:
+    built = LiveSession(load_scenario("s100-video-v1"), Hub(), pilot=None)
+    yield built
+    built.vehicle.close()
+
+
+def test_link_controls_change_the_running_model(session: LiveSession) -> None:
+    medium, ipg = session.medium, session.ipg
+    assert medium is not None and ipg is not None
+    session.apply(LinkChange("ber", 1e-3))
+    assert medium.config.ber == 1e-3
+    session.apply(LinkChange("gap_s", 2.0))
+    assert ipg.gap_after(13) == 2.0
+    session.apply(LinkChange("gap_s", None))
+    assert ipg.gap_after(13) == pytest.approx(13 * 8 / 175)
+    session.apply(LinkChange("distance_m", 300.0))
+    operator, vehicle = session._operator_position(), session.vehicle.truth.position_ned_m
+    assert math.dist(operator, vehicle) == pytest.approx(300.0)
+    session.apply(LinkChange("distance_m", None))
+    assert session._operator_position() == session.scenario.link.operator_position_ned_m
+    session.apply(Outage(3.0))
+    assert medium.in_outage(1.0, 1.0) and not medium.in_outage(3.5, 4.0)
+    keys = [change["key"] for change in session.link_changes]
+    assert keys == ["ber", "gap_s", "gap_s", "distance_m", "distance_m", "outage"]
+    assert (
+        sum(e.node == "live" and e.kind.startswith("link_") for e in session.recorder.events) == 6
+    )
+
+
+def test_orders_and_refusals(session: LiveSession) -> None:
+    console = session.image_console
+    assert console is not None
+    session.apply(ImageRequest((40, 30, 119, 89), 4, 600))
+    settings = console.settings_due(0.0)
+    assert settings is not None and (settings.x0, settings.roi_shift) == (40, 4)
+    session.apply(ImageRequest(None, 7, 900))
+    cleared = console.settings_due(0.0)
+    assert cleared is not None and (cleared.x1, cleared.roi_shift, cleared.budget_bytes) == (
+        0,
+        0,
+        900,
+    )
+    session.apply(Arm(False))
+    session.apply(SetMode("manual"))
+    session.apply(GoToPoint(1.0, 2.0))
+    kinds = [e.kind for e in session.recorder.events if e.node == "live"]
+    assert {"disarm_request", "mode_request", "goto_refused"} <= set(kinds)
+    assert GOTO_REFUSED in session.hub.notes
+
+
+def test_the_state_is_plain_json(session: LiveSession) -> None:
+    state = session.state()
+    text = json.dumps(state, allow_nan=False)
+    assert json.loads(text)["link"]["simulated"] is True
+    assert state["truth"]["failsafe"] == "NOMINAL"
