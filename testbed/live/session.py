@@ -32,6 +32,7 @@ import time
 from collections import deque
 from collections.abc import Generator, Mapping
 from functools import partial
+from itertools import islice
 from typing import Any, cast
 
 import numpy as np
@@ -396,8 +397,8 @@ class LiveSession:
             "image": self._image_state(now),
             "console": {
                 "inputs": self.hub.counters.as_dict(),
-                "input_latency_ms": latency_ms(list(self.pilot.latencies_ns)[-200:]),
-                "lateness_ms": latency_ms(list(self.lateness_ns)[-1000:]),
+                "input_latency_ms": latency_ms(_newest(self.pilot.latencies_ns, 200)),
+                "lateness_ms": latency_ms(_newest(self.lateness_ns, 1000)),
                 "notes": list(self.hub.notes),
             },
             "events": [[round(e.t_s, 2), e.node, e.kind, e.detail] for e in recorder.events[-8:]],
@@ -471,6 +472,11 @@ class LiveSession:
             "image_settings_pushed": 0 if self.image_console is None else self.image_console.pushed,
         }
         return metrics
+
+
+def _newest(samples: deque[int], count: int) -> list[int]:
+    """The newest ``count`` samples (without copying the whole deque)."""
+    return list(islice(reversed(samples), count))
 
 
 def _settings_text(settings: ImageSettings) -> str:
