@@ -5,8 +5,10 @@ simulation's thread only:
 
 * :class:`LiveRequests` — an UPDATE system of the operator station that writes the arm/disarm
   and mode requests the pilot clicked (fresh :class:`~testbed.common.components.ArmRequest`
-  sequence numbers, so a request after a failsafe disarm asks again); the link codec turns them
-  into the order's flags, as for a scripted session;
+  sequence numbers, so a request after a failsafe disarm asks again) and go-to points (a
+  :class:`~testbed.common.components.PositionSetpoint` with GUIDED requested: the teleop codec
+  sends one ``GoTo`` order, the vehicle flies it); the link codec turns them into orders, as
+  for a scripted session;
 * :class:`LiveImageConsole` — the operator's :class:`~testbed.operator.video.ImageConsole` that
   also takes coder settings pushed at any time (an ROI drag), sent as the next gap's
   ``ImageSettings`` order and repeated until acknowledged, exactly as scheduled ones;
@@ -17,7 +19,7 @@ from __future__ import annotations
 
 from testbed.channel import IpgPolicy
 from testbed.channel.mac import Fixed
-from testbed.common.components import ArmRequest, ControlMode, ModeRequest
+from testbed.common.components import ArmRequest, ControlMode, ModeRequest, PositionSetpoint
 from testbed.ecs import Entity, World
 from testbed.operator.video import ImageConsole
 from testbed.protocol import ImageSettings
@@ -46,6 +48,7 @@ class LiveRequests:
         self._entity = entity
         self._arm: bool | None = None
         self._mode: ControlMode | None = None
+        self._goto: tuple[float, float, float] | None = None
         self._seq = _FIRST_ARM_SEQ
 
     def arm(self, armed: bool) -> None:
@@ -56,7 +59,16 @@ class LiveRequests:
         """Ask for ``mode`` at the next operator frame."""
         self._mode = mode
 
+    def goto(self, position_ned_m: tuple[float, float, float]) -> None:
+        """Ask the vehicle to fly to ``position_ned_m`` [m, NED; z = depth] in GUIDED (keeping
+        its heading) at the next operator frame; another mode request ends it."""
+        self._goto = position_ned_m
+
     def __call__(self, world: World) -> None:
+        if self._goto is not None:
+            world.set(self._entity, PositionSetpoint(self._goto))
+            world.set(self._entity, ModeRequest(ControlMode.GUIDED))
+            self._goto = None
         if self._mode is not None:
             world.set(self._entity, ModeRequest(self._mode))
             self._mode = None

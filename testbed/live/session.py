@@ -22,7 +22,9 @@ policy (:class:`~testbed.live.intents.LiveIpg`), an outage from now
 modem is placed that far north of the vehicle; propagation delay and distance-dependent errors
 follow from the medium's model). Image coder settings: the scenario's initial ones, then the
 pilot's (its scheduled ``images.changes`` are not sent: a person is flying). A go-to point
-is refused with a notice: the teleop codec and the vehicle have no autonomy to carry it out yet.
+(supervised control) becomes a ``PositionSetpoint`` with GUIDED requested at the depth the
+operator knows: one ``GoTo`` order, flown by the vehicle's guidance (refused by a vehicle
+without a position fix); any mode request ends it.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ import simpy
 import simpy.rt
 
 from testbed.channel import IpgPolicy, Medium, Trace
-from testbed.common.components import ActiveMode, Armed, FailsafeStatus
+from testbed.common.components import ActiveMode, Armed, FailsafeStatus, PositionSetpoint
 from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Phase
 from testbed.hil import LinkEndpoint
@@ -74,7 +76,7 @@ POLL_S = 0.001
 """Period of the input poll [s]."""
 PUBLISH_HZ = 10.0
 """Rate of the console's state [Hz]."""
-GOTO_REFUSED = "go-to refused: the vehicle has no autonomy yet (no GoTo order is sent)"
+GOTO_REFUSED = "go-to refused: no vehicle state received yet (the depth to hold is unknown)"
 SIMULATED_ONLY = "link controls act on the simulated link only (this session runs on HIL ports)"
 
 _DEG = 180.0 / math.pi
@@ -309,8 +311,18 @@ class LiveSession:
                 self._distance_m = message.value
             self._link_change(message.key, message.value)
         elif isinstance(message, GoToPoint):
+            self._go_to(message)
+
+    def _go_to(self, message: GoToPoint) -> None:
+        """Supervised control: fly to the clicked point at the depth the operator knows."""
+        odometry = self.station.vehicle_odometry()
+        if odometry is None:
             self._event("goto_refused", f"x={message.x:.2f} y={message.y:.2f} m")
             self.hub.note(GOTO_REFUSED)
+            return
+        depth = odometry.position_ned_m[2]
+        self.requests.goto((message.x, message.y, depth))
+        self._event("goto_sent", f"x={message.x:.2f} y={message.y:.2f} z={depth:.2f} m")
 
     def _link_change(self, key: str, value: float | None) -> None:
         self.link_changes.append({"t_s": self.env.now, "key": key, "value": value})
@@ -376,6 +388,7 @@ class LiveSession:
                 "armed": ctl.flags.armed,
                 "failsafe": "NOMINAL" if status is None else status.level.name,
                 "sticks": [round(s, 3) for s in ctl.sticks],
+                "target": self._target(),
             },
             "pilot": {
                 "sticks": [round(s, 3) for s in self.pilot.sticks],
@@ -404,6 +417,12 @@ class LiveSession:
             "events": [[round(e.t_s, 2), e.node, e.kind, e.detail] for e in recorder.events[-8:]],
         }
         return state
+
+    def _target(self) -> list[float] | None:
+        """The go-to target the vehicle holds (its operator entity), or None."""
+        world = self.vehicle.world
+        target = world.get(self.vehicle.operator_entity, PositionSetpoint)
+        return None if target is None else [round(v, 2) for v in target.position_ned_m]
 
     def _image_state(self, now: float) -> dict[str, Any] | None:
         console = self.image_console

@@ -2,7 +2,8 @@
 
 One session (one process, one browser) walks through the console: keyboard sticks move the
 vehicle, an injected fake gamepad does too, the image appears and sharpens, telemetry and the
-link panel update, an ROI drag reaches the vehicle's coder as an ImageSettings order, the
+link panel update, an ROI drag reaches the vehicle's coder as an ImageSettings order, a click
+on the track is a GoTo the vehicle flies, the
 outage button triggers the vehicle's failsafe, a second tab is a read-only viewer whose
 garbage and floods are counted, and Ctrl-C writes the outputs marked as a live session. A
 screenshot of each step goes to the test's ``tmp_path``.
@@ -18,6 +19,7 @@ Skipped, with the reason, when Playwright or a Chromium executable is missing.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -193,6 +195,34 @@ def test_console_flies_the_vehicle_and_shows_the_link(
         assert 35 <= x0r <= 45 and 25 <= y0r <= 35 and 115 <= x1r <= 125 and 85 <= y1r <= 95
         page.screenshot(path=shots / "05-roi.png")
 
+        # supervised control: a click on the track is a GoTo the vehicle flies in GUIDED
+        here = coded["truth"]["pos"]
+        track = page.locator("#track").bounding_box()
+        assert track is not None
+        scale = page.evaluate("view.scale")  # [px/m], the page's own track scale
+        page.mouse.click(
+            track["x"] + track["width"] / 2 + 0.5 * scale,
+            track["y"] + track["height"] / 2 - 1.0 * scale,
+        )
+        aim = (here[0] + 1.0, here[1] + 0.5)
+        guided = live.wait(
+            "GoTo at the vehicle",
+            lambda s: (
+                s["truth"]["target"] is not None and (s["operator"] or {}).get("mode") == "guided"
+            ),
+        )
+        goal = guided["truth"]["target"]
+        assert math.dist(goal[:2], aim) < 0.3  # the vehicle moved a little since the click
+
+        def gap(s: dict[str, Any]) -> float:
+            return math.dist(s["truth"]["pos"][:2], goal[:2])
+
+        start_gap = gap(guided)
+        live.wait("closing on the target", lambda s: gap(s) < start_gap - 0.2)
+        page.screenshot(path=shots / "06-goto.png")
+        press(2)  # X: depth hold ends GUIDED
+        live.wait("depth hold", lambda s: (s["operator"] or {}).get("mode") == "depth_hold")
+
         # a second tab is a read-only viewer; its garbage and floods are counted, not fatal
         viewer = browser.new_page()
         viewer.goto(live.url)
@@ -228,7 +258,7 @@ def test_console_flies_the_vehicle_and_shows_the_link(
             return entered or held
 
         live.wait("failsafe after the outage", failsafe_since_outage)
-        page.screenshot(path=shots / "06-outage.png")
+        page.screenshot(path=shots / "07-outage.png")
         browser.close()
     t_closed = live.state()["t"]
     live.wait("the run goes on without a browser", lambda s: s["t"] > t_closed + 1.0)
@@ -239,8 +269,8 @@ def test_console_flies_the_vehicle_and_shows_the_link(
     assert metrics["live"]["inputs"]["accepted"] > 10
     assert metrics["live"]["input_to_intent_ms"]["n"] > 10
     events = (live.out / "events.csv").read_text()
-    for needed in ("image_settings_sent", "image_settings", "link_outage", "failsafe"):
+    for needed in ("image_settings_sent", "image_settings", "goto_sent", "link_outage", "failsafe"):
         assert needed in events
-    assert len(list(shots.iterdir())) == 6
+    assert len(list(shots.iterdir())) == 7
     if os.environ.get("TESTBED_LIVE_SHOTS"):  # keep the screenshots (docs/live-console.png)
         shutil.copytree(shots, os.environ["TESTBED_LIVE_SHOTS"], dirs_exist_ok=True)

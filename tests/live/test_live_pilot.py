@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from testbed.channel.mac import TELEROBOTICS_2021
-from testbed.common.components import ArmRequest, ControlMode, ModeRequest
+from testbed.common.components import ArmRequest, ControlMode, ModeRequest, PositionSetpoint
 from testbed.ecs import World
 from testbed.live.hub import Hub
 from testbed.live.intents import LiveImageConsole, LiveIpg, LiveRequests
@@ -155,3 +155,18 @@ def test_the_gap_can_be_fixed_and_restored() -> None:
     assert ipg.gap_after(60) == 2.0
     ipg.set_gap(None)
     assert ipg.gap_after(13) == pytest.approx(13 * 8 / 175)
+
+
+def test_a_go_to_point_is_a_position_setpoint_in_guided() -> None:
+    world = World()
+    entity = world.spawn()
+    requests = LiveRequests(entity)
+    requests.goto((1.0, 2.0, 0.9))
+    requests(world)
+    setpoint = world.get(entity, PositionSetpoint)
+    assert setpoint is not None and setpoint.position_ned_m == (1.0, 2.0, 0.9)
+    assert not setpoint.use_yaw  # keeps the heading it has
+    assert world.get(entity, ModeRequest) == ModeRequest(ControlMode.GUIDED)
+    requests.mode(ControlMode.DEPTH_HOLD)  # any mode ends it
+    requests(world)
+    assert world.get(entity, ModeRequest) == ModeRequest(ControlMode.DEPTH_HOLD)

@@ -192,6 +192,11 @@ function drawTrack(s, truth) {
   };
   path(trackOp, "#4af");
   if (truth) path(trackTruth, "#f90");
+  const goal = s.truth.target; // the go-to point the vehicle holds (GUIDED)
+  if (goal) {
+    const [x, y] = xy(goal); g.strokeStyle = "#6f6"; g.beginPath();
+    g.moveTo(x - 6, y - 6); g.lineTo(x + 6, y + 6); g.moveTo(x - 6, y + 6); g.lineTo(x + 6, y - 6); g.stroke();
+  }
 }
 
 function drawDepth(truth) {
