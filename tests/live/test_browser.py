@@ -147,8 +147,9 @@ def test_console_flies_the_vehicle_and_shows_the_link(
         # gamepad buttons, ArduSub's defaults: Back disarms, Start arms, A manual, X depth hold
         def press(button: int) -> None:
             page.evaluate(f"window.__pad.buttons[{button}].pressed = true")
-            page.wait_for_timeout(100)  # ten samples of the page's 100-Hz poll
+            page.wait_for_function(f"padButtons[{button}] === true")  # the page sampled it
             page.evaluate(f"window.__pad.buttons[{button}].pressed = false")
+            page.wait_for_function(f"padButtons[{button}] === false")
 
         press(8)
         live.wait("disarmed", lambda s: not s["truth"]["armed"])
