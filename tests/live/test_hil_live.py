@@ -4,6 +4,7 @@ emulator (the simulated S100 behind two pseudo-terminals), as ``testbed hil`` ru
 from __future__ import annotations
 
 import json
+import select
 import signal
 import subprocess
 import sys
@@ -40,7 +41,10 @@ def test_a_live_session_runs_over_hil_ports(tmp_path: Path) -> None:
         proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             assert proc.stdout is not None
-            url = proc.stdout.readline().split()[-1]
+            ready, _, _ = select.select([proc.stdout], [], [], 4 * _DEADLINE_S)
+            line = proc.stdout.readline() if ready else ""
+            assert line.startswith("testbed live: console on "), line
+            url = line.split()[-1]
             deadline = time.monotonic() + _DEADLINE_S
             state: dict[str, Any] = {}
             while time.monotonic() < deadline:
