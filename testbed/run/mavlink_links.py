@@ -30,11 +30,9 @@ frames whose pilot input it accepted.
 
 from __future__ import annotations
 
-from pymavlink.dialects.v20 import ardupilotmega as mav
-
 from testbed.common.components import ArmRequest, ModeRequest
 from testbed.mavlink import EndpointOptions, VehicleEndpoint
-from testbed.mavlink.ardusub import manual_control_from_sticks
+from testbed.mavlink.ground_station import QGC_STREAM_RATES_HZ, ScriptedGroundStation
 from testbed.operator.station import OperatorStation
 from testbed.operator.video import ImageConsole
 from testbed.run.links import Ingested, Outgoing
@@ -43,8 +41,6 @@ from testbed.vehicle.video import ImageSource
 
 __all__ = ["QGC_STREAM_RATES_HZ", "RawMavlinkOperatorLink", "RawMavlinkVehicleLink"]
 
-QGC_STREAM_RATES_HZ = {1: 2, 2: 2, 3: 2, 6: 3, 10: 20, 11: 10, 12: 3}
-"""QGroundControl's REQUEST_DATA_STREAM rates on connect: stream id → Hz (REFERENCE §4.4)."""
 _GAIN = 1.0
 _RETRY_S = 1.0
 
@@ -83,7 +79,9 @@ class RawMavlinkVehicleLink:
 
 
 class RawMavlinkOperatorLink:
-    """The operator's end: a scripted ground station (module docstring).
+    """The operator's end: a scripted ground station
+    (:class:`~testbed.mavlink.ground_station.ScriptedGroundStation`) flying the station's
+    pilot, arm and mode requests.
 
     Args:
         station: the operator's station (its pilot's sticks, its arm and mode requests).
@@ -93,83 +91,34 @@ class RawMavlinkOperatorLink:
 
     def __init__(self, station: OperatorStation) -> None:
         self._station = station
-        self._mav = mav.MAVLink(None, srcSystem=255, srcComponent=190)
-        self._decoder = mav.MAVLink(None)
-        self._decoder.robust_parsing = True
-        self._connected = False
-        self._next_heartbeat_s = 0.0
-        self._next_retry_s = 0.0
-        self.vehicle_armed = False
-        self.vehicle_mode = 19
-        self.telemetry: dict[str, int] = {}
-        """Telemetry messages decoded, by type."""
+        self.gcs = ScriptedGroundStation(gain=_GAIN, retry_s=_RETRY_S)
 
-    def _encode(self, message: mav.MAVLink_message) -> bytes:
-        return bytes(message.pack(self._mav))
+    @property
+    def vehicle_armed(self) -> bool:
+        """Armed, as the vehicle's last heartbeat said."""
+        return self.gcs.vehicle_armed
+
+    @property
+    def telemetry(self) -> dict[str, int]:
+        """Telemetry messages decoded, by type."""
+        return self.gcs.telemetry
 
     def slot(self, now_s: float) -> list[Outgoing]:
-        packets: list[bytes] = []
-        if not self._connected:
-            self._connected = True
-            for stream, rate in QGC_STREAM_RATES_HZ.items():
-                packets.append(
-                    self._encode(mav.MAVLink_request_data_stream_message(1, 1, stream, rate, 1))
-                )
-        if now_s >= self._next_heartbeat_s:
-            self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
-            hb = mav.MAVLink_heartbeat_message(
-                mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE, 3
-            )
-            packets.append(self._encode(hb))
-        packets.extend(self._requests(now_s))
-        command = self._station.latest_command()
-        if command is not None:
-            x, y, z, r = manual_control_from_sticks(command.sticks, gain=_GAIN)
-            packets.append(self._encode(mav.MAVLink_manual_control_message(1, x, y, z, r, 0)))
-        stick = len(packets) - 1 if command is not None else -1
-        return [Outgoing(p, command if k == stick else None) for k, p in enumerate(packets)]
-
-    def _requests(self, now_s: float) -> list[bytes]:
-        """Arm and mode requests not yet shown by the vehicle's heartbeat, once a second."""
-        world = self._station.world
-        entity = self._station.entity
+        world, entity = self._station.world, self._station.entity
         arm = world.get(entity, ArmRequest)
         mode = world.get(entity, ModeRequest)
-        out: list[bytes] = []
-        if now_s < self._next_retry_s:
-            return out
-        if mode is not None and int(mode.mode) != self.vehicle_mode:
-            number = int(mode.mode)  # ControlMode values are ArduSub's numbers
-            out.append(
-                self._encode(
-                    mav.MAVLink_set_mode_message(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number)
-                )
-            )
-        if arm is not None and arm.armed != self.vehicle_armed:
-            params = (1.0 if arm.armed else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            out.append(
-                self._encode(
-                    mav.MAVLink_command_long_message(
-                        1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, *params
-                    )
-                )
-            )
-        if out:
-            self._next_retry_s = now_s + _RETRY_S
-        return out
+        command = self._station.latest_command()
+        packets, stick = self.gcs.packets(
+            now_s,
+            None if command is None else command.sticks,
+            None if arm is None else arm.armed,
+            None if mode is None else int(mode.mode),  # ControlMode values are ArduSub's
+        )
+        return [Outgoing(p, command if k == stick else None) for k, p in enumerate(packets)]
 
     def ingest(self, payloads: list[tuple[bytes, int]], now_s: float) -> Ingested:
         del now_s
         result = Ingested()
         for payload, _ in payloads:
-            for message in self._decoder.parse_buffer(payload) or []:
-                kind = message.get_type()
-                if kind == "BAD_DATA":
-                    continue
-                self.telemetry[kind] = self.telemetry.get(kind, 0) + 1
-                if kind == "HEARTBEAT" and message.get_srcSystem() == 1:
-                    self.vehicle_armed = bool(message.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-                    self.vehicle_mode = int(message.custom_mode)
-                elif kind == "ATTITUDE":
-                    result.sampled_s.append(message.time_boot_ms / 1000.0)
+            result.sampled_s.extend(self.gcs.receive(payload))
         return result
