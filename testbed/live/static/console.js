@@ -249,8 +249,11 @@ function draw() {
     ["state age [s]", fmt(o.age_s)],
   ] : [["telemetry", "waiting for the first reply"]]);
   drawTrack(s, truth); drawDepth(truth); drawTimeline(s);
+  const pilot = s.role === "pilot"; // a viewer watches: its controls are greyed (and ignored)
+  for (const el of document.querySelectorAll("button, select, input")) el.disabled = !pilot;
+  $("truth").disabled = false;
   for (const id of ["set-ber", "set-gap", "reset-gap", "set-distance", "reset-distance", "outage"])
-    $(id).disabled = !s.link.simulated; // HIL ports: the real link is not ours to change
+    $(id).disabled = !pilot || !s.link.simulated; // HIL ports: the real link is not ours to change
   const L = s.link, u = L.uplink, d = L.downlink, pct = (p) => (p === null ? "–" : `${(100 * p).toFixed(1)} %`);
   rows($("link"), [["", "uplink", "downlink"], ["sent", u.sent, d.sent], ["delivered", u.delivered, d.delivered],
     ["corrupted", u.corrupted, d.corrupted], ["collided", u.collided, d.collided],
