@@ -43,14 +43,13 @@ from testbed.channel import Medium, Trace
 from testbed.ecs import Origin, Phase, Schedule, World
 from testbed.hil import LinkEndpoint, latency_summary_ms
 from testbed.mavlink import EndpointOptions
-from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Link
 from testbed.mavlink.shore import LinkFacts, ShoreEndpoint
 from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
 from testbed.run.images import image_source_factory
-from testbed.run.mavlink_run import endpoint_section
+from testbed.run.mavlink_run import EndpointPilot, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns, run_poll
@@ -92,17 +91,6 @@ class GatewayStation(OperatorStation):
     def __init__(self) -> None:
         super().__init__(_Idle(), SessionPlan(arm_at_s=math.inf))
         self.schedule = Schedule()
-
-
-class _EndpointPilot:
-    """The recorder's view of the pilot: the sticks the ground station holds at the gateway."""
-
-    def __init__(self, endpoint: ShoreEndpoint) -> None:
-        self._endpoint = endpoint
-
-    def sample(self, t_s: float) -> PilotSample:
-        del t_s
-        return PilotSample(sticks_from_rc(self._endpoint.rc.channels))
 
 
 def gateway_link_facts(scenario: Scenario, name: str | None = None) -> LinkFacts:
@@ -247,7 +235,7 @@ def _vehicle_node(
     vehicle = node.vehicle
     observer = VehicleObserver(
         recorder,
-        _EndpointPilot(gateway.endpoint),
+        EndpointPilot(gateway.endpoint),
         vehicle.reference_velocity,
         scenario.metrics.sample_rate_hz,
     )

@@ -57,6 +57,7 @@ from testbed.vehicle.vehicle import Vehicle, VehicleConfig
 
 __all__ = [
     "FRAME_CONFIGS",
+    "EndpointPilot",
     "MavlinkVehicleNode",
     "endpoint_section",
     "mavlink_metrics",
@@ -70,8 +71,9 @@ _DAY_S = 86400.0
 _SAMPLES = 200_000
 
 
-class _EndpointPilot:
-    """The recorder's view of the pilot: the sticks the endpoint last received."""
+class EndpointPilot:
+    """The recorder's view of the pilot: the sticks the endpoint (the vehicle's, or the shore
+    gateway's) last received from the ground station."""
 
     def __init__(self, endpoint: VehicleEndpoint) -> None:
         self._endpoint = endpoint
@@ -128,7 +130,7 @@ class MavlinkVehicleNode:
         self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
         observer = VehicleObserver(
             recorder,
-            _EndpointPilot(self.endpoint),
+            EndpointPilot(self.endpoint),
             vehicle.reference_velocity,
             scenario.metrics.sample_rate_hz,
         )
