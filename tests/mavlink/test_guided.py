@@ -18,6 +18,7 @@ from testbed.common.geometry import euler_from_quat
 from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
 from testbed.ecs import Origin
 from testbed.mavlink import EndpointOptions
+from testbed.mavlink.endpoint import POSITION_FIX_TIMEOUT_S
 from testbed.mavlink.shore import ShoreEndpoint
 from testbed.protocol import GoTo, decode_operator_message
 from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts
@@ -74,6 +75,16 @@ def test_guided_is_refused_without_a_position_fix() -> None:
         assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
     finally:
         gcs.close()
+
+
+def test_a_fix_older_than_the_timeout_is_no_position_estimate(gcs: SimGcs) -> None:
+    gcs.run(1.0, gcs.flying())
+    assert gcs.endpoint.has_position_estimate()
+    gcs.vehicle.sensors.position = None  # the fix is lost: its last reading ages
+    gcs.run(POSITION_FIX_TIMEOUT_S + 0.1, gcs.flying())
+    gcs.send(gcs.set_mode(4))
+    gcs.run(0.05, gcs.flying())
+    assert mode_acks(gcs) == [FAILED]
 
 
 def test_guided_is_accepted_with_a_fix_and_flies_to_a_target_ahead_and_aside(
