@@ -21,11 +21,12 @@ from testbed.mavlink import EndpointOptions
 from testbed.mavlink.endpoint import POSITION_FIX_TIMEOUT_S
 from testbed.mavlink.shore import ShoreEndpoint
 from testbed.protocol import GoTo, decode_operator_message
-from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts
+from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts, run_gateway
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.guidance import PositionGains
 from testbed.vehicle.vehicle import Vehicle
 from tests.mavlink.gcs import FRAME_S, NO_VEHICLE_FAILSAFE, SimGcs
+from tests.mavlink.rt_session import GatewaySession
 
 ACCEPTED = mav.MAV_RESULT_ACCEPTED
 FAILED = mav.MAV_RESULT_FAILED
@@ -288,3 +289,38 @@ def test_through_the_gateway_the_target_travels_as_one_goto_and_the_vehicle_flie
         assert math.hypot(reported.x - p[0], reported.y - p[1]) < 0.05  # the mirrored state
     finally:
         gw.vehicle.close()
+
+
+@pytest.mark.slow
+def test_guided_through_the_real_time_s100_gateway() -> None:
+    """≈ 20 s real time: GUIDED and a body-offset target through ``run_gateway`` on s100."""
+    scenario = load_scenario("s100-teleop-v1", ["metrics.settle_s=1"])
+    session = GatewaySession(
+        lambda links, stop: run_gateway(scenario, links, duration_s=120.0, stop=stop)
+    )
+    try:
+        gcs = session.gcs
+        assert gcs.wait_heartbeat(timeout=30.0) is not None
+        session.pump(1.0)
+        gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert session.ack(400) == ACCEPTED
+        session.heartbeat(lambda hb: hb.base_mode & 128)
+        gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)
+        assert session.ack(mav.MAV_CMD_DO_SET_MODE) == ACCEPTED
+        gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+        assert session.ack(mav.MAV_CMD_DO_SET_MODE) == ACCEPTED
+        session.heartbeat(lambda hb: hb.custom_mode == 4)  # the vehicle's own state
+        session.pump(1.0)
+        mask = POSITION_ONLY | YAW_IGNORE
+        gcs.mav.set_position_target_local_ned_send(
+            0, 1, 1, mav.MAV_FRAME_BODY_OFFSET_NED, mask, 2.0, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0
+        )
+        session.pump(14.0)  # 2 m at ≤ 0.5 m/s and the tail, + a token gap and a crossing
+        result = session.finish()
+    finally:
+        session.close()
+    series = result.recorder.series()
+    x, y = series["north_m"], series["east_m"]  # the truth
+    assert abs(x[-1] - x[0] - 2.0) < TOLERANCE_M + 0.03  # the offset from the reported state
+    assert abs(y[-1] - y[0]) < TOLERANCE_M + 0.03
+    assert result.metrics["frames_rejected"] == {"uplink": 0, "downlink": 0}
