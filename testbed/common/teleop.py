@@ -302,7 +302,18 @@ class TeleopVehicleEnd:
             world.set(
                 intents, AttitudeSetpoint(quat_from_euler(0.0, 0.0, yaw)), origin=Origin.REMOTE
             )
-        elif not isinstance(order, ImageSettings):  # image settings: the image source's
+        elif isinstance(order, ImageSettings):  # the coder's (the image source takes them)
+            # An order in the gap a move order would have used: the sticks last sent stay in
+            # force and the operator is in contact, so the stick command is renewed (same sticks,
+            # same arrival time: its age keeps growing) for the failsafe to count it — else one
+            # settings order under token passing (two gaps between moves, 1.19 s on the S100)
+            # outlasts the 1-s hold timeout and holds a vehicle whose operator is there.
+            last = world.get(intents, MovementCommand)
+            if last is not None:
+                self._seq += 1
+                renewed = MovementCommand(self._seq, last.sampled_s, last.sticks)
+                world.set(intents, renewed, origin=Origin.REMOTE)
+        else:
             self.counters.unsupported += 1
             return False
         self.order_ack_bit = message.order_seq_bit

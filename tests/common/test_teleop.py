@@ -583,6 +583,21 @@ def test_image_settings_order_is_acknowledged_and_leaves_the_intents_alone() -> 
     assert world.components(intents) == ()
 
 
+def test_image_settings_after_a_move_renew_its_sticks_as_contact() -> None:
+    """A settings order takes the gap a move order would have: the sticks last sent stay in
+    force, renewed as a newer command (same sticks, same arrival time, so its age keeps
+    growing), which the vehicle's failsafe counts as contact."""
+    world, _, intents, end = vehicle_end()
+    move = Move(64, -32, 0, 16, False, False, Mode.DEPTH_HOLD)
+    end.apply_order(OperatorMessage(False, False, 0, False, False, move).encode(), 1.0)
+    first = world.get(intents, MovementCommand)
+    assert first is not None and first.sampled_s == 1.0
+    settings = ImageSettings(10, 20, 60, 50, 4, True, 600)
+    assert end.apply_order(OperatorMessage(False, False, 0, True, False, settings).encode(), 1.6)
+    renewed = world.get(intents, MovementCommand)
+    assert renewed == MovementCommand(first.seq + 1, 1.0, first.sticks)
+
+
 def test_order_header_carries_the_image_request_and_settings_replace_the_move() -> None:
     world = World()
     intents = world.spawn()

@@ -124,6 +124,9 @@ def test_settings_change_reaches_the_coder() -> None:
     assert all(c.encoded_bytes <= 400 for c in after)
     assert result.metrics["images"]["settings_sent"] == 2  # no loss: each sent once
     assert result.metrics["images"]["settings_acknowledged"] == 2
+    # each settings order took a move order's gap (1.19 s between moves, more than the 1-s
+    # hold timeout) yet the vehicle's failsafe never held: the order counts as contact
+    assert result.metrics["events"]["failsafe"] == 0
 
 
 def test_same_seed_same_images() -> None:
