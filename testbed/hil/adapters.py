@@ -227,9 +227,11 @@ class S100Adapter:
     __slots__ = (
         "_expect_crlf",
         "_held",
+        "_packet_bytes",
         "_preamble",
         "_remaining",
         "_tail",
+        "_terminated",
         "bytes_in",
         "last_status",
         "missing_terminators",
@@ -257,6 +259,8 @@ class S100Adapter:
         self.terminators = 0
         self.missing_terminators = 0
         self.bytes_in = 0
+        self._packet_bytes = 0  # raw bytes of the packet being received
+        self._terminated = False  # its last bytes were a frame's CR LF
 
     def writes(self, frame: bytes) -> list[Write]:
         """Frame + CR LF, in ≤ 45 B paced pieces unless RTS/CTS is on."""
@@ -273,6 +277,7 @@ class S100Adapter:
     def feed(self, data: bytes) -> bytes:
         """Strip status lines and frame terminators; return the payload stream."""
         self.bytes_in += len(data)
+        self._packet_bytes += len(data)
         buf = self._held + bytes(data)
         self._held = b""
         out = bytearray()
@@ -287,6 +292,7 @@ class S100Adapter:
                 self._expect_crlf = False
                 if buf.startswith(_CRLF, i):
                     self.terminators += 1
+                    self._terminated = True
                     i += 2
                     continue
                 self.missing_terminators += 1
@@ -299,6 +305,7 @@ class S100Adapter:
                     i = status
                     continue
             out.append(b)
+            self._terminated = False
             self._track(b)
             i += 1
         return bytes(out)
@@ -312,7 +319,17 @@ class S100Adapter:
         """The line is idle: the packet has ended. Bytes held for a status line that did not
         come (``+``, ``++``, ``+++`` and printable text without CR LF) are data after all; a
         lone CR held after a frame is its terminator, the LF lost. The header tracking starts
-        afresh (a corrupted length byte stops at the packet's end)."""
+        afresh (a corrupted length byte stops at the packet's end).
+
+        Except for a piece of a longer frame: without RTS/CTS an S100 packet holds at most
+        45 B including its CR LF, so a sender splits a longer frame into 45-B pieces of which
+        only the last ends in CR LF (:meth:`writes`, dccomms' S100Stream; REFERENCE §1.10). A
+        packet of exactly 45 B, unterminated, inside a frame whose header announced more,
+        continues in the next packet: no packet end then."""
+        piece = self._packet_bytes == S100_MAX_WRITE and not self._terminated
+        self._packet_bytes = 0
+        if piece and self._remaining > 0 and not self._held:
+            return []
         held, self._held = self._held, b""
         if self._expect_crlf and held.startswith(b"\r"):
             self.terminators += 1

@@ -27,7 +27,7 @@ from testbed.hil import (
     SerialTransport,
     packet_gap_s,
 )
-from testbed.protocol import CorruptFrame, Frame, encode_frame
+from testbed.protocol import CorruptFrame, Frame, FrameDecoder, encode_frame
 
 ORDER = encode_frame(b"order!!")  # 13 B
 
@@ -103,6 +103,27 @@ def test_m64_ends_a_packet_after_the_last_packet_of_each_frame() -> None:
     bad = adapter.receive(wrp_all(corrupted(ORDER)) + wrp_all(ORDER))
     assert ends(bad) == [16, 29]
     assert adapter.idle() == []
+
+
+def test_s100_frames_longer_than_a_packet_cross_in_45_byte_pieces() -> None:
+    """A 60-B frame (an image reply) leaves in 45-B pieces, only the last with CR LF: the idle
+    line after a piece is no frame's end, so the frame decodes whole; the packet after it ends
+    as any other (the next frame is decoded, a mis-framed one given up)."""
+    reply = encode_frame(bytes(range(54)))  # 60 B
+    sender, receiver = S100Adapter(), S100Adapter()
+    pieces = [w.data for w in sender.writes(reply)]
+    assert [len(p) for p in pieces] == [45, 17]
+    segments: list[Segment] = []
+    for piece in pieces:
+        segments += receiver.receive(piece) + receiver.idle()
+    assert ends(segments) == [60]  # one packet end, after the whole frame
+    assert b"".join(s.data for s in segments) == reply
+    decoder = FrameDecoder()
+    events = [e for s in segments for e in decoder.feed_packet(s.data, packet_end=s.end)]
+    assert events == [Frame(bytes(range(54)))]
+    # a 45-B packet that is not inside a longer frame still ends where the line went idle
+    stray = receiver.receive(b"x" * 45) + receiver.idle()
+    assert stray[-1].end
 
 
 def test_the_endpoint_gives_up_a_mis_framed_candidate_at_a_packet_end() -> None:
