@@ -13,15 +13,8 @@ and requested of the vehicle; GUIDED 4 too when the vehicle has a position estim
 is refused with MAV_RESULT_FAILED and the warning "Flight mode change failed" — ArduSub's
 answer for AUTO, GUIDED, CIRCLE and POSHOLD without a position estimate and for unknown
 numbers. AUTO, CIRCLE, POSHOLD, ACRO, SURFACE, MOTOR_DETECT and SURFTRAK exist in ArduSub but
-not in the simulator, so a position fix does not change their answer.
-
-SET_POSITION_TARGET_LOCAL_NED (ArduSub ``handle_set_position_target_local_ned``): only while
-GUIDED is requested (else ignored, as ArduSub, and counted ``not_guided``); a position target
-(x, y, z not ignored in ``type_mask``; velocity and acceleration targets are counted
-``unsupported_target``) in MAV_FRAME_LOCAL_NED (absolute), LOCAL_OFFSET_NED (from the present
-position) or BODY_OFFSET_NED (from the present position, x ahead and y right of the heading),
-z down = depth; yaw when not ignored, else the present heading is kept. It becomes a
-:class:`~testbed.common.components.PositionSetpoint`.
+not in the simulator, so a position fix does not change their answer. GUIDED's
+SET_POSITION_TARGET_LOCAL_NED is :mod:`testbed.mavlink.guided`'s.
 """
 
 from __future__ import annotations
@@ -31,7 +24,6 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import ControlMode, ModeRequest
 from testbed.mavlink.ardusub import (
     FIRMWARE_VERSION,
     FLIGHT_SW_VERSION,
@@ -59,7 +51,6 @@ __all__ = [
     "on_param_set",
     "on_request_data_stream",
     "on_set_mode",
-    "on_set_position_target_local_ned",
     "on_timesync",
     "send_params",
     "set_mode",
@@ -442,58 +433,6 @@ def on_timesync(
         return  # a reply to a request we never send
     tc1 = max(1, round(now_s * 1e9))  # never 0, which would read as a request
     endpoint.queue(channel, mav.MAVLink_timesync_message(tc1, int(message.ts1)))
-
-
-_POSITION_IGNORE = 0b111  # POSITION_TARGET_TYPEMASK_X/Y/Z_IGNORE
-_MOTION_IGNORE = 0b1_1111_1000  # VX..VZ, AX..AZ ignore bits
-_YAW_IGNORE = 1024
-_MAX_TARGET_M = 1.0e4
-"""Largest accepted |coordinate| of a position target [m] (the vehicle's start range)."""
-
-
-def on_set_position_target_local_ned(
-    endpoint: VehicleEndpoint,
-    channel: Channel,
-    message: mav.MAVLink_message,
-    now_s: float,
-    arrived_s: float,
-) -> None:
-    """GUIDED's position target → a PositionSetpoint (module docstring); no reply."""
-    del channel, now_s, arrived_s
-    if not endpoint.for_us(message.target_system, message.target_component):
-        return
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    if request is None or request.mode is not ControlMode.GUIDED:
-        endpoint.reject("not_guided")
-        return
-    mask = int(message.type_mask)
-    if mask & _POSITION_IGNORE or (~mask) & _MOTION_IGNORE:
-        endpoint.reject("unsupported_target")
-        return
-    x, y, z, yaw = (float(message.x), float(message.y), float(message.z), float(message.yaw))
-    use_yaw = not mask & _YAW_IGNORE
-    if not all(math.isfinite(v) for v in (x, y, z, yaw)):
-        endpoint.reject("bad_field")
-        return
-    frame = int(message.coordinate_frame)
-    if frame != mav.MAV_FRAME_LOCAL_NED:
-        snapshot = endpoint.snapshot_now()
-        if frame == mav.MAV_FRAME_BODY_OFFSET_NED:
-            heading = snapshot.euler_rad[2]
-            c, s = math.cos(heading), math.sin(heading)
-            x, y = c * x - s * y, s * x + c * y
-            if use_yaw:
-                yaw += heading
-        elif frame != mav.MAV_FRAME_LOCAL_OFFSET_NED:
-            endpoint.reject("unsupported_frame")
-            return
-        px, py, pz = snapshot.position_ned_m
-        x, y, z = x + px, y + py, z + pz
-    if max(abs(x), abs(y), abs(z)) > _MAX_TARGET_M:
-        endpoint.reject("bad_field")
-        return
-    endpoint.accepted += 1
-    endpoint.request_position((x, y, z), math.remainder(yaw, math.tau) if use_yaw else None)
 
 
 _FTP_ACK = 128

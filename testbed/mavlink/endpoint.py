@@ -47,7 +47,7 @@ from testbed.common.components import (
     PositionSetpoint,
 )
 from testbed.ecs import Entity, Origin, World
-from testbed.mavlink import commands
+from testbed.mavlink import commands, guided
 from testbed.mavlink.ardusub import RcInput, manual_control_pwm, sticks_from_rc
 from testbed.mavlink.failsafe import FailsafeMonitor
 from testbed.mavlink.params import ParamTable
@@ -173,7 +173,7 @@ class VehicleEndpoint:
             "MISSION_REQUEST_LIST": commands.on_mission_request_list,
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
-            "SET_POSITION_TARGET_LOCAL_NED": commands.on_set_position_target_local_ned,
+            "SET_POSITION_TARGET_LOCAL_NED": guided.on_set_position_target_local_ned,
             "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
 
