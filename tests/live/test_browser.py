@@ -95,7 +95,7 @@ class Live:
     def stop(self) -> int:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
-        return self.proc.wait(timeout=120)
+        return self.proc.wait(timeout=300)  # progress timeout: a loaded host writes slowly
 
 
 @pytest.fixture

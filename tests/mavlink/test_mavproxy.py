@@ -68,7 +68,7 @@ def test_mavproxy_arms_flies_forward_and_disarms_the_vehicle(tmp_path: Path) -> 
     vehicle = subprocess.Popen(
         [
             *(sys.executable, "-m", "testbed", "mavlink", "--gcs", f"udpout:127.0.0.1:{port}"),
-            *("--duration", "120", "--out", str(out), "--no-plots"),
+            *("--duration", "3600", "--out", str(out), "--no-plots"),  # the test's SIGINT ends it
         ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

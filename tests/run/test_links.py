@@ -55,7 +55,12 @@ def station() -> OperatorStation:
 
 def test_every_codec_a_scenario_accepts_has_both_ends() -> None:
     codecs = set(typing.get_args(typing.get_type_hints(LinkSection)["codec"]))
-    assert set(VEHICLE_LINKS) == set(OPERATOR_LINKS) == codecs == {"teleop", "changeset", "mavlink-raw"}
+    assert (
+        set(VEHICLE_LINKS)
+        == set(OPERATOR_LINKS)
+        == codecs
+        == {"teleop", "changeset", "mavlink-raw"}
+    )
 
 
 def test_teleop_order_reaches_the_vehicle_mirror(vehicle: Vehicle) -> None:
