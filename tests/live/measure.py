@@ -28,6 +28,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tests.processes import default_sigint
+
 
 def measure(scenario: str, seconds: float, browser_path: str) -> dict[str, Any]:
     """One session of ``scenario``; returns its ``metrics.json``."""
@@ -36,7 +38,10 @@ def measure(scenario: str, seconds: float, browser_path: str) -> dict[str, Any]:
     out = Path(tempfile.mkdtemp(prefix="live-measure-")) / "out"
     command = [sys.executable, "-m", "testbed", "live", scenario, "--port", "0"]
     proc = subprocess.Popen(
-        [*command, "--no-plots", "--out", str(out)], stdout=subprocess.PIPE, text=True
+        [*command, "--no-plots", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        text=True,
+        preexec_fn=default_sigint,  # it must take our Ctrl-C however we were started
     )
     assert proc.stdout is not None
     url = proc.stdout.readline().split()[-1]

@@ -34,6 +34,8 @@ from typing import Any
 
 import pytest
 
+from tests.processes import default_sigint
+
 _DEADLINE_S = 60.0
 """Failure bound of every wait [s of wall clock]: a loaded machine runs late, never wrong."""
 
@@ -69,7 +71,11 @@ class Live:
         command = [sys.executable, "-m", "testbed", "live", "--port", "0", "--no-plots"]
         command += ["--out", str(out), "--duration", "600"]
         self.proc = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            command,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            preexec_fn=default_sigint,  # it must take the test's Ctrl-C however pytest started
         )
         assert self.proc.stdout is not None
         ready, _, _ = select.select([self.proc.stdout], [], [], 4 * _DEADLINE_S)

@@ -18,6 +18,7 @@ from websockets.sync.client import connect
 
 from testbed.channel import load_link_config
 from testbed.emulator.ptys import ModemEmulator
+from tests.processes import default_sigint
 
 _DEADLINE_S = 60.0
 """Failure bound of the wait [s of wall clock]; the model needs a few 0.594-s gaps."""
@@ -38,7 +39,13 @@ def test_a_live_session_runs_over_hil_ports(tmp_path: Path) -> None:
         out = tmp_path / "out"
         command = [sys.executable, "-m", "testbed", "live", "s100-teleop-v1", "--port", "0"]
         command += ["--operator-port", a, "--vehicle-port", b, "--no-plots", "--out", str(out)]
-        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            command,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            preexec_fn=default_sigint,  # it must take the test's Ctrl-C however pytest started
+        )
         try:
             assert proc.stdout is not None
             ready, _, _ = select.select([proc.stdout], [], [], 4 * _DEADLINE_S)

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.processes import default_sigint
+
 pytest.importorskip("MAVProxy")
 
 WAIT_S = 120.0  # progress timeouts, not latency bounds: only a broken endpoint waits this long
@@ -73,6 +75,7 @@ def test_mavproxy_arms_flies_forward_and_disarms_the_vehicle(tmp_path: Path) -> 
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=default_sigint,  # it must take the test's Ctrl-C however pytest was started
     )
     mavproxy = subprocess.Popen(
         [
@@ -122,7 +125,12 @@ def test_mavproxy_arms_flies_forward_and_disarms_the_vehicle(tmp_path: Path) -> 
         except subprocess.TimeoutExpired:  # MAVProxy's exit can hang on its threads
             mavproxy.kill()
             mavproxy.wait()
-        _, err = vehicle.communicate(timeout=WAIT_S)
+        try:
+            _, err = vehicle.communicate(timeout=WAIT_S)
+        except subprocess.TimeoutExpired:
+            vehicle.kill()  # never leave it running
+            vehicle.communicate()
+            raise
     assert vehicle.returncode == 130, err
 
     with (out / "series.csv").open(newline="") as f:
