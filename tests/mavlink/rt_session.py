@@ -17,13 +17,17 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from testbed.mavlink.links import UdpLink
 from testbed.run.runner import RunResult
 
-WAIT_S = 15.0  # only a broken gateway waits this long
+WAIT_S = 15.0  # only a broken endpoint or gateway waits this long
 
 
 class GatewaySession:
-    """The run on a thread (``run(links, stop)`` → RunResult); the ground station here."""
+    """The run on a thread (``run(links, stop)`` → RunResult: the vehicle's endpoint or the
+    shore gateway); the ground station here."""
 
-    def __init__(self, run: Callable[[list[Any], threading.Event], RunResult]) -> None:
+    def __init__(
+        self, run: Callable[[list[Any], threading.Event], RunResult], wait_s: float = WAIT_S
+    ) -> None:
+        self.wait_s = wait_s  # how long :meth:`until` pumps before it gives up [s]
         self.gcs = mavutil.mavlink_connection(
             "udpin:127.0.0.1:0", source_system=255, source_component=190, dialect="ardupilotmega"
         )
@@ -60,19 +64,20 @@ class GatewaySession:
             self.stop.set()
             self.thread.join(timeout=60.0)
 
-    def pump(self, seconds: float) -> None:
-        """Be a ground station for ``seconds``: 25 Hz sticks, 1 Hz heartbeat, read all."""
+    def pump(self, seconds: float, *, heartbeats: bool = True, sticks: bool = True) -> None:
+        """Be a ground station for ``seconds``: 25 Hz sticks, 1 Hz heartbeat (each unless
+        switched off: a lost ground station, lost pilot input), read all."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            self.tick()
+            self.tick(heartbeats=heartbeats, sticks=sticks)
             self.wait(0.04)
 
-    def tick(self) -> None:
+    def tick(self, *, heartbeats: bool = True, sticks: bool = True) -> None:
         now = time.monotonic()
-        if now - self._last_heartbeat >= 1.0:
+        if heartbeats and now - self._last_heartbeat >= 1.0:
             self.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 4)
             self._last_heartbeat = now
-        if not self.stick_sent_s or now - self.stick_sent_s[-1] >= 0.039:
+        if sticks and (not self.stick_sent_s or now - self.stick_sent_s[-1] >= 0.039):
             x, y, z, r = self.sticks
             self.gcs.mav.manual_control_send(1, x, y, z, r, 0)
             self.stick_sent_s.append(now)
@@ -89,25 +94,25 @@ class GatewaySession:
         if msg is not None:
             self._keep(msg)
 
-    def until(self, what: Callable[[], Any]) -> Any:
-        """Pump until ``what()`` is truthy; its value."""
-        end = time.monotonic() + WAIT_S
+    def until(self, what: Callable[[], Any], **pump: bool) -> Any:
+        """Pump (:meth:`tick`'s switches) until ``what()`` is truthy; its value."""
+        end = time.monotonic() + self.wait_s
         while time.monotonic() < end:
-            self.tick()
+            self.tick(**pump)
             value = what()
             if value:
                 return value
             self.wait(0.02)
-        raise AssertionError("timed out waiting for the gateway")
+        raise AssertionError("timed out waiting for the run's endpoint")
 
-    def heartbeat(self, check: Callable[[Any], bool]) -> Any:
+    def heartbeat(self, check: Callable[[Any], bool], **pump: bool) -> Any:
         self.latest.pop("HEARTBEAT", None)
 
         def found() -> Any:
             hb = self.latest.get("HEARTBEAT")
             return hb if hb is not None and check(hb) else None
 
-        return self.until(found)
+        return self.until(found, **pump)
 
     def ack(self, command: int) -> int:
         def found() -> Any:

@@ -9,119 +9,32 @@ broken endpoint would reach.
 from __future__ import annotations
 
 import os
-import threading
-import time
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Iterator
 
 import pytest
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.mavlink.links import UdpLink
 from testbed.run.mavlink_run import run_mavlink
-from testbed.run.runner import RunResult
 from testbed.run.scenario import load_scenario
+from tests.mavlink.rt_session import GatewaySession
 
 WAIT_S = 10.0  # only a broken endpoint waits this long
 
 
-class Session:
-    """The vehicle on a background thread; the ground station here."""
-
-    def __init__(self) -> None:
-        self.gcs = mavutil.mavlink_connection(
-            "udpin:127.0.0.1:0", source_system=255, source_component=190, dialect="ardupilotmega"
-        )
-        port = self.gcs.port.getsockname()[1]
-        self.link = UdpLink(f"udpout:127.0.0.1:{port}", "127.0.0.1", port, listen=False)
-        self.stop = threading.Event()
-        self.result: RunResult | None = None
-        self.error: BaseException | None = None
-        scenario = load_scenario("s100-teleop-v1")
-        self.thread = threading.Thread(target=self._run, args=(scenario,), daemon=True)
-        self.thread.start()
-        self._last_heartbeat = 0.0
-        self.sticks = (0, 0, 500, 0)
-        self.latest: dict[str, Any] = {}
-
-    def _run(self, scenario: Any) -> None:
-        try:
-            self.result = run_mavlink(scenario, [self.link], duration_s=120.0, stop=self.stop)
-        except BaseException as err:  # surfaced by finish()
-            self.error = err
-
-    def finish(self) -> RunResult:
-        self.stop.set()
-        self.thread.join(timeout=30.0)
-        self.gcs.close()
-        if self.error is not None:
-            raise self.error
-        assert self.result is not None
-        return self.result
-
-    def pump(self, seconds: float, *, heartbeats: bool = True, sticks: bool = True) -> None:
-        """Be a ground station for ``seconds``: 25 Hz sticks, 1 Hz heartbeat, read all."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.tick(heartbeats=heartbeats, sticks=sticks)
-            self.wait(0.04)
-
-    def tick(self, *, heartbeats: bool = True, sticks: bool = True) -> None:
-        now = time.monotonic()
-        if heartbeats and now - self._last_heartbeat >= 1.0:
-            self.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 4)
-            self._last_heartbeat = now
-        if sticks:
-            x, y, z, r = self.sticks
-            self.gcs.mav.manual_control_send(1, x, y, z, r, 0)
-        while (msg := self.gcs.recv_match(blocking=False)) is not None:
-            self.latest[msg.get_type()] = msg
-
-    def wait(self, seconds: float) -> None:
-        """Wait up to ``seconds`` for the vehicle's next message (keeping it)."""
-        msg = self.gcs.recv_match(blocking=True, timeout=seconds)
-        if msg is not None:
-            self.latest[msg.get_type()] = msg
-
-    def until(self, what: Callable[[], Any], **pump: bool) -> Any:
-        """Pump until ``what()`` is truthy; its value."""
-        end = time.monotonic() + WAIT_S
-        while time.monotonic() < end:
-            self.tick(**pump)
-            value = what()
-            if value:
-                return value
-            self.wait(0.02)
-        raise AssertionError("timed out waiting for the vehicle")
-
-    def ack(self, command: int) -> int:
-        def found() -> Any:
-            msg = self.latest.pop("COMMAND_ACK", None)
-            return msg if msg is not None and msg.command == command else None
-
-        return int(self.until(found).result)
-
-    def heartbeat(self, check: Callable[[Any], bool], **pump: bool) -> Any:
-        self.latest.pop("HEARTBEAT", None)
-
-        def found() -> Any:
-            hb = self.latest.get("HEARTBEAT")
-            return hb if hb is not None and check(hb) else None
-
-        return self.until(found, **pump)
-
-
 @pytest.fixture
-def session() -> Iterator[Session]:
-    s = Session()
+def session() -> Iterator[GatewaySession]:
+    scenario = load_scenario("s100-teleop-v1")
+    s = GatewaySession(
+        lambda links, stop: run_mavlink(scenario, links, duration_s=120.0, stop=stop),
+        wait_s=WAIT_S,
+    )
     yield s
-    if s.thread.is_alive():
-        s.stop.set()
-        s.thread.join(timeout=30.0)
+    s.close()
 
 
-def test_a_ground_station_connects_configures_flies_and_loses_contact(session: Session) -> None:
+def test_a_ground_station_connects_configures_flies_and_loses_contact(
+    session: GatewaySession,
+) -> None:
     gcs = session.gcs
     hb = gcs.wait_heartbeat(timeout=WAIT_S)
     assert hb is not None and (hb.type, hb.autopilot) == (12, 3)
