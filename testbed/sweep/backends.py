@@ -227,6 +227,8 @@ def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iter
             yield future.result()
         finished = True
     finally:
+        if not finished:  # interrupted: what closing the comms logs (their tracebacks) is noise
+            logging.getLogger("distributed").setLevel(logging.CRITICAL + 1)
         if cluster is not None and not finished:
             _kill_local_workers(cluster)
         with contextlib.suppress(Exception):
