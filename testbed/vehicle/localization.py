@@ -1,0 +1,140 @@
+"""Localization on the vehicle's ECS: the :class:`Navigation` resource and its system.
+
+:func:`estimate_navigation` runs each frame in PRE_UPDATE right after ``read_sensors``: it
+samples each due :class:`~testbed.vehicle.nav_sensors.NavSource` from the plant truth, adds the
+depth sensor's reading when it is new, hands them with the vehicle's IMU reading to the
+:class:`~testbed.vehicle.estimation.Localizer` and writes the
+:class:`~testbed.vehicle.estimation.NavigationEstimate` on the vehicle entity. Like
+``read_sensors``, the sources are the only readers of the truth; the localizer never sees it.
+
+:class:`NavigationConfig` is the scenario's ``[vehicle.navigation]`` table (loadable with
+:func:`testbed.config.build`: ``[vehicle.navigation.dvl]`` etc. are the optional sub-tables),
+:func:`build_navigation` turns it into the resource. Wiring into the schedule is the vehicle's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from testbed.config import check_range
+from testbed.ecs import World
+from testbed.vehicle.components import DepthReading, ImuReading
+from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, Localizer
+from testbed.vehicle.nav_sensors import (
+    AcousticFix,
+    AcousticFixConfig,
+    Dvl,
+    DvlConfig,
+    Measurement,
+    MotionCapture,
+    MotionCaptureConfig,
+    NavSource,
+)
+from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
+
+__all__ = [
+    "Navigation",
+    "NavigationConfig",
+    "build_navigation",
+    "depth_measurement",
+    "estimate_navigation",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class NavigationConfig:
+    """The vehicle's navigation: which sources are fitted and the filter's noise figures.
+
+    Domains: ``depth_sigma_m`` in [0, 10] m (0 = the depth reading is not used).
+
+    Attributes:
+        motion_capture: motion-capture position, or ``None`` (not fitted).
+        dvl: DVL body velocity, or ``None``.
+        acoustic: delayed acoustic (USBL) fix, or ``None``.
+        filter: the Kalman filter's process noise, initial spread, history and gate.
+        depth_sigma_m: 1σ the filter gives the depth sensor [m]. 0.005 m: the MS5837 model's
+            20 Pa noise is ≈ 2 mm; the rest covers a small density mismatch at shallow depth.
+    """
+
+    motion_capture: MotionCaptureConfig | None = None
+    dvl: DvlConfig | None = None
+    acoustic: AcousticFixConfig | None = None
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    depth_sigma_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_range(self.depth_sigma_m, "depth_sigma_m", 0.0, 10.0, "m")
+
+
+@dataclass(slots=True)
+class Navigation:
+    """The navigation resource: sources, the localizer and what they delivered.
+
+    Attributes:
+        sources: the fitted navigation sources, sampled in this order.
+        localizer: the estimator (any :class:`~testbed.vehicle.estimation.Localizer`).
+        depth_sigma_m: 1σ for depth readings [m]; 0 leaves them out.
+        last_depth_time_s: time of the last depth reading handed on [s] (a newer one is new).
+        delivered: measurements delivered so far, by source name (``"depth"`` for the depth
+            sensor).
+        frames: frames the localizer was stepped.
+    """
+
+    sources: list[NavSource]
+    localizer: Localizer
+    depth_sigma_m: float = 0.005
+    last_depth_time_s: float = -np.inf
+    delivered: dict[str, int] = field(default_factory=dict)
+    frames: int = 0
+
+
+def build_navigation(config: NavigationConfig, rng: np.random.Generator) -> Navigation:
+    """The :class:`Navigation` of ``config``, each source with its own child of ``rng``.
+
+    The children are spawned in a fixed order (motion capture, DVL, acoustic) whether or not
+    each is fitted, so fitting one source does not change another's noise.
+    """
+    mocap_rng, dvl_rng, acoustic_rng = rng.spawn(3)
+    sources: list[NavSource] = []
+    if config.motion_capture is not None:
+        sources.append(MotionCapture(config.motion_capture, mocap_rng))
+    if config.dvl is not None:
+        sources.append(Dvl(config.dvl, dvl_rng))
+    if config.acoustic is not None:
+        sources.append(AcousticFix(config.acoustic, acoustic_rng))
+    return Navigation(sources, KalmanLocalizer(config.filter), config.depth_sigma_m)
+
+
+def depth_measurement(reading: DepthReading, sigma_m: float) -> Measurement:
+    """The depth sensor's reading as a ``depth`` measurement with 1σ ``sigma_m`` [m]."""
+    return Measurement("depth", "depth", reading.time_s, (reading.depth_m,), (sigma_m,))
+
+
+def estimate_navigation(world: World) -> None:
+    """Sample the due navigation sources, step the localizer, store the estimate.
+
+    Does nothing until the vehicle has an IMU reading (the localizer needs its attitude).
+    """
+    nav = world.resource(Navigation)
+    vehicle = world.resource(Controllers).vehicle
+    imu = world.get(vehicle, ImuReading)
+    if imu is None:
+        return
+    t = world.resource(SimClock).time_s
+    truth = world.resource(PlantTruth)
+    measurements: list[Measurement] = []
+    for source in nav.sources:
+        if source.due(t):
+            m = source.sample(t, truth)
+            if m is not None:
+                measurements.append(m)
+    depth = world.get(vehicle, DepthReading)
+    if nav.depth_sigma_m > 0.0 and depth is not None and depth.time_s > nav.last_depth_time_s:
+        nav.last_depth_time_s = depth.time_s
+        measurements.append(depth_measurement(depth, nav.depth_sigma_m))
+    for m in measurements:
+        nav.delivered[m.source] = nav.delivered.get(m.source, 0) + 1
+    nav.frames += 1
+    world.set(vehicle, nav.localizer.step(t, imu, measurements))
