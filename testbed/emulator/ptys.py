@@ -37,9 +37,11 @@ already past. POSIX only (``os.openpty``).
 
 Scheduler lateness (instrumentation, :attr:`ModemEmulator.scheduler_lateness_ms`): each poll of
 the simulation thread records how late it ran against its real-time schedule, and the reader
-records how late it closed each burst against the instant its idle gap ended. A delivery is
-written to its port as late as the simulation thread runs, and a burst enters the link as late
-as the reader closes it; tests add these to the channel model's latency on a loaded machine.
+records how late it closed each burst against the instant its idle gap ended, and how much
+longer than its select timeout passed between two of its wake-ups (a reader the host held up
+picks bytes up that late, whatever it stamps them). A delivery is written to its port as late
+as the simulation thread runs, and a burst enters the link as late as the reader closes it or
+is held up; tests add these to the channel model's latency on a loaded machine.
 
 Size: one class, the two ports and the simulation thread that joins them; a little over the
 500-line guideline, kept whole because its threads share the ports' state.
@@ -79,7 +81,7 @@ MODEM_PERSONALITIES = ("transparent", "evologics", "m64")
 Water Linked M64."""
 
 _READ_CHUNK = 4096
-_SELECT_TIMEOUT_S = 0.1
+_SELECT_TIMEOUT_S = 0.02
 _JOIN_TIMEOUT_S = 2.0
 _MAX_IN_FLIGHT = 4096
 """Headers of transmissions kept for their delivery (copies lost in collisions never claim
@@ -208,6 +210,7 @@ class ModemEmulator:
         self._error: BaseException | None = None
         self._sim_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
         self._reader_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+        self._reader_stall_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
 
     # -- public --------------------------------------------------------------------------------
 
@@ -239,11 +242,14 @@ class ModemEmulator:
         """How late the emulator's threads ran [ms]: ``simulation``, each poll of the simulation
         thread against its real-time schedule (deliveries are written as late); ``reader``, each
         burst closed by the reader against the instant its line went idle for ``idle_s`` (or its
-        byte count was reached: 0). Each ``{p50, p95, max, mean, n}``, NaN (``n`` 0) before any
-        sample. A snapshot: read it again after more traffic."""
+        byte count was reached: 0); ``reader_stall``, each wake-up of the reader less its
+        previous one and the timeout it waited with (0 when not longer). Each
+        ``{p50, p95, max, mean, n}``, NaN (``n`` 0) before any sample.
+        A snapshot: read it again after more traffic."""
         return {
             "simulation": _summary_ms(list(self._sim_lateness_ns.copy())),
             "reader": _summary_ms(list(self._reader_lateness_ns.copy())),
+            "reader_stall": _summary_ms(list(self._reader_stall_ns.copy())),
         }
 
     @property
@@ -319,6 +325,7 @@ class ModemEmulator:
         ports = self._ports
         fds = {port.master: port for port in ports}
         watched = [*fds, self._wake_r]
+        woke_s = time.monotonic()
         while not self._stop.is_set():
             timeout_s = _SELECT_TIMEOUT_S
             now = time.monotonic()
@@ -327,6 +334,8 @@ class ModemEmulator:
                     timeout_s = min(timeout_s, max(0.0, port.last_byte_s + self._idle_s - now))
             readable, _, _ = select.select(watched, [], [], timeout_s)
             now = time.monotonic()
+            self._reader_stall_ns.append(max(0, round((now - woke_s - timeout_s) * 1e9)))
+            woke_s = now
             for fd in readable:
                 if fd not in fds:
                     continue  # the wake-up pipe: the loop condition decides

@@ -174,8 +174,10 @@ def endpoint_report(endpoint: LinkEndpoint) -> dict[str, Any]:
     port down); ``garbage_bytes`` (bytes the frame decoder skipped while hunting, plus bytes the
     adapter dropped as malformed modem sentences); ``corrupt_frames`` (candidates with a bad CRC,
     oversize or truncated); ``reopens`` (successful opens after the first), ``port_errors``,
-    ``reopen_failures``, ``last_error``; ``added_latency_ms`` (:func:`latency_summary_ms`); and
-    ``adapter``, the adapter's own counters.
+    ``reopen_failures``, ``last_error``; ``added_latency_ms`` (:func:`latency_summary_ms`);
+    ``thread_lateness_ms``, how long the host held up the transport's ``reader`` and ``writer``
+    threads (:attr:`~.Transport.reader_lateness_ns`, :attr:`~.Transport.writer_lateness_ns`; the
+    same summary keys); and ``adapter``, the adapter's own counters.
     """
     transport = endpoint.transport
     adapter = transport.adapter.counters()
@@ -193,5 +195,9 @@ def endpoint_report(endpoint: LinkEndpoint) -> dict[str, Any]:
         "reopen_failures": transport.reopen_failures,
         "last_error": transport.last_error,
         "added_latency_ms": latency_summary_ms(endpoint.latencies_ns),
+        "thread_lateness_ms": {
+            "reader": latency_summary_ms(transport.reader_lateness_ns.copy()),
+            "writer": latency_summary_ms(transport.writer_lateness_ns.copy()),
+        },
         "adapter": adapter,
     }

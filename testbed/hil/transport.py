@@ -79,6 +79,8 @@ blocked read can surface as AttributeError/TypeError/ValueError from its vanishe
 file descriptor."""
 
 _MAX_READ = 4096
+_LATENESS_SAMPLES = 200_000
+"""Thread-lateness samples kept per thread (the newest)."""
 
 MIN_PACKET_GAP_S = 0.02
 """Shortest idle time that ends a packet on a byte-transparent modem's line [s]. A USB serial
@@ -144,6 +146,14 @@ class Transport:
     Attributes:
         inbox: received payload stream, in order.
         connected: set while the port is open.
+        read_wait_s: how long a read waits when nothing arrives [s] (set by the subclass).
+        reader_lateness_ns: per read, how much longer than ``read_wait_s`` passed since the
+            previous read returned [ns], 0 when not: a reader thread the host held up shows
+            here, whatever the port did (bytes that arrived meanwhile were picked up at most
+            this plus ``read_wait_s`` late).
+        writer_lateness_ns: per chunk written, its write's return less the instant it could
+            first have been written (queued by :meth:`send`, or the previous chunk's pacing
+            hold ended) [ns]: a writer thread the host held up shows here.
     """
 
     def __init__(
@@ -172,7 +182,10 @@ class Transport:
         self._on_bytes = on_bytes
         self._backoff_initial_s = backoff_initial_s
         self._backoff_max_s = backoff_max_s
-        self._outbox: queue.Queue[bytes | None] = queue.Queue(max_pending_frames)
+        self._outbox: queue.Queue[tuple[bytes, float] | None] = queue.Queue(max_pending_frames)
+        self.read_wait_s = float(packet_gap_s)
+        self.reader_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+        self.writer_lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._port: Any = None
@@ -227,7 +240,7 @@ class Transport:
             self.frames_dropped += 1
             return False
         try:
-            self._outbox.put_nowait(bytes(frame))
+            self._outbox.put_nowait((bytes(frame), time.monotonic()))
         except queue.Full:
             self.frames_dropped += 1
             return False
@@ -325,9 +338,11 @@ class Transport:
         backoff = self._backoff_initial_s
         last_data_s = 0.0
         in_packet = False  # bytes read since the line was last seen idle
+        last_return_ns = 0  # 0: no read returned since the port (re)opened
         while not self._stop.is_set():
             port = self._port
             if port is None:
+                last_return_ns = 0
                 try:
                     port = self._open()
                     try:
@@ -352,13 +367,18 @@ class Transport:
                 if not self._stop.is_set():
                     self._fail(port, exc)
                 continue
+            returned_ns = time.perf_counter_ns()
+            if last_return_ns:
+                wait_ns = round(self.read_wait_s * 1e9)
+                self.reader_lateness_ns.append(max(0, returned_ns - last_return_ns - wait_ns))
+            last_return_ns = returned_ns
             if not data:
                 # an empty read: nothing arrived since the last bytes were read
                 if in_packet and time.monotonic() - last_data_s >= self.packet_gap_s:
                     in_packet = False
                     self._queue(self.adapter.idle(), time.perf_counter_ns())
                 continue
-            read_ns = time.perf_counter_ns()
+            read_ns = returned_ns
             last_data_s = time.monotonic()
             in_packet = True
             self.bytes_in += len(data)
@@ -367,10 +387,12 @@ class Transport:
     def _write_loop(self) -> None:
         next_ok = 0.0
         while True:
-            frame = self._outbox.get()
-            if frame is None or self._stop.is_set():
+            item = self._outbox.get()
+            if item is None or self._stop.is_set():
                 return
+            frame, ready_s = item
             for chunk in self.adapter.writes(frame):
+                ready_s = max(ready_s, next_ok)
                 delay = next_ok - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
                     return
@@ -384,8 +406,10 @@ class Transport:
                     self._fail(port, exc)
                     self.frames_dropped += 1
                     break
+                written_s = time.monotonic()
+                self.writer_lateness_ns.append(max(0, round((written_s - ready_s) * 1e9)))
                 self.bytes_out += len(chunk.data)
-                next_ok = time.monotonic() + chunk.hold_s
+                next_ok = written_s + chunk.hold_s
             else:
                 self.frames_sent += 1
 
@@ -432,6 +456,7 @@ class SerialTransport(Transport):
         super().__init__(adapter, on_bytes=on_bytes, **kwargs)
         self.url = url
         timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
+        self.read_wait_s = timeout_s
         if port_factory is None:
 
             def port_factory() -> PortLike:
@@ -494,6 +519,7 @@ class TcpTransport(Transport):
         super().__init__(adapter, on_bytes=on_bytes, **kwargs)
         self.address = (host, port)
         self._read_timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
+        self.read_wait_s = self._read_timeout_s
         self._connect_timeout_s = connect_timeout_s
         self._start(f"tcp:{host}:{port}")
 

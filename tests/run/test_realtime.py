@@ -425,10 +425,24 @@ class Window:
         never; no frame exceeds the max allowance unless its stall was on a thread the probe's
         path does not share. Each also adds the same statistic of the lateness the run's own
         emulator measured on its two threads (:meth:`emulator_s`): the probe crosses another
-        emulator in that process, and a stall can fall between its crossings."""
+        emulator in that process, and a stall can fall between its crossings; and of the run's
+        own transport threads (:meth:`transports_s`), which the probe's path does not share."""
+        own = self.emulator_s(which) + self.transports_s(which)
         if which == "p95":
-            return self.probe.quantile(0.95) + self.lateness_s("p95") + self.emulator_s("p95")
-        return self.probe.worst_s() + self.lateness_s("max") + self.emulator_s("max")
+            return self.probe.quantile(0.95) + self.lateness_s("p95") + own
+        return self.probe.worst_s() + self.lateness_s("max") + own
+
+    def transports_s(self, key: str) -> float:
+        """How long the host held up the single run's transport threads [s]: statistic ``key``
+        of each endpoint's reader and writer lateness (``thread_lateness_ms``), the largest
+        of the operator's and the vehicle's per thread, the reader's plus the writer's (an order
+        crosses the operator's writer and the vehicle's reader; a reply the reverse)."""
+        endpoints = self.single.metrics["hil"]["endpoints"].values()
+        total = 0.0
+        for thread in ("reader", "writer"):
+            values = [e["thread_lateness_ms"][thread][key] for e in endpoints]
+            total += max((v for v in values if v is not None and not math.isnan(v)), default=0)
+        return max(0.0, total) / 1e3
 
     def describe(self) -> str:
         """The measured allowances, for an assertion's message (a failure on a loaded machine
@@ -437,15 +451,17 @@ class Window:
             f"probe p95/worst {self.probe.quantile(0.95):.3f}/{self.probe.worst_s():.3f} s "
             f"({len(self.probe.excess_s)} crossings, {self.probe.lost} lost), run lateness "
             f"p95/max {self.lateness_s('p95'):.3f}/{self.lateness_s('max'):.3f} s, emulator "
-            f"p95/max {self.emulator_s('p95'):.3f}/{self.emulator_s('max'):.3f} s"
+            f"p95/max {self.emulator_s('p95'):.3f}/{self.emulator_s('max'):.3f} s, transports "
+            f"p95/max {self.transports_s('p95'):.3f}/{self.transports_s('max'):.3f} s"
         )
 
     def emulator_s(self, key: str) -> float:
         """Scheduler lateness the single run's emulator measured [s]: its reader's (a burst
-        enters the link that late) plus its simulation thread's (a delivery is written that
-        late), statistic ``key`` of each; 0 for a thread with no sample."""
+        enters the link that late, or is picked up that late when the reader is held up:
+        ``reader_stall``) plus its simulation thread's (a delivery is written that late),
+        statistic ``key`` of each; 0 for a thread with no sample."""
         late = self.emulators[0]["scheduler_lateness_ms"]
-        values = [late[thread][key] for thread in ("reader", "simulation")]
+        values = [late[thread][key] for thread in ("reader", "reader_stall", "simulation")]
         return sum(0.0 if v is None or math.isnan(v) else max(0.0, v) for v in values) / 1e3
 
 
