@@ -1,0 +1,536 @@
+"""The mission behaviour tree (Angler's Fig. 4, adapted) on py_trees, against a plain context.
+
+The tree, ticked once per :meth:`MissionRunner.tick` (Angler: every 50 ms)::
+
+    Mission [Parallel, SuccessOnAll]
+      Gather data                       context → blackboard (one-shot requests consumed)
+      Tasks [Selector]
+        Disarm fallback [Sequence]
+          Disarm requested?             condition
+          Stop setpoints                drop plan, hold pose, pending requests
+          Disarm vehicle                request_arm = False
+          Mark setup undone
+        Mission [Sequence]
+          Setup [Selector]
+            Setup done?                 condition
+            Setup once [Sequence, memory]
+              Arm vehicle               request_arm = True until armed (timeout → failure)
+              Arm manipulator           placeholder: succeeds (the arm plugs in here)
+              Mark setup done
+          Plan on request               cancel → hold here; GoTo → one leg; start → mission
+          Execute or idle [Selector]
+            Execute trajectory          pose setpoints until done and settled in tolerance
+            Idle / hold station         the last pose held (or nothing, before any order)
+
+Composites without ``memory`` are re-evaluated from their first child every tick, so the
+disarm fallback overrides execution within the tick its trigger is seen, and a new GoTo goal
+replaces the plan at once (re-planned from the current estimate).
+
+**Context.** :class:`MissionContext` is a plain mutable dataclass: the caller writes the inputs
+(time, arm state, estimate, requests) before a tick and reads the outputs after it. The
+one-shot requests (``start_requested``, ``goal``, ``cancel_requested``) are *consumed*: the
+gatherer moves them onto the blackboard and clears them in the context; a request pending while
+the disarm fallback runs is dropped (nothing resumes by itself after a disarm).
+``disarm_requested`` is a level, held true for as long as the pilot or link wants the vehicle
+disarmed. All times come from ``time_s`` (simulation time), never the wall clock, so a run is
+deterministic. Frames: world NED [m], yaw [rad] clockwise from north.
+
+This module imports py_trees and :mod:`testbed.vehicle.mission`; no ECS.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import py_trees
+from py_trees.common import Access, ParallelPolicy, Status
+from py_trees.composites import Parallel, Selector, Sequence
+
+from testbed.common.geometry import Vec3, wrap_angle
+from testbed.config import check_range
+from testbed.vehicle.mission import Mission, Trajectory, plan, single_goal
+
+__all__ = [
+    "GoalRequest",
+    "MissionConfig",
+    "MissionContext",
+    "MissionRunner",
+    "PoseSetpoint",
+]
+
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
+_RUNNERS = itertools.count()
+
+
+@dataclass(frozen=True, slots=True)
+class MissionConfig:
+    """Timing and tolerances of the mission tree (defaults: Angler's where it has them).
+
+    Attributes:
+        tick_rate_hz: how often the caller should tick the tree [Hz] (Angler 20), in (0, 1000].
+        goal_tolerance_m: position error that counts as at the goal [m] (Angler 0.2), > 0.
+        yaw_tolerance_rad: heading error that counts as at the goal [rad] (Angler's 0.1 on the
+            quaternion vector part is 2·asin(0.1) ≈ 0.2 rad), > 0.
+        settle_time_s: the pose must stay within tolerance this long [s], ≥ 0.
+        goal_timeout_s: time past the last point to get within tolerance [s] (Angler 10), > 0;
+            past it execution fails and the last pose is held.
+        setup_timeout_s: time to wait for the vehicle to arm [s] (Angler 15), > 0.
+        goto_speed_m_s: cruise speed of a GoTo leg [m/s], > 0.
+        goto_yaw_rate_rad_s: turn rate that times a GoTo leg's heading change [rad/s], > 0.
+    """
+
+    tick_rate_hz: float = 20.0
+    goal_tolerance_m: float = 0.2
+    yaw_tolerance_rad: float = 0.2
+    settle_time_s: float = 1.0
+    goal_timeout_s: float = 10.0
+    setup_timeout_s: float = 15.0
+    goto_speed_m_s: float = 0.2
+    goto_yaw_rate_rad_s: float = 0.3
+
+    def __post_init__(self) -> None:
+        check_range(self.tick_rate_hz, "tick_rate_hz", 0.0, 1000.0, "Hz", low_open=True)
+        check_range(self.goal_tolerance_m, "goal_tolerance_m", 0.0, math.inf, "m", low_open=True)
+        check_range(self.yaw_tolerance_rad, "yaw_tolerance_rad", 0.0, math.pi, "rad", low_open=True)
+        check_range(self.settle_time_s, "settle_time_s", 0.0, math.inf, "s")
+        check_range(self.goal_timeout_s, "goal_timeout_s", 0.0, math.inf, "s", low_open=True)
+        check_range(self.setup_timeout_s, "setup_timeout_s", 0.0, math.inf, "s", low_open=True)
+        check_range(self.goto_speed_m_s, "goto_speed_m_s", 0.0, 5.0, "m/s", low_open=True)
+        check_range(self.goto_yaw_rate_rad_s, "goto_yaw_rate_rad_s", 0.0, 10.0, low_open=True)
+
+    @property
+    def tick_period_s(self) -> float:
+        """Time between ticks [s] (Angler 0.05)."""
+        return 1.0 / self.tick_rate_hz
+
+
+@dataclass(frozen=True, slots=True)
+class GoalRequest:
+    """A supervised GoTo order.
+
+    Attributes:
+        position_ned: (3,) goal position [m], world NED.
+        yaw_rad: goal heading [rad, clockwise from north], or None to keep the current one.
+    """
+
+    position_ned: Vec3
+    yaw_rad: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PoseSetpoint:
+    """What the tree asks the pose controller for this tick.
+
+    Attributes:
+        position_ned: (3,) desired position [m], world NED.
+        yaw_rad: desired heading [rad, clockwise from north].
+        velocity_ned: (3,) feed-forward velocity [m/s], world NED.
+    """
+
+    position_ned: Vec3
+    yaw_rad: float
+    velocity_ned: Vec3 = _ZERO
+
+
+@dataclass(slots=True)
+class MissionContext:
+    """The tree's inputs and outputs (module docstring: who writes what, and when).
+
+    Attributes:
+        time_s: the clock [s] (simulation time).
+        armed: the vehicle reports itself armed.
+        disarm_requested: the pilot or the link wants the vehicle disarmed (a level).
+        estimate_position_ned: (3,) estimated position [m], world NED.
+        estimate_yaw_rad: estimated heading [rad, clockwise from north].
+        start_requested: one-shot: start the loaded mission (consumed by the tick).
+        goal: one-shot: a GoTo order (consumed by the tick), or None.
+        cancel_requested: one-shot: drop the plan and hold the current pose (consumed).
+        request_arm: output: True to ask for arming, False for disarming, None for no change.
+        pose_setpoint: output: this tick's setpoint, or None (nothing commanded).
+        status: output: one line on what the tree is doing.
+        goal_reached: output: the last plan ended within tolerance (cleared by a new plan).
+        tick_count: output: ticks so far.
+        plan_count: output: plans made (missions started and GoTo legs).
+        disarm_count: output: times the disarm fallback was entered.
+        reached_count: output: plans that ended within tolerance.
+    """
+
+    time_s: float = 0.0
+    armed: bool = False
+    disarm_requested: bool = False
+    estimate_position_ned: Vec3 = _ZERO
+    estimate_yaw_rad: float = 0.0
+    start_requested: bool = False
+    goal: GoalRequest | None = None
+    cancel_requested: bool = False
+    request_arm: bool | None = None
+    pose_setpoint: PoseSetpoint | None = None
+    status: str = ""
+    goal_reached: bool = False
+    tick_count: int = 0
+    plan_count: int = 0
+    disarm_count: int = 0
+    reached_count: int = 0
+
+
+# Blackboard keys (relative to the runner's namespace) and their initial values.
+_KEYS: dict[str, Any] = {
+    # gathered inputs
+    "time_s": 0.0,
+    "armed": False,
+    "disarm_requested": False,
+    "position": _ZERO,
+    "yaw": 0.0,
+    "start": False,
+    "goal": None,
+    "cancel": False,
+    # tree state
+    "disarm_latched": False,
+    "setup_done": False,
+    "trajectory": None,
+    "settle_since": None,
+    "hold": None,
+    # outputs
+    "request_arm": None,
+    "setpoint": None,
+    "status": "",
+    "goal_reached": False,
+    "plans": 0,
+    "disarms": 0,
+    "reached": 0,
+}
+
+
+class _Node(py_trees.behaviour.Behaviour):
+    """A behaviour sharing the runner's blackboard client ``bb``."""
+
+    def __init__(self, name: str, bb: py_trees.blackboard.Client) -> None:
+        super().__init__(name)
+        self.bb = bb
+
+
+class _GatherData(_Node):
+    """Copy the context's inputs onto the blackboard; move the one-shot requests there."""
+
+    def __init__(self, bb: py_trees.blackboard.Client) -> None:
+        super().__init__("Gather data", bb)
+        self.context = MissionContext()
+
+    def update(self) -> Status:
+        ctx, bb = self.context, self.bb
+        bb.time_s = ctx.time_s
+        bb.armed = ctx.armed
+        bb.disarm_requested = ctx.disarm_requested
+        bb.position = ctx.estimate_position_ned
+        bb.yaw = ctx.estimate_yaw_rad
+        if not ctx.disarm_requested:
+            bb.disarm_latched = False
+        if ctx.start_requested:
+            bb.start, ctx.start_requested = True, False
+        if ctx.goal is not None:
+            bb.goal, ctx.goal = ctx.goal, None  # the latest order wins
+        if ctx.cancel_requested:
+            bb.cancel, ctx.cancel_requested = True, False
+        return Status.SUCCESS
+
+
+class _Check(_Node):
+    """Condition: SUCCESS when ``predicate(bb)`` holds, else FAILURE."""
+
+    def __init__(
+        self, name: str, bb: py_trees.blackboard.Client, predicate: Callable[[Any], bool]
+    ) -> None:
+        super().__init__(name, bb)
+        self.predicate = predicate
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.predicate(self.bb) else Status.FAILURE
+
+
+class _Do(_Node):
+    """Action that always succeeds at once: ``effect(bb)``."""
+
+    def __init__(
+        self, name: str, bb: py_trees.blackboard.Client, effect: Callable[[Any], None]
+    ) -> None:
+        super().__init__(name, bb)
+        self.effect = effect
+
+    def update(self) -> Status:
+        self.effect(self.bb)
+        return Status.SUCCESS
+
+
+def _stop_setpoints(bb: Any) -> None:
+    bb.trajectory = bb.hold = bb.setpoint = bb.goal = bb.settle_since = None
+    bb.start = bb.cancel = False
+
+
+def _disarm_vehicle(bb: Any) -> None:
+    bb.request_arm = False
+    bb.status = "disarmed: disarm requested"
+    if not bb.disarm_latched:
+        bb.disarm_latched = True
+        bb.disarms = bb.disarms + 1
+
+
+class _ArmVehicle(_Node):
+    """Ask for arming until the vehicle reports armed; FAILURE after the setup timeout."""
+
+    def __init__(self, bb: py_trees.blackboard.Client, timeout_s: float) -> None:
+        super().__init__("Arm vehicle", bb)
+        self.timeout_s = timeout_s
+        self.since_s: float | None = None
+
+    def initialise(self) -> None:
+        self.since_s = None
+
+    def update(self) -> Status:
+        bb = self.bb
+        if bb.armed:
+            return Status.SUCCESS
+        bb.request_arm = True
+        if self.since_s is None:
+            self.since_s = bb.time_s
+        if bb.time_s - self.since_s > self.timeout_s:
+            bb.status = f"setup failed: not armed within {self.timeout_s:g} s"
+            return Status.FAILURE
+        bb.status = "setup: arming the vehicle"
+        return Status.RUNNING
+
+
+class _PlanOnRequest(_Node):
+    """Act on the pending requests: cancel, then a GoTo goal, then a mission start."""
+
+    def __init__(
+        self, bb: py_trees.blackboard.Client, mission: Mission | None, config: MissionConfig
+    ) -> None:
+        super().__init__("Plan on request", bb)
+        self.mission = mission
+        self.config = config
+
+    def update(self) -> Status:
+        bb = self.bb
+        if bb.cancel:
+            _stop_setpoints(bb)
+            bb.hold = PoseSetpoint(bb.position, bb.yaw)
+            bb.goal_reached = False
+            bb.status = "cancelled: holding the current pose"
+        elif bb.goal is not None:
+            goal: GoalRequest = bb.goal
+            cfg = self.config
+            leg = single_goal(
+                bb.position,
+                bb.yaw,
+                goal.position_ned,
+                goal.yaw_rad,
+                cfg.goto_speed_m_s,
+                bb.time_s,
+                yaw_rate_rad_s=cfg.goto_yaw_rate_rad_s,
+            )
+            self._start(leg)
+        elif bb.start:
+            if self.mission is None:
+                bb.start = False
+                bb.status = "start ignored: no mission loaded"
+            else:
+                self._start(plan(self.mission, bb.position, bb.yaw, bb.time_s))
+        return Status.SUCCESS
+
+    def _start(self, trajectory: Trajectory) -> None:
+        bb = self.bb
+        bb.goal = None
+        bb.start = False
+        bb.trajectory = trajectory
+        bb.settle_since = None
+        bb.goal_reached = False
+        bb.plans = bb.plans + 1
+
+
+class _ExecuteTrajectory(_Node):
+    """Write the trajectory's pose each tick; SUCCESS once done and settled in tolerance.
+
+    FAILURE when there is no trajectory, or when the pose is not within tolerance
+    ``goal_timeout_s`` after the last point (then the last pose is held by the idle branch).
+    """
+
+    def __init__(self, bb: py_trees.blackboard.Client, config: MissionConfig) -> None:
+        super().__init__("Execute trajectory", bb)
+        self.config = config
+
+    def update(self) -> Status:
+        bb, cfg = self.bb, self.config
+        trajectory: Trajectory | None = bb.trajectory
+        if trajectory is None:
+            return Status.FAILURE
+        now = bb.time_s
+        sample = trajectory.sample(now - trajectory.start_time_s)
+        bb.setpoint = PoseSetpoint(sample.position_ned, sample.yaw_rad, sample.velocity_ned)
+        bb.status = f"executing {trajectory.name}"
+        if not sample.done:
+            return Status.RUNNING
+        error_m = math.dist(bb.position, sample.position_ned)
+        error_rad = abs(wrap_angle(bb.yaw - sample.yaw_rad))
+        if error_m < cfg.goal_tolerance_m and error_rad < cfg.yaw_tolerance_rad:
+            if bb.settle_since is None:
+                bb.settle_since = now
+            if now - bb.settle_since >= cfg.settle_time_s:
+                self._finish(trajectory)
+                bb.goal_reached = True
+                bb.reached = bb.reached + 1
+                bb.status = f"{trajectory.name}: goal reached"
+                return Status.SUCCESS
+            return Status.RUNNING
+        bb.settle_since = None
+        late_s = now - trajectory.start_time_s - trajectory.end_time_s
+        if late_s > cfg.goal_timeout_s:
+            self._finish(trajectory)
+            bb.status = f"{trajectory.name}: goal not reached within {cfg.goal_timeout_s:g} s"
+            return Status.FAILURE
+        return Status.RUNNING
+
+    def _finish(self, trajectory: Trajectory) -> None:
+        self.bb.trajectory = None
+        self.bb.settle_since = None
+        self.bb.hold = PoseSetpoint(trajectory.final_position_ned, trajectory.final_yaw_rad)
+
+
+class _Idle(_Node):
+    """Hold the last pose (station keeping), or command nothing before any order."""
+
+    def __init__(self, bb: py_trees.blackboard.Client) -> None:
+        super().__init__("Idle / hold station", bb)
+
+    def initialise(self) -> None:
+        bb = self.bb
+        if bb.hold is None:
+            bb.status = "idle: waiting for a mission start or a goal"
+        elif bb.goal_reached:
+            bb.status = "holding station at the goal"
+        # else keep the line that explains the hold (cancelled, goal not reached in time)
+
+    def update(self) -> Status:
+        self.bb.setpoint = self.bb.hold
+        return Status.RUNNING
+
+
+def _build_tree(
+    bb: py_trees.blackboard.Client, mission: Mission | None, config: MissionConfig
+) -> tuple[py_trees.behaviour.Behaviour, _GatherData]:
+    """The root of the tree in the module docstring, and its data gatherer."""
+    gather = _GatherData(bb)
+
+    def setup_done(value: bool) -> Callable[[Any], None]:
+        def effect(board: Any) -> None:
+            board.setup_done = value
+
+        return effect
+
+    disarm = Sequence(
+        "Disarm fallback",
+        memory=False,
+        children=[
+            _Check("Disarm requested?", bb, lambda board: bool(board.disarm_requested)),
+            _Do("Stop setpoints", bb, _stop_setpoints),
+            _Do("Disarm vehicle", bb, _disarm_vehicle),
+            _Do("Mark setup undone", bb, setup_done(False)),
+        ],
+    )
+    setup = Selector(
+        "Setup",
+        memory=False,
+        children=[
+            _Check("Setup done?", bb, lambda board: bool(board.setup_done)),
+            Sequence(
+                "Setup once",
+                memory=True,
+                children=[
+                    _ArmVehicle(bb, config.setup_timeout_s),
+                    _Do("Arm manipulator", bb, lambda board: None),  # placeholder
+                    _Do("Mark setup done", bb, setup_done(True)),
+                ],
+            ),
+        ],
+    )
+    run = Sequence(
+        "Mission",
+        memory=False,
+        children=[
+            setup,
+            _PlanOnRequest(bb, mission, config),
+            Selector(
+                "Execute or idle",
+                memory=False,
+                children=[_ExecuteTrajectory(bb, config), _Idle(bb)],
+            ),
+        ],
+    )
+    tasks = Selector("Tasks", memory=False, children=[disarm, run])
+    root = Parallel(
+        "Mission tree",
+        policy=ParallelPolicy.SuccessOnAll(synchronise=False),
+        children=[gather, tasks],
+    )
+    return root, gather
+
+
+class MissionRunner:
+    """Builds the mission tree for one vehicle and ticks it against a :class:`MissionContext`.
+
+    Each runner keeps its keys under its own blackboard namespace (``/mission<n>/``), so
+    several runners in one process do not share state. Call :meth:`close` to drop the keys.
+
+    Args:
+        mission: the mission a start request runs, or None (GoTo orders only).
+        config: timing and tolerances.
+    """
+
+    def __init__(self, mission: Mission | None, config: MissionConfig | None = None) -> None:
+        self.mission = mission
+        self.config = config if config is not None else MissionConfig()
+        self.namespace = f"/mission{next(_RUNNERS)}"
+        self._bb = py_trees.blackboard.Client(name=self.namespace, namespace=self.namespace)
+        for key, value in _KEYS.items():
+            self._bb.register_key(key, access=Access.WRITE)
+            self._bb.set(key, value)
+        root, self._gather = _build_tree(self._bb, mission, self.config)
+        self.tree = py_trees.trees.BehaviourTree(root)
+        self._ticks = 0
+
+    @property
+    def root(self) -> py_trees.behaviour.Behaviour:
+        """The tree's root behaviour."""
+        return self.tree.root
+
+    def tick(self, context: MissionContext) -> None:
+        """Tick the tree once on ``context``'s inputs and write its outputs into ``context``.
+
+        The per-tick outputs (``request_arm``, ``pose_setpoint``) start each tick as None.
+        """
+        bb = self._bb
+        bb.request_arm = None
+        bb.setpoint = None
+        self._gather.context = context
+        self.tree.tick()
+        self._ticks += 1
+        context.request_arm = bb.request_arm
+        context.pose_setpoint = bb.setpoint
+        context.status = bb.status
+        context.goal_reached = bb.goal_reached
+        context.tick_count = self._ticks
+        context.plan_count = bb.plans
+        context.disarm_count = bb.disarms
+        context.reached_count = bb.reached
+
+    def tree_ascii(self, *, show_status: bool = False, unicode: bool = False) -> str:
+        """The tree drawn as text (py_trees' ascii or unicode rendering), for docs and logs."""
+        render = py_trees.display.unicode_tree if unicode else py_trees.display.ascii_tree
+        return render(self.root, show_status=show_status)
+
+    def close(self) -> None:
+        """Remove this runner's keys from the (process-wide) blackboard."""
+        self._bb.unregister(clear=True)
