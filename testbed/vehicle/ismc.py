@@ -11,9 +11,13 @@ The law (Angler, Palmer et al.; REFERENCE §3.7; Utkin & Shi 1996), per body axi
 reset` (arming), where the integral is empty, so ``s = 0`` there exactly. REFERENCE §3.7 and
 the paper's eq. 13 print ``− Kp·v_e(0)``; integrating the paper's own eqs. 11–12
 (σ = C·v_e, ż = v̇_e + Kp·v_e − C·v̇_e, z(0) = −C·v_e(0)) gives ``− v_e(0)``, and only that
-meets its assumption s(0) = 0 unless Kp = I. Both have ṡ = v̇_e + Kp·v_e (eq. 14).
+meets its assumption s(0) = 0 unless Kp = I. Both have ṡ = v̇_e + Kp·v_e (eq. 14). The
+integral is stepped by forward Euler (the previous update's v_e times dt): with the wrench
+held over each period that keeps s on the surface of a perfectly modelled plant
+(:meth:`IsmcController.update`).
 
-Closed loop on a plant M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ + d whose model the controller knows:
+Closed loop on a plant M ν̇ + C(ν)ν + D(ν)ν + g(η) = τ + d (d: an unmodelled generalised
+force about CO) whose model the controller otherwise knows:
 M ṡ = −d − ρ·tanh(s/λ). With ``|d| < ρ`` per axis (M diagonal) s settles at −λ·atanh(d/ρ),
 ṡ → 0 and so v̇_e + Kp·v_e → 0: no steady velocity error. With ρ = 0 (the nominal
 computed-torque law alone) the error settles at v_e = −(M·Kp)⁻¹·d. For |s| ≪ λ the robust
@@ -29,8 +33,9 @@ mismatch is a different HydroModel (:func:`mismatched_model`).
 Frames: world NED, body FRD throughout; ν at the body origin CO. τ above is the generalised
 force about CO; the returned wrench has its moment about the CoG (what the allocator and
 ``fossen_acceleration`` take): moment_CoG = moment_CO − r_g × F. Angler (ROS) works in FLU
-and converts to FRD before the thruster allocation; the gains are per-axis magnitudes, which
-that conversion leaves unchanged.
+and converts its wrench to FRD before the thruster allocation; here every input and output is
+FRD already, so nothing is converted, and the gains, per-axis magnitudes, are the same in
+either frame.
 
 The gains per vehicle model are package data (``data/ismc.toml``, :func:`load_ismc_gains`).
 Pure: no ECS, no randomness, no pybullet; plain float tuples in the 10-ms control frame.
@@ -211,6 +216,7 @@ class IsmcController:
         "_coefficients",
         "_cog",
         "_error0",
+        "_last_error",
         "_mass_rows",
         "gains",
         "integral",
@@ -226,6 +232,7 @@ class IsmcController:
         self._mass_rows = tuple(_vec6(row.tolist()) for row in model.mass_matrix)
         self._cog = model.cog_m
         self._error0: Vec6 | None = None
+        self._last_error: Vec6 = _ZERO6
         self.integral: Vec6 = _ZERO6
         self.sliding: Vec6 = _ZERO6
         self.robust: Vec6 = _ZERO6
@@ -250,7 +257,12 @@ class IsmcController:
         """One control step: the body wrench that drives ν towards ``v_cmd``.
 
         The first update after :meth:`reset` arms: it stores v_e(0), leaves the integral at 0
-        (so s = 0 exactly) and ignores ``dt_s``; later ones add v_e·dt_s to the integral first.
+        (so s = 0 exactly) and ignores ``dt_s``. Later ones first add the previous update's
+        v_e times ``dt_s`` to the integral (forward Euler: the error the held wrench was
+        computed from). With the wrench held over the period, the sampled sliding dynamics are
+        then the forward-Euler step of M ṡ = −d − ρ·tanh(s/λ), and s stays 0 on a perfect
+        model; adding the new v_e instead would drift s by Kp·dt·(v_e − v_e(0)) (−0.02 m/s
+        after a 0.2 m/s step at Kp·dt = 0.1), a bias the robust term would then fight.
 
         Args:
             v_cmd: (6,) commanded body twist (u v w p q r) [m/s, rad/s], FRD, at CO.
@@ -284,16 +296,17 @@ class IsmcController:
         else:
             if not (dt_s > 0.0 and math.isfinite(dt_s)):
                 raise ValueError(f"dt_s must be > 0 and finite, got {dt_s}")
-            i = self.integral
+            i, held = self.integral, self._last_error
             integral = (
-                i[0] + error[0] * dt_s,
-                i[1] + error[1] * dt_s,
-                i[2] + error[2] * dt_s,
-                i[3] + error[3] * dt_s,
-                i[4] + error[4] * dt_s,
-                i[5] + error[5] * dt_s,
+                i[0] + held[0] * dt_s,
+                i[1] + held[1] * dt_s,
+                i[2] + held[2] * dt_s,
+                i[3] + held[3] * dt_s,
+                i[4] + held[4] * dt_s,
+                i[5] + held[5] * dt_s,
             )
         self.integral = integral
+        self._last_error = error
         self.sliding = sliding = _vec6(
             [e - e0 + k * s for e, e0, k, s in zip(error, error0, kp, integral, strict=True)]
         )
