@@ -29,7 +29,11 @@ Update (Joseph form, which keeps ``P`` symmetric positive definite)::
 
 Outliers: the normalised innovation ``yᵀ S⁻¹ y`` is gated against the chi-square quantile of
 ``gate_probability`` for ``dim z`` degrees of freedom; a failing measurement is counted and
-dropped, as are non-finite or malformed ones (sensor data never raises here).
+dropped, as are non-finite or malformed ones (sensor data never raises here). A gate alone can
+lock a filter out for good (after a long dropout the covariance may claim less than the error
+really is, and every fix is then "an outlier"), so after ``reacquire_after`` consecutive
+rejections from one source its next rejected measurement *re-acquires*: the covariance of the
+states it observes is reset to the initial spread (their cross terms cleared) and it is applied.
 
 Delayed measurements (exact re-processing): each :meth:`KalmanNavigator.predict` stores a step
 ``(time, input, accepted updates, x, P)``, bounded to the last ``history_s`` seconds. A
@@ -80,6 +84,8 @@ _H_DEPTH = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
 _DIMS = {"position_ned": 3, "velocity_body": 3, "depth": 1}
 _SELECT = {"position_ned": [0, 1, 2], "depth": [2]}  # the state rows H = [I 0], [0 0 1 0 0 0] pick
 _EYE6 = np.eye(6)
+_OBSERVED = {"position_ned": slice(0, 3), "velocity_body": slice(3, 6), "depth": slice(2, 3)}
+_COUNTERS = ("accepted", "rejected", "invalid", "stale", "rollbacks", "reacquired")
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,7 +120,7 @@ class FilterConfig:
 
     Domains: ``accel_noise_m2_s3`` in (0, 100]; ``initial_position_sigma_m`` in (0, 1e4] m;
     ``initial_velocity_sigma_m_s`` in (0, 100] m/s; ``history_s`` in [0, 60] s;
-    ``gate_probability`` in (0, 1).
+    ``gate_probability`` in (0, 1); ``reacquire_after`` in [0, 1000].
 
     Attributes:
         accel_noise_m2_s3: ``q``, spectral density of the white acceleration per NED axis
@@ -123,6 +129,8 @@ class FilterConfig:
         initial_velocity_sigma_m_s: 1σ of the initial velocity per axis [m/s].
         history_s: how far back delayed measurements are re-processed [s].
         gate_probability: chi-square gate; innovations beyond this quantile are rejected.
+        reacquire_after: consecutive rejections of one source after which the next rejected
+            one re-acquires (module docstring); 0 never re-acquires.
     """
 
     accel_noise_m2_s3: float = 0.1
@@ -130,6 +138,7 @@ class FilterConfig:
     initial_velocity_sigma_m_s: float = 1.0
     history_s: float = 5.0
     gate_probability: float = 0.9999
+    reacquire_after: int = 3
 
     def __post_init__(self) -> None:
         check_range(self.accel_noise_m2_s3, "accel_noise_m2_s3", 0.0, 100.0, "m²/s³", low_open=True)
@@ -148,6 +157,7 @@ class FilterConfig:
         check_range(
             self.gate_probability, "gate_probability", 0.0, 1.0, low_open=True, high_open=True
         )
+        check_range(self.reacquire_after, "reacquire_after", 0, 1000)
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,6 +170,7 @@ class FilterCounters:
         invalid: malformed (unknown kind, wrong length, non-finite value or σ ≤ 0).
         stale: older than the history, dropped.
         rollbacks: accepted measurements that were applied by rolling back.
+        reacquired: rejected measurements applied after a covariance reset (module docstring).
     """
 
     accepted: int = 0
@@ -167,6 +178,7 @@ class FilterCounters:
     invalid: int = 0
     stale: int = 0
     rollbacks: int = 0
+    reacquired: int = 0
 
 
 @dataclass(slots=True)
@@ -177,7 +189,8 @@ class _Step:
     accel: np.ndarray | None
     x: np.ndarray
     p: np.ndarray
-    updates: list[tuple[Measurement, Quaternion]] = field(default_factory=list)
+    updates: list[tuple[Measurement, Quaternion, bool]] = field(default_factory=list)
+    """(measurement, attitude, whether it re-acquired) in the order they were applied."""
 
 
 def _transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -193,6 +206,13 @@ def _transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return f, g, qm
 
 
+def _predicted(x: np.ndarray, kind: str, quaternion: Quaternion) -> np.ndarray:
+    """h(x) of a measurement ``kind`` (the DVL's with the attitude body → NED)."""
+    if kind == "velocity_body":
+        return np.array(quat_rotate_inverse(quaternion, (x[3], x[4], x[5])))
+    return x[_SELECT[kind]]
+
+
 class KalmanNavigator:
     """The position/velocity Kalman filter of the module docstring.
 
@@ -203,15 +223,25 @@ class KalmanNavigator:
         velocity_ned_m_s: (3,) initial velocity [m/s], NED (default at rest).
     """
 
-    __slots__ = ("_cache", "_counts", "_gates", "_history", "_p", "_t", "_x", "config")
+    __slots__ = (
+        "_cache",
+        "_counts",
+        "_gates",
+        "_history",
+        "_p",
+        "_streaks",
+        "_t",
+        "_x",
+        "config",
+    )
 
     def __init__(
         self,
         config: FilterConfig,
         *,
         time_s: float = 0.0,
-        position_ned_m: Sequence[float] = (0.0, 0.0, 0.0),
-        velocity_ned_m_s: Sequence[float] = (0.0, 0.0, 0.0),
+        position_ned_m: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+        velocity_ned_m_s: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
     ) -> None:
         self.config = config
         self._t = float(time_s)
@@ -223,7 +253,8 @@ class KalmanNavigator:
         self._p = np.diag(variances)
         self._history: list[_Step] = [_Step(self._t, None, self._x.copy(), self._p.copy())]
         self._gates = {dim: float(chi2.ppf(config.gate_probability, dim)) for dim in (1, 3)}
-        self._counts = {k: 0 for k in ("accepted", "rejected", "invalid", "stale", "rollbacks")}
+        self._counts = {k: 0 for k in _COUNTERS}
+        self._streaks: dict[str, int] = {}
         self._cache: tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     # ------------------------------------------------------------------- accessors
@@ -353,7 +384,15 @@ class KalmanNavigator:
             math.isfinite(s) and s > 0.0 for s in m.sigma
         )
 
-    def _apply(self, step: _Step, m: Measurement, quaternion: Quaternion, *, gate: bool) -> bool:
+    def _apply(
+        self,
+        step: _Step,
+        m: Measurement,
+        quaternion: Quaternion,
+        *,
+        gate: bool,
+        reset: bool = False,
+    ) -> bool:
         """Update ``step``'s posterior in place with ``m``; record it when accepted."""
         x, p = step.x, step.p
         if m.kind == "velocity_body":
@@ -375,17 +414,51 @@ class KalmanNavigator:
             return False
         if gate:
             nis = float(y @ s_inv @ y)
-            if not nis <= self._gates[len(z)]:
+            if nis <= self._gates[len(z)]:
+                self._streaks[m.source] = 0
+            elif not self._reacquire(m):
                 self._counts["rejected"] += 1
                 return False
+            else:  # reset the observed states' spread, then apply the measurement ungated
+                self._counts["reacquired"] += 1
+                self._streaks[m.source] = 0
+                step.p = self._reset_spread(p, m.kind, y)
+                return self._apply(step, m, quaternion, gate=False, reset=True) and self._accept()
         k = pht @ s_inv
         a = _EYE6 - k @ h
         step.x = x + k @ y
         step.p = a @ p @ a.T + k @ r @ k.T
-        step.updates.append((m, quaternion))
+        step.updates.append((m, quaternion, reset))
         if gate:
             self._counts["accepted"] += 1
         return True
+
+    def _accept(self) -> bool:
+        self._counts["accepted"] += 1
+        return True
+
+    def _reacquire(self, m: Measurement) -> bool:
+        """Count a gate rejection of ``m``'s source; whether this one re-acquires instead."""
+        limit = self.config.reacquire_after
+        streak = self._streaks.get(m.source, 0)
+        if limit and streak >= limit:
+            return True
+        self._streaks[m.source] = streak + 1
+        return False
+
+    def _reset_spread(self, p: np.ndarray, kind: str, innovation: np.ndarray) -> np.ndarray:
+        """``p`` with the observed block reset to the initial spread, or wider: the largest
+        innovation component squared (so the fix that re-acquires is believed)."""
+        cfg = self.config
+        block = _OBSERVED[kind]
+        p = p.copy()
+        p[block, :] = 0.0
+        p[:, block] = 0.0
+        sigma = cfg.initial_velocity_sigma_m_s if kind == "velocity_body" else None
+        sigma = cfg.initial_position_sigma_m if sigma is None else sigma
+        idx = np.arange(6)[block]
+        p[idx, idx] = max(sigma * sigma, float(np.max(np.square(innovation))))
+        return p
 
     def _rollback(self, m: Measurement, quaternion: Quaternion) -> bool:
         history = self._history
@@ -419,8 +492,11 @@ class KalmanNavigator:
             step = history[j]
             x, p = self._propagate(prev.x, prev.p, step.time_s - prev.time_s, step.accel)
             replayed = _Step(step.time_s, step.accel, x, p)
-            for old, q in step.updates:
-                self._apply(replayed, old, q, gate=False)
+            for old, q, reset in step.updates:
+                if reset:
+                    y = np.asarray(old.value) - _predicted(replayed.x, old.kind, q)
+                    replayed.p = self._reset_spread(replayed.p, old.kind, y)
+                self._apply(replayed, old, q, gate=False, reset=reset)
             history[j] = prev = replayed
         self._x, self._p = prev.x, prev.p
         return True
