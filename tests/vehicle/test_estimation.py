@@ -410,3 +410,41 @@ def test_navigation_config_loads_from_toml_tables() -> None:
         build(NavigationConfig, {"dvl": {"min_altitude_m": 5.0, "max_altitude_m": 1.0}})
     with pytest.raises(ConfigError, match="noise_m"):
         build(NavigationConfig, {"acoustic": {"noise_m": -1.0}})
+
+
+def test_rollback_through_a_reacquisition_replays_it_exactly() -> None:
+    config = FilterConfig(initial_position_sigma_m=0.01, initial_velocity_sigma_m_s=0.01)
+    late, in_order = KalmanNavigator(config), KalmanNavigator(config)
+    still = Measurement("dvl", "velocity_body", 1.0, (0.0, 0.0, 0.0), (0.01, 0.01, 0.01))
+    for k in range(1, 81):  # the vehicle is really 5 m north: fixes fail the gate, then one
+        t = k * 0.05  # re-acquires (at 2 s); the DVL reading valid at 1 s arrives at 3 s
+        for nav in (late, in_order):
+            nav.predict(t)
+            if k % 10 == 0:
+                nav.update(Measurement("usbl", "position_ned", t, (5.0, 0.0, 0.0), (0.5,) * 3))
+        if k == 20:
+            assert in_order.update(still)
+        if k == 60:
+            assert late.update(still)
+    for nav in (late, in_order):
+        assert (nav.counters.rejected, nav.counters.reacquired) == (3, 1)
+    assert late.counters.rollbacks == 1
+    np.testing.assert_allclose(late.state, in_order.state, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(late.covariance, in_order.covariance, rtol=0, atol=1e-12)
+    assert abs(late.state[0] - 5.0) < 1.0
+
+
+def test_known_acceleration_input_propagates_in_closed_form() -> None:
+    nav = KalmanNavigator(FilterConfig(accel_noise_m2_s3=1e-3))
+    accel = (0.2, -0.1, 0.05)
+    for k in range(1, 101):
+        nav.predict(k * 0.01, accel)
+    a = np.array(accel)
+    np.testing.assert_allclose(nav.state, np.concatenate([0.5 * a, a]), rtol=1e-12, atol=1e-15)
+    p = nav.covariance
+    np.testing.assert_allclose(p, p.T, rtol=0, atol=1e-15)
+    # P(1 s) = P0 propagated plus q·[[1/3, 1/2], [1/2, 1]] per axis (exact discretisation)
+    s_p, s_v, q = 10.0**2, 1.0**2, 1e-3
+    assert p[0, 0] == pytest.approx(s_p + s_v + q / 3.0, rel=1e-12)
+    assert p[0, 3] == pytest.approx(s_v + q / 2.0, rel=1e-12)
+    assert p[3, 3] == pytest.approx(s_v + q, rel=1e-12)
