@@ -206,13 +206,6 @@ def _transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return f, g, qm
 
 
-def _predicted(x: np.ndarray, kind: str, quaternion: Quaternion) -> np.ndarray:
-    """h(x) of a measurement ``kind`` (the DVL's with the attitude body → NED)."""
-    if kind == "velocity_body":
-        return np.array(quat_rotate_inverse(quaternion, (x[3], x[4], x[5])))
-    return x[_SELECT[kind]]
-
-
 class KalmanNavigator:
     """The position/velocity Kalman filter of the module docstring.
 
@@ -393,19 +386,25 @@ class KalmanNavigator:
         gate: bool,
         reset: bool = False,
     ) -> bool:
-        """Update ``step``'s posterior in place with ``m``; record it when accepted."""
+        """Update ``step``'s posterior in place with ``m``; record it when applied.
+
+        ``reset`` widens the observed states' spread first (a re-acquisition); ``gate=False``
+        applies without the gate (re-acquisitions and replays, counted already).
+        """
         x, p = step.x, step.p
+        rot = None
         if m.kind == "velocity_body":
             rot = np.array(rotation_matrix(quaternion))  # body → NED; H = [0 Rᵀ]
             h = np.zeros((3, 6))
             h[:, 3:] = rot.T
-            pht = p[:, 3:] @ rot
         else:
             h = _H_POSITION if m.kind == "position_ned" else _H_DEPTH
-            pht = p[:, _SELECT[m.kind]]
         z = np.asarray(m.value, dtype=np.float64)
         r = np.diag(np.square(np.asarray(m.sigma, dtype=np.float64)))
         y = z - h @ x
+        if reset:
+            p = self._reset_spread(p, m.kind, y)
+        pht = p[:, _SELECT[m.kind]] if rot is None else p[:, 3:] @ rot  # P Hᵀ
         s = h @ pht + r
         try:
             s_inv = np.linalg.inv(s)
@@ -416,14 +415,13 @@ class KalmanNavigator:
             nis = float(y @ s_inv @ y)
             if nis <= self._gates[len(z)]:
                 self._streaks[m.source] = 0
-            elif not self._reacquire(m):
+            elif self._reacquire(m):
+                self._counts["reacquired"] += 1
+                self._counts["accepted"] += 1
+                return self._apply(step, m, quaternion, gate=False, reset=True)
+            else:
                 self._counts["rejected"] += 1
                 return False
-            else:  # reset the observed states' spread, then apply the measurement ungated
-                self._counts["reacquired"] += 1
-                self._streaks[m.source] = 0
-                step.p = self._reset_spread(p, m.kind, y)
-                return self._apply(step, m, quaternion, gate=False, reset=True) and self._accept()
         k = pht @ s_inv
         a = _EYE6 - k @ h
         step.x = x + k @ y
@@ -433,15 +431,12 @@ class KalmanNavigator:
             self._counts["accepted"] += 1
         return True
 
-    def _accept(self) -> bool:
-        self._counts["accepted"] += 1
-        return True
-
     def _reacquire(self, m: Measurement) -> bool:
         """Count a gate rejection of ``m``'s source; whether this one re-acquires instead."""
         limit = self.config.reacquire_after
         streak = self._streaks.get(m.source, 0)
         if limit and streak >= limit:
+            self._streaks[m.source] = 0
             return True
         self._streaks[m.source] = streak + 1
         return False
@@ -493,9 +488,6 @@ class KalmanNavigator:
             x, p = self._propagate(prev.x, prev.p, step.time_s - prev.time_s, step.accel)
             replayed = _Step(step.time_s, step.accel, x, p)
             for old, q, reset in step.updates:
-                if reset:
-                    y = np.asarray(old.value) - _predicted(replayed.x, old.kind, q)
-                    replayed.p = self._reset_spread(replayed.p, old.kind, y)
                 self._apply(replayed, old, q, gate=False, reset=reset)
             history[j] = prev = replayed
         self._x, self._p = prev.x, prev.p
