@@ -32,7 +32,9 @@ __all__ = [
     "DepthSetpoint",
     "FailsafeLevel",
     "FailsafeStatus",
+    "GoalCancel",
     "ImuReading",
+    "MissionStatus",
     "ModeRequest",
     "MovementCommand",
     "Odometry",
@@ -153,6 +155,38 @@ class ActiveMode:
 
 
 @dataclass(frozen=True, slots=True)
+class GoalCancel:
+    """The operator cancels the vehicle's current goal (supervised control): it holds where it
+    is. A new ``seq`` is a new cancel; over the teleop codec it is the order header's
+    "cancel last order" bit.
+
+    Attributes:
+        seq: cancel sequence number (increasing).
+    """
+
+    seq: int
+
+
+@dataclass(frozen=True, slots=True)
+class MissionStatus:
+    """What the vehicle's mission logic reports (vehicles with autonomy only).
+
+    Attributes:
+        ready: no goal in progress (the last one was reached, given up or cancelled, or
+            none was given): the protocol's "ready" flag.
+        cancelled: the last goal was cancelled by the operator: the protocol's "last order
+            cancelled" flag (cleared by the next goal).
+        goals: goals received (mission starts and GoTo orders).
+        reached: goals reached within tolerance.
+    """
+
+    ready: bool
+    cancelled: bool = False
+    goals: int = 0
+    reached: int = 0
+
+
+@dataclass(frozen=True, slots=True)
 class ControlTargets:
     """The targets the closed loops are holding (set from setpoints, trimmed by sticks)."""
 
@@ -255,6 +289,7 @@ REPLICATED: tuple[tuple[type[object], int, Side], ...] = (
     (DepthSetpoint, 104, Side.OPERATOR),
     (AttitudeSetpoint, 105, Side.OPERATOR),
     (PositionSetpoint, 106, Side.OPERATOR),
+    (GoalCancel, 107, Side.OPERATOR),
     (ImuReading, 151, Side.VEHICLE),
     (DepthReading, 152, Side.VEHICLE),
     (PositionReading, 153, Side.VEHICLE),
@@ -265,6 +300,7 @@ REPLICATED: tuple[tuple[type[object], int, Side], ...] = (
     (CommandStatus, 158, Side.VEHICLE),
     (ThrusterOutput, 159, Side.VEHICLE),
     (Odometry, 160, Side.VEHICLE),
+    (MissionStatus, 161, Side.VEHICLE),
 )
 """(type, stable id, owner) of every replicated component. Ids never change
 meaning: add new ones, do not renumber."""

@@ -23,7 +23,9 @@ from testbed.common.components import (
     DepthSetpoint,
     FailsafeLevel,
     FailsafeStatus,
+    GoalCancel,
     ImuReading,
+    MissionStatus,
     ModeRequest,
     MovementCommand,
     Odometry,
@@ -48,10 +50,13 @@ __all__ = [
     "FailsafeLevel",
     "FailsafeStatus",
     "ForceIntent",
+    "GoalCancel",
     "ImuReading",
+    "MissionStatus",
     "ModeRequest",
     "MovementCommand",
     "Odometry",
+    "PoseTarget",
     "PositionReading",
     "PositionSetpoint",
     "ThrusterOutput",
@@ -88,3 +93,21 @@ class AppliedWrench:
 
     requested: tuple[float, float, float, float, float, float]
     achieved: tuple[float, float, float, float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class PoseTarget:
+    """The pose the vehicle's autonomy is flying to this instant (its mission tree's output).
+
+    Attributes:
+        time_s: vehicle time the tree set it [s].
+        position_ned_m: (3,) target of the body origin [m], world NED.
+        yaw_rad: target heading [rad, clockwise from north].
+        velocity_ned_m_s: (3,) the trajectory's velocity there [m/s], world NED (feed-forward;
+            the position moves on at this velocity until the next tick).
+    """
+
+    time_s: float
+    position_ned_m: tuple[float, float, float]
+    yaw_rad: float
+    velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)

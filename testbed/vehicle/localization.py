@@ -6,6 +6,10 @@ depth sensor's reading when it is new, hands them with the vehicle's IMU reading
 :class:`~testbed.vehicle.estimation.Localizer` and writes the
 :class:`~testbed.vehicle.estimation.NavigationEstimate` on the vehicle entity. Like
 ``read_sensors``, the sources are the only readers of the truth; the localizer never sees it.
+The estimate's position is also written as the vehicle's :class:`PositionReading`, so
+everything that reads a position fix (GUIDED's loop, the odometry sent to the operator, the
+GoTo support check) reads the estimate: a vehicle has a position fix or a navigation, not
+both.
 
 :class:`NavigationConfig` is the scenario's ``[vehicle.navigation]`` table (loadable with
 :func:`testbed.config.build`: ``[vehicle.navigation.dvl]`` etc. are the optional sub-tables),
@@ -20,7 +24,7 @@ import numpy as np
 
 from testbed.config import check_range
 from testbed.ecs import World
-from testbed.vehicle.components import DepthReading, ImuReading
+from testbed.vehicle.components import DepthReading, ImuReading, PositionReading
 from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, Localizer
 from testbed.vehicle.nav_sensors import (
     AcousticFix,
@@ -137,4 +141,8 @@ def estimate_navigation(world: World) -> None:
     for m in measurements:
         nav.delivered[m.source] = nav.delivered.get(m.source, 0) + 1
     nav.frames += 1
-    world.set(vehicle, nav.localizer.step(t, imu, measurements))
+    estimate = nav.localizer.step(t, imu, measurements)
+    world.set(vehicle, estimate)
+    # the estimate is the vehicle's position reading: GUIDED's loop, the odometry the operator
+    # is sent and the GoTo support check read it as they read a position fix
+    world.set(vehicle, PositionReading(estimate.time_s, estimate.position_ned_m))

@@ -63,6 +63,7 @@ from testbed.vehicle.components import (
     ModeRequest,
     MovementCommand,
     Odometry,
+    PoseTarget,
     PositionReading,
     PositionSetpoint,
     ThrusterOutput,
@@ -101,6 +102,7 @@ __all__ = [
     "publish_odometry",
     "read_sensors",
     "run_pilot_interface",
+    "set_intent",
     "supervise_failsafe",
     "wrench_of",
 ]
@@ -109,7 +111,8 @@ Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
 _ZERO_INTENTS = {
-    source: ForceIntent(source, ZERO6) for source in ("pilot", "depth", "attitude", "position")
+    source: ForceIntent(source, ZERO6)
+    for source in ("pilot", "depth", "attitude", "position", "velocity")
 }
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 
@@ -180,6 +183,7 @@ class ControlFlags:
     precision: bool = False
     failsafe: bool = False
     guided: bool = False
+    velocity: bool = False
 
 
 @dataclass(slots=True)
@@ -199,6 +203,10 @@ class Controllers:
         flags: the modes in effect this frame.
         shaped: the pilot interface's level wrench and trims for the current sticks and mode
             (a cache: sticks change at the operator's rate, frames run at the control rate).
+        autonomous: the vehicle flies itself (:mod:`testbed.vehicle.autonomy`): it owns its
+            mode (operator mode requests are not applied) and a link HOLD keeps GUIDED flying.
+        velocity_control: in GUIDED the autonomy's velocity controller (the ISMC) flies all
+            six axes; the depth, attitude and position loops stand down.
     """
 
     vehicle: Entity
@@ -213,6 +221,8 @@ class Controllers:
     flags: ControlFlags = field(default_factory=ControlFlags)
     shaped: _PilotCache | None = None
     position: PositionController = field(default_factory=PositionController)
+    autonomous: bool = False
+    velocity_control: bool = False
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -278,9 +288,14 @@ def _update_flags(world: World, ctl: Controllers) -> None:
     flags.armed = _is_armed(world, vehicle)
     flags.failsafe = failsafe
     flags.precision = mode is not None and mode.precision
-    flags.depth_hold = failsafe or m in (ControlMode.DEPTH_HOLD, ControlMode.GUIDED)
-    flags.guided = not failsafe and m is ControlMode.GUIDED
-    flags.attitude_hold = failsafe or m is not ControlMode.MANUAL
+    # under autonomy a link HOLD keeps the mission flying; SURFACE never does
+    link_hold = status is not None and status.level is FailsafeLevel.HOLD
+    holding = failsafe and not (ctl.autonomous and link_hold)
+    flags.guided = not holding and m is ControlMode.GUIDED
+    flags.velocity = flags.guided and ctl.velocity_control
+    loops = not flags.velocity
+    flags.depth_hold = loops and (failsafe or m in (ControlMode.DEPTH_HOLD, ControlMode.GUIDED))
+    flags.attitude_hold = loops and (failsafe or m is not ControlMode.MANUAL)
 
 
 def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
@@ -291,7 +306,7 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
     return ControlTargets(0.0 if depth is None else depth.depth_m, q)
 
 
-def _set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
+def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
     intent = _ZERO_INTENTS.get(source) if wrench == ZERO6 else None
     if intent is None:
         intent = ForceIntent(source, wrench)
@@ -338,6 +353,8 @@ def ingest_commands(world: World) -> None:
                 world.set(vehicle, _measured_targets(world, vehicle))
     for _, mode in world.query1(ModeRequest, changed=True):
         ctl.last_contact_s = now
+        if ctl.autonomous:
+            continue  # the autonomy owns the mode
         previous = world.get(vehicle, ActiveMode)
         world.set(vehicle, ActiveMode(mode.mode, mode.precision))
         if previous is None or previous.mode is not mode.mode:
@@ -407,7 +424,7 @@ def run_pilot_interface(world: World) -> None:
     flags = ctl.flags
     sticks = ZERO6 if flags.failsafe or flags.guided else ctl.sticks
     if not flags.armed or not any(sticks):
-        _set_intent(world, ctl, "pilot", ZERO6)
+        set_intent(world, ctl, "pilot", ZERO6)
         return
     vehicle = ctl.vehicle
     depth_hold, attitude_hold = flags.depth_hold, flags.attitude_hold
@@ -420,7 +437,7 @@ def run_pilot_interface(world: World) -> None:
         fx, fy, fz = level_to_body(
             (w[0], w[1], w[2]), LEVEL if imu is None else imu.quaternion_wxyz
         )
-        _set_intent(world, ctl, "pilot", (fx, fy, fz, w[3], w[4], w[5]))
+        set_intent(world, ctl, "pilot", (fx, fy, fz, w[3], w[4], w[5]))
     else:
         world.set(ctl.intents["pilot"], cache.intent)
     if not (depth_hold or attitude_hold):
@@ -484,22 +501,30 @@ def control_position(world: World) -> None:
     """GUIDED: the position setpoint → level-frame horizontal force intent, and its depth
     (and heading, when it sets one) as the depth and attitude holds' targets.
 
-    Acts only armed, in GUIDED, with a :class:`PositionSetpoint`, an IMU reading and a fresh
+    The setpoint is the autonomy's :class:`PoseTarget` when it has one (its heading always
+    applies), else the operator's :class:`PositionSetpoint`. Acts only armed, in GUIDED, not
+    under the velocity controller, with a setpoint, an IMU reading and a fresh
     :class:`PositionReading` (no older than the loop's ``fix_timeout_s``); otherwise its intent
     is zero and the vehicle holds depth and attitude as in DEPTH_HOLD.
     """
     ctl = world.resource(Controllers)
     flags = ctl.flags
-    if not (flags.guided and flags.armed):
+    if not (flags.guided and flags.armed) or flags.velocity:
         ctl.position.reset()
-        _set_intent(world, ctl, "position", ZERO6)
+        set_intent(world, ctl, "position", ZERO6)
         return
     vehicle = ctl.vehicle
     now = world.resource(SimClock).time_s
     fix = world.get(vehicle, PositionReading)
     imu = world.get(vehicle, ImuReading)
-    setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
-    setpoint = setpoints[-1] if setpoints else None
+    pose = world.get(vehicle, PoseTarget)
+    if pose is not None:
+        setpoint: PositionSetpoint | None = PositionSetpoint(
+            pose.position_ned_m, pose.yaw_rad, True
+        )
+    else:
+        setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
+        setpoint = setpoints[-1] if setpoints else None
     loop = ctl.position
     if (
         setpoint is None
@@ -508,7 +533,7 @@ def control_position(world: World) -> None:
         or now - fix.time_s > loop.gains.fix_timeout_s
     ):
         loop.reset()
-        _set_intent(world, ctl, "position", ZERO6)
+        set_intent(world, ctl, "position", ZERO6)
         return
     targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
     q = targets.quaternion_wxyz
@@ -525,7 +550,7 @@ def control_position(world: World) -> None:
         (m[0], m[1]),
     )
     bx, by, bz = level_to_body((fx, fy, 0.0), imu.quaternion_wxyz)
-    _set_intent(world, ctl, "position", (bx, by, bz, 0.0, 0.0, 0.0))
+    set_intent(world, ctl, "position", (bx, by, bz, 0.0, 0.0, 0.0))
 
 
 def control_depth(world: World) -> None:
@@ -539,11 +564,11 @@ def control_depth(world: World) -> None:
     flags = ctl.flags
     if not (flags.armed and flags.depth_hold) or None in (reading, imu, targets):
         ctl.depth.reset()
-        _set_intent(world, ctl, "depth", ZERO6)
+        set_intent(world, ctl, "depth", ZERO6)
         return
     assert reading is not None and imu is not None and targets is not None
     fx, fy, fz = ctl.depth.update(targets.depth_m, reading.depth_m, imu.quaternion_wxyz, clock.dt_s)
-    _set_intent(world, ctl, "depth", (fx, fy, fz, 0.0, 0.0, 0.0))
+    set_intent(world, ctl, "depth", (fx, fy, fz, 0.0, 0.0, 0.0))
 
 
 def control_attitude(world: World) -> None:
@@ -556,7 +581,7 @@ def control_attitude(world: World) -> None:
     flags = ctl.flags
     if not (flags.armed and flags.attitude_hold) or imu is None or targets is None:
         ctl.attitude.reset()
-        _set_intent(world, ctl, "attitude", ZERO6)
+        set_intent(world, ctl, "attitude", ZERO6)
         return
     tx, ty, tz = ctl.attitude.update(
         targets.quaternion_wxyz,
@@ -565,7 +590,7 @@ def control_attitude(world: World) -> None:
         clock.dt_s,
         ctl.attitude_axes,
     )
-    _set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, tx, ty, tz))
+    set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, tx, ty, tz))
 
 
 def allocate_thrust(world: World) -> None:
@@ -664,7 +689,14 @@ def publish_odometry(world: World) -> None:
     world.set(vehicle, Odometry(sampled_s, position, imu.quaternion_wxyz))
 
 
-def build_schedule(inbound: Sequence[System] = (), outbound: Sequence[System] = ()) -> Schedule:
+def build_schedule(
+    inbound: Sequence[System] = (),
+    outbound: Sequence[System] = (),
+    *,
+    estimators: Sequence[System] = (),
+    planners: Sequence[System] = (),
+    controllers: Sequence[System] = (),
+) -> Schedule:
     """The vehicle frame: sensors and inbound commands; failsafe, pilot, loops, allocation;
     actuation and odometry.
 
@@ -672,17 +704,27 @@ def build_schedule(inbound: Sequence[System] = (), outbound: Sequence[System] = 
         inbound: link systems run first in PRE_UPDATE (they write the operator's intents the
             frames brought, before :func:`ingest_commands` reads them).
         outbound: link or recording systems run last in POST_UPDATE.
+        estimators: PRE_UPDATE systems run right after :func:`read_sensors` (localization).
+        planners: UPDATE systems run right after :func:`supervise_failsafe` (the mission).
+        controllers: UPDATE systems run after the built-in loops, before
+            :func:`allocate_thrust` (the autonomy's velocity controller).
     """
     schedule = Schedule()
     for system in inbound:
         schedule.add(Phase.PRE_UPDATE, system)
     schedule.add(Phase.PRE_UPDATE, read_sensors)
+    for system in estimators:
+        schedule.add(Phase.PRE_UPDATE, system)
     schedule.add(Phase.PRE_UPDATE, ingest_commands)
     schedule.add(Phase.UPDATE, supervise_failsafe)
+    for system in planners:
+        schedule.add(Phase.UPDATE, system)
     schedule.add(Phase.UPDATE, run_pilot_interface)
     schedule.add(Phase.UPDATE, control_position)
     schedule.add(Phase.UPDATE, control_depth)
     schedule.add(Phase.UPDATE, control_attitude)
+    for system in controllers:
+        schedule.add(Phase.UPDATE, system)
     schedule.add(Phase.UPDATE, allocate_thrust)
     schedule.add(Phase.POST_UPDATE, actuate_thrusters)
     schedule.add(Phase.POST_UPDATE, meter_power)

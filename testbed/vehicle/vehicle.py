@@ -42,6 +42,12 @@ from testbed.common.geometry import Quaternion
 from testbed.config import build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
+from testbed.vehicle.autonomy import (
+    AutonomyConfig,
+    build_autonomy,
+    control_velocity,
+    run_mission,
+)
 from testbed.vehicle.camera import CameraConfig, CapturedImage, camera_pose, underwater_grey
 from testbed.vehicle.components import (
     ActiveMode,
@@ -68,6 +74,7 @@ from testbed.vehicle.control import (
     pilot_trims,
 )
 from testbed.vehicle.hydrodynamics import load_model
+from testbed.vehicle.localization import NavigationConfig, build_navigation, estimate_navigation
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
@@ -200,6 +207,11 @@ class VehicleConfig:
         start_euler_rad: (3,) initial roll, pitch, yaw [rad], each in [−2π, 2π].
         camera: the forward camera (disabled by default); when enabled, the physics client
             also holds the pool's scenery (visual only: the dynamics are the same).
+        navigation: the localization (navigation sources and the filter,
+            :mod:`testbed.vehicle.localization`); None = none. Excludes ``sensors.position``
+            (the estimate is the vehicle's position reading).
+        autonomy: the mission tree and velocity controller (:mod:`testbed.vehicle.autonomy`);
+            None = none (the operator flies it). Needs ``navigation``.
     """
 
     model: str = "bluerov2"
@@ -220,6 +232,8 @@ class VehicleConfig:
     start_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.5)
     start_euler_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    navigation: NavigationConfig | None = None
+    autonomy: AutonomyConfig | None = None
 
     def __post_init__(self) -> None:
         check_range(self.control_rate_hz, "control_rate_hz", *CONTROL_RATE_RANGE_HZ, "Hz")
@@ -241,6 +255,16 @@ class VehicleConfig:
         limit = MAX_POSITION_M
         check_ranges(self.start_position_ned_m, "start_position_ned_m", -limit, limit, "m")
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
+        check(
+            self.navigation is None or self.sensors.position is None,
+            "navigation",
+            "excludes sensors.position (the navigation estimate is the position reading)",
+        )
+        check(
+            self.autonomy is None or self.navigation is not None,
+            "autonomy",
+            "needs [vehicle.navigation] (the mission flies on its estimate)",
+        )
 
 
 def load_vehicle_config(
@@ -318,13 +342,22 @@ class Vehicle:
         )
 
         self.world = World()
-        self.schedule = build_schedule(inbound, outbound)
+        navigation = config.navigation
+        autonomy = config.autonomy
+        self.schedule = build_schedule(
+            inbound,
+            outbound,
+            estimators=() if navigation is None else (estimate_navigation,),
+            planners=() if autonomy is None else (run_mission,),
+            controllers=(control_velocity,) if autonomy and autonomy.controller == "ismc" else (),
+        )
         world = self.world
+        start_mode = ControlMode.MANUAL if autonomy is None else ControlMode.GUIDED
         self.entity: Entity = world.spawn(
             VehicleTag(),
             Replicate(),
             Armed(False),
-            ActiveMode(ControlMode.MANUAL),
+            ActiveMode(start_mode),
             FailsafeStatus(FailsafeLevel.NOMINAL, 0.0),
         )
         gains = config.gains
@@ -335,6 +368,8 @@ class Vehicle:
             pilot=config.pilot,
             failsafe=config.failsafe,
             axis_maxima=tuple(float(v) for v in self.allocator.axis_maxima()),
+            autonomous=autonomy is not None,
+            velocity_control=autonomy is not None and autonomy.controller == "ismc",
         )
         for source in ("pilot", "depth", "attitude"):
             zero = ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
@@ -352,6 +387,13 @@ class Vehicle:
         # order) of the runs before GUIDED existed stay the same
         zero = ForceIntent("position", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
         self.controllers.intents["position"] = world.spawn(zero)
+        # localization and autonomy, last: runs without them keep their entities and streams
+        if navigation is not None:
+            world.insert_resource(build_navigation(navigation, rng.spawn(1)[0]))
+        if autonomy is not None:
+            world.insert_resource(build_autonomy(autonomy, self.model))
+            velocity = ForceIntent("velocity", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+            self.controllers.intents["velocity"] = world.spawn(velocity)
         self._seq = 0
         self._arm_seq = 0
         self._control_period_s = 1.0 / config.control_rate_hz

@@ -1,0 +1,331 @@
+"""The vehicle's autonomy (Angler): its mission tree and velocity controller as ECS systems.
+
+A vehicle with a ``[vehicle.autonomy]`` table flies itself; the operator supervises. Per frame:
+
+- PRE_UPDATE, :func:`~testbed.vehicle.localization.estimate_navigation` (after the sensors):
+  the :class:`~testbed.vehicle.estimation.NavigationEstimate` — the only state the systems
+  below read (never the physics truth);
+- UPDATE, :func:`run_mission` (after the failsafe supervisor): at the tree's tick rate (Angler:
+  20 Hz) it fills a :class:`~testbed.vehicle.behaviours.MissionContext` from the world, ticks the
+  :class:`~testbed.vehicle.behaviours.MissionRunner` and applies what the tree asked: arming
+  (``Armed``, GUIDED), the :class:`PoseTarget` to fly, and the replicated
+  :class:`MissionStatus` the operator is told (the protocol's ready and cancelled flags);
+- UPDATE, :func:`control_velocity` (controller ``"ismc"``): the pose target → the kinematic
+  law's body twist (:func:`~testbed.vehicle.kinematic.pose_twist`) → Angler's ISMC
+  (:class:`~testbed.vehicle.ismc.IsmcController`, on the controller's own, possibly mismatched,
+  model) → a six-axis :class:`ForceIntent` the generalized allocator turns into thrust. With
+  controller ``"pid"`` the same target is flown by the PD position loop and the depth and
+  attitude PIDs instead (:func:`~testbed.vehicle.systems.control_position`).
+
+Supervision (the operator's intents, over either codec): a new :class:`PositionSetpoint` (a
+GoTo order) is a goal that starts or replaces the mission's plan; a new
+:class:`AttitudeSetpoint` (KeepHeading) re-aims the current goal, or holds here at that
+heading; a new :class:`GoalCancel` (the order header's cancel bit) drops the plan and holds
+the present pose. The tree's disarm fallback (``disarm_requested``) is a level: the operator's
+last arm request was a disarm, or the link failsafe reached SURFACE (latched until the operator
+asks to arm again). A vehicle under autonomy owns its mode: the operator's mode requests and
+sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD keeps
+the mission flying.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from testbed.common.geometry import euler_from_quat, quat_rotate_inverse
+from testbed.config import ConfigError, check_range
+from testbed.ecs import World
+from testbed.vehicle.behaviours import GoalRequest, MissionConfig, MissionContext, MissionRunner
+from testbed.vehicle.components import (
+    ActiveMode,
+    Armed,
+    ArmRequest,
+    AttitudeSetpoint,
+    ControlMode,
+    FailsafeLevel,
+    FailsafeStatus,
+    GoalCancel,
+    MissionStatus,
+    PoseTarget,
+    PositionSetpoint,
+)
+from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.hydrodynamics import HydroModel
+from testbed.vehicle.ismc import IsmcController, IsmcGains, load_ismc_gains, mismatched_model
+from testbed.vehicle.kinematic import PoseGains, pose_twist
+from testbed.vehicle.mission import Mission, load_mission, load_packaged_mission, mission_names
+from testbed.vehicle.systems import ZERO6, Controllers, SimClock, set_intent
+
+__all__ = [
+    "Autonomy",
+    "AutonomyConfig",
+    "ModelMismatch",
+    "build_autonomy",
+    "control_velocity",
+    "resolve_mission",
+    "run_mission",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class ModelMismatch:
+    """How the controller's model of the vehicle differs from the plant's (a scenario knob):
+    :func:`~testbed.vehicle.ismc.mismatched_model`'s factors.
+
+    Attributes:
+        mass_scale: factor on mass, weight and inertia, in (0, 10].
+        damping_scale: factor on every damping derivative, in [0, 10].
+        added_mass_scale: factor on every added mass, in [0, 10].
+        buoyancy_offset_n: added to the buoyancy [N], in [−1000, 1000].
+    """
+
+    mass_scale: float = 1.0
+    damping_scale: float = 1.0
+    added_mass_scale: float = 1.0
+    buoyancy_offset_n: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_range(self.mass_scale, "mass_scale", 0.0, 10.0, low_open=True)
+        check_range(self.damping_scale, "damping_scale", 0.0, 10.0)
+        check_range(self.added_mass_scale, "added_mass_scale", 0.0, 10.0)
+        check_range(self.buoyancy_offset_n, "buoyancy_offset_n", -1000.0, 1000.0, "N")
+
+
+@dataclass(frozen=True, slots=True)
+class AutonomyConfig:
+    """The scenario's ``[vehicle.autonomy]`` table (needs ``[vehicle.navigation]``).
+
+    Attributes:
+        mission: a packaged mission (``testbed/scenarios/missions/NAME.json``: ``square``,
+            ``lawn_mower``, ``station_keeping``, ``waypoint``) or a path to a mission JSON file;
+            None = no mission: the vehicle arms, holds where it is and flies the operator's
+            GoTo orders.
+        start_s: when the mission starts [s] (the tree's start event), in [0, 1e6].
+        controller: ``"ismc"`` (Angler's velocity controller over the kinematic pose law) or
+            ``"pid"`` (the PD position loop with the depth and attitude PIDs).
+        ismc: the ISMC's gains; None = the packaged ones of the vehicle's model
+            (``data/ismc.toml``).
+        mismatch: the controller's model error (the ISMC's model terms).
+        pose: the kinematic pose law's gains and limits.
+        tree: the mission tree's timing and tolerances (tick rate, goal tolerance, GoTo speed).
+    """
+
+    mission: str | None = None
+    start_s: float = 0.0
+    controller: Literal["ismc", "pid"] = "ismc"
+    ismc: IsmcGains | None = None
+    mismatch: ModelMismatch = field(default_factory=ModelMismatch)
+    pose: PoseGains = field(default_factory=PoseGains)
+    tree: MissionConfig = field(default_factory=MissionConfig)
+
+    def __post_init__(self) -> None:
+        check_range(self.start_s, "start_s", 0.0, 1e6, "s")
+        if self.mission is not None:
+            resolve_mission(self.mission)  # a bad name or file fails here, naming it
+
+
+def resolve_mission(name: str) -> Mission:
+    """The mission ``name``: a packaged one, or a JSON file at that path.
+
+    Raises:
+        ConfigError: neither a packaged mission nor a readable file (the message lists the
+            packaged ones), or a bad file (the message names the file and the field).
+    """
+    if name in mission_names():
+        return load_packaged_mission(name)
+    if not Path(name).is_file():
+        known = ", ".join(mission_names())
+        raise ConfigError(f"mission {name!r}: no such packaged mission ({known}) or file")
+    return load_mission(name)
+
+
+@dataclass(slots=True)
+class Autonomy:
+    """The autonomy resource: the tree, its context, the ISMC and what supervision sent.
+
+    Attributes:
+        config: the autonomy's configuration.
+        runner: the mission tree.
+        context: the tree's inputs and outputs (kept between ticks).
+        ismc: the velocity controller (None with controller ``"pid"``).
+        next_tick_s: vehicle time of the next tree tick [s].
+        started: the mission's start event was given.
+        seen: the operator's last goal, heading and cancel already handed to the tree.
+        last_arm: the operator's last arm request seen.
+        link_disarmed: the link failsafe reached SURFACE; latched until a new arm request.
+        goals: goals given to the tree (mission start, GoTo, KeepHeading).
+        cancels: cancels given to the tree.
+        cancelled: the last supervision was a cancel (cleared by the next goal).
+    """
+
+    config: AutonomyConfig
+    runner: MissionRunner
+    context: MissionContext
+    ismc: IsmcController | None
+    next_tick_s: float = 0.0
+    started: bool = False
+    seen: tuple[object, object, object] = (None, None, None)
+    last_arm: ArmRequest | None = None
+    link_disarmed: bool = False
+    goals: int = 0
+    cancels: int = 0
+    cancelled: bool = False
+
+
+def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
+    """The :class:`Autonomy` resource of ``config`` for a vehicle whose plant is ``model``."""
+    mission = None if config.mission is None else resolve_mission(config.mission)
+    ismc = None
+    if config.controller == "ismc":
+        gains = config.ismc if config.ismc is not None else load_ismc_gains(model.name)
+        m = config.mismatch
+        belief = mismatched_model(
+            model,
+            mass_scale=m.mass_scale,
+            damping_scale=m.damping_scale,
+            added_mass_scale=m.added_mass_scale,
+            buoyancy_offset_n=m.buoyancy_offset_n,
+        )
+        ismc = IsmcController(belief, gains)
+    runner = MissionRunner(mission, config.tree)
+    return Autonomy(config, runner, MissionContext(), ismc)
+
+
+# ------------------------------------------------------------------------------- systems
+
+
+def run_mission(world: World) -> None:
+    """UPDATE: tick the mission tree when due and apply its outputs (module docstring).
+
+    Waits for the first navigation estimate (the tree plans from it).
+    """
+    auto = world.resource(Autonomy)
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
+    now = world.resource(SimClock).time_s
+    _watch_link(world, auto, ctl)
+    if now < auto.next_tick_s - 1e-9:
+        return
+    estimate = world.get(vehicle, NavigationEstimate)
+    if estimate is None:
+        return
+    auto.next_tick_s += auto.config.tree.tick_period_s
+    context = auto.context
+    context.time_s = now
+    context.armed = ctl.flags.armed
+    context.disarm_requested = auto.link_disarmed or (
+        auto.last_arm is not None and not auto.last_arm.armed
+    )
+    context.estimate_position_ned = estimate.position_ned_m
+    context.estimate_yaw_rad = euler_from_quat(estimate.quaternion_wxyz)[2]
+    _supervise_goals(world, auto, context)
+    auto.runner.tick(context)
+    _apply_outputs(world, auto, ctl, now)
+
+
+def _watch_link(world: World, auto: Autonomy, ctl: Controllers) -> None:
+    """Follow the operator's arm requests and the link failsafe (every frame, so a disarm
+    trigger is seen at the first tick after it)."""
+    requests = [r for _, r in world.query1(ArmRequest)]
+    request = requests[-1] if requests else None
+    if request is not None and request != auto.last_arm:
+        auto.last_arm = request
+        if request.armed:
+            auto.link_disarmed = False
+    status = world.get(ctl.vehicle, FailsafeStatus)
+    if status is not None and status.level is FailsafeLevel.SURFACE:
+        auto.link_disarmed = True
+
+
+def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> None:
+    """Hand the operator's new goal, heading or cancel to the tree (one-shot requests)."""
+    goal, heading, cancel = (_latest(world, kind) for kind in _SUPERVISION)
+    seen_goal, seen_heading, seen_cancel = auto.seen
+    mission = auto.config.mission
+    if mission is not None and not auto.started and context.time_s >= auto.config.start_s:
+        auto.started = context.start_requested = True
+        auto.goals += 1
+    if isinstance(goal, PositionSetpoint) and goal != seen_goal:
+        yaw = goal.yaw_rad if goal.use_yaw else None
+        context.goal = GoalRequest(goal.position_ned_m, yaw)
+        auto.goals += 1
+        auto.cancelled = False
+    elif isinstance(heading, AttitudeSetpoint) and heading != seen_heading:
+        yaw = euler_from_quat(heading.quaternion_wxyz)[2]
+        target = world.get(world.resource(Controllers).vehicle, PoseTarget)
+        position = context.estimate_position_ned if target is None else target.position_ned_m
+        context.goal = GoalRequest(position, yaw)
+        auto.goals += 1
+        auto.cancelled = False
+    if isinstance(cancel, GoalCancel) and cancel != seen_cancel:
+        context.cancel_requested = True
+        auto.cancels += 1
+        auto.cancelled = True
+    auto.seen = (goal, heading, cancel)
+
+
+_SUPERVISION = (PositionSetpoint, AttitudeSetpoint, GoalCancel)
+
+
+def _latest(world: World, kind: type[object]) -> object | None:
+    found = [c for _, c in world.query1(kind)]
+    return found[-1] if found else None
+
+
+def _apply_outputs(world: World, auto: Autonomy, ctl: Controllers, now: float) -> None:
+    context = auto.context
+    vehicle = ctl.vehicle
+    if context.request_arm is True and not ctl.flags.armed:
+        world.set(vehicle, Armed(True))
+        world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
+        world.set(vehicle, ActiveMode(ControlMode.GUIDED))
+    elif context.request_arm is False and ctl.flags.armed:
+        world.set(vehicle, Armed(False))
+    setpoint = context.pose_setpoint
+    if setpoint is not None:
+        target = PoseTarget(now, setpoint.position_ned, setpoint.yaw_rad, setpoint.velocity_ned)
+        world.set(vehicle, target)
+    elif context.request_arm is False or not ctl.flags.armed:
+        world.remove(vehicle, PoseTarget)
+    ready = not context.status.startswith(("executing", "setup"))
+    status = MissionStatus(ready, auto.cancelled, auto.goals, context.reached_count)
+    world.set(vehicle, status)
+
+
+def control_velocity(world: World) -> None:
+    """UPDATE (controller ``"ismc"``): the pose target → body twist → ISMC → force intent.
+
+    Acts only armed and in GUIDED under autonomy (``ControlFlags.velocity``) with a
+    :class:`PoseTarget` and a navigation estimate; otherwise its intent is zero and the ISMC is
+    reset (so the sliding variable starts at 0 at the next arming). The target moves on at its
+    feed-forward velocity between the tree's ticks.
+    """
+    auto = world.resource(Autonomy)
+    ctl = world.resource(Controllers)
+    ismc = auto.ismc
+    assert ismc is not None
+    vehicle = ctl.vehicle
+    target = world.get(vehicle, PoseTarget)
+    estimate = world.get(vehicle, NavigationEstimate)
+    if not (ctl.flags.velocity and ctl.flags.armed) or target is None or estimate is None:
+        ismc.reset()
+        set_intent(world, ctl, "velocity", ZERO6)
+        return
+    clock = world.resource(SimClock)
+    ahead = clock.time_s - target.time_s
+    vn, ve, vd = target.velocity_ned_m_s
+    pn, pe, pd = target.position_ned_m
+    position = (pn + vn * ahead, pe + ve * ahead, pd + vd * ahead)
+    q = estimate.quaternion_wxyz
+    twist = pose_twist(
+        position, target.yaw_rad, estimate.position_ned_m, q, auto.config.pose, (vn, ve, vd)
+    )
+    nu = (*estimate.velocity_body_m_s, *estimate.rates_rad_s)
+    down = quat_rotate_inverse(q, (0.0, 0.0, 1.0))
+    wrench = ismc.update(twist, nu, down, clock.dt_s)
+    if not all(math.isfinite(w) for w in wrench):
+        wrench = ZERO6
+    set_intent(world, ctl, "velocity", wrench)
