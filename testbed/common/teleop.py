@@ -15,10 +15,18 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
     heading), which the vehicle flies as that setpoint in GUIDED — refused (counted
     unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED.
-    Each new order toggles the order sequence bit.
+    Each new order toggles the order sequence bit. A ``GoTo`` is sent again, with the same
+    sequence bit, in every gap until a reply acknowledges that bit (a lost GoTo is not lost:
+    ``counters.goals_acked`` counts the acknowledged ones); a new :class:`GoalCancel` sets the
+    header's "cancel last order" bit on every order until a reply says the last order was
+    cancelled. The vehicle turns the bit's rising edge, and a ``DisableKeepHeading``, into a
+    :class:`GoalCancel` of its own intents.
 vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
-    1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame).
+    1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame); a
+    vehicle with autonomy sets the state's ready and last-order-cancelled flags from its
+    :class:`MissionStatus` (ready and not cancelled otherwise), which the operator's end keeps
+    as a :class:`MissionStatus` of its own.
 
 What the wire does not carry is not invented: a ``Move`` has no sample time, so the vehicle
 stamps the :class:`MovementCommand` it writes with the arrival time, and the operator stamps the
@@ -39,6 +47,8 @@ from testbed.common.components import (
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
+    GoalCancel,
+    MissionStatus,
     ModeRequest,
     MovementCommand,
     Odometry,
@@ -48,6 +58,7 @@ from testbed.common.components import (
 from testbed.common.geometry import euler_from_quat, quat_from_euler
 from testbed.ecs import Entity, Origin, World
 from testbed.protocol import (
+    DisableKeepHeading,
     GoTo,
     ImageSettings,
     KeepHeading,
@@ -115,11 +126,15 @@ class TeleopCounters:
         malformed: payloads that did not decode (garbled past the CRC, or a foreign layout).
         unsupported: orders decoded but not supported by this vehicle (e.g. POS_HOLD, or
             GUIDED and go-to without a position fix).
+        goals_acked: (operator end) GoTo orders a reply acknowledged.
+        cancels: (vehicle end) goal cancels applied.
     """
 
     applied: int = 0
     malformed: int = 0
     unsupported: int = 0
+    goals_acked: int = 0
+    cancels: int = 0
 
 
 class TeleopOperatorEnd:
@@ -145,6 +160,9 @@ class TeleopOperatorEnd:
         self._sent_heading: KeepHeading | None = None
         self._sent_position: PositionSetpoint | None = None
         self._settled_arm: ArmRequest | None = None
+        self._pending_goto: tuple[GoTo, bool] | None = None  # the GoTo and its sequence bit
+        self._sent_cancel: GoalCancel | None = None
+        self._pending_cancel = False
 
     def encode_order(
         self,
@@ -161,7 +179,10 @@ class TeleopOperatorEnd:
         """
         world = self._world
         intents = self._intents
-        self.order_seq_bit = not self.order_seq_bit
+        cancel = world.get(intents, GoalCancel)
+        if cancel is not None and cancel != self._sent_cancel:
+            self._sent_cancel, self._pending_cancel = cancel, True
+            self._pending_goto = None  # the cancel supersedes a GoTo not yet acknowledged
         request = world.get(intents, ArmRequest)
         reported = world.get(self.vehicle, Armed)
         vehicle_armed = reported is not None and reported.armed
@@ -183,6 +204,13 @@ class TeleopOperatorEnd:
         if order is None and target is not None and target != self._sent_position and not arm:
             self._sent_position = target
             order = self._goto(target)
+            self._pending_goto = (order, not self.order_seq_bit)
+            self._pending_cancel = False
+        elif order is None and self._pending_goto is not None and not (arm or disarm):
+            order, bit = self._pending_goto  # again, same bit, until a reply acknowledges it
+            message = OperatorMessage(*image_request, bit, self._pending_cancel, order)
+            return message.encode()
+        self.order_seq_bit = not self.order_seq_bit
         if order is None:
             command = world.get(intents, MovementCommand)
             sticks = (0.0,) * 6 if command is None else command.sticks
@@ -191,8 +219,10 @@ class TeleopOperatorEnd:
             order = Move.from_axes(
                 sticks[0], sticks[1], sticks[2], sticks[5], arm, disarm, mode_to_wire(mode)
             )
-        seq_bit, cancel, first_missing = image_request
-        message = OperatorMessage(seq_bit, cancel, first_missing, self.order_seq_bit, False, order)
+        seq_bit, cancel_image, first_missing = image_request
+        message = OperatorMessage(
+            seq_bit, cancel_image, first_missing, self.order_seq_bit, self._pending_cancel, order
+        )
         return message.encode()
 
     def _goto(self, target: PositionSetpoint) -> GoTo:
@@ -237,6 +267,14 @@ class TeleopOperatorEnd:
         mode = mode_from_wire(state.mode)
         if mode is not None:
             world.set(vehicle, ActiveMode(mode), origin=Origin.REMOTE)
+        status = MissionStatus(state.ready, state.last_order_cancelled)
+        world.set(vehicle, status, origin=Origin.REMOTE)
+        pending = self._pending_goto
+        if pending is not None and state.order_ack_bit == pending[1]:
+            self._pending_goto = None
+            self.counters.goals_acked += 1
+        if self._pending_cancel and state.last_order_cancelled:
+            self._pending_cancel = False
         self.counters.applied += 1
         return message
 
@@ -262,6 +300,8 @@ class TeleopVehicleEnd:
         self.order_ack_bit = False
         self._seq = 0
         self._arm_seq = 0
+        self._cancel_seq = 0
+        self._cancelling = False  # the last intact order carried the cancel bit
 
     def apply_order(self, payload: bytes, now_s: float) -> bool:
         """Apply an order's intents; False (counted) if the payload is garbled or unsupported."""
@@ -272,6 +312,9 @@ class TeleopVehicleEnd:
         order = message.order
         world = self._world
         intents = self._intents
+        if message.cancel_order and not self._cancelling:
+            self._cancel()
+        self._cancelling = message.cancel_order
         has_fix = world.has(self._vehicle, PositionReading)
         if isinstance(order, Move):
             mode = mode_from_wire(order.mode)
@@ -302,6 +345,8 @@ class TeleopVehicleEnd:
             world.set(
                 intents, AttitudeSetpoint(quat_from_euler(0.0, 0.0, yaw)), origin=Origin.REMOTE
             )
+        elif isinstance(order, DisableKeepHeading):
+            self._cancel()
         elif isinstance(order, ImageSettings):  # the coder's (the image source takes them)
             # An order in the gap a move order would have used: the sticks last sent stay in
             # force and the operator is in contact, so the stick command is renewed (same sticks,
@@ -319,6 +364,13 @@ class TeleopVehicleEnd:
         self.order_ack_bit = message.order_seq_bit
         self.counters.applied += 1
         return True
+
+    def _cancel(self) -> None:
+        """Write a new :class:`GoalCancel` intent (the vehicle's autonomy drops its goal)."""
+        self._cancel_seq += 1
+        self.counters.cancels += 1
+        world = self._world
+        world.set(self._intents, GoalCancel(self._cancel_seq), origin=Origin.REMOTE)
 
     def acknowledge(self, message: OperatorMessage) -> None:
         """Echo this intact order's sequence bit in the replies from now on.
@@ -347,10 +399,11 @@ class TeleopVehicleEnd:
         else:
             position = odometry.position_ned_m
             roll, pitch, yaw = euler_from_quat(odometry.quaternion_wxyz)
+        mission = world.get(vehicle, MissionStatus)
         state = VehicleState(
-            ready=True,
+            ready=mission is None or mission.ready,
             order_ack_bit=self.order_ack_bit,
-            last_order_cancelled=False,
+            last_order_cancelled=mission is not None and mission.cancelled,
             keeping_heading=mode is not ControlMode.MANUAL,
             armed=armed is not None and armed.armed,
             mode=mode_to_wire(mode),

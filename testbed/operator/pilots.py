@@ -8,8 +8,10 @@ pure functions of time, so observers of a run (the recorder) may sample them aga
 the pilot was commanding at any instant; a live pilot (a person at a console, a ground station)
 returns what it holds now.
 
-Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig. 5) and
-:class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints). A scenario
+Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig. 5),
+:class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints) and
+:class:`SupervisorPilot` (supervised control: a timed list of GoTo goals and cancels for a
+vehicle that flies itself, the narrow-band paper's "high level commands"). A scenario
 configures them (:class:`~testbed.run.scenario.PilotSection`); it does not implement them.
 
 Imports: ``config`` and the standard library only.
@@ -26,11 +28,14 @@ from testbed.config import check, check_range
 __all__ = [
     "PERIOD_RANGE_S",
     "AttitudePilot",
+    "GoalOrder",
+    "GoalStep",
     "Pilot",
     "PilotSample",
     "ScriptedPilot",
     "SineTerm",
     "Sticks",
+    "SupervisorPilot",
 ]
 
 Sticks = tuple[float, float, float, float, float, float]
@@ -43,6 +48,21 @@ PERIOD_RANGE_S = (0.01, 1.0e6)
 
 
 @dataclass(frozen=True, slots=True)
+class GoalOrder:
+    """A supervised order in force: go to a pose, or cancel the goal.
+
+    Attributes:
+        index: the order's place in the pilot's list (a new index is a new order).
+        position_ned_m: (3,) goal of the body origin [m], world NED; None = cancel.
+        yaw_deg: goal heading [deg, clockwise from north], or None to keep the vehicle's.
+    """
+
+    index: int
+    position_ned_m: tuple[float, float, float] | None
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class PilotSample:
     """What the pilot asks for at one instant.
 
@@ -50,10 +70,12 @@ class PilotSample:
         sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
         attitude_deg: (3,) roll, pitch, yaw setpoint [deg] for setpoint-driven runs (the ECS
             paper's attitude experiment), or None when the pilot flies by sticks.
+        goal: the supervised order in force (:class:`SupervisorPilot`), or None.
     """
 
     sticks: Sticks
     attitude_deg: tuple[float, float, float] | None = None
+    goal: GoalOrder | None = None
 
 
 class Pilot(Protocol):
@@ -176,3 +198,66 @@ class AttitudePilot:
     def sample(self, t_s: float) -> PilotSample:
         """Centred sticks and the setpoint at ``t_s`` [s]."""
         return PilotSample(_NO_STICKS, self.attitude_deg(t_s))
+
+
+MAX_GOAL_M = 300.0
+"""Largest accepted ``|coordinate|`` of a goal [m]: the teleop codec's int16 centimetres."""
+
+
+@dataclass(frozen=True, slots=True)
+class GoalStep:
+    """One entry of a supervisor's script: at ``t_s``, go to a pose or cancel.
+
+    Attributes:
+        t_s: operator time the order is given [s], ≥ 0.
+        position_ned_m: (3,) goal [m], world NED, each in [−300, 300] (the GoTo order's int16
+            cm); None with ``cancel``.
+        yaw_deg: goal heading [deg], in [−360, 360]; None keeps the vehicle's heading.
+        cancel: cancel the goal in force (the vehicle holds where it is).
+    """
+
+    t_s: float
+    position_ned_m: tuple[float, float, float] | None = None
+    yaw_deg: float | None = None
+    cancel: bool = False
+
+    def __post_init__(self) -> None:
+        check_range(self.t_s, "t_s", 0.0, 1.0e6, "s")
+        check(
+            self.cancel == (self.position_ned_m is None),
+            "position_ned_m",
+            "a step is a goal (position_ned_m) or a cancel (cancel = true), not both or neither",
+        )
+        if self.position_ned_m is not None:
+            for value in self.position_ned_m:
+                check_range(value, "position_ned_m", -MAX_GOAL_M, MAX_GOAL_M, "m")
+        if self.yaw_deg is not None:
+            check_range(self.yaw_deg, "yaw_deg", -360.0, 360.0, "deg")
+
+
+@dataclass(frozen=True, slots=True)
+class SupervisorPilot:
+    """Supervised control: centred sticks and, from each step's time on, its order in force.
+
+    The operator station turns a new goal into a :class:`~testbed.common.components.
+    PositionSetpoint` (a GoTo order on the teleop codec) and a cancel into a
+    :class:`~testbed.common.components.GoalCancel`; the vehicle's mission logic flies them.
+
+    Attributes:
+        steps: the orders, in time order (times non-decreasing).
+    """
+
+    steps: tuple[GoalStep, ...] = ()
+
+    def __post_init__(self) -> None:
+        times = [step.t_s for step in self.steps]
+        check(times == sorted(times), "goals", "steps must be in time order")
+
+    def sample(self, t_s: float) -> PilotSample:
+        """Centred sticks and the latest step at or before ``t_s`` [s], if any."""
+        goal = None
+        for index, step in enumerate(self.steps):
+            if step.t_s > t_s:
+                break
+            goal = GoalOrder(index, step.position_ned_m, step.yaw_deg)
+        return PilotSample(_NO_STICKS, None, goal)

@@ -28,9 +28,11 @@ from testbed.common.components import (
     AttitudeSetpoint,
     ControlMode,
     DepthSetpoint,
+    GoalCancel,
     ModeRequest,
     MovementCommand,
     Odometry,
+    PositionSetpoint,
 )
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Entity, Phase, Replicate, Schedule, World
@@ -88,10 +90,19 @@ class _Session:
 
 
 def sample_pilot(world: World) -> None:
-    """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint."""
+    """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint, and
+    a supervised goal (a position setpoint, or a cancel) when a new one is in force."""
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
     sample = session.pilot.sample(now)
+    goal = sample.goal
+    if goal is not None:
+        if goal.position_ned_m is None:
+            world.set(session.entity, GoalCancel(goal.index + 1))
+        else:
+            use_yaw = goal.yaw_deg is not None
+            yaw = math.remainder(math.radians(goal.yaw_deg or 0.0), math.tau)
+            world.set(session.entity, PositionSetpoint(goal.position_ned_m, yaw, use_yaw))
     if sample.attitude_deg is not None:
         roll, pitch, yaw = (math.radians(a) for a in sample.attitude_deg)
         world.set(session.entity, AttitudeSetpoint(quat_from_euler(roll, pitch, yaw)))

@@ -22,7 +22,15 @@ from testbed.channel import (
     LinkConfig,
 )
 from testbed.config import check, check_range, check_ranges
-from testbed.operator.pilots import PERIOD_RANGE_S, AttitudePilot, Pilot, ScriptedPilot, SineTerm
+from testbed.operator.pilots import (
+    PERIOD_RANGE_S,
+    AttitudePilot,
+    GoalStep,
+    Pilot,
+    ScriptedPilot,
+    SineTerm,
+    SupervisorPilot,
+)
 
 __all__ = [
     "MAX_DURATION_S",
@@ -192,11 +200,14 @@ class PilotSection:
     since the pilot started, zero before (Centelles et al., Fig. 5: a few slow sinusoids per
     axis). ``kind = "attitude"``: the ECS paper's experiment, no sticks; roll, pitch and yaw
     setpoints ``A · sin(2π τ / T)`` [deg], updated ``setpoint_rate_hz`` times a second and held
-    in between (the operator sends the held value as AttitudeSetpoint at its own rate). Each
-    kind rejects the other's non-zero settings.
+    in between (the operator sends the held value as AttitudeSetpoint at its own rate).
+    ``kind = "supervisor"``: supervised control of a vehicle with ``[vehicle.autonomy]``, no
+    sticks; ``goals`` is a timed list of GoTo goals and cancels
+    (:class:`~testbed.operator.pilots.SupervisorPilot`). Each kind rejects the others'
+    non-zero settings.
 
     Attributes:
-        kind: ``"scripted"`` or ``"attitude"``.
+        kind: ``"scripted"``, ``"attitude"`` or ``"supervisor"``.
         start_s: when the pilot starts [s], in [0, duration_s).
         x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms (amplitude in [−1, 1],
             period in [0.01, 1e6] s, phase in [−2π, 2π] rad).
@@ -205,9 +216,11 @@ class PilotSection:
         roll_period_s, pitch_period_s, yaw_period_s: setpoint periods [s], in [0.01, 1e6].
         setpoint_rate_hz: how often the operator updates the attitude setpoint [Hz], in
             [1e-3, 1000] (``kind = "attitude"``).
+        goals: the supervisor's orders (``kind = "supervisor"``): ``{t_s, position_ned_m,
+            yaw_deg}`` goals and ``{t_s, cancel = true}`` cancels, in time order.
     """
 
-    kind: Literal["scripted", "attitude"] = "scripted"
+    kind: Literal["scripted", "attitude", "supervisor"] = "scripted"
     start_s: float = 5.0
     x: tuple[SineTerm, ...] = ()
     y: tuple[SineTerm, ...] = ()
@@ -220,6 +233,7 @@ class PilotSection:
     yaw_amplitude_deg: float = 0.0
     yaw_period_s: float = 25.0
     setpoint_rate_hz: float = 10.0
+    goals: tuple[GoalStep, ...] = ()
 
     def __post_init__(self) -> None:
         check_time(self.start_s, "start_s")
@@ -228,16 +242,22 @@ class PilotSection:
         for name in ("roll_period_s", "pitch_period_s", "yaw_period_s"):
             check_range(getattr(self, name), name, *PERIOD_RANGE_S, "s")
         check_rate(self.setpoint_rate_hz, "setpoint_rate_hz")
-        used_by, unused = (
-            ("attitude", _ATTITUDE_AMPLITUDES)
-            if self.kind == "scripted"
-            else ("scripted", _STICK_AXES)
-        )
-        for name in unused:
-            check(not getattr(self, name), name, f"only used when kind = {used_by!r}")
+        owners = {
+            "scripted": _STICK_AXES,
+            "attitude": _ATTITUDE_AMPLITUDES,
+            "supervisor": ("goals",),
+        }
+        for kind, names in owners.items():
+            if kind != self.kind:
+                for name in names:
+                    check(not getattr(self, name), name, f"only used when kind = {kind!r}")
+        times = [step.t_s for step in self.goals]
+        check(times == sorted(times), "goals", "must be in time order (t_s non-decreasing)")
 
     def pilot(self) -> Pilot:
         """The pilot this section configures (:mod:`testbed.operator.pilots`)."""
+        if self.kind == "supervisor":
+            return SupervisorPilot(self.goals)
         if self.kind == "attitude":
             return AttitudePilot(
                 self.start_s,

@@ -21,6 +21,8 @@ from testbed.common.components import (
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
+    GoalCancel,
+    MissionStatus,
     ModeRequest,
     MovementCommand,
     Odometry,
@@ -83,9 +85,12 @@ def vehicle_end() -> tuple[World, Entity, Entity, TeleopVehicleEnd]:
     return world, vehicle, intents, TeleopVehicleEnd(world, vehicle, intents)
 
 
-def reply(*, armed: bool, mode: int = 2, heading: int = 0) -> bytes:
-    """A hand-built 14-byte reply payload: only the flags and heading vary, pose otherwise 0."""
-    flags = 0x80 | (0x08 if armed else 0) | mode
+def reply(
+    *, armed: bool, mode: int = 2, heading: int = 0, ack: bool = False, cancelled: bool = False
+) -> bytes:
+    """A hand-built 14-byte reply payload: only the flags and heading vary, pose otherwise 0
+    (flags: bit 7 ready, 6 order-sequence ack, 5 last order cancelled, 3 armed, 2..0 mode)."""
+    flags = 0x80 | (0x40 if ack else 0) | (0x20 if cancelled else 0) | (0x08 if armed else 0) | mode
     attitude = heading << 31
     return bytes((0x0C, flags)) + bytes(6) + attitude.to_bytes(5, "big") + b"\x00"
 
@@ -309,7 +314,6 @@ def test_keep_heading_sets_a_level_attitude_setpoint() -> None:
     [
         NoOrder(),
         HoldChannel(5),
-        DisableKeepHeading(),
         GoTo(100, -200, 300, 45),
         OrderIncoming(),
         Move(10, 0, 0, 0, arm=True, mode=Mode.GUIDED),
@@ -644,9 +648,16 @@ def test_position_setpoint_travels_as_goto_and_the_vehicle_flies_it_in_guided() 
     message = decode_operator_message(payload)
     assert isinstance(message, OperatorMessage)
     assert message.order == GoTo(300, -101, 150, 270)  # 1 cm, whole degrees mod 360
-    follow = decode_operator_message(op_end.encode_order())  # sent once: a Move follows
+    assert payload[1] == 0x86  # sequence bit 1, no cancel, type 6
+    again = op_end.encode_order()  # no reply acknowledged it: the same order, the same bit
+    assert again == payload and op_end.counters.goals_acked == 0
+    assert op_end.apply_reply(reply(armed=True, mode=4, ack=False), 1.0)  # acks another bit
+    assert op_end.encode_order() == payload
+    assert op_end.apply_reply(reply(armed=True, mode=4, ack=True), 1.2)
+    assert op_end.counters.goals_acked == 1
+    follow = decode_operator_message(op_end.encode_order())  # acknowledged: a Move follows
     assert isinstance(follow, OperatorMessage) and isinstance(follow.order, Move)
-    assert follow.order.mode is Mode.GUIDED
+    assert follow.order.mode is Mode.GUIDED and follow.order_seq_bit is False
 
     world, vehicle, intents, end = vehicle_end()
     assert end.apply_order(payload, 1.0) is False  # no position fix: refused
@@ -668,3 +679,52 @@ def test_goto_without_a_heading_carries_the_vehicles_reported_heading() -> None:
     message = decode_operator_message(end.encode_order())
     assert isinstance(message, OperatorMessage)
     assert message.order == GoTo(100, 200, 50, 123)
+
+
+# --------------------------------------------------------------------- supervised control
+
+
+def test_a_goal_cancel_sets_the_header_bit_until_a_reply_says_cancelled() -> None:
+    world, intents, end = operator_end()
+    assert end.encode_order()[1] & 0x40 == 0
+    world.set(intents, GoalCancel(1))
+    first, second = end.encode_order(), end.encode_order()
+    assert first[1] & 0x40 and second[1] & 0x40  # bit 6 of byte 1: cancel last order
+    assert end.apply_reply(reply(armed=True, mode=4, cancelled=True), 1.0)
+    assert end.encode_order()[1] & 0x40 == 0
+    world.set(intents, GoalCancel(1))  # the same cancel again is no new cancel
+    assert end.encode_order()[1] & 0x40 == 0
+
+
+def test_a_cancel_drops_a_goto_not_yet_acknowledged() -> None:
+    world, intents, end = operator_end()
+    world.set(intents, PositionSetpoint((1.0, 0.0, 1.0)))
+    assert end.encode_order()[1] & 0x0F == 6
+    world.set(intents, GoalCancel(1))
+    payload = end.encode_order()
+    assert payload[1] & 0x0F == 1 and payload[1] & 0x40  # a Move carrying the cancel bit
+
+
+def test_the_cancel_bits_rising_edge_and_disable_keep_heading_cancel_the_goal() -> None:
+    world, vehicle, intents, end = vehicle_end()
+    move = Move(0, 0, 0, 0, mode=Mode.DEPTH_HOLD)
+    for seq_bit, cancel in ((True, True), (False, True), (True, False), (False, True)):
+        payload = OperatorMessage(False, False, 0, seq_bit, cancel, move).encode()
+        assert end.apply_order(payload, 1.0)
+    assert world.get(intents, GoalCancel) == GoalCancel(2)  # two rising edges
+    assert world.origin_of(intents, GoalCancel) is Origin.REMOTE
+    payload = OperatorMessage(False, False, 0, True, False, DisableKeepHeading()).encode()
+    assert end.apply_order(payload, 2.0)
+    assert world.get(intents, GoalCancel) == GoalCancel(3) and end.counters.cancels == 3
+
+
+def test_reply_flags_follow_the_vehicles_mission_status() -> None:
+    world, vehicle, intents, end = vehicle_end()
+    assert end.encode_reply()[1] & 0xA0 == 0x80  # no autonomy: ready, nothing cancelled
+    world.set(vehicle, MissionStatus(False, False, 1, 0))
+    assert end.encode_reply()[1] & 0xA0 == 0x00  # a goal in progress: not ready
+    world.set(vehicle, MissionStatus(True, True, 1, 0))
+    assert end.encode_reply()[1] & 0xA0 == 0xA0
+    op_world, _, op_end = operator_end()
+    assert op_end.apply_reply(end.encode_reply(), 3.0)
+    assert op_world.get(op_end.vehicle, MissionStatus) == MissionStatus(True, True)
