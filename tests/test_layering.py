@@ -15,7 +15,7 @@ imports count as the absolute names they resolve to.
 | common   | ecs, protocol, config                              | numpy                           |
 | channel  | protocol, config                                   | numpy, simpy                    |
 | imaging  | config                                             | numpy                           |
-| vehicle  | common, ecs, protocol, imaging, config             | numpy, scipy, numba, pybullet, py_trees |
+| vehicle  | common, ecs, protocol, imaging, config | numpy, scipy, numba, pybullet, py_trees |
 | operator | common, ecs, protocol, imaging, config             | numpy                           |
 | hil      | protocol, config                                   | numpy, serial                   |
 | emulator | channel, protocol, config                          | numpy, simpy, serial            |

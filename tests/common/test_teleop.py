@@ -706,7 +706,7 @@ def test_a_cancel_drops_a_goto_not_yet_acknowledged() -> None:
 
 
 def test_the_cancel_bits_rising_edge_and_disable_keep_heading_cancel_the_goal() -> None:
-    world, vehicle, intents, end = vehicle_end()
+    world, _vehicle, intents, end = vehicle_end()
     move = Move(0, 0, 0, 0, mode=Mode.DEPTH_HOLD)
     for seq_bit, cancel in ((True, True), (False, True), (True, False), (False, True)):
         payload = OperatorMessage(False, False, 0, seq_bit, cancel, move).encode()
@@ -719,7 +719,7 @@ def test_the_cancel_bits_rising_edge_and_disable_keep_heading_cancel_the_goal() 
 
 
 def test_reply_flags_follow_the_vehicles_mission_status() -> None:
-    world, vehicle, intents, end = vehicle_end()
+    world, vehicle, _intents, end = vehicle_end()
     assert end.encode_reply()[1] & 0xA0 == 0x80  # no autonomy: ready, nothing cancelled
     world.set(vehicle, MissionStatus(False, False, 1, 0))
     assert end.encode_reply()[1] & 0xA0 == 0x00  # a goal in progress: not ready
