@@ -19,6 +19,13 @@ interval it grows linearly, so by the renewal-reward theorem
     E[Δ] = E[D] + E[(K·T)²] / (2·E[K·T]) = E[D] + T·(2 − q) / (2·q).
 
 With no loss (``q = 1``) this is ``D + T/2``.
+
+Mission metrics (vehicles under autonomy). The position error is the distance
+``e(t) = |p(t) − p*(t)|`` between the true body-origin position and the pose target the mission
+tree set (:func:`position_error`); :func:`error_statistics` reduces it to Angler's figures (mean
+and spread, and the error at the end of the run, its "final error"), and
+:func:`time_to_converge_s` gives the first instant after which it stays within the goal
+tolerance to the end.
 """
 
 from __future__ import annotations
@@ -32,9 +39,12 @@ import numpy as np
 __all__ = [
     "age_of_information",
     "distribution",
+    "error_statistics",
     "mean_ci95_half_width",
+    "position_error",
     "signal_lag_s",
     "summary",
+    "time_to_converge_s",
 ]
 
 
@@ -188,3 +198,75 @@ def signal_lag_s(
         if curvature < 0.0:
             offset = 0.5 * (left - right) / curvature
     return (k + offset) * dt
+
+
+def position_error(
+    truth: Sequence[Sequence[float]] | np.ndarray, target: Sequence[Sequence[float]] | np.ndarray
+) -> np.ndarray:
+    """The distance between two position tracks, row by row.
+
+    Args:
+        truth: (n, 3) positions [m], NED.
+        target: (n, 3) positions [m], same frame.
+
+    Returns:
+        (n,) Euclidean distances [m]; NaN where either row has a NaN.
+    """
+    a = np.asarray(truth, dtype=float).reshape(-1, 3)
+    b = np.asarray(target, dtype=float).reshape(-1, 3)
+    if a.shape != b.shape:
+        raise ValueError(f"position tracks of different lengths: {len(a)} and {len(b)}")
+    distance: np.ndarray = np.sqrt(np.sum((a - b) ** 2, axis=1))
+    return distance
+
+
+def error_statistics(error: Sequence[float] | np.ndarray) -> dict[str, float]:
+    """``{mean, std, p95, final}`` of an error track (NaN entries left out).
+
+    ``std`` is the population standard deviation (``ddof = 0``, as :func:`distribution`);
+    ``final`` is the last finite entry (Angler's "final error": where the run ended up).
+
+    Args:
+        error: (n,) error values in time order (e.g. :func:`position_error` [m]).
+
+    Returns:
+        The four statistics, NaN each when no entry is finite.
+    """
+    values = np.asarray(error, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return {"mean": math.nan, "std": math.nan, "p95": math.nan, "final": math.nan}
+    return {
+        "mean": float(values.mean()),
+        "std": float(values.std()),
+        "p95": float(np.percentile(values, 95)),
+        "final": float(values[-1]),
+    }
+
+
+def time_to_converge_s(
+    t_s: Sequence[float] | np.ndarray, error: Sequence[float] | np.ndarray, tolerance: float
+) -> float:
+    """The first time after which ``error`` stays below ``tolerance`` up to the last sample.
+
+    That is the time of the first sample of the final unbroken run of samples with
+    ``error < tolerance``; a NaN sample counts as not within tolerance (it breaks the run).
+
+    Args:
+        t_s: (n,) sample times [s], increasing.
+        error: (n,) the error at those times.
+        tolerance: the bound (in the unit of ``error``).
+
+    Returns:
+        That time [s]; NaN if the last sample is not within tolerance (or there is none).
+    """
+    t = np.asarray(t_s, dtype=float)
+    e = np.asarray(error, dtype=float)
+    if t.shape != e.shape:
+        raise ValueError(f"{t.size} times for {e.size} error samples")
+    within = e < tolerance  # NaN compares False
+    if within.size == 0 or not within[-1]:
+        return math.nan
+    outside = np.flatnonzero(~within)
+    first = int(outside[-1]) + 1 if outside.size else 0
+    return float(t[first])

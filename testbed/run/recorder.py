@@ -34,7 +34,8 @@ from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
 from testbed.run.images import ImageLog
-from testbed.vehicle.components import ControlTargets, FailsafeStatus
+from testbed.vehicle.components import ControlTargets, FailsafeStatus, PoseTarget
+from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
 __all__ = [
@@ -61,10 +62,15 @@ SERIES_COLUMNS = (
     "depth_target_m",
     "current_a",                                     # total thruster current (plant forces)
     "armed", "failsafe",
+    "target_n", "target_e", "target_d",              # autonomy's pose target, NED (NaN: none)
+    "target_yaw_deg",
+    "est_n", "est_e", "est_d",                       # navigation estimate, NED (NaN: none)
 )  # fmt: skip
 """Columns of :attr:`Recorder.series`, in order (filled by :meth:`VehicleObserver.row`)."""
 
 _DEG = 180.0 / math.pi
+_NO_TARGET = (math.nan,) * 4
+_NO_ESTIMATE = (math.nan,) * 3
 
 
 class VehicleObserver:
@@ -129,6 +135,13 @@ class VehicleObserver:
         row += (roll * _DEG, pitch * _DEG, yaw * _DEG, *truth.velocity_m_s, *truth.rates_rad_s)
         row += (errors[0] * _DEG, errors[1] * _DEG, errors[2] * _DEG, depth_target)
         row += (world.resource(PowerMeter).current_a, float(ctl.flags.armed), failsafe)
+        target = world.get(ctl.vehicle, PoseTarget)
+        if target is None:
+            row += _NO_TARGET
+        else:
+            row += (*target.position_ned_m, target.yaw_rad * _DEG)
+        estimate = world.get(ctl.vehicle, NavigationEstimate)
+        row += _NO_ESTIMATE if estimate is None else estimate.position_ned_m
         return row
 
 

@@ -23,11 +23,19 @@ import numpy as np
 import simpy
 
 from testbed.channel import Medium, Trace, direction_counts
-from testbed.common.components import ControlMode
+from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
-from testbed.run.metrics import age_of_information, distribution, signal_lag_s, summary
+from testbed.run.metrics import (
+    age_of_information,
+    distribution,
+    error_statistics,
+    position_error,
+    signal_lag_s,
+    summary,
+    time_to_converge_s,
+)
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.scenario import Scenario
@@ -36,8 +44,10 @@ from testbed.vehicle.vehicle import Vehicle
 __all__ = [
     "RunResult",
     "compute_metrics",
+    "goals_acked",
     "make_operator_node",
     "make_vehicle_node",
+    "mission_metrics",
     "run_scenario",
     "tally_images",
     "write_outputs",
@@ -201,8 +211,18 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
             "uplink": vehicle_node.port.payload_bytes,
             "downlink": operator_node.port.payload_bytes,
         },
+        mission_status=vehicle.world.get(vehicle.entity, MissionStatus),
+        goals_acked=goals_acked(operator_node),
     )
     return RunResult(scenario, seed, metrics, recorder, stopped)
+
+
+def goals_acked(operator: OperatorNode) -> int | None:
+    """The goals the operator's teleop end saw acknowledged (``counters.goals_acked``), or
+    None when its link has no such counter (the change-set codec, an older teleop end)."""
+    teleop = getattr(operator.link, "teleop", None)
+    value = getattr(getattr(teleop, "counters", None), "goals_acked", None)
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
 
 
 def tally_images(
@@ -256,8 +276,15 @@ def compute_metrics(
     wall_s: float,
     energy_wh: float,
     payload_bytes: dict[str, int],
+    mission_status: MissionStatus | None = None,
+    goals_acked: int | None = None,
 ) -> dict[str, Any]:
-    """Reduce a recording to the ``metrics.json`` content (README: "metrics.json")."""
+    """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
+
+    ``mission_status`` (the vehicle's :class:`MissionStatus` at the end) and ``goals_acked``
+    (:func:`goals_acked`) feed the ``"mission"`` key of a vehicle under autonomy
+    (:func:`mission_metrics`); None = not known here (null in the file).
+    """
     series = recorder.series()
     t = series["t_s"]
     settle = scenario.metrics.settle_s
@@ -338,7 +365,62 @@ def compute_metrics(
     }
     if scenario.images.enabled:
         metrics["images"] = image_metrics(recorder.images, sim_s)
+    autonomy = scenario.vehicle.autonomy
+    if autonomy is not None:
+        metrics["mission"] = mission_metrics(
+            series,
+            settle,
+            autonomy.tree.goal_tolerance_m,
+            status=mission_status,
+            orders_acknowledged=goals_acked,
+        )
     return metrics
+
+
+def mission_metrics(
+    series: dict[str, np.ndarray],
+    settle_s: float,
+    tolerance_m: float,
+    *,
+    status: MissionStatus | None,
+    orders_acknowledged: int | None,
+) -> dict[str, Any]:
+    """The ``"mission"`` key of ``metrics.json`` (vehicles under autonomy).
+
+    The error rows are those with a pose target, armed, at or after ``settle_s``:
+    ``position_error_m`` (``{mean, std, p95, final}`` of |truth − target| [m], 3-D),
+    ``time_to_converge_s`` (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's
+    goal tolerance, over those rows) and ``estimate_error_m`` (``{mean, p95}`` of
+    |estimate − truth| [m] on those rows that have an estimate); ``samples`` counts the rows.
+
+    Args:
+        series: :meth:`Recorder.series` columns.
+        settle_s: rows before this time [s] are left out.
+        tolerance_m: the mission tree's goal tolerance [m].
+        status: the vehicle's mission status at the end (goals given and reached), or None.
+        orders_acknowledged: goals the operator saw acknowledged, or None.
+    """
+    t = series["t_s"]
+    truth = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
+    target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
+    estimate = np.column_stack([series["est_n"], series["est_e"], series["est_d"]])
+    rows = (t >= settle_s) & (series["armed"] > 0.5) & np.isfinite(target).all(axis=1)
+    error = position_error(truth[rows], target[rows])
+    nav_error = position_error(estimate[rows], truth[rows])
+    nav_error = nav_error[np.isfinite(nav_error)]
+    return {
+        "goal_tolerance_m": tolerance_m,
+        "samples": int(np.count_nonzero(rows)),
+        "position_error_m": error_statistics(error),
+        "time_to_converge_s": time_to_converge_s(t[rows], error, tolerance_m),
+        "estimate_error_m": {
+            "mean": float(nav_error.mean()) if nav_error.size else math.nan,
+            "p95": float(np.percentile(nav_error, 95)) if nav_error.size else math.nan,
+        },
+        "goals": None if status is None else status.goals,
+        "goals_reached": None if status is None else status.reached,
+        "orders_acknowledged": orders_acknowledged,
+    }
 
 
 def _json_ready(value: Any) -> Any:

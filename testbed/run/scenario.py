@@ -69,6 +69,7 @@ __all__ = [
     "MAX_DURATION_S",
     "MAX_PHYSICS_STEPS",
     "MAX_SERIES_ROWS",
+    "MAX_TRIALS",
     "SCHEMA_VERSION",
     "FaultsSection",
     "LinkOutage",
@@ -92,7 +93,9 @@ time at the ≈ 45 µs a step (with its share of the frames) costs on s100-teleo
 default step (1/240 s) allows the whole :data:`MAX_DURATION_S`."""
 MAX_SERIES_ROWS = 10_000_000
 """Most series rows a run may record (``duration_s × min(metrics.sample_rate_hz,
-vehicle.control_rate_hz)``, a row at most once a frame): ≈ 2.6 GB at 32 columns × 8 B."""
+vehicle.control_rate_hz)``, a row at most once a frame): ≈ 3.1 GB at 39 columns × 8 B."""
+MAX_TRIALS = 100
+"""Most trials (runs with consecutive seeds) one scenario may ask for."""
 
 _ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
 _PACKAGE = "testbed"
@@ -111,6 +114,8 @@ class Scenario:
             most :data:`MAX_PHYSICS_STEPS` physics steps and :data:`MAX_SERIES_ROWS` series
             rows.
         seed: default seed, ≥ 0.
+        trials: how many runs ``testbed run`` makes, with seeds ``seed, seed + 1, …``
+            (:mod:`testbed.run.trials`), in [1, :data:`MAX_TRIALS`].
         link, vehicle, operator, pilot, faults, metrics, images: the sections.
         source: where it was loaded from (a path or ``package:<id>``), for messages; not a
             TOML key.
@@ -121,6 +126,7 @@ class Scenario:
     schema: int
     duration_s: float
     seed: int = 0
+    trials: int = 1
     link: LinkSection
     vehicle: VehicleConfig
     operator: OperatorSection = field(default_factory=OperatorSection)
@@ -143,6 +149,11 @@ class Scenario:
         )
         check_range(self.duration_s, "duration_s", 0.0, MAX_DURATION_S, "s", low_open=True)
         check(self.seed >= 0, "seed", f"must be ≥ 0, got {self.seed}")
+        check(
+            1 <= self.trials <= MAX_TRIALS,
+            "trials",
+            f"must be an integer in [1, {MAX_TRIALS}], got {self.trials}",
+        )
         self._check_budget()
         end = self.duration_s
         for i, fault in enumerate(self.faults.thrusters):
@@ -227,6 +238,7 @@ class _ScenarioFile:
     description: str
     duration_s: float
     seed: int = 0
+    trials: int = 1
     link: dict[str, Any] = field(default_factory=dict)
     vehicle: dict[str, Any] = field(default_factory=dict)
     operator: dict[str, Any] = field(default_factory=dict)
@@ -341,6 +353,7 @@ def _from_data(
             schema=top.schema,
             duration_s=top.duration_s,
             seed=top.seed,
+            trials=top.trials,
             link=link,
             vehicle=vehicle,
             operator=operator,

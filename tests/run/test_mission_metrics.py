@@ -1,0 +1,123 @@
+"""Mission metrics on hand-made tracks against hand-computed answers: the position error, its
+statistics (final error, NaN left out), the convergence time, and the ``"mission"`` key of
+``metrics.json`` (present only under autonomy), plus the recorder's target and estimate columns."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from testbed.common.components import MissionStatus
+from testbed.run.metrics import error_statistics, position_error, time_to_converge_s
+from testbed.run.recorder import SERIES_COLUMNS
+from testbed.run.runner import mission_metrics
+
+
+def test_position_error_is_the_3d_distance_nan_where_either_is_missing() -> None:
+    truth = [(0.0, 0.0, 1.0), (1.0, 2.0, 3.0), (0.0, 0.0, 0.0)]
+    target = [(3.0, 4.0, 1.0), (1.0, 2.0, 1.0), (math.nan, 0.0, 0.0)]
+    error = position_error(truth, target)
+    assert error[:2].tolist() == [5.0, 2.0]
+    assert math.isnan(error[2])
+    with pytest.raises(ValueError, match="different lengths"):
+        position_error(truth, target[:2])
+
+
+def test_error_statistics_final_is_the_last_finite_value() -> None:
+    stats = error_statistics([1.0, math.nan, 3.0, 2.0, math.nan])
+    assert stats["mean"] == pytest.approx(2.0)
+    assert stats["std"] == pytest.approx(math.sqrt(2.0 / 3.0))  # population std of 1, 3, 2
+    assert stats["p95"] == pytest.approx(2.9)  # sorted 1, 2, 3 at rank 0.95·2 = 1.9: 2 + 0.9
+    assert stats["final"] == 2.0
+
+
+def test_error_statistics_of_nothing_finite_are_nan() -> None:
+    for values in ([], [math.nan, math.nan]):
+        stats = error_statistics(values)
+        assert set(stats) == {"mean", "std", "p95", "final"}
+        assert all(math.isnan(v) for v in stats.values())
+
+
+@pytest.mark.parametrize(
+    ("error", "expected"),
+    [
+        ([0.5, 0.3, 0.1, 0.15, 0.05], 2.0),  # within 0.2 from t = 2 s on
+        ([0.1, 0.1, 0.1, 0.1, 0.1], 0.0),  # always within: the first sample
+        ([0.1, 0.3, 0.1, 0.25, 0.1], 4.0),  # left twice; the last entry counts
+        ([0.1, 0.1, 0.1, 0.1, 0.3], math.nan),  # ends outside: never converged
+        ([0.1, 0.1, math.nan, 0.1, 0.1], 3.0),  # a NaN breaks the run
+        ([0.1, 0.2, 0.1, 0.1, 0.1], 2.0),  # exactly at the tolerance is outside
+    ],
+)
+def test_time_to_converge(error: list[float], expected: float) -> None:
+    t = [0.0, 1.0, 2.0, 3.0, 4.0]
+    got = time_to_converge_s(t, error, 0.2)
+    assert (math.isnan(got) and math.isnan(expected)) or got == expected
+
+
+def test_time_to_converge_of_no_samples_is_nan() -> None:
+    assert math.isnan(time_to_converge_s([], [], 0.2))
+    with pytest.raises(ValueError):
+        time_to_converge_s([0.0, 1.0], [0.1], 0.2)
+
+
+def _series(n: int = 6) -> dict[str, np.ndarray]:
+    cols = {name: np.zeros(n) for name in SERIES_COLUMNS}
+    cols["t_s"] = np.arange(n, dtype=float)
+    cols["armed"] = np.ones(n)
+    return cols
+
+
+def test_mission_metrics_by_hand() -> None:
+    s = _series()
+    # truth north 0.5, 0.4, 0.3, 0.1, 0.1, 0.05; target at the origin from t = 1 s
+    s["north_m"] = np.array([0.5, 0.4, 0.3, 0.1, 0.1, 0.05])
+    s["target_n"][0] = math.nan
+    s["armed"][2] = 0.0  # a disarmed row is left out
+    s["est_n"] = s["north_m"] + np.array([0.0, 0.0, 0.0, 0.03, 0.0, 0.04])
+    s["est_e"][4] = 0.0
+    s["est_n"][4] = math.nan  # no estimate at that row
+    m = mission_metrics(
+        s,
+        settle_s=1.0,
+        tolerance_m=0.2,
+        status=MissionStatus(ready=True, goals=2, reached=1),
+        orders_acknowledged=None,
+    )
+    # rows t = 1, 3, 4, 5 → errors 0.4, 0.1, 0.1, 0.05
+    assert m["samples"] == 4
+    assert m["position_error_m"]["mean"] == pytest.approx(0.1625)
+    assert m["position_error_m"]["final"] == pytest.approx(0.05)
+    assert m["time_to_converge_s"] == 3.0
+    # estimate errors on rows t = 1, 3, 5 (t = 4 has none): 0, 0.03, 0.04
+    assert m["estimate_error_m"]["mean"] == pytest.approx(0.07 / 3)
+    assert (m["goals"], m["goals_reached"], m["orders_acknowledged"]) == (2, 1, None)
+    assert m["goal_tolerance_m"] == 0.2
+
+
+def test_mission_metrics_without_any_target_are_nan_and_unknown_status_null() -> None:
+    s = _series()
+    for name in ("target_n", "target_e", "target_d", "est_n", "est_e", "est_d"):
+        s[name][:] = math.nan
+    m = mission_metrics(s, 0.0, 0.2, status=None, orders_acknowledged=3)
+    assert m["samples"] == 0
+    assert all(math.isnan(v) for v in m["position_error_m"].values())
+    assert math.isnan(m["time_to_converge_s"])
+    assert math.isnan(m["estimate_error_m"]["mean"])
+    assert (m["goals"], m["goals_reached"], m["orders_acknowledged"]) == (None, None, 3)
+
+
+def test_new_series_columns_are_appended_at_the_end() -> None:
+    assert SERIES_COLUMNS[:3] == ("t_s", "cmd_x", "cmd_y")
+    assert SERIES_COLUMNS[-7:] == (
+        "target_n",
+        "target_e",
+        "target_d",
+        "target_yaw_deg",
+        "est_n",
+        "est_e",
+        "est_d",
+    )
+    assert SERIES_COLUMNS.index("failsafe") == 31  # existing indices unchanged
