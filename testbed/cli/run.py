@@ -12,8 +12,16 @@ from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_seed,
 
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
+    from testbed.run.scenario import Scenario
 
-__all__ = ["add_run_parser", "add_scenarios_parser", "finish_run", "format_summary"]
+__all__ = [
+    "add_run_parser",
+    "add_scenarios_parser",
+    "finish_run",
+    "format_summary",
+    "format_trial",
+    "format_trials_summary",
+]
 
 
 def add_run_parser(sub: Subparsers) -> None:
@@ -22,7 +30,9 @@ def add_run_parser(sub: Subparsers) -> None:
         "run",
         help="simulate one scenario end to end and write metrics, events and plots",
         description="Simulate a scenario: operator and vehicle, each with its ECS world, over "
-        "the simulated link. Writes metrics.json, events.csv, series.csv and plots to --out.",
+        "the simulated link. Writes metrics.json, events.csv, series.csv and plots to --out; "
+        "a scenario with trials = N > 1 runs seeds seed … seed+N−1 into --out/trial-K/ and "
+        "writes trials.json (and trials.png) across them.",
     )
     run.add_argument(
         "scenario",
@@ -60,8 +70,77 @@ def _run_scenario(args: argparse.Namespace) -> int:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
     prepare_out_dir(out, force=args.force)
+    if scenario.trials > 1:
+        return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
     result = run_scenario(scenario, seed=args.seed)
     return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
+
+
+def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool) -> int:
+    """``testbed run`` of a scenario with ``trials > 1``: the trials
+    (:func:`testbed.run.trials.run_trials`), a line per trial and the mean ± std line on
+    stdout, or for an interrupted one a line on stderr and 130/143."""
+    from testbed.run.trials import run_trials
+
+    run_plots = trials_plot = None
+    if plots:
+        from testbed.report.mission_plots import plot_trials
+        from testbed.report.run_plots import write_run_plots
+
+        run_plots, trials_plot = write_run_plots, plot_trials
+
+    def said(trial: int, result: RunResult) -> None:
+        print(format_trial(trial, result.metrics), flush=True)
+
+    trials = run_trials(
+        scenario, out, seed=seed, plots=run_plots, trials_plot=trials_plot, on_trial=said
+    )
+    document = trials.document
+    if trials.stopped is not None:
+        k = document["interrupted_trial"]
+        reached = trials.interrupted_sim_s
+        at = "" if reached != reached else f" at t = {reached:.1f} s of {scenario.duration_s:g} s"
+        print(
+            f"testbed: interrupted in trial {k} of {scenario.trials}{at}; "
+            f"{document['trials_finished']} finished, results in {out}",
+            file=sys.stderr,
+        )
+        return exit_code_of(trials.stopped)
+    print(format_trials_summary(document, out))
+    return EXIT_OK
+
+
+def _num(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
+    return "n/a" if value is None or value != value else f"{scale * value:.{digits}f}"
+
+
+def format_trial(trial: int, metrics: dict[str, Any]) -> str:
+    """One line for a finished trial: seed, real-time factor, mission error and command lag."""
+    from testbed.run.trials import headline
+
+    h = headline(metrics)
+    return (
+        f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
+        f"position error mean {_num(h['position_error_mean_m'])} m, "
+        f"final {_num(h['position_error_final_m'])} m; "
+        f"converged at {_num(h['time_to_converge_s'], digits=1)} s; "
+        f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
+    )
+
+
+def format_trials_summary(document: dict[str, Any], out: Path) -> str:
+    """The mean ± std line over the trials (and where they were written)."""
+
+    def pm(name: str, scale: float = 1.0, digits: int = 3) -> str:
+        figure = document["across_trials"][name]
+        return f"{_num(figure['mean'], scale, digits)} ± {_num(figure['std'], scale, digits)}"
+
+    return (
+        f"{document['trials_finished']} trials (mean ± std over trials): position error mean "
+        f"{pm('position_error_mean_m')} m, final {pm('position_error_final_m')} m; converged at "
+        f"{pm('time_to_converge_s', digits=1)} s; command lag mean "
+        f"{pm('command_lag_mean_s', 1000.0, 0)} ms\n  wrote {out}/"
+    )
 
 
 def finish_run(

@@ -11,6 +11,9 @@
   disarmed and failsafe intervals shaded, node events marked.
 - ``attitude_errors.png`` (attitude experiments only) — probability-density histograms of the
   attitude error per axis after the settling time (the ECS paper's Figs. 2–3).
+- ``mission.png`` (vehicles under autonomy that recorded a pose target, written by
+  :func:`write_run_plots`) — the path against the target and the error over time
+  (:func:`testbed.report.mission_plots.plot_mission`).
 
 Figures are built with :class:`matplotlib.figure.Figure` directly (Agg canvas, see
 :mod:`testbed.report.figures`), never through ``pyplot``, so no global figure state is touched.
@@ -31,10 +34,12 @@ from matplotlib.patches import Patch
 
 from testbed.report.figures import no_data, save
 from testbed.report.images import plot_image_strip
+from testbed.report.mission_plots import has_target, plot_mission
 from testbed.report.timeline import TIMELINE_WINDOW_S, plot_timeline
 from testbed.run.metrics import signal_lag_s
 from testbed.run.recorder import NodeEvent, Recorder
 from testbed.run.runner import RunResult
+from testbed.vehicle.autonomy import resolve_mission
 
 __all__ = [
     "plot_attitude_errors",
@@ -369,6 +374,22 @@ def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
                 out_dir / "images.png",
                 title=title,
                 count=scenario.images.strip_images,
+            )
+        )
+    autonomy = scenario.vehicle.autonomy
+    series = result.recorder.series()
+    if autonomy is not None and has_target(series):
+        mission = None if autonomy.mission is None else resolve_mission(autonomy.mission)
+        written.append(
+            plot_mission(
+                series,
+                out_dir / "mission.png",
+                title=title,
+                waypoints_ned=[]
+                if mission is None
+                else [w.position_ned for w in mission.waypoints],
+                tolerance_m=autonomy.tree.goal_tolerance_m,
+                settle_s=scenario.metrics.settle_s,
             )
         )
     return written
