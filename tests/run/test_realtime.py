@@ -805,7 +805,8 @@ def test_two_computers_each_write_what_they_observe(window: Window) -> None:
     assert vehicle["command_lag_s"]["n"] == operator["command_lag_s"]["n"] == 0  # two clocks
     assert operator["energy_wh"] is None and vehicle["energy_wh"] > 0.0
     rows = (window.pair_dirs["vehicle"] / "series.csv").read_text().splitlines()
-    assert rows[-1].split(",")[-2] == "1"  # armed: the operator's arm order got there
+    armed = rows[0].split(",").index("armed")
+    assert rows[-1].split(",")[armed] == "1"  # the operator's arm order got there
     assert 1 <= operator["hil"]["round_trip_s"]["n"] <= replies
 
 
