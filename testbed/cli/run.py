@@ -211,8 +211,22 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             + ", PSNR mean "
             + ("n/a" if psnr is None or psnr != psnr else f"{psnr:.1f} dB")
         )
+    mission = metrics.get("mission")
+    if mission is not None:
+        error = mission["position_error_m"]
+        lines.append(
+            f"  mission position error mean {_num(error['mean'])} m, std {_num(error['std'])} m, "
+            f"final {_num(error['final'])} m; converged at "
+            f"{_num(mission['time_to_converge_s'], digits=1)} s; goals reached "
+            f"{_count(mission['goals_reached'])}/{_count(mission['goals'])}; estimate error mean "
+            f"{_num(mission['estimate_error_m']['mean'])} m"
+        )
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def _count(value: int | None) -> str:
+    return "n/a" if value is None else str(value)
 
 
 def _list_scenarios(args: argparse.Namespace) -> int:

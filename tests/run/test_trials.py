@@ -184,3 +184,16 @@ def test_cli_bad_trials_is_one_line_naming_the_key(
     assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.toml: trials:" in err[0], err
+
+
+def test_cli_trials_print_a_line_per_trial_and_the_mean(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    code = main(["run", str(write_scenario(tmp_path, 2)), "--out", str(out), "--no-plots"])
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("trial 1 seed 7: ") and lines[1].startswith("trial 2 seed 8: ")
+    assert lines[2].startswith("2 trials (mean ± std over trials): position error mean ")
+    assert (out / "trial-2" / "metrics.json").is_file() and (out / TRIALS_FILE).is_file()
+    assert not (out / "trials.png").exists()
