@@ -244,14 +244,13 @@ class SupervisorPilot:
     :class:`~testbed.common.components.GoalCancel`; the vehicle's mission logic flies them.
 
     Attributes:
-        steps: the orders, in time order (times non-decreasing).
+        steps: the orders, kept in time order (a stable sort of the given ones by ``t_s``).
     """
 
     steps: tuple[GoalStep, ...] = ()
 
     def __post_init__(self) -> None:
-        times = [step.t_s for step in self.steps]
-        check(times == sorted(times), "goals", "steps must be in time order")
+        object.__setattr__(self, "steps", tuple(sorted(self.steps, key=lambda step: step.t_s)))
 
     def sample(self, t_s: float) -> PilotSample:
         """Centred sticks and the latest step at or before ``t_s`` [s], if any."""

@@ -217,7 +217,7 @@ class PilotSection:
         setpoint_rate_hz: how often the operator updates the attitude setpoint [Hz], in
             [1e-3, 1000] (``kind = "attitude"``).
         goals: the supervisor's orders (``kind = "supervisor"``): ``{t_s, position_ned_m,
-            yaw_deg}`` goals and ``{t_s, cancel = true}`` cancels, in time order.
+            yaw_deg}`` goals and ``{t_s, cancel = true}`` cancels, taken in time order.
     """
 
     kind: Literal["scripted", "attitude", "supervisor"] = "scripted"
@@ -251,8 +251,6 @@ class PilotSection:
             if kind != self.kind:
                 for name in names:
                     check(not getattr(self, name), name, f"only used when kind = {kind!r}")
-        times = [step.t_s for step in self.goals]
-        check(times == sorted(times), "goals", "must be in time order (t_s non-decreasing)")
 
     def pilot(self) -> Pilot:
         """The pilot this section configures (:mod:`testbed.operator.pilots`)."""

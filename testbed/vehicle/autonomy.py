@@ -21,7 +21,8 @@ Supervision (the operator's intents, over either codec): a new :class:`PositionS
 GoTo order) is a goal that starts or replaces the mission's plan; a new
 :class:`AttitudeSetpoint` (KeepHeading) re-aims the current goal, or holds here at that
 heading; a new :class:`GoalCancel` (the order header's cancel bit) drops the plan and holds
-the present pose. The tree's disarm fallback (``disarm_requested``) is a level: the operator's
+the present pose; armed before any order, the vehicle holds station where it is. The tree's
+disarm fallback (``disarm_requested``) is a level: the operator's
 last arm request was a disarm, or the link failsafe reached SURFACE (latched until the operator
 asks to arm again). A vehicle under autonomy owns its mode: the operator's mode requests and
 sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD keeps
@@ -30,6 +31,7 @@ the mission flying.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,6 +97,34 @@ class ModelMismatch:
 
 
 @dataclass(frozen=True, slots=True)
+class IsmcSettings:
+    """Overrides of the vehicle model's packaged ISMC gains (``data/ismc.toml``); each None
+    keeps the packaged value. Domains: :class:`~testbed.vehicle.ismc.IsmcGains`'.
+
+    Attributes:
+        kp: (6,) Kp per body axis (u v w p q r) [1/s].
+        rho: switching gain ρ [N, N·m].
+        lambda_: boundary-layer width λ [m/s, rad/s].
+    """
+
+    kp: tuple[float, float, float, float, float, float] | None = None
+    rho: float | None = None
+    lambda_: float | None = None
+
+    def __post_init__(self) -> None:
+        self.applied_to(IsmcGains((1.0,) * 6, 1.0, 1.0, 100.0))  # checks each value set
+
+    def applied_to(self, gains: IsmcGains) -> IsmcGains:
+        """``gains`` with the values set here (checked by :class:`IsmcGains`)."""
+        return dataclasses.replace(
+            gains,
+            kp=gains.kp if self.kp is None else self.kp,
+            rho=gains.rho if self.rho is None else self.rho,
+            lambda_=gains.lambda_ if self.lambda_ is None else self.lambda_,
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class AutonomyConfig:
     """The scenario's ``[vehicle.autonomy]`` table (needs ``[vehicle.navigation]``).
 
@@ -106,7 +136,7 @@ class AutonomyConfig:
         start_s: when the mission starts [s] (the tree's start event), in [0, 1e6].
         controller: ``"ismc"`` (Angler's velocity controller over the kinematic pose law) or
             ``"pid"`` (the PD position loop with the depth and attitude PIDs).
-        ismc: the ISMC's gains; None = the packaged ones of the vehicle's model
+        ismc: overrides of the ISMC gains packaged for the vehicle's model
             (``data/ismc.toml``).
         mismatch: the controller's model error (the ISMC's model terms).
         pose: the kinematic pose law's gains and limits.
@@ -116,7 +146,7 @@ class AutonomyConfig:
     mission: str | None = None
     start_s: float = 0.0
     controller: Literal["ismc", "pid"] = "ismc"
-    ismc: IsmcGains | None = None
+    ismc: IsmcSettings = field(default_factory=IsmcSettings)
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     pose: PoseGains = field(default_factory=PoseGains)
     tree: MissionConfig = field(default_factory=MissionConfig)
@@ -159,6 +189,7 @@ class Autonomy:
         goals: goals given to the tree (mission start, GoTo, KeepHeading).
         cancels: cancels given to the tree.
         cancelled: the last supervision was a cancel (cleared by the next goal).
+        reached_s: vehicle time of each tick at which the tree reported a goal reached [s].
     """
 
     config: AutonomyConfig
@@ -173,6 +204,7 @@ class Autonomy:
     goals: int = 0
     cancels: int = 0
     cancelled: bool = False
+    reached_s: list[float] = field(default_factory=list)
 
 
 def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
@@ -180,7 +212,7 @@ def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
     mission = None if config.mission is None else resolve_mission(config.mission)
     ismc = None
     if config.controller == "ismc":
-        gains = config.ismc if config.ismc is not None else load_ismc_gains(model.name)
+        gains = config.ismc.applied_to(load_ismc_gains(model.name))
         m = config.mismatch
         belief = mismatched_model(
             model,
@@ -285,11 +317,17 @@ def _apply_outputs(world: World, auto: Autonomy, ctl: Controllers, now: float) -
     elif context.request_arm is False and ctl.flags.armed:
         world.set(vehicle, Armed(False))
     setpoint = context.pose_setpoint
-    if setpoint is not None:
+    armed = world.get(vehicle, Armed)
+    if armed is None or not armed.armed:
+        world.remove(vehicle, PoseTarget)
+    elif setpoint is not None:
         target = PoseTarget(now, setpoint.position_ned, setpoint.yaw_rad, setpoint.velocity_ned)
         world.set(vehicle, target)
-    elif context.request_arm is False or not ctl.flags.armed:
-        world.remove(vehicle, PoseTarget)
+    elif not world.has(vehicle, PoseTarget):  # armed with no order yet: hold station here
+        here = PoseTarget(now, context.estimate_position_ned, context.estimate_yaw_rad)
+        world.set(vehicle, here)
+    if context.reached_count > len(auto.reached_s):
+        auto.reached_s.append(now)
     ready = not context.status.startswith(("executing", "setup"))
     status = MissionStatus(ready, auto.cancelled, auto.goals, context.reached_count)
     world.set(vehicle, status)

@@ -8,8 +8,8 @@ depth sensor's reading when it is new, hands them with the vehicle's IMU reading
 ``read_sensors``, the sources are the only readers of the truth; the localizer never sees it.
 The estimate's position is also written as the vehicle's :class:`PositionReading`, so
 everything that reads a position fix (GUIDED's loop, the odometry sent to the operator, the
-GoTo support check) reads the estimate: a vehicle has a position fix or a navigation, not
-both.
+GoTo support check) reads the estimate. A vehicle's position fix (``sensors.position``), when
+it also has a navigation, is one of the navigation's sources (:class:`FixSource`).
 
 :class:`NavigationConfig` is the scenario's ``[vehicle.navigation]`` table (loadable with
 :func:`testbed.config.build`: ``[vehicle.navigation.dvl]`` etc. are the optional sub-tables),
@@ -18,6 +18,7 @@ both.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,9 +37,14 @@ from testbed.vehicle.nav_sensors import (
     MotionCaptureConfig,
     NavSource,
 )
+from testbed.vehicle.sensors import PositionFix
 from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
 
+MIN_FIX_SIGMA_M = 1e-4
+"""Smallest 1σ [m] a position fix is given in the filter (a noiseless fix is 0.1 mm)."""
+
 __all__ = [
+    "FixSource",
     "Navigation",
     "NavigationConfig",
     "build_navigation",
@@ -94,11 +100,41 @@ class Navigation:
     frames: int = 0
 
 
-def build_navigation(config: NavigationConfig, rng: np.random.Generator) -> Navigation:
+class FixSource:
+    """The vehicle's position fix (:class:`~testbed.vehicle.sensors.PositionFix`) as a
+    navigation source: its readings become ``position_ned`` measurements with 1σ its noise
+    (at least :data:`MIN_FIX_SIGMA_M`).
+
+    Args:
+        fix: the sensor (its own generator and rate).
+        name: the source's name.
+    """
+
+    def __init__(self, fix: PositionFix, name: str = "fix") -> None:
+        self.fix = fix
+        self.name = name
+
+    def due(self, time_s: float) -> bool:
+        """Whether the fix has a reading due at ``time_s``."""
+        return self.fix.due(time_s)
+
+    def sample(self, time_s: float, truth: PlantTruth) -> Measurement | None:
+        """The fix's reading of the true position now, as a measurement."""
+        reading = self.fix.sample(time_s, truth.position_ned_m)
+        sigma = max(self.fix.config.noise_m, MIN_FIX_SIGMA_M)
+        return Measurement(
+            self.name, "position_ned", reading.time_s, reading.position_ned_m, (sigma,) * 3
+        )
+
+
+def build_navigation(
+    config: NavigationConfig, rng: np.random.Generator, extra: Sequence[NavSource] = ()
+) -> Navigation:
     """The :class:`Navigation` of ``config``, each source with its own child of ``rng``.
 
     The children are spawned in a fixed order (motion capture, DVL, acoustic) whether or not
-    each is fitted, so fitting one source does not change another's noise.
+    each is fitted, so fitting one source does not change another's noise. ``extra`` sources
+    (the vehicle's position fix) are sampled after these.
     """
     mocap_rng, dvl_rng, acoustic_rng = rng.spawn(3)
     sources: list[NavSource] = []
@@ -108,6 +144,7 @@ def build_navigation(config: NavigationConfig, rng: np.random.Generator) -> Navi
         sources.append(Dvl(config.dvl, dvl_rng))
     if config.acoustic is not None:
         sources.append(AcousticFix(config.acoustic, acoustic_rng))
+    sources.extend(extra)
     return Navigation(sources, KalmanLocalizer(config.filter), config.depth_sigma_m)
 
 

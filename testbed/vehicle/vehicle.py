@@ -74,7 +74,13 @@ from testbed.vehicle.control import (
     pilot_trims,
 )
 from testbed.vehicle.hydrodynamics import load_model
-from testbed.vehicle.localization import NavigationConfig, build_navigation, estimate_navigation
+from testbed.vehicle.localization import (
+    FixSource,
+    NavigationConfig,
+    build_navigation,
+    estimate_navigation,
+)
+from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
@@ -208,10 +214,11 @@ class VehicleConfig:
         camera: the forward camera (disabled by default); when enabled, the physics client
             also holds the pool's scenery (visual only: the dynamics are the same).
         navigation: the localization (navigation sources and the filter,
-            :mod:`testbed.vehicle.localization`); None = none. Excludes ``sensors.position``
-            (the estimate is the vehicle's position reading).
+            :mod:`testbed.vehicle.localization`); None = none. Its estimate is the vehicle's
+            position reading; a ``sensors.position`` fix becomes one of its sources.
         autonomy: the mission tree and velocity controller (:mod:`testbed.vehicle.autonomy`);
-            None = none (the operator flies it). Needs ``navigation``.
+            None = none (the operator flies it). Without ``navigation`` it gets the default
+            one (:attr:`navigation_in_use`: the position fix if fitted, else motion capture).
     """
 
     model: str = "bluerov2"
@@ -255,16 +262,16 @@ class VehicleConfig:
         limit = MAX_POSITION_M
         check_ranges(self.start_position_ned_m, "start_position_ned_m", -limit, limit, "m")
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
-        check(
-            self.navigation is None or self.sensors.position is None,
-            "navigation",
-            "excludes sensors.position (the navigation estimate is the position reading)",
-        )
-        check(
-            self.autonomy is None or self.navigation is not None,
-            "autonomy",
-            "needs [vehicle.navigation] (the mission flies on its estimate)",
-        )
+
+    @property
+    def navigation_in_use(self) -> NavigationConfig | None:
+        """The navigation the vehicle runs: ``navigation``; under autonomy without one, the
+        default (the position fix alone when fitted, else default motion capture)."""
+        if self.navigation is not None or self.autonomy is None:
+            return self.navigation
+        if self.sensors.position is not None:
+            return NavigationConfig()
+        return NavigationConfig(motion_capture=MotionCaptureConfig())
 
 
 def load_vehicle_config(
@@ -335,15 +342,16 @@ class Vehicle:
         self._camera_rng = rng.spawn(1)[0] if camera.enabled and camera.noise_std_grey else None
         self._last_capture_s: float | None = None
         sensors = config.sensors
+        fix = None if sensors.position is None else PositionFix(sensors.position, position_rng)
+        navigation = config.navigation_in_use
+        autonomy = config.autonomy
         self.sensors = SensorSuite(
             Imu(sensors.imu, imu_rng),
             DepthSensor(sensors.depth, depth_rng),
-            None if sensors.position is None else PositionFix(sensors.position, position_rng),
+            fix if navigation is None else None,  # else a navigation source (below)
         )
 
         self.world = World()
-        navigation = config.navigation
-        autonomy = config.autonomy
         self.schedule = build_schedule(
             inbound,
             outbound,
@@ -389,7 +397,8 @@ class Vehicle:
         self.controllers.intents["position"] = world.spawn(zero)
         # localization and autonomy, last: runs without them keep their entities and streams
         if navigation is not None:
-            world.insert_resource(build_navigation(navigation, rng.spawn(1)[0]))
+            extra = () if fix is None else (FixSource(fix),)
+            world.insert_resource(build_navigation(navigation, rng.spawn(1)[0], extra))
         if autonomy is not None:
             world.insert_resource(build_autonomy(autonomy, self.model))
             velocity = ForceIntent("velocity", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))

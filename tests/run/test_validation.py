@@ -39,8 +39,9 @@ BAD_FLOATS = (math.nan, math.inf, -math.inf, 0.0, -1.0, 1e308, -1e308)
 TOML_INT_MAX = 2**63 - 1
 """TOML's largest integer: an integer key's stand-in for 1e308 (and its negation, −1 − it)."""
 
-DEFAULT_SCENARIOS = ("s100-teleop-v1", "tether-teleop-v1", "s100-video-v1")
-"""One scenario per codec (teleop, changeset), and the one with the camera and images."""
+DEFAULT_SCENARIOS = ("s100-teleop-v1", "tether-teleop-v1", "s100-video-v1", "s100-supervised-v1")
+"""One scenario per codec (teleop, changeset), the one with the camera and images, and the one
+with navigation and autonomy."""
 
 
 @dataclass(frozen=True, slots=True)
