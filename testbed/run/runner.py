@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -24,7 +25,7 @@ import simpy
 
 from testbed.channel import Medium, Trace, direction_counts
 from testbed.common.components import ControlMode, MissionStatus
-from testbed.ecs import Phase
+from testbed.ecs import Phase, World
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.metrics import (
@@ -39,6 +40,7 @@ from testbed.run.metrics import (
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.scenario import Scenario
+from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -213,8 +215,17 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         },
         mission_status=vehicle.world.get(vehicle.entity, MissionStatus),
         goals_acked=goals_acked(operator_node),
+        goals_reached_s=goals_reached_s(vehicle.world),
     )
     return RunResult(scenario, seed, metrics, recorder, stopped)
+
+
+def goals_reached_s(world: World) -> tuple[float, ...]:
+    """Vehicle times [s] at which its mission tree reported a goal reached (none without
+    autonomy)."""
+    if not world.has_resource(Autonomy):
+        return ()
+    return tuple(world.resource(Autonomy).reached_s)
 
 
 def goals_acked(operator: OperatorNode) -> int | None:
@@ -278,12 +289,14 @@ def compute_metrics(
     payload_bytes: dict[str, int],
     mission_status: MissionStatus | None = None,
     goals_acked: int | None = None,
+    goals_reached_s: Sequence[float] = (),
 ) -> dict[str, Any]:
     """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
 
     ``mission_status`` (the vehicle's :class:`MissionStatus` at the end) and ``goals_acked``
-    (:func:`goals_acked`) feed the ``"mission"`` key of a vehicle under autonomy
-    (:func:`mission_metrics`); None = not known here (null in the file).
+    (:func:`goals_acked`) and ``goals_reached_s`` (:func:`goals_reached_s`) feed the
+    ``"mission"`` key of a vehicle under autonomy (:func:`mission_metrics`); None = not known
+    here (null in the file).
     """
     series = recorder.series()
     t = series["t_s"]
@@ -373,6 +386,7 @@ def compute_metrics(
             autonomy.tree.goal_tolerance_m,
             status=mission_status,
             orders_acknowledged=goals_acked,
+            reached_s=goals_reached_s,
         )
     return metrics
 
@@ -384,14 +398,18 @@ def mission_metrics(
     *,
     status: MissionStatus | None,
     orders_acknowledged: int | None,
+    reached_s: Sequence[float] = (),
 ) -> dict[str, Any]:
     """The ``"mission"`` key of ``metrics.json`` (vehicles under autonomy).
 
     The error rows are those with a pose target, armed, at or after ``settle_s``:
-    ``position_error_m`` (``{mean, std, p95, final}`` of |truth − target| [m], 3-D),
-    ``time_to_converge_s`` (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's
-    goal tolerance, over those rows) and ``estimate_error_m`` (``{mean, p95}`` of
-    |estimate − truth| [m] on those rows that have an estimate); ``samples`` counts the rows.
+    ``position_error_m`` (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
+    ``estimate_error_m`` (``{mean, p95}`` of |estimate − truth| [m] on those rows that have an
+    estimate); ``samples`` counts the rows. ``time_to_converge_s``
+    (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's goal tolerance) is taken
+    over every armed row with a target, from the start (the settle time does not cut the
+    approach). ``completion_s``: when the tree last reported a goal reached [s], if the vehicle
+    ended ready (no goal in progress), else NaN (the last goal was never reached).
 
     Args:
         series: :meth:`Recorder.series` columns.
@@ -404,7 +422,8 @@ def mission_metrics(
     truth = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
     target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
     estimate = np.column_stack([series["est_n"], series["est_e"], series["est_d"]])
-    rows = (t >= settle_s) & (series["armed"] > 0.5) & np.isfinite(target).all(axis=1)
+    flying = (series["armed"] > 0.5) & np.isfinite(target).all(axis=1)
+    rows = (t >= settle_s) & flying
     error = position_error(truth[rows], target[rows])
     nav_error = position_error(estimate[rows], truth[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
@@ -412,7 +431,12 @@ def mission_metrics(
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),
-        "time_to_converge_s": time_to_converge_s(t[rows], error, tolerance_m),
+        "time_to_converge_s": time_to_converge_s(
+            t[flying], position_error(truth[flying], target[flying]), tolerance_m
+        ),
+        "completion_s": (
+            reached_s[-1] if reached_s and status is not None and status.ready else math.nan
+        ),
         "estimate_error_m": {
             "mean": float(nav_error.mean()) if nav_error.size else math.nan,
             "p95": float(np.percentile(nav_error, 95)) if nav_error.size else math.nan,
