@@ -34,7 +34,7 @@ from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
 from testbed.run.images import ImageLog
-from testbed.vehicle.components import ControlTargets, FailsafeStatus, PoseTarget
+from testbed.vehicle.components import ControlTargets, FailsafeStatus, MissionStatus, PoseTarget
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
@@ -75,7 +75,8 @@ _NO_ESTIMATE = (math.nan,) * 3
 
 class VehicleObserver:
     """POST_UPDATE system appended to the vehicle's schedule: records what the vehicle
-    publishes — failsafe changes as node events and, at ``sample_rate_hz``, one series row —
+    publishes — failsafe changes and the mission's goals given and reached (``mission_goal``,
+    ``mission_reached``) as node events and, at ``sample_rate_hz``, one series row —
     reading its resources and components only (never the controllers' or the plant's insides).
 
     Args:
@@ -101,6 +102,7 @@ class VehicleObserver:
         self._sample_period_s = 1.0 / sample_rate_hz
         self._next_sample_s = 0.0
         self._last_failsafe = 0
+        self._last_mission: tuple[int, int] = (0, 0)
 
     def __call__(self, world: World) -> None:
         now = world.resource(SimClock).time_s
@@ -110,6 +112,14 @@ class VehicleObserver:
         if level != self._last_failsafe:
             self._recorder.event(now, "vehicle", "failsafe", status.level.name if status else "")
             self._last_failsafe = level
+        mission = world.get(ctl.vehicle, MissionStatus)
+        if mission is not None and (mission.goals, mission.reached) != self._last_mission:
+            goals, reached = self._last_mission
+            if mission.goals != goals:
+                self._recorder.event(now, "vehicle", "mission_goal", str(mission.goals))
+            if mission.reached != reached:
+                self._recorder.event(now, "vehicle", "mission_reached", str(mission.reached))
+            self._last_mission = (mission.goals, mission.reached)
         if now < self._next_sample_s - 1e-9:
             return
         self._next_sample_s += self._sample_period_s

