@@ -10,6 +10,8 @@ last part is ``ber``, e.g. ``link.ber``), one line per value of the other grid k
 - ``ber_vs_per.png`` — uplink and downlink packet error rate against BER, with the closed form
   :func:`~testbed.report.closed_forms.closed_form_per` for each direction's mean frame length;
 - ``ber_vs_tracking.png`` — the velocity tracking RMSE of each axis against BER;
+- ``ber_vs_mission.png`` (sweeps of supervised control) — mission completion time and final
+  position error against BER;
 - ``ber_vs_images.png`` (sweeps with images) — images per minute against BER with
   :func:`~testbed.report.closed_forms.closed_form_images_per_minute`, and image latency.
 
@@ -113,7 +115,41 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
     ]
     if "images.per_minute" in results.columns:
         paths.append(_plot_images(results, out / "ber_vs_images.png", ber, axis, groups, colours))
+    if "mission.completion_s" in results.columns:
+        paths.append(_plot_mission(results, out / "ber_vs_mission.png", ber, axis, groups, colours))
     return paths
+
+
+def _plot_mission(
+    results: Results,
+    path: Path,
+    ber: np.ndarray,
+    axis: LogAxis | None,
+    groups: list[tuple[str, np.ndarray]],
+    colours: list[str],
+) -> Path:
+    """Supervised control: when the last goal was reached, and the final position error."""
+    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
+    done_ax, error_ax = fig.subplots(1, 2, sharex=True)
+    done = results.numbers("mission.completion_s")
+    final = results.numbers("mission.position_error_m.final")
+    for (label, mask), colour in zip(groups, colours, strict=True):
+        draw(done_ax, axis, ber[mask], done[mask], color=colour, label=label or None)
+        draw(error_ax, axis, ber[mask], final[mask], color=colour, label=label or None)
+    done_ax.set_title("last goal reached")
+    done_ax.set_ylabel("mission completion [s]")
+    error_ax.set_title("final position error")
+    error_ax.set_ylabel("|truth − target| [m]")
+    for ax in (done_ax, error_ax):
+        ax.set_xlabel("bit error rate")
+        ax.grid(True, which="major", alpha=0.3)
+    if axis is not None:
+        axis.apply(done_ax)
+    if any(label for label, _ in groups):
+        done_ax.legend(title="grid", fontsize="small")
+    footnote(fig, _BARS_NOTE + "; a lost GoTo or its reply costs one more inter-packet gap")
+    _title(fig, results, "BER vs supervised control")
+    return save(fig, path)
 
 
 def _ber_curve(ber: np.ndarray, axis: LogAxis | None) -> np.ndarray:

@@ -329,3 +329,18 @@ def test_images_per_minute_closed_form_matches_the_state_machines(
     count = expected * cycles * gap_s / 60.0
     tolerance = (4.0 * math.sqrt(max(count, 1.0)) + 1.0) * 60.0 / (cycles * gap_s)
     assert simulated == pytest.approx(expected, abs=tolerance)
+
+
+@pytest.mark.filterwarnings("ignore:No artists with labels")  # no PER or tracking columns here
+def test_a_supervised_sweep_also_gets_the_mission_plot(tmp_path: Path) -> None:
+    path = tmp_path / "results.csv"
+    metrics = ["mission.completion_s", "mission.position_error_m.final"]
+    with path.open("w", encoding="utf-8", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["point", "seed", "link.ber", "status", "error", *metrics])
+        for point, ber in enumerate(BERS):
+            for seed in range(2):
+                writer.writerow([point, seed, ber, "ok", "", 84.0 + 1e3 * ber + seed, 0.006])
+    paths = plot_ber_sweep(path, tmp_path / "plots")
+    assert paths[-1].name == "ber_vs_mission.png"
+    assert paths[-1].read_bytes()[:8] == PNG_MAGIC and paths[-1].stat().st_size > 20_000
