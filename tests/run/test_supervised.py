@@ -9,6 +9,7 @@ plus one vehicle frame after delivery).
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from testbed.channel import EventKind
@@ -95,3 +96,26 @@ def test_a_lossy_link_still_delivers_every_goto_by_sending_it_again() -> None:
     assert len(sent) > 2  # sent again
     assert mission["goals"] == 2 and mission["orders_acknowledged"] == 2
     assert mission["goals_reached"] == 2
+
+
+def test_over_the_change_set_codec_goals_and_cancels_replicate() -> None:
+    """The tether's change-set codec carries the same intents as replicated components
+    (PositionSetpoint, GoalCancel): the first goal is cancelled on the way (not reached), the
+    second is reached."""
+    result = run(
+        'link={preset="tether", codec="changeset", mac="free"}',
+        "duration_s=25",
+        "metrics.settle_s=0",
+        "pilot.goals=[{t_s=3.0, position_ned_m=[2.0, 0.0, 1.0]}, {t_s=6.0, cancel=true},"
+        " {t_s=9.0, position_ned_m=[0.0, 1.0, 1.0]}]",
+    )
+    mission = result.metrics["mission"]
+    assert (mission["goals"], mission["goals_reached"]) == (2, 1)
+    assert mission["position_error_m"]["final"] < 0.05
+    assert mission["orders_acknowledged"] is None  # no order acknowledgements on this codec
+    series = result.recorder.series()
+    t, target = series["t_s"], series["target_n"]
+    moving = target[(t > 4.0) & (t < 5.9)]
+    held = target[(t > 6.3) & (t < 8.9)]
+    assert np.all(np.diff(moving) > 0)  # the leg's target walks north at 0.2 m/s
+    assert np.ptp(held) == 0.0 and 0.3 < held[0] < 1.0  # after the cancel: held where it was
