@@ -33,6 +33,7 @@ __all__ = [
     "check_ranges",
     "load_toml",
     "parse_override",
+    "read_text",
 ]
 
 
@@ -119,6 +120,21 @@ def check_ranges(
         check_range(value, f"{key}[{i}]", low, high, unit, **options)
 
 
+def read_text(path: str | Path) -> str:
+    """A configuration file's text (UTF-8).
+
+    Raises:
+        ConfigError: the file is missing or unreadable (message names the file).
+    """
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{path}: cannot read: {err}") from None
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file into a dict.
 
@@ -126,12 +142,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         ConfigError: the file is missing, unreadable or not valid TOML (message names the file).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: cannot read: {err}") from None
+    text = read_text(path)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:

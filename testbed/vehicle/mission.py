@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.common.geometry import Vec3, wrap_angle
-from testbed.config import ConfigError
+from testbed.config import ConfigError, read_text
 
 __all__ = [
     "Mission",
@@ -315,14 +315,7 @@ def load_mission(path: str | Path) -> Mission:
         ConfigError: missing or unreadable file, malformed JSON, or a field that does not check;
             one line naming the file and the field path.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: cannot read: {err}") from None
-    return _parse_text(text, str(path))
+    return _parse_text(read_text(path), str(path))
 
 
 def _parse_text(text: str, source: str) -> Mission:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 import numpy as np
 
 from testbed.config import check_range
+from testbed.vehicle.sensors import SampleClock
 
 if TYPE_CHECKING:
     from testbed.vehicle.systems import PlantTruth
@@ -95,24 +96,6 @@ class NavSource(Protocol):
         ...
 
 
-class _Clock:
-    """When a sensor at ``rate_hz`` is next due; late polls do not produce bursts."""
-
-    __slots__ = ("next_s", "period_s")
-
-    def __init__(self, rate_hz: float) -> None:
-        self.period_s = 1.0 / rate_hz
-        self.next_s = 0.0
-
-    def due(self, time_s: float) -> bool:
-        return time_s >= self.next_s - 1e-9
-
-    def advance(self, time_s: float) -> None:
-        self.next_s += self.period_s
-        if self.next_s <= time_s:
-            self.next_s = time_s + self.period_s
-
-
 class _DelayLine:
     """Measurements held until their delivery time (FIFO: delays are constant)."""
 
@@ -153,7 +136,7 @@ class _DelayedPositionSource:
         self, name: str, rate_hz: float, noise_m: float, delay_s: float, rng: np.random.Generator
     ) -> None:
         self.name = name
-        self._clock = _Clock(rate_hz)
+        self._clock = SampleClock(rate_hz)
         self._line = _DelayLine(delay_s)
         self._rng = rng
         self._sigma = noise_m
@@ -301,7 +284,7 @@ class Dvl:
         self.config = config
         self.name = name
         self._rng = rng
-        self._clock = _Clock(config.rate_hz)
+        self._clock = SampleClock(config.rate_hz)
         self.dropouts = 0
         """Locked samples lost to random dropout."""
         self.unlocked = 0

@@ -40,6 +40,7 @@ __all__ = [
     "PositionFix",
     "PositionFixConfig",
     "PositionReading",
+    "SampleClock",
     "baro_depth_m",
     "baro_pressure_pa",
 ]
@@ -110,7 +111,7 @@ class _Normals:
         return [self.take() for _ in range(count)]
 
 
-class _Clock:
+class SampleClock:
     """When a sensor at ``rate_hz`` is next due. Late polls do not produce bursts."""
 
     __slots__ = ("next_s", "period_s")
@@ -169,7 +170,7 @@ class Imu:
     def __init__(self, config: ImuConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = _Normals(rng)
-        self._clock = _Clock(config.rate_hz)
+        self._clock = SampleClock(config.rate_hz)
         tau = config.correlation_time_s
         self._decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
         self._innovation = math.sqrt(1.0 - self._decay * self._decay)
@@ -260,7 +261,7 @@ class DepthSensor:
     def __init__(self, config: DepthSensorConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = _Normals(rng)
-        self._clock = _Clock(config.rate_hz)
+        self._clock = SampleClock(config.rate_hz)
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -309,7 +310,7 @@ class PositionFix:
     def __init__(self, config: PositionFixConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = _Normals(rng)
-        self._clock = _Clock(config.rate_hz)
+        self._clock = SampleClock(config.rate_hz)
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
