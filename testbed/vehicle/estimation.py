@@ -79,6 +79,7 @@ __all__ = [
 
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
 _TIME_EPS_S = 1e-9
+_CACHED_STEPS = 16  # time steps whose F, G, Q are kept
 _H_POSITION = np.hstack([np.eye(3), np.zeros((3, 3))])
 _H_DEPTH = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
 _DIMS = {"position_ned": 3, "velocity_body": 3, "depth": 1}
@@ -248,7 +249,8 @@ class KalmanNavigator:
         self._gates = {dim: float(chi2.ppf(config.gate_probability, dim)) for dim in (1, 3)}
         self._counts = {k: 0 for k in _COUNTERS}
         self._streaks: dict[str, int] = {}
-        self._cache: tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+        # F, G, Q by time step [ns]: frames land 2 or 3 physics steps apart, so a handful
+        self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------------- accessors
 
@@ -314,12 +316,13 @@ class KalmanNavigator:
     def _propagate(
         self, x: np.ndarray, p: np.ndarray, dt: float, accel: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
-        cache = self._cache
-        if cache is not None and abs(cache[0] - dt) <= 1e-12:  # frames' dt jitter by ~1 ulp
-            f, g, qm = cache[1]
-        else:
-            f, g, qm = _transition(dt, self.config.accel_noise_m2_s3)
-            self._cache = (dt, (f, g, qm))
+        key = round(dt * 1e9)  # frames' dt jitter by ~1 ulp; 1 ns is far below any step
+        matrices = self._cache.get(key)
+        if matrices is None:
+            if len(self._cache) >= _CACHED_STEPS:
+                self._cache.clear()
+            matrices = self._cache[key] = _transition(dt, self.config.accel_noise_m2_s3)
+        f, g, qm = matrices
         x = f @ x
         if accel is not None:
             x = x + g @ accel
