@@ -141,6 +141,9 @@ class AutonomyConfig:
         mismatch: the controller's model error (the ISMC's model terms).
         pose: the kinematic pose law's gains and limits.
         tree: the mission tree's timing and tolerances (tick rate, goal tolerance, GoTo speed).
+        ready_sigma_m: the tree first ticks once the estimate's largest position 1σ is at most
+            this [m], in (0, 100] (the filter starts at the origin, 10 m uncertain: a hold or a
+            plan from that would fly the vehicle towards the origin); then it always ticks.
     """
 
     mission: str | None = None
@@ -150,9 +153,11 @@ class AutonomyConfig:
     mismatch: ModelMismatch = field(default_factory=ModelMismatch)
     pose: PoseGains = field(default_factory=PoseGains)
     tree: MissionConfig = field(default_factory=MissionConfig)
+    ready_sigma_m: float = 0.5
 
     def __post_init__(self) -> None:
         check_range(self.start_s, "start_s", 0.0, 1e6, "s")
+        check_range(self.ready_sigma_m, "ready_sigma_m", 0.0, 100.0, "m", low_open=True)
         if self.mission is not None:
             resolve_mission(self.mission)  # a bad name or file fails here, naming it
 
@@ -182,6 +187,7 @@ class Autonomy:
         context: the tree's inputs and outputs (kept between ticks).
         ismc: the velocity controller (None with controller ``"pid"``).
         next_tick_s: vehicle time of the next tree tick [s].
+        navigating: the estimate has been good enough to start from (``ready_sigma_m``).
         started: the mission's start event was given.
         seen: the operator's last goal, heading and cancel already handed to the tree.
         last_arm: the operator's last arm request seen.
@@ -197,6 +203,7 @@ class Autonomy:
     context: MissionContext
     ismc: IsmcController | None
     next_tick_s: float = 0.0
+    navigating: bool = False
     started: bool = False
     seen: tuple[object, object, object] = (None, None, None)
     last_arm: ArmRequest | None = None
@@ -232,7 +239,7 @@ def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
 def run_mission(world: World) -> None:
     """UPDATE: tick the mission tree when due and apply its outputs (module docstring).
 
-    Waits for the first navigation estimate (the tree plans from it).
+    Waits for a navigation estimate within ``ready_sigma_m`` (the tree plans from it).
     """
     auto = world.resource(Autonomy)
     ctl = world.resource(Controllers)
@@ -244,6 +251,11 @@ def run_mission(world: World) -> None:
     estimate = world.get(vehicle, NavigationEstimate)
     if estimate is None:
         return
+    if not auto.navigating:
+        if max(estimate.position_sigma_m) > auto.config.ready_sigma_m:
+            return
+        auto.navigating = True
+        auto.next_tick_s = now
     auto.next_tick_s += auto.config.tree.tick_period_s
     context = auto.context
     context.time_s = now
