@@ -21,9 +21,9 @@ if os.environ.get("CI"):
 
 
 def pytest_sessionstart(session: object) -> None:
-    """Compile (or load from numba's disk cache) the vehicle's kernels once, here, before any
-    test. On a fresh checkout the first process to fly a vehicle compiles them for a few
-    seconds; otherwise that would be whichever child process a real-time or signal test started
+    """Compile (or load from numba's disk cache) the vehicle's and the navigation filter's
+    kernels once, here, before any test. On a fresh checkout the first process to fly a vehicle
+    compiles them for a few seconds; otherwise that would be whichever child process a real-time or signal test started
     first, and its set-up would overrun the waits those tests derive from a warm start."""
     import numpy as np
 
@@ -33,3 +33,9 @@ def pytest_sessionstart(session: object) -> None:
         vehicle.arm()
         vehicle.command((0.5, 0.0, 0.0, 0.0, 0.0, 0.1))
         vehicle.advance(0.1)
+    from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+    from testbed.vehicle.nav_sensors import Measurement
+
+    navigator = KalmanNavigator(FilterConfig())  # the navigation filter's kernels
+    navigator.predict(0.01)
+    navigator.update(Measurement("fix", "position_ned", 0.01, (0.0, 0.0, 0.0), (0.1,) * 3))

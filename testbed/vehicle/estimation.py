@@ -66,6 +66,7 @@ from testbed.common.geometry import (
     rotation_matrix,
 )
 from testbed.config import check_range
+from testbed.vehicle.filter_kernels import innovation, joseph_update, propagate
 from testbed.vehicle.nav_sensors import Measurement
 
 __all__ = [
@@ -83,8 +84,6 @@ _CACHED_STEPS = 16  # time steps whose F, G, Q are kept
 _H_POSITION = np.hstack([np.eye(3), np.zeros((3, 3))])
 _H_DEPTH = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
 _DIMS = {"position_ned": 3, "velocity_body": 3, "depth": 1}
-_SELECT = {"position_ned": [0, 1, 2], "depth": [2]}  # the state rows H = [I 0], [0 0 1 0 0 0] pick
-_EYE6 = np.eye(6)
 _OBSERVED = {"position_ned": slice(0, 3), "velocity_body": slice(3, 6), "depth": slice(2, 3)}
 _COUNTERS = ("accepted", "rejected", "invalid", "stale", "rollbacks", "reacquired")
 
@@ -323,10 +322,10 @@ class KalmanNavigator:
                 self._cache.clear()
             matrices = self._cache[key] = _transition(dt, self.config.accel_noise_m2_s3)
         f, g, qm = matrices
-        x = f @ x
+        x, p = propagate(x, p, f, qm)
         if accel is not None:
             x = x + g @ accel
-        return x, f @ p @ f.T + qm
+        return x, p
 
     def _trim(self) -> None:
         horizon = self._t - self.config.history_s
@@ -395,27 +394,22 @@ class KalmanNavigator:
         applies without the gate (re-acquisitions and replays, counted already).
         """
         x, p = step.x, step.p
-        rot = None
         if m.kind == "velocity_body":
-            rot = np.array(rotation_matrix(quaternion))  # body → NED; H = [0 Rᵀ]
             h = np.zeros((3, 6))
-            h[:, 3:] = rot.T
+            h[:, 3:] = np.array(rotation_matrix(quaternion)).T  # R: body → NED; H = [0 Rᵀ]
         else:
             h = _H_POSITION if m.kind == "position_ned" else _H_DEPTH
-        z = np.asarray(m.value, dtype=np.float64)
-        r = np.diag(np.square(np.asarray(m.sigma, dtype=np.float64)))
-        y = z - h @ x
-        if reset:
-            p = self._reset_spread(p, m.kind, y)
-        pht = p[:, _SELECT[m.kind]] if rot is None else p[:, 3:] @ rot  # P Hᵀ
-        s = h @ pht + r
+        z = np.array(m.value, dtype=np.float64)
+        sigma = np.array(m.sigma, dtype=np.float64)
         try:
-            s_inv = np.linalg.inv(s)
-        except np.linalg.LinAlgError:
+            y, pht, s_inv, nis = innovation(x, p, h, z, sigma)
+            if reset:
+                p = self._reset_spread(p, m.kind, y)
+                y, pht, s_inv, nis = innovation(x, p, h, z, sigma)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
             self._counts["invalid"] += 1
             return False
         if gate:
-            nis = float(y @ s_inv @ y)
             if nis <= self._gates[len(z)]:
                 self._streaks[m.source] = 0
             elif self._reacquire(m):
@@ -425,10 +419,7 @@ class KalmanNavigator:
             else:
                 self._counts["rejected"] += 1
                 return False
-        k = pht @ s_inv
-        a = _EYE6 - k @ h
-        step.x = x + k @ y
-        step.p = a @ p @ a.T + k @ r @ k.T
+        step.x, step.p = joseph_update(x, p, h, pht, s_inv, y, sigma)
         step.updates.append((m, quaternion, reset))
         if gate:
             self._counts["accepted"] += 1
