@@ -508,8 +508,9 @@ class KalmanLocalizer:
     """The default :class:`Localizer`: :class:`KalmanNavigator` with the IMU as AHRS.
 
     Measurements are applied in order of their validity time; the DVL is rotated with this
-    frame's IMU attitude (the DVL is not delayed). No acceleration input (the IMU reading
-    carries no accelerometer yet).
+    frame's IMU attitude (the DVL is not delayed). An ``acceleration_ned`` measurement (the
+    accelerometer: the mean acceleration since the previous frame) is not an update but the
+    input the prediction to this frame holds over its interval.
     """
 
     __slots__ = ("navigator",)
@@ -522,8 +523,15 @@ class KalmanLocalizer:
     ) -> NavigationEstimate:
         """Predict to ``time_s`` [s], apply ``measurements``, return the estimate."""
         nav = self.navigator
-        nav.predict(max(time_s, nav.time_s))
+        accel = None
+        updates = []
+        for m in measurements:
+            if m.kind == "acceleration_ned":
+                accel = m.value
+            else:
+                updates.append(m)
+        nav.predict(max(time_s, nav.time_s), accel)
         q = imu.quaternion_wxyz
-        for m in sorted(measurements, key=lambda m: m.time_s):
+        for m in sorted(updates, key=lambda m: m.time_s):
             nav.update(m, q)
         return nav.estimate(q, imu.rates_rad_s)

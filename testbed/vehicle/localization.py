@@ -28,6 +28,8 @@ from testbed.ecs import World
 from testbed.vehicle.components import DepthReading, ImuReading, PositionReading
 from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, Localizer
 from testbed.vehicle.nav_sensors import (
+    Accelerometer,
+    AccelerometerConfig,
     AcousticFix,
     AcousticFixConfig,
     Dvl,
@@ -63,6 +65,8 @@ class NavigationConfig:
         motion_capture: motion-capture position, or ``None`` (not fitted).
         dvl: DVL body velocity, or ``None``.
         acoustic: delayed acoustic (USBL) fix, or ``None``.
+        accelerometer: the IMU's accelerometer (NED acceleration, the filter's prediction
+            input), or ``None`` (the filter predicts with constant velocity alone).
         filter: the Kalman filter's process noise, initial spread, history and gate.
         depth_sigma_m: 1σ the filter gives the depth sensor [m]. 0.005 m: the MS5837 model's
             20 Pa noise is ≈ 2 mm; the rest covers a small density mismatch at shallow depth.
@@ -71,6 +75,7 @@ class NavigationConfig:
     motion_capture: MotionCaptureConfig | None = None
     dvl: DvlConfig | None = None
     acoustic: AcousticFixConfig | None = None
+    accelerometer: AccelerometerConfig | None = None
     filter: FilterConfig = field(default_factory=FilterConfig)
     depth_sigma_m: float = 0.005
 
@@ -144,6 +149,8 @@ def build_navigation(
         sources.append(Dvl(config.dvl, dvl_rng))
     if config.acoustic is not None:
         sources.append(AcousticFix(config.acoustic, acoustic_rng))
+    if config.accelerometer is not None:  # its own child, spawned after the three above
+        sources.append(Accelerometer(config.accelerometer, rng.spawn(1)[0]))
     sources.extend(extra)
     return Navigation(sources, KalmanLocalizer(config.filter), config.depth_sigma_m)
 

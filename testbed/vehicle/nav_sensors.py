@@ -37,6 +37,8 @@ if TYPE_CHECKING:
     from testbed.vehicle.systems import PlantTruth
 
 __all__ = [
+    "Accelerometer",
+    "AccelerometerConfig",
     "AcousticFix",
     "AcousticFixConfig",
     "Dvl",
@@ -48,9 +50,10 @@ __all__ = [
     "NavSource",
 ]
 
-MeasurementKind = Literal["position_ned", "velocity_body", "depth"]
-"""What a :class:`Measurement` holds: (3,) NED position [m], (3,) body FRD velocity [m/s] or
-(1,) depth [m, positive down]."""
+MeasurementKind = Literal["position_ned", "velocity_body", "depth", "acceleration_ned"]
+"""What a :class:`Measurement` holds: (3,) NED position [m], (3,) body FRD velocity [m/s],
+(1,) depth [m, positive down] or (3,) NED acceleration [m/s²] (an input to the filter's
+prediction, not an update)."""
 
 NAV_RATE_RANGE_HZ = (0.001, 10000.0)
 """Accepted navigation sensor rates [Hz]; polled once per frame, so a rate above the frame rate
@@ -319,3 +322,60 @@ class Dvl:
         value = (u + s * float(draws[0]), v + s * float(draws[1]), w + s * float(draws[2]))
         sigma = max(s, 1e-9)
         return Measurement(self.name, "velocity_body", time_s, value, (sigma, sigma, sigma))
+
+
+@dataclass(frozen=True, slots=True)
+class AccelerometerConfig:
+    """The IMU's accelerometer, as its AHRS outputs it: NED linear acceleration, gravity removed
+    with the AHRS attitude.
+
+    Domains: ``rate_hz`` in [0.001, 10000] Hz; ``noise_m_s2`` in [0, 10] m/s²; each bias
+    component in [−10, 10] m/s².
+
+    Attributes:
+        rate_hz: output rate [Hz] (one sample per frame at most).
+        noise_m_s2: white noise per NED axis [m/s²], 1σ (0.02: a MEMS IMU's ≈ 150 µg/√Hz at
+            100 Hz plus the gravity-removal error of a 0.1° attitude error, ≈ 0.017 m/s²).
+        bias_m_s2: (3,) constant NED bias [m/s²] (not estimated by the filter).
+    """
+
+    rate_hz: float = 100.0
+    noise_m_s2: float = 0.02
+    bias_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        _check_rate(self.rate_hz)
+        check_range(self.noise_m_s2, "noise_m_s2", 0.0, 10.0, "m/s²")
+        for value in self.bias_m_s2:
+            check_range(value, "bias_m_s2", -10.0, 10.0, "m/s²")
+
+
+class Accelerometer:
+    """The accelerometer: the true mean NED acceleration over the last frame
+    (:attr:`~testbed.vehicle.systems.PlantTruth.acceleration_ned_m_s2`) plus bias and white
+    noise, as an ``acceleration_ned`` measurement (the filter's prediction input)."""
+
+    __slots__ = ("_clock", "_rng", "config", "name")
+
+    def __init__(
+        self, config: AccelerometerConfig, rng: np.random.Generator, name: str = "accel"
+    ) -> None:
+        self.config = config
+        self.name = name
+        self._rng = rng
+        self._clock = SampleClock(config.rate_hz)
+
+    def due(self, time_s: float) -> bool:
+        """Whether a sample is due at ``time_s`` [s]."""
+        return self._clock.due(time_s)
+
+    def sample(self, time_s: float, truth: PlantTruth) -> Measurement | None:
+        """Measure the true NED acceleration now [m/s²]."""
+        self._clock.advance(time_s)
+        cfg = self.config
+        draws = self._rng.standard_normal(3)
+        s = cfg.noise_m_s2
+        a, b = truth.acceleration_ned_m_s2, cfg.bias_m_s2
+        value = tuple(a[i] + b[i] + s * float(draws[i]) for i in range(3))
+        sigma = max(s, 1e-9)
+        return Measurement(self.name, "acceleration_ned", time_s, value, (sigma, sigma, sigma))

@@ -138,12 +138,16 @@ class PlantTruth:
         rates_rad_s: (3,) body rates (p, q, r), FRD.
         position_ned_m: (3,) body-origin position, NED [m] (depth = down component).
         velocity_m_s: (3,) body velocity (u, v, w) at the body origin [m/s], FRD.
+        acceleration_ned_m_s2: (3,) mean NED acceleration of the body origin over the last
+            frame interval [m/s²] (the NED velocity's change over it; kept only for a vehicle
+            with an accelerometer, else zero).
     """
 
     quaternion_wxyz: Quaternion = LEVEL
     rates_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    acceleration_ned_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(slots=True)

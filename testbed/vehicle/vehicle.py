@@ -38,7 +38,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from testbed.common.geometry import Quaternion
+from testbed.common.geometry import Quaternion, quat_rotate
 from testbed.config import build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.vehicle.allocation import Allocator
@@ -408,6 +408,8 @@ class Vehicle:
         self._control_period_s = 1.0 / config.control_rate_hz
         self._next_control_s = 0.0
         self._last_frame_s: float | None = None
+        self._accelerometer = navigation is not None and navigation.accelerometer is not None
+        self._last_velocity_ned: tuple[float, float, float] | None = None
         self.frames = 0
 
     # ------------------------------------------------------------------------- running
@@ -442,6 +444,17 @@ class Vehicle:
         truth.rates_rad_s = (nu[3], nu[4], nu[5])
         truth.position_ned_m = position
         truth.velocity_m_s = (nu[0], nu[1], nu[2])
+        if self._accelerometer:  # the NED velocity's change since the last frame
+            v_ned = quat_rotate(quaternion, truth.velocity_m_s)
+            last = self._last_velocity_ned
+            if last is not None and self._last_frame_s is not None and now > self._last_frame_s:
+                h = now - self._last_frame_s
+                truth.acceleration_ned_m_s2 = (
+                    (v_ned[0] - last[0]) / h,
+                    (v_ned[1] - last[1]) / h,
+                    (v_ned[2] - last[2]) / h,
+                )
+            self._last_velocity_ned = v_ned
         period = self._control_period_s
         clock = self.clock
         clock.time_s = now
