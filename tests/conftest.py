@@ -23,8 +23,9 @@ if os.environ.get("CI"):
 def pytest_sessionstart(session: object) -> None:
     """Compile (or load from numba's disk cache) the vehicle's and the navigation filter's
     kernels once, here, before any test. On a fresh checkout the first process to fly a vehicle
-    compiles them for a few seconds; otherwise that would be whichever child process a real-time
-    or signal test started first, and its set-up would overrun the waits those tests derive from a warm start."""
+    compiles them for a few seconds; otherwise that would be whichever child process a
+    real-time or signal test started first, and its set-up would overrun the waits those tests
+    derive from a warm start."""
     import numpy as np
 
     from testbed.vehicle.vehicle import Vehicle, VehicleConfig
