@@ -193,6 +193,7 @@ class TeleopOperatorEnd:
         setpoint = world.get(intents, AttitudeSetpoint)
         target = world.get(intents, PositionSetpoint)
         order: Move | KeepHeading | GoTo | ImageSettings | None = None
+        resent_bit: bool | None = None  # a GoTo sent again keeps its sequence bit
         if image_settings is not None and not (arm or disarm):
             order = image_settings
         elif setpoint is not None and setpoint != self._sent_attitude and not arm:
@@ -207,10 +208,9 @@ class TeleopOperatorEnd:
             self._pending_goto = (order, not self.order_seq_bit)
             self._pending_cancel = False
         elif order is None and self._pending_goto is not None and not (arm or disarm):
-            order, bit = self._pending_goto  # again, same bit, until a reply acknowledges it
-            message = OperatorMessage(*image_request, bit, self._pending_cancel, order)
-            return message.encode()
-        self.order_seq_bit = not self.order_seq_bit
+            order, resent_bit = self._pending_goto  # again, until a reply acknowledges it
+        if resent_bit is None:
+            self.order_seq_bit = not self.order_seq_bit
         if order is None:
             command = world.get(intents, MovementCommand)
             sticks = (0.0,) * 6 if command is None else command.sticks
@@ -220,8 +220,9 @@ class TeleopOperatorEnd:
                 sticks[0], sticks[1], sticks[2], sticks[5], arm, disarm, mode_to_wire(mode)
             )
         seq_bit, cancel_image, first_missing = image_request
+        order_bit = self.order_seq_bit if resent_bit is None else resent_bit
         message = OperatorMessage(
-            seq_bit, cancel_image, first_missing, self.order_seq_bit, self._pending_cancel, order
+            seq_bit, cancel_image, first_missing, order_bit, self._pending_cancel, order
         )
         return message.encode()
 
