@@ -25,7 +25,7 @@ import simpy
 
 from testbed.channel import Medium, Trace, direction_counts
 from testbed.common.components import ControlMode, MissionStatus
-from testbed.ecs import Phase, World
+from testbed.ecs import Phase
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.metrics import (
@@ -40,7 +40,6 @@ from testbed.run.metrics import (
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.scenario import Scenario
-from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -215,17 +214,8 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         },
         mission_status=vehicle.world.get(vehicle.entity, MissionStatus),
         goals_acked=goals_acked(operator_node),
-        goals_reached_s=goals_reached_s(vehicle.world),
     )
     return RunResult(scenario, seed, metrics, recorder, stopped)
-
-
-def goals_reached_s(world: World) -> tuple[float, ...]:
-    """Vehicle times [s] at which its mission tree reported a goal reached (none without
-    autonomy)."""
-    if not world.has_resource(Autonomy):
-        return ()
-    return tuple(world.resource(Autonomy).reached_s)
 
 
 def goals_acked(operator: OperatorNode) -> int | None:
@@ -289,12 +279,11 @@ def compute_metrics(
     payload_bytes: dict[str, int],
     mission_status: MissionStatus | None = None,
     goals_acked: int | None = None,
-    goals_reached_s: Sequence[float] = (),
 ) -> dict[str, Any]:
     """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
 
     ``mission_status`` (the vehicle's :class:`MissionStatus` at the end) and ``goals_acked``
-    (:func:`goals_acked`) and ``goals_reached_s`` (:func:`goals_reached_s`) feed the
+    (:func:`goals_acked`) feed, with the recorder's ``mission_reached`` events, the
     ``"mission"`` key of a vehicle under autonomy (:func:`mission_metrics`); None = not known
     here (null in the file).
     """
@@ -386,7 +375,7 @@ def compute_metrics(
             autonomy.tree.goal_tolerance_m,
             status=mission_status,
             orders_acknowledged=goals_acked,
-            reached_s=goals_reached_s,
+            reached_s=[e.t_s for e in recorder.events if e.kind == "mission_reached"],
         )
     return metrics
 

@@ -195,7 +195,6 @@ class Autonomy:
         goals: goals given to the tree (mission start, GoTo, KeepHeading).
         cancels: cancels given to the tree.
         cancelled: the last supervision was a cancel (cleared by the next goal).
-        reached_s: vehicle time of each tick at which the tree reported a goal reached [s].
     """
 
     config: AutonomyConfig
@@ -211,7 +210,6 @@ class Autonomy:
     goals: int = 0
     cancels: int = 0
     cancelled: bool = False
-    reached_s: list[float] = field(default_factory=list)
 
 
 def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
@@ -338,8 +336,6 @@ def _apply_outputs(world: World, auto: Autonomy, ctl: Controllers, now: float) -
     elif not world.has(vehicle, PoseTarget):  # armed with no order yet: hold station here
         here = PoseTarget(now, context.estimate_position_ned, context.estimate_yaw_rad)
         world.set(vehicle, here)
-    if context.reached_count > len(auto.reached_s):
-        auto.reached_s.append(now)
     ready = not context.status.startswith(("executing", "setup"))
     status = MissionStatus(ready, auto.cancelled, auto.goals, context.reached_count)
     world.set(vehicle, status)
