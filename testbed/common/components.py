@@ -30,6 +30,7 @@ __all__ = [
     "ControlTargets",
     "DepthReading",
     "DepthSetpoint",
+    "EndEffectorSetpoint",
     "FailsafeLevel",
     "FailsafeStatus",
     "GoalCancel",
@@ -121,6 +122,27 @@ class PositionSetpoint:
             target).
         yaw_rad: heading on the way and on arrival [rad, clockwise from north], used when
             ``use_yaw``; otherwise the heading held when the setpoint arrived is kept.
+        use_yaw: whether ``yaw_rad`` applies.
+    """
+
+    position_ned_m: Vec3
+    yaw_rad: float = 0.0
+    use_yaw: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class EndEffectorSetpoint:
+    """Go-to target of the manipulator arm's tool point (the end effector: the point the
+    gripper closes on), in the position fix's world NED frame — the same frame as
+    :class:`PositionSetpoint`, but for the arm's tool, not the vehicle's body origin.
+
+    Over the teleop codec it travels as an ``EndEffectorGoTo`` order (1 cm, 0.01° tool yaw); a
+    later :class:`GoalCancel` cancels it, as it does a position setpoint.
+
+    Attributes:
+        position_ned_m: (3,) target of the tool point [m]: north, east, down.
+        yaw_rad: the tool's yaw about the world down axis [rad, clockwise from north], used
+            when ``use_yaw``; otherwise the tool keeps its yaw.
         use_yaw: whether ``yaw_rad`` applies.
     """
 
@@ -290,6 +312,7 @@ REPLICATED: tuple[tuple[type[object], int, Side], ...] = (
     (AttitudeSetpoint, 105, Side.OPERATOR),
     (PositionSetpoint, 106, Side.OPERATOR),
     (GoalCancel, 107, Side.OPERATOR),
+    (EndEffectorSetpoint, 108, Side.OPERATOR),
     (ImuReading, 151, Side.VEHICLE),
     (DepthReading, 152, Side.VEHICLE),
     (PositionReading, 153, Side.VEHICLE),

@@ -14,13 +14,19 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     travels, roll and pitch setpoints cannot); a changed :class:`PositionSetpoint` becomes a
     ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
     heading), which the vehicle flies as that setpoint in GUIDED — refused (counted
-    unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED.
-    Each new order toggles the order sequence bit. A ``GoTo`` is sent again, with the same
-    sequence bit, in every gap until a reply acknowledges that bit (a lost GoTo is not lost:
-    ``counters.goals_acked`` counts the acknowledged ones); a new :class:`GoalCancel` sets the
-    header's "cancel last order" bit on every order until a reply says the last order was
-    cancelled. The vehicle turns the bit's rising edge, and a ``DisableKeepHeading``, into a
-    :class:`GoalCancel` of its own intents.
+    unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED; a
+    changed :class:`EndEffectorSetpoint` becomes an ``EndEffectorGoTo`` (the extension's code
+    8: 1 cm, the tool yaw in 0.01° or none), which the vehicle writes back as that setpoint
+    (its mode untouched; refused without a position fix too, the target being in the fix's
+    frame). Each new order toggles the order sequence bit. Both are *goals* and go through
+    one path: a goal order is sent again, with the same sequence bit, in every gap until a
+    reply acknowledges that bit (a lost goal is not lost: ``counters.goals_acked`` counts the
+    acknowledged ones); a newer goal of the same kind replaces one not yet acknowledged, a
+    goal of the other kind waits for that acknowledgement (neither is dropped). A new
+    :class:`GoalCancel` drops the unacknowledged goal, whichever kind, and sets the header's
+    "cancel last order" bit on every order until a reply says the last order was cancelled.
+    The vehicle turns the bit's rising edge, and a ``DisableKeepHeading``, into a
+    :class:`GoalCancel` of its own intents (which cancels either goal).
 vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
     1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame); a
@@ -47,6 +53,7 @@ from testbed.common.components import (
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
+    EndEffectorSetpoint,
     GoalCancel,
     MissionStatus,
     ModeRequest,
@@ -71,6 +78,7 @@ from testbed.protocol import (
     decode_operator_message,
     decode_vehicle_message,
 )
+from testbed.protocol.orders import EndEffectorGoTo
 
 __all__ = [
     "ReplyChunk",
@@ -88,6 +96,17 @@ _TO_WIRE = {
     ControlMode.GUIDED: Mode.GUIDED,
 }
 _FROM_WIRE = {wire: mode for mode, wire in _TO_WIRE.items()}
+
+_GoalSetpoint = PositionSetpoint | EndEffectorSetpoint
+"""An intent that travels as a goal order (sent again until acknowledged)."""
+_GoalOrder = GoTo | EndEffectorGoTo
+"""The goal orders, one per :data:`_GoalSetpoint` kind."""
+_GOAL_ORDERS: dict[type[_GoalSetpoint], type[_GoalOrder]] = {
+    PositionSetpoint: GoTo,
+    EndEffectorSetpoint: EndEffectorGoTo,
+}
+"""Goal intent → its order, in the order changed goals are taken within one gap."""
+_YAW_CDEG = 36000  # the EndEffectorGoTo's tool yaw codes per turn
 
 
 class ReplyChunk(Protocol):
@@ -126,7 +145,7 @@ class TeleopCounters:
         malformed: payloads that did not decode (garbled past the CRC, or a foreign layout).
         unsupported: orders decoded but not supported by this vehicle (e.g. POS_HOLD, or
             GUIDED and go-to without a position fix).
-        goals_acked: (operator end) GoTo orders a reply acknowledged.
+        goals_acked: (operator end) goal orders (GoTo, EndEffectorGoTo) a reply acknowledged.
         cancels: (vehicle end) goal cancels applied.
     """
 
@@ -158,9 +177,9 @@ class TeleopOperatorEnd:
         self.order_seq_bit = False
         self._sent_attitude: AttitudeSetpoint | None = None
         self._sent_heading: KeepHeading | None = None
-        self._sent_position: PositionSetpoint | None = None
+        self._sent_goals: dict[type[_GoalSetpoint], _GoalSetpoint] = {}
         self._settled_arm: ArmRequest | None = None
-        self._pending_goto: tuple[GoTo, bool] | None = None  # the GoTo and its sequence bit
+        self._pending_goal: tuple[_GoalOrder, bool] | None = None  # the order and its seq bit
         self._sent_cancel: GoalCancel | None = None
         self._pending_cancel = False
 
@@ -182,7 +201,7 @@ class TeleopOperatorEnd:
         cancel = world.get(intents, GoalCancel)
         if cancel is not None and cancel != self._sent_cancel:
             self._sent_cancel, self._pending_cancel = cancel, True
-            self._pending_goto = None  # the cancel supersedes a GoTo not yet acknowledged
+            self._pending_goal = None  # the cancel supersedes a goal not yet acknowledged
         request = world.get(intents, ArmRequest)
         reported = world.get(self.vehicle, Armed)
         vehicle_armed = reported is not None and reported.armed
@@ -191,9 +210,8 @@ class TeleopOperatorEnd:
             arm = request.armed and not vehicle_armed
             disarm = not request.armed and vehicle_armed
         setpoint = world.get(intents, AttitudeSetpoint)
-        target = world.get(intents, PositionSetpoint)
-        order: Move | KeepHeading | GoTo | ImageSettings | None = None
-        resent_bit: bool | None = None  # a GoTo sent again keeps its sequence bit
+        order: Move | KeepHeading | _GoalOrder | ImageSettings | None = None
+        resent_bit: bool | None = None  # a goal sent again keeps its sequence bit
         if image_settings is not None and not (arm or disarm):
             order = image_settings
         elif setpoint is not None and setpoint != self._sent_attitude and not arm:
@@ -202,13 +220,14 @@ class TeleopOperatorEnd:
             heading = KeepHeading.from_degrees(yaw_deg)
             if heading != self._sent_heading:  # a roll/pitch-only change has nothing to send
                 self._sent_heading = order = heading
-        if order is None and target is not None and target != self._sent_position and not arm:
-            self._sent_position = target
-            order = self._goto(target)
-            self._pending_goto = (order, not self.order_seq_bit)
+        target = None if order is not None or arm else self._changed_goal()
+        if target is not None:
+            self._sent_goals[type(target)] = target
+            order = self._goal_order(target)
+            self._pending_goal = (order, not self.order_seq_bit)
             self._pending_cancel = False
-        elif order is None and self._pending_goto is not None and not (arm or disarm):
-            order, resent_bit = self._pending_goto  # again, until a reply acknowledges it
+        elif order is None and self._pending_goal is not None and not (arm or disarm):
+            order, resent_bit = self._pending_goal  # again, until a reply acknowledges it
         if resent_bit is None:
             self.order_seq_bit = not self.order_seq_bit
         if order is None:
@@ -226,16 +245,33 @@ class TeleopOperatorEnd:
         )
         return message.encode()
 
-    def _goto(self, target: PositionSetpoint) -> GoTo:
-        """The GoTo order of a position setpoint (int16 cm, clamped; heading in whole degrees:
-        the setpoint's, or the vehicle's last reported one)."""
+    def _changed_goal(self) -> _GoalSetpoint | None:
+        """The goal intent to send as a new order now: the first kind (vehicle, then end
+        effector) whose intent changed since it was last sent, skipping a kind other than the
+        one still waiting for its acknowledgement (it goes once that one is acknowledged)."""
+        pending = self._pending_goal
+        for kind, order_type in _GOAL_ORDERS.items():
+            target = self._world.get(self._intents, kind)
+            if target is None or target == self._sent_goals.get(kind):
+                continue
+            if pending is None or isinstance(pending[0], order_type):
+                return target
+        return None
+
+    def _goal_order(self, target: _GoalSetpoint) -> _GoalOrder:
+        """The order of a goal intent: int16 cm, clamped, for both; a GoTo's heading in whole
+        degrees (the setpoint's, or the vehicle's last reported one), an EndEffectorGoTo's tool
+        yaw in 0.01° (or none)."""
+        x, y, z = (max(-32768, min(32767, round(100.0 * v))) for v in target.position_ned_m)
+        if isinstance(target, EndEffectorSetpoint):
+            yaw = round(100.0 * math.degrees(target.yaw_rad)) % _YAW_CDEG
+            return EndEffectorGoTo(x, y, z, yaw if target.use_yaw else None)
         if target.use_yaw:
             heading = math.degrees(target.yaw_rad)
         else:
             odometry = self._world.get(self.vehicle, Odometry)
             quaternion = (1.0, 0.0, 0.0, 0.0) if odometry is None else odometry.quaternion_wxyz
             heading = math.degrees(euler_from_quat(quaternion)[2])
-        x, y, z = (max(-32768, min(32767, round(100.0 * v))) for v in target.position_ned_m)
         return GoTo(x, y, z, round(heading) % 360)
 
     def apply_reply(self, payload: bytes, now_s: float) -> VehicleMessage | None:
@@ -270,14 +306,26 @@ class TeleopOperatorEnd:
             world.set(vehicle, ActiveMode(mode), origin=Origin.REMOTE)
         status = MissionStatus(state.ready, state.last_order_cancelled)
         world.set(vehicle, status, origin=Origin.REMOTE)
-        pending = self._pending_goto
+        pending = self._pending_goal
         if pending is not None and state.order_ack_bit == pending[1]:
-            self._pending_goto = None
+            self._pending_goal = None
             self.counters.goals_acked += 1
         if self._pending_cancel and state.last_order_cancelled:
             self._pending_cancel = False
         self.counters.applied += 1
         return message
+
+
+def _goal_setpoint(order: _GoalOrder) -> _GoalSetpoint:
+    """The goal intent a goal order carries (cm → m; the angle → rad in (−π, π])."""
+    target = (order.x_cm / 100.0, order.y_cm / 100.0, order.z_cm / 100.0)
+    if isinstance(order, GoTo):
+        yaw = math.remainder(math.radians(order.heading % 360), math.tau)
+        return PositionSetpoint(target, yaw, True)
+    if order.yaw_cdeg is None:
+        return EndEffectorSetpoint(target)
+    yaw = math.remainder(math.radians(order.yaw_cdeg / 100.0), math.tau)
+    return EndEffectorSetpoint(target, yaw, True)
 
 
 class TeleopVehicleEnd:
@@ -333,14 +381,13 @@ class TeleopVehicleEnd:
             self._seq += 1
             command = MovementCommand(self._seq, now_s, (x, y, z, 0.0, 0.0, yaw))
             world.set(intents, command, origin=Origin.REMOTE)
-        elif isinstance(order, GoTo):
-            if not has_fix:
+        elif isinstance(order, GoTo | EndEffectorGoTo):
+            if not has_fix:  # a goal in the position fix's frame
                 self.counters.unsupported += 1
                 return False
-            target = (order.x_cm / 100.0, order.y_cm / 100.0, order.z_cm / 100.0)
-            yaw = math.remainder(math.radians(order.heading % 360), math.tau)
-            world.set(intents, PositionSetpoint(target, yaw, True), origin=Origin.REMOTE)
-            world.set(intents, ModeRequest(ControlMode.GUIDED), origin=Origin.REMOTE)
+            world.set(intents, _goal_setpoint(order), origin=Origin.REMOTE)
+            if isinstance(order, GoTo):  # the vehicle flies its goal in GUIDED
+                world.set(intents, ModeRequest(ControlMode.GUIDED), origin=Origin.REMOTE)
         elif isinstance(order, KeepHeading):
             yaw = math.radians(order.heading_deg)
             world.set(

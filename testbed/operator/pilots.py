@@ -10,9 +10,10 @@ returns what it holds now.
 
 Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig. 5),
 :class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints) and
-:class:`SupervisorPilot` (supervised control: a timed list of GoTo goals and cancels for a
-vehicle that flies itself, the narrow-band paper's "high level commands"). A scenario
-configures them (:class:`~testbed.run.scenario.PilotSection`); it does not implement them.
+:class:`SupervisorPilot` (supervised control: a timed list of GoTo goals — of the vehicle or of
+its arm's end effector — and cancels for a vehicle that flies itself, the narrow-band paper's
+"high level commands"). A scenario configures them (:class:`~testbed.run.scenario.PilotSection`);
+it does not implement them.
 
 Imports: ``config`` and the standard library only.
 """
@@ -21,13 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Literal, Protocol
 
 from testbed.config import check, check_range
 
 __all__ = [
+    "GOAL_FRAMES",
     "PERIOD_RANGE_S",
     "AttitudePilot",
+    "GoalFrame",
     "GoalOrder",
     "GoalStep",
     "Pilot",
@@ -46,6 +49,12 @@ _NO_STICKS: Sticks = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 PERIOD_RANGE_S = (0.01, 1.0e6)
 """Accepted periods [s] of stick sine terms and attitude setpoints."""
 
+GoalFrame = Literal["vehicle", "end_effector"]
+"""What a supervised goal moves: the vehicle's body origin (a PositionSetpoint, a GoTo order)
+or the manipulator arm's tool point (an EndEffectorSetpoint, an EndEffectorGoTo order)."""
+GOAL_FRAMES: tuple[GoalFrame, ...] = ("vehicle", "end_effector")
+"""The accepted :data:`GoalFrame` values; ``"vehicle"`` is the default."""
+
 
 @dataclass(frozen=True, slots=True)
 class GoalOrder:
@@ -53,13 +62,17 @@ class GoalOrder:
 
     Attributes:
         index: the order's place in the pilot's list (a new index is a new order).
-        position_ned_m: (3,) goal of the body origin [m], world NED; None = cancel.
-        yaw_deg: goal heading [deg, clockwise from north], or None to keep the vehicle's.
+        position_ned_m: (3,) goal [m], world NED, of the body origin (``frame = "vehicle"``)
+            or of the arm's tool point (``"end_effector"``); None = cancel.
+        yaw_deg: goal heading [deg, clockwise from north] of the vehicle or of the tool, or
+            None to keep the current one.
+        frame: what the goal moves (:data:`GoalFrame`).
     """
 
     index: int
     position_ned_m: tuple[float, float, float] | None
     yaw_deg: float | None = None
+    frame: GoalFrame = "vehicle"
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,14 +225,18 @@ class GoalStep:
         t_s: operator time the order is given [s], ≥ 0.
         position_ned_m: (3,) goal [m], world NED, each in [−300, 300] (the GoTo order's int16
             cm); None with ``cancel``.
-        yaw_deg: goal heading [deg], in [−360, 360]; None keeps the vehicle's heading.
-        cancel: cancel the goal in force (the vehicle holds where it is).
+        yaw_deg: goal heading [deg], in [−360, 360]; None keeps the vehicle's (or the
+            tool's) heading.
+        cancel: cancel the goal in force, of either frame (the vehicle holds where it is).
+        frame: ``"vehicle"`` (default: the goal is the body origin's, a GoTo order) or
+            ``"end_effector"`` (the arm's tool point, an EndEffectorGoTo order); goals only.
     """
 
     t_s: float
     position_ned_m: tuple[float, float, float] | None = None
     yaw_deg: float | None = None
     cancel: bool = False
+    frame: GoalFrame = "vehicle"
 
     def __post_init__(self) -> None:
         check_range(self.t_s, "t_s", 0.0, 1.0e6, "s")
@@ -233,6 +250,16 @@ class GoalStep:
                 check_range(value, "position_ned_m", -MAX_GOAL_M, MAX_GOAL_M, "m")
         if self.yaw_deg is not None:
             check_range(self.yaw_deg, "yaw_deg", -360.0, 360.0, "deg")
+        check(
+            self.frame in GOAL_FRAMES,
+            "frame",
+            f"must be one of {', '.join(map(repr, GOAL_FRAMES))}, got {self.frame!r}",
+        )
+        check(
+            not self.cancel or self.frame == "vehicle",
+            "frame",
+            "not used with cancel = true (a cancel cancels the goal of either frame)",
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,8 +267,10 @@ class SupervisorPilot:
     """Supervised control: centred sticks and, from each step's time on, its order in force.
 
     The operator station turns a new goal into a :class:`~testbed.common.components.
-    PositionSetpoint` (a GoTo order on the teleop codec) and a cancel into a
-    :class:`~testbed.common.components.GoalCancel`; the vehicle's mission logic flies them.
+    PositionSetpoint` (a GoTo order on the teleop codec) — or, for an ``"end_effector"`` goal,
+    an :class:`~testbed.common.components.EndEffectorSetpoint` (an EndEffectorGoTo order) —
+    and a cancel into a :class:`~testbed.common.components.GoalCancel`; the vehicle's mission
+    logic flies them.
 
     Attributes:
         steps: the orders, kept in time order (a stable sort of the given ones by ``t_s``).
@@ -258,5 +287,5 @@ class SupervisorPilot:
         for index, step in enumerate(self.steps):
             if step.t_s > t_s:
                 break
-            goal = GoalOrder(index, step.position_ned_m, step.yaw_deg)
+            goal = GoalOrder(index, step.position_ned_m, step.yaw_deg, step.frame)
         return PilotSample(_NO_STICKS, None, goal)

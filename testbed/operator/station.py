@@ -28,6 +28,7 @@ from testbed.common.components import (
     AttitudeSetpoint,
     ControlMode,
     DepthSetpoint,
+    EndEffectorSetpoint,
     GoalCancel,
     ModeRequest,
     MovementCommand,
@@ -91,7 +92,8 @@ class _Session:
 
 def sample_pilot(world: World) -> None:
     """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint, and
-    a supervised goal (a position setpoint, or a cancel) when a new one is in force."""
+    a supervised goal (a position setpoint, an end-effector setpoint for a goal in the
+    ``"end_effector"`` frame, or a cancel) when a new one is in force."""
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
     sample = session.pilot.sample(now)
@@ -102,7 +104,8 @@ def sample_pilot(world: World) -> None:
         else:
             use_yaw = goal.yaw_deg is not None
             yaw = math.remainder(math.radians(goal.yaw_deg or 0.0), math.tau)
-            world.set(session.entity, PositionSetpoint(goal.position_ned_m, yaw, use_yaw))
+            kind = EndEffectorSetpoint if goal.frame == "end_effector" else PositionSetpoint
+            world.set(session.entity, kind(goal.position_ned_m, yaw, use_yaw))
     if sample.attitude_deg is not None:
         roll, pitch, yaw = (math.radians(a) for a in sample.attitude_deg)
         world.set(session.entity, AttitudeSetpoint(quat_from_euler(roll, pitch, yaw)))

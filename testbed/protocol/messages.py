@@ -6,7 +6,10 @@
   :class:`VehicleState`, a chunk-info byte and an image chunk of 0..150 bytes.
 
 These are frame *payloads*; :mod:`testbed.protocol.framing` wraps them in frames. With a 40-B
-chunk a reply payload is 54 B and its 3-preamble frame 60 B; a move order is 7 B (13-B frame).
+chunk a reply payload is 54 B and its 3-preamble frame 60 B; a move order is 7 B (13-B frame),
+a go-to (``GoTo``) or an end-effector go-to (``EndEffectorGoTo``, code 8, the extension of the
+paper's order table) 10 B (16-B frame). Order codes 9..15 name no order: such a payload is a
+:class:`MalformedPayload`.
 
 **Byte order.** Every multi-byte field is big-endian. The original telerobotics code
 (``src/nodes/ROV.cpp``, ``Operator.cpp``) wrote the state's x, y, z and the go-to fields in host
@@ -32,6 +35,7 @@ from .orders import (
     AXIS_SCALE,
     ORDER_TYPES,
     DisableKeepHeading,
+    EndEffectorGoTo,
     GoTo,
     HoldChannel,
     ImageSettings,
@@ -55,6 +59,7 @@ __all__ = [
     "STATE_SIZE",
     "VEHICLE_HEADER_SIZE",
     "DisableKeepHeading",
+    "EndEffectorGoTo",
     "GoTo",
     "HoldChannel",
     "ImageSettings",

@@ -17,7 +17,10 @@ a value outside its documented range is rejected, so ``decode`` is the exact inv
 
 Order table (code, body size): NoOrder (0, 0) · Move (1, 5) · KeepHeading (2, 2) ·
 HoldChannel (3, 1) · ImageSettings (4, 8) · DisableKeepHeading (5, 0) · GoTo (6, 8) ·
-OrderIncoming (7, 0).
+OrderIncoming (7, 0) — the paper's layout, codes 0..7 — and, as an **extension** of it (not in
+the telerobotics code): EndEffectorGoTo (8, 8), the manipulator arm's tool point to a position.
+The type code is a 4-bit field, so codes 9..15 remain unused; a payload naming one is
+malformed.
 
 Standard library only; no I/O.
 """
@@ -32,8 +35,10 @@ from typing import ClassVar, Self
 
 __all__ = [
     "AXIS_SCALE",
+    "EE_NO_YAW",
     "ORDER_TYPES",
     "DisableKeepHeading",
+    "EndEffectorGoTo",
     "GoTo",
     "HoldChannel",
     "ImageSettings",
@@ -50,6 +55,10 @@ AXIS_SCALE = 127
 
 _ROI_MAX = 1023
 _INT16 = (-32768, 32767)
+
+EE_NO_YAW = 0xFFFF
+"""The :class:`EndEffectorGoTo` yaw field's sentinel: no tool yaw target."""
+_EE_YAW_CODES = 36000  # 0.01° steps: 0..35999 = 0..359.99°
 
 
 class Mode(enum.IntEnum):
@@ -403,6 +412,63 @@ class OrderIncoming(_EmptyBody):
     CODE: ClassVar[int] = 7
 
 
+@dataclass(frozen=True, slots=True)
+class EndEffectorGoTo:
+    """Move the manipulator arm's tool point to a position (8 B) — an extension of the paper's
+    order table (code 8; the telerobotics code has no arm).
+
+    Body (big-endian)::
+
+        bytes 0–1  x_cm  int16   north [cm]  ┐ the GoTo's coordinates: world NED frame of the
+        bytes 2–3  y_cm  int16   east [cm]   │ vehicle's positioning system, 1 cm step,
+        bytes 4–5  z_cm  int16   down [cm]   ┘ −327.68..327.67 m
+        bytes 6–7  yaw   uint16  tool yaw: 0..35999 = 0.00..359.99° in 0.01° steps, clockwise
+                                 from north (about the world down axis); 0xFFFF
+                                 (:data:`EE_NO_YAW`) = no yaw target (the tool keeps its yaw);
+                                 36000..65534 reserved, rejected
+
+    The position is the target of the arm's tool point (the end effector), not of the vehicle;
+    the vehicle-manipulator system decides how vehicle and arm share the motion.
+
+    Attributes:
+        x_cm: north [cm], −32768..32767.
+        y_cm: east [cm], −32768..32767.
+        z_cm: down [cm], −32768..32767.
+        yaw_cdeg: tool yaw target [0.01°, clockwise from north], 0..35999, or None for no
+            yaw target.
+    """
+
+    CODE: ClassVar[int] = 8
+    BODY_SIZE: ClassVar[int] = 8
+
+    x_cm: int
+    y_cm: int
+    z_cm: int
+    yaw_cdeg: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("x_cm", "y_cm", "z_cm"):
+            check_int(name, getattr(self, name), *_INT16)
+        if self.yaw_cdeg is not None:
+            check_int("yaw_cdeg", self.yaw_cdeg, 0, _EE_YAW_CODES - 1)
+
+    def encode(self) -> bytes:
+        """The 8-byte body."""
+        yaw = EE_NO_YAW if self.yaw_cdeg is None else self.yaw_cdeg
+        return struct.pack(">hhhH", self.x_cm, self.y_cm, self.z_cm, yaw)
+
+    @classmethod
+    def decode(cls, data: bytes) -> Self:
+        """Parse an 8-byte body. Raises ValueError on a bad size or a reserved yaw code."""
+        _check_body(cls.__name__, cls.BODY_SIZE, data)
+        x_cm, y_cm, z_cm, yaw = struct.unpack(">hhhH", data)
+        if yaw == EE_NO_YAW:
+            return cls(x_cm, y_cm, z_cm)
+        if yaw >= _EE_YAW_CODES:
+            raise ValueError(f"EndEffectorGoTo yaw code {yaw} is reserved (36000..65534)")
+        return cls(x_cm, y_cm, z_cm, yaw)
+
+
 Order = (
     NoOrder
     | Move
@@ -412,6 +478,7 @@ Order = (
     | DisableKeepHeading
     | GoTo
     | OrderIncoming
+    | EndEffectorGoTo
 )
 """Any order an :class:`~testbed.protocol.messages.OperatorMessage` can carry."""
 
@@ -426,6 +493,7 @@ ORDER_TYPES: dict[int, type[Order]] = {
         DisableKeepHeading,
         GoTo,
         OrderIncoming,
+        EndEffectorGoTo,
     )
 }
-"""Order class by type code (0..7)."""
+"""Order class by type code: the paper's 0..7 and the extension's 8 (codes 9..15 unused)."""
