@@ -36,6 +36,7 @@ from testbed.operator.pilots import Pilot
 from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus, MissionStatus, PoseTarget
 from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
 
 __all__ = [
@@ -65,6 +66,8 @@ SERIES_COLUMNS = (
     "target_n", "target_e", "target_d",              # autonomy's pose target, NED (NaN: none)
     "target_yaw_deg",
     "est_n", "est_e", "est_d",                       # navigation estimate, NED (NaN: none)
+    "ee_n", "ee_e", "ee_d",                          # end effector, truth, NED (NaN: no arm)
+    "ee_target_n", "ee_target_e", "ee_target_d",     # autonomy's end-effector target (NaN: none)
 )  # fmt: skip
 """Columns of :attr:`Recorder.series`, in order (filled by :meth:`VehicleObserver.row`)."""
 
@@ -152,7 +155,12 @@ class VehicleObserver:
             row += (*target.position_ned_m, target.yaw_rad * _DEG)
         estimate = world.get(ctl.vehicle, NavigationEstimate)
         row += _NO_ESTIMATE if estimate is None else estimate.position_ned_m
-        return row
+        if not world.has_resource(Manipulator):
+            return row + _NO_ESTIMATE + _NO_ESTIMATE
+        arm = world.resource(Manipulator)
+        row += arm.end_effector_ned(truth.position_ned_m, truth.quaternion_wxyz)
+        reach = world.get(ctl.vehicle, EndEffectorTarget)
+        return row + (_NO_ESTIMATE if reach is None else reach.position_ned_m)
 
 
 class SeriesRows(Sequence[tuple[float, ...]]):

@@ -391,8 +391,10 @@ def mission_metrics(
 ) -> dict[str, Any]:
     """The ``"mission"`` key of ``metrics.json`` (vehicles under autonomy).
 
-    The error rows are those with a pose target, armed, at or after ``settle_s``:
-    ``position_error_m`` (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
+    The error rows are those with a pose target, armed, at or after ``settle_s``; on rows
+    with an end-effector target the target and the truth are the end effector's (``frame``:
+    ``"end_effector"`` when any row has one, else ``"body"``). ``position_error_m``
+    (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
     ``estimate_error_m`` (``{mean, p95}`` of |estimate − truth| [m] on those rows that have an
     estimate); ``samples`` counts the rows. ``time_to_converge_s``
     (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's goal tolerance) is taken
@@ -408,15 +410,23 @@ def mission_metrics(
         orders_acknowledged: goals the operator saw acknowledged, or None.
     """
     t = series["t_s"]
-    truth = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
+    body = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
+    truth = body
     target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
+    reach = np.column_stack([series[f"ee_target_{k}"] for k in "ned"])
+    reaching = np.isfinite(reach).all(axis=1)  # rows flown by the end effector
+    if reaching.any():
+        ee = np.column_stack([series[f"ee_{k}"] for k in "ned"])
+        truth = np.where(reaching[:, None], ee, truth)
+        target = np.where(reaching[:, None], reach, target)
     estimate = np.column_stack([series["est_n"], series["est_e"], series["est_d"]])
     flying = (series["armed"] > 0.5) & np.isfinite(target).all(axis=1)
     rows = (t >= settle_s) & flying
     error = position_error(truth[rows], target[rows])
-    nav_error = position_error(estimate[rows], truth[rows])
+    nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
     return {
+        "frame": "end_effector" if reaching.any() else "body",
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),

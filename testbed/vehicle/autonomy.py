@@ -47,6 +47,7 @@ from testbed.vehicle.components import (
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
+    EndEffectorSetpoint,
     FailsafeLevel,
     FailsafeStatus,
     GoalCancel,
@@ -58,6 +59,7 @@ from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.hydrodynamics import HydroModel
 from testbed.vehicle.ismc import IsmcController, IsmcGains, load_ismc_gains, mismatched_model
 from testbed.vehicle.kinematic import PoseGains, pose_twist
+from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.mission import Mission, load_mission, load_packaged_mission, mission_names
 from testbed.vehicle.systems import ZERO6, Controllers, SimClock, set_intent
 
@@ -189,7 +191,8 @@ class Autonomy:
         next_tick_s: vehicle time of the next tree tick [s].
         navigating: the estimate has been good enough to start from (``ready_sigma_m``).
         started: the mission's start event was given.
-        seen: the operator's last goal, heading and cancel already handed to the tree.
+        seen: the operator's last goal, heading, cancel and end-effector goal already handed
+            to the tree.
         last_arm: the operator's last arm request seen.
         link_disarmed: the link failsafe reached SURFACE; latched until a new arm request.
         goals: goals given to the tree (mission start, GoTo, KeepHeading).
@@ -204,7 +207,7 @@ class Autonomy:
     next_tick_s: float = 0.0
     navigating: bool = False
     started: bool = False
-    seen: tuple[object, object, object] = (None, None, None)
+    seen: tuple[object, object, object, object] = (None, None, None, None)
     last_arm: ArmRequest | None = None
     link_disarmed: bool = False
     goals: int = 0
@@ -263,6 +266,12 @@ def run_mission(world: World) -> None:
     )
     context.estimate_position_ned = estimate.position_ned_m
     context.estimate_yaw_rad = euler_from_quat(estimate.quaternion_wxyz)[2]
+    if world.has_resource(Manipulator):
+        arm = world.resource(Manipulator)
+        context.manipulator_armed = arm.armed
+        context.end_effector_position_ned = arm.end_effector_ned(
+            estimate.position_ned_m, estimate.quaternion_wxyz
+        )
     _supervise_goals(world, auto, context)
     auto.runner.tick(context)
     _apply_outputs(world, auto, ctl, now)
@@ -284,8 +293,8 @@ def _watch_link(world: World, auto: Autonomy, ctl: Controllers) -> None:
 
 def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> None:
     """Hand the operator's new goal, heading or cancel to the tree (one-shot requests)."""
-    goal, heading, cancel = (_latest(world, kind) for kind in _SUPERVISION)
-    seen_goal, seen_heading, seen_cancel = auto.seen
+    goal, heading, cancel, reach = (_latest(world, kind) for kind in _SUPERVISION)
+    seen_goal, seen_heading, seen_cancel, seen_reach = auto.seen
     mission = auto.config.mission
     if mission is not None and not auto.started and context.time_s >= auto.config.start_s:
         auto.started = context.start_requested = True
@@ -293,6 +302,11 @@ def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> N
     if isinstance(goal, PositionSetpoint) and goal != seen_goal:
         yaw = goal.yaw_rad if goal.use_yaw else None
         context.goal = GoalRequest(goal.position_ned_m, yaw)
+        auto.goals += 1
+        auto.cancelled = False
+    elif isinstance(reach, EndEffectorSetpoint) and reach != seen_reach:
+        yaw = reach.yaw_rad if reach.use_yaw else None
+        context.goal = GoalRequest(reach.position_ned_m, yaw, end_effector=True)
         auto.goals += 1
         auto.cancelled = False
     elif isinstance(heading, AttitudeSetpoint) and heading != seen_heading:
@@ -306,10 +320,10 @@ def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> N
         context.cancel_requested = True
         auto.cancels += 1
         auto.cancelled = True
-    auto.seen = (goal, heading, cancel)
+    auto.seen = (goal, heading, cancel, reach)
 
 
-_SUPERVISION = (PositionSetpoint, AttitudeSetpoint, GoalCancel)
+_SUPERVISION = (PositionSetpoint, AttitudeSetpoint, GoalCancel, EndEffectorSetpoint)
 
 
 def _latest(world: World, kind: type[object]) -> object | None:
@@ -326,11 +340,21 @@ def _apply_outputs(world: World, auto: Autonomy, ctl: Controllers, now: float) -
         world.set(vehicle, ActiveMode(ControlMode.GUIDED))
     elif context.request_arm is False and ctl.flags.armed:
         world.set(vehicle, Armed(False))
+    if context.request_manipulator is not None and world.has_resource(Manipulator):
+        world.resource(Manipulator).armed = context.request_manipulator
     setpoint = context.pose_setpoint
     armed = world.get(vehicle, Armed)
     if armed is None or not armed.armed:
         world.remove(vehicle, PoseTarget)
+        world.remove(vehicle, EndEffectorTarget)
+    elif setpoint is not None and setpoint.end_effector:
+        reach = EndEffectorTarget(
+            now, setpoint.position_ned, setpoint.yaw_rad, setpoint.velocity_ned
+        )
+        world.set(vehicle, reach)
+        world.remove(vehicle, PoseTarget)
     elif setpoint is not None:
+        world.remove(vehicle, EndEffectorTarget)
         target = PoseTarget(now, setpoint.position_ned, setpoint.yaw_rad, setpoint.velocity_ned)
         world.set(vehicle, target)
     elif not world.has(vehicle, PoseTarget):  # armed with no order yet: hold station here
@@ -356,22 +380,42 @@ def control_velocity(world: World) -> None:
     vehicle = ctl.vehicle
     target = world.get(vehicle, PoseTarget)
     estimate = world.get(vehicle, NavigationEstimate)
-    if not (ctl.flags.velocity and ctl.flags.armed) or target is None or estimate is None:
+    reach = world.resource(Manipulator).vehicle_twist if world.has_resource(Manipulator) else None
+    flying = target is not None or reach is not None
+    if not (ctl.flags.velocity and ctl.flags.armed) or not flying or estimate is None:
         ismc.reset()
         set_intent(world, ctl, "velocity", ZERO6)
         return
     clock = world.resource(SimClock)
+    q = estimate.quaternion_wxyz
+    nu = (*estimate.velocity_body_m_s, *estimate.rates_rad_s)
+    down = quat_rotate_inverse(q, (0.0, 0.0, 1.0))
+    if reach is not None:  # the TPIK's vehicle twist (an end-effector target)
+        _fly_twist(world, ctl, ismc, reach, nu, down, clock.dt_s)
+        return
+    assert target is not None
     ahead = clock.time_s - target.time_s
     vn, ve, vd = target.velocity_ned_m_s
     pn, pe, pd = target.position_ned_m
     position = (pn + vn * ahead, pe + ve * ahead, pd + vd * ahead)
-    q = estimate.quaternion_wxyz
     twist = pose_twist(
         position, target.yaw_rad, estimate.position_ned_m, q, auto.config.pose, (vn, ve, vd)
     )
-    nu = (*estimate.velocity_body_m_s, *estimate.rates_rad_s)
-    down = quat_rotate_inverse(q, (0.0, 0.0, 1.0))
-    wrench = ismc.update(twist, nu, down, clock.dt_s)
+    _fly_twist(world, ctl, ismc, twist, nu, down, clock.dt_s)
+
+
+def _fly_twist(
+    world: World,
+    ctl: Controllers,
+    ismc: IsmcController,
+    twist: tuple[float, ...],
+    nu: tuple[float, ...],
+    down: tuple[float, float, float],
+    dt_s: float,
+) -> None:
+    """The ISMC's wrench for a body twist [m/s, rad/s] as the velocity intent (zero if not
+    finite)."""
+    wrench = ismc.update(twist, nu, down, dt_s)
     if not all(math.isfinite(w) for w in wrench):
         wrench = ZERO6
     set_intent(world, ctl, "velocity", wrench)

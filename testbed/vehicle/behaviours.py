@@ -15,12 +15,19 @@ The tree, ticked once per :meth:`MissionRunner.tick` (Angler: every 50 ms)::
             Setup done?                 condition
             Setup once [Sequence, memory]
               Arm vehicle               request_arm = True until armed (timeout → failure)
-              Arm manipulator           placeholder: succeeds (the arm plugs in here)
+              Arm manipulator           request_manipulator = True until armed (none: skip)
               Mark setup done
           Plan on request               cancel → hold here; GoTo → one leg; start → mission
           Execute or idle [Selector]
             Execute trajectory          pose setpoints until done and settled in tolerance
             Idle / hold station         the last pose held (or nothing, before any order)
+
+**Frames.** A plan is flown by the vehicle's body origin or by the arm's end effector (a
+mission whose ``child`` is the tool frame, :attr:`~testbed.vehicle.mission.Mission.end_effector`,
+or an end-effector GoTo): it starts from, and its tolerance is checked against, that frame's
+estimated position, and its setpoints say which frame they are for
+(:attr:`PoseSetpoint.end_effector`). The arm primitives are arming the manipulator (setup),
+moving the end effector along a plan (execute) and holding it there (idle).
 
 Composites without ``memory`` are re-evaluated from their first child every tick, so the
 disarm fallback overrides execution within the tick its trigger is seen, and a new GoTo goal
@@ -119,6 +126,7 @@ class GoalRequest:
 
     position_ned: Vec3
     yaw_rad: float | None = None
+    end_effector: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,11 +137,13 @@ class PoseSetpoint:
         position_ned: (3,) desired position [m], world NED.
         yaw_rad: desired heading [rad, clockwise from north].
         velocity_ned: (3,) feed-forward velocity [m/s], world NED.
+        end_effector: the position is the end effector's (the yaw stays the vehicle's).
     """
 
     position_ned: Vec3
     yaw_rad: float
     velocity_ned: Vec3 = _ZERO
+    end_effector: bool = False
 
 
 @dataclass(slots=True)
@@ -146,10 +156,14 @@ class MissionContext:
         disarm_requested: the pilot or the link wants the vehicle disarmed (a level).
         estimate_position_ned: (3,) estimated position [m], world NED.
         estimate_yaw_rad: estimated heading [rad, clockwise from north].
+        end_effector_position_ned: (3,) the end effector's estimated position [m], world NED,
+            or None (no arm).
+        manipulator_armed: the arm reports itself armed.
         start_requested: one-shot: start the loaded mission (consumed by the tick).
         goal: one-shot: a GoTo order (consumed by the tick), or None.
         cancel_requested: one-shot: drop the plan and hold the current pose (consumed).
         request_arm: output: True to ask for arming, False for disarming, None for no change.
+        request_manipulator: output: the same for the arm.
         pose_setpoint: output: this tick's setpoint, or None (nothing commanded).
         status: output: one line on what the tree is doing.
         goal_reached: output: the last plan ended within tolerance (cleared by a new plan).
@@ -164,10 +178,13 @@ class MissionContext:
     disarm_requested: bool = False
     estimate_position_ned: Vec3 = _ZERO
     estimate_yaw_rad: float = 0.0
+    end_effector_position_ned: Vec3 | None = None
+    manipulator_armed: bool = False
     start_requested: bool = False
     goal: GoalRequest | None = None
     cancel_requested: bool = False
     request_arm: bool | None = None
+    request_manipulator: bool | None = None
     pose_setpoint: PoseSetpoint | None = None
     status: str = ""
     goal_reached: bool = False
@@ -185,6 +202,8 @@ _KEYS: dict[str, Any] = {
     "disarm_requested": False,
     "position": _ZERO,
     "yaw": 0.0,
+    "ee_position": None,
+    "manipulator_armed": False,
     "start": False,
     "goal": None,
     "cancel": False,
@@ -192,10 +211,12 @@ _KEYS: dict[str, Any] = {
     "disarm_latched": False,
     "setup_done": False,
     "trajectory": None,
+    "end_effector": False,
     "settle_since": None,
     "hold": None,
     # outputs
     "request_arm": None,
+    "request_manipulator": None,
     "setpoint": None,
     "status": "",
     "goal_reached": False,
@@ -227,6 +248,8 @@ class _GatherData(_Node):
         bb.disarm_requested = ctx.disarm_requested
         bb.position = ctx.estimate_position_ned
         bb.yaw = ctx.estimate_yaw_rad
+        bb.ee_position = ctx.end_effector_position_ned
+        bb.manipulator_armed = ctx.manipulator_armed
         if not ctx.disarm_requested:
             bb.disarm_latched = False
         if ctx.start_requested:
@@ -272,6 +295,8 @@ def _stop_setpoints(bb: Any) -> None:
 
 def _disarm_vehicle(bb: Any) -> None:
     bb.request_arm = False
+    if bb.ee_position is not None:
+        bb.request_manipulator = False
     bb.status = "disarmed: disarm requested"
     if not bb.disarm_latched:
         bb.disarm_latched = True
@@ -303,6 +328,41 @@ class _ArmVehicle(_Node):
         return Status.RUNNING
 
 
+class _ArmManipulator(_Node):
+    """Ask for the arm's arming until it reports armed (SUCCESS at once without an arm);
+    FAILURE after the setup timeout."""
+
+    def __init__(self, bb: py_trees.blackboard.Client, timeout_s: float) -> None:
+        super().__init__("Arm manipulator", bb)
+        self.timeout_s = timeout_s
+        self.since_s: float | None = None
+
+    def initialise(self) -> None:
+        self.since_s = None
+
+    def update(self) -> Status:
+        bb = self.bb
+        if bb.ee_position is None or bb.manipulator_armed:
+            return Status.SUCCESS
+        bb.request_manipulator = True
+        if self.since_s is None:
+            self.since_s = bb.time_s
+        if bb.time_s - self.since_s > self.timeout_s:
+            bb.status = f"setup failed: manipulator not armed within {self.timeout_s:g} s"
+            return Status.FAILURE
+        bb.status = "setup: arming the manipulator"
+        return Status.RUNNING
+
+
+def _frame_position(bb: Any, end_effector: bool) -> Vec3:
+    """The estimated position of the frame a plan flies: the end effector's or the body's."""
+    if end_effector and bb.ee_position is not None:
+        position: Vec3 = bb.ee_position
+        return position
+    body: Vec3 = bb.position
+    return body
+
+
 class _PlanOnRequest(_Node):
     """Act on the pending requests: cancel, then a GoTo goal, then a mission start."""
 
@@ -323,8 +383,9 @@ class _PlanOnRequest(_Node):
         elif bb.goal is not None:
             goal: GoalRequest = bb.goal
             cfg = self.config
+            bb.end_effector = goal.end_effector and bb.ee_position is not None
             leg = single_goal(
-                bb.position,
+                _frame_position(bb, bb.end_effector),
                 bb.yaw,
                 goal.position_ned,
                 goal.yaw_rad,
@@ -338,7 +399,9 @@ class _PlanOnRequest(_Node):
                 bb.start = False
                 bb.status = "start ignored: no mission loaded"
             else:
-                self._start(plan(self.mission, bb.position, bb.yaw, bb.time_s))
+                bb.end_effector = self.mission.end_effector and bb.ee_position is not None
+                start = _frame_position(bb, bb.end_effector)
+                self._start(plan(self.mission, start, bb.yaw, bb.time_s))
         return Status.SUCCESS
 
     def _start(self, trajectory: Trajectory) -> None:
@@ -369,11 +432,14 @@ class _ExecuteTrajectory(_Node):
             return Status.FAILURE
         now = bb.time_s
         sample = trajectory.sample(now - trajectory.start_time_s)
-        bb.setpoint = PoseSetpoint(sample.position_ned, sample.yaw_rad, sample.velocity_ned)
+        end_effector = bool(bb.end_effector)
+        bb.setpoint = PoseSetpoint(
+            sample.position_ned, sample.yaw_rad, sample.velocity_ned, end_effector
+        )
         bb.status = f"executing {trajectory.name}"
         if not sample.done:
             return Status.RUNNING
-        error_m = math.dist(bb.position, sample.position_ned)
+        error_m = math.dist(_frame_position(bb, end_effector), sample.position_ned)
         error_rad = abs(wrap_angle(bb.yaw - sample.yaw_rad))
         if error_m < cfg.goal_tolerance_m and error_rad < cfg.yaw_tolerance_rad:
             if bb.settle_since is None:
@@ -396,7 +462,11 @@ class _ExecuteTrajectory(_Node):
     def _finish(self, trajectory: Trajectory) -> None:
         self.bb.trajectory = None
         self.bb.settle_since = None
-        self.bb.hold = PoseSetpoint(trajectory.final_position_ned, trajectory.final_yaw_rad)
+        self.bb.hold = PoseSetpoint(
+            trajectory.final_position_ned,
+            trajectory.final_yaw_rad,
+            end_effector=bool(self.bb.end_effector),
+        )
 
 
 class _Idle(_Node):
@@ -450,7 +520,7 @@ def _build_tree(
                 memory=True,
                 children=[
                     _ArmVehicle(bb, config.setup_timeout_s),
-                    _Do("Arm manipulator", bb, lambda board: None),  # placeholder
+                    _ArmManipulator(bb, config.setup_timeout_s),
                     _Do("Mark setup done", bb, setup_done(True)),
                 ],
             ),
@@ -513,11 +583,13 @@ class MissionRunner:
         """
         bb = self._bb
         bb.request_arm = None
+        bb.request_manipulator = None
         bb.setpoint = None
         self._gather.context = context
         self.tree.tick()
         self._ticks += 1
         context.request_arm = bb.request_arm
+        context.request_manipulator = bb.request_manipulator
         context.pose_setpoint = bb.setpoint
         context.status = bb.status
         context.goal_reached = bb.goal_reached

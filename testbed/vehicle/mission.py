@@ -11,7 +11,9 @@ A mission file (Angler's ``preplanned_end_effector_planner`` library format) is:
 **world NED metres** (x north, y east, z down: ``z = 1`` is 1 m deep) and converts nothing.
 ``rx, ry, rz`` are Euler angles ``xyz`` [rad] (extrinsic x, y, z, which is the Z-Y-X
 roll–pitch–yaw of :mod:`testbed.common.geometry`), so ``rz`` is the yaw, clockwise from north.
-``parent`` and ``child`` are names only (kept for Angler compatibility, not used).
+``parent`` is a name only (kept for Angler compatibility). ``child`` names the frame the
+waypoints are for: Angler's tool frame ``alpha_standard_jaws_tool`` (or ``end_effector``) makes
+them the arm's end effector's (:data:`TOOL_FRAMES`), anything else (``base_link``) the body's.
 
 **Checks.** Missing or unknown keys, non-numbers, non-finite numbers, an empty waypoint list, a
 negative first time and repeated or decreasing times (Angler's library has repeated ones; they
@@ -45,6 +47,7 @@ from testbed.common.geometry import Vec3, wrap_angle
 from testbed.config import ConfigError, read_text
 
 __all__ = [
+    "TOOL_FRAMES",
     "Mission",
     "Trajectory",
     "TrajectorySample",
@@ -59,6 +62,8 @@ __all__ = [
 ]
 
 _PACKAGE_DIR = ("scenarios", "missions")
+TOOL_FRAMES = ("alpha_standard_jaws_tool", "end_effector")
+"""``child`` frame names that put a mission's waypoints on the arm's end effector."""
 _TOP_KEYS = ("name", "parent", "child", "waypoints")
 _WAYPOINT_KEYS = ("time_from_start", "transform", "velocity", "acceleration")
 _TRANSFORM_KEYS = ("x", "y", "z", "rx", "ry", "rz")
@@ -97,7 +102,8 @@ class Mission:
     Attributes:
         name: the mission's ``name``.
         parent: Angler's reference frame name (read as world NED here).
-        child: Angler's controlled frame name (informational).
+        child: Angler's controlled frame name: a tool frame (:data:`TOOL_FRAMES`) makes the
+            waypoints the end effector's (:attr:`end_effector`), anything else the body's.
         waypoints: the points, times strictly increasing.
         source: the file the mission came from (for messages).
     """
@@ -107,6 +113,11 @@ class Mission:
     child: str
     waypoints: tuple[Waypoint, ...]
     source: str = "<mission>"
+
+    @property
+    def end_effector(self) -> bool:
+        """The waypoints are for the arm's end effector (``child`` is a tool frame)."""
+        return self.child in TOOL_FRAMES
 
     @property
     def duration_s(self) -> float:

@@ -45,6 +45,8 @@ from numpy.typing import NDArray
 
 from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
 from testbed.config import check
+from testbed.vehicle.arm import ArmModel
+from testbed.vehicle.arm_body import G_M_S2, RHO_KG_M3, ArmBody, arm_links
 from testbed.vehicle.camera import CameraConfig, CameraPose
 from testbed.vehicle.hydrodynamics import HydroModel, coefficients, load_model
 from testbed.vehicle.plant_kernels import pybullet_state, pybullet_wrench
@@ -96,6 +98,8 @@ Quat = tuple[float, float, float, float]
 _Raw = tuple[Vec3, tuple[float, float, float, float], Vec3, Vec3]
 """pybullet's (position, orientation xyzw, linear velocity, angular velocity), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
+_Coupling = tuple[Sequence[float], Sequence[float], Sequence[float], Vec3, Vec3]
+"""The last step's hull velocity, angular velocity, rotation, force and torque (world)."""
 
 
 def ned_to_pybullet(vector: Sequence[float]) -> Vec3:
@@ -201,6 +205,19 @@ class Physics:
         current: water current (none by default).
         pool: pool scene (open water by default).
         rng: generator for the current's variation (needed only if it varies).
+        arm: a manipulator on the hull (:mod:`.arm_body`), or None.
+        arm_coupling: the arm's reaction on the hull enters Fossen's equation (True), or is
+            cancelled, as if the arm were massless to the hull (False: what coupling costs).
+        arm_trim: a float fixed to the hull cancels the arm's weight in water and its moment
+            in the arm's initial pose (as Angler's vehicle is ballasted for its arm); only with
+            ``arm_coupling`` (uncoupled, the hull feels none of the arm's weight either).
+
+    Coupling. The arm's links are the hull's children in one pybullet multibody, so pybullet's
+    articulated dynamics carry the joint reactions. Each step measures the arm's reaction on the
+    hull over the last step from the hull's own motion, R = m·Δv/Δt − F_applied (and
+    I·Δω/Δt + ω×Iω − τ_applied), then solves Fossen's equation with τ + R (one step late:
+    the arm is ~10 % of the hull's mass and added mass, so the lag's recurrence factor is
+    ~0.1) and applies the force that gives that acceleration less R, which pybullet adds back.
 
     Use as a context manager or call :meth:`close`; the pybullet client is disconnected then.
     """
@@ -215,6 +232,9 @@ class Physics:
         current: WaterCurrent | None = None,
         pool: PoolScene | None = None,
         rng: np.random.Generator | None = None,
+        arm: ArmModel | None = None,
+        arm_coupling: bool = True,
+        arm_trim: bool = True,
     ) -> None:
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
@@ -236,12 +256,23 @@ class Physics:
         self._floats: tuple[float, Vec3, Quat, Vec6] | None = None
 
         self._cog = model.cog_m
+        self.arm_model = arm
+        self.arm_coupling = arm_coupling
+        self.arm: ArmBody | None = None
+        self._trim: tuple[float, Vec3] | None = None
+        self._coupling: list[_Coupling | None] = [None]  # the last step's (v, ω, R, F, τ), world
+        self.arm_reaction_frd: Vec6 = (0.0,) * 6
+        """The arm's reaction on the hull measured at the last step [N, N·m], FRD, CoG."""
 
         self.client_id: int = pybullet.connect(pybullet.DIRECT)
         self._finalizer = weakref.finalize(self, _disconnect, self.client_id)
         self.body_id: int = self._build_scene()
-        self._advance = self._make_stepper()
+        if arm is not None:
+            self.arm = ArmBody(pybullet, self.client_id, self.body_id, arm)
+        self._advance = self._make_stepper() if arm is None else self._make_arm_stepper()
         self.reset()
+        if arm is not None and arm_trim and arm_coupling:
+            self._trim = self._arm_trim()
 
     # --- setup -----------------------------------------------------------------------------
 
@@ -263,11 +294,15 @@ class Physics:
             collisionFramePosition=centre_flu,
             physicsClientId=cid,
         )
+        links = (
+            {} if self.arm_model is None else arm_links(pybullet, cid, self.arm_model, self._cog)
+        )
         body: int = pybullet.createMultiBody(
             baseMass=self.model.mass_kg,
             baseCollisionShapeIndex=shape,
             basePosition=[0.0, 0.0, 0.0],
             physicsClientId=cid,
+            **links,
         )
         pybullet.changeDynamics(
             body,
@@ -357,6 +392,9 @@ class Physics:
             ned_to_pybullet(rotate(rot, (p, q, r))),
             physicsClientId=cid,
         )
+        if self.arm is not None:
+            self.arm.reset(self.arm_model.initial_q_rad if self.arm_model else ())
+            self._coupling[0] = None
         self._steps = 0
         self._next_current_update_s = self.current.update_period_s
         self._nu_dot = (0.0,) * 6
@@ -531,6 +569,121 @@ class Physics:
         pybullet_state(model.cog_m, zero3, (0.0, 0.0, 0.0, 1.0), level, zero3, zero3)
         return advance
 
+    def _make_arm_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
+        """:meth:`_make_stepper`'s step with the arm: its measured reaction coupled into (or
+        cancelled from) the hull's Fossen equation, the trim float's wrench, and the links'
+        loads (class docstring)."""
+        get_pose = pybullet.getBasePositionAndOrientation
+        get_velocity = pybullet.getBaseVelocity
+        apply_force = pybullet.applyExternalForce
+        apply_torque = pybullet.applyExternalTorque
+        step_simulation = pybullet.stepSimulation
+        matrix_from_quaternion = pybullet.getMatrixFromQuaternion
+        link_frame = pybullet.LINK_FRAME
+        cid, body = self.client_id, self.body_id
+        model = self.model
+        fossen = coefficients(model)
+        rigid = (
+            model.mass_kg,
+            *model.inertia_kg_m2,
+            *model.cog_m,
+            *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
+            1.0 / model.hull_size_m[2],
+        )
+        arm = self.arm
+        assert arm is not None
+        m, dt, coupled = model.mass_kg, self.dt_s, self.arm_coupling
+        inertia = model.inertia_kg_m2  # FRD and FLU share the diagonal
+        memory = self._coupling
+
+        def advance(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
+            if raw is None:
+                (_, _, height), orientation = get_pose(body, cid)
+                linear, angular = get_velocity(body, cid)
+            else:
+                (_, _, height), orientation, linear, angular = raw
+            rotation = matrix_from_quaternion(orientation)
+            reaction = _measured_reaction(memory[0], linear, angular, rotation, m, inertia, dt)
+            self.arm_reaction_frd = reaction
+            load = [w + t for w, t in zip(wrench_body, self._trim_wrench(rotation), strict=True)]
+            if coupled:
+                load = [w + r for w, r in zip(load, reaction, strict=True)]
+            wrench = (load[0], load[1], load[2], load[3], load[4], load[5])
+            force, torque, nu_dot = pybullet_wrench(
+                fossen, rigid, height, rotation, linear, angular, wrench, current_ned
+            )
+            rx, ry, rz, rk, rm, rn = reaction  # FRD → FLU: (x, −y, −z)
+            force = (force[0] - rx, force[1] + ry, force[2] + rz)
+            torque = (torque[0] - rk, torque[1] + rm, torque[2] + rn)
+            apply_force(body, -1, force, _ZERO3, link_frame, cid)
+            apply_torque(body, -1, torque, link_frame, cid)
+            arm.apply_loads(current_ned)
+            step_simulation(cid)
+            memory[0] = (
+                linear,
+                angular,
+                rotation,
+                _rotated(rotation, force),
+                _rotated(rotation, torque),
+            )
+            return nu_dot
+
+        return advance
+
+    def _trim_wrench(self, rotation: Sequence[float]) -> Vec6:
+        """The trim float's wrench [N, N·m], body FRD about the CoG: its buoyancy (world up)
+        at its body-fixed point."""
+        if self._trim is None:
+            return (0.0,) * 6
+        lift, (px, py, pz) = self._trim
+        # world up in the body FLU: the last row of R (body FLU → world)
+        fx, fy, fz = lift * rotation[6], lift * rotation[7], lift * rotation[8]
+        mx, my, mz = py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx
+        return (fx, -fy, -fz, mx, -my, -mz)
+
+    def _arm_trim(self) -> tuple[float, Vec3]:
+        """The trim float for the arm's present (initial) pose: its lift [N] (the arm's weight
+        less its buoyancy) and its point [m], body FLU from the CoG, below which the arm's
+        net weight acts (so it cancels both the force and the moment)."""
+        arm = self.arm
+        assert arm is not None
+        cid = self.client_id
+        base, orientation = pybullet.getBasePositionAndOrientation(self.body_id, cid)
+        rot = pybullet.getMatrixFromQuaternion(orientation)
+        states = pybullet.getLinkStates(
+            self.body_id, arm.link_indices, computeForwardKinematics=1, physicsClientId=cid
+        )
+        down, moment_x, moment_y = 0.0, 0.0, 0.0
+        for link, state in zip(arm.links, states, strict=True):
+            com = _body_point(rot, base, state[0])
+            offset = _rotated(pybullet.getMatrixFromQuaternion(state[5]), link.cov_m)
+            cov = _body_point(rot, base, [p + o for p, o in zip(state[4], offset, strict=True)])
+            weight, lift = link.mass_kg * G_M_S2, RHO_KG_M3 * G_M_S2 * link.volume_m3
+            down += weight - lift
+            # moment about the CoG of (0, 0, −weight) at com and (0, 0, lift) at cov (FLU)
+            moment_x += -com[1] * weight + cov[1] * lift
+            moment_y += com[0] * weight - cov[0] * lift
+        if abs(down) < 1e-9:
+            return (0.0, (0.0, 0.0, 0.0))
+        # lift `down` (up) at (px, py): moment (py·down, −px·down) cancels the arm's
+        return (down, (moment_y / down, -moment_x / down, 0.0))
+
+    def arm_state(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The arm's joint angles [rad] and rates [rad/s] (model order); empty without an arm."""
+        self._check_open()
+        return ((), ()) if self.arm is None else self.arm.joint_state()
+
+    @property
+    def arm_commanded_rates(self) -> tuple[float, ...]:
+        """The joint motors' present target rates [rad/s]; empty without an arm."""
+        return () if self.arm is None else self.arm.commanded_rates
+
+    def command_arm(self, rates_rad_s: Sequence[float]) -> None:
+        """Drive the arm's joints at these rates [rad/s] (held until changed)."""
+        if self.arm is None:
+            raise RuntimeError("this vehicle has no arm")
+        self.arm.command(rates_rad_s)
+
     def _check_open(self) -> None:
         if not self._finalizer.alive:
             raise RuntimeError("Physics is closed")
@@ -542,6 +695,65 @@ class Physics:
         pos, orn = pybullet.getBasePositionAndOrientation(self.body_id, cid)
         lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
         return (pos, orn, lin, ang)
+
+
+def _rotated(rotation: Sequence[float], v: Sequence[float]) -> Vec3:
+    """R·v for pybullet's row-major 3×3 ``rotation``."""
+    r = rotation
+    return (
+        r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
+        r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+        r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
+    )
+
+
+def _body_point(rotation: Sequence[float], base: Sequence[float], point: Sequence[float]) -> Vec3:
+    """A world point in the base's frame (FLU, from the CoG): Rᵀ(point − base)."""
+    d = [p - b for p, b in zip(point, base, strict=True)]
+    r = rotation
+    return (
+        r[0] * d[0] + r[3] * d[1] + r[6] * d[2],
+        r[1] * d[0] + r[4] * d[1] + r[7] * d[2],
+        r[2] * d[0] + r[5] * d[1] + r[8] * d[2],
+    )
+
+
+def _measured_reaction(
+    last: _Coupling | None,
+    linear: Sequence[float],
+    angular: Sequence[float],
+    rotation: Sequence[float],
+    mass: float,
+    inertia: Sequence[float],
+    dt: float,
+) -> Vec6:
+    """The arm's reaction on the hull over the last step [N, N·m], body FRD about the CoG.
+
+    From the hull's velocities before (``last``: linear, angular, rotation, and the force and
+    torque applied, all pybullet's world) and now: R = m·Δv/Δt − F and, in the body at the
+    step's start, I·Δω/Δt + ω×I·ω − τ (what the hull's own Newton–Euler equations leave
+    unexplained). Zero before the first step.
+    """
+    if last is None:
+        return (0.0,) * 6
+    lin0, ang0, rot0, f0, t0 = last
+    fx = mass * (linear[0] - lin0[0]) / dt - f0[0]
+    fy = mass * (linear[1] - lin0[1]) / dt - f0[1]
+    fz = mass * (linear[2] - lin0[2]) / dt - f0[2]
+    r0 = rot0
+    w = _body_point(r0, (0.0, 0.0, 0.0), ang0)
+    dw = _body_point(r0, ang0, angular)
+    ix, iy, iz = inertia
+    hx, hy, hz = ix * w[0], iy * w[1], iz * w[2]
+    tau_body = (
+        ix * dw[0] / dt + w[1] * hz - w[2] * hy,
+        iy * dw[1] / dt + w[2] * hx - w[0] * hz,
+        iz * dw[2] / dt + w[0] * hy - w[1] * hx,
+    )
+    tx, ty, tz = (a - b for a, b in zip(_rotated(r0, tau_body), t0, strict=True))
+    bf = _body_point(rotation, (0.0, 0.0, 0.0), (fx, fy, fz))
+    bt = _body_point(rotation, (0.0, 0.0, 0.0), (tx, ty, tz))
+    return (bf[0], -bf[1], -bf[2], bt[0], -bt[1], -bt[2])
 
 
 def _disconnect(client_id: int) -> None:

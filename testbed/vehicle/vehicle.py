@@ -80,6 +80,7 @@ from testbed.vehicle.localization import (
     build_navigation,
     estimate_navigation,
 )
+from testbed.vehicle.manipulation import ArmConfig, Manipulator, build_manipulator, plan_arm
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.scenery import pool_scenery
@@ -219,6 +220,8 @@ class VehicleConfig:
         autonomy: the mission tree and velocity controller (:mod:`testbed.vehicle.autonomy`);
             None = none (the operator flies it). Without ``navigation`` it gets the default
             one (:attr:`navigation_in_use`: the position fix if fitted, else motion capture).
+        arm: a manipulator on the hull (:mod:`testbed.vehicle.manipulation`); None = none.
+            Under autonomy its mission tree arms it and flies end-effector goals with TPIK.
     """
 
     model: str = "bluerov2"
@@ -241,6 +244,7 @@ class VehicleConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     navigation: NavigationConfig | None = None
     autonomy: AutonomyConfig | None = None
+    arm: ArmConfig | None = None
 
     def __post_init__(self) -> None:
         check_range(self.control_rate_hz, "control_rate_hz", *CONTROL_RATE_RANGE_HZ, "Hz")
@@ -326,6 +330,7 @@ class Vehicle:
         n = self._matrix.shape[1]
         self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
         self.model = load_model(config.model, added_mass_coriolis=config.added_mass_coriolis)
+        arm_model = None if config.arm is None else config.arm.arm_model()
         self.physics = Physics(
             self.model,
             dt_s=config.physics_dt_s,
@@ -333,6 +338,9 @@ class Vehicle:
             start_euler_rad=config.start_euler_rad,
             current=config.current,
             rng=current_rng,
+            arm=arm_model,
+            arm_coupling=config.arm is None or config.arm.coupling,
+            arm_trim=config.arm is None or config.arm.trim,
         )
         camera = config.camera
         if camera.enabled:
@@ -356,7 +364,10 @@ class Vehicle:
             inbound,
             outbound,
             estimators=() if navigation is None else (estimate_navigation,),
-            planners=() if autonomy is None else (run_mission,),
+            planners=(
+                *(() if autonomy is None else (run_mission,)),
+                *(() if config.arm is None else (plan_arm,)),
+            ),
             controllers=(control_velocity,) if autonomy and autonomy.controller == "ismc" else (),
         )
         world = self.world
@@ -403,6 +414,10 @@ class Vehicle:
             world.insert_resource(build_autonomy(autonomy, self.model))
             velocity = ForceIntent("velocity", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
             self.controllers.intents["velocity"] = world.spawn(velocity)
+        self.manipulator: Manipulator | None = None
+        if config.arm is not None:
+            self.manipulator = build_manipulator(config.arm, arm_model)
+            world.insert_resource(self.manipulator)
         self._seq = 0
         self._arm_seq = 0
         self._control_period_s = 1.0 / config.control_rate_hz
@@ -467,7 +482,12 @@ class Vehicle:
         dt = physics.dt_s
         steps = max(1, math.ceil((self._next_control_s - now) / dt - 1e-6))
         self.actuation.interval_s = steps * dt
+        arm = self.manipulator
+        if arm is not None:  # the joints' encoders
+            arm.q_rad, arm.rates_rad_s = physics.arm_state()
         self.schedule.run(self.world)
+        if arm is not None and arm.command_rad_s != physics.arm_commanded_rates:
+            physics.command_arm(arm.command_rad_s)
         self.frames += 1
 
     @property

@@ -461,7 +461,7 @@ def test_malformed_replies_are_counted_never_raised(payload: bytes) -> None:
 
 # ---------------------------------------------------------------------------------- fuzz
 
-_BODY_SIZES = {0: 0, 1: 5, 2: 2, 3: 1, 4: 8, 5: 0, 6: 8, 7: 0}
+_BODY_SIZES = {0: 0, 1: 5, 2: 2, 3: 1, 4: 8, 5: 0, 6: 8, 7: 0, 8: 8}
 
 
 def classify_order(payload: bytes) -> str:
@@ -480,6 +480,8 @@ def classify_order(payload: bytes) -> str:
         return "applied" if int.from_bytes(body, "big") <= 359 else "malformed"
     if code == 4:  # image settings: the vehicle's image source takes them
         return "malformed" if body[5] & 0x0E else "applied"
+    if code == 8:  # end-effector go-to: yaw codes 36000..65534 are reserved
+        return "malformed" if 36000 <= int.from_bytes(body[6:8], "big") < 0xFFFF else "unsupported"
     return "unsupported"
 
 

@@ -254,7 +254,7 @@ def test_reply_with_default_chunk_is_54_bytes() -> None:
     [
         (b"", "needs 2 B"),
         (b"\x00", "needs 2 B"),
-        (bytes([0, 0x08]), "unknown order type 8"),
+        (bytes([0, 0x09]), "unknown order type 9"),
         (bytes([0, 0x0F]), "unknown order type 15"),
         (bytes([0, 0x10]), "reserved"),
         (bytes([0, 0x01, 0, 0, 0]), "5 B"),
@@ -334,5 +334,5 @@ def test_order_type_of_reads_the_header_nibble_without_the_body() -> None:
     }
     for code, cls in by_hand.items():
         assert order_type_of(bytes((0x80, 0xC0 | code))) is cls  # flags set, body absent
-    assert order_type_of(bytes((0, 8))) is None  # codes 8..15 name no order
+    assert order_type_of(bytes((0, 9))) is None  # codes 9..15 name no order (8: the extension)
     assert order_type_of(b"\x01") is None and order_type_of(b"") is None

@@ -24,6 +24,7 @@ from testbed.protocol import (
     Order,
     OrderIncoming,
 )
+from testbed.protocol.orders import EndEffectorGoTo
 from tests.strategies import orders, roi
 
 
@@ -37,6 +38,7 @@ def test_type_codes_and_body_sizes_follow_the_reference_table() -> None:
         5: (DisableKeepHeading, 0),
         6: (GoTo, 8),
         7: (OrderIncoming, 0),
+        8: (EndEffectorGoTo, 8),  # the extension of the paper's table
     }
     assert {code: (cls, cls.BODY_SIZE) for code, cls in ORDER_TYPES.items()} == table
     assert all(code == cls.CODE for code, cls in ORDER_TYPES.items())
