@@ -1,4 +1,8 @@
-"""PNG plots of autonomous missions: the vehicle's path against its pose target (Angler Figs. 6–7).
+"""PNG plots of autonomous missions: the path flown against its target (Angler Figs. 6–7).
+
+What is drawn is what the mission flies (:func:`~testbed.run.metrics.tracked_positions`): the
+vehicle's body origin against its pose target, or the arm's end effector against its target
+(with the body's path in grey on the single-run figure).
 
 - ``mission.png`` (:func:`plot_mission`, one run) — a top view, east across and north up, of the
   true path, the navigation estimate (thin), the pose target (dashed) and the mission's
@@ -22,7 +26,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from testbed.report.figures import no_data, save
-from testbed.run.metrics import position_error
+from testbed.run.metrics import position_error, tracked_positions
 from testbed.run.trials import TrialTrack
 
 __all__ = ["has_target", "mission_error", "plot_mission", "plot_trials"]
@@ -31,15 +35,16 @@ _TRUTH, _ESTIMATE, _TARGET = "tab:blue", "tab:orange", "k"
 
 
 def has_target(series: Mapping[str, np.ndarray]) -> bool:
-    """Whether the series recorded a pose target at some row (a vehicle under autonomy)."""
-    column = series.get("target_n")
-    return column is not None and bool(np.isfinite(np.asarray(column, dtype=float)).any())
+    """Whether the series recorded a pose or end-effector target at some row (a vehicle
+    under autonomy)."""
+    return bool(np.isfinite(tracked_positions(series)[1]).all(axis=1).any())
 
 
 def mission_error(series: Mapping[str, np.ndarray]) -> np.ndarray:
-    """(n,) |truth − target| [m] per row; NaN where there is no target or it is disarmed."""
-    truth = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
-    target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
+    """(n,) |truth − target| [m] per row of what the mission flies (the body, or the end
+    effector: :func:`~testbed.run.metrics.tracked_positions`); NaN where there is no target
+    or it is disarmed."""
+    truth, target, _ = tracked_positions(series)
     error = position_error(truth, target)
     error[np.asarray(series["armed"], dtype=float) <= 0.5] = np.nan
     return error
@@ -96,15 +101,20 @@ def plot_mission(
         no_data(top, "no pose target recorded")
         no_data(err, "no pose target recorded")
         return save(fig, path)
-    top.plot(series["east_m"], series["north_m"], color=_TRUTH, lw=1.6, label="truth")
-    top.plot(series["est_e"], series["est_n"], color=_ESTIMATE, lw=0.7, label="estimate")
-    top.plot(series["target_e"], series["target_n"], color=_TARGET, lw=1.2, ls="--", label="target")
+    truth, target, reaching = tracked_positions(series)
+    if reaching:  # the end effector flies the mission; the body's path beside it
+        top.plot(series["east_m"], series["north_m"], color="0.6", lw=0.8, label="body")
+        top.plot(truth[:, 1], truth[:, 0], color=_TRUTH, lw=1.6, label="end effector")
+    else:
+        top.plot(series["east_m"], series["north_m"], color=_TRUTH, lw=1.6, label="truth")
+        top.plot(series["est_e"], series["est_n"], color=_ESTIMATE, lw=0.7, label="estimate")
+    top.plot(target[:, 1], target[:, 0], color=_TARGET, lw=1.2, ls="--", label="target")
     points = np.asarray(waypoints_ned, dtype=float).reshape(-1, 3)
     if points.size:
         top.plot(
             points[:, 1], points[:, 0], "s", color="tab:red", ms=7, mfc="none", label="waypoints"
         )
-    top.plot(series["east_m"][:1], series["north_m"][:1], "o", color=_TRUTH, ms=5, label="start")
+    top.plot(truth[:1, 1], truth[:1, 0], "o", color=_TRUTH, ms=5, label="start")
     top.legend(loc="best", fontsize=8)
     t = np.asarray(series["t_s"], dtype=float)
     error = mission_error(series)
@@ -136,12 +146,13 @@ def plot_trials(tracks: Sequence[TrialTrack], path: Path, title: str) -> Path:
         no_data(err, "no pose target recorded")
         return save(fig, path)
     colours = [f"C{k % 10}" for k in range(len(drawn))]
-    first = drawn[0].series
-    top.plot(first["target_e"], first["target_n"], color=_TARGET, lw=1.2, ls="--", label="target")
+    _, first_target, _ = tracked_positions(drawn[0].series)
+    top.plot(first_target[:, 1], first_target[:, 0], color=_TARGET, lw=1.2, ls="--", label="target")
     for track, colour in zip(drawn, colours, strict=True):
         s = track.series
         label = f"trial {track.trial} (seed {track.seed})"
-        top.plot(s["east_m"], s["north_m"], color=colour, lw=1.0, label=label)
+        path_ned, _, _ = tracked_positions(s)
+        top.plot(path_ned[:, 1], path_ned[:, 0], color=colour, lw=1.0, label=label)
         err.plot(s["t_s"], mission_error(s), color=colour, lw=1.0)
     legend_size = 8 if len(drawn) <= 10 else 6
     top.legend(loc="best", fontsize=legend_size, ncol=1 if len(drawn) <= 10 else 2)

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from array import array
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -45,6 +45,7 @@ __all__ = [
     "signal_lag_s",
     "summary",
     "time_to_converge_s",
+    "tracked_positions",
 ]
 
 
@@ -218,6 +219,30 @@ def position_error(
         raise ValueError(f"position tracks of different lengths: {len(a)} and {len(b)}")
     distance: np.ndarray = np.sqrt(np.sum((a - b) ** 2, axis=1))
     return distance
+
+
+def tracked_positions(
+    series: Mapping[str, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """What a mission flies, row by row, and its target, world NED: the body origin and the
+    pose target (``north_m``…, ``target_*``); or, when some row has an end-effector target
+    (``ee_target_*``), the end effector (``ee_*``) and that target (NaN on the rows without
+    one, e.g. the station held before the mission started).
+
+    Returns:
+        ``(truth, target, reaching)``: (n, 3) positions [m] each (NaN where there is no
+        target), and whether the end effector is what is flown.
+    """
+    truth = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
+    target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
+    if "ee_target_n" not in series:  # a series from before the arm
+        return truth.astype(float), target.astype(float), False
+    reach = np.column_stack([series[f"ee_target_{k}"] for k in "ned"]).astype(float)
+    rows = np.isfinite(reach).all(axis=1)
+    if not rows.any():
+        return truth.astype(float), target.astype(float), False
+    ee = np.column_stack([series[f"ee_{k}"] for k in "ned"]).astype(float)
+    return ee, reach, True
 
 
 def error_statistics(error: Sequence[float] | np.ndarray) -> dict[str, float]:

@@ -36,6 +36,7 @@ from testbed.run.metrics import (
     signal_lag_s,
     summary,
     time_to_converge_s,
+    tracked_positions,
 )
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver
@@ -411,14 +412,7 @@ def mission_metrics(
     """
     t = series["t_s"]
     body = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
-    truth = body
-    target = np.column_stack([series["target_n"], series["target_e"], series["target_d"]])
-    reach = np.column_stack([series[f"ee_target_{k}"] for k in "ned"])
-    reaching = np.isfinite(reach).all(axis=1)  # rows flown by the end effector
-    if reaching.any():
-        ee = np.column_stack([series[f"ee_{k}"] for k in "ned"])
-        truth = np.where(reaching[:, None], ee, truth)
-        target = np.where(reaching[:, None], reach, target)
+    truth, target, reaching = tracked_positions(series)
     estimate = np.column_stack([series["est_n"], series["est_e"], series["est_d"]])
     flying = (series["armed"] > 0.5) & np.isfinite(target).all(axis=1)
     rows = (t >= settle_s) & flying
@@ -426,7 +420,7 @@ def mission_metrics(
     nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
     return {
-        "frame": "end_effector" if reaching.any() else "body",
+        "frame": "end_effector" if reaching else "body",
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),

@@ -67,6 +67,12 @@ _TRACK_COLUMNS = (
     "est_n",
     "est_e",
     "armed",
+    "ee_n",
+    "ee_e",
+    "ee_d",
+    "ee_target_n",
+    "ee_target_e",
+    "ee_target_d",
 )
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from testbed.config import ConfigError, check_ranges
+from testbed.config import check, check_ranges
 from testbed.ecs import World
 from testbed.vehicle.arm import ArmModel, end_effector_ned, load_arm_model, uvms_jacobian
 from testbed.vehicle.estimation import NavigationEstimate
@@ -69,22 +69,26 @@ class ArmConfig:
     def __post_init__(self) -> None:
         if self.initial_q_rad is not None:
             check_ranges(self.initial_q_rad, "initial_q_rad", -2 * math.pi, 2 * math.pi, "rad")
+        self.arm_model()  # a bad file or a start outside the limits fails here, naming it
+        load_tpik_config(self.tpik)
 
     def arm_model(self) -> ArmModel:
-        """The arm model, with ``initial_q_rad`` applied (ConfigError on a bad file or a
-        start outside the joints' limits, naming the key)."""
+        """The arm model, with ``initial_q_rad`` applied.
+
+        Raises:
+            ConfigError: a bad arm file; FieldError: a start of the wrong length or outside
+                the joints' limits (naming the key).
+        """
         model = load_arm_model(self.model)
         q = self.initial_q_rad
         if q is None:
             return model
-        if len(q) != model.n_joints:
-            raise ConfigError(f"initial_q_rad: {model.n_joints} joints, got {len(q)} values")
+        n = model.n_joints
+        check(len(q) == n, "initial_q_rad", f"{n} joints, got {len(q)} values")
         for joint, angle in zip(model.joints, q, strict=True):
-            if not joint.lower_rad <= angle <= joint.upper_rad:
-                raise ConfigError(
-                    f"initial_q_rad: {joint.name} = {angle:g} rad is outside "
-                    f"[{joint.lower_rad:g}, {joint.upper_rad:g}]"
-                )
+            inside = joint.lower_rad <= angle <= joint.upper_rad
+            limits = f"[{joint.lower_rad:g}, {joint.upper_rad:g}]"
+            check(inside, "initial_q_rad", f"{joint.name} = {angle:g} rad is outside {limits}")
         return dataclasses.replace(model, initial_q_rad=tuple(float(a) for a in q))
 
 

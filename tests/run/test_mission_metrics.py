@@ -67,6 +67,9 @@ def _series(n: int = 6) -> dict[str, np.ndarray]:
     cols = {name: np.zeros(n) for name in SERIES_COLUMNS}
     cols["t_s"] = np.arange(n, dtype=float)
     cols["armed"] = np.ones(n)
+    for name in SERIES_COLUMNS:
+        if name.startswith("ee_"):  # no arm: the recorder writes NaN
+            cols[name][:] = math.nan
     return cols
 
 
@@ -97,6 +100,29 @@ def test_mission_metrics_by_hand() -> None:
     assert m["goal_tolerance_m"] == 0.2
 
 
+def test_end_effector_rows_are_scored_on_the_end_effector() -> None:
+    """With an end-effector target the error is the end effector's against it (by hand), the
+    estimate error stays the body's, and the frame is named."""
+    s = _series()
+    s["north_m"] = np.full(6, 9.0)  # the body is far away: it must not enter the error
+    s["est_n"] = np.full(6, 9.1)
+    s["ee_n"], s["ee_e"], s["ee_d"] = (
+        np.array([1.0, 0.9, 0.8, 0.6, 0.5, 0.5]),
+        np.zeros(6),
+        np.zeros(6),
+    )
+    s["ee_target_n"], s["ee_target_e"], s["ee_target_d"] = np.full(6, 0.5), np.zeros(6), np.zeros(6)
+    s["ee_target_n"][0] = math.nan  # the station held before the mission: no ee target
+    m = mission_metrics(s, settle_s=1.0, tolerance_m=0.2, status=None, orders_acknowledged=None)
+    assert m["frame"] == "end_effector"
+    assert m["samples"] == 5
+    errors = [0.4, 0.3, 0.1, 0.0, 0.0]
+    assert m["position_error_m"]["mean"] == pytest.approx(np.mean(errors))
+    assert m["position_error_m"]["final"] == pytest.approx(0.0)
+    assert m["estimate_error_m"]["mean"] == pytest.approx(0.1)
+    assert m["time_to_converge_s"] == pytest.approx(3.0)  # 0.1 m at t = 3 s is within 0.2
+
+
 def test_mission_metrics_without_any_target_are_nan_and_unknown_status_null() -> None:
     s = _series()
     for name in ("target_n", "target_e", "target_d", "est_n", "est_e", "est_d"):
@@ -111,7 +137,7 @@ def test_mission_metrics_without_any_target_are_nan_and_unknown_status_null() ->
 
 def test_new_series_columns_are_appended_at_the_end() -> None:
     assert SERIES_COLUMNS[:3] == ("t_s", "cmd_x", "cmd_y")
-    assert SERIES_COLUMNS[-7:] == (
+    assert SERIES_COLUMNS[-13:] == (
         "target_n",
         "target_e",
         "target_d",
@@ -119,5 +145,11 @@ def test_new_series_columns_are_appended_at_the_end() -> None:
         "est_n",
         "est_e",
         "est_d",
+        "ee_n",
+        "ee_e",
+        "ee_d",
+        "ee_target_n",
+        "ee_target_e",
+        "ee_target_d",
     )
     assert SERIES_COLUMNS.index("failsafe") == 31  # existing indices unchanged
