@@ -142,7 +142,9 @@ class EndEffectorSetpoint:
     Attributes:
         position_ned_m: (3,) target of the tool point [m]: north, east, down.
         yaw_rad: the tool's yaw about the world down axis [rad, clockwise from north], used
-            when ``use_yaw``; otherwise the tool keeps its yaw.
+            when ``use_yaw``; otherwise the tool keeps its yaw. The vehicle's TPIK (no tool
+            orientation task by default) aims the vehicle's heading there: its arm reaches
+            straight ahead, so the tool points along the vehicle.
         use_yaw: whether ``yaw_rad`` applies.
     """
 

@@ -41,6 +41,8 @@ PACKAGED = [
     "s100-thruster-failure-v1",
     "s100-video-v1",
     "tether-teleop-v1",
+    "uvms-station-keeping-v1",
+    "uvms-waypoint-v1",
 ]
 TELEOP = ["s100-teleop-v1", "tether-teleop-v1", "m64-teleop-v1", "s100-outage-v1"]
 ECS = {
