@@ -256,11 +256,86 @@ class EqualityTask:
     error: FloatArray
 
 
+def _identity(n: int) -> FloatArray:
+    """The read-only (n, n) identity, built once per n."""
+    eye = _IDENTITIES.get(n)
+    if eye is None:
+        eye = np.eye(n)
+        eye.flags.writeable = False
+        _IDENTITIES[n] = eye
+    return eye
+
+
+_IDENTITIES: dict[int, FloatArray] = {}
+
+
+def _symmetric_eig(g: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Eigenvalues and (column) eigenvectors of a small symmetric matrix; 2 × 2 in closed form
+    (a rotation by ½·atan2(2b, a − c)), larger ones by ``np.linalg.eigh``."""
+    if g.shape[0] != 2:
+        lam, u = np.linalg.eigh(g)
+        return lam, u
+    a, b, c = float(g[0, 0]), float(g[0, 1]), float(g[1, 1])
+    mean, radius = 0.5 * (a + c), math.hypot(0.5 * (a - c), b)
+    angle = 0.5 * math.atan2(2.0 * b, a - c)
+    cos, sin = math.cos(angle), math.sin(angle)
+    return np.array([mean + radius, mean - radius]), np.array([[cos, -sin], [sin, cos]])
+
+
+def _robust_inverse(a: FloatArray, lam: FloatArray, u: FloatArray, t2: float) -> FloatArray:
+    """:func:`pinv` of ``a`` (m ≤ n) from the eigen-pairs (λ, U) of a·aᵀ: Aᵀ U g(Λ) Uᵀ."""
+    out: FloatArray = a.T @ ((u / np.maximum(lam, t2)) @ u.T)
+    return out
+
+
+def _kept_projector(a: FloatArray, lam: FloatArray, u: FloatArray, t2: float) -> FloatArray:
+    """:func:`_row_space` of ``a`` (m < n) from the eigen-pairs (λ, U) of a·aᵀ: each kept
+    v = Aᵀu/σ, so Σ v vᵀ = Aᵀ U_k Λ_k⁻¹ U_kᵀ A."""
+    keep = lam >= t2
+    w = a.T @ u[:, keep]
+    out: FloatArray = (w / lam[keep]) @ w.T
+    return out
+
+
 def pinv(matrix: FloatArray, threshold: float) -> FloatArray:
-    """Singularity-robust pseudo-inverse: σ ≥ t → 1/σ, σ < t → σ/t² (module docstring (d))."""
-    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
-    inv = np.where(s >= threshold, 1.0 / np.maximum(s, threshold), s / threshold**2)
-    return (vt.T * inv) @ u.T  # type: ignore[no-any-return]
+    """Singularity-robust pseudo-inverse: σ ≥ t → 1/σ, σ < t → σ/t² (module docstring (d)).
+
+    Computed from the smaller Gram matrix, not an SVD of ``matrix``: with A = U Σ Vᵀ and
+    A Aᵀ = U Σ² Uᵀ, the robust inverse V f(Σ) Uᵀ is Aᵀ U g(Σ²) Uᵀ with g(λ) = 1 / max(λ, t²)
+    (σ·g(σ²) = 1/σ for σ ≥ t and σ/t² below: the same law, λ = σ² against t²), or its mirror
+    V g(Σ²) Vᵀ Aᵀ from AᵀA when A has more rows than columns. One row: aᵀ / max(a·a, t²).
+    """
+    a = np.atleast_2d(np.asarray(matrix, dtype=float))
+    t2 = threshold * threshold
+    m, n = a.shape
+    if m == 1:
+        row = a[0]
+        out: FloatArray = (row / max(float(row @ row), t2))[:, None]
+        return out
+    if m <= n:
+        lam, u = _symmetric_eig(a @ a.T)
+        return _robust_inverse(a, lam, u, t2)
+    lam, v = _symmetric_eig(a.T @ a)
+    out = ((v / np.maximum(lam, t2)) @ v.T) @ a.T
+    return out
+
+
+def _row_space(stacked: FloatArray, threshold: float) -> FloatArray:
+    """(n, n) the projector onto the span of the right singular vectors of ``stacked`` whose
+    singular value is ≥ ``threshold`` (eigenvalue λ = σ² ≥ t² of the smaller Gram matrix)."""
+    t2 = threshold * threshold
+    m, n = stacked.shape
+    if m == 1:
+        row = stacked[0]
+        norm2 = float(row @ row)
+        return np.outer(row, row / norm2) if norm2 >= t2 else np.zeros((n, n))
+    if m < n:
+        lam, u = _symmetric_eig(stacked @ stacked.T)
+        return _kept_projector(stacked, lam, u, t2)
+    lam, v = _symmetric_eig(stacked.T @ stacked)
+    rows = v[:, lam >= t2]
+    out: FloatArray = rows @ rows.T
+    return out
 
 
 def null_space(jacobians: Sequence[FloatArray], n: int, threshold: float) -> FloatArray:
@@ -271,26 +346,61 @@ def null_space(jacobians: Sequence[FloatArray], n: int, threshold: float) -> Flo
     """
     if not jacobians:
         return np.eye(n)
-    stacked = np.vstack([np.atleast_2d(j) for j in jacobians])
-    _, s, vt = np.linalg.svd(stacked, full_matrices=False)
-    rows = vt[s >= threshold]
-    return np.eye(n) - rows.T @ rows  # type: ignore[no-any-return]
+    stacked = np.vstack([np.atleast_2d(np.asarray(j, dtype=float)) for j in jacobians])
+    out: FloatArray = _identity(n) - _row_space(stacked, threshold)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Level:
+    """The recursion after some tasks: ζ, the projector N and the stacked Jacobians so far."""
+
+    zeta: FloatArray
+    projector: FloatArray
+    stacked: FloatArray
+
+
+def _start(n: int) -> _Level:
+    return _Level(np.zeros(n), _identity(n), np.zeros((0, n)))
+
+
+def _task_jacobian(task: EqualityTask, n: int) -> FloatArray:
+    jac = np.atleast_2d(np.asarray(task.jacobian, dtype=float))
+    if jac.shape[1] != n:
+        raise ValueError(f"task {task.name}: jacobian has {jac.shape[1]} columns, not {n}")
+    return jac
+
+
+def _descend(level: _Level, task: EqualityTask, threshold: float, project: bool) -> _Level:
+    """One priority level of the recursion (module docstring); N_i only if ``project``."""
+    n = level.zeta.shape[0]
+    jac = _task_jacobian(task, n)
+    residual = np.asarray(task.error, dtype=float).reshape(-1) - jac @ level.zeta
+    m = jac.shape[0]
+    if level.stacked.shape[0] == 0 and 1 < m < n:  # N = I: J N and the stack are J, one Gram
+        t2 = threshold * threshold
+        lam, u = _symmetric_eig(jac @ jac.T)
+        zeta = level.zeta + _robust_inverse(jac, lam, u, t2) @ residual
+        if not project:
+            return _Level(zeta, level.projector, level.stacked)
+        return _Level(zeta, _identity(n) - _kept_projector(jac, lam, u, t2), jac)
+    zeta = level.zeta + pinv(jac @ level.projector, threshold) @ residual
+    if not project:
+        return _Level(zeta, level.projector, level.stacked)
+    stacked = np.concatenate([level.stacked, jac])
+    return _Level(zeta, _identity(n) - _row_space(stacked, threshold), stacked)
+
+
+def _finish(level: _Level, tasks: Sequence[EqualityTask], threshold: float) -> FloatArray:
+    """ζ after ``tasks`` below ``level`` (no projector after the last: nothing uses it)."""
+    for k, task in enumerate(tasks):
+        level = _descend(level, task, threshold, k + 1 < len(tasks))
+    return level.zeta
 
 
 def prioritized_solution(tasks: Sequence[EqualityTask], n: int, threshold: float) -> FloatArray:
     """ζ (n,) of the recursive null-space projection (module docstring), tasks highest first."""
-    zeta = np.zeros(n)
-    projector = np.eye(n)
-    taken: list[FloatArray] = []
-    for task in tasks:
-        jac = np.atleast_2d(np.asarray(task.jacobian, dtype=float))
-        if jac.shape[1] != n:
-            raise ValueError(f"task {task.name}: jacobian has {jac.shape[1]} columns, not {n}")
-        residual = np.asarray(task.error, dtype=float).reshape(-1) - jac @ zeta
-        zeta = zeta + pinv(jac @ projector, threshold) @ residual
-        taken.append(jac)
-        projector = null_space(taken, n, threshold)
-    return zeta
+    return _finish(_start(n), tasks, threshold)
 
 
 def rotation_error(target: FloatArray, current: FloatArray) -> FloatArray:
@@ -365,16 +475,14 @@ def saturate(zeta: FloatArray, config: TpikConfig) -> FloatArray:
     ``joint_velocity_limits`` on the joints. ζ within all limits is returned unchanged.
     """
     zeta = np.asarray(zeta, dtype=float)
-    limits = np.concatenate(
-        [
-            np.full(3, config.max_linear_m_s),
-            np.full(3, config.max_angular_rad_s),
-            np.asarray(config.joint_velocity_limits, dtype=float),
-        ]
+    limits = (
+        (config.max_linear_m_s,) * 3
+        + (config.max_angular_rad_s,) * 3
+        + tuple(config.joint_velocity_limits)
     )
-    if zeta.shape != limits.shape:
-        raise ValueError(f"ζ has shape {zeta.shape}, the limits {limits.shape}")
-    ratio = float(np.max(np.abs(zeta) / limits))
+    if zeta.shape != (len(limits),):
+        raise ValueError(f"ζ has shape {zeta.shape}, the limits {(len(limits),)}")
+    ratio = max(abs(z) / limit for z, limit in zip(zeta.tolist(), limits, strict=True))
     return zeta / ratio if ratio > 1.0 else zeta.copy()
 
 
@@ -463,11 +571,23 @@ def solve_uvms(config: TpikConfig, state: TpikInput) -> TpikOutput:
     best_active: tuple[JointLimitTask, ...] = ()
     best_norm = -1.0
     modes = 0
+    threshold = config.singular_threshold
+    # the recursion after each mode's set tasks, which come first: a mode's prefix is the
+    # mode of its first active tasks (combinations come in order), solved before it
+    prefixes: dict[tuple[JointLimitTask, ...], _Level] = {(): _start(n)}
     for count in range(len(candidates) + 1):
         for active in itertools.combinations(candidates, count):
             modes += 1
-            tasks = [*(_limit_task(t, q, n) for t in active), *fixed]
-            zeta = prioritized_solution(tasks, n, config.singular_threshold)
+            level = prefixes.get(active)
+            if level is None:
+                parent = prefixes[active[:-1]]
+                level = _descend(parent, _limit_task(active[-1], q, n), threshold, True)
+                if count < len(candidates):
+                    prefixes[active] = level
+            zeta = _finish(level, fixed, threshold)
+            if not candidates:  # one mode, nothing to check
+                best, best_active = zeta, active
+                break
             inactive = [t for t in candidates if t not in active]
             if not _admissible(zeta, q, inactive, config.period_s):
                 continue
@@ -476,10 +596,11 @@ def solve_uvms(config: TpikConfig, state: TpikInput) -> TpikOutput:
                 best, best_active, best_norm = zeta, active, norm
     assert best is not None  # the all-active mode has nothing to check
     zeta = saturate(best, config)
-    u, v, w, p, q_rate, r = (float(x) for x in zeta[:VEHICLE_DOF])
+    values = zeta.tolist()
+    u, v, w, p, q_rate, r = values[:VEHICLE_DOF]
     return TpikOutput(
         vehicle_twist=(u, v, w, p, q_rate, r),
-        joint_rates=tuple(float(x) for x in zeta[VEHICLE_DOF:]),
+        joint_rates=tuple(values[VEHICLE_DOF:]),
         active=tuple(t.name for t in best_active),
         mode_count=modes,
     )

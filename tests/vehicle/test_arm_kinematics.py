@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Iterator
@@ -37,6 +38,7 @@ from testbed.vehicle.arm import (
     link_centres_ned,
     load_arm_model,
     uvms_jacobian,
+    uvms_kinematics,
 )
 
 S = np.diag([1.0, -1.0, -1.0])
@@ -251,6 +253,47 @@ def test_uvms_jacobian_arm_part_is_the_rotated_arm_jacobian(model: ArmModel) -> 
     np.testing.assert_allclose(jac[:3, 6:], rot @ arm[:3], atol=1e-12)
     np.testing.assert_allclose(jac[3:, 6:], rot @ arm[3:], atol=1e-12)
     np.testing.assert_allclose(jac[3:, :3], 0.0)
+
+
+def test_uvms_kinematics_is_the_two_separate_functions(model: ArmModel) -> None:
+    rng = np.random.default_rng(17)
+    for _ in range(30):
+        q = _random_q(rng)
+        quat = quat_from_euler(*rng.uniform(-math.pi, math.pi, 3))
+        position = rng.uniform(-5.0, 5.0, 3)
+        p, r, jac = uvms_kinematics(model, q, position, quat)
+        p_alone, r_alone = end_effector_ned(model, q, position, quat)
+        np.testing.assert_allclose(p, p_alone, atol=1e-12)
+        np.testing.assert_allclose(r, r_alone, atol=1e-12)
+        np.testing.assert_allclose(jac, uvms_jacobian(model, q, quat), atol=1e-12)
+        # and the body-frame pieces, rotated and moved by the vehicle's pose
+        p_b, r_b = end_effector_pose(model, q)
+        rot = r_alone @ r_b.T
+        np.testing.assert_allclose(p, position + rot @ p_b, atol=1e-12)
+        np.testing.assert_allclose(jac[:3, 3:6], -rot @ _skew(p_b), atol=1e-12)
+
+
+def _skew(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def test_a_changed_model_gets_its_own_fixed_chain(model: ArmModel) -> None:
+    """The per-model precomputation follows the model: a moved mount moves the end effector."""
+    q = np.array(model.initial_q_rad)
+    moved = dataclasses.replace(model, mount_m=(model.mount_m[0] + 0.1, *model.mount_m[1:]))
+    p, _ = end_effector_pose(model, q)
+    p_moved, _ = end_effector_pose(moved, q)
+    np.testing.assert_allclose(p_moved - p, [0.1, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(end_effector_pose(model, q)[0], p)  # the original unchanged
+    twin = dataclasses.replace(model)  # equal, not the same object: the same figures
+    assert twin == model and twin is not model
+    np.testing.assert_allclose(end_effector_pose(twin, q)[0], p, atol=0.0)
+    frame = joint_transforms(model, q)[0]
+    frame[:] = 0.0  # a caller's copy: writing it changes nothing cached
+    np.testing.assert_allclose(end_effector_pose(model, q)[0], p, atol=0.0)
+    base = base_transform(model)
+    base[:] = 0.0
+    np.testing.assert_allclose(end_effector_pose(model, q)[0], p, atol=0.0)
 
 
 def test_link_centres_in_the_world(model: ArmModel) -> None:

@@ -36,6 +36,7 @@ from testbed.vehicle.tpik import (
     TpikInput,
     load_tpik_config,
     null_space,
+    pinv,
     prioritized_solution,
     rotation_error,
     saturate,
@@ -118,6 +119,32 @@ def test_rank_deficient_stack_stays_finite() -> None:
     assert np.all(np.isfinite(zeta))
     assert np.linalg.norm(zeta) < 1.0 / T * 10.0  # the damped gain is at most 1/t
     assert np.allclose(prioritized_solution([zero], N, T), 0.0)
+
+
+def _svd_law(matrix: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
+    """The docstring's (d) written with an SVD: the robust inverse and the truncated N."""
+    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
+    gain = np.where(s >= t, 1.0 / np.maximum(s, t), s / t**2)
+    rows = vt[s >= t]
+    return (vt.T * gain) @ u.T, np.eye(matrix.shape[1]) - rows.T @ rows
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("m", [1, 2, 3, 5, 12])
+def test_pinv_and_null_space_are_the_svd_law(seed: int, m: int) -> None:
+    """Singular values on both sides of t (and exact zeros): the stated law, however computed."""
+    rng = np.random.default_rng(300 + seed)
+    k = min(m, N)
+    left, _ = np.linalg.qr(rng.normal(size=(m, k)))
+    right, _ = np.linalg.qr(rng.normal(size=(N, k)))
+    sigma = rng.choice([0.0, 0.3 * T, 0.9 * T, 1.1 * T, 3 * T, 0.5, 2.0], size=k)
+    matrix = (left * sigma) @ right.T
+    expected_inv, expected_null = _svd_law(matrix, T)
+    np.testing.assert_allclose(pinv(matrix, T), expected_inv, atol=1e-8)
+    np.testing.assert_allclose(null_space([matrix], N, T), expected_null, atol=1e-8)
+    if m > 1:  # the same rows as several tasks stack to the same projector
+        parts = [matrix[: m // 2], matrix[m // 2 :]]
+        np.testing.assert_allclose(null_space(parts, N, T), expected_null, atol=1e-8)
 
 
 # --- 3. set-based joint limits on a vehicle-manipulator model --------------------------------
@@ -300,6 +327,7 @@ def test_reachable_target_leaves_set_tasks_inactive() -> None:
     target = start.ee()[0] + np.array([0.1, -0.05, 0.05])
     qs, actives, final = _run(config, start, target)
     assert all(not a for a in actives)
+    assert solve_uvms(config, start.tpik_input(target, 0.0)).mode_count == 1  # none in a band
     for task in config.limit_tasks:
         q = qs[:, task.joint]
         assert np.all((q > task.low_threshold) & (q < task.high_threshold))
