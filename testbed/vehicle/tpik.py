@@ -60,7 +60,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -351,8 +351,7 @@ def null_space(jacobians: Sequence[FloatArray], n: int, threshold: float) -> Flo
     return out
 
 
-@dataclass(frozen=True, slots=True)
-class _Level:
+class _Level(NamedTuple):
     """The recursion after some tasks: ζ, the projector N and the stacked Jacobians so far."""
 
     zeta: FloatArray
@@ -371,20 +370,34 @@ def _task_jacobian(task: EqualityTask, n: int) -> FloatArray:
     return jac
 
 
+def _robust_step(b: FloatArray, residual: FloatArray, t2: float) -> FloatArray:
+    """:func:`pinv` (b) @ residual, without forming the inverse: Bᵀ U g(Λ) Uᵀ r."""
+    m, n = b.shape
+    if m == 1:
+        row = b[0]
+        out: FloatArray = row * (float(residual[0]) / max(float(row @ row), t2))
+        return out
+    if m > n:
+        return pinv(b, math.sqrt(t2)) @ residual
+    lam, u = _symmetric_eig(b @ b.T)
+    out = b.T @ (u @ ((residual @ u) / np.maximum(lam, t2)))
+    return out
+
+
 def _descend(level: _Level, task: EqualityTask, threshold: float, project: bool) -> _Level:
     """One priority level of the recursion (module docstring); N_i only if ``project``."""
     n = level.zeta.shape[0]
     jac = _task_jacobian(task, n)
     residual = np.asarray(task.error, dtype=float).reshape(-1) - jac @ level.zeta
     m = jac.shape[0]
+    t2 = threshold * threshold
     if level.stacked.shape[0] == 0 and 1 < m < n:  # N = I: J N and the stack are J, one Gram
-        t2 = threshold * threshold
         lam, u = _symmetric_eig(jac @ jac.T)
-        zeta = level.zeta + _robust_inverse(jac, lam, u, t2) @ residual
+        zeta = level.zeta + jac.T @ (u @ ((residual @ u) / np.maximum(lam, t2)))
         if not project:
             return _Level(zeta, level.projector, level.stacked)
         return _Level(zeta, _identity(n) - _kept_projector(jac, lam, u, t2), jac)
-    zeta = level.zeta + pinv(jac @ level.projector, threshold) @ residual
+    zeta = level.zeta + _robust_step(jac @ level.projector, residual, t2)
     if not project:
         return _Level(zeta, level.projector, level.stacked)
     stacked = np.concatenate([level.stacked, jac])
