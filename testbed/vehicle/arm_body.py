@@ -144,12 +144,11 @@ class ArmBody:
             for link in self.links
         ]
         self._rates: tuple[float, ...] = (0.0,) * len(model.joints)
-        for index, joint in zip(self.joint_indices, model.joints, strict=True):
+        self._applied: tuple[float, ...] | None = None  # the motors' targets now
+        for index in self.joint_indices:
             pb.changeDynamics(
                 body_id,
                 index,
-                jointLowerLimit=joint.lower_rad,
-                jointUpperLimit=joint.upper_rad,
                 jointDamping=0.0,
                 linearDamping=0.0,
                 angularDamping=0.0,
@@ -168,22 +167,42 @@ class ArmBody:
         for index, angle in zip(self.joint_indices, q_rad, strict=True):
             self._pb.resetJointState(self._body, index, float(angle), 0.0, self._cid)
         self.command((0.0,) * len(self.joint_indices))
+        self._applied = None
 
     def command(self, rates_rad_s: Sequence[float]) -> None:
         """Drive the joint motors at these rates [rad/s] (held until the next command), each
-        up to its joint's effort."""
+        up to its joint's effort and never past its position limits (:meth:`hold_limits`)."""
         rates = tuple(float(r) for r in rates_rad_s)
         if len(rates) != len(self.joint_indices):
             raise ValueError(f"{len(self.joint_indices)} joint rates expected, got {len(rates)}")
         self._rates = rates
-        self._pb.setJointMotorControlArray(
-            self._body,
-            self.joint_indices,
-            self._pb.VELOCITY_CONTROL,
-            targetVelocities=list(rates),
-            forces=self._efforts,
-            physicsClientId=self._cid,
-        )
+
+    def hold_limits(self, dt_s: float) -> None:
+        """Before a step of ``dt_s`` [s]: each motor's target is the commanded rate, cut so the
+        joint ends the step at most at its limit (the arm's soft limits, as Reach's firmware
+        keeps its joints inside theirs); the motors are set again only when that changes.
+        pybullet's own limit constraints on these links are not relied on: on the lightest
+        links they let a driven joint through, or past by 0.025 rad pulling its neighbour."""
+        states = self._pb.getJointStates(self._body, self.joint_indices, self._cid)
+        targets = []
+        for state, rate, joint in zip(states, self._rates, self.model.joints, strict=True):
+            angle = state[0]
+            if rate > 0.0:
+                rate = min(rate, max(0.0, (joint.upper_rad - angle) / dt_s))
+            elif rate < 0.0:
+                rate = max(rate, min(0.0, (joint.lower_rad - angle) / dt_s))
+            targets.append(rate)
+        applied = tuple(targets)
+        if applied != self._applied:
+            self._applied = applied
+            self._pb.setJointMotorControlArray(
+                self._body,
+                self.joint_indices,
+                self._pb.VELOCITY_CONTROL,
+                targetVelocities=targets,
+                forces=self._efforts,
+                physicsClientId=self._cid,
+            )
 
     @property
     def commanded_rates(self) -> tuple[float, ...]:

@@ -29,7 +29,7 @@ import numpy as np
 
 from testbed.config import check, check_ranges
 from testbed.ecs import World
-from testbed.vehicle.arm import ArmModel, end_effector_ned, load_arm_model, uvms_jacobian
+from testbed.vehicle.arm import ArmModel, end_effector_ned, load_arm_model, uvms_kinematics
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.systems import Controllers, SimClock
 from testbed.vehicle.tpik import TpikConfig, TpikInput, TpikOutput, load_tpik_config, solve_uvms
@@ -201,7 +201,7 @@ def _tpik_input(
     q = np.asarray(arm.q_rad, dtype=float)
     position = np.asarray(estimate.position_ned_m, dtype=float)
     quaternion = np.asarray(estimate.quaternion_wxyz, dtype=float)
-    ee_position, ee_rotation = end_effector_ned(arm.model, q, position, quaternion)
+    ee_position, ee_rotation, jacobian = uvms_kinematics(arm.model, q, position, quaternion)
     ahead = now - target.time_s
     velocity = np.asarray(target.velocity_ned_m_s, dtype=float)
     return TpikInput(
@@ -210,7 +210,7 @@ def _tpik_input(
         quaternion_wxyz=quaternion,
         ee_position_ned_m=ee_position,
         ee_rotation_ned=ee_rotation,
-        uvms_jacobian=uvms_jacobian(arm.model, q, quaternion),
+        uvms_jacobian=jacobian,
         target_position_ned_m=np.asarray(target.position_ned_m, dtype=float) + velocity * ahead,
         target_rotation_ned=None,
         target_yaw_rad=target.yaw_rad,

@@ -262,6 +262,7 @@ class Physics:
         self._trim: tuple[float, Vec3] | None = None
         self._coupling: list[_Coupling | None] = [None]  # the last step's (v, ω, R, F, τ), world
         self.arm_reaction_frd: Vec6 = (0.0,) * 6
+        self._seed_reaction: Vec6 = (0.0,) * 6  # the resting arm's, for the first step
         """The arm's reaction on the hull measured at the last step [N, N·m], FRD, CoG."""
 
         self.client_id: int = pybullet.connect(pybullet.DIRECT)
@@ -395,6 +396,7 @@ class Physics:
         if self.arm is not None:
             self.arm.reset(self.arm_model.initial_q_rad if self.arm_model else ())
             self._coupling[0] = None
+            self._seed_reaction = self._arm_static_reaction()
         self._steps = 0
         self._next_current_update_s = self.current.update_period_s
         self._nu_dot = (0.0,) * 6
@@ -592,6 +594,7 @@ class Physics:
         )
         arm = self.arm
         assert arm is not None
+        self._make_stepper()  # compiles (or loads) the kernels outside the first timed step
         m, dt, coupled = model.mass_kg, self.dt_s, self.arm_coupling
         inertia = model.inertia_kg_m2  # FRD and FLU share the diagonal
         memory = self._coupling
@@ -603,7 +606,11 @@ class Physics:
             else:
                 (_, _, height), orientation, linear, angular = raw
             rotation = matrix_from_quaternion(orientation)
-            reaction = _measured_reaction(memory[0], linear, angular, rotation, m, inertia, dt)
+            last = memory[0]
+            if last is None:  # nothing measured yet: the resting arm's weight and buoyancy
+                reaction = self._seed_reaction
+            else:
+                reaction = _measured_reaction(last, linear, angular, rotation, m, inertia, dt)
             self.arm_reaction_frd = reaction
             load = [w + t for w, t in zip(wrench_body, self._trim_wrench(rotation), strict=True)]
             if coupled:
@@ -618,6 +625,7 @@ class Physics:
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
             apply_torque(body, -1, torque, link_frame, cid)
             arm.apply_loads(current_ned)
+            arm.hold_limits(dt)
             step_simulation(cid)
             memory[0] = (
                 linear,
@@ -641,32 +649,45 @@ class Physics:
         mx, my, mz = py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx
         return (fx, -fy, -fz, mx, -my, -mz)
 
-    def _arm_trim(self) -> tuple[float, Vec3]:
-        """The trim float for the arm's present (initial) pose: its lift [N] (the arm's weight
-        less its buoyancy) and its point [m], body FLU from the CoG, below which the arm's
-        net weight acts (so it cancels both the force and the moment)."""
+    def _arm_static_reaction(self) -> Vec6:
+        """The resting arm's wrench on the hull in its present pose [N, N·m], body FRD about
+        the CoG: each link's weight at its centre of mass and buoyancy at its centre of
+        volume, along the world vertical (what the measured reaction is before any motion)."""
         arm = self.arm
         assert arm is not None
         cid = self.client_id
         base, orientation = pybullet.getBasePositionAndOrientation(self.body_id, cid)
         rot = pybullet.getMatrixFromQuaternion(orientation)
+        ux, uy, uz = rot[6], rot[7], rot[8]  # world up in the body (FLU)
         states = pybullet.getLinkStates(
             self.body_id, arm.link_indices, computeForwardKinematics=1, physicsClientId=cid
         )
-        down, moment_x, moment_y = 0.0, 0.0, 0.0
+        force = [0.0, 0.0, 0.0]
+        moment = [0.0, 0.0, 0.0]
         for link, state in zip(arm.links, states, strict=True):
             com = _body_point(rot, base, state[0])
             offset = _rotated(pybullet.getMatrixFromQuaternion(state[5]), link.cov_m)
             cov = _body_point(rot, base, [p + o for p, o in zip(state[4], offset, strict=True)])
             weight, lift = link.mass_kg * G_M_S2, RHO_KG_M3 * G_M_S2 * link.volume_m3
-            down += weight - lift
-            # moment about the CoG of (0, 0, −weight) at com and (0, 0, lift) at cov (FLU)
-            moment_x += -com[1] * weight + cov[1] * lift
-            moment_y += com[0] * weight - cov[0] * lift
+            for point, size in ((com, -weight), (cov, lift)):
+                fx, fy, fz = size * ux, size * uy, size * uz
+                force[0], force[1], force[2] = force[0] + fx, force[1] + fy, force[2] + fz
+                moment[0] += point[1] * fz - point[2] * fy
+                moment[1] += point[2] * fx - point[0] * fz
+                moment[2] += point[0] * fy - point[1] * fx
+        return (force[0], -force[1], -force[2], moment[0], -moment[1], -moment[2])
+
+    def _arm_trim(self) -> tuple[float, Vec3]:
+        """The trim float for the arm's present (start) pose: its lift [N] (the arm's weight
+        less its buoyancy) and its point [m], body FLU from the CoG, under which the arm's
+        net weight acts, so that it cancels the force and the horizontal moment (the start
+        attitude taken as level: every packaged scenario starts level)."""
+        _, _, down, mx, my, _ = self._arm_static_reaction()  # FRD: down = the net pull
         if abs(down) < 1e-9:
             return (0.0, (0.0, 0.0, 0.0))
-        # lift `down` (up) at (px, py): moment (py·down, −px·down) cancels the arm's
-        return (down, (moment_y / down, -moment_x / down, 0.0))
+        # FLU: the arm's moment is (mx, −my); a lift `down` at (px, py) gives (py, −px)·down,
+        # which cancels it at py = −mx/down, px = −my/down
+        return (down, (-my / down, -mx / down, 0.0))
 
     def arm_state(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """The arm's joint angles [rad] and rates [rad/s] (model order); empty without an arm."""
@@ -719,7 +740,7 @@ def _body_point(rotation: Sequence[float], base: Sequence[float], point: Sequenc
 
 
 def _measured_reaction(
-    last: _Coupling | None,
+    last: _Coupling,
     linear: Sequence[float],
     angular: Sequence[float],
     rotation: Sequence[float],
@@ -732,10 +753,8 @@ def _measured_reaction(
     From the hull's velocities before (``last``: linear, angular, rotation, and the force and
     torque applied, all pybullet's world) and now: R = m·Δv/Δt − F and, in the body at the
     step's start, I·Δω/Δt + ω×I·ω − τ (what the hull's own Newton–Euler equations leave
-    unexplained). Zero before the first step.
+    unexplained).
     """
-    if last is None:
-        return (0.0,) * 6
     lin0, ang0, rot0, f0, t0 = last
     fx = mass * (linear[0] - lin0[0]) / dt - f0[0]
     fy = mass * (linear[1] - lin0[1]) / dt - f0[1]

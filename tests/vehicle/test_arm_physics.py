@@ -165,8 +165,7 @@ def test_base_rotation_yaws_the_free_hull_the_other_way(
     from above by the numpy FK); with coupling the free hull yaws the opposite way, by > 2° and
     by a clear multiple (> 20×) of the uncoupled run's yaw. Without coupling the arm's motion
     leaves the hull essentially where the same uncoupled run with the arm at rest leaves it:
-    attitude within 0.5°, position within 1 mm (the at-rest run has its own start-up
-    transient, see the xfail below)."""
+    attitude within 0.5°, position within 1 mm."""
     rate = alpha5.joints[0].velocity_rad_s
     coupled, _, q_end = drive_axis_e(heavy, alpha5, True, rate)
     uncoupled, position, q_free = drive_axis_e(heavy, alpha5, False, rate)
@@ -183,12 +182,6 @@ def test_base_rotation_yaws_the_free_hull_the_other_way(
     assert np.abs(position - position_rest).max() < 1e-3
 
 
-@pytest.mark.xfail(
-    reason="uncoupled, the arm's reaction of the first step is not cancelled (it is measured "
-    "one step late from a zero start): the resting arm's 8 N weight kicks the hull to 0.8° of "
-    "pitch and 0.4° of roll",
-    strict=True,
-)
 def test_uncoupled_hull_with_the_arm_at_rest_stays_level(
     heavy: HydroModel, alpha5: ArmModel
 ) -> None:
@@ -200,20 +193,8 @@ def test_uncoupled_hull_with_the_arm_at_rest_stays_level(
 
 # --- joint limits and rates ---------------------------------------------------------------
 
-_LIMIT_BUGS = {
-    ("axis_b", -1): "pybullet does not enforce axis_b's limits (it passes 0 rad)",
-    ("axis_b", 1): "pybullet does not enforce axis_b's limits (it passes 3.22 rad)",
-    ("axis_c", 1): "axis_c overshoots its upper limit by 0.025 rad and drags axis_d",
-}
 _CASES = [
-    pytest.param(
-        j,
-        side,
-        id=f"{name}-{'lower' if side < 0 else 'upper'}",
-        marks=[pytest.mark.xfail(reason=_LIMIT_BUGS[name, side], strict=True)]
-        if (name, side) in _LIMIT_BUGS
-        else [],
-    )
+    pytest.param(j, side, id=f"{name}-{'lower' if side < 0 else 'upper'}")
     for j, name in enumerate(("axis_e", "axis_d", "axis_c", "axis_b"))
     for side in (-1, 1)
 ]
