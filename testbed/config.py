@@ -32,6 +32,7 @@ __all__ = [
     "check_range",
     "check_ranges",
     "load_toml",
+    "named_table",
     "parse_override",
     "read_text",
 ]
@@ -147,6 +148,22 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: malformed TOML: {err}") from None
+
+
+def named_table(tables: Mapping[str, Any], name: str, source: str, what: str) -> dict[str, Any]:
+    """``tables[name]``, a TOML file's table of that name.
+
+    Raises:
+        ConfigError: no such table (the message names the file and the known ones), or not
+            a table; ``what`` says what the tables hold (e.g. "ISMC gains").
+    """
+    table = tables.get(name)
+    if table is None:
+        known = ", ".join(sorted(tables))
+        raise ConfigError(f"{source}: {name}: no {what} of this name (known: {known})")
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{source}: {name}: expected a table")
+    return dict(table)
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:

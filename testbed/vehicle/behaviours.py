@@ -303,12 +303,25 @@ def _disarm_vehicle(bb: Any) -> None:
         bb.disarms = bb.disarms + 1
 
 
-class _ArmVehicle(_Node):
-    """Ask for arming until the vehicle reports armed; FAILURE after the setup timeout."""
+class _ArmUntilArmed(_Node):
+    """Ask for arming (``request`` key = True) until ``armed(bb)`` reports it; SUCCESS at once
+    when ``fitted(bb)`` is false (nothing to arm); FAILURE after the setup timeout."""
 
-    def __init__(self, bb: py_trees.blackboard.Client, timeout_s: float) -> None:
-        super().__init__("Arm vehicle", bb)
+    def __init__(
+        self,
+        bb: py_trees.blackboard.Client,
+        what: str,
+        timeout_s: float,
+        request: str,
+        armed: Callable[[Any], bool],
+        fitted: Callable[[Any], bool] = lambda board: True,
+    ) -> None:
+        super().__init__(f"Arm {what}", bb)
+        self.what = what
         self.timeout_s = timeout_s
+        self.request = request
+        self.armed = armed
+        self.fitted = fitted
         self.since_s: float | None = None
 
     def initialise(self) -> None:
@@ -316,41 +329,15 @@ class _ArmVehicle(_Node):
 
     def update(self) -> Status:
         bb = self.bb
-        if bb.armed:
+        if not self.fitted(bb) or self.armed(bb):
             return Status.SUCCESS
-        bb.request_arm = True
+        bb.set(self.request, True)
         if self.since_s is None:
             self.since_s = bb.time_s
         if bb.time_s - self.since_s > self.timeout_s:
-            bb.status = f"setup failed: not armed within {self.timeout_s:g} s"
+            bb.status = f"setup failed: {self.what} not armed within {self.timeout_s:g} s"
             return Status.FAILURE
-        bb.status = "setup: arming the vehicle"
-        return Status.RUNNING
-
-
-class _ArmManipulator(_Node):
-    """Ask for the arm's arming until it reports armed (SUCCESS at once without an arm);
-    FAILURE after the setup timeout."""
-
-    def __init__(self, bb: py_trees.blackboard.Client, timeout_s: float) -> None:
-        super().__init__("Arm manipulator", bb)
-        self.timeout_s = timeout_s
-        self.since_s: float | None = None
-
-    def initialise(self) -> None:
-        self.since_s = None
-
-    def update(self) -> Status:
-        bb = self.bb
-        if bb.ee_position is None or bb.manipulator_armed:
-            return Status.SUCCESS
-        bb.request_manipulator = True
-        if self.since_s is None:
-            self.since_s = bb.time_s
-        if bb.time_s - self.since_s > self.timeout_s:
-            bb.status = f"setup failed: manipulator not armed within {self.timeout_s:g} s"
-            return Status.FAILURE
-        bb.status = "setup: arming the manipulator"
+        bb.status = f"setup: arming the {self.what}"
         return Status.RUNNING
 
 
@@ -519,8 +506,21 @@ def _build_tree(
                 "Setup once",
                 memory=True,
                 children=[
-                    _ArmVehicle(bb, config.setup_timeout_s),
-                    _ArmManipulator(bb, config.setup_timeout_s),
+                    _ArmUntilArmed(
+                        bb,
+                        "vehicle",
+                        config.setup_timeout_s,
+                        "request_arm",
+                        lambda board: bool(board.armed),
+                    ),
+                    _ArmUntilArmed(
+                        bb,
+                        "manipulator",
+                        config.setup_timeout_s,
+                        "request_manipulator",
+                        lambda board: bool(board.manipulator_armed),
+                        lambda board: board.ee_position is not None,
+                    ),
                     _Do("Mark setup done", bb, setup_done(True)),
                 ],
             ),

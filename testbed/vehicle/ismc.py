@@ -49,7 +49,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 
-from testbed.config import ConfigError, build, check, check_range, check_ranges, load_toml
+from testbed.config import build, check, check_range, check_ranges, load_toml, named_table
 from testbed.vehicle.hydrodynamics import HydroModel, coefficients
 from testbed.vehicle.plant_kernels import fossen_acceleration
 
@@ -130,12 +130,7 @@ def load_ismc_gains(model_name: str) -> IsmcGains:
             or a bad table (unknown key, out-of-range value; file and dotted key named).
     """
     path, tables = _gains_tables()
-    table = tables.get(model_name)
-    if table is None:
-        known = ", ".join(sorted(tables))
-        raise ConfigError(f"{path}: {model_name}: no ISMC gains for this model (known: {known})")
-    if not isinstance(table, dict):
-        raise ConfigError(f"{path}: {model_name}: expected a table")
+    table = named_table(tables, model_name, path, "ISMC gains")
     return build(IsmcGains, table, source=path, prefix=f"{model_name}.")
 
 

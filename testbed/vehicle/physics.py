@@ -270,7 +270,7 @@ class Physics:
         self.body_id: int = self._build_scene()
         if arm is not None:
             self.arm = ArmBody(pybullet, self.client_id, self.body_id, arm)
-        self._advance = self._make_stepper() if arm is None else self._make_arm_stepper()
+        self._advance = self._make_stepper()
         self.reset()
         if arm is not None and arm_trim and arm_coupling:
             self._trim = self._arm_trim()
@@ -530,7 +530,7 @@ class Physics:
     def _make_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
         """One step: pybullet's reads, the compiled :func:`~.plant_kernels.pybullet_wrench`,
         force, torque and pybullet's step (attribute lookups bound once: this runs 240 times a
-        simulated second)."""
+        simulated second); with an arm, the coupled step (class docstring)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
         apply_force = pybullet.applyExternalForce
@@ -569,37 +569,17 @@ class Physics:
         level, zero3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
         pybullet_wrench(fossen, rigid, 0.0, level, zero3, zero3, (0.0,) * 6, zero3)
         pybullet_state(model.cog_m, zero3, (0.0, 0.0, 0.0, 1.0), level, zero3, zero3)
-        return advance
-
-    def _make_arm_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
-        """:meth:`_make_stepper`'s step with the arm: its measured reaction coupled into (or
-        cancelled from) the hull's Fossen equation, the trim float's wrench, and the links'
-        loads (class docstring)."""
-        get_pose = pybullet.getBasePositionAndOrientation
-        get_velocity = pybullet.getBaseVelocity
-        apply_force = pybullet.applyExternalForce
-        apply_torque = pybullet.applyExternalTorque
-        step_simulation = pybullet.stepSimulation
-        matrix_from_quaternion = pybullet.getMatrixFromQuaternion
-        link_frame = pybullet.LINK_FRAME
-        cid, body = self.client_id, self.body_id
-        model = self.model
-        fossen = coefficients(model)
-        rigid = (
-            model.mass_kg,
-            *model.inertia_kg_m2,
-            *model.cog_m,
-            *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
-            1.0 / model.hull_size_m[2],
-        )
+        if self.arm is None:
+            return advance
+        # With the arm: its measured reaction coupled into (or cancelled from) the hull's
+        # Fossen equation, the trim float's wrench, and the links' loads (class docstring).
         arm = self.arm
         assert arm is not None
-        self._make_stepper()  # compiles (or loads) the kernels outside the first timed step
         m, dt, coupled = model.mass_kg, self.dt_s, self.arm_coupling
         inertia = model.inertia_kg_m2  # FRD and FLU share the diagonal
         memory = self._coupling
 
-        def advance(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
+        def advance_arm(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
             if raw is None:
                 (_, _, height), orientation = get_pose(body, cid)
                 linear, angular = get_velocity(body, cid)
@@ -636,7 +616,7 @@ class Physics:
             )
             return nu_dot
 
-        return advance
+        return advance_arm
 
     def _trim_wrench(self, rotation: Sequence[float]) -> Vec6:
         """The trim float's wrench [N, N·m], body FRD about the CoG: its buoyancy (world up)

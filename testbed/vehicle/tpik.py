@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -66,7 +66,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common.geometry import Vec3, euler_from_quat, wrap_angle
-from testbed.config import ConfigError, build, check, check_range, check_ranges, load_toml
+from testbed.config import build, check, check_range, check_ranges, load_toml, named_table
 
 __all__ = [
     "SLOW_RATE_RAD_S",
@@ -230,12 +230,7 @@ def load_tpik_config(name: str = "alpha5-heavy", path: str | Path | None = None)
             source, tables = str(packaged), load_toml(packaged)
     else:
         source, tables = str(path), load_toml(path)
-    table = tables.get(name)
-    if table is None:
-        known = ", ".join(sorted(tables))
-        raise ConfigError(f"{source}: {name}: no TPIK table of this name (known: {known})")
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{source}: {name}: expected a table")
+    table = named_table(tables, name, source, "TPIK table")
     data: dict[str, Any] = {"level_gain": None, "yaw_gain": None, **table}
     data.pop("source", None)  # free-text provenance
     return build(TpikConfig, data, source=source, prefix=f"{name}.")

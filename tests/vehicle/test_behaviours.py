@@ -251,7 +251,7 @@ def test_arming_timeout_fails_setup_and_retries() -> None:
         statuses = [ctx.status for ctx in rig.run_until(1.2)]
         # asked from t = 0; more than 1 s later (t = 1.05) setup fails, the next tick retries
         assert statuses[:21] == ["setup: arming the vehicle"] * 21
-        assert statuses[21] == "setup failed: not armed within 1 s"
+        assert statuses[21] == "setup failed: vehicle not armed within 1 s"
         assert statuses[22] == "setup: arming the vehicle"
         assert rig.context.request_arm is True and not rig.vehicle.armed
     finally:
