@@ -200,6 +200,7 @@ class Transport:
         self.bytes_out = 0
         self.callback_errors = 0
         self.setup_writes = 0
+        self.write_timeouts = 0  # writes the port timed out once (SerialTransport)
         self.packet_ends = 0
 
     def _start(self, name: str) -> None:
@@ -259,6 +260,7 @@ class Transport:
             "callback_errors": self.callback_errors,
             "setup_writes": self.setup_writes,
             "packet_ends": self.packet_ends,
+            "write_timeouts": self.write_timeouts,
         }
         counts.update({f"adapter_{k}": v for k, v in self.adapter.counters().items()})
         return counts
@@ -428,8 +430,9 @@ class SerialTransport(Transport):
             an idle line ends a packet as soon as it has been idle that long. Bounds how fast
             :meth:`close` returns and when an idle line is seen, not latency (a read returns on
             its first byte).
-        write_timeout_s: a write blocked longer than this (flow control stuck) counts as a
-            port error [s].
+        write_timeout_s: two writes in a row blocked longer than this (flow control stuck)
+            count as a port error [s]; one alone is counted in ``write_timeouts``
+            (:meth:`_write`).
         port_factory: opens the port (tests inject fakes); defaults to
             :func:`serial.serial_for_url` with the settings above.
         **kwargs: :class:`Transport` options (backoff, queue size, ``packet_gap_s``: default
@@ -470,6 +473,7 @@ class SerialTransport(Transport):
                 return port
 
         self._factory = port_factory
+        self._timeouts_in_row = 0
         self._start(f"serial:{url}")
 
     def _open(self) -> PortLike:
@@ -484,7 +488,23 @@ class SerialTransport(Transport):
         return data
 
     def _write(self, port: PortLike, data: bytes) -> None:
-        port.write(data)
+        """Write ``data``; pyserial's write timeout is a port error only twice in a row.
+
+        pyserial also raises its ``SerialTimeoutException`` when the write went through but
+        the host held the thread past the timeout before it looked at the clock (it checks
+        after a complete ``os.write``): one timeout alone is counted (``write_timeouts``) and
+        the frame taken as sent; flow control that is really stuck times out the next write
+        too, and that one fails the port.
+        """
+        try:
+            port.write(data)
+        except serial.SerialTimeoutException:
+            self.write_timeouts += 1
+            self._timeouts_in_row += 1
+            if self._timeouts_in_row >= 2:
+                raise
+            return
+        self._timeouts_in_row = 0
 
 
 class TcpTransport(Transport):

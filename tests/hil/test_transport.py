@@ -241,3 +241,70 @@ def test_tcp_transport_round_trip_through_an_echoing_peer() -> None:
 def test_first_open_failure_raises() -> None:
     with pytest.raises(serial.SerialException):
         SerialTransport("/dev/does-not-exist-testbed", RawAdapter(), baudrate=9600)
+
+
+class StalledWritePort:
+    """A loop:// port whose writes go through but then raise pyserial's write timeout, as
+    pyserial's own ``write`` does when the host held the thread past ``write_timeout`` before
+    it checked the clock (it checks after a complete ``os.write``); ``stuck`` ones raise
+    without writing (flow control that never lets a byte out)."""
+
+    def __init__(self, stalls: list[str]) -> None:
+        self.port = serial.serial_for_url("loop://", timeout=0.01)
+        self.stalls = stalls  # per write: "ok", "stalled" (written, then raises) or "stuck"
+
+    def read(self, size: int = 1) -> bytes:
+        return bytes(self.port.read(size))
+
+    def write(self, data: bytes) -> int | None:
+        kind = self.stalls.pop(0) if self.stalls else "ok"
+        if kind != "stuck":
+            self.port.write(data)
+        if kind != "ok":
+            raise serial.SerialTimeoutException("Write timeout")
+        return len(data)
+
+    @property
+    def in_waiting(self) -> int:
+        return int(self.port.in_waiting)
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def test_one_write_timeout_after_the_bytes_went_out_is_counted_not_a_port_error() -> None:
+    """The frame the stalled write carried comes back through loop:// (it went out), the
+    port stays open, and the timeout is counted; two timeouts in a row fail the port."""
+    port = StalledWritePort(["stalled", "ok"])
+    transport = SerialTransport("fake", RawAdapter(), baudrate=115200, port_factory=lambda: port)
+    endpoint = LinkEndpoint(transport)
+    try:
+        endpoint.send(encode_frame(b"first"))
+        endpoint.send(encode_frame(b"second"))
+        assert collect(endpoint, 2) == [b"first", b"second"]
+        counts = transport.counters()
+        assert counts["write_timeouts"] == 1 and counts["port_errors"] == 0
+        assert counts["frames_sent"] == 2 and counts["frames_dropped"] == 0
+    finally:
+        endpoint.close()
+    ports = [StalledWritePort(["stuck", "stuck"])]
+    transport = SerialTransport(
+        "fake",
+        RawAdapter(),
+        baudrate=115200,
+        port_factory=lambda: ports.pop(0) if ports else StalledWritePort([]),
+        backoff_initial_s=0.001,
+    )
+    try:
+        transport.send(encode_frame(b"a"))
+        transport.send(encode_frame(b"b"))
+        assert transport.connected.wait(WAIT_S)
+        deadline = threading.Event()
+        for _ in range(500):  # bounded: the writer thread takes both frames within ms
+            if transport.port_errors:
+                break
+            deadline.wait(0.01)
+        assert transport.port_errors == 1 and transport.write_timeouts == 2
+        assert transport.frames_dropped == 1  # the second, whose write failed the port
+    finally:
+        transport.close()
