@@ -174,7 +174,9 @@ def endpoint_report(endpoint: LinkEndpoint) -> dict[str, Any]:
     port down); ``garbage_bytes`` (bytes the frame decoder skipped while hunting, plus bytes the
     adapter dropped as malformed modem sentences); ``corrupt_frames`` (candidates with a bad CRC,
     oversize or truncated); ``reopens`` (successful opens after the first), ``port_errors``,
-    ``reopen_failures``, ``last_error``; ``added_latency_ms`` (:func:`latency_summary_ms`);
+    ``reopen_failures``, ``write_timeouts`` (single pyserial write timeouts, not port errors:
+    :meth:`~.SerialTransport._write`), ``last_error``; ``added_latency_ms``
+    (:func:`latency_summary_ms`);
     ``thread_lateness_ms``, how long the host held up the transport's ``reader`` and ``writer``
     threads (:attr:`~.Transport.reader_lateness_ns`, :attr:`~.Transport.writer_lateness_ns`; the
     same summary keys); and ``adapter``, the adapter's own counters.
@@ -193,6 +195,7 @@ def endpoint_report(endpoint: LinkEndpoint) -> dict[str, Any]:
         "reopens": max(0, transport.opens - 1),
         "port_errors": transport.port_errors,
         "reopen_failures": transport.reopen_failures,
+        "write_timeouts": transport.write_timeouts,
         "last_error": transport.last_error,
         "added_latency_ms": latency_summary_ms(endpoint.latencies_ns),
         "thread_lateness_ms": {
