@@ -148,8 +148,12 @@ def test_a_ground_station_arms_flies_and_disarms_through_the_hil_modems(
         session.heartbeat(lambda hb: hb.base_mode & 128)  # the vehicle's state says armed
         banner = [m.text for _, m in session.seen.get("STATUSTEXT", [])]
         assert any(text.startswith("Gateway s100") for text in banner), banner
+        start = session.until(lambda: session.latest.get("LOCAL_POSITION_NED"))
         session.sticks = (1000, 0, 500, 0)  # forward
         session.pump(5.0)
+        # and on until the ground station sees the vehicle 0.5 m ahead (a loaded host can hold
+        # the orders back: a progress wait, not a fixed time)
+        session.until(lambda: session.latest["LOCAL_POSITION_NED"].x - start.x > 0.5)
         session.sticks = (0, 0, 500, 0)
         gcs.mav.command_long_send(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
         assert session.ack(400) == mav.MAV_RESULT_ACCEPTED
