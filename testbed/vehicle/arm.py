@@ -28,6 +28,7 @@ Pure numpy; rotations from :mod:`testbed.common.geometry`. No pybullet.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -296,6 +297,15 @@ def _derive_link(spec: _LinkSpec, end: Vec3) -> ArmLink:
     )
 
 
+@functools.cache
+def _packaged_arm_model(name: str) -> ArmModel:
+    """The packaged model ``name``, read once per process (the package's files do not change
+    while it runs; the model is immutable)."""
+    entry = resources.files("testbed.vehicle").joinpath("data", f"{name}.toml")
+    with resources.as_file(entry) as packaged:
+        return load_arm_model(name, path=packaged)
+
+
 def load_arm_model(name: str = "alpha5", *, path: str | Path | None = None) -> ArmModel:
     """Load an arm model from ``testbed/vehicle/data/{name}.toml`` (or from ``path``).
 
@@ -308,9 +318,7 @@ def load_arm_model(name: str = "alpha5", *, path: str | Path | None = None) -> A
             range; the message names the file and the dotted key (e.g. ``joints[1].axis``).
     """
     if path is None:
-        entry = resources.files("testbed.vehicle").joinpath("data", f"{name}.toml")
-        with resources.as_file(entry) as packaged:
-            return load_arm_model(name, path=packaged)
+        return _packaged_arm_model(name)
     spec = build(_ArmSpec, load_toml(path), source=str(path))
     n = len(spec.joints)
     return ArmModel(

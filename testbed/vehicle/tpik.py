@@ -54,6 +54,7 @@ NED. Pure numpy; no ECS, no randomness.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Sequence
@@ -226,10 +227,18 @@ def load_tpik_config(name: str = "alpha5-heavy", path: str | Path | None = None)
         ConfigError: missing file or table, or a bad table (file and dotted key named).
     """
     if path is None:
-        with resources.as_file(_config_file()) as packaged:
-            source, tables = str(packaged), load_toml(packaged)
-    else:
-        source, tables = str(path), load_toml(path)
+        return _packaged_tpik_config(name)
+    return _tpik_config(name, str(path), load_toml(path))
+
+
+@functools.cache
+def _packaged_tpik_config(name: str) -> TpikConfig:
+    """Table ``name`` of the packaged ``data/tpik.toml``, read once per process."""
+    with resources.as_file(_config_file()) as packaged:
+        return _tpik_config(name, str(packaged), load_toml(packaged))
+
+
+def _tpik_config(name: str, source: str, tables: dict[str, Any]) -> TpikConfig:
     table = named_table(tables, name, source, "TPIK table")
     data: dict[str, Any] = {"level_gain": None, "yaw_gain": None, **table}
     data.pop("source", None)  # free-text provenance
