@@ -208,24 +208,51 @@ class AttitudeGains:
     yaw: PidGains = field(default_factory=PidGains)
 
 
+MAX_TARGET_RATE_HOLD_S = 0.25
+"""Longest time [s] over which one step of an attitude target is fed forward as a rate."""
+
+
 class AttitudeController:
     """Three per-axis PIDs on the swing–twist attitude error, returning a body torque.
 
     The derivative is fed the error rate ``target rate − body rate`` from the gyro and the
-    target's own motion, so no measured angle is ever differenced.
+    target's own motion, so no measured angle is ever differenced. Targets arrive held (a
+    setpoint sent at 40 Hz and received over a link steps every 2–3 frames of 100 Hz), so each
+    step of the target is fed forward as its size over the mean time between its steps (the
+    mean of the last interval and the mean before; at most :data:`MAX_TARGET_RATE_HOLD_S`),
+    held until the next step: a steady setpoint's rate feeds forward within ≈ 10 % of
+    constant, without the spike on the frames it stepped and nothing in between that one
+    frame's difference gives; a lone step after a still spell (≥ 0.5 s) is fed over 0.25 s in
+    full instead of kicking in one frame (after a shorter one, up to 1.5 × its size over the
+    mean interval: the feedforward's only overshoot).
     """
 
-    __slots__ = ("_last_target", "pids")
+    __slots__ = (
+        "_hold_left_s",
+        "_interval_s",
+        "_last_target",
+        "_since_change_s",
+        "_target_rate_ned",
+        "pids",
+    )
 
     def __init__(self, gains: AttitudeGains) -> None:
         self.pids = (PID(gains.roll), PID(gains.pitch), PID(gains.yaw))
         self._last_target: Quaternion | None = None
+        self._since_change_s = 0.0
+        self._interval_s = 0.0  # the mean time between the target's steps (0: none yet)
+        self._hold_left_s = 0.0
+        self._target_rate_ned: Vec3 = (0.0, 0.0, 0.0)
 
     def reset(self) -> None:
-        """Reset every axis and forget the previous target."""
+        """Reset every axis and forget the previous target and its rate."""
         for pid in self.pids:
             pid.reset()
         self._last_target = None
+        self._since_change_s = 0.0
+        self._interval_s = 0.0
+        self._hold_left_s = 0.0
+        self._target_rate_ned = (0.0, 0.0, 0.0)
 
     def update(
         self,
@@ -250,17 +277,37 @@ class AttitudeController:
         """
         errors = attitude_error(target, current)
         last = self._last_target
-        if last is None or last is target or last == target:
-            target_rates: Vec3 = (0.0, 0.0, 0.0)
-        else:
-            # the target's increment since the last step (a small world-frame rotation, whose
-            # rotation vector is 2·vec(target·last⁻¹)), on the current body axes
+        self._since_change_s += dt_s
+        rate = self._target_rate_ned
+        left = self._hold_left_s
+        if last is None:
+            self._since_change_s = 0.0
+        elif last is not target and last != target:
+            # the target's step since it last changed (a small world-frame rotation, whose
+            # rotation vector is 2·vec(target·last⁻¹)) over the mean time between its steps
             sw, sx, sy, sz = quat_multiply(target, quat_conjugate(last))
             if sw < 0.0:
                 sx, sy, sz = -sx, -sy, -sz
-            k = 2.0 / dt_s
-            target_rates = quat_rotate_inverse(current, (k * sx, k * sy, k * sz))
+            since = self._since_change_s
+            mean = self._interval_s
+            mean = self._interval_s = since if mean == 0.0 else 0.5 * (mean + since)
+            spread = min(mean, MAX_TARGET_RATE_HOLD_S)
+            k = 2.0 / spread
+            rate = self._target_rate_ned = (k * sx, k * sy, k * sz)
+            # held until the next step, or until it is late by half the mean interval (the
+            # target stopped); a lone step is thus fed over MAX_TARGET_RATE_HOLD_S in full
+            left = spread if spread >= MAX_TARGET_RATE_HOLD_S else 1.5 * spread
+            self._since_change_s = 0.0
         self._last_target = target
+        if left > 1e-9:  # still feeding the last step: this frame's share of it
+            self._hold_left_s = left - dt_s
+            if left < dt_s:
+                f = left / dt_s
+                rate = (rate[0] * f, rate[1] * f, rate[2] * f)
+            target_rates = quat_rotate_inverse(current, rate)
+        else:
+            self._hold_left_s = 0.0
+            target_rates = (0.0, 0.0, 0.0)
         out = [0.0, 0.0, 0.0]
         for k in range(3):
             pid = self.pids[k]

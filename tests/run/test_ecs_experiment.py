@@ -102,13 +102,11 @@ def test_the_bound_catches_an_untuned_roll_loop() -> None:
     assert errors(result)["roll"]["std"] > STD_BOUND_DEG
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="through the runner (tether link, change-set sync) ecs-4h tracks yaw worse than "
-    "ecs-2h (std ≈ 0.19° vs 0.12°, seeds 1-3, also against the commanded setpoint); the "
-    "removed direct-Vehicle experiment gave 0.07° vs 0.13°: open question",
-)
 def test_more_thrusters_do_not_track_worse() -> None:
+    # unsaturated, the same torque demand gives the same motion whatever the layout; this
+    # failed (0.19° vs 0.12°) while the attitude loop fed the held setpoint's rate forward as a
+    # spike on the frames it stepped: the 2h pair's per-thruster slew limit smoothed it, the
+    # 4h's halved forces did not
     four = run("ecs-4h", duration_s=35.0, seed=2)
     two = run("ecs-2h", duration_s=35.0, seed=2)
     assert errors(four)["yaw"]["std"] <= errors(two)["yaw"]["std"] * 1.05

@@ -133,6 +133,43 @@ def test_attitude_derivative_uses_gyro_and_target_rate() -> None:
     assert torque[2] == pytest.approx(math.degrees(0.2), rel=1e-6)
 
 
+def test_a_held_setpoint_feeds_its_mean_rate_forward_not_spikes() -> None:
+    # a yaw ramp at 0.2 rad/s sampled at 40 Hz, seen by a 100-Hz loop: the target steps by
+    # 5 mrad every 2 or 3 frames; kd = 1 with the body still makes the yaw output the target
+    # rate fed forward [deg/s]
+    ctrl = AttitudeController(AttitudeGains(yaw=PidGains(kd=1.0, max_output=1e9)))
+    level = (1.0, 0.0, 0.0, 0.0)
+    omega, dt = 0.2, 0.01
+    outputs = []
+    for frame in range(231):  # the ramp for 2 s, then held still for 0.3 s
+        sampled = min(2.0, math.floor(frame * dt * 40.0 + 1e-9) / 40.0)  # last 40-Hz sample
+        target = quat_from_euler(0.0, 0.0, omega * sampled)
+        outputs.append(ctrl.update(target, level, (0.0, 0.0, 0.0), dt)[2])
+    fed = np.radians(outputs)
+    # it adds up to the ramp's angle (closed form: ω·2 s, as rotation vectors of the 80
+    # 5-mrad steps) and stops once the target does
+    steps = 80 * 2.0 * math.sin(omega * 0.025 / 2.0)
+    assert np.sum(fed) * dt == pytest.approx(steps, rel=0.025)  # 1.8 % over: the held rates
+    assert np.all(fed[210:] == 0.0)
+    # once the mean interval has settled, every frame of the ramp feeds a rate within 10 % of
+    # ω; one frame's difference gives 2.5 ω on the frames the target stepped and 0 between
+    assert np.all(np.abs(fed[20:200] - omega) <= 0.1 * omega)
+
+
+def test_a_lone_step_after_a_still_spell_kicks_little_and_stops() -> None:
+    ctrl = AttitudeController(AttitudeGains(yaw=PidGains(kd=1.0, max_output=1e9)))
+    level = (1.0, 0.0, 0.0, 0.0)
+    for _ in range(100):  # 1 s still
+        ctrl.update(level, level, (0.0, 0.0, 0.0), 0.01)
+    step = quat_from_euler(0.0, 0.0, math.radians(10.0))
+    fed = [ctrl.update(step, level, (0.0, 0.0, 0.0), 0.01)[2] for _ in range(30)]
+    # the step as a rotation vector (2·sin(5°) rad) spread over MAX_TARGET_RATE_HOLD_S
+    # (0.25 s, not the 1 s since the first target): 25 frames of it, then nothing
+    rate = math.degrees(2.0 * math.sin(math.radians(5.0))) / 0.25
+    np.testing.assert_allclose(fed[:25], rate, rtol=1e-9)
+    assert fed[25:] == [0.0] * 5
+
+
 def test_attitude_loop_settles_a_rigid_body() -> None:
     # J ω̇ = τ − c ω about yaw; mate-rov 2025 yaw gains stabilise a 0.28 kg·m² body
     j, c, dt = 0.28, 0.07, 0.01
