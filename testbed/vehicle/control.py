@@ -268,13 +268,18 @@ class AttitudeController:
             target: (4,) target attitude, body → NED.
             current: (4,) measured attitude, body → NED.
             rates_rad_s: (3,) measured body rates (p, q, r) [rad/s], FRD.
-            dt_s: time since the previous step [s].
+            dt_s: time since the previous step [s], > 0.
             axes: which of roll, pitch, yaw to control (e.g. pitch off when the thruster layout
                 cannot produce pitch torque); a disabled axis outputs 0 and is reset.
 
         Returns:
             (3,) body torque (K, M, N) [N·m], FRD.
+
+        Raises:
+            ValueError: ``dt_s`` is not positive.
         """
+        if not dt_s > 0.0:  # before the target's rate divides by the time it took
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
         errors = attitude_error(target, current)
         last = self._last_target
         self._since_change_s += dt_s

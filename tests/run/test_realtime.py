@@ -433,6 +433,11 @@ class Window:
                 return noises * len(NOISE)
         raise AssertionError(f"{lost} B lost on the air: not whole orders and noise")
 
+    @property
+    def noise_crossed_bytes(self) -> int:
+        """Line noise that reached the vehicle's port [B]: written, less lost on the air."""
+        return self.noise_bytes - self.noise_lost_bytes
+
     def lateness_s(self, key: str) -> float:
         """The run's measured scheduler lateness (``hil.scheduler_lateness_ms[key]``) [s]."""
         return max(0.0, float(self.single.metrics["hil"]["scheduler_lateness_ms"][key]) / 1e3)
@@ -621,9 +626,12 @@ def test_orders_reach_the_vehicle_and_state_returns(window: Window) -> None:
     assert lost_on_air.is_integer()
     assert modems[1]["rx_collided"] <= lost_on_air
     assert (lost_on_air == 0) == (modems[1]["rx_collided"] == 0), window.emulators[0]
-    noise_in = window.noise_bytes - window.noise_lost_bytes  # what reached the vehicle
     unhanded = _unhanded(
-        window, ends["vehicle"]["bytes_in"], noise_in, up["frames_delivered"], order
+        window,
+        ends["vehicle"]["bytes_in"],
+        window.noise_crossed_bytes,
+        up["frames_delivered"],
+        order,
     )
     late_orders = (ports[1]["bytes_out"] - ends["vehicle"]["bytes_in"]) / order
     in_flight = math.ceil((_link_s(window.config, order) + window.host_s("max")) / ipg_s)
@@ -729,7 +737,7 @@ def test_added_latency_is_the_wait_for_the_next_poll(window: Window) -> None:
     assert terminators - up["frames_delivered"] == _unhanded(
         window,
         ends["vehicle"]["bytes_in"],
-        window.noise_bytes - window.noise_lost_bytes,
+        window.noise_crossed_bytes,
         up["frames_delivered"],
         13 + CRLF,
     )
@@ -742,7 +750,7 @@ def test_garbage_on_the_line_is_counted_not_fatal(window: Window) -> None:
     # vehicle's decoder skipped it, and the orders behind it still decoded.
     # (A burst that collided on the air took its noise with it: the emulator counts it.)
     assert window.noise_bytes >= len(NOISE)
-    crossed = window.noise_bytes - window.noise_lost_bytes
+    crossed = window.noise_crossed_bytes
     assert hil["endpoints"]["vehicle"]["garbage_bytes"] == crossed
     assert hil["garbage_bytes"] == crossed
     if window.noise_lost_bytes:
