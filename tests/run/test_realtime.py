@@ -322,7 +322,13 @@ class LinkProbe:
 
     A stall (the host doing nothing on that path for a while) shows in full in one or the other
     record except for the part of it before the probe's frame was written, which is at most
-    one crossing (:attr:`model_s`) or one wait: :meth:`worst_s` adds that."""
+    one crossing (:attr:`model_s`) or one wait: :meth:`worst_s` adds that.
+
+    The probe waits for each frame, so a stall is one sample of its excess however long it
+    lasts, while the run's orders go out on a schedule and a stall of D holds up every order
+    written in it (about D/IPG of them): the statistics of :attr:`excess_s` bound a typical
+    crossing, and :meth:`stall_s` the stall a frame written at a given instant met (its
+    timeline, :attr:`sent_s`)."""
 
     PAYLOAD = b"probe!!"  # a 13-B WAFrame, 15 B with its CR LF: the size of an order
 
@@ -330,11 +336,14 @@ class LinkProbe:
         size = len(encode_frame(self.PAYLOAD)) + CRLF
         self.model_s = IDLE_S + config.intrinsic_delay_s + config.airtime_s(size)
         self.excess_s: list[float] = []
+        self.sent_s: list[float] = []
+        """Monotonic instant each crossing's frame was written [s] (one per :attr:`excess_s`)."""
         self.wait_late_s: list[float] = [0.0]
         self.lost = 0
         self._paths = paths
         self._gap_s = gap_s
         self._stop = threading.Event()
+        self._crossed = threading.Event()
         self._thread = threading.Thread(target=self._run, name="link-probe", daemon=True)
 
     def _run(self) -> None:
@@ -360,10 +369,13 @@ class LinkProbe:
             if frames:
                 if frames == [Frame(self.PAYLOAD)]:
                     self.excess_s.append(time.monotonic() - t0 - self.model_s)
+                    self.sent_s.append(t0)
+                    self._crossed.set()
                 else:
                     self.lost += 1
                 return
         self.excess_s.append(time.monotonic() - t0 - self.model_s)
+        self.sent_s.append(t0)
 
     def _pause(self) -> None:
         due = time.monotonic() + self._gap_s
@@ -371,7 +383,10 @@ class LinkProbe:
             self.wait_late_s.append(max(0.0, time.monotonic() - due))
 
     def __enter__(self) -> LinkProbe:
+        """Start probing; return once a first frame has crossed (or 60 s passed), so that the
+        record covers what follows."""
         self._thread.start()
+        self._crossed.wait(60.0)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -387,6 +402,44 @@ class LinkProbe:
         the part of a stall it can miss (one crossing, or one wait if longer)."""
         seen = max(self.quantile(1.0), max(self.wait_late_s))
         return seen + max(self.model_s, self._gap_s)
+
+    def stall_s(self, first_s: float, last_s: float) -> float:
+        """The longest stall a frame written on the probe's path between the monotonic instants
+        ``first_s`` and ``last_s`` can have met [s]: the excess of each crossing in flight then,
+        or of the next one for an instant between crossings (a stall that began there lasts
+        into it) plus the time from that instant to the crossing's start; :meth:`worst_s`
+        outside the probe's record. A frame written inside a crossing's stall is released at
+        about the same time as the probe's, so the probe's excess bounds it."""
+        covering = self._covering(first_s, last_s)
+        if covering is None:
+            return self.worst_s()
+        return max(e + max(0.0, sent - max(first_s, since)) for sent, since, e in covering)
+
+    def seen_s(self, first_s: float, last_s: float) -> float:
+        """The largest excess the probe saw on the crossings that cover the monotonic instants
+        ``first_s`` to ``last_s`` (as :meth:`stall_s`, without the part of a stall the probe
+        can miss) [s]; :meth:`worst_s` outside the probe's record."""
+        covering = self._covering(first_s, last_s)
+        if covering is None:
+            return self.worst_s()
+        return max(excess for _, _, excess in covering)
+
+    def _covering(self, first_s: float, last_s: float) -> list[tuple[float, float, float]] | None:
+        """The crossings that cover ``first_s`` to ``last_s``, as (sent, covering from, excess)
+        [s]: each covers the time from the previous one's arrival to its own; None if the span
+        is not inside the record."""
+        if not self.sent_s:
+            return None
+        if first_s < self.sent_s[0] or last_s > self.sent_s[-1] + self.model_s + self.excess_s[-1]:
+            return None
+        out = []
+        since = self.sent_s[0]
+        for sent, excess in zip(self.sent_s, self.excess_s, strict=True):
+            arrived = sent + self.model_s + excess
+            if since <= last_s and arrived >= first_s:
+                out.append((sent, since, excess))
+            since = arrived
+        return out
 
 
 @dataclass
@@ -411,6 +464,8 @@ class Window:
     """Each call of the operator port's factory: (monotonic instant, opened)."""
     unplug_monotonic: tuple[float, float]
     """The unplug window on the monotonic clock [s]."""
+    clock_monotonic: tuple[float, float]
+    """Earliest and latest monotonic instant at which the single run's clock started [s]."""
 
     @property
     def noise_bytes(self) -> int:
@@ -481,12 +536,12 @@ class Window:
             f"p95/max {self.transports_s('p95'):.3f}/{self.transports_s('max'):.3f} s"
         )
 
-    def emulator_s(self, key: str) -> float:
-        """Scheduler lateness the single run's emulator measured [s]: its reader's (a burst
-        enters the link that late, or is picked up that late when the reader is held up:
-        ``reader_stall``) plus its simulation thread's (a delivery is written that late),
-        statistic ``key`` of each; 0 for a thread with no sample."""
-        late = self.emulators[0]["scheduler_lateness_ms"]
+    def emulator_s(self, key: str, index: int = 0) -> float:
+        """Scheduler lateness emulator ``index`` (0: the single run's) measured [s]: its
+        reader's (a burst enters the link that late, or is picked up that late when the reader
+        is held up: ``reader_stall``) plus its simulation thread's (a delivery is written that
+        late), statistic ``key`` of each; 0 for a thread with no sample."""
+        late = self.emulators[index]["scheduler_lateness_ms"]
         values = [late[thread][key] for thread in ("reader", "reader_stall", "simulation")]
         return sum(0.0 if v is None or math.isnan(v) else max(0.0, v) for v in values) / 1e3
 
@@ -563,6 +618,7 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         probe,
         attempts,
         unplug,
+        clock_started,
     )
 
 
@@ -622,10 +678,13 @@ def test_orders_reach_the_vehicle_and_state_returns(window: Window) -> None:
     lost_bytes = ports[0]["bytes_in"] - ports[1]["bytes_out"] - window.noise_lost_bytes
     lost_on_air = lost_bytes / order
     # Each collided burst held one order, or several the writer sent back to back after a
-    # stall; none lost without a collision.
+    # stall, or the line noise (written on the reopened port by the thread that reopened it,
+    # it crosses alone when the first order is written later than the idle gap after it);
+    # none lost without a collision.
     assert lost_on_air.is_integer()
-    assert modems[1]["rx_collided"] <= lost_on_air
-    assert (lost_on_air == 0) == (modems[1]["rx_collided"] == 0), window.emulators[0]
+    lost_bursts = lost_on_air + window.noise_lost_bytes // len(NOISE)
+    assert modems[1]["rx_collided"] <= lost_bursts, window.emulators[0]
+    assert (lost_bursts == 0) == (modems[1]["rx_collided"] == 0), window.emulators[0]
     unhanded = _unhanded(
         window,
         ends["vehicle"]["bytes_in"],
@@ -670,8 +729,11 @@ def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
     next control frame (≤ 1/100 s + one 1/240-s physics step) + two 1-ms polls + what the host
     adds. Lower bound: the link part alone, less the run's largest measured lateness (the
     receiving poll is stamped that much early). Upper bounds: the model plus the host's
-    measured allowance (:meth:`Window.host_s`): its p95 one for the median, its max one for
-    the 95th percentile; 2 ms of clock rounding on each."""
+    measured allowance (:meth:`Window.host_s`): its p95 one for the median of the orders the
+    host did not hold up (:func:`_unheld`: a stall holds up every order written in it and
+    those queued behind them, so one long stall can hold up half of them while the probe
+    counts it once), its max one for the 95th percentile of all; 2 ms of clock rounding on
+    each."""
     recorder = window.single.recorder
     sizes = {
         e.size_bytes
@@ -681,18 +743,44 @@ def test_command_lag_is_the_emulated_links_latency(window: Window) -> None:
     assert sizes == {13}  # the paper's move order in a WAFrame
     link_s = _link_s(window.config, 13 + CRLF)  # 151.4 ms
     model_s = link_s + 1 / 100 + 1 / 240 + 2 * POLL_S
-    lags = np.array(
-        [
-            applied - recorder.commands_sampled[seq]
-            for seq, applied in recorder.commands_applied.items()
-            if seq in recorder.commands_sampled
-        ]
+    orders = sorted(  # every order sent, with the instant it was applied if it was
+        (sampled, recorder.commands_applied.get(seq))
+        for seq, sampled in recorder.commands_sampled.items()
     )
+    lags = np.array([a - s for s, a in orders if a is not None])
     assert 1 <= lags.size <= window.single.metrics["link"]["uplink"]["frames_delivered"]
     assert lags.min() >= link_s - window.lateness_s("max") - 0.002
-    assert np.median(lags) <= model_s + window.host_s("p95") + 0.002, window.describe()
-    assert np.percentile(lags, 95) <= model_s + window.host_s("max") + 0.002, window.describe()
+    unheld = lags[_unheld(window, orders)]
+    message = f"{unheld.size} of {lags.size} orders not held up; {window.describe()}"
+    assert unheld.size >= 1, message
+    assert np.median(unheld) <= model_s + window.host_s("p95") + 0.002, message
+    assert np.percentile(lags, 95) <= model_s + window.host_s("max") + 0.002, message
     assert window.single.metrics["command_lag_s"]["n"] == lags.size
+
+
+def _unheld(window: Window, orders: list[tuple[float, float | None]]) -> np.ndarray:
+    """Which applied orders the host did not hold up (``orders``: every order sent, in order,
+    as (sampled, applied or None)): the probe saw no excess above its 95th percentile while
+    it was alive (sampled → applied, the run's clock placed at the earliest and latest
+    instant it can have started; :meth:`LinkProbe.seen_s`), and the link was free when it
+    went out: a reply reached the operator after the order before it was sent and before it
+    (the token came back). After a stall the orders written in it cross together and the
+    replies behind them, so the orders that follow can wait for the air; the rule leaves them
+    out without a model of that queue. On a host that holds nothing up every order counts
+    but those whose life overlapped one of the probe's slowest 5 % of crossings."""
+    trace = window.single.recorder.trace
+    replies = [e.t_s for e in trace.events if e.kind is EventKind.DELIVER and e.dst == "operator"]
+    clock_lo, clock_hi = window.clock_monotonic
+    typical_s = window.probe.quantile(0.95)
+    unheld = []
+    previous_s = None
+    for sampled, applied in orders:
+        if applied is not None:
+            calm = window.probe.seen_s(clock_lo + sampled, clock_hi + applied) <= typical_s
+            free = previous_s is None or any(previous_s < t <= sampled for t in replies)
+            unheld.append(calm and free)
+        previous_s = sampled
+    return np.array(unheld)
 
 
 def test_round_trip_is_both_directions_of_the_link(window: Window) -> None:
@@ -887,9 +975,11 @@ def test_cli_one_computer_run(window: Window) -> None:
     assert up["frames_delivered"] >= 1
     # Each reply was delivered, lost in a collision its emulator counted (a loaded host held it
     # past the token margin), or still on its way when the run ended (one per IPG over a
-    # crossing and this run's own worst measured lateness).
+    # crossing, this run's own worst measured lateness and its emulator's: a reply written
+    # while the emulator was held up waits in the port).
     modems = window.emulators[2]["modems"]
     late_s = max(0.0, float(metrics["hil"]["scheduler_lateness_ms"]["max"]) / 1e3)
+    late_s += window.emulator_s("max", index=2)
     in_flight = math.ceil((_link_s(window.config, 20 + CRLF) + late_s) / IPG_S)
     undelivered = down["frames_sent"] - down["frames_delivered"]
     explained = modems[0]["rx_collided"] + in_flight
