@@ -92,13 +92,13 @@ class Lateness:
         probe saw; plus :data:`MARGIN_S` once. Maxima, so the bound holds for every frame
         measured before it is computed."""
         late = emulator.scheduler_lateness_ms
-        simulation_s = _ms(late["simulation"]["max"])
-        reader_s = _ms(late["reader"]["max"])
+        simulation_s = ms_as_s(late["simulation"]["max"])
+        reader_s = ms_as_s(late["reader"]["max"])
         per_packet_s = IDLE_S + EMULATOR_POLL_S + simulation_s + reader_s
         return packets * (per_packet_s + wakes * max(self.probe.late_s)) + MARGIN_S
 
 
-def _ms(value: float) -> float:
+def ms_as_s(value: float) -> float:
     """A lateness statistic [ms] as seconds, 0 when there is none yet (NaN)."""
     return value / 1e3 if value == value else 0.0
 

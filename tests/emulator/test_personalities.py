@@ -39,6 +39,7 @@ from testbed.emulator.personalities import (
 from testbed.emulator.ptys import ModemEmulator
 from testbed.hil import LinkEndpoint, PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
+from tests.emulator.conftest import ms_as_s
 from tests.strategies import split_at
 
 # -- helpers -------------------------------------------------------------------------------------
@@ -518,7 +519,7 @@ def test_hil_run_over_emulated_evologics_modems() -> None:
     # measured lateness, one order per gap of it).
     late_ms = [result.metrics["hil"]["scheduler_lateness_ms"]["max"]]
     late_ms += [emulator.scheduler_lateness_ms[t]["max"] for t in ("reader_stall", "simulation")]
-    in_flight = 1 + math.ceil(sum(max(0.0, v) for v in late_ms) / 1e3 / 0.5)
+    in_flight = 1 + math.ceil(sum(max(0.0, ms_as_s(v)) for v in late_ms) / 0.5)
     assert up["frames_sent"] - up["frames_delivered"] <= in_flight + collided[1], late_ms
     assert up["frames_delivered"] >= 1 and down["frames_delivered"] >= 1
     assert down["frames_sent"] == up["frames_delivered"]  # one reply per order

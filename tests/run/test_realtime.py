@@ -327,7 +327,7 @@ class LinkProbe:
     The probe waits for each frame, so a stall is one sample of its excess however long it
     lasts, while the run's orders go out on a schedule and a stall of D holds up every order
     written in it (about D/IPG of them): the statistics of :attr:`excess_s` bound a typical
-    crossing, and :meth:`stall_s` the stall a frame written at a given instant met (its
+    crossing, and :meth:`seen_s` tells what the probe saw while a given frame was alive (its
     timeline, :attr:`sent_s`)."""
 
     PAYLOAD = b"probe!!"  # a 13-B WAFrame, 15 B with its CR LF: the size of an order
@@ -403,43 +403,23 @@ class LinkProbe:
         seen = max(self.quantile(1.0), max(self.wait_late_s))
         return seen + max(self.model_s, self._gap_s)
 
-    def stall_s(self, first_s: float, last_s: float) -> float:
-        """The longest stall a frame written on the probe's path between the monotonic instants
-        ``first_s`` and ``last_s`` can have met [s]: the excess of each crossing in flight then,
-        or of the next one for an instant between crossings (a stall that began there lasts
-        into it) plus the time from that instant to the crossing's start; :meth:`worst_s`
-        outside the probe's record. A frame written inside a crossing's stall is released at
-        about the same time as the probe's, so the probe's excess bounds it."""
-        covering = self._covering(first_s, last_s)
-        if covering is None:
-            return self.worst_s()
-        return max(e + max(0.0, sent - max(first_s, since)) for sent, since, e in covering)
-
     def seen_s(self, first_s: float, last_s: float) -> float:
         """The largest excess the probe saw on the crossings that cover the monotonic instants
-        ``first_s`` to ``last_s`` (as :meth:`stall_s`, without the part of a stall the probe
-        can miss) [s]; :meth:`worst_s` outside the probe's record."""
-        covering = self._covering(first_s, last_s)
-        if covering is None:
-            return self.worst_s()
-        return max(excess for _, _, excess in covering)
-
-    def _covering(self, first_s: float, last_s: float) -> list[tuple[float, float, float]] | None:
-        """The crossings that cover ``first_s`` to ``last_s``, as (sent, covering from, excess)
-        [s]: each covers the time from the previous one's arrival to its own; None if the span
-        is not inside the record."""
+        ``first_s`` to ``last_s`` [s] (each crossing covers the time from the previous one's
+        arrival to its own, so an instant between two is covered by the next: a stall that
+        began there lasts into it); :meth:`worst_s` when the span is not inside the record."""
         if not self.sent_s:
-            return None
+            return self.worst_s()
         if first_s < self.sent_s[0] or last_s > self.sent_s[-1] + self.model_s + self.excess_s[-1]:
-            return None
-        out = []
+            return self.worst_s()
+        seen = 0.0
         since = self.sent_s[0]
         for sent, excess in zip(self.sent_s, self.excess_s, strict=True):
             arrived = sent + self.model_s + excess
             if since <= last_s and arrived >= first_s:
-                out.append((sent, since, excess))
+                seen = max(seen, excess)
             since = arrived
-        return out
+        return seen
 
 
 @dataclass
