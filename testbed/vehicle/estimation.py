@@ -55,7 +55,6 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-from scipy.stats import chi2
 
 from testbed.common.components import ImuReading
 from testbed.common.geometry import (
@@ -245,7 +244,11 @@ class KalmanNavigator:
         variances += [config.initial_velocity_sigma_m_s**2] * 3
         self._p = np.diag(variances)
         self._history: list[_Step] = [_Step(self._t, None, self._x.copy(), self._p.copy())]
-        self._gates = {dim: float(chi2.ppf(config.gate_probability, dim)) for dim in (1, 3)}
+        # chdtri(k, q): the x with P(χ²_k > x) = q, i.e. chi2.ppf(1 − q, k); scipy.special here
+        # rather than scipy.stats at import (≈ 1 s of every process's start-up otherwise)
+        from scipy.special import chdtri
+
+        self._gates = {dim: float(chdtri(dim, 1.0 - config.gate_probability)) for dim in (1, 3)}
         self._counts = {k: 0 for k in _COUNTERS}
         self._streaks: dict[str, int] = {}
         # F, G, Q by time step [ns]: frames land 2 or 3 physics steps apart, so a handful
