@@ -13,11 +13,23 @@ from __future__ import annotations
 
 import os
 
+import pytest
 from hypothesis import settings
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config: pytest.Config) -> None:
+    """A run that selects the ``hil`` tests (``-m hil``) stays in one process: the machine's real
+    modems are one set, and two xdist workers (the default ``-n 2``) would open them both."""
+    selects_hil = "hil" in str(config.option.markexpr).replace("not hil", "")
+    if selects_hil and hasattr(config.option, "numprocesses"):
+        config.option.numprocesses = 0
+        config.option.dist = "no"
+        config.option.tx = []
 
 
 def pytest_sessionstart(session: object) -> None:
