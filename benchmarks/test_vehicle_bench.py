@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, TypeVar, cast
 
 import numpy as np
@@ -29,7 +30,7 @@ import pybullet
 import pytest
 
 from testbed.common.geometry import quat_from_euler
-from testbed.ecs import Phase, Schedule, World
+from testbed.ecs import Entity, Phase, Schedule, World
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle import systems
@@ -187,6 +188,68 @@ def test_vehicle_frame_breakdown(benchmark: pytest.FixtureRequest) -> None:
     for name, us in per_frame.items():
         print(f"  {name:28s} {us:7.2f}")
     assert frames == 100 * SIM_S
+
+
+@dataclass(frozen=True, slots=True)
+class _Reading:
+    a: float
+    b: float
+    c: float
+
+
+class _Gain:
+    k = 1.0
+
+
+def _least_system(index: int) -> Callable[[World], None]:
+    """A system doing the least a vehicle system does: one resource, one get, one set."""
+
+    def system(world: World) -> None:
+        gain = world.resource(_Gain)
+        reading = world.get(Entity(1), _Reading)
+        assert reading is not None
+        world.set(Entity(1), _Reading(reading.a + gain.k, reading.b, reading.c))
+
+    system.__name__ = f"least_{index}"
+    return system
+
+
+def test_least_python_frame_against_floor(benchmark: pytest.FixtureRequest) -> None:
+    """The cheapest frame a schedule of Python systems can run, against the floor in one run.
+
+    As many systems as the vehicle's schedule (``systems.build_schedule``), each only reading a
+    resource, getting one 3-float component and setting a new one, at 100 Hz. Its cost over the
+    floor's is what Python systems take before any law runs: the vehicle-alone aim (within 2×
+    of the floor, while the Fossen plant alone is 1.5–1.7× it) leaves 0.3–0.5× for them.
+    """
+    count = len(systems.build_schedule().names())
+    world = World()
+    world.insert_resource(_Gain())
+    world.spawn(_Reading(0.0, 0.0, 0.0))
+    schedule = Schedule()
+    for index in range(count):
+        schedule.add(Phase.UPDATE, _least_system(index))
+
+    def frames() -> None:
+        for _ in range(round(100 * SIM_S)):
+            schedule.run(world)
+
+    floor_s = best_of(lambda: bare_pybullet(SIM_S), rounds=3)
+    benchmark.pedantic(frames, rounds=3, iterations=1)  # type: ignore[attr-defined]
+    least_s = benchmark.stats.stats.min  # type: ignore[attr-defined]
+    ratio = least_s / floor_s
+    benchmark.extra_info.update(  # type: ignore[attr-defined]
+        {
+            "systems": count,
+            "least_frame_us": round(least_s / (100 * SIM_S) * 1e6, 2),
+            "least_frames_over_floor": round(ratio, 2),
+        }
+    )
+    print(
+        f"\n{count} least Python systems at 100 Hz: {least_s / (100 * SIM_S) * 1e6:.1f} µs a "
+        f"frame, {ratio:.2f}x the bare floor's time"
+    )
+    assert world.get(Entity(1), _Reading) == _Reading(float(count * 100 * SIM_S * 3), 0.0, 0.0)
 
 
 ECS_SCENARIOS = ["ecs-yaw-4h-v1", "ecs-yaw-3h-v1", "ecs-yaw-2h-v1", "ecs-rollpitch-6dof-v1"]
