@@ -28,13 +28,8 @@ import pytest
 from pytest_benchmark.fixture import BenchmarkFixture
 
 from testbed.common.geometry import quat_from_euler
-from testbed.vehicle.arm import (
-    ArmModel,
-    end_effector_ned,
-    load_arm_model,
-    uvms_jacobian,
-    uvms_kinematics,
-)
+from testbed.vehicle.arm import ArmModel, load_arm_model
+from testbed.vehicle.arm_kinematics import end_effector_ned, uvms_jacobian, uvms_kinematics
 from testbed.vehicle.tpik import TpikConfig, TpikInput, load_tpik_config, solve_uvms
 
 pytestmark = pytest.mark.benchmark

@@ -1,4 +1,4 @@
-"""Vehicle control laws: PID, attitude and depth hold, pilot shaping, failsafe.
+"""Vehicle control laws: PID, attitude and depth hold, failsafe (the pilot's in :mod:`.pilot`).
 
 Everything here is pure and framework-free: controllers are small stateful objects fed with
 *sensor* values (never the physics truth) and returning body-frame force/torque intents; the ECS
@@ -9,8 +9,7 @@ body vectors into the world frame; wrenches are ``(X, Y, Z, K, M, N)`` = (surge,
 force [N], roll, pitch, yaw torque [N·m]) in the body frame. The laws follow mate-rov-2025
 (REFERENCE §3.6): orientation error ``q_err = q_target·q_current⁻¹`` split per body axis by
 swing–twist, in **degrees** so that mate-rov's published gains apply unchanged; depth error
-``e = target − depth`` (positive down) drives a world-vertical force rotated into the body; the
-pilot's sticks are shaped cubically and scaled by the allocator's axis maxima.
+``e = target − depth`` (positive down) drives a world-vertical force rotated into the body.
 
 The hot path uses Python floats and tuples, not NumPy: six-element arrays cost more in call
 overhead than the arithmetic they hold. Nothing in this module draws random numbers.
@@ -26,15 +25,12 @@ from typing import Literal
 from testbed.common.geometry import (
     Quaternion,
     Vec3,
-    Wrench,
     attitude_error,
     quat_conjugate,
     quat_multiply,
-    quat_rotate,
     quat_rotate_inverse,
-    yaw_only,
 )
-from testbed.config import check, check_range, check_ranges
+from testbed.config import check, check_range
 
 __all__ = [
     "PID",
@@ -43,13 +39,7 @@ __all__ = [
     "DepthController",
     "FailsafeConfig",
     "PidGains",
-    "PilotGains",
     "failsafe_level",
-    "level_to_body",
-    "pilot_level_wrench",
-    "pilot_trims",
-    "pilot_wrench",
-    "shape_stick",
 ]
 
 _DEG_PER_RAD = 180.0 / math.pi
@@ -358,197 +348,6 @@ class DepthController:
         """
         down_n = self.pid.update(target_depth_m - depth_m, dt_s) + self.feedforward_n
         return quat_rotate_inverse(attitude, (0.0, 0.0, down_n))
-
-
-# --------------------------------------------------------------------------------------------
-# Pilot interface
-
-
-MAX_PILOT_GAIN = 10.0
-"""Largest accepted stick scale and per-axis pilot gain (dimensionless: a fraction of the
-allocator's axis maximum; above 1 the stick saturates the axis early)."""
-_PILOT_AXIS_GAINS = (
-    "translation",
-    "depth_hold_translation",
-    "depth_hold_translation_precision",
-    "torque",
-    "attitude_hold_torque",
-)
-
-
-@dataclass(frozen=True, slots=True)
-class PilotGains:
-    """Stick shaping and per-axis gains (mate-rov pilot interface, REFERENCE §3.6).
-
-    Axis order everywhere: surge, sway, heave, roll, pitch, yaw.
-
-    Domains: scales and per-axis gains in [0, 10]; ``dead_zone`` in [0, 1);
-    ``depth_trim_m_s`` in [0, 5] m/s; attitude trim rates in [0, 10] rad/s.
-
-    Attributes:
-        normal_scale, precision_scale: ``s`` in ``u = sign(x)|x|³·s``.
-        dead_zone: sticks with ``|x| < dead_zone`` read as 0.
-        translation: force gains in manual/stabilise modes.
-        depth_hold_translation: force gains in depth hold (heave trims the target instead).
-        depth_hold_translation_precision: the same in precision mode.
-        torque: torque gains without attitude hold.
-        attitude_hold_torque: torque gains with attitude hold (the sticks trim the target).
-        depth_trim_m_s: depth-target rate at full heave stick (normal, precision).
-        attitude_trim_rad_s: attitude-target rates at full stick (roll, pitch, yaw), normal.
-        attitude_trim_precision_rad_s: the same in precision mode.
-    """
-
-    normal_scale: float = 0.8
-    precision_scale: float = 0.3
-    dead_zone: float = 0.05
-    translation: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    depth_hold_translation: tuple[float, float, float] = (1.0, 1.0, 0.1)
-    depth_hold_translation_precision: tuple[float, float, float] = (1.0, 1.0, 0.0)
-    torque: tuple[float, float, float] = (1.0, 1.0, 0.5)
-    attitude_hold_torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    depth_trim_m_s: tuple[float, float] = (0.3, 0.2)
-    attitude_trim_rad_s: tuple[float, float, float] = (
-        math.radians(35.0),
-        math.radians(35.0),
-        math.radians(100.0),
-    )
-    attitude_trim_precision_rad_s: tuple[float, float, float] = (
-        math.radians(25.0),
-        math.radians(25.0),
-        math.radians(60.0),
-    )
-
-    def __post_init__(self) -> None:
-        check_range(self.dead_zone, "dead_zone", 0.0, 1.0, high_open=True)
-        check_range(self.normal_scale, "normal_scale", 0.0, MAX_PILOT_GAIN)
-        check_range(self.precision_scale, "precision_scale", 0.0, MAX_PILOT_GAIN)
-        for name in _PILOT_AXIS_GAINS:
-            check_ranges(getattr(self, name), name, 0.0, MAX_PILOT_GAIN)
-        check_ranges(self.depth_trim_m_s, "depth_trim_m_s", 0.0, 5.0, "m/s")
-        for name in ("attitude_trim_rad_s", "attitude_trim_precision_rad_s"):
-            check_ranges(getattr(self, name), name, 0.0, 10.0, "rad/s")
-
-
-def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
-    """Cubic stick shaping ``sign(x)·|x|³·scale`` with ``x`` clipped to [−1, 1].
-
-    Inside the dead zone the output is 0; outside it the stick is used as is (mate-rov 2024
-    zeroes small inputs rather than rescaling the rest).
-    """
-    x = max(-1.0, min(1.0, x))
-    if abs(x) < dead_zone:
-        return 0.0
-    return x * x * x * scale  # the cube keeps the sign
-
-
-def pilot_level_wrench(
-    sticks: Sequence[float],
-    axis_maxima: Sequence[float],
-    *,
-    gains: PilotGains,
-    precision: bool = False,
-    depth_hold: bool = False,
-    attitude_hold: bool = False,
-) -> Wrench:
-    """The pilot's force/torque intent before attitude enters: :func:`pilot_wrench` at level.
-
-    It depends on the sticks and the mode only (a cache of it holds while they do, at the
-    operator's rate rather than the control rate). In depth hold its force is in the yaw-only
-    (level) frame, to be rotated into the body by :func:`level_to_body`; otherwise it is the
-    body wrench itself.
-
-    Args:
-        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
-        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m] (0 for an axis the thruster
-            layout cannot produce).
-        gains: shaping and gains.
-        precision: precision mode (smaller scale; no heave force in depth hold).
-        depth_hold: depth hold is active.
-        attitude_hold: attitude hold is active.
-
-    Returns:
-        (6,) wrench (X, Y, Z, K, M, N) [N, N·m]: force in the level frame (depth hold) or the
-        body frame, torque in the body frame, FRD.
-    """
-    scale = gains.precision_scale if precision else gains.normal_scale
-    dz = gains.dead_zone
-    u = [shape_stick(sticks[k], scale, dz) * axis_maxima[k] for k in range(6)]
-    if depth_hold:
-        tg = gains.depth_hold_translation_precision if precision else gains.depth_hold_translation
-    else:
-        tg = gains.translation
-    rg = gains.attitude_hold_torque if attitude_hold else gains.torque
-    return (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
-
-
-def level_to_body(force: Vec3, attitude: Quaternion) -> Vec3:
-    """A force in the yaw-only (level) frame of ``attitude`` (body → NED), in the body frame."""
-    return quat_rotate(quat_multiply(quat_conjugate(attitude), yaw_only(attitude)), force)
-
-
-def pilot_wrench(
-    sticks: Sequence[float],
-    axis_maxima: Sequence[float],
-    attitude: Quaternion,
-    *,
-    gains: PilotGains,
-    precision: bool = False,
-    depth_hold: bool = False,
-    attitude_hold: bool = False,
-) -> Wrench:
-    """The pilot's force/torque intent from stick positions, in the body frame.
-
-    :func:`pilot_level_wrench`, its force rotated into the body in depth hold, where
-    translation is commanded in the yaw-only (level) frame (:func:`level_to_body`).
-
-    Args:
-        sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
-        axis_maxima: (6,) the allocator's per-axis maxima [N, N·m].
-        attitude: (4,) measured attitude, body → NED; used in depth hold only.
-        gains: shaping and gains.
-        precision: precision mode (smaller scale; no heave force in depth hold).
-        depth_hold: depth hold is active.
-        attitude_hold: attitude hold is active.
-
-    Returns:
-        (6,) body wrench (X, Y, Z, K, M, N) [N, N·m], FRD.
-    """
-    wrench = pilot_level_wrench(
-        sticks,
-        axis_maxima,
-        gains=gains,
-        precision=precision,
-        depth_hold=depth_hold,
-        attitude_hold=attitude_hold,
-    )
-    if not depth_hold:
-        return wrench
-    fx, fy, fz = level_to_body((wrench[0], wrench[1], wrench[2]), attitude)
-    return (fx, fy, fz, wrench[3], wrench[4], wrench[5])
-
-
-def pilot_trims(
-    sticks: Sequence[float], *, gains: PilotGains, precision: bool = False
-) -> tuple[float, float, float, float]:
-    """How fast the sticks move the hold targets: ``shape(x) · rate`` at full-stick rates.
-
-    Args:
-        sticks: (6,) stick positions in [−1, 1].
-        gains: the trim rates (``depth_trim_m_s``, ``attitude_trim[_precision]_rad_s``).
-        precision: precision mode (the smaller rates).
-
-    Returns:
-        (depth [m/s, + down] from heave, roll, pitch, yaw [rad/s] about the target's body axes
-        (roll, pitch) and world down (yaw)).
-    """
-    dz = gains.dead_zone
-    rates = gains.attitude_trim_precision_rad_s if precision else gains.attitude_trim_rad_s
-    return (
-        shape_stick(sticks[2], 1.0, dz) * gains.depth_trim_m_s[1 if precision else 0],
-        shape_stick(sticks[3], 1.0, dz) * rates[0],
-        shape_stick(sticks[4], 1.0, dz) * rates[1],
-        shape_stick(sticks[5], 1.0, dz) * rates[2],
-    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -29,7 +29,8 @@ import numpy as np
 
 from testbed.config import check, check_ranges
 from testbed.ecs import World
-from testbed.vehicle.arm import ArmModel, end_effector_ned, load_arm_model, uvms_kinematics
+from testbed.vehicle.arm import ArmModel, load_arm_model
+from testbed.vehicle.arm_kinematics import end_effector_ned, uvms_kinematics
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.systems import Controllers, SimClock
 from testbed.vehicle.tpik import TpikConfig, TpikInput, TpikOutput, load_tpik_config, solve_uvms

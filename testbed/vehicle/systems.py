@@ -72,13 +72,10 @@ from testbed.vehicle.control import (
     AttitudeController,
     DepthController,
     FailsafeConfig,
-    PilotGains,
     failsafe_level,
-    level_to_body,
-    pilot_level_wrench,
-    pilot_trims,
 )
 from testbed.vehicle.guidance import PositionController
+from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench
 from testbed.vehicle.thrusters import ThrusterDynamics
@@ -466,8 +463,8 @@ def run_pilot_interface(world: World) -> None:
 
 
 class _PilotCache:
-    """:func:`~testbed.vehicle.control.pilot_level_wrench` and
-    :func:`~testbed.vehicle.control.pilot_trims` of one set of sticks in one mode, kept while
+    """:func:`~testbed.vehicle.pilot.pilot_level_wrench` and
+    :func:`~testbed.vehicle.pilot.pilot_trims` of one set of sticks in one mode, kept while
     the sticks (the same object), the mode, the axis maxima and the gains stay the same."""
 
     __slots__ = ("axis_maxima", "gains", "intent", "modes", "sticks", "trims", "wrench")

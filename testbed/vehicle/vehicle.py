@@ -69,9 +69,6 @@ from testbed.vehicle.control import (
     DepthController,
     FailsafeConfig,
     PidGains,
-    PilotGains,
-    pilot_level_wrench,
-    pilot_trims,
 )
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.localization import (
@@ -83,6 +80,7 @@ from testbed.vehicle.localization import (
 from testbed.vehicle.manipulation import ArmConfig, Manipulator, build_manipulator, plan_arm
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
+from testbed.vehicle.pilot import PilotGains, pilot_level_wrench, pilot_trims
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
     DepthSensor,

@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 
 from testbed.common.geometry import quat_from_axis_angle, quat_from_euler, quat_multiply
 from testbed.config import ConfigError
-from testbed.vehicle.arm import (
-    ArmModel,
+from testbed.vehicle.arm import ArmModel, load_arm_model
+from testbed.vehicle.arm_kinematics import (
     arm_jacobian,
     base_transform,
     end_effector_ned,
@@ -36,7 +36,6 @@ from testbed.vehicle.arm import (
     joint_transforms,
     link_centres_body,
     link_centres_ned,
-    load_arm_model,
     uvms_jacobian,
     uvms_kinematics,
 )

@@ -17,7 +17,8 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from testbed.vehicle.arm import ArmModel, end_effector_pose, link_centres_ned, load_arm_model
+from testbed.vehicle.arm import ArmModel, load_arm_model
+from testbed.vehicle.arm_kinematics import end_effector_pose, link_centres_ned
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.physics import Physics
 

@@ -16,12 +16,9 @@ from testbed.vehicle.control import (
     DepthController,
     FailsafeConfig,
     PidGains,
-    PilotGains,
     failsafe_level,
-    pilot_trims,
-    pilot_wrench,
-    shape_stick,
 )
+from testbed.vehicle.pilot import PilotGains, pilot_trims, pilot_wrench, shape_stick
 
 # ------------------------------------------------------------------------------- PID
 

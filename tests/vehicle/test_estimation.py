@@ -24,7 +24,6 @@ from testbed.vehicle.control import (
     DepthController,
     FailsafeConfig,
     PidGains,
-    PilotGains,
 )
 from testbed.vehicle.estimation import (
     FilterConfig,
@@ -49,6 +48,7 @@ from testbed.vehicle.nav_sensors import (
     MotionCaptureConfig,
     NavSource,
 )
+from testbed.vehicle.pilot import PilotGains
 from testbed.vehicle.sensors import DepthSensor, DepthSensorConfig
 from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
 

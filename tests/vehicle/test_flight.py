@@ -34,9 +34,9 @@ import pytest
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.allocation import Allocator
-from testbed.vehicle.control import PilotGains
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.physics import Physics, simulate_open_loop
+from testbed.vehicle.pilot import PilotGains
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config
 from testbed.vehicle.vehicle import YAW_GAINS

@@ -17,7 +17,6 @@ from testbed.vehicle.control import (
     DepthController,
     FailsafeConfig,
     PidGains,
-    PilotGains,
 )
 from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, NavigationEstimate
 from testbed.vehicle.localization import Navigation, estimate_navigation
@@ -31,6 +30,7 @@ from testbed.vehicle.nav_sensors import (
     MotionCaptureConfig,
     NavSource,
 )
+from testbed.vehicle.pilot import PilotGains
 from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
 
 TRUTH = PlantTruth(

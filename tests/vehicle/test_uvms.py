@@ -18,7 +18,8 @@ from numpy.typing import NDArray
 
 from testbed.run.runner import run_scenario, write_outputs
 from testbed.run.scenario import Scenario, load_scenario
-from testbed.vehicle.arm import end_effector_ned, link_centres_body, load_arm_model
+from testbed.vehicle.arm import load_arm_model
+from testbed.vehicle.arm_kinematics import end_effector_ned, link_centres_body
 from testbed.vehicle.camera import CameraConfig, camera_pose
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.manipulation import EndEffectorTarget
