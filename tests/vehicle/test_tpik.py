@@ -29,15 +29,12 @@ from testbed.common.geometry import (
     rotation_matrix,
 )
 from testbed.config import ConfigError, FieldError
+from testbed.vehicle.task_priority import EqualityTask, null_space, pinv, prioritized_solution
 from testbed.vehicle.tpik import (
-    EqualityTask,
     JointLimitTask,
     TpikConfig,
     TpikInput,
     load_tpik_config,
-    null_space,
-    pinv,
-    prioritized_solution,
     rotation_error,
     saturate,
     solve_uvms,
