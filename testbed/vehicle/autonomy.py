@@ -6,9 +6,9 @@ A vehicle with a ``[vehicle.autonomy]`` table flies itself; the operator supervi
   the :class:`~testbed.vehicle.estimation.NavigationEstimate` — the only state the systems
   below read (never the physics truth);
 - UPDATE, :func:`run_mission` (after the failsafe supervisor): at the tree's tick rate (Angler:
-  20 Hz) it fills a :class:`~testbed.vehicle.behaviours.MissionContext` from the world, ticks the
-  :class:`~testbed.vehicle.behaviours.MissionRunner` and applies what the tree asked: arming
-  (``Armed``, GUIDED), the :class:`PoseTarget` to fly, and the replicated
+  20 Hz) it fills a :class:`~testbed.vehicle.mission_context.MissionContext` from the world,
+  ticks the :class:`~testbed.vehicle.behaviours.MissionRunner` and applies what the tree
+  asked: arming (``Armed``, GUIDED), the :class:`PoseTarget` to fly, and the replicated
   :class:`MissionStatus` the operator is told (the protocol's ready and cancelled flags);
 - UPDATE, :func:`control_velocity` (controller ``"ismc"``): the pose target → the kinematic
   law's body twist (:func:`~testbed.vehicle.kinematic.pose_twist`) → Angler's ISMC
@@ -40,7 +40,7 @@ from typing import Literal
 from testbed.common.geometry import euler_from_quat, quat_rotate_inverse
 from testbed.config import ConfigError, check_range
 from testbed.ecs import World
-from testbed.vehicle.behaviours import GoalRequest, MissionConfig, MissionContext, MissionRunner
+from testbed.vehicle.behaviours import MissionRunner
 from testbed.vehicle.components import (
     ActiveMode,
     Armed,
@@ -61,6 +61,7 @@ from testbed.vehicle.ismc import IsmcController, IsmcGains, load_ismc_gains, mis
 from testbed.vehicle.kinematic import PoseGains, pose_twist
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.mission import Mission, load_mission, load_packaged_mission, mission_names
+from testbed.vehicle.mission_context import GoalRequest, MissionConfig, MissionContext
 from testbed.vehicle.systems import ZERO6, Controllers, SimClock, set_intent
 
 __all__ = [

@@ -25,24 +25,26 @@ The tree, ticked once per :meth:`MissionRunner.tick` (Angler: every 50 ms)::
 **Frames.** A plan is flown by the vehicle's body origin or by the arm's end effector (a
 mission whose ``child`` is the tool frame, :attr:`~testbed.vehicle.mission.Mission.end_effector`,
 or an end-effector GoTo): it starts from, and its tolerance is checked against, that frame's
-estimated position, and its setpoints say which frame they are for
-(:attr:`PoseSetpoint.end_effector`). The arm primitives are arming the manipulator (setup),
-moving the end effector along a plan (execute) and holding it there (idle).
+estimated position, and its setpoints say which frame they are for (:attr:`~testbed.vehicle.
+mission_context.PoseSetpoint.end_effector`). The arm primitives are arming the manipulator
+(setup), moving the end effector along a plan (execute) and holding it there (idle).
 
 Composites without ``memory`` are re-evaluated from their first child every tick, so the
 disarm fallback overrides execution within the tick its trigger is seen, and a new GoTo goal
 replaces the plan at once (re-planned from the current estimate).
 
-**Context.** :class:`MissionContext` is a plain mutable dataclass: the caller writes the inputs
-(time, arm state, estimate, requests) before a tick and reads the outputs after it. The
-one-shot requests (``start_requested``, ``goal``, ``cancel_requested``) are *consumed*: the
-gatherer moves them onto the blackboard and clears them in the context; a request pending while
-the disarm fallback runs is dropped (nothing resumes by itself after a disarm).
+**Context.** :class:`~testbed.vehicle.mission_context.MissionContext` is a plain mutable
+dataclass: the caller writes the inputs (time, arm state, estimate, requests) before a tick and
+reads the outputs after it. The one-shot requests (``start_requested``, ``goal``,
+``cancel_requested``) are *consumed*: the gatherer moves them onto the blackboard and clears
+them in the context; a request pending while the disarm fallback runs is dropped (nothing
+resumes by itself after a disarm).
 ``disarm_requested`` is a level, held true for as long as the pilot or link wants the vehicle
 disarmed. All times come from ``time_s`` (simulation time), never the wall clock, so a run is
 deterministic. Frames: world NED [m], yaw [rad] clockwise from north.
 
-This module imports py_trees and :mod:`testbed.vehicle.mission`; no ECS.
+This module imports py_trees, :mod:`testbed.vehicle.mission` and
+:mod:`testbed.vehicle.mission_context`; no ECS.
 """
 
 from __future__ import annotations
@@ -50,7 +52,6 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import py_trees
@@ -58,140 +59,13 @@ from py_trees.common import Access, ParallelPolicy, Status
 from py_trees.composites import Parallel, Selector, Sequence
 
 from testbed.common.geometry import Vec3, wrap_angle
-from testbed.config import check_range
 from testbed.vehicle.mission import Mission, Trajectory, plan, single_goal
+from testbed.vehicle.mission_context import GoalRequest, MissionConfig, MissionContext, PoseSetpoint
 
-__all__ = [
-    "GoalRequest",
-    "MissionConfig",
-    "MissionContext",
-    "MissionRunner",
-    "PoseSetpoint",
-]
+__all__ = ["MissionRunner"]
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 _RUNNERS = itertools.count()
-
-
-@dataclass(frozen=True, slots=True)
-class MissionConfig:
-    """Timing and tolerances of the mission tree (defaults: Angler's where it has them).
-
-    Attributes:
-        tick_rate_hz: how often the caller should tick the tree [Hz] (Angler 20), in (0, 1000].
-        goal_tolerance_m: position error that counts as at the goal [m] (Angler 0.2), > 0.
-        yaw_tolerance_rad: heading error that counts as at the goal [rad] (Angler's 0.1 on the
-            quaternion vector part is 2·asin(0.1) ≈ 0.2 rad), > 0.
-        settle_time_s: the pose must stay within tolerance this long [s], ≥ 0.
-        goal_timeout_s: time past the last point to get within tolerance [s] (Angler 10), > 0;
-            past it execution fails and the last pose is held.
-        setup_timeout_s: time to wait for the vehicle to arm [s] (Angler 15), > 0.
-        goto_speed_m_s: cruise speed of a GoTo leg [m/s], > 0.
-        goto_yaw_rate_rad_s: turn rate that times a GoTo leg's heading change [rad/s], > 0.
-    """
-
-    tick_rate_hz: float = 20.0
-    goal_tolerance_m: float = 0.2
-    yaw_tolerance_rad: float = 0.2
-    settle_time_s: float = 1.0
-    goal_timeout_s: float = 10.0
-    setup_timeout_s: float = 15.0
-    goto_speed_m_s: float = 0.2
-    goto_yaw_rate_rad_s: float = 0.3
-
-    def __post_init__(self) -> None:
-        check_range(self.tick_rate_hz, "tick_rate_hz", 0.0, 1000.0, "Hz", low_open=True)
-        check_range(self.goal_tolerance_m, "goal_tolerance_m", 0.0, math.inf, "m", low_open=True)
-        check_range(self.yaw_tolerance_rad, "yaw_tolerance_rad", 0.0, math.pi, "rad", low_open=True)
-        check_range(self.settle_time_s, "settle_time_s", 0.0, math.inf, "s")
-        check_range(self.goal_timeout_s, "goal_timeout_s", 0.0, math.inf, "s", low_open=True)
-        check_range(self.setup_timeout_s, "setup_timeout_s", 0.0, math.inf, "s", low_open=True)
-        check_range(self.goto_speed_m_s, "goto_speed_m_s", 0.0, 5.0, "m/s", low_open=True)
-        check_range(self.goto_yaw_rate_rad_s, "goto_yaw_rate_rad_s", 0.0, 10.0, low_open=True)
-
-    @property
-    def tick_period_s(self) -> float:
-        """Time between ticks [s] (Angler 0.05)."""
-        return 1.0 / self.tick_rate_hz
-
-
-@dataclass(frozen=True, slots=True)
-class GoalRequest:
-    """A supervised GoTo order.
-
-    Attributes:
-        position_ned: (3,) goal position [m], world NED.
-        yaw_rad: goal heading [rad, clockwise from north], or None to keep the current one.
-    """
-
-    position_ned: Vec3
-    yaw_rad: float | None = None
-    end_effector: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class PoseSetpoint:
-    """What the tree asks the pose controller for this tick.
-
-    Attributes:
-        position_ned: (3,) desired position [m], world NED.
-        yaw_rad: desired heading [rad, clockwise from north].
-        velocity_ned: (3,) feed-forward velocity [m/s], world NED.
-        end_effector: the position is the end effector's (the yaw stays the vehicle's).
-    """
-
-    position_ned: Vec3
-    yaw_rad: float
-    velocity_ned: Vec3 = _ZERO
-    end_effector: bool = False
-
-
-@dataclass(slots=True)
-class MissionContext:
-    """The tree's inputs and outputs (module docstring: who writes what, and when).
-
-    Attributes:
-        time_s: the clock [s] (simulation time).
-        armed: the vehicle reports itself armed.
-        disarm_requested: the pilot or the link wants the vehicle disarmed (a level).
-        estimate_position_ned: (3,) estimated position [m], world NED.
-        estimate_yaw_rad: estimated heading [rad, clockwise from north].
-        end_effector_position_ned: (3,) the end effector's estimated position [m], world NED,
-            or None (no arm).
-        manipulator_armed: the arm reports itself armed.
-        start_requested: one-shot: start the loaded mission (consumed by the tick).
-        goal: one-shot: a GoTo order (consumed by the tick), or None.
-        cancel_requested: one-shot: drop the plan and hold the current pose (consumed).
-        request_arm: output: True to ask for arming, False for disarming, None for no change.
-        request_manipulator: output: the same for the arm.
-        pose_setpoint: output: this tick's setpoint, or None (nothing commanded).
-        status: output: one line on what the tree is doing.
-        goal_reached: output: the last plan ended within tolerance (cleared by a new plan).
-        tick_count: output: ticks so far.
-        plan_count: output: plans made (missions started and GoTo legs).
-        disarm_count: output: times the disarm fallback was entered.
-        reached_count: output: plans that ended within tolerance.
-    """
-
-    time_s: float = 0.0
-    armed: bool = False
-    disarm_requested: bool = False
-    estimate_position_ned: Vec3 = _ZERO
-    estimate_yaw_rad: float = 0.0
-    end_effector_position_ned: Vec3 | None = None
-    manipulator_armed: bool = False
-    start_requested: bool = False
-    goal: GoalRequest | None = None
-    cancel_requested: bool = False
-    request_arm: bool | None = None
-    request_manipulator: bool | None = None
-    pose_setpoint: PoseSetpoint | None = None
-    status: str = ""
-    goal_reached: bool = False
-    tick_count: int = 0
-    plan_count: int = 0
-    disarm_count: int = 0
-    reached_count: int = 0
 
 
 # Blackboard keys (relative to the runner's namespace) and their initial values.

@@ -14,14 +14,9 @@ from dataclasses import astuple, dataclass
 import pytest
 
 from testbed.config import FieldError
-from testbed.vehicle.behaviours import (
-    GoalRequest,
-    MissionConfig,
-    MissionContext,
-    MissionRunner,
-    PoseSetpoint,
-)
+from testbed.vehicle.behaviours import MissionRunner
 from testbed.vehicle.mission import Mission, load_packaged_mission
+from testbed.vehicle.mission_context import GoalRequest, MissionConfig, MissionContext, PoseSetpoint
 
 DT = 0.05
 TAU = 0.5
