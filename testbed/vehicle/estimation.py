@@ -43,8 +43,9 @@ through the stored steps (their inputs and their previously accepted measurement
 re-applied without a second gate) to the present. The result equals a filter that received the
 measurement at its true time. Measurements older than the history are dropped and counted.
 
-:class:`Localizer` is the seam for a user's own algorithm; :class:`KalmanLocalizer` is the
-default. No ECS here (that is :mod:`testbed.vehicle.localization`); no global RNG.
+The filter is the default localizer's (:class:`~testbed.vehicle.localization.KalmanLocalizer`;
+the seam for a user's own algorithm is :class:`~testbed.vehicle.localization.Localizer`). No ECS
+here (that is :mod:`testbed.vehicle.localization`); no global RNG.
 """
 
 from __future__ import annotations
@@ -52,11 +53,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
-from testbed.common.components import ImuReading
 from testbed.common.geometry import (
     Quaternion,
     Vec3,
@@ -71,9 +70,7 @@ from testbed.vehicle.nav_sensors import Measurement
 __all__ = [
     "FilterConfig",
     "FilterCounters",
-    "KalmanLocalizer",
     "KalmanNavigator",
-    "Localizer",
     "NavigationEstimate",
 ]
 
@@ -489,52 +486,3 @@ class KalmanNavigator:
             history[j] = prev = replayed
         self._x, self._p = prev.x, prev.p
         return True
-
-
-# --------------------------------------------------------------------------------- localizer
-
-
-class Localizer(Protocol):
-    """The localization seam: IMU attitude plus measurements in, an estimate out.
-
-    A user plugs their own algorithm by writing one class with this method.
-    """
-
-    def step(
-        self, time_s: float, imu: ImuReading, measurements: Sequence[Measurement]
-    ) -> NavigationEstimate:
-        """Advance to ``time_s`` [s] with this frame's IMU reading and new measurements."""
-        ...
-
-
-class KalmanLocalizer:
-    """The default :class:`Localizer`: :class:`KalmanNavigator` with the IMU as AHRS.
-
-    Measurements are applied in order of their validity time; the DVL is rotated with this
-    frame's IMU attitude (the DVL is not delayed). An ``acceleration_ned`` measurement (the
-    accelerometer: the mean acceleration since the previous frame) is not an update but the
-    input the prediction to this frame holds over its interval.
-    """
-
-    __slots__ = ("navigator",)
-
-    def __init__(self, config: FilterConfig, *, time_s: float = 0.0) -> None:
-        self.navigator = KalmanNavigator(config, time_s=time_s)
-
-    def step(
-        self, time_s: float, imu: ImuReading, measurements: Sequence[Measurement]
-    ) -> NavigationEstimate:
-        """Predict to ``time_s`` [s], apply ``measurements``, return the estimate."""
-        nav = self.navigator
-        accel = None
-        updates = []
-        for m in measurements:
-            if m.kind == "acceleration_ned":
-                accel = m.value
-            else:
-                updates.append(m)
-        nav.predict(max(time_s, nav.time_s), accel)
-        q = imu.quaternion_wxyz
-        for m in sorted(updates, key=lambda m: m.time_s):
-            nav.update(m, q)
-        return nav.estimate(q, imu.rates_rad_s)

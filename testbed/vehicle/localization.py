@@ -3,7 +3,7 @@
 :func:`estimate_navigation` runs each frame in PRE_UPDATE right after ``read_sensors``: it
 samples each due :class:`~testbed.vehicle.nav_sensors.NavSource` from the plant truth, adds the
 depth sensor's reading when it is new, hands them with the vehicle's IMU reading to the
-:class:`~testbed.vehicle.estimation.Localizer` and writes the
+:class:`Localizer` and writes the
 :class:`~testbed.vehicle.estimation.NavigationEstimate` on the vehicle entity. Like
 ``read_sensors``, the sources are the only readers of the truth; the localizer never sees it.
 The estimate's position is also written as the vehicle's :class:`PositionReading`, so
@@ -20,13 +20,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from testbed.config import check_range
 from testbed.ecs import World
 from testbed.vehicle.components import DepthReading, ImuReading, PositionReading
-from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, Localizer
+from testbed.vehicle.estimation import FilterConfig, KalmanNavigator, NavigationEstimate
 from testbed.vehicle.nav_sensors import (
     Accelerometer,
     AccelerometerConfig,
@@ -47,12 +48,63 @@ MIN_FIX_SIGMA_M = 1e-4
 
 __all__ = [
     "FixSource",
+    "KalmanLocalizer",
+    "Localizer",
     "Navigation",
     "NavigationConfig",
     "build_navigation",
     "depth_measurement",
     "estimate_navigation",
 ]
+
+
+# --------------------------------------------------------------------------------- localizer
+
+
+class Localizer(Protocol):
+    """The localization seam: IMU attitude plus measurements in, an estimate out.
+
+    A user plugs their own algorithm by writing one class with this method.
+    """
+
+    def step(
+        self, time_s: float, imu: ImuReading, measurements: Sequence[Measurement]
+    ) -> NavigationEstimate:
+        """Advance to ``time_s`` [s] with this frame's IMU reading and new measurements."""
+        ...
+
+
+class KalmanLocalizer:
+    """The default :class:`Localizer`: :class:`KalmanNavigator` with the IMU as AHRS.
+
+    Measurements are applied in order of their validity time; the DVL is rotated with this
+    frame's IMU attitude (the DVL is not delayed). An ``acceleration_ned`` measurement (the
+    accelerometer: the mean acceleration since the previous frame) is not an update but the
+    input the prediction to this frame holds over its interval.
+    """
+
+    __slots__ = ("navigator",)
+
+    def __init__(self, config: FilterConfig, *, time_s: float = 0.0) -> None:
+        self.navigator = KalmanNavigator(config, time_s=time_s)
+
+    def step(
+        self, time_s: float, imu: ImuReading, measurements: Sequence[Measurement]
+    ) -> NavigationEstimate:
+        """Predict to ``time_s`` [s], apply ``measurements``, return the estimate."""
+        nav = self.navigator
+        accel = None
+        updates = []
+        for m in measurements:
+            if m.kind == "acceleration_ned":
+                accel = m.value
+            else:
+                updates.append(m)
+        nav.predict(max(time_s, nav.time_s), accel)
+        q = imu.quaternion_wxyz
+        for m in sorted(updates, key=lambda m: m.time_s):
+            nav.update(m, q)
+        return nav.estimate(q, imu.rates_rad_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,7 +141,7 @@ class Navigation:
 
     Attributes:
         sources: the fitted navigation sources, sampled in this order.
-        localizer: the estimator (any :class:`~testbed.vehicle.estimation.Localizer`).
+        localizer: the estimator (any :class:`Localizer`).
         depth_sigma_m: 1σ for depth readings [m]; 0 leaves them out.
         last_depth_time_s: time of the last depth reading handed on [s] (a newer one is new).
         delivered: measurements delivered so far, by source name (``"depth"`` for the depth

@@ -27,11 +27,11 @@ from testbed.vehicle.control import (
 )
 from testbed.vehicle.estimation import (
     FilterConfig,
-    KalmanLocalizer,
     KalmanNavigator,
     NavigationEstimate,
 )
 from testbed.vehicle.localization import (
+    KalmanLocalizer,
     Navigation,
     NavigationConfig,
     build_navigation,

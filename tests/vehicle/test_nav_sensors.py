@@ -18,8 +18,8 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
 )
-from testbed.vehicle.estimation import FilterConfig, KalmanLocalizer, NavigationEstimate
-from testbed.vehicle.localization import Navigation, estimate_navigation
+from testbed.vehicle.estimation import FilterConfig, NavigationEstimate
+from testbed.vehicle.localization import KalmanLocalizer, Navigation, estimate_navigation
 from testbed.vehicle.nav_sensors import (
     AcousticFix,
     AcousticFixConfig,
