@@ -29,12 +29,10 @@ without a position fix); any mode request ends it.
 
 from __future__ import annotations
 
-import math
 import time
 from collections import deque
 from collections.abc import Generator, Mapping
 from functools import partial
-from itertools import islice
 from typing import Any, cast
 
 import numpy as np
@@ -42,10 +40,9 @@ import simpy
 import simpy.rt
 
 from testbed.channel import IpgPolicy, Medium, Trace
-from testbed.common.components import ActiveMode, Armed, FailsafeStatus, PositionSetpoint
-from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Phase
 from testbed.hil import LinkEndpoint
+from testbed.live.console_state import console_state
 from testbed.live.hub import Hub
 from testbed.live.intents import MODES, LiveImageConsole, LiveIpg, LiveRequests
 from testbed.live.messages import (
@@ -57,7 +54,7 @@ from testbed.live.messages import (
     Outage,
     SetMode,
 )
-from testbed.live.monitor import LinkMonitor, finite_or_none, image_view, latency_ms
+from testbed.live.monitor import LinkMonitor, latency_ms
 from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
@@ -79,13 +76,8 @@ PUBLISH_HZ = 10.0
 GOTO_REFUSED = "go-to refused: no vehicle state received yet (the depth to hold is unknown)"
 SIMULATED_ONLY = "link controls act on the simulated link only (this session runs on HIL ports)"
 
-_DEG = 180.0 / math.pi
 _STICK_TOLERANCE = 0.01
 """Applied sticks this close to the pilot's count as his (the teleop codec's step is 1/127)."""
-
-
-def _rpy_deg(quaternion: tuple[float, float, float, float]) -> list[float]:
-    return [round(a * _DEG, 2) for a in euler_from_quat(quaternion)]
 
 
 class LiveSession:
@@ -134,7 +126,7 @@ class LiveSession:
                 self.hil_modems[role] = HilModem(
                     env, role, peer, endpoints[role], trace=self.recorder.trace, ledger=self.ledger
                 )
-        self._distance_m: float | None = None
+        self.distance_m: float | None = None  # operator–vehicle distance set live [m]
         self.vehicle_node = self._vehicle_node(np.random.default_rng(vehicle_seed))
         self.vehicle: Vehicle = self.vehicle_node.vehicle
         self.ipg = LiveIpg(link.ipg_policy) if link.mac == "token" else None
@@ -181,10 +173,10 @@ class LiveSession:
         return self.medium.attach(role, position)
 
     def _operator_position(self) -> tuple[float, float, float]:
-        if self._distance_m is None:
+        if self.distance_m is None:
             return self.scenario.link.operator_position_ned_m
         x, y, z = self.vehicle.truth.position_ned_m
-        return (x + self._distance_m, y, z)
+        return (x + self.distance_m, y, z)
 
     def _operator_node(self) -> OperatorNode:
         scenario = self.scenario
@@ -308,7 +300,7 @@ class LiveSession:
             elif message.key == "gap_s" and self.ipg is not None:
                 self.ipg.set_gap(message.value)
             elif message.key == "distance_m":
-                self._distance_m = message.value
+                self.distance_m = message.value
             self._link_change(message.key, message.value)
         elif isinstance(message, GoToPoint):
             self._go_to(message)
@@ -351,98 +343,8 @@ class LiveSession:
     # ------------------------------------------------------------------------------ state
 
     def state(self) -> dict[str, Any]:
-        """The console's state now (JSON-ready, built fresh)."""
-        now = self.env.now
-        recorder = self.recorder
-        station, vehicle = self.station, self.vehicle
-        odometry = station.vehicle_odometry()
-        world = station.world
-        armed = next((a.armed for _, a in world.query1(Armed)), None)
-        mode = next((m.mode.name.lower() for _, m in world.query1(ActiveMode)), None)
-        truth = vehicle.truth
-        ctl = vehicle.world.resource(Controllers)
-        status = vehicle.world.get(ctl.vehicle, FailsafeStatus)
-        self.monitor.update()
-        lag = age = odometry_age = math.nan
-        if recorder.command_updates:
-            applied, sampled = recorder.command_updates[-1]
-            lag = applied - sampled
-            age = now - sampled
-        if recorder.odometry_updates:
-            odometry_age = now - recorder.odometry_updates[-1][1]
-        state: dict[str, Any] = {
-            "t": round(now, 3),
-            "server_ns": time.monotonic_ns(),
-            "operator": None
-            if odometry is None
-            else {
-                "pos": [round(v, 3) for v in odometry.position_ned_m],
-                "rpy": _rpy_deg(odometry.quaternion_wxyz),
-                "armed": armed,
-                "mode": mode,
-                "age_s": finite_or_none(station.vehicle_state_age_s(now)),
-            },
-            "truth": {
-                "pos": [round(v, 3) for v in truth.position_ned_m],
-                "rpy": _rpy_deg(truth.quaternion_wxyz),
-                "armed": ctl.flags.armed,
-                "failsafe": "NOMINAL" if status is None else status.level.name,
-                "sticks": [round(s, 3) for s in ctl.sticks],
-                "target": self._target(),
-            },
-            "pilot": {
-                "sticks": [round(s, 3) for s in self.pilot.sticks],
-                "taken": self.pilot.taken,
-            },
-            "link": {
-                "uplink": self.monitor.direction("uplink", recorder.frames_decoded["uplink"]),
-                "downlink": self.monitor.direction("downlink", recorder.frames_decoded["downlink"]),
-                "command_lag_s": finite_or_none(lag),
-                "command_age_s": finite_or_none(age),
-                "odometry_age_s": finite_or_none(odometry_age),
-                "simulated": self.medium is not None,
-                "ber": None if self.medium is None else self.medium.config.ber,
-                "gap_s": None if self.ipg is None else self.ipg.gap_after(13),
-                "distance_m": self._distance_m,
-                "outage": self.medium is not None and self.medium.in_outage(now, now),
-                "timeline": list(self.monitor.timeline),
-            },
-            "image": self._image_state(now),
-            "console": {
-                "inputs": self.hub.counters.as_dict(),
-                "input_latency_ms": latency_ms(_newest(self.pilot.latencies_ns, 200)),
-                "lateness_ms": latency_ms(_newest(self.lateness_ns, 1000)),
-                "notes": list(self.hub.notes),
-            },
-            "events": [[round(e.t_s, 2), e.node, e.kind, e.detail] for e in recorder.events[-8:]],
-        }
-        return state
-
-    def _target(self) -> list[float] | None:
-        """The go-to target the vehicle holds (its operator entity), or None."""
-        world = self.vehicle.world
-        target = world.get(self.vehicle.operator_entity, PositionSetpoint)
-        return None if target is None else [round(v, 2) for v in target.position_ned_m]
-
-    def _image_state(self, now: float) -> dict[str, Any] | None:
-        console = self.image_console
-        images = self.vehicle_node.images
-        if console is None or images is None:
-            return None
-        current = images.current
-        coder = images.settings
-        return {
-            "view": image_view(console.view),
-            "bytes": len(console.assembler.prefix()),
-            "chunks": console.chunks_received,
-            "completed": len(self.recorder.images.received),
-            "age_s": None if current is None else round(now - current.t_s, 2),
-            "coder": {
-                "roi": [coder.x0, coder.y0, coder.x1, coder.y1],
-                "shift": coder.roi_shift,
-                "budget": coder.budget_bytes,
-            },
-        }
+        """The console's state now (JSON-ready, built fresh; :func:`.console_state`)."""
+        return console_state(self)
 
     def metrics(self, reached_s: float, wall_s: float) -> dict[str, Any]:
         """``metrics.json``: :func:`~testbed.run.runner.compute_metrics`'s keys and ``live``."""
@@ -491,11 +393,6 @@ class LiveSession:
             "image_settings_pushed": 0 if self.image_console is None else self.image_console.pushed,
         }
         return metrics
-
-
-def _newest(samples: deque[int], count: int) -> list[int]:
-    """The newest ``count`` samples (without copying the whole deque)."""
-    return list(islice(reversed(samples), count))
 
 
 def _settings_text(settings: ImageSettings) -> str:
