@@ -1,4 +1,4 @@
-"""Command-line interface: ``testbed run|link|sweep|plot|modem-emulator|hil|mavlink|scenarios``.
+"""Command-line interface: ``testbed SUBCOMMAND``, one per job (run, link, sweep, plot, …).
 
 Each subcommand parses its arguments, builds frozen configs through :mod:`testbed.config`, runs,
 prints results to stdout and logs to stderr. A user's mistake (unknown key, bad value, missing
@@ -6,7 +6,8 @@ file) prints one line to stderr and returns exit code 2, never a traceback.
 
 This module holds the parser, the dispatch and the error handling; each subcommand group has its
 own module (:mod:`~testbed.cli.run`, :mod:`~testbed.cli.link`, :mod:`~testbed.cli.sweep`,
-:mod:`~testbed.cli.emulator`, :mod:`~testbed.cli.hil`, :mod:`~testbed.cli.mavlink`), whose
+:mod:`~testbed.cli.emulator`, :mod:`~testbed.cli.hil`, :mod:`~testbed.cli.mavlink`,
+:mod:`~testbed.cli.live`), whose
 heavy imports happen only when the command runs, so ``testbed --help`` stays fast.
 """
 
@@ -34,7 +35,11 @@ __all__ = ["EXIT_OK", "EXIT_USAGE", "build_parser", "format_summary", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``testbed`` argument parser with all subcommands."""
-    parser = Parser(prog="testbed", description=__doc__.splitlines()[0])
+    parser = Parser(
+        prog="testbed",
+        description="A network-simulated teleoperation testbed for underwater ROVs: "
+        "one subcommand per job (testbed SUBCOMMAND --help for each).",
+    )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     add_run_parser(sub)
     add_link_parser(sub)
