@@ -217,6 +217,17 @@ def _least_system(index: int) -> Callable[[World], None]:
     return system
 
 
+def _frames_against_floor(
+    benchmark: pytest.FixtureRequest, frames: Callable[[], None]
+) -> tuple[float, float]:
+    """Time ``frames`` (SIM_S of 100-Hz frames; best of 3) after the floor (best of 3): the
+    µs a frame and the ratio of its time to the floor's."""
+    floor_s = best_of(lambda: bare_pybullet(SIM_S), rounds=3)
+    benchmark.pedantic(frames, rounds=3, iterations=1)  # type: ignore[attr-defined]
+    least_s = benchmark.stats.stats.min  # type: ignore[attr-defined]
+    return least_s / (100 * SIM_S) * 1e6, least_s / floor_s
+
+
 def test_least_python_frame_against_floor(benchmark: pytest.FixtureRequest) -> None:
     """The cheapest frame a schedule of Python systems can run, against the floor in one run.
 
@@ -237,11 +248,7 @@ def test_least_python_frame_against_floor(benchmark: pytest.FixtureRequest) -> N
         for _ in range(round(100 * SIM_S)):
             schedule.run(world)
 
-    floor_s = best_of(lambda: bare_pybullet(SIM_S), rounds=3)
-    benchmark.pedantic(frames, rounds=3, iterations=1)  # type: ignore[attr-defined]
-    least_s = benchmark.stats.stats.min  # type: ignore[attr-defined]
-    ratio = least_s / floor_s
-    frame_us = least_s / (100 * SIM_S) * 1e6
+    frame_us, ratio = _frames_against_floor(benchmark, frames)
     benchmark.extra_info.update(  # type: ignore[attr-defined]
         {
             "systems": count,
@@ -323,13 +330,12 @@ def test_least_compiled_frame_against_floor(benchmark: pytest.FixtureRequest) ->
             )
         wrenches.append(wrench)
 
-    floor_s = best_of(lambda: bare_pybullet(SIM_S), rounds=3)
-    benchmark.pedantic(frames, rounds=3, iterations=1)  # type: ignore[attr-defined]
-    least_s = benchmark.stats.stats.min  # type: ignore[attr-defined]
-    ratio = least_s / floor_s
-    frame_us = least_s / (100 * SIM_S) * 1e6
+    frame_us, ratio = _frames_against_floor(benchmark, frames)
     benchmark.extra_info.update(  # type: ignore[attr-defined]
-        {"least_compiled_frame_us": round(frame_us, 2), "compiled_frame_over_floor": ratio}
+        {
+            "least_compiled_frame_us": round(frame_us, 2),
+            "compiled_frame_over_floor": round(ratio, 3),
+        }
     )
     print(
         f"\none compiled frame call at 100 Hz: {frame_us:.2f} µs a frame, "
