@@ -75,7 +75,7 @@ class Localizer(Protocol):
 
 
 class KalmanLocalizer:
-    """The default :class:`Localizer`: :class:`KalmanNavigator` with the IMU as AHRS.
+    """The default :class:`Localizer`: :class:`~.estimation.KalmanNavigator`, IMU as the AHRS.
 
     Measurements are applied in order of their validity time; the DVL is rotated with this
     frame's IMU attitude (the DVL is not delayed). An ``acceleration_ned`` measurement (the
