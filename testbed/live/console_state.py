@@ -2,7 +2,8 @@
 
 :func:`console_state` reads a :class:`~testbed.live.session.LiveSession` (its operator station's
 view, the vehicle's truth and control flags, the pilot, the link monitor, the image console and
-the hub's counters) and builds the dict fresh each call; nothing here writes to the session.
+the hub's counters) and builds the dict fresh each call; the only thing it changes is the link
+monitor, which it brings up to date first.
 Angles in degrees, positions NED [m], ages [s], latencies [ms].
 """
 
@@ -27,11 +28,11 @@ __all__ = ["console_state"]
 _DEG = 180.0 / math.pi
 
 
-def console_state(self: LiveSession) -> dict[str, Any]:
-    """The console's state now: JSON-ready, built fresh from ``self``'s nodes, recorder and hub."""
-    now = self.env.now
-    recorder = self.recorder
-    station, vehicle = self.station, self.vehicle
+def console_state(session: LiveSession) -> dict[str, Any]:
+    """The console's state now: JSON-ready, built fresh from the session."""
+    now = session.env.now
+    recorder = session.recorder
+    station, vehicle = session.station, session.vehicle
     odometry = station.vehicle_odometry()
     world = station.world
     armed = next((a.armed for _, a in world.query1(Armed)), None)
@@ -39,7 +40,7 @@ def console_state(self: LiveSession) -> dict[str, Any]:
     truth = vehicle.truth
     ctl = vehicle.world.resource(Controllers)
     status = vehicle.world.get(ctl.vehicle, FailsafeStatus)
-    self.monitor.update()
+    session.monitor.update()
     lag = age = odometry_age = math.nan
     if recorder.command_updates:
         applied, sampled = recorder.command_updates[-1]
@@ -65,47 +66,47 @@ def console_state(self: LiveSession) -> dict[str, Any]:
             "armed": ctl.flags.armed,
             "failsafe": "NOMINAL" if status is None else status.level.name,
             "sticks": [round(s, 3) for s in ctl.sticks],
-            "target": _target(self),
+            "target": _target(session),
         },
         "pilot": {
-            "sticks": [round(s, 3) for s in self.pilot.sticks],
-            "taken": self.pilot.taken,
+            "sticks": [round(s, 3) for s in session.pilot.sticks],
+            "taken": session.pilot.taken,
         },
         "link": {
-            "uplink": self.monitor.direction("uplink", recorder.frames_decoded["uplink"]),
-            "downlink": self.monitor.direction("downlink", recorder.frames_decoded["downlink"]),
+            "uplink": session.monitor.direction("uplink", recorder.frames_decoded["uplink"]),
+            "downlink": session.monitor.direction("downlink", recorder.frames_decoded["downlink"]),
             "command_lag_s": finite_or_none(lag),
             "command_age_s": finite_or_none(age),
             "odometry_age_s": finite_or_none(odometry_age),
-            "simulated": self.medium is not None,
-            "ber": None if self.medium is None else self.medium.config.ber,
-            "gap_s": None if self.ipg is None else self.ipg.gap_after(13),
-            "distance_m": self.distance_m,
-            "outage": self.medium is not None and self.medium.in_outage(now, now),
-            "timeline": list(self.monitor.timeline),
+            "simulated": session.medium is not None,
+            "ber": None if session.medium is None else session.medium.config.ber,
+            "gap_s": None if session.ipg is None else session.ipg.gap_after(13),
+            "distance_m": session.distance_m,
+            "outage": session.medium is not None and session.medium.in_outage(now, now),
+            "timeline": list(session.monitor.timeline),
         },
-        "image": _image_state(self, now),
+        "image": _image_state(session, now),
         "console": {
-            "inputs": self.hub.counters.as_dict(),
-            "input_latency_ms": latency_ms(_newest(self.pilot.latencies_ns, 200)),
-            "lateness_ms": latency_ms(_newest(self.lateness_ns, 1000)),
-            "notes": list(self.hub.notes),
+            "inputs": session.hub.counters.as_dict(),
+            "input_latency_ms": latency_ms(_newest(session.pilot.latencies_ns, 200)),
+            "lateness_ms": latency_ms(_newest(session.lateness_ns, 1000)),
+            "notes": list(session.hub.notes),
         },
         "events": [[round(e.t_s, 2), e.node, e.kind, e.detail] for e in recorder.events[-8:]],
     }
     return state
 
 
-def _target(self: LiveSession) -> list[float] | None:
+def _target(session: LiveSession) -> list[float] | None:
     """The go-to target the vehicle holds (its operator entity), or None."""
-    world = self.vehicle.world
-    target = world.get(self.vehicle.operator_entity, PositionSetpoint)
+    world = session.vehicle.world
+    target = world.get(session.vehicle.operator_entity, PositionSetpoint)
     return None if target is None else [round(v, 2) for v in target.position_ned_m]
 
 
-def _image_state(self: LiveSession, now: float) -> dict[str, Any] | None:
-    console = self.image_console
-    images = self.vehicle_node.images
+def _image_state(session: LiveSession, now: float) -> dict[str, Any] | None:
+    console = session.image_console
+    images = session.vehicle_node.images
     if console is None or images is None:
         return None
     current = images.current
@@ -114,7 +115,7 @@ def _image_state(self: LiveSession, now: float) -> dict[str, Any] | None:
         "view": image_view(console.view),
         "bytes": len(console.assembler.prefix()),
         "chunks": console.chunks_received,
-        "completed": len(self.recorder.images.received),
+        "completed": len(session.recorder.images.received),
         "age_s": None if current is None else round(now - current.t_s, 2),
         "coder": {
             "roi": [coder.x0, coder.y0, coder.x1, coder.y1],
