@@ -7,8 +7,8 @@ file) prints one line to stderr and returns exit code 2, never a traceback.
 This module holds the parser, the dispatch and the error handling; each subcommand group has its
 own module (:mod:`~testbed.cli.run`, :mod:`~testbed.cli.link`, :mod:`~testbed.cli.sweep`,
 :mod:`~testbed.cli.emulator`, :mod:`~testbed.cli.hil`, :mod:`~testbed.cli.mavlink`,
-:mod:`~testbed.cli.live`), whose
-heavy imports happen only when the command runs, so ``testbed --help`` stays fast.
+:mod:`~testbed.cli.live`), whose heavy imports happen only when the command runs, so
+``testbed --help`` stays fast.
 """
 
 from __future__ import annotations
