@@ -12,7 +12,7 @@ imports count as the absolute names they resolve to.
 | config   | -                                                  | -                               |
 | protocol | config                                             | numpy                           |
 | ecs      | config                                             | numpy                           |
-| common   | ecs, protocol, config                              | numpy                           |
+| common   | ecs, protocol, config                              | numpy, numba                    |
 | channel  | protocol, config                                   | numpy, simpy                    |
 | imaging  | config                                             | numpy                           |
 | vehicle  | common, ecs, protocol, imaging, config | numpy, scipy, numba, pybullet, py_trees |

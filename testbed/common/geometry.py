@@ -5,13 +5,22 @@ laws and both nodes' teleoperation call these). Conventions: world NED, body FRD
 quaternion rotates body vectors into the world, and so does its :func:`rotation_matrix`.
 Plain floats and tuples (no NumPy): these run in every control frame, where six-element arrays
 cost more in call overhead than the arithmetic they hold (``np.array(rotation_matrix(q))`` is the
-(3, 3) matrix where one is wanted). Standard library only.
+(3, 3) matrix where one is wanted).
+
+The formulas compiled control laws need (the products, rotations, ``wrap_angle`` and
+``attitude_error``) are also registered with numba (``register_jitable``): a Python caller calls
+the plain function, unchanged, and a compiled kernel that calls it compiles this same source into
+itself (:mod:`testbed.common.jit` keeps such kernels' disk caches in step with this file).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+
+from numba.extending import register_jitable
+
+from testbed.common import jit as _jit  # noqa: F401  (math.fmod for compiled callers)
 
 __all__ = [
     "Quaternion",
@@ -43,6 +52,7 @@ Rotation = tuple[Vec3, Vec3, Vec3]
 _TWO_PI = 2.0 * math.pi
 
 
+@register_jitable
 def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
     """Hamilton product ``a·b`` (apply ``b`` first, then ``a``)."""
     aw, ax, ay, az = a
@@ -55,6 +65,7 @@ def quat_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
     )
 
 
+@register_jitable
 def quat_conjugate(q: Quaternion) -> Quaternion:
     """The conjugate, which is the inverse of a unit quaternion."""
     return (q[0], -q[1], -q[2], -q[3])
@@ -73,6 +84,7 @@ def quat_normalize(q: Sequence[float]) -> Quaternion:
     return (w / norm, x / norm, y / norm, z / norm)
 
 
+@register_jitable
 def quat_rotate(q: Quaternion, v: Sequence[float]) -> Vec3:
     """Rotate ``v`` by ``q`` (body → world for an attitude quaternion)."""
     w, x, y, z = q
@@ -88,6 +100,7 @@ def quat_rotate(q: Quaternion, v: Sequence[float]) -> Vec3:
     )
 
 
+@register_jitable
 def quat_rotate_inverse(q: Quaternion, v: Sequence[float]) -> Vec3:
     """Rotate ``v`` by ``q⁻¹`` (world → body for an attitude quaternion)."""
     return quat_rotate((q[0], -q[1], -q[2], -q[3]), v)
@@ -153,6 +166,7 @@ def yaw_only(q: Quaternion) -> Quaternion:
     return (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
 
 
+@register_jitable
 def wrap_angle(angle_rad: float) -> float:
     """``angle_rad`` wrapped into (−π, π]."""
     wrapped = math.fmod(angle_rad + math.pi, _TWO_PI)
@@ -173,6 +187,7 @@ def twist_angle(q: Quaternion, axis: Sequence[float]) -> float:
     return wrap_angle(2.0 * math.atan2(along, q[0]))
 
 
+@register_jitable
 def attitude_error(target: Quaternion, current: Quaternion) -> Vec3:
     """Per-body-axis attitude error [rad] of ``current`` against ``target`` (roll, pitch, yaw).
 

@@ -11,8 +11,8 @@ force [N], roll, pitch, yaw torque [N·m]) in the body frame. The laws follow ma
 swing–twist, in **degrees** so that mate-rov's published gains apply unchanged; depth error
 ``e = target − depth`` (positive down) drives a world-vertical force rotated into the body.
 
-The hot path uses Python floats and tuples, not NumPy: six-element arrays cost more in call
-overhead than the arithmetic they hold. Nothing in this module draws random numbers.
+The loops' arithmetic is compiled (:mod:`.control_kernels`); the classes here validate, hold the
+state arrays and expose the terms. Nothing in this module draws random numbers.
 """
 
 from __future__ import annotations
@@ -22,17 +22,28 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from testbed.common.geometry import (
-    Quaternion,
-    Vec3,
-    attitude_error,
-    quat_conjugate,
-    quat_multiply,
-    quat_rotate_inverse,
-)
+import numpy as np
+
+from testbed.common.geometry import Quaternion, Vec3
 from testbed.config import check, check_range
+from testbed.vehicle.control_kernels import (
+    ATTITUDE_STATE_SIZE,
+    BACK_CALCULATION,
+    CLAMP,
+    CONDITIONAL,
+    D_TERM,
+    I_TERM,
+    INTEGRAL,
+    MAX_TARGET_RATE_HOLD_S,
+    P_TERM,
+    PID_STATE_SIZE,
+    attitude_update,
+    depth_update,
+    pid_update,
+)
 
 __all__ = [
+    "MAX_TARGET_RATE_HOLD_S",
     "PID",
     "AttitudeController",
     "AttitudeGains",
@@ -40,9 +51,8 @@ __all__ = [
     "FailsafeConfig",
     "PidGains",
     "failsafe_level",
+    "pid_gains_array",
 ]
-
-_DEG_PER_RAD = 180.0 / math.pi
 
 
 # --------------------------------------------------------------------------------------------
@@ -104,26 +114,52 @@ class PID:
     ``update`` takes the error and, optionally, its rate (e.g. from a gyro, which is far less
     noisy than differencing a measured angle); without it the derivative is the filtered
     backward difference of the error. The terms of the last update are kept in ``p``, ``i``,
-    ``d`` for telemetry.
+    ``d`` for telemetry. The arithmetic is :func:`~.control_kernels.pid_update`; this class
+    holds the gains and the state it advances (a view into a larger state when ``state`` is
+    given, as :class:`AttitudeController` does for its three axes).
     """
 
-    __slots__ = ("_d_state", "_has_last", "_last_error", "d", "gains", "i", "integral", "p")
+    __slots__ = ("_gains", "_state", "gains")
 
-    def __init__(self, gains: PidGains) -> None:
+    def __init__(self, gains: PidGains, state: np.ndarray | None = None) -> None:
         self.gains = gains
-        self.integral = 0.0
-        self.p = self.i = self.d = 0.0
-        self._last_error = 0.0
-        self._has_last = False
-        self._d_state = 0.0
+        self._gains = pid_gains_array(gains)
+        self._state = np.zeros(PID_STATE_SIZE) if state is None else state
+        self._state[:] = 0.0
+
+    @property
+    def integral(self) -> float:
+        """The integral state [error unit · s]."""
+        return float(self._state[INTEGRAL])
+
+    @property
+    def p(self) -> float:
+        """The last update's proportional term."""
+        return float(self._state[P_TERM])
+
+    @property
+    def i(self) -> float:
+        """The last update's integral term."""
+        return float(self._state[I_TERM])
+
+    @property
+    def d(self) -> float:
+        """The last update's derivative term."""
+        return float(self._state[D_TERM])
+
+    @property
+    def state_array(self) -> np.ndarray:
+        """The state :func:`~.control_kernels.pid_update` advances (a view, not a copy)."""
+        return self._state
+
+    @property
+    def gains_array(self) -> np.ndarray:
+        """The gains in the kernels' layout (:func:`pid_gains_array`)."""
+        return self._gains
 
     def reset(self) -> None:
         """Forget the integral, the previous error and the derivative filter state."""
-        self.integral = 0.0
-        self.p = self.i = self.d = 0.0
-        self._last_error = 0.0
-        self._has_last = False
-        self._d_state = 0.0
+        self._state[:] = 0.0
 
     def update(self, error: float, dt_s: float, error_rate: float | None = None) -> float:
         """Advance one step and return the (clamped) output.
@@ -138,51 +174,33 @@ class PID:
         """
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        g = self.gains
-        has_last = self._has_last
-        if error_rate is None:
-            raw = (error - self._last_error) / dt_s if has_last else 0.0
-        else:
-            raw = error_rate
-        tau = g.derivative_tau_s
-        if tau > 0.0 and has_last:
-            d_state = self._d_state
-            d_state += (raw - d_state) * (dt_s / (tau + dt_s))
-        else:
-            d_state = raw
-        self._d_state = d_state
-        self._last_error = error
-        self._has_last = True
+        has_rate = error_rate is not None
+        rate = float(error_rate) if error_rate is not None else 0.0
+        return pid_update(self._state, self._gains, float(error), float(dt_s), rate, has_rate)
 
-        # clamps below are max(-c, min(c, x)) written out (same result, NaN included)
-        p = g.kp * error
-        d = g.kd * d_state
-        limit = g.max_output
-        if abs(error) >= g.i_zone:
-            self.integral = 0.0
-        else:
-            cap = g.max_integral
-            candidate = self.integral + error * dt_s
-            candidate = candidate if candidate < cap else cap
-            candidate = candidate if candidate > -cap else -cap
-            anti_windup = g.anti_windup
-            if anti_windup == "conditional":
-                unsat = p + g.ki * candidate + d
-                if abs(unsat) <= limit or (unsat > 0.0) != (error > 0.0):
-                    self.integral = candidate
-            elif anti_windup == "back_calculation" and g.ki != 0.0:
-                # İ = e + (sat(u) − u)/(ki·Tt), u from the integral before this step
-                unsat = p + g.ki * self.integral + d
-                excess = max(-limit, min(limit, unsat)) - unsat
-                candidate += excess * dt_s / (g.tracking_time_s * g.ki)
-                self.integral = max(-cap, min(cap, candidate))
-            else:
-                self.integral = candidate
-        i = g.ki * self.integral
-        self.p, self.i, self.d = p, i, d
-        out = p + i + d
-        out = out if out < limit else limit
-        return out if out > -limit else -limit
+
+def pid_gains_array(gains: PidGains) -> np.ndarray:
+    """``gains`` in :mod:`.control_kernels`' PID gains layout (9 float64)."""
+    return np.array(
+        [
+            gains.kp,
+            gains.ki,
+            gains.kd,
+            gains.max_integral,
+            gains.max_output,
+            gains.i_zone,
+            gains.derivative_tau_s,
+            _ANTI_WINDUP_CODES[gains.anti_windup],
+            gains.tracking_time_s,
+        ]
+    )
+
+
+_ANTI_WINDUP_CODES = {
+    "clamp": CLAMP,
+    "conditional": CONDITIONAL,
+    "back_calculation": BACK_CALCULATION,
+}
 
 
 # --------------------------------------------------------------------------------------------
@@ -198,10 +216,6 @@ class AttitudeGains:
     yaw: PidGains = field(default_factory=PidGains)
 
 
-MAX_TARGET_RATE_HOLD_S = 0.25
-"""Longest time [s] over which one step of an attitude target is fed forward as a rate."""
-
-
 class AttitudeController:
     """Three per-axis PIDs on the swing–twist attitude error, returning a body torque.
 
@@ -215,34 +229,23 @@ class AttitudeController:
     frame's difference gives; a lone step after a still spell (≥ 0.5 s) is fed over 0.25 s in
     full instead of kicking in one frame (after a shorter one, up to 1.5 × its size over the
     mean interval: the feedforward's only overshoot).
+
+    The arithmetic is :func:`~.control_kernels.attitude_update`; ``pids`` are the three axes'
+    :class:`PID` over their part of the state, for telemetry.
     """
 
-    __slots__ = (
-        "_hold_left_s",
-        "_interval_s",
-        "_last_target",
-        "_since_change_s",
-        "_target_rate_ned",
-        "pids",
-    )
+    __slots__ = ("_gains", "_state", "pids")
 
     def __init__(self, gains: AttitudeGains) -> None:
-        self.pids = (PID(gains.roll), PID(gains.pitch), PID(gains.yaw))
-        self._last_target: Quaternion | None = None
-        self._since_change_s = 0.0
-        self._interval_s = 0.0  # the mean time between the target's steps (0: none yet)
-        self._hold_left_s = 0.0
-        self._target_rate_ned: Vec3 = (0.0, 0.0, 0.0)
+        self._state = np.zeros(ATTITUDE_STATE_SIZE)
+        axes = (gains.roll, gains.pitch, gains.yaw)
+        n = PID_STATE_SIZE
+        self.pids = tuple(PID(g, self._state[k * n : (k + 1) * n]) for k, g in enumerate(axes))
+        self._gains = np.stack([pid.gains_array for pid in self.pids])
 
     def reset(self) -> None:
         """Reset every axis and forget the previous target and its rate."""
-        for pid in self.pids:
-            pid.reset()
-        self._last_target = None
-        self._since_change_s = 0.0
-        self._interval_s = 0.0
-        self._hold_left_s = 0.0
-        self._target_rate_ned = (0.0, 0.0, 0.0)
+        self._state[:] = 0.0
 
     def update(
         self,
@@ -268,50 +271,17 @@ class AttitudeController:
         Raises:
             ValueError: ``dt_s`` is not positive.
         """
-        if not dt_s > 0.0:  # before the target's rate divides by the time it took
+        if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        errors = attitude_error(target, current)
-        last = self._last_target
-        self._since_change_s += dt_s
-        rate = self._target_rate_ned
-        left = self._hold_left_s
-        if last is None:
-            self._since_change_s = 0.0
-        elif last is not target and last != target:
-            # the target's step since it last changed (a small world-frame rotation, whose
-            # rotation vector is 2·vec(target·last⁻¹)) over the mean time between its steps
-            sw, sx, sy, sz = quat_multiply(target, quat_conjugate(last))
-            if sw < 0.0:
-                sx, sy, sz = -sx, -sy, -sz
-            since = self._since_change_s
-            mean = self._interval_s
-            mean = self._interval_s = since if mean == 0.0 else 0.5 * (mean + since)
-            spread = min(mean, MAX_TARGET_RATE_HOLD_S)
-            k = 2.0 / spread
-            rate = self._target_rate_ned = (k * sx, k * sy, k * sz)
-            # held until the next step, or until it is late by half the mean interval (the
-            # target stopped); a lone step is thus fed over MAX_TARGET_RATE_HOLD_S in full
-            left = spread if spread >= MAX_TARGET_RATE_HOLD_S else 1.5 * spread
-            self._since_change_s = 0.0
-        self._last_target = target
-        if left > 1e-9:  # still feeding the last step: this frame's share of it
-            self._hold_left_s = left - dt_s
-            if left < dt_s:
-                f = left / dt_s
-                rate = (rate[0] * f, rate[1] * f, rate[2] * f)
-            target_rates = quat_rotate_inverse(current, rate)
-        else:
-            self._hold_left_s = 0.0
-            target_rates = (0.0, 0.0, 0.0)
-        out = [0.0, 0.0, 0.0]
-        for k in range(3):
-            pid = self.pids[k]
-            if not axes[k]:
-                pid.reset()
-                continue
-            rate_deg_s = (target_rates[k] - rates_rad_s[k]) * _DEG_PER_RAD
-            out[k] = pid.update(errors[k] * _DEG_PER_RAD, dt_s, rate_deg_s)
-        return (out[0], out[1], out[2])
+        return attitude_update(
+            self._state,
+            self._gains,
+            _floats4(target),
+            _floats4(current),
+            _floats3(rates_rad_s),
+            float(dt_s),
+            axes if type(axes) is tuple else (bool(axes[0]), bool(axes[1]), bool(axes[2])),
+        )
 
 
 class DepthController:
@@ -319,13 +289,15 @@ class DepthController:
 
     The force acts along world +Z (down) and is rotated into the body frame with the measured
     attitude, so holding depth does not push the vehicle sideways when it is tilted. A constant
-    ``feedforward_n`` (e.g. minus the net buoyancy) may be added to the world-down force.
+    ``feedforward_n`` (e.g. minus the net buoyancy) may be added to the world-down force. The
+    arithmetic is :func:`~.control_kernels.depth_update`.
     """
 
-    __slots__ = ("feedforward_n", "pid")
+    __slots__ = ("_pid_gains", "_pid_state", "feedforward_n", "pid")
 
     def __init__(self, gains: PidGains, feedforward_n: float = 0.0) -> None:
         self.pid = PID(gains)
+        self._pid_state, self._pid_gains = self.pid.state_array, self.pid.gains_array
         self.feedforward_n = feedforward_n
 
     def reset(self) -> None:
@@ -341,13 +313,40 @@ class DepthController:
             target_depth_m: setpoint [m], positive down.
             depth_m: measured depth [m], positive down.
             attitude: (4,) measured attitude, body → NED.
-            dt_s: time since the previous step [s].
+            dt_s: time since the previous step [s], > 0.
 
         Returns:
             (3,) body force (X, Y, Z) [N], FRD.
+
+        Raises:
+            ValueError: ``dt_s`` is not positive.
         """
-        down_n = self.pid.update(target_depth_m - depth_m, dt_s) + self.feedforward_n
-        return quat_rotate_inverse(attitude, (0.0, 0.0, down_n))
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        return depth_update(
+            self._pid_state,
+            self._pid_gains,
+            float(target_depth_m),
+            float(depth_m),
+            _floats4(attitude),
+            float(dt_s),
+            float(self.feedforward_n),
+        )
+
+
+def _floats4(q: Sequence[float]) -> Quaternion:
+    """``q`` as a tuple of four floats (one compiled signature), without copying one."""
+    if type(q) is tuple and type(q[0]) is float:
+        return q  # four floats by the callers' contract
+    w, x, y, z = q
+    return (float(w), float(x), float(y), float(z))
+
+
+def _floats3(v: Sequence[float]) -> Vec3:
+    if type(v) is tuple and type(v[0]) is float:
+        return v
+    x, y, z = v
+    return (float(x), float(y), float(z))
 
 
 # --------------------------------------------------------------------------------------------
