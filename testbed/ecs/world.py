@@ -457,6 +457,26 @@ class World:
         column = self._query_column(cls, changed, added, since)
         return scan_one(column, changed, added, since, origin, packed=False)
 
+    def changed_any(self, *types: type[Any], since: int | None = None) -> bool:
+        """Whether a component of these types was added or changed after ``since``.
+
+        The cheap test in front of a system that only reacts to changes (each column keeps its
+        newest change tick): false means every ``query1(cls, changed=True)`` of these types
+        would yield nothing. A component changed and then removed may still count; removals
+        themselves are not changes (see :meth:`removals_since`).
+
+        Args:
+            types: component types.
+            since: a tick; default :attr:`last_run_tick` (the running system's previous run).
+        """
+        tick = self.last_run_tick if since is None else since
+        columns = self._columns
+        for cls in types:
+            column = columns.get(cls)
+            if column is not None and column.changed_max > tick and column.slots:
+                return True
+        return False
+
     def single(self, cls: type[C]) -> tuple[Entity, C]:
         """The one entity having ``cls``, with its component.
 

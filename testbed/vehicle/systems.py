@@ -112,6 +112,8 @@ _ZERO_INTENTS = {
     for source in ("pilot", "depth", "attitude", "position", "velocity")
 }
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
+_INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
+"""What :func:`ingest_commands` reacts to."""
 
 
 # ------------------------------------------------------------------------------ resources
@@ -334,6 +336,8 @@ def read_sensors(world: World) -> None:
 
 def ingest_commands(world: World) -> None:
     """Apply new operator intents: sticks (newer seq only), arm, mode and setpoints."""
+    if not world.changed_any(*_INTENT_TYPES):  # most frames: nothing new arrived
+        return
     clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     vehicle = ctl.vehicle
