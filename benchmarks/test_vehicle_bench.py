@@ -232,9 +232,7 @@ def _least_system(index: int) -> Callable[[World], None]:
     return system
 
 
-def _frames_against_floor(
-    benchmark: pytest.FixtureRequest, frames: Callable[[], None]
-) -> tuple[float, float]:
+def _frames_against_floor(frames: Callable[[], None]) -> tuple[float, float]:
     """Time ``frames`` (SIM_S of 100-Hz frames) and the floor, five interleaved rounds each:
     the µs a frame and the ratio of the least of its times to the floor's."""
 
@@ -245,11 +243,10 @@ def _frames_against_floor(
 
     best = interleaved_best({"floor": lambda: timed_floor(SIM_S), "frames": frames_round}, 5)
     floor_s, least_s = best["floor"], best["frames"]
-    benchmark.extra_info["bare_floor_rtf"] = round(SIM_S / floor_s, 1)  # type: ignore[attr-defined]
     return least_s / (100 * SIM_S) * 1e6, least_s / floor_s
 
 
-def test_least_python_frame_against_floor(benchmark: pytest.FixtureRequest) -> None:
+def test_least_python_frame_against_floor() -> None:
     """The cheapest frame a schedule of Python systems can run, against the floor in one run.
 
     As many systems as the vehicle's schedule (``systems.build_schedule``), each only reading a
@@ -272,14 +269,7 @@ def test_least_python_frame_against_floor(benchmark: pytest.FixtureRequest) -> N
             schedule.run(world)
         rounds.append(None)
 
-    frame_us, ratio = _frames_against_floor(benchmark, frames)
-    benchmark.extra_info.update(  # type: ignore[attr-defined]
-        {
-            "systems": count,
-            "least_frame_us": round(frame_us, 2),
-            "least_frames_over_floor": round(ratio, 2),
-        }
-    )
+    frame_us, ratio = _frames_against_floor(frames)
     print(
         f"\n{count} least Python systems at 100 Hz: {frame_us:.1f} µs a frame, "
         f"{ratio:.2f}x the bare floor's time"
@@ -331,7 +321,7 @@ def _least_compiled_frame(
     return (wrench[0], wrench[1], wrench[2], wrench[3], wrench[4], wrench[5])
 
 
-def test_least_compiled_frame_against_floor(benchmark: pytest.FixtureRequest) -> None:
+def test_least_compiled_frame_against_floor() -> None:
     """The cheapest frame a compiled design can run, against the floor in one run.
 
     One call per 100-Hz frame into :func:`_least_compiled_frame`, with the arguments such a
@@ -357,13 +347,7 @@ def test_least_compiled_frame_against_floor(benchmark: pytest.FixtureRequest) ->
             )
         wrenches.append(wrench)
 
-    frame_us, ratio = _frames_against_floor(benchmark, frames)
-    benchmark.extra_info.update(  # type: ignore[attr-defined]
-        {
-            "least_compiled_frame_us": round(frame_us, 2),
-            "compiled_frame_over_floor": round(ratio, 3),
-        }
-    )
+    frame_us, ratio = _frames_against_floor(frames)
     print(
         f"\none compiled frame call at 100 Hz: {frame_us:.2f} µs a frame, "
         f"{ratio:.2f}x the bare floor's time"

@@ -40,10 +40,12 @@ def pytest_sessionstart(session: object) -> None:
     derive from a warm start."""
     import numpy as np
 
+    from testbed.vehicle.components import ControlMode
     from testbed.vehicle.vehicle import Vehicle, VehicleConfig
 
-    with Vehicle(VehicleConfig(), np.random.default_rng(0)) as vehicle:
+    with Vehicle(VehicleConfig(), np.random.default_rng(0)) as vehicle:  # builds the loops'
         vehicle.arm()
+        vehicle.set_mode(ControlMode.DEPTH_HOLD)  # and runs them
         vehicle.command((0.5, 0.0, 0.0, 0.0, 0.0, 0.1))
         vehicle.advance(0.1)
     from testbed.vehicle.estimation import FilterConfig, KalmanNavigator

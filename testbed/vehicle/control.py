@@ -40,6 +40,7 @@ from testbed.vehicle.control_kernels import (
     attitude_update,
     depth_update,
     pid_update,
+    warm_up,
 )
 
 __all__ = [
@@ -237,6 +238,7 @@ class AttitudeController:
     __slots__ = ("_gains", "_state", "pids")
 
     def __init__(self, gains: AttitudeGains) -> None:
+        warm_up()
         self._state = np.zeros(ATTITUDE_STATE_SIZE)
         axes = (gains.roll, gains.pitch, gains.yaw)
         n = PID_STATE_SIZE
@@ -296,6 +298,7 @@ class DepthController:
     __slots__ = ("_pid_gains", "_pid_state", "feedforward_n", "pid")
 
     def __init__(self, gains: PidGains, feedforward_n: float = 0.0) -> None:
+        warm_up()
         self.pid = PID(gains)
         self._pid_state, self._pid_gains = self.pid.state_array, self.pid.gains_array
         self.feedforward_n = feedforward_n

@@ -25,6 +25,7 @@ forces [N]; body FRD, world NED; quaternions ``(w, x, y, z)`` body → NED.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -58,6 +59,7 @@ __all__ = [
     "attitude_update",
     "depth_update",
     "pid_update",
+    "warm_up",
 ]
 
 INTEGRAL, P_TERM, I_TERM, D_TERM, LAST_ERROR, HAS_LAST, D_FILTERED = range(7)
@@ -232,6 +234,17 @@ def depth_update(
     feed-forward [N], rotated into the body with the measured attitude → (X, Y, Z) [N], FRD."""
     down_n = pid_update(state, gains, target_depth_m - depth_m, dt_s, 0.0, False) + feedforward_n
     return quat_rotate_inverse(attitude, (0.0, 0.0, down_n))
+
+
+@functools.cache
+def warm_up() -> None:
+    """Compile (or load from the disk cache) every kernel here, once per process: the
+    controllers call it when they are built, so the first frame of a timed run does not."""
+    gains = np.zeros((3, PID_GAINS_SIZE))
+    level, zero = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    pid_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.01, 0.0, False)
+    attitude_update(np.zeros(ATTITUDE_STATE_SIZE), gains, level, level, zero, 0.01, (True,) * 3)
+    depth_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.0, level, 0.01, 0.0)
 
 
 jit.refresh_stale_caches((attitude_update, depth_update), (geometry, jit))
