@@ -10,7 +10,10 @@ stays cheap and never loads pybullet):
   current (``WaterCurrent``, ``CurrentProcess``).
 * ``physics``: the plant (``Physics``, ``PoolScene``, ``simulate_open_loop``), the only module
   in the project that imports pybullet.
-* ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle.
+* ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle; the
+  per-frame arithmetic of the plant, the thrust chain, the closed loops and the navigation
+  filter is compiled by numba in ``plant_kernels``, ``thrust_kernels``, ``control_kernels`` and
+  ``filter_kernels``.
 
 Rotations (quaternions, Euler angles, rotation matrices) are ``testbed.common.geometry``.
 """
