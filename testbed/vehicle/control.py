@@ -120,13 +120,18 @@ class PID:
     given, as :class:`AttitudeController` does for its three axes).
     """
 
-    __slots__ = ("_gains", "_state", "gains")
+    __slots__ = ("_config", "_gains", "_state")
 
     def __init__(self, gains: PidGains, state: np.ndarray | None = None) -> None:
-        self.gains = gains
+        self._config = gains
         self._gains = pid_gains_array(gains)
         self._state = np.zeros(PID_STATE_SIZE) if state is None else state
         self._state[:] = 0.0
+
+    @property
+    def gains(self) -> PidGains:
+        """The loop's gains (fixed at construction: the kernel reads their array form)."""
+        return self._config
 
     @property
     def integral(self) -> float:
