@@ -40,7 +40,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -201,12 +201,12 @@ def test_run_hil_rejects_bad_arguments_and_closes_what_it_was_given() -> None:
 class UnpluggedPort:
     """A pyserial port that fails (as an unplugged USB modem does) inside a monotonic window."""
 
-    def __init__(self, url: str, window: tuple[float, float]) -> None:
+    def __init__(self, url: str, window: Sequence[float]) -> None:
         self._window = window
         self._port = serial.Serial(url, timeout=0.05, write_timeout=2.0)
 
     @staticmethod
-    def check(window: tuple[float, float]) -> None:
+    def check(window: Sequence[float]) -> None:
         if window[0] <= time.monotonic() < window[1]:
             raise serial.SerialException("device disconnected")
 
@@ -233,10 +233,10 @@ NOISE = b"\x00\xffline noise\x00"
 
 
 def _unplugged_factory(
-    url: str, window: tuple[float, float], attempts: list[tuple[float, bool]]
+    url: str, window: Sequence[float], attempts: list[tuple[float, bool]]
 ) -> Callable[[], UnpluggedPort]:
-    """A port factory for the transport that fails inside ``window``; each call is appended to
-    ``attempts`` as (monotonic instant, opened)."""
+    """A port factory for the transport that fails inside ``window`` (read at each call: it may
+    be set later); each call is appended to ``attempts`` as (monotonic instant, opened)."""
     opened: list[UnpluggedPort] = []
 
     def factory() -> UnpluggedPort:
@@ -551,8 +551,14 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         for child in children.values():  # each says when its nodes are built and its clock
             assert child.stderr is not None  # starts: imports and compiled kernels are loaded
             child.stderr.readline()
-        t0 = time.monotonic()
-        unplug = (t0 + UNPLUG_S[0], t0 + UNPLUG_S[1])
+        # the unplug is placed on the run's clock: armed when the run starts it (a loaded host
+        # may take seconds to build the nodes), never before
+        unplug = [math.inf, math.inf]
+
+        def arm_unplug() -> None:
+            now = time.monotonic()
+            unplug[:] = [now + UNPLUG_S[0], now + UNPLUG_S[1]]
+
         attempts: list[tuple[float, bool]] = []
         operator = open_endpoint(
             PortSettings(single[0], "s100", "operator"),
@@ -568,6 +574,7 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
                 {"operator": operator, "vehicle": vehicle},
                 duration_s=DURATION_S,
                 modem="s100",
+                on_start=arm_unplug,
             )
             clock_started = (called, time.monotonic() - result.metrics["wall_s"])
         single_dir = root / "single"
@@ -588,8 +595,8 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         result,
         single_dir,
         (  # (earliest, latest) of the start, then of the end
-            (t0 + UNPLUG_S[0] - clock_started[1], t0 + UNPLUG_S[0] - clock_started[0]),
-            (t0 + UNPLUG_S[1] - clock_started[1], t0 + UNPLUG_S[1] - clock_started[0]),
+            (unplug[0] - clock_started[1], unplug[0] - clock_started[0]),
+            (unplug[1] - clock_started[1], unplug[1] - clock_started[0]),
         ),
         {"vehicle": root / "vehicle", "operator": root / "operator"},
         root / "cli",
@@ -597,7 +604,7 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         reports,
         probe,
         attempts,
-        unplug,
+        (unplug[0], unplug[1]),
         clock_started,
     )
 
