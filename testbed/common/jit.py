@@ -66,6 +66,9 @@ def refresh_stale_caches(kernels: Iterable[Any], dependencies: Iterable[ModuleTy
         except FileNotFoundError:
             continue  # nothing saved yet: the first call compiles and saves
         if saved < newest:
-            cache.flush()
+            try:
+                cache.flush()
+            except OSError:  # a read-only cache (an install's): numba cannot save there either
+                continue
             emptied += 1
     return emptied
