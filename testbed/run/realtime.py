@@ -434,9 +434,10 @@ def hil_metrics(
 
     ``hil``: ``mode``, ``modem``, ``poll_s``; ``added_latency_ms`` (port read returned → frame
     handed to the node, both endpoints pooled: ``p50``, ``p95``, ``max``, ``mean``, ``n``);
-    ``round_trip_s`` (operator, token passing: order handed to the modem → next reply handed
-    to the node); ``scheduler_lateness_ms`` (``lateness_ns``: how late the poll process ran
-    against its real-time schedule, :func:`rt_lateness_ns`; same keys as ``added_latency_ms``);
+    ``round_trip_s`` (operator, token passing: order handed to the modem → the reply that
+    answers it handed to the node, :func:`_round_trips`); ``scheduler_lateness_ms``
+    (``lateness_ns``: how late the poll process ran against its real-time schedule,
+    :func:`rt_lateness_ns`; same keys as ``added_latency_ms``);
     ``reopens`` and ``garbage_bytes`` summed over the endpoints; ``endpoints``
     (:func:`~testbed.hil.endpoint_report` per node: bytes and frames in/out, drops, garbage,
     corrupt frames, port faults, latency, adapter counters).
@@ -523,14 +524,25 @@ def _direction(
 
 
 def _round_trips(trace: Trace) -> list[float]:
-    """Token passing at the operator: each reply handed over → time since the last order sent
-    before it that had no reply yet [s]."""
+    """Token passing at the operator: each reply handed over → time since the order it answers
+    was sent [s], for the replies whose order is known.
+
+    A reply answers the one order sent before it that has no reply yet. When a second order
+    goes out before the first one's reply (a reply lost, or one a loaded host held past the next
+    slot), the next reply may answer either, so it is not paired, and neither is any other
+    until the next order; pairing it with the newer order would count a round trip shorter than
+    the link can carry.
+    """
     out: list[float] = []
     pending: float | None = None
+    ambiguous = False
     for event in trace.events:
         if event.kind is EventKind.ENQUEUE and event.src == "operator":
+            ambiguous = pending is not None
             pending = event.t_s
         elif event.kind is EventKind.DELIVER and event.dst == "operator" and pending is not None:
-            out.append(event.t_s - pending)
+            if not ambiguous:
+                out.append(event.t_s - pending)
             pending = None
+            ambiguous = False
     return out
