@@ -53,9 +53,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_SIGNALLED: list[int] = []
+"""The interrupt signals this process received (a list, so the handlers can append)."""
+
+
 def _terminate(signum: int, frame: FrameType | None) -> None:
-    del signum, frame
+    del frame
+    _SIGNALLED.append(signum)
     raise Terminated
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    del frame
+    _SIGNALLED.append(signum)
+    raise KeyboardInterrupt
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -68,9 +79,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
-    previous = None
+    previous: list[tuple[int, object]] = []
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminate)
+        del _SIGNALLED[:]
+        previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _terminate)))
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+            previous.append((signal.SIGINT, signal.signal(signal.SIGINT, _interrupt)))
     try:
         code: int = args.handler(args)
     except ConfigError as err:
@@ -82,7 +96,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as interrupt:
         print("testbed: interrupted", file=sys.stderr)
         return exit_code_of(interrupt)
+    except Exception:
+        # An interrupt raised inside a library that turned it into an error of its own (the
+        # handler runs wherever the program is, e.g. in a compiler's clean-up): still the
+        # interrupt the user asked for, ended the same way, with what was kept so far.
+        if not _SIGNALLED:
+            raise
+        print("testbed: interrupted", file=sys.stderr)
+        return exit_code_of(
+            Terminated() if _SIGNALLED[0] == signal.SIGTERM else KeyboardInterrupt()
+        )
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous:
+            signal.signal(signum, handler)  # type: ignore[arg-type]
     return code

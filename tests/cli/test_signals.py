@@ -57,7 +57,7 @@ def test_interrupt_keeps_a_marked_partial_result(
         time.sleep(wait_s)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=WAIT_S)
-        assert proc.returncode == code
+        assert proc.returncode == code, stderr
         lines = stderr.strip().splitlines()
         if lines != ["testbed: interrupted"]:
             break
@@ -162,3 +162,49 @@ def test_modem_emulator_rejects_an_endless_duration_in_one_line() -> None:
     )
     assert done.returncode == 2 and done.stderr.count("\n") == 1
     assert done.stderr.startswith("testbed: error: --duration: must be a finite time")
+
+
+SWALLOWED = """
+import os, signal, sys, time
+import testbed.cli.run as run
+
+def swallow(args):  # a library that turns the interrupt into an error of its own
+    try:
+        os.kill(os.getpid(), signal.SIG{name})
+        time.sleep(30)
+    except KeyboardInterrupt as interrupt:
+        raise RuntimeError("lost in a library") from interrupt
+    return 0
+
+run._list_scenarios = swallow
+from testbed.cli.main import main
+sys.exit(main(["scenarios"]))
+"""
+
+
+@pytest.mark.parametrize(("name", "code"), [("INT", 130), ("TERM", 143)])
+def test_an_interrupt_a_library_turned_into_its_own_error_still_ends_as_one(
+    name: str, code: int
+) -> None:
+    # The handler raises wherever the program is; code that catches the interrupt and raises
+    # something else must not turn Ctrl-C or SIGTERM into a traceback and exit code 1.
+    done = subprocess.run(
+        [sys.executable, "-c", SWALLOWED.format(name=name)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+        preexec_fn=default_sigint,
+    )
+    assert (done.returncode, done.stderr) == (code, "testbed: interrupted\n")
+
+
+def test_an_error_with_no_signal_is_not_taken_for_an_interrupt() -> None:
+    # the same error from a KeyboardInterrupt no signal raised: a real failure, reported
+    script = SWALLOWED.replace("os.kill(os.getpid(), signal.SIG{name})", "raise KeyboardInterrupt")
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+    )
+    assert done.returncode == 1 and "RuntimeError: lost in a library" in done.stderr
