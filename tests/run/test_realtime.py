@@ -891,11 +891,16 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
     held = list(zip(holds, releases[: len(holds)], strict=True))  # (from, until)
     # (The hold may be let go inside the window by an order sent before it and delayed by a
     # loaded host; the rule above has checked every release against the orders handed over.)
-    assert any(t <= start_s + lag_s + hold_s + 2 * frame_s and r < math.inf for t, r in held), (
-        held,
-        window.unplug_env_s,
-        lag_s,
-    )
+    # The vehicle holds only once armed: a host that stalled for seconds before the arm order
+    # was applied (a command lag of seconds, measured) can arm it after the unplug began; the
+    # gap rule above then carries the failsafe's check.
+    seen = (held, window.unplug_env_s, lag_s, armed_s, failsafe, window.describe())
+    if armed_s < start_s:
+        assert any(t <= start_s + lag_s + hold_s + 2 * frame_s and r < math.inf for t, r in held), (
+            seen
+        )
+    else:
+        assert lag_s > hold_s, seen  # only such a stall arms it that late (the arm is at t ≈ 1 s)
     assert metrics["events"]["failsafe"] == len(failsafe) >= 2
     assert max(recorder.commands_applied.values()) > first_back_s  # orders flow again
     assert metrics["link"]["uplink"]["per"] > 0.0  # the orders lost count
