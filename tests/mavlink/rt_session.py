@@ -103,7 +103,22 @@ class GatewaySession:
             if value:
                 return value
             self.wait(0.02)
-        raise AssertionError("timed out waiting for the run's endpoint")
+        raise AssertionError(f"timed out waiting for the run's endpoint; {self.describe()}")
+
+    def describe(self) -> str:
+        """What the ground station last saw (for a failure's message: a loaded host that holds
+        the orders back shows as failsafe texts and a vehicle that stopped short)."""
+        hb = self.latest.get("HEARTBEAT")
+        position = self.latest.get("LOCAL_POSITION_NED")
+        texts = [m.text for _, m in self.seen.get("STATUSTEXT", [])][-5:]
+        sent = self.stick_sent_s
+        return (
+            f"heartbeat base_mode {None if hb is None else hb.base_mode}, custom_mode "
+            f"{None if hb is None else hb.custom_mode}; position "
+            f"{None if position is None else (position.x, position.y, position.z)}; last texts "
+            f"{texts}; sticks {self.sticks}, {len(sent)} sent, longest gap "
+            f"{self.max_stick_gap_s() if len(sent) > 1 else None} s"
+        )
 
     def heartbeat(self, check: Callable[[Any], bool], **pump: bool) -> Any:
         self.latest.pop("HEARTBEAT", None)
