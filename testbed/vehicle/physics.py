@@ -452,8 +452,7 @@ class Physics:
             if raw is None:
                 raw = self._raw = self._read()
             position, orientation, linear, angular = raw
-            rotation = pybullet.getMatrixFromQuaternion(orientation)
-            state = pybullet_state(self._cog, position, orientation, rotation, linear, angular)
+            state = pybullet_state(self._cog, position, orientation, linear, angular)
             floats = self._floats = (self._steps * self.dt_s, *state)
         return floats
 
@@ -529,24 +528,27 @@ class Physics:
 
     def _make_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
         """One step: pybullet's reads, the compiled :func:`~.plant_kernels.pybullet_wrench`,
-        force, torque and pybullet's step (attribute lookups bound once: this runs 240 times a
-        simulated second); with an arm, the coupled step (class docstring)."""
+        force, torque and pybullet's step, the floor's five pybullet calls (attribute lookups
+        bound once: this runs 240 times a simulated second); with an arm, the coupled step
+        (class docstring)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
         apply_force = pybullet.applyExternalForce
         apply_torque = pybullet.applyExternalTorque
         step_simulation = pybullet.stepSimulation
-        matrix_from_quaternion = pybullet.getMatrixFromQuaternion
+        rotation_of = pybullet.getMatrixFromQuaternion  # the arm step needs R here too
         link_frame = pybullet.LINK_FRAME
         cid, body = self.client_id, self.body_id
         model = self.model
         fossen = coefficients(model)
-        rigid = (
-            model.mass_kg,
-            *model.inertia_kg_m2,
-            *model.cog_m,
-            *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
-            1.0 / model.hull_size_m[2],
+        rigid = np.array(
+            (
+                model.mass_kg,
+                *model.inertia_kg_m2,
+                *model.cog_m,
+                *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
+                1.0 / model.hull_size_m[2],
+            )
         )
 
         def advance(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
@@ -555,9 +557,8 @@ class Physics:
                 linear, angular = get_velocity(body, cid)
             else:  # read since the last step (by state_floats): still current
                 (_, _, height), orientation, linear, angular = raw
-            rotation = matrix_from_quaternion(orientation)
             force, torque, nu_dot = pybullet_wrench(
-                fossen, rigid, height, rotation, linear, angular, wrench_body, current_ned
+                fossen, rigid, height, orientation, linear, angular, wrench_body, current_ned
             )
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
             apply_torque(body, -1, torque, link_frame, cid)
@@ -566,9 +567,9 @@ class Physics:
 
         # Compile (or load from numba's cache) here, not inside the first step of a timed run:
         # both kernels are pure, so a call on a resting, level body changes nothing.
-        level, zero3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
+        level, zero3 = (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
         pybullet_wrench(fossen, rigid, 0.0, level, zero3, zero3, (0.0,) * 6, zero3)
-        pybullet_state(model.cog_m, zero3, (0.0, 0.0, 0.0, 1.0), level, zero3, zero3)
+        pybullet_state(model.cog_m, zero3, level, zero3, zero3)
         if self.arm is None:
             return advance
         # With the arm: its measured reaction coupled into (or cancelled from) the hull's
@@ -585,7 +586,7 @@ class Physics:
                 linear, angular = get_velocity(body, cid)
             else:
                 (_, _, height), orientation, linear, angular = raw
-            rotation = matrix_from_quaternion(orientation)
+            rotation = rotation_of(orientation)
             last = memory[0]
             if last is None:  # nothing measured yet: the resting arm's weight and buoyancy
                 reaction = self._seed_reaction
@@ -597,7 +598,7 @@ class Physics:
                 load = [w + r for w, r in zip(load, reaction, strict=True)]
             wrench = (load[0], load[1], load[2], load[3], load[4], load[5])
             force, torque, nu_dot = pybullet_wrench(
-                fossen, rigid, height, rotation, linear, angular, wrench, current_ned
+                fossen, rigid, height, orientation, linear, angular, wrench, current_ned
             )
             rx, ry, rz, rk, rm, rn = reaction  # FRD → FLU: (x, −y, −z)
             force = (force[0] - rx, force[1] + ry, force[2] + rz)

@@ -8,10 +8,11 @@ machine compiles in about a second; later ones load the machine code):
   for its array interface), reading the model's coefficients as one float64 array laid out by
   :func:`~.hydrodynamics.coefficients` with the offsets below;
 * :func:`pybullet_wrench` and :func:`pybullet_state`, what :class:`~.physics.Physics` computes
-  from pybullet's reads each step: the body force and torque that give pybullet's rigid body
-  Fossen's acceleration, and the state in NED/FRD. pybullet's world is NED rotated by π about
-  north and its body frame FLU (vectors map by (x, −y, −z)); only this module and
-  :mod:`.physics` (which makes the calls) know it.
+  from pybullet's reads each step (with :func:`matrix_from_quaternion`, pybullet's own
+  rotation matrix, so a step calls pybullet only to read, apply and step): the body force and
+  torque that give pybullet's rigid body Fossen's acceleration, and the state in NED/FRD.
+  pybullet's world is NED rotated by π about north and its body frame FLU (vectors map by
+  (x, −y, −z)); only this module and :mod:`.physics` (which makes the calls) know it.
 
 They share one module because numba's disk cache does not follow calls into other files: a
 cached kernel calling one defined elsewhere would keep a stale copy of it after that file
@@ -147,6 +148,39 @@ def fossen_acceleration(
 
 
 @numba.njit(cache=True)
+def matrix_from_quaternion(
+    orientation: tuple[float, float, float, float],
+) -> tuple[float, ...]:  # pragma: no cover - compiled
+    """pybullet's ``getMatrixFromQuaternion``, computed here so a step makes no call for it:
+    Bullet's ``btMatrix3x3::setRotation`` (s = 2/|q|², the same operations in the same order,
+    so the same bits; checked against pybullet in the tests).
+
+    Args:
+        orientation: pybullet's quaternion (x, y, z, w), body FLU → world.
+
+    Returns:
+        R as its row-major 9 entries.
+    """
+    x, y, z, w = orientation
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    return (
+        1.0 - (yy + zz),
+        xy - wz,
+        xz + wy,
+        xy + wz,
+        1.0 - (xx + zz),
+        yz - wx,
+        xz - wy,
+        yz + wx,
+        1.0 - (xx + yy),
+    )
+
+
+@numba.njit(cache=True)
 def body_velocity(
     rotation: tuple[float, ...], linear: Vec3, angular: Vec3
 ) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
@@ -179,16 +213,16 @@ def pybullet_state(
     cog: Vec3,
     position: Vec3,
     orientation: tuple[float, float, float, float],
-    rotation: tuple[float, ...],
     linear: Vec3,
     angular: Vec3,
 ) -> tuple[Vec3, Quat, Vec6]:  # pragma: no cover - compiled (called by Physics)
     """(CO position NED, attitude quaternion wxyz body FRD → NED, ν at CO FRD) from pybullet's
-    reads of the base (the CoG): position and orientation (x, y, z, w), its matrix, and the
-    world velocities. CO is at −r_g from the CoG: position = p_g − R_ned·r_g."""
+    reads of the base (the CoG): position and orientation (x, y, z, w) and the world
+    velocities. CO is at −r_g from the CoG: position = p_g − R_ned·r_g."""
     xg, yg, zg = cog
     px, py, pz = position
     ox, oy, oz, ow = orientation
+    rotation = matrix_from_quaternion(orientation)
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
     # R_ned·r_g with R_ned = diag(1, −1, −1)·R·diag(1, −1, −1)
     north = px - (r00 * xg - r01 * yg - r02 * zg)
@@ -202,9 +236,9 @@ def pybullet_state(
 @numba.njit(cache=True)
 def pybullet_wrench(
     fossen: FloatArray,
-    rigid: tuple[float, ...],
+    rigid: FloatArray,
     height: float,
-    rotation: tuple[float, ...],
+    orientation: tuple[float, float, float, float],
     linear: Vec3,
     angular: Vec3,
     wrench: Vec6,
@@ -212,8 +246,8 @@ def pybullet_wrench(
 ) -> tuple[Vec3, Vec3, Vec6]:  # pragma: no cover - compiled (called by Physics)
     """The body force and torque that give pybullet's rigid body Fossen's acceleration.
 
-    From pybullet's state (the CoG's height z-up, R body FLU → world as its row-major matrix,
-    the CoG's world velocity and the world angular velocity), the body velocity at CO, the
+    From pybullet's state (the CoG's height z-up, its orientation, the CoG's world velocity and
+    the world angular velocity), the body velocity at CO, the
     down direction and the current in the body FRD and the submerged fraction go to
     :func:`fossen_acceleration`; its ν̇ becomes the force
     m·(v̇_o + ω̇×r_g + ω×v_g) and the torque I_g·ω̇ + ω×I_g·ω (pybullet subtracts ω×I_g·ω
@@ -221,9 +255,10 @@ def pybullet_wrench(
 
     Args:
         fossen: the model's :func:`~testbed.vehicle.hydrodynamics.coefficients`.
-        rigid: (m, Ixx, Iyy, Izz, r_g (3), r_b − r_g (3), 1/hull height) [kg, kg·m², m, 1/m].
+        rigid: (11,) m, Ixx, Iyy, Izz, r_g (3), r_b − r_g (3), 1/hull height [kg, kg·m², m,
+            1/m] (an array: one argument to unbox per call).
         height: pybullet's base (CoG) z, up [m].
-        rotation: pybullet's ``getMatrixFromQuaternion`` of the base orientation (9).
+        orientation: pybullet's base quaternion (x, y, z, w), body FLU → world.
         linear: the CoG's velocity, pybullet's world [m/s].
         angular: angular velocity, pybullet's world [rad/s].
         wrench: applied body wrench [N, N·m], FRD, about the CoG.
@@ -232,7 +267,17 @@ def pybullet_wrench(
     Returns:
         (force, torque) in the body FLU frame [N, N·m], and ν̇ at CO (FRD) [m/s², rad/s²].
     """
-    m, ixx, iyy, izz, xg, yg, zg, dbx, dby, dbz, inv_height = rigid
+    m, ixx, iyy, izz = rigid[0], rigid[1], rigid[2], rigid[3]
+    xg, yg, zg, dbx, dby, dbz, inv_height = (
+        rigid[4],
+        rigid[5],
+        rigid[6],
+        rigid[7],
+        rigid[8],
+        rigid[9],
+        rigid[10],
+    )
+    rotation = matrix_from_quaternion(orientation)
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
     ug, vg, wg, p, q, r = body_velocity(rotation, linear, angular)
     gx, gy, gz = -r20, r21, r22  # NED down in the body: the last row of R_ned

@@ -425,3 +425,19 @@ def test_close_disconnects_its_own_client(wu: HydroModel) -> None:
         sim.close()  # idempotent
         with pytest.raises(RuntimeError):
             sim.state()
+
+
+def test_the_steps_rotation_matrix_is_pybullets_to_the_bit() -> None:
+    # The step computes pybullet's getMatrixFromQuaternion itself (one pybullet call a step
+    # fewer): the same bits as pybullet's, for unit and non-unit quaternions and near the axes.
+    from testbed.vehicle.plant_kernels import matrix_from_quaternion
+
+    rng = np.random.default_rng(7)
+    for i in range(20000):
+        q = rng.normal(size=4)
+        if i % 3 == 0:
+            q *= (1.0, 1e-4, 1e-7, 1.0)
+        if i % 2 == 0:
+            q /= np.linalg.norm(q)
+        orientation = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        assert matrix_from_quaternion(orientation) == pybullet.getMatrixFromQuaternion(orientation)
