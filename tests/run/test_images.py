@@ -166,3 +166,14 @@ def test_run_summary_has_an_images_line(clean_run: RunResult) -> None:
     none_yet["images"]["latency_s"] = {"mean": math.nan}
     none_yet["images"]["psnr_db"] = {"mean": None}
     assert "latency mean n/a, PSNR mean n/a" in format_summary(none_yet, Path("out"))
+
+
+def test_run_summary_says_n_a_for_a_yaw_error_it_could_not_measure(clean_run: RunResult) -> None:
+    # a run with no yaw target to hold (a supervised mission) has no yaw error: n/a, not nan
+    from testbed.cli.main import format_summary
+
+    attitude = clean_run.metrics["attitude_error_deg"]
+    yaw = attitude["yaw"]
+    assert f"yaw error std {yaw['std']:.2f} deg" in format_summary(clean_run.metrics, Path("out"))
+    unmeasured = {**clean_run.metrics, "attitude_error_deg": {**attitude, "yaw": {"std": math.nan}}}
+    assert "yaw error std n/a deg;" in format_summary(unmeasured, Path("out"))
