@@ -99,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception:
         # An interrupt raised inside a library that turned it into an error of its own (the
         # handler runs wherever the program is, e.g. in a compiler's clean-up): still the
-        # interrupt the user asked for, ended the same way, with what was kept so far.
+        # interrupt the user asked for, ended as one the command does not handle (one line).
         if not _SIGNALLED:
             raise
         print("testbed: interrupted", file=sys.stderr)
