@@ -148,6 +148,17 @@ def _extend(column: array[Any], values: Sequence[Any]) -> array[Any]:
     return column
 
 
+def _cut(column: array[Any], length: int) -> array[Any]:
+    """``column`` with no more than ``length`` values: the same array, or a copy if a NumPy view
+    of it is held."""
+    if len(column) > length:
+        try:
+            del column[length:]
+        except BufferError:
+            return array(column.typecode, column[:length])
+    return column
+
+
 def _view(column: array[int]) -> np.ndarray:
     return np.frombuffer(column, dtype=np.dtype(column.typecode))
 
@@ -167,18 +178,12 @@ class Trace:
     """
 
     __slots__ = (
-        "_bits",
-        "_dst",
-        "_frame",
-        "_kind",
+        "_columns",
         "_kinds",
+        "_length",
         "_name_code",
         "_names",
-        "_part",
         "_pending",
-        "_size",
-        "_src",
-        "_t",
     )
 
     def __init__(self, kinds: Iterable[EventKind] | None = None) -> None:
@@ -186,14 +191,12 @@ class Trace:
         self._pending: list[tuple[float, EventKind, str, str, int, int, int, int]] = []
         self._names: list[str] = []
         self._name_code: dict[str, int] = {}
-        self._t = array("d")
-        self._kind = array("B")
-        self._src = array("B")
-        self._dst = array("B")
-        self._frame = array("i")
-        self._part = array("h")
-        self._size = array("h")
-        self._bits = array("h")
+        # time, kind, src, dst, frame id, part, size, bit errors
+        self._columns: tuple[array[Any], ...] = (
+            *(array(code) for code in "dBBBi"),
+            *(array("h") for _ in range(3)),
+        )
+        self._length = 0  # events in the columns (an interrupted flush may leave more: cut)
 
     @classmethod
     def of(cls, events: Iterable[LinkEvent]) -> Trace:
@@ -229,12 +232,23 @@ class Trace:
     def _code(self, name: str) -> int:
         code = self._name_code.get(name)
         if code is None:
-            code = self._name_code[name] = len(self._names)
+            # the name first, then its code: an interrupt between leaves an unused name, never
+            # a code without one
             self._names.append(name)
+            code = self._name_code[name] = len(self._names) - 1
         return code
 
     def _flush(self) -> None:
-        """Move the pending tuples to the columns."""
+        """Move the pending tuples to the columns, in one step an interrupt cannot split.
+
+        A ``KeyboardInterrupt`` (Ctrl-C, or the CLI's SIGTERM) is raised wherever the program
+        is, and a run that ends by one writes its trace. Raised while the columns were being
+        extended one after the other, it would leave them of unequal lengths with the tuples
+        still pending (moved again by the next flush). So the columns are first cut back to
+        the committed length (what an interrupted flush left beyond it), extended, and only then
+        committed together with an empty pending list by one assignment (Python runs signal
+        handlers at calls and loops; the assignment's stores come after its last call).
+        """
         pending = self._pending
         if not pending:
             return
@@ -248,15 +262,21 @@ class Trace:
                 self._code(name)
             src_codes = list(map(codes.__getitem__, src))
             dst_codes = list(map(codes.__getitem__, dst))
-        self._t = _extend(self._t, t_s)
-        self._kind = _extend(self._kind, bytes(map(KIND_CODE.__getitem__, kind)))
-        self._src = _extend(self._src, src_codes)
-        self._dst = _extend(self._dst, dst_codes)
-        self._frame = _extend(self._frame, frame_id)
-        self._part = _extend(self._part, part)
-        self._size = _extend(self._size, size_bytes)
-        self._bits = _extend(self._bits, bit_errors)
-        pending.clear()
+        n = self._length
+        values = (
+            t_s,
+            bytes(map(KIND_CODE.__getitem__, kind)),
+            src_codes,
+            dst_codes,
+            frame_id,
+            part,
+            size_bytes,
+            bit_errors,
+        )
+        columns = tuple(
+            _extend(_cut(column, n), new) for column, new in zip(self._columns, values, strict=True)
+        )
+        self._columns, self._length, self._pending = columns, n + len(pending), []
 
     @property
     def events(self) -> TraceEvents:
@@ -266,17 +286,9 @@ class Trace:
     def columns(self) -> TraceColumns:
         """NumPy views of the columns (see :class:`TraceColumns`)."""
         self._flush()
+        t, kind, src, dst, frame, part, size, bits = map(_view, self._columns)
         return TraceColumns(
-            np.frombuffer(self._t, dtype=np.float64),
-            np.frombuffer(self._kind, dtype=np.uint8),
-            _view(self._src),
-            _view(self._dst),
-            _view(self._frame),
-            _view(self._part),
-            _view(self._size),
-            _view(self._bits),
-            KIND_BY_CODE,
-            tuple(self._names),
+            t, kind, src, dst, frame, part, size, bits, KIND_BY_CODE, tuple(self._names)
         )
 
     def name_code(self, name: str) -> int | None:
@@ -287,8 +299,7 @@ class Trace:
     @property
     def nbytes(self) -> int:
         """Bytes held by the columns (the pending tuples not counted)."""
-        columns = (self._t, self._kind, self._src, self._dst, self._frame, self._part)
-        return sum(c.itemsize * len(c) for c in (*columns, self._size, self._bits))
+        return sum(c.itemsize * len(c) for c in self._columns)
 
     def _slice(self, start: int, stop: int) -> list[LinkEvent]:
         """Events ``start:stop`` (``0 ≤ start ≤ stop ≤ len``) built as :class:`LinkEvent`."""
@@ -297,15 +308,7 @@ class Trace:
         return [
             LinkEvent(t, KIND_BY_CODE[k], names[s], names[d], f, p, n, b)
             for t, k, s, d, f, p, n, b in zip(
-                self._t[start:stop],
-                self._kind[start:stop],
-                self._src[start:stop],
-                self._dst[start:stop],
-                self._frame[start:stop],
-                self._part[start:stop],
-                self._size[start:stop],
-                self._bits[start:stop],
-                strict=True,
+                *(column[start:stop] for column in self._columns), strict=True
             )
         ]
 
@@ -321,7 +324,7 @@ class Trace:
         return [events[i] for i in order.tolist()]
 
     def __len__(self) -> int:
-        return len(self._t) + len(self._pending)
+        return self._length + len(self._pending)
 
     def __iter__(self) -> Iterator[LinkEvent]:
         self._flush()

@@ -253,10 +253,10 @@ class FloatPairs(ListEquality, Sequence[tuple[float, float]]):
             self.append(pair)
 
     def append(self, pair: tuple[float, float]) -> None:
-        """Append one pair."""
+        """Append one pair (in one call: an interrupt lands before or after it, never between
+        its two values)."""
         a, b = pair
-        self._values.append(a)
-        self._values.append(b)
+        self._values.extend((a, b))
 
     def __len__(self) -> int:
         return len(self._values) // 2

@@ -35,6 +35,7 @@ from testbed.channel import (
     frame_outcomes,
     transmissions,
 )
+from tests.interrupts import interrupt_at_line
 
 K = EventKind
 F = FrameOutcome
@@ -185,3 +186,36 @@ def test_direction_counts_of_an_empty_trace() -> None:
     counts = direction_counts(Trace(), OP, VEH)
     assert (counts.frames_sent, counts.frames_settled, counts.frames_dropped) == (0, 0, 0)
     assert math.isnan(counts.mean_frame_bytes)
+
+
+def test_an_interrupt_anywhere_in_a_flush_loses_and_repeats_no_event() -> None:
+    # Ctrl-C (or the CLI's SIGTERM) raises where the program is; a run it ends writes its
+    # trace. Whatever line of the flush it lands on, the trace then holds every event recorded,
+    # each once, in order, its columns of one length, and it records on.
+    names = ["operator", "vehicle", "buoy", "relay"]
+    truth = [  # a node first heard in the interrupted chunk ("glider"): its name is coded then
+        LinkEvent(0.01 * i, K.TX_START, src, names[(i + 1) % 4], i, i % 3, 20 + i % 40)
+        for i in range(3000)
+        for src in ["glider" if i >= 2500 and i % 7 == 0 else names[i % 4]]
+    ]
+    k = 1
+    while True:
+        trace = Trace()
+        for event in truth[:1500]:
+            trace.record(*event)
+        trace.columns()  # the first half in the columns (and a view of them held)
+        for event in truth[1500:2999]:
+            trace.record(*event)
+        with interrupt_at_line(k, Trace._flush) as seen:
+            trace.record(*truth[2999])
+            trace.columns()  # flushes, unless an interrupt landed before it did
+        assert list(trace.events) == truth, k
+        columns = trace.columns()
+        assert len(columns.t_s) == len(columns.frame_id) == len(columns.bit_errors) == 3000
+        extra = LinkEvent(99.0, K.DELIVER, "vehicle", "operator", 9999, 0, 13)
+        trace.record(*extra)
+        assert list(trace.events) == [*truth, extra] and len(trace) == 3001
+        if not seen["raised"]:  # past the flush's last line: every line has been tried
+            break
+        k += 1
+    assert k > 20  # the flush and what it calls ran that many lines, each interrupted once

@@ -13,6 +13,7 @@ import pytest
 
 from testbed.channel import EventKind, LinkEvent, Trace
 from testbed.run.recorder import SERIES_COLUMNS, FloatPairs, Recorder, SeriesRows
+from tests.interrupts import interrupt_at_line
 
 K = EventKind
 OP, VEH, ALL = "operator", "vehicle", "*"
@@ -202,3 +203,20 @@ def test_float_pairs_give_back_their_tuples() -> None:
     assert list(pairs)[1:3] == [(0.0, 0.5), (1.0, 1.5)] == pairs[1:3]
     assert pairs == [(1.0, 2.0), *((float(i), i + 0.5) for i in range(10_000))]
     assert Recorder().command_updates == []
+
+
+def test_an_interrupt_anywhere_in_appending_a_pair_keeps_the_pairs_whole() -> None:
+    # the command and odometry updates are flat float pairs: an interrupt while one is added
+    # leaves it wholly in or wholly out, never one value of it
+    k = 1
+    while True:
+        pairs = FloatPairs([(0.0, -1.0), (1.0, 0.5)])
+        with interrupt_at_line(k, FloatPairs.append) as seen:
+            pairs.append((2.0, 1.5))
+        assert list(pairs) in ([(0.0, -1.0), (1.0, 0.5)], [(0.0, -1.0), (1.0, 0.5), (2.0, 1.5)])
+        pairs.append((3.0, 2.5))
+        assert list(pairs)[-1] == (3.0, 2.5)
+        if not seen["raised"]:
+            break
+        k += 1
+    assert k > 1

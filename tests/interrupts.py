@@ -1,0 +1,47 @@
+"""An interrupt landing anywhere: for tests of code a Ctrl-C (or the CLI's SIGTERM) may cut."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from types import FrameType
+from typing import Any
+
+
+@contextmanager
+def interrupt_at_line(k: int, function: Callable[..., Any]) -> Iterator[dict[str, int]]:
+    """Raise KeyboardInterrupt at the k-th line run inside ``function`` (and what it calls)
+    within the block, and swallow it there, as a run that keeps its work on an interrupt does.
+
+    Python runs signal handlers only at calls and loops; a line is finer, so code that holds
+    together under every ``k`` holds together under a real signal. Yields ``{"lines": …,
+    "raised": 0 or 1}``: ``raised`` stays 0 once ``k`` is past the last line run inside it.
+    """
+    seen = {"lines": 0, "raised": 0}
+    depth = [0]  # calls of ``function`` under way
+
+    def inside(frame: FrameType, event: str, arg: object) -> Any:
+        if event == "line":
+            seen["lines"] += 1
+            if seen["lines"] == k:
+                seen["raised"] = 1
+                raise KeyboardInterrupt
+        elif event == "return" and frame.f_code is function.__code__:  # also when it raised
+            depth[0] -= 1
+        return inside
+
+    def calls(frame: FrameType, event: str, arg: object) -> Any:
+        if frame.f_code is function.__code__:
+            depth[0] += 1
+            return inside
+        return inside if depth[0] else None
+
+    previous = sys.gettrace()
+    sys.settrace(calls)
+    try:
+        yield seen
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sys.settrace(previous)
