@@ -59,6 +59,7 @@ from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
+from testbed.run.interrupts import interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
@@ -227,8 +228,9 @@ class LiveSession:
         start = time.perf_counter()
         try:
             env.run(until=duration_s)
-        except KeyboardInterrupt as interrupt:
-            stopped = interrupt
+        except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
+            if (stopped := interrupt_of(error)) is None:
+                raise
         finally:
             wall_s = time.perf_counter() - start
             self.vehicle.close()

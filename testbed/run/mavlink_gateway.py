@@ -49,6 +49,7 @@ from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
 from testbed.run.images import image_source_factory
+from testbed.run.interrupts import interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -350,8 +351,9 @@ def run_gateway(
         env.sync()  # start the clock now, after pybullet has loaded
         start = time.perf_counter()
         env.run(until=simpy.AnyOf(env, [process, env.timeout(duration)]))
-    except KeyboardInterrupt as interrupt:
-        stopped = interrupt
+    except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
+        if (stopped := interrupt_of(error)) is None:
+            raise
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:

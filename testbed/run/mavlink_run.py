@@ -48,6 +48,7 @@ from testbed.mavlink import EndpointOptions, VehicleEndpoint
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Link
 from testbed.operator.pilots import PilotSample
+from testbed.run.interrupts import interrupt_of
 from testbed.run.realtime import rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.runner import RunResult, compute_metrics
@@ -232,8 +233,9 @@ def run_mavlink(
         env.sync()  # start the clock now, after pybullet has loaded
         start = time.perf_counter()
         env.run(until=process)  # the duration, or the stop event, whichever comes first
-    except KeyboardInterrupt as interrupt:
-        stopped = interrupt
+    except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
+        if (stopped := interrupt_of(error)) is None:
+            raise
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:

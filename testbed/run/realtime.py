@@ -64,6 +64,7 @@ from testbed.channel import Delivery, EventKind, Trace
 from testbed.channel.trace import BROADCAST
 from testbed.hil import LinkEndpoint, endpoint_report, latency_summary_ms
 from testbed.protocol import Frame, encode_frame
+from testbed.run.interrupts import interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder
@@ -365,8 +366,9 @@ def run_hil(
         if on_start is not None:
             on_start()
         env.run(until=duration)
-    except KeyboardInterrupt as interrupt:  # Ctrl-C or SIGTERM: keep what ran, marked partial
-        stopped = interrupt
+    except BaseException as error:  # Ctrl-C or SIGTERM: keep what ran, marked partial
+        if (stopped := interrupt_of(error)) is None:
+            raise
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if vehicle_node is not None:

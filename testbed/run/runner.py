@@ -28,6 +28,7 @@ from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
+from testbed.run.interrupts import interrupt_of
 from testbed.run.metrics import (
     age_of_information,
     distribution,
@@ -196,8 +197,9 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     stopped: KeyboardInterrupt | None = None
     try:
         env.run(until=scenario.duration_s)
-    except KeyboardInterrupt as interrupt:  # keep what ran: the caller writes it, marked
-        stopped = interrupt
+    except BaseException as error:  # an interrupt: keep what ran (the caller writes it, marked)
+        if (stopped := interrupt_of(error)) is None:
+            raise
     finally:
         vehicle.close()
     wall_s = time.perf_counter() - start

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from testbed.run.interrupts import interrupt_of
 from testbed.run.outputs import PlotWriter, write_json_atomic, write_run
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import Scenario
@@ -225,8 +226,10 @@ def run_trials(
                 files += write_run(result, trial_dir(out, k))
                 break
             files += write_run(result, trial_dir(out, k), plots=plots)
-        except KeyboardInterrupt as interrupt:  # between runs or while writing one
-            stopped, interrupted = interrupt, k
+        except BaseException as error:  # an interrupt between runs or while writing one
+            if (stopped := interrupt_of(error)) is None:
+                raise
+            interrupted = k
             break
         finished.append(result)
         tracks.append(_track(k, result))

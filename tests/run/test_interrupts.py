@@ -1,0 +1,59 @@
+"""An interrupt that a compiled library reported as its own error still ends a run the way
+Ctrl-C does: what ran is kept, marked partial.
+
+numba's kernels call back into Python (``numba.core.serialize._numba_unpickle``) for their
+constants, e.g. on every ``np.linalg.inv`` of the navigation filter; a KeyboardInterrupt raised
+there (as a real signal's handler can be, at any Python line) comes out of the kernel as
+``SystemError``, caused by it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from numba.core import serialize
+
+from testbed.cli.options import Terminated
+from testbed.run.interrupts import interrupt_of
+from testbed.run.outputs import write_run
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
+from tests.interrupts import interrupt_at_line
+from tests.processes import check_set
+
+
+def test_the_interrupt_is_found_as_the_cause_or_the_context_of_another_error() -> None:
+    interrupt = Terminated()
+    try:
+        try:
+            raise interrupt
+        except KeyboardInterrupt as caught:
+            raise SystemError("returned a result with an exception set") from caught
+    except SystemError as wrapped:
+        assert interrupt_of(wrapped) is interrupt  # the SIGTERM one: exit code 143 kept
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise OSError("while cleaning up")  # noqa: B904 (the implicit context is the point)
+    except OSError as during:
+        assert isinstance(interrupt_of(during), KeyboardInterrupt)
+    assert interrupt_of(ValueError("no interrupt")) is None
+    looped = ValueError("a cycle")
+    looped.__context__ = RuntimeError()
+    looped.__context__.__context__ = looped
+    assert interrupt_of(looped) is None
+
+
+def test_a_run_interrupted_inside_a_kernels_callback_keeps_what_ran(tmp_path: Path) -> None:
+    scenario = load_scenario("s100-supervised-v1", ["duration_s=6"])
+    with interrupt_at_line(1, serialize._numba_unpickle) as seen:
+        result = run_scenario(scenario, seed=0)
+    assert seen["raised"] == 1  # the kernel did call back, and was interrupted there
+    assert isinstance(result.stopped, KeyboardInterrupt)
+    assert 0.0 <= result.metrics["sim_s"] < 6.0
+    write_run(result, tmp_path / "run")  # what `testbed run` writes
+    metrics = check_set(tmp_path / "run")
+    assert metrics["complete"] is False
+    assert metrics["sim_s"] == pytest.approx(result.metrics["sim_s"])
