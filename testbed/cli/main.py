@@ -56,15 +56,46 @@ def build_parser() -> argparse.ArgumentParser:
 _SIGNALLED: list[int] = []
 """The interrupt signals this process received (a list, so the handlers can append)."""
 
+_PUT_OFF_IN = ("numba.", "llvmlite.")
+"""Modules whose Python code an interrupt must not be raised in (see :func:`_put_off`)."""
+
+_PUT_OFF_S = 0.001
+"""How long an interrupt is put off at a time [s]."""
+
+
+def _put_off(signum: int, frame: FrameType | None) -> bool:
+    """Send ``signum`` again, to be handled after the numba code running now, if any is.
+
+    Python runs a handler wherever the program is, also in numba's own Python code: its
+    compiler, and the callbacks its compiled kernels make (``_numba_unpickle``, on every
+    ``np.linalg.inv`` of the navigation filter's). An exception raised in a kernel's first
+    callback crashes the process (a segmentation fault, seen), in a later one it comes out as
+    ``SystemError``. So while any frame of the stack is numba's, the signal is sent again a
+    moment later (from a timer thread: sent from the handler, it would be handled inside it),
+    until the stack is the program's own.
+    """
+    while frame is not None:
+        if frame.f_globals.get("__name__", "").startswith(_PUT_OFF_IN):
+            again = threading.Timer(
+                _PUT_OFF_S, signal.pthread_kill, (threading.get_ident(), signum)
+            )
+            again.daemon = True
+            again.start()
+            return True
+        frame = frame.f_back
+    return False
+
 
 def _terminate(signum: int, frame: FrameType | None) -> None:
-    del frame
+    if _put_off(signum, frame):
+        return
     _SIGNALLED.append(signum)
     raise Terminated
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    del frame
+    if _put_off(signum, frame):
+        return
     _SIGNALLED.append(signum)
     raise KeyboardInterrupt
 

@@ -208,3 +208,82 @@ def test_an_error_with_no_signal_is_not_taken_for_an_interrupt() -> None:
         timeout=WAIT_S,
     )
     assert done.returncode == 1 and "RuntimeError: lost in a library" in done.stderr
+
+
+PUT_OFF = """
+import importlib, pickle, signal, sys, time
+from numba.core import serialize
+cli = importlib.import_module("testbed.cli.main")  # the module (the package exports main())
+
+frames = []
+def capture(frame, event, arg):
+    if frame.f_code is serialize._numba_unpickle.__code__:
+        frames.append(frame)
+sys.settrace(capture)
+serialize._numba_unpickle(1, pickle.dumps(1), b"put-off")  # a kernel's callback into Python
+sys.settrace(None)
+signal.signal(signal.SIGTERM, cli._terminate)
+cli._terminate(signal.SIGTERM, frames[0])  # the handler, run inside numba's code: put off
+print("put off", cli._SIGNALLED, flush=True)
+try:
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:  # the program's own code, where it is raised
+        pass
+except KeyboardInterrupt as interrupt:
+    print(type(interrupt).__name__, cli._SIGNALLED == [signal.SIGTERM])
+try:
+    cli._terminate(signal.SIGTERM, sys._getframe())  # in the program's own code: at once
+except KeyboardInterrupt as interrupt:
+    print("at once", type(interrupt).__name__)
+"""
+
+
+def test_an_interrupt_inside_numbas_own_code_is_raised_after_it() -> None:
+    # An exception raised in a compiled kernel's first callback into Python crashed the process
+    # (segmentation fault) and in a later one came out as SystemError: the handlers put the
+    # signal off while numba's code runs and raise it in the program's own code.
+    done = subprocess.run(
+        [sys.executable, "-c", PUT_OFF], capture_output=True, text=True, timeout=WAIT_S
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["put off []", "Terminated True", "at once Terminated"]
+
+
+IN_A_CALLBACK = """
+import importlib, signal, sys
+from numba.core import serialize
+cli = importlib.import_module("testbed.cli.main")
+callback = serialize._numba_unpickle.__code__
+arrived = []
+
+def calls(frame, event, arg):
+    if frame.f_code is callback and not arrived:  # the first callback of a kernel, in the run
+        return inside
+    return None
+
+def inside(frame, event, arg):
+    if event == "line" and not arrived:  # SIGTERM arrives here: Python calls its handler so
+        arrived.append(1)
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, frame)
+    return None
+
+sys.settrace(calls)
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_result(
+    tmp_path: Path,
+) -> None:
+    # Without putting it off, this ended in a segmentation fault (the navigation filter's
+    # np.linalg.inv calls back into Python; the first such call cannot take an exception).
+    out = tmp_path / "run"
+    args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out", str(out)]
+    done = subprocess.run(
+        [sys.executable, "-c", IN_A_CALLBACK, *args], capture_output=True, text=True, timeout=WAIT_S
+    )
+    assert done.returncode == 143, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed: interrupted at t = "), done.stderr
+    metrics = check_set(out)
+    assert metrics["complete"] is False and 0.0 <= metrics["sim_s"] < 20.0
