@@ -13,10 +13,12 @@ own module (:mod:`~testbed.cli.run`, :mod:`~testbed.cli.link`, :mod:`~testbed.cl
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import signal
 import sys
 import threading
+import time
 from collections.abc import Sequence
 from types import FrameType
 
@@ -71,19 +73,21 @@ def _put_off(signum: int, frame: FrameType | None) -> bool:
     ``np.linalg.inv`` of the navigation filter's). An exception raised in a kernel's first
     callback crashes the process (a segmentation fault, seen), in a later one it comes out as
     ``SystemError``. So while any frame of the stack is numba's, the signal is sent again a
-    moment later (from a timer thread: sent from the handler, it would be handled inside it),
-    until the stack is the program's own.
+    moment later, from a thread of its own (sent from the handler, it would be handled inside
+    it; a ``threading.Timer`` would wait here for its thread to start), until the stack is the
+    program's own.
     """
     while frame is not None:
         if frame.f_globals.get("__name__", "").startswith(_PUT_OFF_IN):
-            again = threading.Timer(
-                _PUT_OFF_S, signal.pthread_kill, (threading.get_ident(), signum)
-            )
-            again.daemon = True
-            again.start()
+            _thread.start_new_thread(_send_again, (threading.get_ident(), signum))
             return True
         frame = frame.f_back
     return False
+
+
+def _send_again(thread_id: int, signum: int) -> None:
+    time.sleep(_PUT_OFF_S)
+    signal.pthread_kill(thread_id, signum)
 
 
 def _terminate(signum: int, frame: FrameType | None) -> None:

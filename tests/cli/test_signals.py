@@ -213,20 +213,26 @@ def test_an_error_with_no_signal_is_not_taken_for_an_interrupt() -> None:
 PUT_OFF = """
 import importlib, pickle, signal, sys, time
 from numba.core import serialize
-cli = importlib.import_module("testbed.cli.main")  # the module (the package exports main())
+cli = importlib.import_module("testbed.cli.main")
+signal.signal(signal.SIGTERM, cli._terminate)
 
-frames = []
-def capture(frame, event, arg):
-    if frame.f_code is serialize._numba_unpickle.__code__:
-        frames.append(frame)
-sys.settrace(capture)
+def calls(frame, event, arg):
+    return inside if frame.f_code is serialize._numba_unpickle.__code__ else None
+
+arrived = []
+
+def inside(frame, event, arg):  # SIGTERM arrives at the callback's first line: its handler
+    if event == "line" and not arrived:
+        arrived.append(1)
+        cli._terminate(signal.SIGTERM, frame)
+        print("put off", cli._SIGNALLED, flush=True)
+    return None
+
+sys.settrace(calls)
 serialize._numba_unpickle(1, pickle.dumps(1), b"put-off")  # a kernel's callback into Python
 sys.settrace(None)
-signal.signal(signal.SIGTERM, cli._terminate)
-cli._terminate(signal.SIGTERM, frames[0])  # the handler, run inside numba's code: put off
-print("put off", cli._SIGNALLED, flush=True)
 try:
-    deadline = time.monotonic() + 10.0
+    deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline:  # the program's own code, where it is raised
         pass
 except KeyboardInterrupt as interrupt:
