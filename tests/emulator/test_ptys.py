@@ -113,19 +113,28 @@ def test_bit_errors_reach_the_port_and_the_decoder_rejects_them() -> None:
 
 
 def test_a_burst_larger_than_the_fifo_is_split_and_still_arrives(lateness: Any) -> None:
+    """Each of three sends is split and arrives no sooner than the model says; the quickest is
+    within the host's measured allowance of it. (The quickest, not each: a 2-packet frame
+    crosses about ten thread wakes and two kernel PTY hand-offs, and beside two busy loops one
+    of them was once held up longer than the wake probe, which samples every 1 ms, had seen:
+    120 ms against a 59-ms model and a 53-ms allowance. A delay the emulator itself added
+    would be in every send.)"""
     config = load_link_config("s100", [*FAST, "tx_buffer_bytes=30"])
     frame = encode_frame(bytes(range(40)))  # 46 B → bursts of 30 and 16 B
+    sends = 3
     with ModemEmulator(config, seed=0, idle_s=IDLE_S) as emulator:
         path_a, path_b = emulator.paths
         with serial.Serial(path_a) as a, serial.Serial(path_b, timeout=TIMEOUT_S) as b:
-            got, latency_s = send_and_time(a, b, frame)
+            crossings = [send_and_time(a, b, frame) for _ in range(sends)]
         allowance_s = lateness.allowance_s(emulator, packets=2)
-        assert got == frame
-        assert emulator.counters[0].bursts == 2
-        assert emulator.modems[0].counters.tx_transmissions == 2
+        assert [got for got, _ in crossings] == [frame] * sends
+        assert emulator.counters[0].bursts == 2 * sends
+        assert emulator.modems[0].counters.tx_transmissions == 2 * sends
     # The second part waits for the first: two intrinsic delays, both airtimes, one queue gap.
     model_s = 2 * config.intrinsic_delay_s + config.airtime_s(len(frame)) + config.queue_gap_s
-    assert model_s <= latency_s <= model_s + allowance_s
+    latencies_s = [latency_s for _, latency_s in crossings]
+    assert min(latencies_s) >= model_s
+    assert min(latencies_s) <= model_s + allowance_s, (latencies_s, model_s, allowance_s)
 
 
 def test_close_joins_threads_and_is_final(fast: LinkConfig) -> None:

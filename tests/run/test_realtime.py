@@ -40,7 +40,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -198,30 +198,52 @@ def test_run_hil_rejects_bad_arguments_and_closes_what_it_was_given() -> None:
 # -- the real-time window -----------------------------------------------------------------------
 
 
-class UnpluggedPort:
-    """A pyserial port that fails (as an unplugged USB modem does) inside a monotonic window."""
+class Unplug:
+    """When the operator's modem is unplugged, on the monotonic clock [s].
 
-    def __init__(self, url: str, window: Sequence[float]) -> None:
-        self._window = window
+    It is out from ``start_s`` until ``end_s`` *and* until the transport has noticed (one of
+    its calls failed): a loaded host can hold the transport's threads off the port for longer
+    than the planned window, and an unplug nobody saw would test nothing. ``end_s`` then moves
+    to that first failed call, so the window recorded is the one the port was really out."""
+
+    def __init__(self) -> None:
+        self.start_s = math.inf
+        self.end_s = math.inf
+        self.noticed = False
+
+    def place(self, start_s: float, end_s: float) -> None:
+        self.start_s, self.end_s = start_s, end_s
+
+    def check(self) -> None:
+        """Raise as an unplugged USB modem does, if it is out now."""
+        now = time.monotonic()
+        if now < self.start_s or (now >= self.end_s and self.noticed):
+            return
+        if not self.noticed:
+            self.noticed = True
+            self.end_s = max(self.end_s, now)
+        raise serial.SerialException("device disconnected")
+
+
+class UnpluggedPort:
+    """A pyserial port that fails (as an unplugged USB modem does) while ``unplug`` is out."""
+
+    def __init__(self, url: str, unplug: Unplug) -> None:
+        self._unplug = unplug
         self._port = serial.Serial(url, timeout=0.05, write_timeout=2.0)
 
-    @staticmethod
-    def check(window: Sequence[float]) -> None:
-        if window[0] <= time.monotonic() < window[1]:
-            raise serial.SerialException("device disconnected")
-
     def read(self, size: int = 1) -> bytes:
-        self.check(self._window)
+        self._unplug.check()
         return bytes(self._port.read(size))
 
     def write(self, data: bytes) -> int | None:
-        self.check(self._window)
+        self._unplug.check()
         written: int | None = self._port.write(data)
         return written
 
     @property
     def in_waiting(self) -> int:
-        self.check(self._window)
+        self._unplug.check()
         return int(self._port.in_waiting)
 
     def close(self) -> None:
@@ -233,20 +255,20 @@ NOISE = b"\x00\xffline noise\x00"
 
 
 def _unplugged_factory(
-    url: str, window: Sequence[float], attempts: list[tuple[float, bool]]
+    url: str, unplug: Unplug, attempts: list[tuple[float, bool]]
 ) -> Callable[[], UnpluggedPort]:
-    """A port factory for the transport that fails inside ``window`` (read at each call: it may
-    be set later); each call is appended to ``attempts`` as (monotonic instant, opened)."""
+    """A port factory for the transport that fails while ``unplug`` is out (placed later);
+    each call is appended to ``attempts`` as (monotonic instant, opened)."""
     opened: list[UnpluggedPort] = []
 
     def factory() -> UnpluggedPort:
         try:
-            UnpluggedPort.check(window)
+            unplug.check()
         except serial.SerialException:
             attempts.append((time.monotonic(), False))
             raise
         attempts.append((time.monotonic(), True))
-        port = UnpluggedPort(url, window)
+        port = UnpluggedPort(url, unplug)
         if opened:  # plugged back in: line noise goes out before any frame
             port.write(NOISE)
         opened.append(port)
@@ -443,7 +465,8 @@ class Window:
     port_opens: list[tuple[float, bool]]
     """Each call of the operator port's factory: (monotonic instant, opened)."""
     unplug_monotonic: tuple[float, float]
-    """The unplug window on the monotonic clock [s]."""
+    """The unplug window on the monotonic clock, as the port was really out (:class:`Unplug`)
+    [s]."""
     clock_monotonic: tuple[float, float]
     """Earliest and latest monotonic instant at which the single run's clock started [s]."""
 
@@ -553,11 +576,11 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
             child.stderr.readline()
         # the unplug is placed on the run's clock: armed when the run starts it (a loaded host
         # may take seconds to build the nodes), never before
-        unplug = [math.inf, math.inf]
+        unplug = Unplug()
 
         def arm_unplug() -> None:
             now = time.monotonic()
-            unplug[:] = [now + UNPLUG_S[0], now + UNPLUG_S[1]]
+            unplug.place(now + UNPLUG_S[0], now + UNPLUG_S[1])
 
         attempts: list[tuple[float, bool]] = []
         operator = open_endpoint(
@@ -595,8 +618,8 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         result,
         single_dir,
         (  # (earliest, latest) of the start, then of the end
-            (unplug[0] - clock_started[1], unplug[0] - clock_started[0]),
-            (unplug[1] - clock_started[1], unplug[1] - clock_started[0]),
+            (unplug.start_s - clock_started[1], unplug.start_s - clock_started[0]),
+            (unplug.end_s - clock_started[1], unplug.end_s - clock_started[0]),
         ),
         {"vehicle": root / "vehicle", "operator": root / "operator"},
         root / "cli",
@@ -604,7 +627,7 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
         reports,
         probe,
         attempts,
-        (unplug[0], unplug[1]),
+        (unplug.start_s, unplug.end_s),
         clock_started,
     )
 
