@@ -64,7 +64,7 @@ from testbed.common.geometry import (
     rotation_matrix,
 )
 from testbed.config import check_range
-from testbed.vehicle.filter_kernels import innovation, joseph_update, propagate
+from testbed.vehicle.filter_kernels import GATED, SINGULAR, gated_update, propagate
 from testbed.vehicle.nav_sensors import Measurement
 
 __all__ = [
@@ -82,6 +82,8 @@ _H_DEPTH = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
 _DIMS = {"position_ned": 3, "velocity_body": 3, "depth": 1}
 _OBSERVED = {"position_ned": slice(0, 3), "velocity_body": slice(3, 6), "depth": slice(2, 3)}
 _COUNTERS = ("accepted", "rejected", "invalid", "stale", "rollbacks", "reacquired")
+_NO_INPUT = np.zeros(0)
+"""The prediction's input when there is none (constant velocity)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -277,18 +279,18 @@ class KalmanNavigator:
         self, quaternion_wxyz: Quaternion = LEVEL, rates_rad_s: Vec3 = (0.0, 0.0, 0.0)
     ) -> NavigationEstimate:
         """The newest estimate, with the given IMU attitude (body → NED) and rates [rad/s]."""
-        x = self._x
-        sig = np.sqrt(np.maximum(np.diag(self._p), 0.0))
-        v_ned = (float(x[3]), float(x[4]), float(x[5]))
+        n, e, d, vn, ve, vd = self._x.tolist()
+        s0, s1, s2, s3, s4, s5 = (math.sqrt(max(v, 0.0)) for v in self._p.diagonal().tolist())
+        v_ned = (vn, ve, vd)
         return NavigationEstimate(
             time_s=self._t,
-            position_ned_m=(float(x[0]), float(x[1]), float(x[2])),
+            position_ned_m=(n, e, d),
             velocity_ned_m_s=v_ned,
             velocity_body_m_s=quat_rotate_inverse(quaternion_wxyz, v_ned),
             quaternion_wxyz=quaternion_wxyz,
             rates_rad_s=rates_rad_s,
-            position_sigma_m=(float(sig[0]), float(sig[1]), float(sig[2])),
-            velocity_sigma_m_s=(float(sig[3]), float(sig[4]), float(sig[5])),
+            position_sigma_m=(s0, s1, s2),
+            velocity_sigma_m_s=(s3, s4, s5),
         )
 
     # --------------------------------------------------------------------- predict
@@ -322,10 +324,7 @@ class KalmanNavigator:
                 self._cache.clear()
             matrices = self._cache[key] = _transition(dt, self.config.accel_noise_m2_s3)
         f, g, qm = matrices
-        x, p = propagate(x, p, f, qm)
-        if accel is not None:
-            x = x + g @ accel
-        return x, p
+        return propagate(x, p, f, g, qm, _NO_INPUT if accel is None else accel)
 
     def _trim(self) -> None:
         horizon = self._t - self.config.history_s
@@ -375,9 +374,8 @@ class KalmanNavigator:
             return False
         if not math.isfinite(m.time_s):
             return False
-        return all(math.isfinite(v) for v in m.value) and all(
-            math.isfinite(s) and s > 0.0 for s in m.sigma
-        )
+        isfinite = math.isfinite
+        return all(map(isfinite, m.value)) and all(map(isfinite, m.sigma)) and min(m.sigma) > 0.0
 
     def _apply(
         self,
@@ -401,27 +399,24 @@ class KalmanNavigator:
             h = _H_POSITION if m.kind == "position_ned" else _H_DEPTH
         z = np.array(m.value, dtype=np.float64)
         sigma = np.array(m.sigma, dtype=np.float64)
-        try:
-            y, pht, s_inv, nis = innovation(x, p, h, z, sigma)
-            if reset:
-                p = self._reset_spread(p, m.kind, y)
-                y, pht, s_inv, nis = innovation(x, p, h, z, sigma)
-        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+        if reset:  # the innovation does not depend on P
+            p = self._reset_spread(p, m.kind, z - h @ x)
+        limit = self._gates[len(z)] if gate else math.inf
+        x, p, _, status = gated_update(x, p, h, z, sigma, limit)
+        if status == SINGULAR:
             self._counts["invalid"] += 1
             return False
-        if gate:
-            if nis <= self._gates[len(z)]:
-                self._streaks[m.source] = 0
-            elif self._reacquire(m):
+        if status == GATED:
+            if self._reacquire(m):
                 self._counts["reacquired"] += 1
                 self._counts["accepted"] += 1
                 return self._apply(step, m, quaternion, gate=False, reset=True)
-            else:
-                self._counts["rejected"] += 1
-                return False
-        step.x, step.p = joseph_update(x, p, h, pht, s_inv, y, sigma)
+            self._counts["rejected"] += 1
+            return False
+        step.x, step.p = x, p
         step.updates.append((m, quaternion, reset))
         if gate:
+            self._streaks[m.source] = 0
             self._counts["accepted"] += 1
         return True
 
