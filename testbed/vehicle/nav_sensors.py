@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 import numpy as np
 
 from testbed.config import check_range
-from testbed.vehicle.sensors import SampleClock
+from testbed.vehicle.sensors import NormalDraws, SampleClock
 
 if TYPE_CHECKING:
     from testbed.vehicle.systems import PlantTruth
@@ -125,15 +125,10 @@ def _check_rate(rate_hz: float) -> None:
     check_range(rate_hz, "rate_hz", *NAV_RATE_RANGE_HZ, "Hz")
 
 
-def _noisy(values: tuple[float, ...], sigma: float, rng: np.random.Generator) -> tuple[float, ...]:
-    draws = rng.standard_normal(len(values))
-    return tuple(float(v) + sigma * float(d) for v, d in zip(values, draws, strict=True))
-
-
 class _DelayedPositionSource:
     """Shared body of the position sources: sample on the clock, deliver through a delay."""
 
-    __slots__ = ("_clock", "_line", "_rng", "_sigma", "name")
+    __slots__ = ("_clock", "_line", "_normals", "_sigma", "name")
 
     def __init__(
         self, name: str, rate_hz: float, noise_m: float, delay_s: float, rng: np.random.Generator
@@ -141,7 +136,7 @@ class _DelayedPositionSource:
         self.name = name
         self._clock = SampleClock(rate_hz)
         self._line = _DelayLine(delay_s)
-        self._rng = rng
+        self._normals = NormalDraws(rng)
         self._sigma = noise_m
 
     @property
@@ -162,8 +157,11 @@ class _DelayedPositionSource:
         """
         if self._clock.due(time_s):
             self._clock.advance(time_s)
-            value = _noisy(tuple(truth.position_ned_m), self._sigma, self._rng)
-            sigma = max(self._sigma, 1e-9)
+            n0, n1, n2 = self._normals.take_many(3)
+            x, y, z = truth.position_ned_m
+            s = self._sigma
+            value = (float(x) + s * n0, float(y) + s * n1, float(z) + s * n2)
+            sigma = max(s, 1e-9)
             self._line.push(
                 Measurement(self.name, "position_ned", time_s, value, (sigma, sigma, sigma))
             )
@@ -355,14 +353,14 @@ class Accelerometer:
     (:attr:`~testbed.vehicle.systems.PlantTruth.acceleration_ned_m_s2`) plus bias and white
     noise, as an ``acceleration_ned`` measurement (the filter's prediction input)."""
 
-    __slots__ = ("_clock", "_rng", "config", "name")
+    __slots__ = ("_clock", "_normals", "config", "name")
 
     def __init__(
         self, config: AccelerometerConfig, rng: np.random.Generator, name: str = "accel"
     ) -> None:
         self.config = config
         self.name = name
-        self._rng = rng
+        self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
 
     def due(self, time_s: float) -> bool:
@@ -373,9 +371,9 @@ class Accelerometer:
         """Measure the true NED acceleration now [m/s²]."""
         self._clock.advance(time_s)
         cfg = self.config
-        draws = self._rng.standard_normal(3)
+        n0, n1, n2 = self._normals.take_many(3)
         s = cfg.noise_m_s2
-        a, b = truth.acceleration_ned_m_s2, cfg.bias_m_s2
-        value = tuple(a[i] + b[i] + s * float(draws[i]) for i in range(3))
+        (a0, a1, a2), (b0, b1, b2) = truth.acceleration_ned_m_s2, cfg.bias_m_s2
+        value = (a0 + b0 + s * n0, a1 + b1 + s * n1, a2 + b2 + s * n2)
         sigma = max(s, 1e-9)
         return Measurement(self.name, "acceleration_ned", time_s, value, (sigma, sigma, sigma))

@@ -37,6 +37,7 @@ __all__ = [
     "Imu",
     "ImuConfig",
     "ImuReading",
+    "NormalDraws",
     "PositionFix",
     "PositionFixConfig",
     "PositionReading",
@@ -82,8 +83,10 @@ def baro_depth_m(
     return (pressure_pa - surface_pressure_pa) / (ARDUSUB_PA_PER_M * spec_grav)
 
 
-class _Normals:
-    """Standard normal draws from ``rng``, fetched in blocks (a per-call draw costs ~1 µs)."""
+class NormalDraws:
+    """Standard normal draws from ``rng``, fetched in blocks (a per-call draw costs ~1 µs): the
+    same numbers, in the same order, as one ``rng.standard_normal`` call per draw, for a
+    generator nothing else draws from."""
 
     __slots__ = ("_buffer", "_index", "_rng", "block")
 
@@ -169,7 +172,7 @@ class Imu:
 
     def __init__(self, config: ImuConfig, rng: np.random.Generator) -> None:
         self.config = config
-        self._normals = _Normals(rng)
+        self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
         tau = config.correlation_time_s
         self._decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
@@ -260,7 +263,7 @@ class DepthSensor:
 
     def __init__(self, config: DepthSensorConfig, rng: np.random.Generator) -> None:
         self.config = config
-        self._normals = _Normals(rng)
+        self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
 
     def due(self, time_s: float) -> bool:
@@ -309,7 +312,7 @@ class PositionFix:
 
     def __init__(self, config: PositionFixConfig, rng: np.random.Generator) -> None:
         self.config = config
-        self._normals = _Normals(rng)
+        self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
 
     def due(self, time_s: float) -> bool:
