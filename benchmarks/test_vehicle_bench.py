@@ -47,6 +47,8 @@ SIM_S = 20.0
 DT_S = 1.0 / 240.0
 SEED = 20250101
 F = TypeVar("F", bound=Callable[..., Any])
+VEHICLE_SYSTEMS = len(systems.build_schedule().names())
+"""How many systems the vehicle's own schedule runs (the least frames run as many)."""
 
 
 def bare_pybullet(sim_s: float) -> None:
@@ -246,22 +248,16 @@ def _frames_against_floor(frames: Callable[[], None]) -> tuple[float, float]:
     return least_s / (100 * SIM_S) * 1e6, least_s / floor_s
 
 
-def test_least_python_frame_against_floor() -> None:
-    """The cheapest frame a schedule of Python systems can run, against the floor in one run.
-
-    As many systems as the vehicle's schedule (``systems.build_schedule``), each only reading a
-    resource, getting one 3-float component and setting a new one, at 100 Hz. Its cost over the
-    floor's is what Python systems take before any law runs: the vehicle-alone aim (within 2×
-    of the floor, while the Fossen plant alone is 1.5–1.7× it) leaves 0.3–0.5× for them.
-    """
-    count = len(systems.build_schedule().names())
-    world = World()
-    world.insert_resource(_Gain())
-    world.spawn(_Reading(0.0, 0.0, 0.0))
+def _systems_against_floor(
+    world: World, system_of: Callable[[int], Callable[[World], None]]
+) -> tuple[int, float, float, int]:
+    """A schedule of as many systems as the vehicle's (``system_of(index)`` each) run on
+    ``world`` at 100 Hz against the floor: the count, µs a frame, the ratio to the floor and
+    the frames run in all."""
+    count = VEHICLE_SYSTEMS
     schedule = Schedule()
     for index in range(count):
-        schedule.add(Phase.UPDATE, _least_system(index))
-
+        schedule.add(Phase.UPDATE, system_of(index))
     rounds: list[None] = []
 
     def frames() -> None:
@@ -270,11 +266,25 @@ def test_least_python_frame_against_floor() -> None:
         rounds.append(None)
 
     frame_us, ratio = _frames_against_floor(frames)
+    return count, frame_us, ratio, len(rounds) * round(100 * SIM_S)
+
+
+def test_least_python_frame_against_floor() -> None:
+    """The cheapest frame a schedule of Python systems can run, against the floor in one run.
+
+    As many systems as the vehicle's schedule (``systems.build_schedule``), each only reading a
+    resource, getting one 3-float component and setting a new one, at 100 Hz. Its cost over the
+    floor's is what Python systems take before any law runs: the vehicle-alone aim (within 2×
+    of the floor, while the Fossen plant alone is 1.5–1.7× it) leaves 0.3–0.5× for them.
+    """
+    world = World()
+    world.insert_resource(_Gain())
+    world.spawn(_Reading(0.0, 0.0, 0.0))
+    count, frame_us, ratio, frames_run = _systems_against_floor(world, _least_system)
     print(
         f"\n{count} least Python systems at 100 Hz: {frame_us:.1f} µs a frame, "
         f"{ratio:.2f}x the bare floor's time"
     )
-    frames_run = len(rounds) * 100 * SIM_S
     assert world.get(Entity(1), _Reading) == _Reading(float(count * frames_run), 0.0, 0.0)
 
 
@@ -399,30 +409,17 @@ def test_kernel_systems_frame_against_floor() -> None:
     their laws and components are compiled: whether such a frame fits 300× and "within 2× of
     the floor" beside the plant's own cost.
     """
-    count = len(systems.build_schedule().names())
     world = World()
-    world.insert_resource(_Store(np.zeros(count + 1), np.ones(count)))
-    schedule = Schedule()
-    for index in range(count):
-        schedule.add(Phase.UPDATE, _kernel_system(index))
+    world.insert_resource(_Store(np.zeros(VEHICLE_SYSTEMS + 1), np.ones(VEHICLE_SYSTEMS)))
     _least_kernel(np.zeros(2), np.zeros(1), 0)
-    rounds: list[None] = []
-
-    def frames() -> None:
-        for _ in range(round(100 * SIM_S)):
-            schedule.run(world)
-        rounds.append(None)
-
-    frame_us, ratio = _frames_against_floor(frames)
+    count, frame_us, ratio, _ = _systems_against_floor(world, _kernel_system)
     print(
         f"\n{count} compiled-kernel systems at 100 Hz: {frame_us:.2f} µs a frame, "
         f"{ratio:.2f}x the bare floor's time"
     )
-    # each frame moves the running sum one slot along and adds every gain: the last slot holds
-    # the previous frame's first slot plus count, so after F frames the first slot is 0 and the
-    # last is count (each frame starts from slot 0, which nothing writes)
+    # each frame sets slot i + 1 to slot i plus its gain (1), in order from slot 0, which
+    # nothing writes: after any frame slot i holds i
     assert world.resource(_Store).values.tolist() == [float(i) for i in range(count + 1)]
-    assert len(rounds) == 5
 
 
 ECS_SCENARIOS = ["ecs-yaw-4h-v1", "ecs-yaw-3h-v1", "ecs-yaw-2h-v1", "ecs-rollpitch-6dof-v1"]

@@ -44,21 +44,6 @@ def _product(a: FloatArray, b: FloatArray) -> FloatArray:  # pragma: no cover - 
 
 
 @numba.njit(cache=True)
-def _product_t(a: FloatArray, b: FloatArray) -> FloatArray:  # pragma: no cover - compiled
-    """``a @ b.T`` for (n, k) ``a`` and (m, k) ``b``."""
-    n, k = a.shape
-    m = b.shape[0]
-    out = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            total = 0.0
-            for inner in range(k):
-                total += a[i, inner] * b[j, inner]
-            out[i, j] = total
-    return out
-
-
-@numba.njit(cache=True)
 def _inverse(s: FloatArray) -> tuple[FloatArray, bool]:  # pragma: no cover - compiled
     """``s⁻¹`` of a small square matrix by Gauss-Jordan elimination with partial pivoting,
     and whether it exists (a zero or non-finite pivot: ``False``, the matrix is garbage)."""
@@ -106,7 +91,7 @@ def propagate(
         for j in range(accel.shape[0]):
             total += g[i, j] * accel[j]
         x_next[i] = total
-    p_next = _product_t(_product(f, p), f)
+    p_next = _product(_product(f, p), f.T)
     for i in range(n):
         for j in range(n):
             p_next[i, j] += qm[i, j]
@@ -133,7 +118,7 @@ def gated_update(
         for j in range(n):
             total -= h[i, j] * x[j]
         y[i] = total
-    pht = _product_t(p, h)  # P Hᵀ, (n, m)
+    pht = _product(p, h.T)  # P Hᵀ, (n, m)
     s = _product(h, pht)
     for i in range(m):
         s[i, i] += sigma[i] * sigma[i]
@@ -158,7 +143,7 @@ def gated_update(
     a = -_product(k, h)  # I − K H
     for i in range(n):
         a[i, i] += 1.0
-    p_post = _product_t(_product(a, p), a)
+    p_post = _product(_product(a, p), a.T)
     for i in range(n):
         for j in range(n):
             total = 0.0
