@@ -69,13 +69,13 @@ def _put_off(signum: int, frame: FrameType | None) -> bool:
     """Send ``signum`` again, to be handled after the numba code running now, if any is.
 
     Python runs a handler wherever the program is, also in numba's own Python code: its
-    compiler, and the callbacks its compiled kernels make (``_numba_unpickle``, on every
-    ``np.linalg.inv`` of the navigation filter's). An exception raised in a kernel's first
-    callback crashes the process (a segmentation fault, seen), in a later one it comes out as
-    ``SystemError``. So while any frame of the stack is numba's, the signal is sent again a
-    moment later, from a thread of its own (sent from the handler, it would be handled inside
-    it; a ``threading.Timer`` would wait here for its thread to start), until the stack is the
-    program's own.
+    compiler, and the callbacks its compiled kernels make (``_numba_unpickle``, each time a
+    kernel hands a new array back: the navigation filter's, every frame). An exception raised
+    in a kernel's first callback crashes the process (a segmentation fault, seen), in a later
+    one it comes out as ``SystemError``. So while any frame of the stack is numba's, the signal
+    is sent again a moment later, from a thread of its own (sent from the handler, it would be
+    handled inside it; a ``threading.Timer`` would wait here for its thread to start), until
+    the stack is the program's own.
     """
     while frame is not None:
         if frame.f_globals.get("__name__", "").startswith(_PUT_OFF_IN):

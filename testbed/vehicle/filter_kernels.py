@@ -3,9 +3,10 @@
 The equations are :mod:`testbed.vehicle.estimation`'s (its module docstring); this module only
 does them on small float64 arrays without numpy's per-call overhead, which at 100 Hz motion
 capture (with a one-step replay of every late fix) was most of a frame. The products are plain
-loops over the (≤ 6)-sized matrices: numba's ``@`` and ``np.linalg.inv`` go through BLAS and
-LAPACK, which for a 6 × 6 matrix cost more in the call (and in numba's callback into Python on
-each) than in the arithmetic. Compiled by numba and cached to disk beside this file; the
+loops over the (≤ 6)-sized matrices (numba's ``@`` and ``np.linalg.inv`` go through BLAS and
+LAPACK, which for a 6 × 6 matrix cost more in the call than in the arithmetic), and each call
+returns as few new arrays as it can: numba hands every one back to Python with a call into
+Python (``_numba_unpickle``). Compiled by numba and cached to disk beside this file; the
 kernels call nothing outside it (numba's cache does not follow calls into other files). numpy
 and numba only.
 """

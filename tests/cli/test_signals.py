@@ -282,7 +282,8 @@ def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_resul
     tmp_path: Path,
 ) -> None:
     # Without putting it off, this ended in a segmentation fault (the navigation filter's
-    # np.linalg.inv calls back into Python; the first such call cannot take an exception).
+    # kernels call back into Python to hand back each new array; the first such call cannot
+    # take an exception).
     out = tmp_path / "run"
     args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out", str(out)]
     done = subprocess.run(

@@ -1,8 +1,8 @@
 """An interrupt that a compiled library reported as its own error still ends a run the way
 Ctrl-C does: what ran is kept, marked partial.
 
-numba's kernels call back into Python (``numba.core.serialize._numba_unpickle``) for their
-constants, e.g. on every ``np.linalg.inv`` of the navigation filter; a KeyboardInterrupt raised
+numba's kernels call back into Python (``numba.core.serialize._numba_unpickle``) each time
+one hands a new array back, e.g. the navigation filter's every frame; a KeyboardInterrupt raised
 there (as a real signal's handler can be, at any Python line) comes out of the kernel as
 ``SystemError``, caused by it.
 """
