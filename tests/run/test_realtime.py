@@ -201,10 +201,12 @@ def test_run_hil_rejects_bad_arguments_and_closes_what_it_was_given() -> None:
 class Unplug:
     """When the operator's modem is unplugged, on the monotonic clock [s].
 
-    It is out from ``start_s`` until ``end_s`` *and* until the transport has noticed (one of
-    its calls failed): a loaded host can hold the transport's threads off the port for longer
-    than the planned window, and an unplug nobody saw would test nothing. ``end_s`` then moves
-    to that first failed call, so the window recorded is the one the port was really out."""
+    It is out from ``start_s`` for its planned length, and, if the transport first touches the
+    port only after that, for the planned length from that touch: a loaded host can hold the
+    transport's threads off the port for longer than the window, and an unplug nobody saw
+    would test nothing (no port error, no orders dropped, no line noise). ``end_s`` is then
+    moved, so the window recorded is the one the port was really out. No order can cross in
+    between: any write would have been the touch."""
 
     def __init__(self) -> None:
         self.start_s = math.inf
@@ -217,12 +219,14 @@ class Unplug:
     def check(self) -> None:
         """Raise as an unplugged USB modem does, if it is out now."""
         now = time.monotonic()
-        if now < self.start_s or (now >= self.end_s and self.noticed):
+        if now < self.start_s:
             return
         if not self.noticed:
             self.noticed = True
-            self.end_s = max(self.end_s, now)
-        raise serial.SerialException("device disconnected")
+            if now >= self.end_s:
+                self.end_s = now + (self.end_s - self.start_s)
+        if now < self.end_s:
+            raise serial.SerialException("device disconnected")
 
 
 class UnpluggedPort:
