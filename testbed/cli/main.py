@@ -90,18 +90,17 @@ def _send_again(thread_id: int, signum: int) -> None:
     signal.pthread_kill(thread_id, signum)
 
 
-def _terminate(signum: int, frame: FrameType | None) -> None:
+def _interrupt_for(signum: int) -> KeyboardInterrupt:
+    """What a signal is raised as: :class:`Terminated` for SIGTERM, else ``KeyboardInterrupt``."""
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def _signalled(signum: int, frame: FrameType | None) -> None:
+    """The handler of SIGTERM and SIGINT: the signal's interrupt, raised here unless put off."""
     if _put_off(signum, frame):
         return
     _SIGNALLED.append(signum)
-    raise Terminated
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    if _put_off(signum, frame):
-        return
-    _SIGNALLED.append(signum)
-    raise KeyboardInterrupt
+    raise _interrupt_for(signum)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -117,9 +116,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous: list[tuple[int, object]] = []
     if threading.current_thread() is threading.main_thread():
         del _SIGNALLED[:]
-        previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _terminate)))
+        previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _signalled)))
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
-            previous.append((signal.SIGINT, signal.signal(signal.SIGINT, _interrupt)))
+            previous.append((signal.SIGINT, signal.signal(signal.SIGINT, _signalled)))
     try:
         code: int = args.handler(args)
     except ConfigError as err:
@@ -138,9 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not _SIGNALLED:
             raise
         print("testbed: interrupted", file=sys.stderr)
-        return exit_code_of(
-            Terminated() if _SIGNALLED[0] == signal.SIGTERM else KeyboardInterrupt()
-        )
+        return exit_code_of(_interrupt_for(_SIGNALLED[0]))
     finally:
         for signum, handler in previous:
             signal.signal(signum, handler)  # type: ignore[arg-type]

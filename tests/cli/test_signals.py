@@ -214,7 +214,7 @@ PUT_OFF = """
 import importlib, pickle, signal, sys, time
 from numba.core import serialize
 cli = importlib.import_module("testbed.cli.main")
-signal.signal(signal.SIGTERM, cli._terminate)
+signal.signal(signal.SIGTERM, cli._signalled)
 
 def calls(frame, event, arg):
     return inside if frame.f_code is serialize._numba_unpickle.__code__ else None
@@ -224,7 +224,7 @@ arrived = []
 def inside(frame, event, arg):  # SIGTERM arrives at the callback's first line: its handler
     if event == "line" and not arrived:
         arrived.append(1)
-        cli._terminate(signal.SIGTERM, frame)
+        cli._signalled(signal.SIGTERM, frame)
         print("put off", cli._SIGNALLED, flush=True)
     return None
 
@@ -238,7 +238,7 @@ try:
 except KeyboardInterrupt as interrupt:
     print(type(interrupt).__name__, cli._SIGNALLED == [signal.SIGTERM])
 try:
-    cli._terminate(signal.SIGTERM, sys._getframe())  # in the program's own code: at once
+    cli._signalled(signal.SIGTERM, sys._getframe())  # in the program's own code: at once
 except KeyboardInterrupt as interrupt:
     print("at once", type(interrupt).__name__)
 """
