@@ -184,6 +184,22 @@ class Allocator:
         self._failures: dict[int, ThrusterFault] = {}
         self._axis_maxima: np.ndarray | None = None
         self._rebuild()
+        # Compile (or load from numba's cache) the per-frame kernel now, on a scratch copy of
+        # the work rows, not in the first frame of a timed run (as Physics and the loops do).
+        allocate_pinv(
+            np.zeros(6),
+            self._stuck_wrench,
+            self._pinv,
+            self._f_lo,
+            self._f_hi,
+            -1.0,
+            self._cap_active,
+            CURRENT_TOLERANCE_A,
+            self._work.copy(),
+            self._thrusters,
+            self._current_table,
+            self._pwm_table,
+        )
 
     # ----------------------------------------------------------------- properties
 

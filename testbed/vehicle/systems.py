@@ -270,6 +270,8 @@ class Actuation:
             self.commanded_forces_n = np.zeros(n)
         if self.actual_forces_n.size == 0:
             self.actual_forces_n = np.zeros(n)
+        # compiled (or loaded) now, not in the first frame of a timed run (pure: no state)
+        interval_wrench(self.matrix, self.actual_forces_n, self.actual_forces_n, 0.0)
 
 
 # -------------------------------------------------------------------------------- helpers

@@ -130,6 +130,8 @@ class ThrusterDynamics:
         self._gain = np.ones(n_thrusters)  # command multiplier: 0 dead, factor degraded
         self._held = np.full(n_thrusters, math.nan)  # dead or stuck: the force it gives, else NaN
         self._blend = (math.nan, math.nan, 1.0)  # (dt_s, τ, 1 - exp(-dt/τ)) of the last step
+        # compiled (or loaded) now, on scratch forces, not in the first frame of a timed run
+        lag_step(np.zeros(n_thrusters), self._forces, self._gain, self._held, 0.0)
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
