@@ -252,6 +252,10 @@ class KalmanNavigator:
         self._streaks: dict[str, int] = {}
         # F, G, Q by time step [ns]: frames land 2 or 3 physics steps apart, so a handful
         self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        # compile (or load) the kernels now, not in the first frame of a timed run (both pure)
+        f, g, qm = _transition(0.01, config.accel_noise_m2_s3)
+        propagate(self._x, self._p, f, g, qm, _NO_INPUT)
+        gated_update(self._x, self._p, _H_DEPTH, np.zeros(1), np.ones(1), math.inf)
 
     # ------------------------------------------------------------------- accessors
 

@@ -257,13 +257,23 @@ def test_an_interrupt_inside_numbas_own_code_is_raised_after_it() -> None:
 
 IN_A_CALLBACK = """
 import importlib, signal, sys
+import simpy
 from numba.core import serialize
 cli = importlib.import_module("testbed.cli.main")
 callback = serialize._numba_unpickle.__code__
+in_run = sys.argv.pop(1) == "run"  # the first callback once the clock runs, else the first
 arrived = []
+started = [not in_run]
+simulate = simpy.Environment.run
+
+def run(env, until=None):
+    started[0] = True
+    return simulate(env, until)
+
+simpy.Environment.run = run
 
 def calls(frame, event, arg):
-    if frame.f_code is callback and not arrived:  # the first callback of a kernel, in the run
+    if frame.f_code is callback and started[0] and not arrived:
         return inside
     return None
 
@@ -283,11 +293,31 @@ def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_resul
 ) -> None:
     # Without putting it off, this ended in a segmentation fault (the navigation filter's
     # kernels call back into Python to hand back each new array; the first such call cannot
-    # take an exception).
-    out = tmp_path / "run"
-    args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out", str(out)]
+    # take an exception). The kernels make their first callbacks while the vehicle is built
+    # (they are compiled there, before the clock starts): one line and 143, and the put-off
+    # signal lands in the program's own code, still building (nothing to keep) or just started
+    # (a marked partial set); a SIGTERM in the first callback once the clock runs keeps what ran.
+    args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out"]
+    out = tmp_path / "setup"
     done = subprocess.run(
-        [sys.executable, "-c", IN_A_CALLBACK, *args], capture_output=True, text=True, timeout=WAIT_S
+        [sys.executable, "-c", IN_A_CALLBACK, "setup", *args, str(out)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+    )
+    assert done.returncode == 143, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed: interrupted"), done.stderr
+    if lines[0].startswith("testbed: interrupted at t = "):
+        assert check_set(out)["complete"] is False
+    else:  # still building: nothing written (the CLI made the empty --out before the run)
+        assert lines == ["testbed: interrupted"] and not any(out.iterdir())
+    out = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-c", IN_A_CALLBACK, "run", *args, str(out)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
     )
     assert done.returncode == 143, done.stderr
     lines = done.stderr.strip().splitlines()

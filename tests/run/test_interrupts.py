@@ -10,8 +10,10 @@ there (as a real signal's handler can be, at any Python line) comes out of the k
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
+import simpy
 from numba.core import serialize
 
 from testbed.cli.options import Terminated
@@ -46,10 +48,24 @@ def test_the_interrupt_is_found_as_the_cause_or_the_context_of_another_error() -
     assert interrupt_of(looped) is None
 
 
-def test_a_run_interrupted_inside_a_kernels_callback_keeps_what_ran(tmp_path: Path) -> None:
+def test_a_run_interrupted_inside_a_kernels_callback_keeps_what_ran(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     scenario = load_scenario("s100-supervised-v1", ["duration_s=6"])
-    with interrupt_at_line(1, serialize._numba_unpickle) as seen:
-        result = run_scenario(scenario, seed=0)
+    seen: dict[str, int] = {}
+    simulate = simpy.Environment.run
+
+    def run_with_an_interrupt(env: simpy.Environment, until: Any = None) -> Any:
+        # inside the simulation only: building the vehicle calls the kernels once too (to
+        # compile them before the clock starts), and an interrupt there has nothing to keep
+        with interrupt_at_line(1, serialize._numba_unpickle) as raised:
+            try:
+                return simulate(env, until)
+            finally:
+                seen.update(raised)
+
+    monkeypatch.setattr(simpy.Environment, "run", run_with_an_interrupt)
+    result = run_scenario(scenario, seed=0)
     assert seen["raised"] == 1  # the kernel did call back, and was interrupted there
     assert isinstance(result.stopped, KeyboardInterrupt)
     assert 0.0 <= result.metrics["sim_s"] < 6.0
