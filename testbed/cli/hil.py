@@ -153,7 +153,7 @@ def run_hil_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
     from testbed.cli.run import finish_run
     from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
-    from testbed.run.outputs import prepare_out_dir
+    from testbed.run.outputs import claimed_out_dir
     from testbed.run.realtime import run_hil
     from testbed.run.scenario import load_scenario
 
@@ -177,41 +177,43 @@ def run_hil_command(args: argparse.Namespace) -> int:
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
-    prepare_out_dir(out, force=args.force)  # before any port is opened or any time is spent
-    endpoints: dict[str, Any] = {}
-    try:
-        for role, (option, url) in ports.items():
-            settings = PortSettings(url, args.modem, role, args.baud, args.rtscts, args.m64_channel)
-            try:
-                endpoints[role] = open_endpoint(settings)
-            except open_errors as err:
-                reason = " ".join(str(err).split()) or type(err).__name__
-                raise ConfigError(f"{option}: cannot open {url}: {reason}") from None
-    except BaseException:
-        for endpoint in endpoints.values():
-            endpoint.close()
-        raise
-    where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
+    with claimed_out_dir(out, force=args.force):  # before any port is opened or any time is spent
+        endpoints: dict[str, Any] = {}
+        try:
+            for role, (option, url) in ports.items():
+                settings = PortSettings(
+                    url, args.modem, role, args.baud, args.rtscts, args.m64_channel
+                )
+                try:
+                    endpoints[role] = open_endpoint(settings)
+                except open_errors as err:
+                    reason = " ".join(str(err).split()) or type(err).__name__
+                    raise ConfigError(f"{option}: cannot open {url}: {reason}") from None
+        except BaseException:
+            for endpoint in endpoints.values():
+                endpoint.close()
+            raise
+        where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
 
-    def announce() -> None:  # once the nodes are built and the real-time clock starts
-        print(
-            f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, "
-            "Ctrl-C ends early",
-            file=sys.stderr,
-            flush=True,
+        def announce() -> None:  # once the nodes are built and the real-time clock starts
+            print(
+                f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, "
+                "Ctrl-C ends early",
+                file=sys.stderr,
+                flush=True,
+            )
+
+        result = run_hil(
+            scenario,
+            endpoints,
+            seed=args.seed,
+            duration_s=duration,
+            modem=args.modem,
+            on_start=announce,
         )
-
-    result = run_hil(
-        scenario,
-        endpoints,
-        seed=args.seed,
-        duration_s=duration,
-        modem=args.modem,
-        on_start=announce,
-    )
-    return finish_run(
-        result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
-    )
+        return finish_run(
+            result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
+        )
 
 
 def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:

@@ -89,7 +89,7 @@ def _run_live(args: argparse.Namespace) -> int:
     from testbed.live.hub import Hub
     from testbed.live.server import ConsoleServer, bind
     from testbed.live.session import LiveSession
-    from testbed.run.outputs import prepare_out_dir, write_run
+    from testbed.run.outputs import claimed_out_dir, write_run
     from testbed.run.scenario import load_scenario
 
     check_seed(args.seed)
@@ -99,41 +99,43 @@ def _run_live(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration: must be in (0, {_MAX_DURATION_S:g}] s, got {args.duration}")
     scenario = load_scenario(args.scenario, args.overrides)
     out = args.out or Path("runs") / f"{scenario.id}-live-{time.strftime('%Y%m%d-%H%M%S')}"
-    prepare_out_dir(out, force=args.force)
-    try:
-        sock = bind(args.host, args.port)
-    except OSError as err:
-        raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
-    try:
-        endpoints = _open_ports(args)
-        hub = Hub()
-        session = LiveSession(
-            scenario, hub, seed=args.seed, pilot=None, endpoints=endpoints, modem=args.modem
-        )
-    except BaseException:
-        sock.close()
-        raise
-    server = ConsoleServer(hub, session.pilot, sock)
-    server.start()
-    print(f"testbed live: console on {server.url}", flush=True)
-    try:
-        result = session.run(args.duration)
-    finally:
-        server.stop()
-    plots = None
-    if not args.no_plots:
-        from testbed.report.run_plots import write_run_plots
+    with claimed_out_dir(out, force=args.force):
+        try:
+            sock = bind(args.host, args.port)
+        except OSError as err:
+            raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
+        try:
+            endpoints = _open_ports(args)
+            hub = Hub()
+            session = LiveSession(
+                scenario, hub, seed=args.seed, pilot=None, endpoints=endpoints, modem=args.modem
+            )
+        except BaseException:
+            sock.close()
+            raise
+        server = ConsoleServer(hub, session.pilot, sock)
+        server.start()
+        print(f"testbed live: console on {server.url}", flush=True)
+        try:
+            result = session.run(args.duration)
+        finally:
+            server.stop()
+        plots = None
+        if not args.no_plots:
+            from testbed.report.run_plots import write_run_plots
 
-        plots = write_run_plots
-    try:
-        write_run(result, out, plots=plots)
-    except KeyboardInterrupt:  # a second Ctrl-C while plotting: the data files first
-        write_run(result, out, plots=None)
-    reached = result.metrics["sim_s"]
-    print(f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr)
-    if isinstance(result.stopped, Terminated):
-        return EXIT_TERMINATED
-    return EXIT_OK
+            plots = write_run_plots
+        try:
+            write_run(result, out, plots=plots)
+        except KeyboardInterrupt:  # a second Ctrl-C while plotting: the data files first
+            write_run(result, out, plots=None)
+        reached = result.metrics["sim_s"]
+        print(
+            f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr
+        )
+        if isinstance(result.stopped, Terminated):
+            return EXIT_TERMINATED
+        return EXIT_OK
 
 
 def _open_ports(args: argparse.Namespace) -> dict[str, Any] | None:

@@ -105,7 +105,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     from testbed.cli.run import finish_run
     from testbed.mavlink.links import open_link, parse_url
     from testbed.run.mavlink_run import run_mavlink
-    from testbed.run.outputs import prepare_out_dir
+    from testbed.run.outputs import claimed_out_dir
     from testbed.run.scenario import load_scenario
 
     ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
@@ -141,49 +141,49 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     out = args.out
     if out is None:
         out = Path("runs") / f"mavlink-{scenario.id}-{time.strftime('%Y%m%d-%H%M%S')}"
-    prepare_out_dir(out, force=args.force)
-    links: list[Any] = []
-    try:
-        for url in urls:
-            try:
-                links.append(open_link(url))
-            except OSError as err:
-                reason = " ".join(str(err).split()) or type(err).__name__
-                raise ConfigError(f"--gcs: cannot open {url}: {reason}") from None
-    except BaseException:
-        for link in links:
-            link.close()
-        raise
-    endpoints: dict[str, Any] = {}
-    if hil:
-        endpoints = _open_modems(args, ports, links)
-    where = ", ".join(urls)
-    if gateway:
-        via = f"{args.modem} modems" if hil else f"the {scenario.link.preset} link"
-        what = f"gateway to the vehicle through {via} ({scenario.link.codec})"
-    else:
-        what = "ArduSub vehicle (sysid 1)"
-    print(
-        f"testbed: mavlink: {what} on {where}; running {duration:g} s, Ctrl-C ends early",
-        file=sys.stderr,
-        flush=True,
-    )
-    if gateway:
-        from testbed.run.mavlink_gateway import run_gateway
-
-        result = run_gateway(
-            scenario,
-            links,
-            seed=args.seed,
-            duration_s=duration,
-            hil=endpoints or None,
-            modem=args.modem if hil else "",
+    with claimed_out_dir(out, force=args.force):
+        links: list[Any] = []
+        try:
+            for url in urls:
+                try:
+                    links.append(open_link(url))
+                except OSError as err:
+                    reason = " ".join(str(err).split()) or type(err).__name__
+                    raise ConfigError(f"--gcs: cannot open {url}: {reason}") from None
+        except BaseException:
+            for link in links:
+                link.close()
+            raise
+        endpoints: dict[str, Any] = {}
+        if hil:
+            endpoints = _open_modems(args, ports, links)
+        where = ", ".join(urls)
+        if gateway:
+            via = f"{args.modem} modems" if hil else f"the {scenario.link.preset} link"
+            what = f"gateway to the vehicle through {via} ({scenario.link.codec})"
+        else:
+            what = "ArduSub vehicle (sysid 1)"
+        print(
+            f"testbed: mavlink: {what} on {where}; running {duration:g} s, Ctrl-C ends early",
+            file=sys.stderr,
+            flush=True,
         )
-    else:
-        result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
-    return finish_run(
-        result, out, plots=not args.no_plots, planned_s=duration, summary=format_mavlink_summary
-    )
+        if gateway:
+            from testbed.run.mavlink_gateway import run_gateway
+
+            result = run_gateway(
+                scenario,
+                links,
+                seed=args.seed,
+                duration_s=duration,
+                hil=endpoints or None,
+                modem=args.modem if hil else "",
+            )
+        else:
+            result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
+        return finish_run(
+            result, out, plots=not args.no_plots, planned_s=duration, summary=format_mavlink_summary
+        )
 
 
 def _open_modems(

@@ -59,7 +59,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
     """Handler of ``testbed run``: load, simulate, write, summarise."""
     import time
 
-    from testbed.run.outputs import prepare_out_dir
+    from testbed.run.outputs import claimed_out_dir
     from testbed.run.runner import run_scenario
     from testbed.run.scenario import load_scenario
 
@@ -69,11 +69,11 @@ def _run_scenario(args: argparse.Namespace) -> int:
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
-    prepare_out_dir(out, force=args.force)
-    if scenario.trials > 1:
-        return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
-    result = run_scenario(scenario, seed=args.seed)
-    return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
+    with claimed_out_dir(out, force=args.force):
+        if scenario.trials > 1:
+            return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
+        result = run_scenario(scenario, seed=args.seed)
+        return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
 
 
 def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool) -> int:

@@ -5,38 +5,13 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
-import signal
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from types import FrameType
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir
+from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir, exit_code_of
 from testbed.config import ConfigError
 
 __all__ = ["add_plot_parser", "add_sweep_parser"]
-
-EXIT_SIGINT = 128 + signal.SIGINT  # 130, as a shell reports a Ctrl-C
-EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
-
-
-class _Terminated(BaseException):
-    """SIGTERM during a sweep (not an Exception: nothing on the way catches it)."""
-
-
-def _raise_terminated(signum: int, frame: FrameType | None) -> None:
-    raise _Terminated
-
-
-@contextmanager
-def _sigterm_raises() -> Iterator[None]:
-    """For the duration of the sweep, SIGTERM raises :class:`_Terminated` (main thread)."""
-    old = signal.signal(signal.SIGTERM, _raise_terminated)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
 
 
 def check_writable_dir(out: Path, option: str = "--out") -> None:
@@ -119,24 +94,20 @@ def _interrupted_line(args: argparse.Namespace, out: Path | None, total: int | N
 def _run_sweep(args: argparse.Namespace) -> int:
     """Handler of ``testbed sweep``: check the options and every grid point, run, summarise.
 
-    SIGINT (KeyboardInterrupt) and SIGTERM (a handler installed for the sweep) stop the
+    SIGINT and SIGTERM (both a ``KeyboardInterrupt`` through the CLI's one handler) stop the
     workers, keep the journal and the tables of the runs that finished, print one line and
     return 130 / 143.
     """
     out: Path | None = args.out
     total: int | None = None
     try:
-        with _sigterm_raises():
-            try:
-                return _sweep(args)
-            finally:
-                out, total = getattr(args, "_out", out), getattr(args, "_total", None)
-    except KeyboardInterrupt:
+        try:
+            return _sweep(args)
+        finally:
+            out, total = getattr(args, "_out", out), getattr(args, "_total", None)
+    except KeyboardInterrupt as interrupt:
         print(_interrupted_line(args, out, total), file=sys.stderr, flush=True)
-        return EXIT_SIGINT
-    except _Terminated:
-        print(_interrupted_line(args, out, total), file=sys.stderr, flush=True)
-        return EXIT_SIGTERM
+        return exit_code_of(interrupt)
 
 
 def _sweep(args: argparse.Namespace) -> int:

@@ -19,14 +19,21 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
 from testbed.run.runner import RunResult
 
-__all__ = ["METRICS_FILE", "json_ready", "prepare_out_dir", "write_json_atomic", "write_run"]
+__all__ = [
+    "METRICS_FILE",
+    "claimed_out_dir",
+    "json_ready",
+    "prepare_out_dir",
+    "write_json_atomic",
+    "write_run",
+]
 
 METRICS_FILE = "metrics.json"
 _TMP_PREFIX = ".tmp-"
@@ -53,6 +60,26 @@ def prepare_out_dir(out: Path, *, force: bool = False) -> None:
         raise ConfigError(f"--out: {out}: cannot write there ({err.strerror or err})") from None
     if not force and any(out.iterdir()):
         raise ConfigError(f"--out: {out} is not empty (use --force to replace its results)")
+
+
+@contextlib.contextmanager
+def claimed_out_dir(out: Path, *, force: bool = False) -> Iterator[Path]:
+    """:func:`prepare_out_dir`, then the work inside; when that work ends by an error or an
+    interrupt, the directories ``out`` made (``out`` and parents that did not exist) are
+    removed again if they are still empty: bad input found after the check (a port that does
+    not open) or a Ctrl-C before anything was written leaves nothing behind. Whatever was
+    written is kept."""
+    missing = [path for path in (out, *out.absolute().parents) if not path.exists()]
+    prepare_out_dir(out, force=force)
+    try:
+        yield out
+    except BaseException:
+        for path in missing:  # deepest first; stops at the first that is not empty
+            try:
+                path.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def json_ready(value: Any) -> Any:

@@ -5,7 +5,7 @@
 journal in batches and rewrites ``results.csv`` and ``aggregate.csv``. :func:`format_summary`
 is the few lines a person reads afterwards.
 
-Interrupted (KeyboardInterrupt, or any other exception such as the CLI's SIGTERM one), it stops
+Interrupted (a KeyboardInterrupt: Ctrl-C, or SIGTERM through the CLI's handler) or broken, it stops
 the backend's workers, writes the runs that finished to the journal, regenerates both tables
 from the journal and re-raises: ``--resume`` then runs exactly the missing (point, seed)s.
 Before the first run it checks that every aggregated metric is one a run produces

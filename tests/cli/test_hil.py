@@ -54,12 +54,14 @@ def test_bad_input_is_one_line_naming_the_option(
 
 
 def test_a_port_that_fails_to_open_closes_the_one_already_open(
-    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["hil", "--operator-port", "loop://", "--vehicle-port", MISSING]
+    out = tmp_path / "runs" / "hil"
+    argv = ["hil", "--operator-port", "loop://", "--vehicle-port", MISSING, "--out", str(out)]
     assert main(argv) == 2
     _, err = capsys.readouterr()
     assert err.startswith("testbed: error: --vehicle-port: cannot open")
+    assert not (tmp_path / "runs").exists()  # the --out it made is removed again
     alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:loop://")]
     assert alive == []  # the operator's reader and writer were stopped and joined
 

@@ -76,3 +76,24 @@ def test_bad_input_exits_2_with_one_line(
     err = capsys.readouterr().err
     assert fragment in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_an_interrupt_before_anything_is_written_leaves_no_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C while the nodes are built: the --out made for the run (and its new parents) is
+    removed again; one given that already existed is kept, as it was."""
+    import testbed.run.runner as runner
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "run_scenario", interrupted)
+    made = tmp_path / "new" / "out"
+    assert main(["run", "--out", str(made), "--no-plots"]) == 130
+    assert capsys.readouterr().err == "testbed: interrupted\n"
+    assert not (tmp_path / "new").exists()
+    given = tmp_path / "given"
+    given.mkdir()
+    assert main(["run", "--out", str(given), "--no-plots"]) == 130
+    assert given.is_dir() and not any(given.iterdir())

@@ -37,6 +37,7 @@ def test_bad_input_is_one_line_and_exit_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "out").exists()  # also when the error came after --out was made
 
 
 def test_a_short_session_writes_the_run_outputs_and_the_mavlink_section(
