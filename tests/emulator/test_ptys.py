@@ -57,19 +57,28 @@ def test_frame_crosses_both_ways_after_the_model_latency(
     ports: tuple[ModemEmulator, serial.Serial, serial.Serial],
     lateness: Any,
 ) -> None:
+    """A → B, B → A, A → B, each sent three times: every crossing arrives intact and no sooner
+    than the model says; the quickest of each three is within the host's measured allowance
+    (the quickest, not each: beside busy loops one thread wake on the way can be held up
+    longer than the wake probe saw, as in the FIFO test below; a delay the emulator itself
+    added would be in every send)."""
     emulator, port_a, port_b = ports
+    sends = 3
     for k, (src, dst) in enumerate([(port_a, port_b), (port_b, port_a), (port_a, port_b)]):
         frame = encode_frame(bytes([k]) * 40)
-        got, latency_s = send_and_time(src, dst, frame)
-        assert got == frame
-        assert FrameDecoder().feed(got) == [Frame(bytes([k]) * 40)]
+        crossings = [send_and_time(src, dst, frame) for _ in range(sends)]
+        assert [got for got, _ in crossings] == [frame] * sends
+        assert FrameDecoder().feed(crossings[0][0]) == [Frame(bytes([k]) * 40)]
         model_s = fast.intrinsic_delay_s + fast.airtime_s(len(frame))  # 20 + 19.2 ms
-        assert model_s <= latency_s <= model_s + lateness.allowance_s(emulator)
+        latencies_s = [latency_s for _, latency_s in crossings]
+        allowance_s = lateness.allowance_s(emulator)
+        assert min(latencies_s) >= model_s
+        assert min(latencies_s) <= model_s + allowance_s, (latencies_s, model_s, allowance_s)
     emulator.close()  # joins its threads: a delivery can be read before its bytes are counted
     counters_a, counters_b = emulator.counters
-    assert (counters_a.bursts, counters_b.bursts) == (2, 1)
-    assert (counters_a.deliveries, counters_b.deliveries) == (1, 2)
-    assert counters_b.bytes_out == counters_a.bytes_in == 2 * len(frame)
+    assert (counters_a.bursts, counters_b.bursts) == (2 * sends, sends)
+    assert (counters_a.deliveries, counters_b.deliveries) == (sends, 2 * sends)
+    assert counters_b.bytes_out == counters_a.bytes_in == 2 * sends * len(frame)
     assert counters_a.bytes_overflowed == counters_b.bytes_overflowed == 0
     assert emulator.modems[1].counters.rx_bit_errors == 0
     assert emulator.error is None
@@ -80,7 +89,8 @@ def test_model_latency_scales_with_bitrate_not_with_the_emulator(
 ) -> None:
     """Halving the bitrate adds exactly one more airtime: the delay comes from the model. Each
     latency is the model plus what the host added (0 to its measured allowance), so their
-    difference is the extra airtime within the larger of the two allowances."""
+    difference is the extra airtime within the larger of the two allowances. Each is the
+    quickest of three sends (every send at least the model; see the test above)."""
     slow = load_link_config("s100", [*FAST, "bitrate_bps=9600"])
     frame = encode_frame(bytes(100))  # 106 B: 44 ms at 19.2 kbit/s, 88 ms at 9.6 kbit/s
     latencies, allowances = [], []
@@ -89,10 +99,11 @@ def test_model_latency_scales_with_bitrate_not_with_the_emulator(
             path_a, path_b = emulator.paths
             with serial.Serial(path_a, timeout=TIMEOUT_S) as a, serial.Serial(path_b) as b:
                 b.timeout = TIMEOUT_S
-                got, latency_s = send_and_time(a, b, frame)
+                crossings = [send_and_time(a, b, frame) for _ in range(3)]
             allowance_s = lateness.allowance_s(emulator)
-        assert got == frame
+        assert [got for got, _ in crossings] == [frame] * 3
         model_s = config.intrinsic_delay_s + config.airtime_s(len(frame))
+        latency_s = min(latency for _, latency in crossings)
         assert model_s <= latency_s <= model_s + allowance_s
         latencies.append(latency_s)
         allowances.append(allowance_s)

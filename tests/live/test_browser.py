@@ -70,7 +70,7 @@ class Live:
     def __init__(self, out: Path) -> None:
         self.out = out
         command = [sys.executable, "-m", "testbed", "live", "--port", "0", "--no-plots"]
-        command += ["--out", str(out), "--duration", "600"]
+        command += ["--out", str(out), "--duration", "3600"]  # the test ends it (SIGINT)
         self.proc = subprocess.Popen(
             command,
             stdout=subprocess.PIPE,
@@ -96,8 +96,10 @@ class Live:
         start = time.monotonic()
         deadline = start + _DEADLINE_S
         progress = None
+        state: dict[str, Any] = {}
         while time.monotonic() < min(deadline, start + _CAP_S):
-            assert self.proc.poll() is None, "testbed live ended: " + self.proc.stderr.read()
+            ended = self.proc.poll() is not None
+            assert not ended, f"testbed live ended waiting for {what}: " + self.proc.stderr.read()
             state = self.state()
             if state and ok(state):
                 return state
@@ -106,7 +108,9 @@ class Live:
             if now != progress:
                 progress, deadline = now, time.monotonic() + _DEADLINE_S
             time.sleep(0.05)
-        raise AssertionError(f"never: {what}; last state {json.dumps(self.state())[:2000]}")
+        waited = time.monotonic() - start
+        last = json.dumps(state)[:2000]
+        raise AssertionError(f"never in {waited:.0f} s: {what}; last state {last}")
 
     def stop(self) -> int:
         if self.proc.poll() is None:
