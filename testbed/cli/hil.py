@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers, check_seed
+from testbed.cli.options import Subparsers, check_seed, open_modem_ports
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -152,13 +152,11 @@ def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
 def run_hil_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
     from testbed.cli.run import finish_run
-    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+    from testbed.hil import PortSettings
     from testbed.run.outputs import claimed_out_dir
     from testbed.run.realtime import run_hil
     from testbed.run.scenario import load_scenario
 
-    # pyserial: OSError (no such port), ValueError (unknown URL scheme), KeyError (bad option)…
-    open_errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
     mode, scenario_name = _words(args.words)
     ports = _ports(args, mode)
     if args.baud is not None and args.baud <= 0:
@@ -178,21 +176,13 @@ def run_hil_command(args: argparse.Namespace) -> int:
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):  # before any port is opened or any time is spent
-        endpoints: dict[str, Any] = {}
-        try:
-            for role, (option, url) in ports.items():
-                settings = PortSettings(
-                    url, args.modem, role, args.baud, args.rtscts, args.m64_channel
-                )
-                try:
-                    endpoints[role] = open_endpoint(settings)
-                except open_errors as err:
-                    reason = " ".join(str(err).split()) or type(err).__name__
-                    raise ConfigError(f"{option}: cannot open {url}: {reason}") from None
-        except BaseException:
-            for endpoint in endpoints.values():
-                endpoint.close()
-            raise
+        modem, baud, rtscts, channel = args.modem, args.baud, args.rtscts, args.m64_channel
+        endpoints = open_modem_ports(
+            {
+                role: (option, PortSettings(url, modem, role, baud, rtscts, channel))
+                for role, (option, url) in ports.items()
+            }
+        )
         where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
 
         def announce() -> None:  # once the nodes are built and the real-time clock starts

@@ -40,6 +40,7 @@ from testbed.cli.options import (
     Terminated,
     add_set_option,
     check_seed,
+    open_modem_ports,
 )
 from testbed.config import ConfigError
 
@@ -149,22 +150,14 @@ def _open_ports(args: argparse.Namespace) -> dict[str, Any] | None:
             raise ConfigError(f"--{role}-port: required with --{_other(role)}-port")
     if args.operator_port == args.vehicle_port:
         raise ConfigError("--vehicle-port: must differ from --operator-port")
-    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+    from testbed.hil import PortSettings
 
-    errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
-    endpoints: dict[str, Any] = {}
-    try:
-        for role, url in ports.items():
-            try:
-                endpoints[role] = open_endpoint(PortSettings(url, args.modem, role))
-            except errors as err:
-                reason = " ".join(str(err).split()) or type(err).__name__
-                raise ConfigError(f"--{role}-port: cannot open {url}: {reason}") from None
-    except BaseException:
-        for endpoint in endpoints.values():
-            endpoint.close()
-        raise
-    return endpoints
+    return open_modem_ports(
+        {
+            role: (f"--{role}-port", PortSettings(url, args.modem, role))
+            for role, url in ports.items()
+        }
+    )
 
 
 def _other(role: str) -> str:

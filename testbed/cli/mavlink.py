@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers, add_set_option, check_seed
+from testbed.cli.options import Subparsers, add_set_option, check_seed, open_modem_ports
 from testbed.config import ConfigError
 
 __all__ = ["add_mavlink_parser", "format_mavlink_summary", "run_mavlink_command"]
@@ -190,23 +190,22 @@ def _open_modems(
     args: argparse.Namespace, ports: dict[str, str], links: list[Any]
 ) -> dict[str, Any]:
     """The two HIL modem endpoints (on failure the links and what opened are closed)."""
-    from testbed.hil import PORT_ERRORS, PortSettings, open_endpoint
+    from testbed.hil import PortSettings
 
-    open_errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
-    endpoints: dict[str, Any] = {}
     try:
-        for role, url in ports.items():
-            settings = PortSettings(url, args.modem, role, args.baud, args.rtscts)
-            try:
-                endpoints[role] = open_endpoint(settings)
-            except open_errors as err:
-                reason = " ".join(str(err).split()) or type(err).__name__
-                raise ConfigError(f"--{role}-port: cannot open {url}: {reason}") from None
+        return open_modem_ports(
+            {
+                role: (
+                    f"--{role}-port",
+                    PortSettings(url, args.modem, role, args.baud, args.rtscts),
+                )
+                for role, url in ports.items()
+            }
+        )
     except BaseException:
-        for item in [*links, *endpoints.values()]:
-            item.close()
+        for link in links:
+            link.close()
         raise
-    return endpoints
 
 
 def format_mavlink_summary(metrics: dict[str, Any], out: Path) -> str:

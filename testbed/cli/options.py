@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Mapping
 from pathlib import Path
-from typing import NoReturn, TypeAlias
+from typing import TYPE_CHECKING, NoReturn, TypeAlias
 
 from testbed.config import ConfigError
+
+if TYPE_CHECKING:
+    from testbed.hil import LinkEndpoint, PortSettings
 
 __all__ = [
     "EXIT_INTERRUPTED",
@@ -22,6 +26,7 @@ __all__ = [
     "check_out_dir",
     "check_seed",
     "exit_code_of",
+    "open_modem_ports",
 ]
 
 EXIT_OK = 0
@@ -75,3 +80,29 @@ def check_out_dir(out: Path) -> None:
     """``--out``: a directory or nothing yet; else :class:`ConfigError`."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out: {out} exists and is not a directory")
+
+
+def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str, LinkEndpoint]:
+    """Each role's modem endpoint on its port (``role → (option, settings)``), in order.
+
+    Raises:
+        ConfigError: a port cannot be opened (no such device, a bad pyserial URL or option):
+            one line naming its option, after the endpoints already open are closed.
+    """
+    from testbed.hil import PORT_ERRORS, open_endpoint
+
+    # pyserial: OSError (no such port), ValueError (unknown URL scheme), KeyError (bad option)…
+    errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
+    endpoints: dict[str, LinkEndpoint] = {}
+    try:
+        for role, (option, settings) in ports.items():
+            try:
+                endpoints[role] = open_endpoint(settings)
+            except errors as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise ConfigError(f"{option}: cannot open {settings.url}: {reason}") from None
+    except BaseException:
+        for endpoint in endpoints.values():
+            endpoint.close()
+        raise
+    return endpoints
