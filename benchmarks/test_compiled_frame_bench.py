@@ -14,8 +14,8 @@ the same readings. Then it runs that frame at 100 Hz on the real Fossen plant (`
 Hz) beside the bare floor, as the vehicle-alone benchmark does, and beside the plant with an
 empty frame: what a compiled frame of these laws would cost, measured, not estimated.
 
-Not in it: the sensors' noise models (readings are the truth plus white noise from a block of
-draws, the least frame's sensors), the failsafe, the pilot interface and command ingestion
+Not in it: the sensors' noise models (the readings are the true attitude, and rates and depth
+plus white noise from a block of draws, the least frame's sensors), the failsafe, the pilot interface and command ingestion
 (events and cached shaping in the benchmark's run: sticks at zero), the schedule and the
 components. A design that keeps those in Python pays for them on top.
 """
@@ -49,14 +49,16 @@ from testbed.vehicle.vehicle import Vehicle
 pytestmark = pytest.mark.benchmark
 
 
-@njit  # not cached: it compiles kernels of other files into itself (numba's cache would not
-def _laws_frame(  # see their edits)
+# Not cached: it compiles kernels of other files into itself, whose edits numba's disk cache
+# would not see.
+@njit
+def _laws_frame(
     loops: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, tuple[bool, bool, bool]],
     allocation: tuple[
         np.ndarray, np.ndarray, float, float, float, float, np.ndarray, np.ndarray, np.ndarray
     ],
     tables: tuple[np.ndarray, np.ndarray],
-    plant: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float],
+    plant: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float],
     readings: tuple[tuple[float, float, float, float], tuple[float, float, float], float],
     targets: tuple[float, tuple[float, float, float, float]],
     pilot: tuple[float, float, float, float, float, float],
@@ -69,7 +71,7 @@ def _laws_frame(  # see their edits)
     depth_state, depth_gains, attitude_state, attitude_gains, feedforward_n, axes = loops
     offset, pinv, f_lo, f_hi, slew_n_s, cap_a, work, thrusters, start = allocation
     current_table, pwm_table = tables
-    actual, gain, held, matrix, _, blend, weight = plant
+    actual, gain, held, matrix, blend, weight = plant
     quaternion, rates, depth_m = readings
     depth_target, attitude_target = targets
     fx, fy, fz = depth_update(
@@ -162,7 +164,6 @@ def _arrays_of(vehicle: Vehicle, interval_s: float) -> _Arrays:
         dynamics._gain,
         dynamics._held,
         act.matrix,
-        np.zeros(6),
         blend,
         weight,
     )
@@ -261,8 +262,9 @@ def test_the_compiled_frame_makes_the_systems_wrench() -> None:
 
 def _plant_with_frame(compiled: bool) -> float:
     """Seconds of SIM_S of the vehicle-alone run with the frame replaced: the truth read, the
-    readings (truth plus noise from a block of draws), the yaw setpoint at 40 Hz and, when
-    ``compiled``, :func:`_laws_frame`, then the physics steps to the next frame."""
+    readings (the true attitude; rates and depth plus white noise from a block of draws), the
+    yaw setpoint at 40 Hz and, when ``compiled``, :func:`_laws_frame`, then the physics steps
+    to the next frame."""
     vehicle = make_vehicle(SIM_S)
     try:
         physics = vehicle.physics
@@ -280,12 +282,16 @@ def _plant_with_frame(compiled: bool) -> float:
         frame = 0
         while physics.time_s < SIM_S - 1e-9:
             now, position, q, nu = physics.state_floats()
-            if frame % 4 == 0 or frame % 4 == 2:  # the 40-Hz setpoint (every 2.5 frames)
+            if frame % 5 in (0, 2):  # the 40-Hz setpoint: every 2.5 frames
                 yaw = math.radians(20.0) * math.sin(2.0 * math.pi * now / 25.0)
                 target = quat_from_euler(0.0, 0.0, yaw)
-            k = (7 * frame) % 4088
-            rates = (nu[3] + 0.002 * noise[k], nu[4] + 0.002 * noise[k + 1], nu[5])
-            depth_m = position[2] + 0.002 * noise[k + 2]
+            k = (4 * frame) % 4092
+            rates = (
+                nu[3] + 0.002 * noise[k],
+                nu[4] + 0.002 * noise[k + 1],
+                nu[5] + 0.002 * noise[k + 2],
+            )
+            depth_m = position[2] + 0.002 * noise[k + 3]
             next_frame += period
             interval = max(1, math.ceil((next_frame - now) / physics.dt_s - 1e-6))
             plant = plants.get(interval)
