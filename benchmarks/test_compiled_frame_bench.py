@@ -15,9 +15,10 @@ Hz) beside the bare floor, as the vehicle-alone benchmark does, and beside the p
 empty frame: what a compiled frame of these laws would cost, measured, not estimated.
 
 Not in it: the sensors' noise models (the readings are the true attitude, and rates and depth
-plus white noise from a block of draws, the least frame's sensors), the failsafe, the pilot interface and command ingestion
-(events and cached shaping in the benchmark's run: sticks at zero), the schedule and the
-components. A design that keeps those in Python pays for them on top.
+plus white noise from a block of draws, the least frame's sensors), the failsafe, the pilot
+interface and command ingestion (events and cached shaping in the benchmark's run: sticks at
+zero), the schedule and the components. A design that keeps those in Python pays for them on
+top.
 """
 
 from __future__ import annotations
