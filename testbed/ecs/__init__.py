@@ -4,7 +4,9 @@ Each node (vehicle, operator) owns one :class:`World` ticked by a :class:`Schedu
 phases. Components are frozen dataclasses written with :meth:`World.set`, which records a change
 (tick and :class:`Origin`) only when the value differs; systems ask for what changed since they
 last ran. :mod:`testbed.ecs.registry` says which component types replicate, under which id and
-owned by which side, and lists the local changes a link codec must send.
+owned by which side, and lists the local changes a link codec must send. :mod:`testbed.ecs.store`
+keeps chosen component types in float64 tables a compiled frame can write (the world's API
+unchanged for them).
 
 Standard library only (the layering test allows numpy); no I/O, no clock, no global state.
 """
@@ -22,6 +24,7 @@ from testbed.ecs.registry import (
     replicated_entries,
 )
 from testbed.ecs.schedule import Phase, Schedule, System
+from testbed.ecs.store import FrameStore
 from testbed.ecs.world import Entity, Origin, Removal, Replicate, World, check_component_type
 
 __all__ = [
@@ -29,6 +32,7 @@ __all__ = [
     "ChangeKind",
     "ComponentRegistry",
     "Entity",
+    "FrameStore",
     "Origin",
     "Phase",
     "RawChange",

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any, NewType, TypeVar, overload
 
 from testbed.ecs.storage import Column, Slot, iter_all, iter_filtered, scan_one
+from testbed.ecs.store import FrameStore, StoreColumn
 
 __all__ = [
     "Entity",
@@ -537,6 +538,22 @@ class World:
         if since is not None and not (changed or added):
             raise ValueError("query: 'since' needs changed=True or added=True")
         return self._columns.get(cls) or self._new_column(cls)
+
+    def use_store(self, store: FrameStore) -> None:
+        """Keep the components of ``store``'s types in its tables (:mod:`testbed.ecs.store`):
+        the world's API is unchanged for them, and a compiled frame may write their rows.
+
+        Raises:
+            TypeError: a type is not a frozen dataclass.
+            ValueError: a type already has components (or a column) in this world.
+        """
+        tables = list(store.tables())
+        for cls, _ in tables:
+            check_component_type(cls)
+            if cls in self._columns:
+                raise ValueError(f"{cls.__qualname__} already has a column in this world")
+        for cls, table in tables:
+            self._columns[cls] = StoreColumn(table)
 
     def _new_column(self, cls: type[Any]) -> Column:
         check_component_type(cls)

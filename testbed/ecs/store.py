@@ -1,0 +1,269 @@
+"""Store-backed columns: a component type's values kept in float64 tables that a compiled frame
+can read and write, seen through the world's API as frozen components with change ticks.
+
+A :class:`FrameStore` holds one :class:`Table` per registered component type: ``values``, a
+``(capacity, width)`` float64 array with one row per entity holding the component's fields
+(:class:`Layout`), ``ticks``, a ``(capacity,)`` int64 array with the world tick at which each
+row last changed (0: a free row), and ``origins``, ``(capacity,)`` int8 (0 LOCAL, 1 REMOTE).
+:meth:`~testbed.ecs.world.World.use_store` makes the world keep those types in the tables.
+Everything the world offers works the same for them: ``set`` records a change only for a value
+that differs, ``get`` returns the object that was set (or, after a write into the table, a new
+one built from the row), queries filter on the rows' ticks and origins, removals are logged.
+
+A compiled frame writes a row's fields and then its tick, a tick newer than the row's (the
+world's tick while its system runs: each system runs at a tick of its own), and leaves a row
+whose value is unchanged alone, so that readers are not woken. It writes origin 0 (LOCAL).
+This is stage 1 of the plan in ``docs/performance.md`` (the production compiled frame).
+
+Fields a table holds: ``float``, ``int`` (exact within ±2⁵³), ``bool``, enums (their index in
+the enum) and tuples of floats of the length the prototype has. Other field types are refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import functools
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from testbed.ecs.storage import GONE, Column, Slot
+
+if TYPE_CHECKING:
+    from testbed.ecs.world import Entity, Origin
+
+__all__ = ["FrameStore", "Layout", "StoreColumn", "Table"]
+
+_FLOAT, _INT, _BOOL, _ENUM, _TUPLE = range(5)
+_EXACT_INT = 2**53
+
+
+class Layout:
+    """Where each field of one component type sits in a row of floats, taken from a
+    prototype instance (its tuples' lengths included).
+
+    Raises:
+        TypeError: a field of a kind a table cannot hold, or one not set by ``__init__``.
+    """
+
+    __slots__ = ("cls", "fields", "width")
+
+    def __init__(self, prototype: object) -> None:
+        cls = type(prototype)
+        self.cls = cls
+        fields: list[tuple[str, int, int, Any]] = []  # (name, kind, offset, size or members)
+        offset = 0
+        for spec in dataclasses.fields(cls):  # type: ignore[arg-type]
+            name = f"{cls.__qualname__}.{spec.name}"
+            if not spec.init:
+                raise TypeError(f"{name}: a stored field must be set by __init__")
+            value = getattr(prototype, spec.name)
+            if isinstance(value, bool):
+                fields.append((spec.name, _BOOL, offset, 1))
+            elif isinstance(value, enum.Enum):
+                fields.append((spec.name, _ENUM, offset, tuple(type(value))))
+            elif isinstance(value, int):
+                fields.append((spec.name, _INT, offset, 1))
+            elif isinstance(value, float):
+                fields.append((spec.name, _FLOAT, offset, 1))
+            elif isinstance(value, tuple) and all(type(v) is float for v in value):
+                fields.append((spec.name, _TUPLE, offset, len(value)))
+                offset += len(value) - 1
+            else:
+                raise TypeError(
+                    f"{name}: a table holds floats, ints, bools, enums and tuples of floats, "
+                    f"got {type(value).__name__}"
+                )
+            offset += 1
+        self.fields = tuple(fields)
+        self.width = offset
+
+    def write(self, row: np.ndarray, value: object) -> None:
+        """Put ``value``'s fields into ``row`` (a ``(width,)`` view).
+
+        Raises:
+            ValueError: a tuple of another length than the layout's, an int beyond ±2⁵³.
+        """
+        for name, kind, offset, extra in self.fields:
+            field = getattr(value, name)
+            if kind == _TUPLE:
+                if len(field) != extra:
+                    raise ValueError(
+                        f"{self.cls.__qualname__}.{name}: {extra} values, got {len(field)}"
+                    )
+                row[offset : offset + extra] = field
+            elif kind == _ENUM:
+                row[offset] = extra.index(field)
+            else:
+                if kind == _INT and not -_EXACT_INT <= field <= _EXACT_INT:
+                    raise ValueError(f"{self.cls.__qualname__}.{name}: beyond ±2**53: {field}")
+                row[offset] = field
+
+    def read(self, row: np.ndarray) -> object:
+        """A new component built from ``row``."""
+        xs = row.tolist()
+        args: list[object] = []
+        for _, kind, offset, extra in self.fields:
+            if kind == _FLOAT:
+                args.append(xs[offset])
+            elif kind == _TUPLE:
+                args.append(tuple(xs[offset : offset + extra]))
+            elif kind == _ENUM:
+                args.append(extra[int(xs[offset])])
+            elif kind == _INT:
+                args.append(int(xs[offset]))
+            else:
+                args.append(xs[offset] != 0.0)
+        return self.cls(*args)
+
+
+class Table:
+    """One component type's rows: ``values`` (capacity, width) float64, ``ticks`` (capacity,)
+    int64 (0 for a free row), ``origins`` (capacity,) int8 (0 LOCAL, 1 REMOTE)."""
+
+    __slots__ = ("_free", "capacity", "layout", "origins", "ticks", "values")
+
+    def __init__(self, layout: Layout, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError(f"capacity must be ≥ 1, got {capacity}")
+        self.layout = layout
+        self.capacity = capacity
+        self.values = np.zeros((capacity, layout.width))
+        self.ticks = np.zeros(capacity, dtype=np.int64)
+        self.origins = np.zeros(capacity, dtype=np.int8)
+        self._free = list(range(capacity - 1, -1, -1))  # the lowest row first
+
+    def allocate(self) -> int:
+        """A free row.
+
+        Raises:
+            RuntimeError: every row is in use.
+        """
+        if not self._free:
+            raise RuntimeError(
+                f"the {self.layout.cls.__qualname__} table is full ({self.capacity} rows)"
+            )
+        return self._free.pop()
+
+    def release(self, row: int) -> None:
+        """Free ``row`` (its tick goes back to 0)."""
+        self.ticks[row] = 0
+        self._free.append(row)
+
+
+class FrameStore:
+    """The tables of the component types a world keeps store-backed."""
+
+    __slots__ = ("_tables",)
+
+    def __init__(self) -> None:
+        self._tables: dict[type[Any], Table] = {}
+
+    def add(self, prototype: object, capacity: int = 8) -> Table:
+        """A table for ``type(prototype)`` with ``capacity`` rows (one per entity).
+
+        Raises:
+            ValueError: the type already has a table, or ``capacity`` < 1.
+            TypeError: a field a table cannot hold (:class:`Layout`).
+        """
+        cls = type(prototype)
+        if cls in self._tables:
+            raise ValueError(f"{cls.__qualname__} already has a table")
+        table = self._tables[cls] = Table(Layout(prototype), capacity)
+        return table
+
+    def table(self, cls: type[Any]) -> Table:
+        """The table of ``cls`` (KeyError if it has none)."""
+        return self._tables[cls]
+
+    def tables(self) -> Iterator[tuple[type[Any], Table]]:
+        """Every ``(type, table)``, in the order they were added."""
+        return iter(self._tables.items())
+
+
+@functools.cache
+def _origins() -> tuple[Origin, Origin]:
+    """(LOCAL, REMOTE), the origin codes 0 and 1 (imported late: the world imports this)."""
+    from testbed.ecs.world import Origin
+
+    return (Origin.LOCAL, Origin.REMOTE)
+
+
+class StoreSlot(Slot):
+    """A slot whose value, change tick and origin live in a table row (see the module
+    docstring); ``added`` stays an attribute. The value last set from Python is kept and
+    returned while the row's tick is the one it was set at."""
+
+    __slots__ = ("_cached", "_cached_tick", "_row", "_table")
+    _cached: object
+    _cached_tick: int | None
+
+    def __init__(self, table: Table, row: int, slot: Slot) -> None:
+        self._table = table
+        self._row = row
+        self.added = slot.added
+        self.origin = slot.origin
+        self.value = slot.value
+        self.changed = slot.changed
+
+    @property
+    def value(self) -> object:
+        cached = self._cached
+        if cached is GONE:
+            return GONE
+        tick = self._cached_tick
+        if tick is None or tick == self._table.ticks[self._row]:
+            return cached
+        cached = self._cached = self._table.layout.read(self._table.values[self._row])
+        self._cached_tick = int(self._table.ticks[self._row])
+        return cached
+
+    @value.setter
+    def value(self, component: object) -> None:
+        if component is GONE:
+            self._table.release(self._row)
+        else:
+            self._table.layout.write(self._table.values[self._row], component)
+        self._cached = component
+        self._cached_tick = None  # until the change tick is set (World.set sets it next)
+
+    @property
+    def changed(self) -> int:
+        return int(self._table.ticks[self._row])
+
+    @changed.setter
+    def changed(self, tick: int) -> None:
+        self._table.ticks[self._row] = tick
+        if self._cached_tick is None:
+            self._cached_tick = tick
+
+    @property
+    def origin(self) -> Origin:
+        return _origins()[int(self._table.origins[self._row])]
+
+    @origin.setter
+    def origin(self, origin: Origin) -> None:
+        self._table.origins[self._row] = _origins().index(origin)
+
+
+class StoreColumn(Column):
+    """A column whose slots are rows of ``table``; its newest change tick is the table's."""
+
+    __slots__ = ("table",)
+
+    def __init__(self, table: Table) -> None:
+        super().__init__()
+        self.table = table
+
+    def insert(self, entity: Entity, slot: Slot) -> None:
+        super().insert(entity, StoreSlot(self.table, self.table.allocate(), slot))
+
+    @property
+    def changed_max(self) -> int:
+        return int(self.table.ticks.max())
+
+    @changed_max.setter
+    def changed_max(self, tick: int) -> None:
+        pass  # the rows' ticks are the record
