@@ -32,7 +32,13 @@ import numpy as np
 import pytest
 from numba import njit
 
-from benchmarks.test_vehicle_bench import SIM_S, interleaved_best, make_vehicle, timed_floor
+from benchmarks.test_vehicle_bench import (
+    SIM_S,
+    drive,
+    interleaved_best,
+    make_vehicle,
+    timed_floor,
+)
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Phase, World
 from testbed.vehicle.allocation import CURRENT_TOLERANCE_A
@@ -213,21 +219,10 @@ def _recorded_frames(sim_s: float) -> list[_Frame]:
 
     vehicle.schedule.add(Phase.POST_UPDATE, record, name="record_frame")
     try:
-        _drive(vehicle, sim_s)
+        drive(vehicle, sim_s)
     finally:
         vehicle.close()
     return frames
-
-
-def _drive(vehicle: Vehicle, sim_s: float) -> None:
-    """``test_vehicle_bench.drive``'s operator: the yaw setpoint and zero sticks at 40 Hz."""
-    t = 0.0
-    while t < sim_s - 1e-9:
-        yaw = math.radians(20.0) * math.sin(2.0 * math.pi * t / 25.0)
-        vehicle.set_attitude(quat_from_euler(0.0, 0.0, yaw))
-        vehicle.command((0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
-        t += 0.025
-        vehicle.advance(t)
 
 
 def test_the_compiled_frame_makes_the_systems_wrench() -> None:
