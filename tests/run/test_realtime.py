@@ -966,11 +966,14 @@ def test_two_computers_each_write_what_they_observe(window: Window) -> None:
     writer_late_s = _lateness_ms(vehicle["hil"]["endpoints"]["vehicle"], "writer") / 1e3
     assert 0 <= received - written <= 1 + math.ceil(writer_late_s / IPG_S), modems
     assert modems[0]["rx_delivered"] + modems[0]["rx_collided"] == modems[1]["tx_transmissions"]
-    # a round trip's host delays: both runs' worst scheduler lateness, the vehicle's writer,
-    # the operator's reader and the emulator's own (what it held up crosses after the stall)
+    # a round trip's host delays: both runs' worst scheduler lateness, every transport thread
+    # on the way (the operator's writer, the vehicle's reader and writer, the operator's
+    # reader) and the emulator's own (what it held up crosses after the stall)
     late_ms = [
         float(operator["hil"]["scheduler_lateness_ms"]["max"]),
         float(vehicle["hil"]["scheduler_lateness_ms"]["max"]),
+        _lateness_ms(operator["hil"]["endpoints"]["operator"], "writer"),
+        _lateness_ms(vehicle["hil"]["endpoints"]["vehicle"], "reader"),
         _lateness_ms(vehicle["hil"]["endpoints"]["vehicle"], "writer"),
         _lateness_ms(operator["hil"]["endpoints"]["operator"], "reader"),
         1e3 * window.emulator_s("max", index=1),
@@ -1000,10 +1003,14 @@ def test_cli_one_computer_run(window: Window) -> None:
     assert up["frames_delivered"] >= 1
     # Each reply was delivered, lost in a collision its emulator counted (a loaded host held it
     # past the token margin), or still on its way when the run ended (one per IPG over a
-    # crossing, this run's own worst measured lateness and its emulator's: a reply written
+    # crossing, this run's own worst measured lateness, its transport threads' on the reply's
+    # way (the vehicle's writer, the operator's reader) and its emulator's: a reply written
     # while the emulator was held up waits in the port).
     modems = window.emulators[2]["modems"]
+    endpoints = metrics["hil"]["endpoints"]
     late_s = max(0.0, float(metrics["hil"]["scheduler_lateness_ms"]["max"]) / 1e3)
+    late_s += _lateness_ms(endpoints["vehicle"], "writer") / 1e3
+    late_s += _lateness_ms(endpoints["operator"], "reader") / 1e3
     late_s += window.emulator_s("max", index=2)
     in_flight = math.ceil((_link_s(window.config, 20 + CRLF) + late_s) / IPG_S)
     undelivered = down["frames_sent"] - down["frames_delivered"]
