@@ -17,8 +17,9 @@ The removal log grows with every removal; a node that removes components often s
 :meth:`World.trim_removals` with the oldest tick any reader still needs.
 
 This module is the world's API; column storage and query scans live in
-:mod:`testbed.ecs.storage`. No scheduling, no replication wire format, no I/O, no randomness.
-Standard library only.
+:mod:`testbed.ecs.storage`, store-backed columns (float64 tables, numpy) in
+:mod:`testbed.ecs.store`. No scheduling, no replication wire format, no I/O, no randomness;
+otherwise the standard library only.
 
 Size: the :class:`World` class is the API and most of the module (storage and scans are already
 in :mod:`testbed.ecs.storage`), so it stays whole, a little over 500 lines.
