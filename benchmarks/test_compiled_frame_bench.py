@@ -44,13 +44,20 @@ from testbed.ecs import Phase, World
 from testbed.vehicle.allocation import CURRENT_TOLERANCE_A
 from testbed.vehicle.components import ControlTargets, DepthReading, ForceIntent, ImuReading
 from testbed.vehicle.control_kernels import attitude_update, depth_update
-from testbed.vehicle.systems import Actuation, Controllers, PowerMeter, SimClock
+from testbed.vehicle.systems import (
+    Actuation,
+    Controllers,
+    PowerMeter,
+    SimClock,
+    mean_force_weight,
+)
 from testbed.vehicle.thrust_kernels import (
     allocate_pinv,
     interval_wrench,
     lag_step,
     total_current,
 )
+from testbed.vehicle.thrusters import lag_blend
 from testbed.vehicle.vehicle import Vehicle
 
 pytestmark = pytest.mark.benchmark
@@ -139,10 +146,8 @@ def _arrays_of(vehicle: Vehicle, interval_s: float) -> _Arrays:
     allocator = act.allocator
     assert allocator.method == "pinv"
     dynamics = act.dynamics
-    h, tau = interval_s, dynamics.time_constant_s
-    blend = 1.0 if tau == 0.0 else -math.expm1(-h / tau)
-    e = math.exp(-h / tau) if tau > 0.0 else 0.0
-    weight = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+    blend = lag_blend(interval_s, dynamics.time_constant_s)
+    weight = mean_force_weight(interval_s, dynamics.time_constant_s)
     power = world.resource(PowerMeter)
     current_table = power.current_of.__self__._current_table  # type: ignore[attr-defined]
     assert current_table is allocator._current_table

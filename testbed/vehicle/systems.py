@@ -95,6 +95,7 @@ __all__ = [
     "control_depth",
     "control_position",
     "ingest_commands",
+    "mean_force_weight",
     "meter_power",
     "publish_odometry",
     "read_sensors",
@@ -632,6 +633,15 @@ def allocate_thrust(world: World) -> None:
 # ---------------------------------------------------------------------------- POST_UPDATE
 
 
+def mean_force_weight(interval_s: float, time_constant_s: float) -> float:
+    """c, the weight of the end force in the mean force over an interval of a first-order lag
+    with the command held: ``F0 + (F1 − F0)·c`` with ``c = 1/(1 − e) − τ/h``, ``e = exp(−h/τ)``
+    (0.5 where e is 1, a zero interval)."""
+    tau, h = time_constant_s, interval_s
+    e = math.exp(-h / tau) if tau > 0.0 else 0.0
+    return 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+
+
 def actuate_thrusters(world: World) -> None:
     """Step the thruster plant over the coming interval; hand its wrench to the physics.
 
@@ -651,9 +661,7 @@ def actuate_thrusters(world: World) -> None:
     if act.mean_weight[0] == key:  # the interval is almost always the same
         c = act.mean_weight[1]
     else:
-        tau = key[1]
-        e = math.exp(-h / tau) if tau > 0.0 else 0.0
-        c = 1.0 / (1.0 - e) - tau / h if e < 1.0 else 0.5
+        c = mean_force_weight(h, key[1])
         act.mean_weight = (key, c)
     act.actual_forces_n = f1
     act.plant_wrench = interval_wrench(act.matrix, f0, f1, c)

@@ -51,6 +51,7 @@ __all__ = [
     "ThrusterFault",
     "ThrusterSpec",
     "known_thruster_configs",
+    "lag_blend",
     "load_thruster_config",
     "mate_rov_to_frd",
     "read_thruster_config",
@@ -88,6 +89,14 @@ class ThrusterFault:
             raise ValueError(f"fault value must be finite, got {self.value}")
         if self.mode == "degraded" and not 0.0 <= self.value <= 1.0:
             raise ValueError(f"degraded factor must be in [0, 1], got {self.value}")
+
+
+def lag_blend(dt_s: float, time_constant_s: float) -> float:
+    """The first-order lag's step over ``dt_s`` [s] with the command held: 1 − exp(−dt/τ)
+    (1 for τ = 0, no lag)."""
+    if time_constant_s == 0.0:
+        return 1.0
+    return -math.expm1(-dt_s / time_constant_s)
 
 
 class ThrusterDynamics:
@@ -211,7 +220,7 @@ class ThrusterDynamics:
         if dt_s != last_dt or tau != last_tau:  # the frame interval is almost always the same
             if not dt_s >= 0.0:
                 raise ValueError(f"dt_s must be >= 0, got {dt_s}")
-            blend = 1.0 if tau == 0.0 else -math.expm1(-dt_s / tau)
+            blend = lag_blend(dt_s, tau)
             self._blend = (dt_s, tau, blend)
         forces = self._forces.copy()
         lag_step(forces, command, self._gain, self._held, blend)
