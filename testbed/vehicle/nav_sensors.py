@@ -157,11 +157,8 @@ class _DelayedPositionSource:
         """
         if self._clock.due(time_s):
             self._clock.advance(time_s)
-            n0, n1, n2 = self._normals.take_many(3)
-            x, y, z = truth.position_ned_m
-            s = self._sigma
-            value = (float(x) + s * n0, float(y) + s * n1, float(z) + s * n2)
-            sigma = max(s, 1e-9)
+            value = self._normals.perturbed(truth.position_ned_m, self._sigma)
+            sigma = max(self._sigma, 1e-9)
             self._line.push(
                 Measurement(self.name, "position_ned", time_s, value, (sigma, sigma, sigma))
             )
@@ -371,9 +368,7 @@ class Accelerometer:
         """Measure the true NED acceleration now [m/s²]."""
         self._clock.advance(time_s)
         cfg = self.config
-        n0, n1, n2 = self._normals.take_many(3)
-        s = cfg.noise_m_s2
         (a0, a1, a2), (b0, b1, b2) = truth.acceleration_ned_m_s2, cfg.bias_m_s2
-        value = (a0 + b0 + s * n0, a1 + b1 + s * n1, a2 + b2 + s * n2)
-        sigma = max(s, 1e-9)
+        value = self._normals.perturbed((a0 + b0, a1 + b1, a2 + b2), cfg.noise_m_s2)
+        sigma = max(cfg.noise_m_s2, 1e-9)
         return Measurement(self.name, "acceleration_ned", time_s, value, (sigma, sigma, sigma))

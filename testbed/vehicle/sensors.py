@@ -104,6 +104,12 @@ class NormalDraws:
         self._index += 1
         return value
 
+    def perturbed(self, values: Sequence[float], sigma: float) -> tuple[float, float, float]:
+        """(3,) ``values`` each plus ``sigma`` times the next draw (white noise, 1σ ``sigma``)."""
+        n0, n1, n2 = self.take_many(3)
+        x, y, z = values
+        return (float(x) + sigma * n0, float(y) + sigma * n1, float(z) + sigma * n2)
+
     def take_many(self, count: int) -> list[float]:
         """The next ``count`` draws (the same as ``count`` calls of :meth:`take`)."""
         start = self._index
@@ -322,9 +328,4 @@ class PositionFix:
     def sample(self, time_s: float, position_ned_m: Sequence[float]) -> PositionReading:
         """Measure the true (3,) NED position [m] now (and schedule the next reading)."""
         self._clock.advance(time_s)
-        n = self.config.noise_m
-        take = self._normals.take
-        x, y, z = position_ned_m
-        return PositionReading(
-            time_s, (float(x) + n * take(), float(y) + n * take(), float(z) + n * take())
-        )
+        return PositionReading(time_s, self._normals.perturbed(position_ned_m, self.config.noise_m))
