@@ -297,30 +297,29 @@ def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_resul
     # (they are compiled there, before the clock starts): one line and 143, and the put-off
     # signal lands in the program's own code, still building (nothing to keep) or just started
     # (a marked partial set); a SIGTERM in the first callback once the clock runs keeps what ran.
-    args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out"]
+    def sigterm_in_first_callback(mode: str, out: Path) -> str:
+        """The one stderr line of a run that took SIGTERM in its first callback (``mode``:
+        while the vehicle is built, or once the clock runs), after its exit code 143."""
+        args = ["run", "s100-supervised-v1", "--set", "duration_s=20", "--no-plots", "--out"]
+        done = subprocess.run(
+            [sys.executable, "-c", IN_A_CALLBACK, mode, *args, str(out)],
+            capture_output=True,
+            text=True,
+            timeout=WAIT_S,
+        )
+        assert done.returncode == 143, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("testbed: interrupted"), done.stderr
+        return lines[0]
+
     out = tmp_path / "setup"
-    done = subprocess.run(
-        [sys.executable, "-c", IN_A_CALLBACK, "setup", *args, str(out)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert done.returncode == 143, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("testbed: interrupted"), done.stderr
-    if lines[0].startswith("testbed: interrupted at t = "):
+    line = sigterm_in_first_callback("setup", out)
+    if line.startswith("testbed: interrupted at t = "):
         assert check_set(out)["complete"] is False
     else:  # still building: nothing written, and the --out the CLI made is removed again
-        assert lines == ["testbed: interrupted"] and not out.exists()
+        assert line == "testbed: interrupted" and not out.exists()
     out = tmp_path / "run"
-    done = subprocess.run(
-        [sys.executable, "-c", IN_A_CALLBACK, "run", *args, str(out)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert done.returncode == 143, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("testbed: interrupted at t = "), done.stderr
+    line = sigterm_in_first_callback("run", out)
+    assert line.startswith("testbed: interrupted at t = "), line
     metrics = check_set(out)
     assert metrics["complete"] is False and 0.0 <= metrics["sim_s"] < 20.0
