@@ -16,7 +16,10 @@ whose value is unchanged alone, so that readers are not woken. It writes origin 
 This is stage 1 of the plan in ``docs/performance.md`` (the production compiled frame).
 
 Fields a table holds: ``float``, ``int`` (exact within ±2⁵³), ``bool``, enums (their index in
-the enum) and tuples of floats of the length the prototype has. Other field types are refused.
+the enum) and tuples of floats of the length the prototype has, all in the row; and ``str``
+(a label, such as the source of a force intent), kept beside the row in ``Table.texts``: a
+compiled frame cannot change it, and a row it writes keeps its labels. Other field types are
+refused.
 """
 
 from __future__ import annotations
@@ -34,9 +37,9 @@ from testbed.ecs.storage import GONE, Column, Slot
 if TYPE_CHECKING:
     from testbed.ecs.world import Entity, Origin
 
-__all__ = ["FrameStore", "Layout", "StoreColumn", "Table"]
+__all__ = ["FrameStore", "Layout", "RowView", "StoreColumn", "Table"]
 
-_FLOAT, _INT, _BOOL, _ENUM, _TUPLE = range(5)
+_FLOAT, _INT, _BOOL, _ENUM, _TUPLE, _TEXT = range(6)
 _EXACT_INT = 2**53
 
 
@@ -48,13 +51,14 @@ class Layout:
         TypeError: a field of a kind a table cannot hold, or one not set by ``__init__``.
     """
 
-    __slots__ = ("cls", "fields", "width")
+    __slots__ = ("cls", "fields", "n_texts", "width")
 
     def __init__(self, prototype: object) -> None:
         cls = type(prototype)
         self.cls = cls
         fields: list[tuple[str, int, int, Any]] = []  # (name, kind, offset, size or members)
         offset = 0
+        n_texts = 0
         for spec in dataclasses.fields(cls):  # type: ignore[arg-type]
             name = f"{cls.__qualname__}.{spec.name}"
             if not spec.init:
@@ -71,24 +75,36 @@ class Layout:
             elif isinstance(value, tuple) and all(type(v) is float for v in value):
                 fields.append((spec.name, _TUPLE, offset, len(value)))
                 offset += len(value) - 1
+            elif isinstance(value, str):
+                fields.append((spec.name, _TEXT, n_texts, 0))
+                n_texts += 1
+                continue
             else:
                 raise TypeError(
-                    f"{name}: a table holds floats, ints, bools, enums and tuples of floats, "
+                    f"{name}: a table holds floats, ints, bools, enums, tuples of floats and str, "
                     f"got {type(value).__name__}"
                 )
             offset += 1
         self.fields = tuple(fields)
         self.width = offset
+        self.n_texts = n_texts
 
-    def write(self, row: np.ndarray, value: object) -> None:
-        """Put ``value``'s fields into ``row`` (a ``(width,)`` view).
+    def write(self, row: np.ndarray, value: object) -> tuple[str, ...]:
+        """Put ``value``'s fields into ``row`` (a ``(width,)`` view); return its ``str`` fields
+        in field order (kept beside the row).
 
         Raises:
             ValueError: a tuple of another length than the layout's, an int beyond ±2⁵³.
+            TypeError: a ``str`` field holding something else.
         """
+        texts: list[str] = []
         for name, kind, offset, extra in self.fields:
             field = getattr(value, name)
-            if kind == _TUPLE:
+            if kind == _TEXT:
+                if type(field) is not str:
+                    raise TypeError(f"{self.cls.__qualname__}.{name}: a str, got {field!r}")
+                texts.append(field)
+            elif kind == _TUPLE:
                 if len(field) != extra:
                     raise ValueError(
                         f"{self.cls.__qualname__}.{name}: {extra} values, got {len(field)}"
@@ -100,9 +116,10 @@ class Layout:
                 if kind == _INT and not -_EXACT_INT <= field <= _EXACT_INT:
                     raise ValueError(f"{self.cls.__qualname__}.{name}: beyond ±2**53: {field}")
                 row[offset] = field
+        return tuple(texts)
 
-    def read(self, row: np.ndarray) -> object:
-        """A new component built from ``row``."""
+    def read(self, row: np.ndarray, texts: tuple[str, ...] = ()) -> object:
+        """A new component built from ``row`` and its ``str`` fields ``texts``."""
         xs = row.tolist()
         args: list[object] = []
         for _, kind, offset, extra in self.fields:
@@ -114,6 +131,8 @@ class Layout:
                 args.append(extra[int(xs[offset])])
             elif kind == _INT:
                 args.append(int(xs[offset]))
+            elif kind == _TEXT:
+                args.append(texts[offset])
             else:
                 args.append(xs[offset] != 0.0)
         return self.cls(*args)
@@ -121,9 +140,10 @@ class Layout:
 
 class Table:
     """One component type's rows: ``values`` (capacity, width) float64, ``ticks`` (capacity,)
-    int64 (0 for a free row), ``origins`` (capacity,) int8 (0 LOCAL, 1 REMOTE)."""
+    int64 (0 for a free row), ``origins`` (capacity,) int8 (0 LOCAL, 1 REMOTE), and ``texts``,
+    each row's ``str`` fields."""
 
-    __slots__ = ("_free", "capacity", "layout", "origins", "ticks", "values")
+    __slots__ = ("_free", "capacity", "layout", "origins", "texts", "ticks", "values")
 
     def __init__(self, layout: Layout, capacity: int) -> None:
         if capacity < 1:
@@ -133,6 +153,7 @@ class Table:
         self.values = np.zeros((capacity, layout.width))
         self.ticks = np.zeros(capacity, dtype=np.int64)
         self.origins = np.zeros(capacity, dtype=np.int8)
+        self.texts: list[tuple[str, ...]] = [()] * capacity
         self._free = list(range(capacity - 1, -1, -1))  # the lowest row first
 
     def allocate(self) -> int:
@@ -147,10 +168,30 @@ class Table:
             )
         return self._free.pop()
 
+    def write(self, row: int, value: object) -> None:
+        """Put ``value`` into ``row`` (its fields; not its tick)."""
+        self.texts[row] = self.layout.write(self.values[row], value)
+
+    def read(self, row: int) -> object:
+        """A new component built from ``row``."""
+        return self.layout.read(self.values[row], self.texts[row])
+
     def release(self, row: int) -> None:
         """Free ``row`` (its tick goes back to 0)."""
         self.ticks[row] = 0
         self._free.append(row)
+
+
+class RowView:
+    """One entity's row of a table, as a compiled frame writes it: ``values``, the row's
+    ``(width,)`` view, and ``tick``, a ``(1,)`` view of its change tick (write the fields, then
+    the tick, only when a field changed; see the module docstring)."""
+
+    __slots__ = ("tick", "values")
+
+    def __init__(self, table: Table, row: int) -> None:
+        self.values = table.values[row]
+        self.tick = table.ticks[row : row + 1]
 
 
 class FrameStore:
@@ -216,7 +257,7 @@ class StoreSlot(Slot):
         tick = self._cached_tick
         if tick is None or tick == self._table.ticks[self._row]:
             return cached
-        cached = self._cached = self._table.layout.read(self._table.values[self._row])
+        cached = self._cached = self._table.read(self._row)
         self._cached_tick = int(self._table.ticks[self._row])
         return cached
 
@@ -225,7 +266,7 @@ class StoreSlot(Slot):
         if component is GONE:
             self._table.release(self._row)
         else:
-            self._table.layout.write(self._table.values[self._row], component)
+            self._table.write(self._row, component)
         self._cached = component
         self._cached_tick = None  # until the change tick is set (World.set sets it next)
 
@@ -259,6 +300,12 @@ class StoreColumn(Column):
 
     def insert(self, entity: Entity, slot: Slot) -> None:
         super().insert(entity, StoreSlot(self.table, self.table.allocate(), slot))
+
+    def row_view(self, entity: Entity) -> RowView:
+        """``entity``'s row (KeyError if it has none)."""
+        slot = self.slots[entity]
+        assert isinstance(slot, StoreSlot)
+        return RowView(self.table, slot._row)
 
     @property
     def changed_max(self) -> int:

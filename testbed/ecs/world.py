@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from typing import Any, NewType, TypeVar, overload
 
 from testbed.ecs.storage import Column, Slot, iter_all, iter_filtered, scan_one
-from testbed.ecs.store import FrameStore, StoreColumn
+from testbed.ecs.store import FrameStore, RowView, StoreColumn
 
 __all__ = [
     "Entity",
@@ -555,6 +555,21 @@ class World:
                 raise ValueError(f"{cls.__qualname__} already has a column in this world")
         for cls, table in tables:
             self._columns[cls] = StoreColumn(table)
+
+    def row_view(self, entity: Entity, cls: type[Any]) -> RowView:
+        """Where a store-backed component lives (:meth:`use_store`): ``entity``'s row of the
+        ``cls`` table, for a compiled frame to write. The view stays valid until the component
+        is removed.
+
+        Raises:
+            LookupError: ``cls`` is not store-backed, or ``entity`` has no such component.
+        """
+        column = self._columns.get(cls)
+        if not isinstance(column, StoreColumn):
+            raise LookupError(f"{cls.__qualname__} is not kept in a frame store")
+        if entity not in column.slots:
+            raise LookupError(f"entity {entity} has no {cls.__qualname__} component")
+        return column.row_view(entity)
 
     def _new_column(self, cls: type[Any]) -> Column:
         check_component_type(cls)

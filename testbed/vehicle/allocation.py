@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -46,13 +46,19 @@ from testbed.vehicle.thrust_kernels import (
     PWM_SIGN,
     STUCK,
     allocate_pinv,
+    allocate_rows,
     current_scale,
     limit_forces,
     pinv_forces,
+    put_output,
+    sum_rows,
     total_current,
 )
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.thrusters import FaultMode, ThrusterFault
+
+if TYPE_CHECKING:
+    from testbed.ecs.store import RowView, Table
 
 __all__ = [
     "AXIS_DIRECTION_TOLERANCE",
@@ -183,6 +189,8 @@ class Allocator:
         )
         self._failures: dict[int, ThrusterFault] = {}
         self._axis_maxima: np.ndarray | None = None
+        # allocate_rows' limits: f_lo, f_hi, the slew step (set per call), cap, tolerance
+        self._limits = np.array([self._f_lo, self._f_hi, -1.0, 0.0, CURRENT_TOLERANCE_A])
         self._rebuild()
         # Compile (or load from numba's cache) the per-frame kernel now, on a scratch copy of
         # the work rows, not in the first frame of a timed run (as Physics and the loops do).
@@ -370,6 +378,60 @@ class Allocator:
             self._pwm_table,
         )
 
+    def step_rows(
+        self,
+        intents: Table,
+        dt_s: float,
+        requested: np.ndarray,
+        output: RowView,
+        tick: int,
+    ) -> float:
+        """:meth:`step` of the sum of a force-intent table's live rows, written into a
+        ThrusterOutput row (the frame's path, :func:`~testbed.vehicle.systems.allocate_thrust`).
+
+        Args:
+            intents: the table of the frame's force intents: (rows, 6) wrenches [N, N·m], FRD,
+                summed in row order (:func:`~testbed.vehicle.thrust_kernels.sum_rows`).
+            dt_s: time since the previous command [s] (> 0; the slew limit applies).
+            requested: (6,) receives the sum.
+            output: the ThrusterOutput row (forces, PWM, currents, scale), its tick set to
+                ``tick`` when a value changed.
+            tick: the running system's world tick.
+
+        Returns:
+            The scale, as :meth:`step`.
+
+        Raises:
+            ValueError: a sum that is not finite, or dt_s not > 0.
+        """
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        if self.method == "pinv":  # the common case, one compiled call
+            limits = self._limits
+            limits[2] = self._slew * dt_s
+            scale = allocate_rows(
+                intents.values,
+                intents.ticks,
+                requested,
+                self._stuck_wrench,
+                self._pinv,
+                limits,
+                self._work,
+                self._thrusters,
+                self._current_table,
+                self._pwm_table,
+                output.values,
+                output.tick,
+                tick,
+            )
+            if scale != scale:
+                raise ValueError(f"wrench must be finite, got {requested.tolist()}")
+            return scale
+        sum_rows(intents.values, intents.ticks, requested)
+        scale = self.step(requested, dt_s)
+        put_output(self._work, scale, output.values, output.tick, tick)
+        return scale
+
     @property
     def output(self) -> np.ndarray:
         """(3, n) the last :meth:`step`'s commands: forces [N], PWM [µs], currents [A] (a
@@ -469,6 +531,7 @@ class Allocator:
         self._thrusters[STUCK] = stuck_forces
         stuck_current = total_current(stuck_forces, 1.0, self._current_table)  # 0 A at 0 N
         self._cap_active = self._current_limit_a - stuck_current
+        self._limits[3] = self._cap_active
         self._work[PREVIOUS] *= commandable
         self._axis_maxima = None
 

@@ -44,10 +44,10 @@ from testbed.common.geometry import (
     yaw_only,
 )
 from testbed.ecs import Entity, Phase, Schedule, System, World
+from testbed.ecs.store import RowView, Table
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.components import (
     ActiveMode,
-    AppliedWrench,
     Armed,
     ArmRequest,
     AttitudeSetpoint,
@@ -58,7 +58,6 @@ from testbed.vehicle.components import (
     DepthSetpoint,
     FailsafeLevel,
     FailsafeStatus,
-    ForceIntent,
     ImuReading,
     ModeRequest,
     MovementCommand,
@@ -77,7 +76,7 @@ from testbed.vehicle.control import (
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
-from testbed.vehicle.thrust_kernels import interval_wrench
+from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench, put_wrench_pair
 from testbed.vehicle.thrusters import ThrusterDynamics
 
 __all__ = [
@@ -108,10 +107,6 @@ __all__ = [
 Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
-_ZERO_INTENTS = {
-    source: ForceIntent(source, ZERO6)
-    for source in ("pilot", "depth", "attitude", "position", "velocity")
-}
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
 """What :func:`ingest_commands` reacts to."""
@@ -202,6 +197,7 @@ class Controllers:
         failsafe: command-staleness failsafe timeouts.
         axis_maxima: (6,) allocator axis maxima [N, N·m] (stick scaling; 0 disables an axis).
         intents: the ForceIntent entity of each source (pilot, depth, attitude, position).
+        intent_rows: each source's ForceIntent row (:func:`set_intent` writes it).
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
@@ -220,6 +216,7 @@ class Controllers:
     failsafe: FailsafeConfig
     axis_maxima: tuple[float, ...]
     intents: dict[str, Entity] = field(default_factory=dict)
+    intent_rows: dict[str, RowView] = field(default_factory=dict)
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
@@ -240,10 +237,13 @@ class Actuation:
     """The allocator, the thruster plant and the wrench handed to the physics.
 
     Attributes:
-        allocator: the controller's allocation (:meth:`~.Allocator.step` per frame).
+        allocator: the controller's allocation (:meth:`~.Allocator.step_rows` per frame).
         dynamics: the plant's thrusters (first-order lag of ``time_constant_s``, faults).
         matrix: (6, n) the *physical* configuration ``T`` [N, N·m per N], body FRD (the
             plant's geometry, whatever the allocator believes).
+        intents: the store's :class:`ForceIntent` table (the frame's intents, summed by row).
+        output: the vehicle's :class:`ThrusterOutput` row, written by the allocation.
+        applied: the vehicle's :class:`AppliedWrench` row, written by the actuation.
         interval_s: time until the next frame [s] (the plant holds the command that long);
             set by the vehicle before each frame.
         commanded_forces_n: (n,) forces commanded this frame [N] (0 when disarmed).
@@ -257,10 +257,13 @@ class Actuation:
     allocator: Allocator
     dynamics: ThrusterDynamics
     matrix: np.ndarray
+    intents: Table
+    output: RowView
+    applied: RowView
     interval_s: float = 0.01
     commanded_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     actual_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    requested: Wrench6 = ZERO6
+    requested: np.ndarray = field(default_factory=lambda: np.zeros(6))
     plant_wrench: Wrench6 = ZERO6
     mean_weight: tuple[tuple[float, float], float] = ((math.nan, math.nan), 0.5)
 
@@ -313,10 +316,10 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
 
 
 def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
-    intent = _ZERO_INTENTS.get(source) if wrench == ZERO6 else None
-    if intent is None:
-        intent = ForceIntent(source, wrench)
-    world.set(controllers.intents[source], intent)
+    """Write ``source``'s :class:`ForceIntent` wrench [N, N·m], FRD, into its row (a change
+    only when it differs)."""
+    row = controllers.intent_rows[source]
+    put_wrench(row.values, row.tick, world.tick, *wrench)
 
 
 # ------------------------------------------------------------------------------ PRE_UPDATE
@@ -447,7 +450,7 @@ def run_pilot_interface(world: World) -> None:
         )
         set_intent(world, ctl, "pilot", (fx, fy, fz, w[3], w[4], w[5]))
     else:
-        world.set(ctl.intents["pilot"], cache.intent)
+        set_intent(world, ctl, "pilot", cache.wrench)
     if not (depth_hold or attitude_hold):
         return
     targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
@@ -474,7 +477,7 @@ class _PilotCache:
     :func:`~testbed.vehicle.pilot.pilot_trims` of one set of sticks in one mode, kept while
     the sticks (the same object), the mode, the axis maxima and the gains stay the same."""
 
-    __slots__ = ("axis_maxima", "gains", "intent", "modes", "sticks", "trims", "wrench")
+    __slots__ = ("axis_maxima", "gains", "modes", "sticks", "trims", "wrench")
 
     def __init__(self, ctl: Controllers, sticks: tuple[float, ...]) -> None:
         flags = ctl.flags
@@ -491,7 +494,6 @@ class _PilotCache:
             attitude_hold=flags.attitude_hold,
         )
         self.wrench: Wrench6 = w
-        self.intent = ForceIntent("pilot", w)  # the body intent outside depth hold
         self.trims = pilot_trims(sticks, gains=gains, precision=flags.precision)
 
     def holds(self, ctl: Controllers, sticks: tuple[float, ...]) -> bool:
@@ -602,32 +604,24 @@ def control_attitude(world: World) -> None:
 
 
 def allocate_thrust(world: World) -> None:
-    """Σ force intents → allocator → per-thruster commands (all off when disarmed)."""
+    """Σ force intents → allocator → per-thruster commands (all off when disarmed).
+
+    The intents are summed in the order of their rows in the store (the order their entities
+    were spawned in); the allocation writes the vehicle's :class:`ThrusterOutput` row.
+    """
     ctl = world.resource(Controllers)
     act = world.resource(Actuation)
     if not ctl.flags.armed:
         act.allocator.reset()  # re-arming slews up from 0 N
         n = act.matrix.shape[1]
-        act.requested = ZERO6
+        act.requested[:] = 0.0
         act.commanded_forces_n = np.zeros(n)
         world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
         return
-    x = y = z = k = m = nn = 0.0
-    for _, intent in world.query1(ForceIntent):
-        w = intent.wrench
-        x += w[0]
-        y += w[1]
-        z += w[2]
-        k += w[3]
-        m += w[4]
-        nn += w[5]
-    requested = act.requested = (x, y, z, k, m, nn)
     allocator = act.allocator
-    scale = allocator.step(requested, world.resource(SimClock).dt_s)
-    output = allocator.output
-    act.commanded_forces_n = output[0].copy()
-    forces, pwm, currents = output.tolist()
-    world.set(ctl.vehicle, ThrusterOutput(tuple(forces), tuple(pwm), tuple(currents), scale))
+    dt = world.resource(SimClock).dt_s
+    allocator.step_rows(act.intents, dt, act.requested, act.output, world.tick)
+    act.commanded_forces_n = allocator.output[0].copy()
 
 
 # ---------------------------------------------------------------------------- POST_UPDATE
@@ -664,9 +658,10 @@ def actuate_thrusters(world: World) -> None:
         c = mean_force_weight(h, key[1])
         act.mean_weight = (key, c)
     act.actual_forces_n = f1
-    act.plant_wrench = interval_wrench(act.matrix, f0, f1, c)
-    vehicle = world.resource(Controllers).vehicle
-    world.set(vehicle, AppliedWrench(act.requested, act.plant_wrench))
+    applied = act.applied  # the vehicle's AppliedWrench (requested, achieved)
+    act.plant_wrench = put_wrench_pair(
+        act.matrix, f0, f1, c, act.requested, applied.values, applied.tick, world.tick
+    )
 
 
 def meter_power(world: World) -> None:

@@ -42,6 +42,7 @@ __all__ = [
     "PWM_SIGN",
     "STUCK",
     "allocate_pinv",
+    "allocate_rows",
     "current_scale",
     "interval_wrench",
     "lag_step",
@@ -49,6 +50,10 @@ __all__ = [
     "lookup",
     "lookup_many",
     "pinv_forces",
+    "put_output",
+    "put_wrench",
+    "put_wrench_pair",
+    "sum_rows",
     "total_current",
 ]
 
@@ -334,3 +339,131 @@ def interval_wrench(
         m += matrix[4, i] * f
         nn += matrix[5, i] * f
     return (x, y, z, k, m, nn)
+
+
+# ------------------------------------------------------------------ component rows
+#
+# The frame's store-backed components (:mod:`testbed.ecs.store`): a kernel writes a row's fields
+# and then, only when a field changed, the row's change tick (``tick_cell``, the row's one-element
+# view of its table's ticks) with the tick of the system that runs it.
+
+
+@numba.njit(cache=True)
+def sum_rows(rows: np.ndarray, ticks: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """Σ of the live rows (tick > 0) of a (rows, 6) wrench table into ``out`` (6,), row by row
+    from 0.0 in row order (the force intents' sum, [N, N·m], body FRD)."""
+    for j in range(6):
+        out[j] = 0.0
+    for r in range(rows.shape[0]):
+        if ticks[r] > 0:
+            for j in range(6):
+                out[j] += rows[r, j]
+
+
+@numba.njit(cache=True)
+def put_wrench(
+    row: np.ndarray,
+    tick_cell: np.ndarray,
+    tick: int,
+    x: float,
+    y: float,
+    z: float,
+    k: float,
+    m: float,
+    n: float,
+) -> None:  # pragma: no cover - compiled
+    """A force intent's wrench row (X, Y, Z, K, M, N) [N, N·m], FRD; its tick moves only when a
+    value changed."""
+    changed = False
+    for j, value in enumerate((x, y, z, k, m, n)):
+        if row[j] != value:
+            row[j] = value
+            changed = True
+    if changed:
+        tick_cell[0] = tick
+
+
+@numba.njit(cache=True)
+def put_output(
+    work: np.ndarray, scale: float, row: np.ndarray, tick_cell: np.ndarray, tick: int
+) -> None:  # pragma: no cover - compiled
+    """A ThrusterOutput row (forces, PWM, currents, scale) from ``work``'s first three rows and
+    ``scale``; its tick moves only when a value changed."""
+    n = work.shape[1]
+    changed = row[3 * n] != scale
+    for k in range(3):
+        for i in range(n):
+            x = work[k, i]
+            if row[k * n + i] != x:
+                row[k * n + i] = x
+                changed = True
+    row[3 * n] = scale
+    if changed:
+        tick_cell[0] = tick
+
+
+@numba.njit(cache=True)
+def allocate_rows(
+    intents: np.ndarray,
+    intent_ticks: np.ndarray,
+    requested: np.ndarray,
+    offset: np.ndarray,
+    pinv: np.ndarray,
+    limits: np.ndarray,
+    work: np.ndarray,
+    thrusters: np.ndarray,
+    current_table: np.ndarray,
+    pwm_table: np.ndarray,
+    output: np.ndarray,
+    output_tick: np.ndarray,
+    tick: int,
+) -> float:  # pragma: no cover - compiled
+    """The allocation of one frame on component rows: :func:`sum_rows` of the intents into
+    ``requested``, :func:`allocate_pinv` of it with ``limits`` = (f_lo, f_hi, slew step, current
+    cap, tolerance), and :func:`put_output`. Returns the scale, NaN for a sum that is not finite
+    (nothing is written then)."""
+    sum_rows(intents, intent_ticks, requested)
+    scale = allocate_pinv(
+        requested,
+        offset,
+        pinv,
+        limits[0],
+        limits[1],
+        limits[2],
+        limits[3],
+        limits[4],
+        work,
+        thrusters,
+        current_table,
+        pwm_table,
+    )
+    if scale == scale:
+        put_output(work, scale, output, output_tick, tick)
+    return scale
+
+
+@numba.njit(cache=True)
+def put_wrench_pair(
+    matrix: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    weight: float,
+    requested: np.ndarray,
+    row: np.ndarray,
+    tick_cell: np.ndarray,
+    tick: int,
+) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
+    """:func:`interval_wrench` of the interval, written with ``requested`` (6,) into an
+    AppliedWrench row (requested, achieved); returns the achieved wrench [N, N·m], FRD."""
+    w = interval_wrench(matrix, start, end, weight)
+    changed = False
+    for j in range(6):
+        if row[j] != requested[j]:
+            row[j] = requested[j]
+            changed = True
+        if row[6 + j] != w[j]:
+            row[6 + j] = w[j]
+            changed = True
+    if changed:
+        tick_cell[0] = tick
+    return w

@@ -41,6 +41,7 @@ import numpy as np
 from testbed.common.geometry import Quaternion, quat_rotate
 from testbed.config import build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
+from testbed.ecs.store import FrameStore
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.autonomy import (
     AutonomyConfig,
@@ -51,6 +52,7 @@ from testbed.vehicle.autonomy import (
 from testbed.vehicle.camera import CameraConfig, CapturedImage, camera_pose, underwater_grey
 from testbed.vehicle.components import (
     ActiveMode,
+    AppliedWrench,
     Armed,
     ArmRequest,
     AttitudeSetpoint,
@@ -61,6 +63,7 @@ from testbed.vehicle.components import (
     ForceIntent,
     ModeRequest,
     MovementCommand,
+    ThrusterOutput,
     VehicleTag,
 )
 from testbed.vehicle.control import (
@@ -358,6 +361,15 @@ class Vehicle:
         )
 
         self.world = World()
+        # the frame's components that compiled kernels write: kept in a frame store
+        zero6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        rest = ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0)  # disarmed
+        store = FrameStore()
+        store.add(ForceIntent("", zero6), capacity=8)
+        store.add(rest, capacity=1)
+        store.add(AppliedWrench(zero6, zero6), capacity=1)
+        self.world.use_store(store)
+        self.store = store
         self.schedule = build_schedule(
             inbound,
             outbound,
@@ -376,6 +388,8 @@ class Vehicle:
             Armed(False),
             ActiveMode(start_mode),
             FailsafeStatus(FailsafeLevel.NOMINAL, 0.0),
+            rest,
+            AppliedWrench(zero6, zero6),
         )
         gains = config.gains
         self.controllers = Controllers(
@@ -389,9 +403,15 @@ class Vehicle:
             velocity_control=autonomy is not None and autonomy.controller == "ismc",
         )
         for source in ("pilot", "depth", "attitude"):
-            zero = ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
-            self.controllers.intents[source] = world.spawn(zero)
-        self.actuation = Actuation(self.allocator, self.dynamics, self._matrix)
+            self._spawn_intent(source)
+        self.actuation = Actuation(
+            self.allocator,
+            self.dynamics,
+            self._matrix,
+            store.table(ForceIntent),
+            world.row_view(self.entity, ThrusterOutput),
+            world.row_view(self.entity, AppliedWrench),
+        )
         self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
         self.truth = PlantTruth()
         self.power = PowerMeter(config.supply_voltage_v, t200.total_current_a)
@@ -402,16 +422,14 @@ class Vehicle:
         self.operator_entity: Entity = world.spawn(Replicate(), origin=Origin.REMOTE)
         # GUIDED's intent entity, spawned after the others so the entity ids (and the summing
         # order) of the runs before GUIDED existed stay the same
-        zero = ForceIntent("position", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
-        self.controllers.intents["position"] = world.spawn(zero)
+        self._spawn_intent("position")
         # localization and autonomy, last: runs without them keep their entities and streams
         if navigation is not None:
             extra = () if fix is None else (FixSource(fix),)
             world.insert_resource(build_navigation(navigation, rng.spawn(1)[0], extra))
         if autonomy is not None:
             world.insert_resource(build_autonomy(autonomy, self.model))
-            velocity = ForceIntent("velocity", (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
-            self.controllers.intents["velocity"] = world.spawn(velocity)
+            self._spawn_intent("velocity")
         self.manipulator: Manipulator | None = None
         if config.arm is not None:
             self.manipulator = build_manipulator(config.arm, arm_model)
@@ -424,6 +442,13 @@ class Vehicle:
         self._accelerometer = navigation is not None and navigation.accelerometer is not None
         self._last_velocity_ned: tuple[float, float, float] | None = None
         self.frames = 0
+
+    def _spawn_intent(self, source: str) -> None:
+        """An entity with ``source``'s zero :class:`ForceIntent` (its row sums in spawn order)."""
+        world = self.world
+        entity = world.spawn(ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+        self.controllers.intents[source] = entity
+        self.controllers.intent_rows[source] = world.row_view(entity, ForceIntent)
 
     # ------------------------------------------------------------------------- running
 

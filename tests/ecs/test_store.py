@@ -89,7 +89,7 @@ def test_every_field_kind_goes_through_a_row_and_back() -> None:
     assert layout.width == 1 + 4 + 1 + 1 + 1
     row = np.zeros(layout.width)
     value = Reading(12.5, (0.5, -0.5, 0.5, -0.5), 2**53, True, Mode.HOLD)
-    layout.write(row, value)
+    assert layout.write(row, value) == ()
     assert row.tolist() == [12.5, 0.5, -0.5, 0.5, -0.5, 2.0**53, 1.0, 1.0]
     back = layout.read(row)
     assert back == value and type(back.seq) is int and type(back.armed) is bool  # type: ignore[attr-defined]
@@ -131,13 +131,36 @@ def test_rows_are_freed_and_reused_and_a_full_table_says_so() -> None:
     assert world.get(second, Reading) == PROTOTYPE
 
 
+@dataclass(frozen=True, slots=True)
+class Labelled:
+    source: str
+    wrench: tuple[float, float]
+
+
+def test_a_label_is_kept_beside_its_row_and_survives_a_frames_write() -> None:
+    store = FrameStore()
+    table = store.add(Labelled("", (0.0, 0.0)), capacity=2)
+    assert table.layout.width == 2
+    world = World()
+    world.use_store(store)
+    pilot = world.spawn(Labelled("pilot", (1.0, 2.0)))
+    depth = world.spawn(Labelled("depth", (0.0, 0.0)))
+    world.advance()
+    table.values[0] = (3.0, 4.0)  # a frame writes the wrench, never the label
+    table.ticks[0] = world.tick
+    assert world.get(pilot, Labelled) == Labelled("pilot", (3.0, 4.0))
+    assert world.get(depth, Labelled) == Labelled("depth", (0.0, 0.0))
+    with pytest.raises(TypeError, match=r"Labelled\.source: a str, got 7"):
+        world.set(depth, Labelled(7, (0.0, 0.0)))  # type: ignore[arg-type]
+
+
 def test_fields_a_table_cannot_hold_and_late_stores_are_refused() -> None:
     @dataclass(frozen=True, slots=True)
-    class Named:
-        name: str
+    class Listed:
+        names: list[str]
 
-    with pytest.raises(TypeError, match=r"Named\.name: a table holds floats"):
-        FrameStore().add(Named("pilot"))
+    with pytest.raises(TypeError, match=r"Listed\.names: a table holds floats"):
+        FrameStore().add(Listed(["pilot"]))
     store = FrameStore()
     store.add(PROTOTYPE)
     with pytest.raises(ValueError, match="already has a table"):
