@@ -193,6 +193,14 @@ class RowView:
         self.values = table.values[row]
         self.tick = table.ticks[row : row + 1]
 
+    @classmethod
+    def detached(cls, width: int) -> RowView:
+        """A row of ``width`` floats of its own, in no table (a scratch row)."""
+        view = cls.__new__(cls)
+        view.values = np.zeros(width)
+        view.tick = np.zeros(1, dtype=np.int64)
+        return view
+
 
 class FrameStore:
     """The tables of the component types a world keeps store-backed."""

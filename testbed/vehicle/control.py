@@ -20,12 +20,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from testbed.common.geometry import Quaternion, Vec3
 from testbed.config import check, check_range
+
+if TYPE_CHECKING:
+    from testbed.ecs.store import RowView
 from testbed.vehicle.control_kernels import (
     ATTITUDE_STATE_SIZE,
     BACK_CALCULATION,
@@ -37,7 +40,9 @@ from testbed.vehicle.control_kernels import (
     MAX_TARGET_RATE_HOLD_S,
     P_TERM,
     PID_STATE_SIZE,
+    attitude_rows,
     attitude_update,
+    depth_rows,
     depth_update,
     pid_update,
     warm_up,
@@ -290,6 +295,36 @@ class AttitudeController:
             axes if type(axes) is tuple else (bool(axes[0]), bool(axes[1]), bool(axes[2])),
         )
 
+    def update_rows(
+        self,
+        targets: RowView,
+        imu: RowView,
+        dt_s: float,
+        axes: tuple[bool, bool, bool],
+        intent: RowView,
+        tick: int,
+    ) -> None:
+        """:meth:`update` on the frame store's rows (a frame's path): the ControlTargets and
+        ImuReading rows in, the torque written into a ForceIntent row at ``tick``
+        (:func:`~.control_kernels.attitude_rows`).
+
+        Raises:
+            ValueError: ``dt_s`` is not positive.
+        """
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        attitude_rows(
+            self._state,
+            self._gains,
+            targets.values,
+            imu.values,
+            dt_s + 0.0,
+            axes,
+            intent.values,
+            intent.tick,
+            tick,
+        )
+
 
 class DepthController:
     """Depth hold: PID on ``e = target − depth`` (m, positive down) → world-down force [N].
@@ -339,6 +374,37 @@ class DepthController:
             _floats4(attitude),
             float(dt_s),
             float(self.feedforward_n),
+        )
+
+    def update_rows(
+        self,
+        targets: RowView,
+        reading: RowView,
+        imu: RowView,
+        dt_s: float,
+        intent: RowView,
+        tick: int,
+    ) -> None:
+        """:meth:`update` on the frame store's rows (a frame's path): the ControlTargets,
+        DepthReading and ImuReading rows in, the force written into a ForceIntent row at
+        ``tick`` (:func:`~.control_kernels.depth_rows`).
+
+        Raises:
+            ValueError: ``dt_s`` is not positive.
+        """
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s}")
+        depth_rows(
+            self._pid_state,
+            self._pid_gains,
+            float(self.feedforward_n),
+            targets.values,
+            reading.values,
+            imu.values,
+            dt_s + 0.0,
+            intent.values,
+            intent.tick,
+            tick,
         )
 
 

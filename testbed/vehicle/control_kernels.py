@@ -40,6 +40,8 @@ from testbed.common.geometry import (
     quat_multiply,
     quat_rotate_inverse,
 )
+from testbed.vehicle import thrust_kernels
+from testbed.vehicle.thrust_kernels import put_wrench
 
 __all__ = [
     "ATTITUDE_STATE_SIZE",
@@ -56,7 +58,9 @@ __all__ = [
     "PID_GAINS_SIZE",
     "PID_STATE_SIZE",
     "P_TERM",
+    "attitude_rows",
     "attitude_update",
+    "depth_rows",
     "depth_update",
     "pid_update",
     "warm_up",
@@ -236,6 +240,55 @@ def depth_update(
     return quat_rotate_inverse(attitude, (0.0, 0.0, down_n))
 
 
+# ------------------------------------------------------------------ component rows
+#
+# The loops on the frame store's rows (:mod:`testbed.ecs.store`; field order of the components):
+# ControlTargets (depth_m, quaternion_wxyz), DepthReading (time_s, pressure_pa, depth_m),
+# ImuReading (time_s, quaternion_wxyz, rates_rad_s); the output is the loop's ForceIntent row
+# (its tick moves only when the wrench changed, :func:`~.thrust_kernels.put_wrench`).
+
+
+@numba.njit(cache=True)
+def depth_rows(
+    state: np.ndarray,
+    gains: np.ndarray,
+    feedforward_n: float,
+    targets: np.ndarray,
+    reading: np.ndarray,
+    imu: np.ndarray,
+    dt_s: float,
+    intent: np.ndarray,
+    intent_tick: np.ndarray,
+    tick: int,
+) -> None:  # pragma: no cover - compiled
+    """:func:`depth_update` of the rows' target depth, measured depth and attitude, written as
+    the depth loop's force intent (X, Y, Z, 0, 0, 0) [N]."""
+    attitude = (imu[1], imu[2], imu[3], imu[4])
+    fx, fy, fz = depth_update(state, gains, targets[0], reading[2], attitude, dt_s, feedforward_n)
+    put_wrench(intent, intent_tick, tick, fx, fy, fz, 0.0, 0.0, 0.0)
+
+
+@numba.njit(cache=True)
+def attitude_rows(
+    state: np.ndarray,
+    gains: np.ndarray,
+    targets: np.ndarray,
+    imu: np.ndarray,
+    dt_s: float,
+    axes: tuple[bool, bool, bool],
+    intent: np.ndarray,
+    intent_tick: np.ndarray,
+    tick: int,
+) -> None:  # pragma: no cover - compiled
+    """:func:`attitude_update` of the rows' target attitude, measured attitude and rates,
+    written as the attitude loop's torque intent (0, 0, 0, K, M, N) [N·m]."""
+    target = (targets[1], targets[2], targets[3], targets[4])
+    current = (imu[1], imu[2], imu[3], imu[4])
+    rates = (imu[5], imu[6], imu[7])
+    tx, ty, tz = attitude_update(state, gains, target, current, rates, dt_s, axes)
+    put_wrench(intent, intent_tick, tick, 0.0, 0.0, 0.0, tx, ty, tz)
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel here, once per process: the
@@ -245,6 +298,24 @@ def warm_up() -> None:
     pid_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.01, 0.0, False)
     attitude_update(np.zeros(ATTITUDE_STATE_SIZE), gains, level, level, zero, 0.01, (True,) * 3)
     depth_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.0, level, 0.01, 0.0)
+    row, tick_cell, imu = np.zeros(6), np.zeros(1, dtype=np.int64), np.zeros(8)
+    depth_rows(
+        np.zeros(PID_STATE_SIZE),
+        gains[0],
+        0.0,
+        np.zeros(5),
+        np.zeros(3),
+        imu,
+        0.01,
+        row,
+        tick_cell,
+        1,
+    )
+    attitude_rows(
+        np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, tick_cell, 1
+    )
 
 
-jit.refresh_stale_caches((attitude_update, depth_update), (geometry, jit))
+jit.refresh_stale_caches(
+    (attitude_update, depth_update, attitude_rows, depth_rows), (geometry, jit, thrust_kernels)
+)

@@ -27,10 +27,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from testbed.common.components import DepthReading, ImuReading, PositionReading
-from testbed.common.geometry import Quaternion, quat_multiply
+from testbed.common.geometry import Quaternion
 from testbed.config import check_range
+from testbed.ecs.store import Layout, RowView
+from testbed.vehicle import sensor_kernels
+from testbed.vehicle.sensor_kernels import (
+    ARDUSUB_PA_PER_M,
+    SEA_LEVEL_PA,
+    STANDARD_GRAVITY_M_S2,
+    baro_depth_m,
+    baro_pressure_pa,
+    depth_sample,
+    imu_sample,
+    position_sample,
+)
 
 __all__ = [
+    "ARDUSUB_PA_PER_M",
+    "SEA_LEVEL_PA",
+    "STANDARD_GRAVITY_M_S2",
     "DepthReading",
     "DepthSensor",
     "DepthSensorConfig",
@@ -45,10 +60,6 @@ __all__ = [
     "baro_depth_m",
     "baro_pressure_pa",
 ]
-
-STANDARD_GRAVITY_M_S2 = 9.80665
-SEA_LEVEL_PA = 101325.0
-ARDUSUB_PA_PER_M = 9800.0  # ArduSub's ρg for specific gravity 1
 
 SENSOR_RATE_RANGE_HZ = (0.01, 10000.0)
 """Accepted sensor output rates [Hz]; the sensors are polled once per control frame, so a rate
@@ -65,44 +76,34 @@ def _check_rate(rate_hz: float) -> None:
     check_range(rate_hz, "rate_hz", *SENSOR_RATE_RANGE_HZ, "Hz")
 
 
-def baro_pressure_pa(
-    depth_m: float,
-    *,
-    water_density_kg_m3: float = 1000.0,
-    surface_pressure_pa: float = SEA_LEVEL_PA,
-    gravity_m_s2: float = STANDARD_GRAVITY_M_S2,
-) -> float:
-    """Absolute hydrostatic pressure [Pa] at ``depth_m`` (positive down; 0 above the surface)."""
-    return surface_pressure_pa + water_density_kg_m3 * gravity_m_s2 * max(depth_m, 0.0)
-
-
-def baro_depth_m(
-    pressure_pa: float, *, spec_grav: float = 1.0, surface_pressure_pa: float = SEA_LEVEL_PA
-) -> float:
-    """Depth [m, positive down] from absolute pressure, as ArduSub: Δp / (9800·spec_grav)."""
-    return (pressure_pa - surface_pressure_pa) / (ARDUSUB_PA_PER_M * spec_grav)
-
-
 class NormalDraws:
     """Standard normal draws from ``rng``, fetched in blocks (a per-call draw costs ~1 µs): the
     same numbers, in the same order, as one ``rng.standard_normal`` call per draw, for a
-    generator nothing else draws from."""
+    generator nothing else draws from.
 
-    __slots__ = ("_buffer", "_index", "_rng", "block")
+    Compiled sensor models draw straight from :attr:`buffer` at :attr:`cursor` ``[0]`` and
+    advance it, after :meth:`ready` made enough draws available.
+    """
+
+    __slots__ = ("_rng", "block", "buffer", "cursor")
 
     def __init__(self, rng: np.random.Generator, block: int = 1024) -> None:
         self._rng = rng
         self.block = block
-        self._buffer: list[float] = []
-        self._index = 0
+        self.buffer = np.zeros(0)
+        self.cursor = np.zeros(1, dtype=np.int64)
+
+    def ready(self, count: int) -> None:
+        """Make at least ``count`` draws available from the cursor (the rest of the block, then
+        a new one: the order of the draws is kept)."""
+        start = int(self.cursor[0])
+        if start + count > self.buffer.size:
+            fresh = self._rng.standard_normal(max(self.block, count))
+            self.buffer = np.concatenate((self.buffer[start:], fresh))
+            self.cursor[0] = 0
 
     def take(self) -> float:
-        if self._index >= len(self._buffer):
-            self._buffer = self._rng.standard_normal(self.block).tolist()
-            self._index = 0
-        value = self._buffer[self._index]
-        self._index += 1
-        return value
+        return self.take_many(1)[0]
 
     def perturbed(self, values: Sequence[float], sigma: float) -> tuple[float, float, float]:
         """(3,) ``values`` each plus ``sigma`` times the next draw (white noise, 1σ ``sigma``)."""
@@ -112,12 +113,11 @@ class NormalDraws:
 
     def take_many(self, count: int) -> list[float]:
         """The next ``count`` draws (the same as ``count`` calls of :meth:`take`)."""
-        start = self._index
-        end = start + count
-        if end <= len(self._buffer):
-            self._index = end
-            return self._buffer[start:end]
-        return [self.take() for _ in range(count)]
+        self.ready(count)
+        start = int(self.cursor[0])
+        self.cursor[0] = start + count
+        draws: list[float] = self.buffer[start : start + count].tolist()
+        return draws
 
 
 class SampleClock:
@@ -172,21 +172,24 @@ class ImuConfig:
 
 
 class Imu:
-    """Attitude and rate sensor; see the module docstring for the model."""
+    """Attitude and rate sensor; see the module docstring for the model (the arithmetic is
+    :func:`~.sensor_kernels.imu_sample`)."""
 
-    __slots__ = ("_clock", "_decay", "_errors", "_innovation", "_normals", "_sigmas", "config")
+    __slots__ = ("_clock", "_errors", "_normals", "_params", "_scratch", "config")
 
     def __init__(self, config: ImuConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
         tau = config.correlation_time_s
-        self._decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
-        self._innovation = math.sqrt(1.0 - self._decay * self._decay)
+        decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
+        innovation = math.sqrt(1.0 - decay * decay)
         sigmas = (config.attitude_noise_rad, config.attitude_noise_rad, config.heading_noise_rad)
-        self._sigmas = sigmas
+        self._params = np.array([decay, innovation, *sigmas, config.gyro_noise_rad_s])
         # stationary start: the correlated error already has its steady-state spread
-        self._errors = [s * self._normals.take() for s in sigmas]
+        self._errors = np.array([s * self._normals.take() for s in sigmas])
+        self._scratch = _Scratch(_IMU)
+        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -202,27 +205,36 @@ class Imu:
             quaternion_wxyz: (4,) true attitude, body → NED.
             rates_rad_s: (3,) true body rates [rad/s], FRD.
         """
+        scratch = self._scratch
+        self.sample_into(time_s, quaternion_wxyz, rates_rad_s, scratch.row, 0)
+        return scratch.reading()  # type: ignore[return-value]  # the ImuReading layout's
+
+    def sample_into(
+        self,
+        time_s: float,
+        quaternion_wxyz: Quaternion,
+        rates_rad_s: Sequence[float],
+        row: RowView,
+        tick: int,
+    ) -> None:
+        """:meth:`sample`, written into an ImuReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
-        n0, n1, n2, n3, n4, n5 = self._normals.take_many(6)  # in the order they were drawn
-        a, b = self._decay, self._innovation
-        s0, s1, s2 = self._sigmas
-        e0, e1, e2 = self._errors
-        ex = a * e0 + b * s0 * n0
-        ey = a * e1 + b * s1 * n1
-        eh = a * e2 + b * s2 * n2
-        self._errors = [ex, ey, eh]
-        # body roll/pitch error: rotation vector (ex, ey, 0) on the body axes
-        angle = math.sqrt(ex * ex + ey * ey)
-        if angle > 0.0:
-            s = math.sin(0.5 * angle) / angle
-            q_body: Quaternion = (math.cos(0.5 * angle), ex * s, ey * s, 0.0)
-        else:
-            q_body = (1.0, 0.0, 0.0, 0.0)
-        q_heading: Quaternion = (math.cos(0.5 * eh), 0.0, 0.0, math.sin(0.5 * eh))
-        measured = quat_multiply(q_heading, quat_multiply(quaternion_wxyz, q_body))
-        g = self.config.gyro_noise_rad_s
-        rates = (rates_rad_s[0] + g * n3, rates_rad_s[1] + g * n4, rates_rad_s[2] + g * n5)
-        return ImuReading(time_s, measured, rates)
+        normals = self._normals
+        normals.ready(6)
+        q0, q1, q2, q3 = quaternion_wxyz
+        p, q, r = rates_rad_s
+        imu_sample(
+            normals.buffer,
+            normals.cursor,
+            self._errors,
+            self._params,
+            (q0 + 0.0, q1 + 0.0, q2 + 0.0, q3 + 0.0),  # as floats: one compiled signature
+            (p + 0.0, q + 0.0, r + 0.0),
+            time_s + 0.0,
+            row.values,
+            row.tick,
+            tick,
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -263,14 +275,25 @@ class DepthSensorConfig:
 
 
 class DepthSensor:
-    """Pressure depth sensor; see the module docstring for the model."""
+    """Pressure depth sensor; see the module docstring for the model (the arithmetic is
+    :func:`~.sensor_kernels.depth_sample`)."""
 
-    __slots__ = ("_clock", "_normals", "config")
+    __slots__ = ("_clock", "_normals", "_params", "_scratch", "config")
 
     def __init__(self, config: DepthSensorConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
+        self._params = np.array(
+            [
+                config.water_density_kg_m3,
+                config.surface_pressure_pa,
+                config.noise_pa,
+                config.spec_grav,
+            ]
+        )
+        self._scratch = _Scratch(_DEPTH)
+        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -278,15 +301,25 @@ class DepthSensor:
 
     def sample(self, time_s: float, depth_m: float) -> DepthReading:
         """Measure the true depth [m, positive down] now (and schedule the next reading)."""
+        scratch = self._scratch
+        self.sample_into(time_s, depth_m, scratch.row, 0)
+        return scratch.reading()  # type: ignore[return-value]  # the DepthReading layout's
+
+    def sample_into(self, time_s: float, depth_m: float, row: RowView, tick: int) -> None:
+        """:meth:`sample`, written into a DepthReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
-        cfg = self.config
-        surface = cfg.surface_pressure_pa
-        pressure = baro_pressure_pa(
-            depth_m, water_density_kg_m3=cfg.water_density_kg_m3, surface_pressure_pa=surface
+        normals = self._normals
+        normals.ready(1)
+        depth_sample(
+            normals.buffer,
+            normals.cursor,
+            self._params,
+            depth_m + 0.0,
+            time_s + 0.0,
+            row.values,
+            row.tick,
+            tick,
         )
-        pressure += cfg.noise_pa * self._normals.take()
-        depth = baro_depth_m(pressure, spec_grav=cfg.spec_grav, surface_pressure_pa=surface)
-        return DepthReading(time_s, pressure, depth)
 
 
 # --------------------------------------------------------------------------------------------
@@ -312,14 +345,17 @@ class PositionFixConfig:
 
 
 class PositionFix:
-    """Position-fix sensor; see the module docstring for the model."""
+    """Position-fix sensor; see the module docstring for the model (the arithmetic is
+    :func:`~.sensor_kernels.position_sample`)."""
 
-    __slots__ = ("_clock", "_normals", "config")
+    __slots__ = ("_clock", "_normals", "_scratch", "config")
 
     def __init__(self, config: PositionFixConfig, rng: np.random.Generator) -> None:
         self.config = config
         self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
+        self._scratch = _Scratch(_POSITION)
+        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -327,5 +363,45 @@ class PositionFix:
 
     def sample(self, time_s: float, position_ned_m: Sequence[float]) -> PositionReading:
         """Measure the true (3,) NED position [m] now (and schedule the next reading)."""
+        scratch = self._scratch
+        self.sample_into(time_s, position_ned_m, scratch.row, 0)
+        return scratch.reading()  # type: ignore[return-value]  # the PositionReading layout's
+
+    def sample_into(
+        self, time_s: float, position_ned_m: Sequence[float], row: RowView, tick: int
+    ) -> None:
+        """:meth:`sample`, written into a PositionReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
-        return PositionReading(time_s, self._normals.perturbed(position_ned_m, self.config.noise_m))
+        normals = self._normals
+        normals.ready(3)
+        x, y, z = position_ned_m
+        position_sample(
+            normals.buffer,
+            normals.cursor,
+            self.config.noise_m,
+            (x + 0.0, y + 0.0, z + 0.0),
+            time_s + 0.0,
+            row.values,
+            row.tick,
+            tick,
+        )
+
+
+# --------------------------------------------------------------------------------------------
+
+_IMU = Layout(ImuReading(0.0, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
+_DEPTH = Layout(DepthReading(0.0, 0.0, 0.0))
+_POSITION = Layout(PositionReading(0.0, (0.0, 0.0, 0.0)))
+
+
+class _Scratch:
+    """A sensor's own row, for a sample taken outside a world."""
+
+    __slots__ = ("layout", "row")
+
+    def __init__(self, layout: Layout) -> None:
+        self.layout = layout
+        self.row = RowView.detached(layout.width)
+
+    def reading(self) -> object:
+        return self.layout.read(self.row.values)

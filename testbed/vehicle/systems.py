@@ -44,7 +44,7 @@ from testbed.common.geometry import (
     yaw_only,
 )
 from testbed.ecs import Entity, Phase, Schedule, System, World
-from testbed.ecs.store import RowView, Table
+from testbed.ecs.store import Layout, RowView, Table
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.components import (
     ActiveMode,
@@ -75,6 +75,7 @@ from testbed.vehicle.control import (
 )
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
+from testbed.vehicle.sensor_kernels import odometry_rows
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench, put_wrench_pair
 from testbed.vehicle.thrusters import ThrusterDynamics
@@ -107,6 +108,7 @@ __all__ = [
 Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
+_ODOMETRY = Layout(Odometry(0.0, (0.0, 0.0, 0.0), LEVEL))
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
 _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
 """What :func:`ingest_commands` reacts to."""
@@ -198,6 +200,8 @@ class Controllers:
         axis_maxima: (6,) allocator axis maxima [N, N·m] (stick scaling; 0 disables an axis).
         intents: the ForceIntent entity of each source (pilot, depth, attitude, position).
         intent_rows: each source's ForceIntent row (:func:`set_intent` writes it).
+        rows: the vehicle's own store-backed components' rows, by type, from the first time a
+            system asks for one the vehicle has (:func:`vehicle_row`).
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
@@ -217,6 +221,7 @@ class Controllers:
     axis_maxima: tuple[float, ...]
     intents: dict[str, Entity] = field(default_factory=dict)
     intent_rows: dict[str, RowView] = field(default_factory=dict)
+    rows: dict[type, RowView] = field(default_factory=dict)
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
@@ -315,6 +320,17 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
     return ControlTargets(0.0 if depth is None else depth.depth_m, q)
 
 
+def vehicle_row(world: World, ctl: Controllers, cls: type) -> RowView | None:
+    """The vehicle's ``cls`` row (a store-backed type), or None while it has no ``cls``.
+
+    The vehicle's store-backed components are never removed, so a row once found stays valid.
+    """
+    row = ctl.rows.get(cls)
+    if row is None and world.has(ctl.vehicle, cls):
+        row = ctl.rows[cls] = world.row_view(ctl.vehicle, cls)
+    return row
+
+
 def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
     """Write ``source``'s :class:`ForceIntent` wrench [N, N·m], FRD, into its row (a change
     only when it differs)."""
@@ -326,18 +342,36 @@ def set_intent(world: World, controllers: Controllers, source: str, wrench: Wren
 
 
 def read_sensors(world: World) -> None:
-    """Sample each due sensor from the plant truth and store its reading on the vehicle."""
-    clock = world.resource(SimClock)
+    """Sample each due sensor from the plant truth and store its reading on the vehicle.
+
+    A sensor's first reading is set as a component; later ones are written into its row.
+    """
+    t = world.resource(SimClock).time_s
     truth = world.resource(PlantTruth)
     sensors = world.resource(SensorSuite)
-    vehicle = world.resource(Controllers).vehicle
-    t = clock.time_s
-    if sensors.imu.due(t):
-        world.set(vehicle, sensors.imu.sample(t, truth.quaternion_wxyz, truth.rates_rad_s))
-    if sensors.depth.due(t):
-        world.set(vehicle, sensors.depth.sample(t, truth.position_ned_m[2]))
-    if sensors.position is not None and sensors.position.due(t):
-        world.set(vehicle, sensors.position.sample(t, truth.position_ned_m))
+    ctl = world.resource(Controllers)
+    tick = world.tick
+    imu = sensors.imu
+    if imu.due(t):
+        row = vehicle_row(world, ctl, ImuReading)
+        if row is not None:
+            imu.sample_into(t, truth.quaternion_wxyz, truth.rates_rad_s, row, tick)
+        else:
+            world.set(ctl.vehicle, imu.sample(t, truth.quaternion_wxyz, truth.rates_rad_s))
+    depth = sensors.depth
+    if depth.due(t):
+        row = vehicle_row(world, ctl, DepthReading)
+        if row is not None:
+            depth.sample_into(t, truth.position_ned_m[2], row, tick)
+        else:
+            world.set(ctl.vehicle, depth.sample(t, truth.position_ned_m[2]))
+    fix = sensors.position
+    if fix is not None and fix.due(t):
+        row = vehicle_row(world, ctl, PositionReading)
+        if row is not None:
+            fix.sample_into(t, truth.position_ned_m, row, tick)
+        else:
+            world.set(ctl.vehicle, fix.sample(t, truth.position_ned_m))
 
 
 def ingest_commands(world: World) -> None:
@@ -565,42 +599,33 @@ def control_position(world: World) -> None:
 
 def control_depth(world: World) -> None:
     """Depth hold → world-vertical force intent rotated into the body frame."""
-    clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
-    vehicle = ctl.vehicle
-    reading = world.get(vehicle, DepthReading)
-    imu = world.get(vehicle, ImuReading)
-    targets = world.get(vehicle, ControlTargets)
     flags = ctl.flags
+    targets = vehicle_row(world, ctl, ControlTargets)
+    reading = vehicle_row(world, ctl, DepthReading)
+    imu = vehicle_row(world, ctl, ImuReading)
     if not (flags.armed and flags.depth_hold) or None in (reading, imu, targets):
         ctl.depth.reset()
         set_intent(world, ctl, "depth", ZERO6)
         return
     assert reading is not None and imu is not None and targets is not None
-    fx, fy, fz = ctl.depth.update(targets.depth_m, reading.depth_m, imu.quaternion_wxyz, clock.dt_s)
-    set_intent(world, ctl, "depth", (fx, fy, fz, 0.0, 0.0, 0.0))
+    dt = world.resource(SimClock).dt_s
+    ctl.depth.update_rows(targets, reading, imu, dt, ctl.intent_rows["depth"], world.tick)
 
 
 def control_attitude(world: World) -> None:
     """Attitude hold → body torque intent (axes the thrusters cannot torque stay off)."""
-    clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
-    vehicle = ctl.vehicle
-    imu = world.get(vehicle, ImuReading)
-    targets = world.get(vehicle, ControlTargets)
     flags = ctl.flags
+    targets = vehicle_row(world, ctl, ControlTargets)
+    imu = vehicle_row(world, ctl, ImuReading)
     if not (flags.armed and flags.attitude_hold) or imu is None or targets is None:
         ctl.attitude.reset()
         set_intent(world, ctl, "attitude", ZERO6)
         return
-    tx, ty, tz = ctl.attitude.update(
-        targets.quaternion_wxyz,
-        imu.quaternion_wxyz,
-        imu.rates_rad_s,
-        clock.dt_s,
-        ctl.attitude_axes,
-    )
-    set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, tx, ty, tz))
+    dt = world.resource(SimClock).dt_s
+    intent = ctl.intent_rows["attitude"]
+    ctl.attitude.update_rows(targets, imu, dt, ctl.attitude_axes, intent, world.tick)
 
 
 def allocate_thrust(world: World) -> None:
@@ -685,18 +710,24 @@ def publish_odometry(world: World) -> None:
     """POST_UPDATE: the vehicle's own estimate for the operator, from its sensors only.
 
     Position: the position fix when fitted (else north and east 0) with the depth sensor's
-    depth; attitude: the IMU's. Written only when a reading changed.
+    depth; attitude: the IMU's (:func:`~.sensor_kernels.odometry_rows`). Written only when a
+    reading changed.
     """
-    vehicle = world.resource(Controllers).vehicle
-    imu = world.get(vehicle, ImuReading)
-    depth = world.get(vehicle, DepthReading)
+    ctl = world.resource(Controllers)
+    imu = vehicle_row(world, ctl, ImuReading)
+    depth = vehicle_row(world, ctl, DepthReading)
     if imu is None or depth is None:
         return
-    fix = world.get(vehicle, PositionReading)
-    north, east = (0.0, 0.0) if fix is None else fix.position_ned_m[:2]
-    sampled_s = max(imu.time_s, depth.time_s)
-    position = (north, east, depth.depth_m)
-    world.set(vehicle, Odometry(sampled_s, position, imu.quaternion_wxyz))
+    fix = vehicle_row(world, ctl, PositionReading)
+    odometry = vehicle_row(world, ctl, Odometry)
+    # the first is set as a component (from a row of its own), the rest written into its row
+    row = odometry or RowView.detached(_ODOMETRY.width)
+    fix_values = imu.values if fix is None else fix.values  # read only with a fix
+    odometry_rows(
+        imu.values, depth.values, fix_values, fix is not None, row.values, row.tick, world.tick
+    )
+    if odometry is None:
+        world.set(ctl.vehicle, _ODOMETRY.read(row.values))
 
 
 def build_schedule(

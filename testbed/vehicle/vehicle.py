@@ -57,12 +57,17 @@ from testbed.vehicle.components import (
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
+    ControlTargets,
+    DepthReading,
     DepthSetpoint,
     FailsafeLevel,
     FailsafeStatus,
     ForceIntent,
+    ImuReading,
     ModeRequest,
     MovementCommand,
+    Odometry,
+    PositionReading,
     ThrusterOutput,
     VehicleTag,
 )
@@ -368,6 +373,14 @@ class Vehicle:
         store.add(ForceIntent("", zero6), capacity=8)
         store.add(rest, capacity=1)
         store.add(AppliedWrench(zero6, zero6), capacity=1)
+        for reading in (
+            ImuReading(0.0, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+            DepthReading(0.0, 0.0, 0.0),
+            PositionReading(0.0, (0.0, 0.0, 0.0)),
+            ControlTargets(0.0, (1.0, 0.0, 0.0, 0.0)),
+            Odometry(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)),
+        ):
+            store.add(reading, capacity=1)
         self.world.use_store(store)
         self.store = store
         self.schedule = build_schedule(

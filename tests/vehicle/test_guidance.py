@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from testbed.config import FieldError
+from testbed.ecs.store import RowView
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.components import (
     ArmRequest,
@@ -79,6 +80,12 @@ class _BiasedFix:
     def sample(self, time_s: float, position: tuple[float, float, float]) -> PositionReading:
         x, y, z = position
         return self._fix.sample(time_s, (x + self._bias_m, y, z))
+
+    def sample_into(
+        self, time_s: float, position: tuple[float, float, float], row: RowView, tick: int
+    ) -> None:
+        x, y, z = position
+        self._fix.sample_into(time_s, (x + self._bias_m, y, z), row, tick)
 
 
 def _vehicle(fix_bias_m: float = 0.0) -> Vehicle:
