@@ -98,24 +98,28 @@ class Layout:
             TypeError: a ``str`` field holding something else.
         """
         texts: list[str] = []
-        for name, kind, offset, extra in self.fields:
+        flat: list[object] = []  # the row's values in order: the fields tile the row
+        for name, kind, _, extra in self.fields:
             field = getattr(value, name)
-            if kind == _TEXT:
-                if type(field) is not str:
-                    raise TypeError(f"{self.cls.__qualname__}.{name}: a str, got {field!r}")
-                texts.append(field)
+            if kind == _FLOAT:
+                flat.append(field)
             elif kind == _TUPLE:
                 if len(field) != extra:
                     raise ValueError(
                         f"{self.cls.__qualname__}.{name}: {extra} values, got {len(field)}"
                     )
-                row[offset : offset + extra] = field
+                flat.extend(field)
+            elif kind == _TEXT:
+                if type(field) is not str:
+                    raise TypeError(f"{self.cls.__qualname__}.{name}: a str, got {field!r}")
+                texts.append(field)
             elif kind == _ENUM:
-                row[offset] = extra.index(field)
+                flat.append(extra.index(field))
             else:
                 if kind == _INT and not -_EXACT_INT <= field <= _EXACT_INT:
                     raise ValueError(f"{self.cls.__qualname__}.{name}: beyond ±2**53: {field}")
-                row[offset] = field
+                flat.append(field)
+        row[:] = flat
         return tuple(texts)
 
     def read(self, row: np.ndarray, texts: tuple[str, ...] = ()) -> object:
@@ -294,7 +298,7 @@ class StoreSlot(Slot):
 
     @origin.setter
     def origin(self, origin: Origin) -> None:
-        self._table.origins[self._row] = _origins().index(origin)
+        self._table.origins[self._row] = origin is not _origins()[0]  # 0 LOCAL, 1 REMOTE
 
 
 class StoreColumn(Column):
@@ -317,7 +321,8 @@ class StoreColumn(Column):
 
     @property
     def changed_max(self) -> int:
-        return int(self.table.ticks.max())
+        ticks = self.table.ticks
+        return int(ticks[0]) if ticks.size == 1 else max(ticks.tolist())  # faster than .max()
 
     @changed_max.setter
     def changed_max(self, tick: int) -> None:

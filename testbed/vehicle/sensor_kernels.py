@@ -7,7 +7,8 @@ dataclass) and, when a value changed, the row's change tick; a sensor sampled ou
 writes a scratch row of its own.
 
 Noise comes from a block of standard normal draws (:class:`~.sensors.NormalDraws`): a kernel
-takes its draws at ``cursor[0]`` and advances it; the caller makes sure enough are there.
+takes its draws at ``cursor[0]`` and advances it, and returns False, having done nothing, when
+the block holds too few (the caller then fetches more and calls again).
 
 Row layouts (float64):
 
@@ -89,7 +90,7 @@ def imu_sample(
     row: np.ndarray,
     tick_cell: np.ndarray,
     tick: int,
-) -> None:  # pragma: no cover - compiled
+) -> bool:  # pragma: no cover - compiled
     """One IMU reading (the model of :class:`~.sensors.Imu`) into an ImuReading row.
 
     Args:
@@ -101,14 +102,10 @@ def imu_sample(
         row, tick_cell, tick: the row, its change tick and the tick to write.
     """
     i = cursor[0]
-    n0, n1, n2, n3, n4, n5 = (
-        draws[i],
-        draws[i + 1],
-        draws[i + 2],
-        draws[i + 3],
-        draws[i + 4],
-        draws[i + 5],
-    )
+    if i + 6 > draws.size:
+        return False
+    n0, n1, n2 = draws[i], draws[i + 1], draws[i + 2]  # the attitude errors'
+    n3, n4, n5 = draws[i + 3], draws[i + 4], draws[i + 5]  # the gyro noise
     cursor[0] = i + 6
     a, b = params[DECAY], params[INNOVATION]
     ex = a * errors[0] + b * params[SIGMA_ROLL] * n0
@@ -135,6 +132,7 @@ def imu_sample(
             changed = True
     if changed:
         tick_cell[0] = tick
+    return True
 
 
 @numba.njit(cache=True)
@@ -147,11 +145,13 @@ def depth_sample(
     row: np.ndarray,
     tick_cell: np.ndarray,
     tick: int,
-) -> None:  # pragma: no cover - compiled
+) -> bool:  # pragma: no cover - compiled
     """One pressure-depth reading (the model of :class:`~.sensors.DepthSensor`) into a
     DepthReading row; one draw. ``params``: water density [kg/m³], surface pressure [Pa],
     pressure noise 1σ [Pa], the firmware's specific gravity."""
     i = cursor[0]
+    if i + 1 > draws.size:
+        return False
     cursor[0] = i + 1
     surface = params[1]
     pressure = baro_pressure_pa(depth_m, params[0], surface, STANDARD_GRAVITY_M_S2)
@@ -164,6 +164,7 @@ def depth_sample(
             changed = True
     if changed:
         tick_cell[0] = tick
+    return True
 
 
 @numba.njit(cache=True)
@@ -176,10 +177,12 @@ def position_sample(
     row: np.ndarray,
     tick_cell: np.ndarray,
     tick: int,
-) -> None:  # pragma: no cover - compiled
+) -> bool:  # pragma: no cover - compiled
     """One position fix (the true NED position [m] plus white noise of 1σ ``noise_m``) into a
     PositionReading row; three draws."""
     i = cursor[0]
+    if i + 3 > draws.size:
+        return False
     cursor[0] = i + 3
     x, y, z = position_ned_m
     changed = False
@@ -191,6 +194,7 @@ def position_sample(
             changed = True
     if changed:
         tick_cell[0] = tick
+    return True
 
 
 @numba.njit(cache=True)

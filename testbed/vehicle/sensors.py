@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from testbed.common.components import DepthReading, ImuReading, PositionReading
-from testbed.common.geometry import Quaternion
+from testbed.common.geometry import Quaternion, Vec3
 from testbed.config import check_range
 from testbed.ecs.store import Layout, RowView
 from testbed.vehicle import sensor_kernels
@@ -195,9 +195,7 @@ class Imu:
         """Whether a reading is due at ``time_s``."""
         return self._clock.due(time_s)
 
-    def sample(
-        self, time_s: float, quaternion_wxyz: Quaternion, rates_rad_s: Sequence[float]
-    ) -> ImuReading:
+    def sample(self, time_s: float, quaternion_wxyz: Quaternion, rates_rad_s: Vec3) -> ImuReading:
         """Measure the true attitude and body rates now (and schedule the next reading).
 
         Args:
@@ -213,28 +211,26 @@ class Imu:
         self,
         time_s: float,
         quaternion_wxyz: Quaternion,
-        rates_rad_s: Sequence[float],
+        rates_rad_s: Vec3,
         row: RowView,
         tick: int,
     ) -> None:
         """:meth:`sample`, written into an ImuReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
         normals = self._normals
-        normals.ready(6)
-        q0, q1, q2, q3 = quaternion_wxyz
-        p, q, r = rates_rad_s
-        imu_sample(
+        while not imu_sample(
             normals.buffer,
             normals.cursor,
             self._errors,
             self._params,
-            (q0 + 0.0, q1 + 0.0, q2 + 0.0, q3 + 0.0),  # as floats: one compiled signature
-            (p + 0.0, q + 0.0, r + 0.0),
-            time_s + 0.0,
+            quaternion_wxyz,
+            rates_rad_s,
+            time_s,
             row.values,
             row.tick,
             tick,
-        )
+        ):
+            normals.ready(6)
 
 
 # --------------------------------------------------------------------------------------------
@@ -309,17 +305,17 @@ class DepthSensor:
         """:meth:`sample`, written into a DepthReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
         normals = self._normals
-        normals.ready(1)
-        depth_sample(
+        while not depth_sample(
             normals.buffer,
             normals.cursor,
             self._params,
-            depth_m + 0.0,
-            time_s + 0.0,
+            depth_m,
+            time_s,
             row.values,
             row.tick,
             tick,
-        )
+        ):
+            normals.ready(1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -361,30 +357,28 @@ class PositionFix:
         """Whether a reading is due at ``time_s``."""
         return self._clock.due(time_s)
 
-    def sample(self, time_s: float, position_ned_m: Sequence[float]) -> PositionReading:
+    def sample(self, time_s: float, position_ned_m: Vec3) -> PositionReading:
         """Measure the true (3,) NED position [m] now (and schedule the next reading)."""
         scratch = self._scratch
         self.sample_into(time_s, position_ned_m, scratch.row, 0)
         return scratch.reading()  # type: ignore[return-value]  # the PositionReading layout's
 
-    def sample_into(
-        self, time_s: float, position_ned_m: Sequence[float], row: RowView, tick: int
-    ) -> None:
+    def sample_into(self, time_s: float, position_ned_m: Vec3, row: RowView, tick: int) -> None:
         """:meth:`sample`, written into a PositionReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
         normals = self._normals
-        normals.ready(3)
-        x, y, z = position_ned_m
-        position_sample(
+        noise = self.config.noise_m
+        while not position_sample(
             normals.buffer,
             normals.cursor,
-            self.config.noise_m,
-            (x + 0.0, y + 0.0, z + 0.0),
-            time_s + 0.0,
+            noise,
+            position_ned_m,
+            time_s,
             row.values,
             row.tick,
             tick,
-        )
+        ):
+            normals.ready(3)
 
 
 # --------------------------------------------------------------------------------------------

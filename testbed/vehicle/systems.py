@@ -77,7 +77,7 @@ from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensor_kernels import odometry_rows
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
-from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench, put_wrench_pair
+from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench
 from testbed.vehicle.thrusters import ThrusterDynamics
 
 __all__ = [
@@ -673,20 +673,17 @@ def actuate_thrusters(world: World) -> None:
     """
     act = world.resource(Actuation)
     h = act.interval_s
-    f0 = act.actual_forces_n
     dynamics = act.dynamics
-    f1 = dynamics.step(act.commanded_forces_n, h)
     key = (h, dynamics.time_constant_s)
     if act.mean_weight[0] == key:  # the interval is almost always the same
         c = act.mean_weight[1]
     else:
         c = mean_force_weight(h, key[1])
         act.mean_weight = (key, c)
-    act.actual_forces_n = f1
-    applied = act.applied  # the vehicle's AppliedWrench (requested, achieved)
-    act.plant_wrench = put_wrench_pair(
-        act.matrix, f0, f1, c, act.requested, applied.values, applied.tick, world.tick
+    act.plant_wrench = dynamics.step_applied(
+        act.commanded_forces_n, h, act.matrix, c, act.requested, act.applied, world.tick
     )
+    act.actual_forces_n = dynamics.live_forces_n
 
 
 def meter_power(world: World) -> None:

@@ -41,6 +41,7 @@ __all__ = [
     "PWM_OFFSET",
     "PWM_SIGN",
     "STUCK",
+    "actuate_rows",
     "allocate_pinv",
     "allocate_rows",
     "current_scale",
@@ -467,3 +468,27 @@ def put_wrench_pair(
     if changed:
         tick_cell[0] = tick
     return w
+
+
+@numba.njit(cache=True)
+def actuate_rows(
+    forces: np.ndarray,
+    start: np.ndarray,
+    command: np.ndarray,
+    gain: np.ndarray,
+    held: np.ndarray,
+    blend: float,
+    matrix: np.ndarray,
+    weight: float,
+    requested: np.ndarray,
+    row: np.ndarray,
+    tick_cell: np.ndarray,
+    tick: int,
+) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
+    """One frame's interval of the thrusters: ``start`` ← ``forces``, :func:`lag_step` of
+    ``forces`` in place (its arguments), then :func:`put_wrench_pair` of the interval (its
+    arguments). Returns the interval's wrench [N, N·m], FRD."""
+    for i in range(forces.size):
+        start[i] = forces[i]
+    lag_step(forces, command, gain, held, blend)
+    return put_wrench_pair(matrix, start, forces, weight, requested, row, tick_cell, tick)

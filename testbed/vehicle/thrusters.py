@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -26,7 +26,10 @@ from testbed.vehicle.t200 import (
     T200,
     ZERO_FORCE_N,
 )
-from testbed.vehicle.thrust_kernels import lag_step
+from testbed.vehicle.thrust_kernels import actuate_rows, lag_step
+
+if TYPE_CHECKING:
+    from testbed.ecs.store import RowView
 from testbed.vehicle.thruster_config import (
     Handedness,
     ThrusterConfig,
@@ -135,12 +138,17 @@ class ThrusterDynamics:
         self.n_thrusters = n_thrusters
         self.time_constant_s = float(time_constant_s)
         self._forces = np.zeros(n_thrusters)
+        self._start = np.zeros(n_thrusters)  # step_applied's forces at the interval's start
         self._faults: dict[int, ThrusterFault] = {}
         self._gain = np.ones(n_thrusters)  # command multiplier: 0 dead, factor degraded
         self._held = np.full(n_thrusters, math.nan)  # dead or stuck: the force it gives, else NaN
         self._blend = (math.nan, math.nan, 1.0)  # (dt_s, τ, 1 - exp(-dt/τ)) of the last step
         # compiled (or loaded) now, on scratch forces, not in the first frame of a timed run
         lag_step(np.zeros(n_thrusters), self._forces, self._gain, self._held, 0.0)
+        scratch, row = np.zeros(n_thrusters), np.zeros(12)
+        matrix, ticks = np.zeros((6, n_thrusters)), np.zeros(1, dtype=np.int64)
+        actuate_rows(scratch, scratch.copy(), scratch, self._gain, self._held, 0.0, matrix, 0.5,
+                     row[:6], row, ticks, 1)  # fmt: skip
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
@@ -148,6 +156,12 @@ class ThrusterDynamics:
     def forces_n(self) -> np.ndarray:
         """(n,) current actual forces [N] (a copy)."""
         return self._forces.copy()
+
+    @property
+    def live_forces_n(self) -> np.ndarray:
+        """(n,) current actual forces [N], the plant's own array: :meth:`step_applied`
+        overwrites it (read it, do not keep it)."""
+        return self._forces
 
     @property
     def faults(self) -> dict[int, ThrusterFault]:
@@ -215,17 +229,72 @@ class ThrusterDynamics:
             raise ValueError(
                 f"commanded_forces_n must have shape ({self.n_thrusters},), got {command.shape}"
             )
+        forces = self._forces.copy()
+        lag_step(forces, command, self._gain, self._held, self._blend_over(dt_s))
+        self._forces = forces
+        return forces
+
+    def step_applied(
+        self,
+        commanded_forces_n: np.ndarray,
+        dt_s: float,
+        matrix: np.ndarray,
+        weight: float,
+        requested: np.ndarray,
+        applied: RowView,
+        tick: int,
+    ) -> tuple[float, float, float, float, float, float]:
+        """:meth:`step` in place over a frame's interval, with the wrench of the interval's mean
+        forces written into an AppliedWrench row (the frame's path,
+        :func:`~testbed.vehicle.systems.actuate_thrusters`; one compiled call,
+        :func:`~testbed.vehicle.thrust_kernels.actuate_rows`).
+
+        Args:
+            commanded_forces_n: (n,) float64 command held over the interval [N].
+            dt_s: the interval [s], >= 0.
+            matrix: (6, n) the thrusters' configuration T [N, N·m per N], body FRD.
+            weight: the end forces' weight in the interval's mean force
+                (:func:`~testbed.vehicle.systems.mean_force_weight`).
+            requested: (6,) the wrench that was asked for [N, N·m] (the row's first half).
+            applied: the AppliedWrench row, its tick set to ``tick`` when it changed.
+            tick: the running system's world tick.
+
+        Returns:
+            (6,) the interval's wrench [N, N·m], FRD.
+
+        Raises:
+            ValueError: negative dt_s.
+        """
+        return actuate_rows(
+            self._forces,
+            self._start,
+            commanded_forces_n,
+            self._gain,
+            self._held,
+            self._blend_over(dt_s),
+            matrix,
+            weight,
+            requested,
+            applied.values,
+            applied.tick,
+            tick,
+        )
+
+    def _blend_over(self, dt_s: float) -> float:
+        """:func:`lag_blend` of ``dt_s`` and τ (the last one kept: the frame interval is almost
+        always the same).
+
+        Raises:
+            ValueError: negative dt_s.
+        """
         tau = self.time_constant_s
         last_dt, last_tau, blend = self._blend
-        if dt_s != last_dt or tau != last_tau:  # the frame interval is almost always the same
+        if dt_s != last_dt or tau != last_tau:
             if not dt_s >= 0.0:
                 raise ValueError(f"dt_s must be >= 0, got {dt_s}")
             blend = lag_blend(dt_s, tau)
             self._blend = (dt_s, tau, blend)
-        forces = self._forces.copy()
-        lag_step(forces, command, self._gain, self._held, blend)
-        self._forces = forces
-        return forces
+        return blend
 
     def _check_index(self, index: int) -> None:
         if not 0 <= index < self.n_thrusters:

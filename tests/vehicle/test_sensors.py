@@ -63,6 +63,26 @@ def test_imu_correlated_noise_is_gauss_markov() -> None:
     assert heading.std() == pytest.approx(cfg.heading_noise_rad, rel=0.15)
 
 
+def test_noise_draws_follow_the_generator_across_blocks() -> None:
+    """The gyro noise of reading k is g times draws 3 + 6k + (3, 4, 5) of the sensor's generator
+    (three draws seed the attitude errors, then six per reading): the sensors draw in blocks of
+    1024, and 400 readings cross two of them."""
+    cfg = ImuConfig(gyro_noise_rad_s=0.01)
+    imu = Imu(cfg, np.random.default_rng(7))
+    draws = np.random.default_rng(7).standard_normal(3 + 6 * 400)
+    truth = (0.1, -0.2, 0.3)
+    for k in range(400):
+        rates = imu.sample(k * 0.01, (1.0, 0.0, 0.0, 0.0), truth).rates_rad_s
+        gyro = draws[3 + 6 * k + 3 : 3 + 6 * k + 6]
+        assert rates == tuple(float(t + 0.01 * n) for t, n in zip(truth, gyro, strict=True))
+    depth = DepthSensor(DepthSensorConfig(noise_pa=20.0), np.random.default_rng(8))
+    pressure_draws = np.random.default_rng(8).standard_normal(2500)
+    for k in range(2500):
+        reading = depth.sample(k * 0.01, 2.0)
+        expected = baro_pressure_pa(2.0) + 20.0 * float(pressure_draws[k])
+        assert reading.pressure_pa == expected
+
+
 def test_zero_noise_imu_reads_truth() -> None:
     cfg = ImuConfig(attitude_noise_rad=0.0, heading_noise_rad=0.0, gyro_noise_rad_s=0.0)
     imu = Imu(cfg, np.random.default_rng(0))
