@@ -71,13 +71,15 @@ def quat_conjugate(q: Quaternion) -> Quaternion:
     return (q[0], -q[1], -q[2], -q[3])
 
 
+@register_jitable
 def quat_normalize(q: Sequence[float]) -> Quaternion:
     """``q`` scaled to unit norm.
 
     Raises:
         ValueError: ``q`` is (numerically) zero.
     """
-    w, x, y, z = (float(v) for v in q)
+    w, x, y, z = q
+    w, x, y, z = float(w), float(x), float(y), float(z)
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     if norm < 1e-12:
         raise ValueError("cannot normalise a zero quaternion")
@@ -126,6 +128,7 @@ def rotate(rows: Sequence[Sequence[float]], v: Sequence[float]) -> Vec3:
     return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
 
 
+@register_jitable
 def quat_from_axis_angle(axis: Sequence[float], angle_rad: float) -> Quaternion:
     """Rotation by ``angle_rad`` about the unit vector ``axis`` (right-handed)."""
     half = 0.5 * angle_rad
@@ -159,6 +162,7 @@ def euler_from_quat(q: Sequence[float]) -> Vec3:
     return (roll, pitch, yaw)
 
 
+@register_jitable
 def yaw_only(q: Quaternion) -> Quaternion:
     """The heading part of an attitude: rotation about world down by the Z-Y-X yaw."""
     w, x, y, z = q

@@ -40,7 +40,8 @@ from testbed.common.geometry import (
     quat_multiply,
     quat_rotate_inverse,
 )
-from testbed.vehicle import thrust_kernels
+from testbed.vehicle import pilot, thrust_kernels
+from testbed.vehicle.pilot import level_to_body, trim_targets
 from testbed.vehicle.thrust_kernels import put_wrench
 
 __all__ = [
@@ -63,6 +64,7 @@ __all__ = [
     "depth_rows",
     "depth_update",
     "pid_update",
+    "pilot_rows",
     "warm_up",
 ]
 
@@ -289,6 +291,44 @@ def attitude_rows(
     put_wrench(intent, intent_tick, tick, 0.0, 0.0, 0.0, tx, ty, tz)
 
 
+@numba.njit(cache=True)
+def pilot_rows(
+    wrench: tuple[float, float, float, float, float, float],
+    trims: tuple[float, float, float, float],
+    depth_hold: bool,
+    attitude_hold: bool,
+    imu: np.ndarray,
+    targets: np.ndarray,
+    dt_s: float,
+    intent: np.ndarray,
+    intent_tick: np.ndarray,
+    targets_tick: np.ndarray,
+    tick: int,
+) -> None:  # pragma: no cover - compiled
+    """The pilot interface's frame on the rows: its force intent from the sticks' level wrench
+    (:func:`~.pilot.pilot_level_wrench`; in depth hold the force rotated into the body with the
+    ImuReading row's attitude, :func:`~.pilot.level_to_body`), and in a hold mode the
+    ControlTargets row moved by the trims (:func:`~.pilot.trim_targets`)."""
+    if depth_hold:
+        attitude = (imu[1], imu[2], imu[3], imu[4])
+        fx, fy, fz = level_to_body((wrench[0], wrench[1], wrench[2]), attitude)
+        put_wrench(intent, intent_tick, tick, fx, fy, fz, wrench[3], wrench[4], wrench[5])
+    else:
+        x, y, z, k, m, n = wrench
+        put_wrench(intent, intent_tick, tick, x, y, z, k, m, n)
+    if not (depth_hold or attitude_hold):
+        return
+    target = (targets[1], targets[2], targets[3], targets[4])
+    depth, q = trim_targets(targets[0], target, trims, dt_s, depth_hold, attitude_hold)
+    changed = False
+    for j, value in enumerate((depth, q[0], q[1], q[2], q[3])):
+        if targets[j] != value:
+            targets[j] = value
+            changed = True
+    if changed:
+        targets_tick[0] = tick
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel here, once per process: the
@@ -311,11 +351,14 @@ def warm_up() -> None:
         tick_cell,
         1,
     )
+    wrench, trims, targets = (0.0,) * 6, (0.0,) * 4, np.array([0.0, 1.0, 0.0, 0.0, 0.0])
+    pilot_rows(wrench, trims, True, True, imu, targets, 0.01, row, tick_cell, tick_cell, 1)
     attitude_rows(
         np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, tick_cell, 1
     )
 
 
 jit.refresh_stale_caches(
-    (attitude_update, depth_update, attitude_rows, depth_rows), (geometry, jit, thrust_kernels)
+    (attitude_update, depth_update, attitude_rows, depth_rows, pilot_rows),
+    (geometry, jit, pilot, thrust_kernels),
 )

@@ -410,8 +410,11 @@ class Physics:
         Args:
             wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
         """
-        fx, fy, fz, mx, my, mz = wrench_body  # as floats (+ 0.0): one compiled signature
-        wrench = (fx + 0.0, fy + 0.0, fz + 0.0, mx + 0.0, my + 0.0, mz + 0.0)
+        if type(wrench_body) is tuple:  # the frame's: six floats from a compiled kernel
+            wrench = wrench_body
+        else:
+            fx, fy, fz, mx, my, mz = wrench_body  # as floats (+ 0.0): one compiled signature
+            wrench = (fx + 0.0, fy + 0.0, fz + 0.0, mx + 0.0, my + 0.0, mz + 0.0)
         raw = self._raw
         self._raw = None
         self._floats = None

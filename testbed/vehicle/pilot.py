@@ -14,12 +14,16 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from numba.extending import register_jitable
+
 from testbed.common.geometry import (
     Quaternion,
     Vec3,
     Wrench,
     quat_conjugate,
+    quat_from_axis_angle,
     quat_multiply,
+    quat_normalize,
     quat_rotate,
     yaw_only,
 )
@@ -33,6 +37,7 @@ __all__ = [
     "pilot_trims",
     "pilot_wrench",
     "shape_stick",
+    "trim_targets",
 ]
 
 
@@ -153,6 +158,7 @@ def pilot_level_wrench(
     return (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
 
 
+@register_jitable
 def level_to_body(force: Vec3, attitude: Quaternion) -> Vec3:
     """A force in the yaw-only (level) frame of ``attitude`` (body → NED), in the body frame."""
     return quat_rotate(quat_multiply(quat_conjugate(attitude), yaw_only(attitude)), force)
@@ -221,3 +227,38 @@ def pilot_trims(
         shape_stick(sticks[4], 1.0, dz) * rates[1],
         shape_stick(sticks[5], 1.0, dz) * rates[2],
     )
+
+
+@register_jitable
+def trim_targets(
+    depth_m: float,
+    quaternion_wxyz: Quaternion,
+    trims: tuple[float, float, float, float],
+    dt_s: float,
+    depth_hold: bool,
+    attitude_hold: bool,
+) -> tuple[float, Quaternion]:
+    """The hold targets after the sticks' trims (:func:`pilot_trims`) acted for ``dt_s`` [s].
+
+    In depth hold the depth target [m, + down] moves at the heave trim (never above the
+    surface); in attitude hold the attitude target (body → NED) turns about its own body axes by
+    the roll and pitch trims and about world down by the yaw trim, and is normalised.
+
+    Returns:
+        (depth [m], attitude (4,)).
+    """
+    depth_rate, roll_rate, pitch_rate, yaw_rate = trims
+    q = quaternion_wxyz
+    if depth_hold:
+        depth_m = max(0.0, depth_m + depth_rate * dt_s)
+    if attitude_hold:
+        roll = roll_rate * dt_s
+        pitch = pitch_rate * dt_s
+        yaw = yaw_rate * dt_s
+        if roll != 0.0 or pitch != 0.0:  # about the target's own body axes
+            angle = math.hypot(roll, pitch)
+            q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
+        if yaw != 0.0:  # about world down
+            q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
+        q = quat_normalize(q)
+    return depth_m, q

@@ -37,9 +37,7 @@ import numpy as np
 from testbed.common.geometry import (
     Quaternion,
     euler_from_quat,
-    quat_from_axis_angle,
     quat_from_euler,
-    quat_multiply,
     quat_normalize,
     yaw_only,
 )
@@ -73,6 +71,7 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     failsafe_level,
 )
+from testbed.vehicle.control_kernels import pilot_rows
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensor_kernels import odometry_rows
@@ -109,7 +108,12 @@ Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
 _ODOMETRY = Layout(Odometry(0.0, (0.0, 0.0, 0.0), LEVEL))
+_CONTROL_TARGETS = Layout(ControlTargets(0.0, LEVEL))
+_LEVEL_IMU = np.array([0.0, *LEVEL, 0.0, 0.0, 0.0])
+"""An ImuReading row reading level (the pilot's attitude before the IMU's first reading)."""
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
+_FLAG_TYPES = (Armed, ActiveMode, FailsafeStatus)
+"""What the modes in effect follow from (:func:`_update_flags`)."""
 _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
 """What :func:`ingest_commands` reacts to."""
 
@@ -205,6 +209,7 @@ class Controllers:
         sticks: the last accepted stick positions.
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
+        flags_tick: the world tick they were last worked out at (0: never).
         shaped: the pilot interface's level wrench and trims for the current sticks and mode
             (a cache: sticks change at the operator's rate, frames run at the control rate).
         autonomous: the vehicle flies itself (:mod:`testbed.vehicle.autonomy`): it owns its
@@ -225,6 +230,7 @@ class Controllers:
     sticks: tuple[float, ...] = ZERO6
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
+    flags_tick: int = 0
     shaped: _PilotCache | None = None
     position: PositionController = field(default_factory=PositionController)
     autonomous: bool = False
@@ -292,7 +298,11 @@ def _is_armed(world: World, vehicle: Entity) -> bool:
 
 
 def _update_flags(world: World, ctl: Controllers) -> None:
-    """Work out the modes in effect this frame from the vehicle's state components."""
+    """Work out the modes in effect this frame from the vehicle's state components (again
+    only after one of them changed)."""
+    if ctl.flags_tick and not world.changed_any(*_FLAG_TYPES, since=ctl.flags_tick):
+        return
+    ctl.flags_tick = world.tick
     vehicle = ctl.vehicle
     flags = ctl.flags
     mode = world.get(vehicle, ActiveMode)
@@ -476,34 +486,30 @@ def run_pilot_interface(world: World) -> None:
     cache = ctl.shaped
     if cache is None or not cache.holds(ctl, sticks):
         cache = ctl.shaped = _PilotCache(ctl, sticks)
-    if depth_hold:  # translation in the level (yaw-only) frame, rotated into the body
-        imu = world.get(vehicle, ImuReading)
-        w = cache.wrench
-        fx, fy, fz = level_to_body(
-            (w[0], w[1], w[2]), LEVEL if imu is None else imu.quaternion_wxyz
-        )
-        set_intent(world, ctl, "pilot", (fx, fy, fz, w[3], w[4], w[5]))
-    else:
-        set_intent(world, ctl, "pilot", cache.wrench)
-    if not (depth_hold or attitude_hold):
-        return
-    targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
-    depth_m, q = targets.depth_m, targets.quaternion_wxyz
-    dt = world.resource(SimClock).dt_s
-    depth_rate, roll_rate, pitch_rate, yaw_rate = cache.trims
-    if depth_hold:
-        depth_m = max(0.0, depth_m + depth_rate * dt)
-    if attitude_hold:
-        roll = roll_rate * dt
-        pitch = pitch_rate * dt
-        yaw = yaw_rate * dt
-        if roll or pitch:  # about the target's own body axes
-            angle = math.hypot(roll, pitch)
-            q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
-        if yaw:  # about world down
-            q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
-        q = quat_normalize(q)
-    world.set(vehicle, ControlTargets(depth_m, q))
+    imu = vehicle_row(world, ctl, ImuReading)
+    targets = vehicle_row(world, ctl, ControlTargets)
+    hold = depth_hold or attitude_hold
+    row = targets
+    if row is None:  # no targets yet: trim the measured ones in a row of its own
+        row = RowView.detached(_CONTROL_TARGETS.width)
+        if hold:
+            _CONTROL_TARGETS.write(row.values, _measured_targets(world, vehicle))
+    intent = ctl.intent_rows["pilot"]
+    pilot_rows(
+        cache.wrench,
+        cache.trims,
+        depth_hold,  # translation in the level (yaw-only) frame, rotated into the body
+        attitude_hold,
+        _LEVEL_IMU if imu is None else imu.values,
+        row.values,
+        world.resource(SimClock).dt_s,
+        intent.values,
+        intent.tick,
+        row.tick,
+        world.tick,
+    )
+    if targets is None and hold:
+        world.set(vehicle, _CONTROL_TARGETS.read(row.values))
 
 
 class _PilotCache:
