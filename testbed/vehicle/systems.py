@@ -100,6 +100,7 @@ __all__ = [
     "read_sensors",
     "run_pilot_interface",
     "set_intent",
+    "shaped_sticks",
     "supervise_failsafe",
     "wrench_of",
 ]
@@ -483,9 +484,7 @@ def run_pilot_interface(world: World) -> None:
         return
     vehicle = ctl.vehicle
     depth_hold, attitude_hold = flags.depth_hold, flags.attitude_hold
-    cache = ctl.shaped
-    if cache is None or not cache.holds(ctl, sticks):
-        cache = ctl.shaped = _PilotCache(ctl, sticks)
+    cache = shaped_sticks(ctl, sticks)
     imu = vehicle_row(world, ctl, ImuReading)
     targets = vehicle_row(world, ctl, ControlTargets)
     hold = depth_hold or attitude_hold
@@ -510,6 +509,16 @@ def run_pilot_interface(world: World) -> None:
     )
     if targets is None and hold:
         world.set(vehicle, _CONTROL_TARGETS.read(row.values))
+
+
+def shaped_sticks(ctl: Controllers, sticks: tuple[float, ...]) -> _PilotCache:
+    """The pilot's level wrench (``.wrench``) and trims (``.trims``) for ``sticks`` in the
+    present mode (:func:`~testbed.vehicle.pilot.pilot_level_wrench`,
+    :func:`~testbed.vehicle.pilot.pilot_trims`), kept in ``ctl.shaped`` while they hold."""
+    cache = ctl.shaped
+    if cache is None or not cache.holds(ctl, sticks):
+        cache = ctl.shaped = _PilotCache(ctl, sticks)
+    return cache
 
 
 class _PilotCache:

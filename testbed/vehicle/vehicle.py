@@ -88,7 +88,7 @@ from testbed.vehicle.localization import (
 from testbed.vehicle.manipulation import ArmConfig, Manipulator, build_manipulator, plan_arm
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
-from testbed.vehicle.pilot import PilotGains, pilot_level_wrench, pilot_trims
+from testbed.vehicle.pilot import PilotGains
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
     DepthSensor,
@@ -106,6 +106,7 @@ from testbed.vehicle.systems import (
     SensorSuite,
     SimClock,
     build_schedule,
+    shaped_sticks,
     wrench_of,
 )
 from testbed.vehicle.t200 import SUPPLY_VOLTAGE_RANGE_V
@@ -553,15 +554,10 @@ class Vehicle:
         """
         ctl = self.controllers
         flags = ctl.flags
-        wrench = pilot_level_wrench(
-            sticks,
-            ctl.axis_maxima,
-            gains=ctl.pilot,
-            precision=flags.precision,
-            depth_hold=flags.depth_hold,
-            attitude_hold=flags.attitude_hold,
-        )
-        depth_rate, _, _, yaw_rate = pilot_trims(sticks, gains=ctl.pilot, precision=flags.precision)
+        held = sticks if type(sticks) is tuple else tuple(sticks)  # the pilot's own: cached
+        shaped = shaped_sticks(ctl, held)
+        wrench = shaped.wrench
+        depth_rate, _, _, yaw_rate = shaped.trims
         model = self.model
 
         def steady(axis: int, force: float) -> float:
