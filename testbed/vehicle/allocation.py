@@ -208,6 +208,10 @@ class Allocator:
             self._current_table,
             self._pwm_table,
         )
+        ticks, n = np.zeros(8, dtype=np.int64), self._n
+        allocate_rows(np.zeros((8, 6)), ticks, np.zeros(6), self._stuck_wrench, self._pinv,
+                      self._limits, self._work.copy(), self._thrusters, self._current_table,
+                      self._pwm_table, np.zeros(3 * n + 1), ticks[:1], 1, np.zeros(n))  # fmt: skip
 
     # ----------------------------------------------------------------- properties
 
@@ -385,6 +389,7 @@ class Allocator:
         requested: np.ndarray,
         output: RowView,
         tick: int,
+        commanded: np.ndarray,
     ) -> float:
         """:meth:`step` of the sum of a force-intent table's live rows, written into a
         ThrusterOutput row (the frame's path, :func:`~testbed.vehicle.systems.allocate_thrust`).
@@ -397,6 +402,7 @@ class Allocator:
             output: the ThrusterOutput row (forces, PWM, currents, scale), its tick set to
                 ``tick`` when a value changed.
             tick: the running system's world tick.
+            commanded: (n,) receives the commanded forces [N].
 
         Returns:
             The scale, as :meth:`step`.
@@ -423,13 +429,14 @@ class Allocator:
                 output.values,
                 output.tick,
                 tick,
+                commanded,
             )
             if scale != scale:
                 raise ValueError(f"wrench must be finite, got {requested.tolist()}")
             return scale
         sum_rows(intents.values, intents.ticks, requested)
         scale = self.step(requested, dt_s)
-        put_output(self._work, scale, output.values, output.tick, tick)
+        put_output(self._work, scale, output.values, output.tick, tick, commanded)
         return scale
 
     @property

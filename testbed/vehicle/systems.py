@@ -258,7 +258,8 @@ class Actuation:
         applied: the vehicle's :class:`AppliedWrench` row, written by the actuation.
         interval_s: time until the next frame [s] (the plant holds the command that long);
             set by the vehicle before each frame.
-        commanded_forces_n: (n,) forces commanded this frame [N] (0 when disarmed).
+        commanded_forces_n: (n,) forces commanded this frame [N] (0 when disarmed; written in
+            place by the allocation).
         actual_forces_n: (n,) the thrusters' actual forces at the end of the interval [N].
         requested: (6,) the summed intents of this frame [N, N·m].
         plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
@@ -655,13 +656,12 @@ def allocate_thrust(world: World) -> None:
         act.allocator.reset()  # re-arming slews up from 0 N
         n = act.matrix.shape[1]
         act.requested[:] = 0.0
-        act.commanded_forces_n = np.zeros(n)
+        act.commanded_forces_n[:] = 0.0
         world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
         return
-    allocator = act.allocator
     dt = world.resource(SimClock).dt_s
-    allocator.step_rows(act.intents, dt, act.requested, act.output, world.tick)
-    act.commanded_forces_n = allocator.output[0].copy()
+    commanded = act.commanded_forces_n
+    act.allocator.step_rows(act.intents, dt, act.requested, act.output, world.tick, commanded)
 
 
 # ---------------------------------------------------------------------------- POST_UPDATE

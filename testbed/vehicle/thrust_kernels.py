@@ -386,11 +386,18 @@ def put_wrench(
 
 @numba.njit(cache=True)
 def put_output(
-    work: np.ndarray, scale: float, row: np.ndarray, tick_cell: np.ndarray, tick: int
+    work: np.ndarray,
+    scale: float,
+    row: np.ndarray,
+    tick_cell: np.ndarray,
+    tick: int,
+    commanded: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """A ThrusterOutput row (forces, PWM, currents, scale) from ``work``'s first three rows and
-    ``scale``; its tick moves only when a value changed."""
+    ``scale``; its tick moves only when a value changed. ``commanded`` (n,) gets the forces."""
     n = work.shape[1]
+    for i in range(n):
+        commanded[i] = work[FORCES, i]
     changed = row[3 * n] != scale
     for k in range(3):
         for i in range(n):
@@ -418,11 +425,12 @@ def allocate_rows(
     output: np.ndarray,
     output_tick: np.ndarray,
     tick: int,
+    commanded: np.ndarray,
 ) -> float:  # pragma: no cover - compiled
     """The allocation of one frame on component rows: :func:`sum_rows` of the intents into
     ``requested``, :func:`allocate_pinv` of it with ``limits`` = (f_lo, f_hi, slew step, current
-    cap, tolerance), and :func:`put_output`. Returns the scale, NaN for a sum that is not finite
-    (nothing is written then)."""
+    cap, tolerance), and :func:`put_output` (with ``commanded``). Returns the scale, NaN for a
+    sum that is not finite (nothing is written then)."""
     sum_rows(intents, intent_ticks, requested)
     scale = allocate_pinv(
         requested,
@@ -439,7 +447,7 @@ def allocate_rows(
         pwm_table,
     )
     if scale == scale:
-        put_output(work, scale, output, output_tick, tick)
+        put_output(work, scale, output, output_tick, tick, commanded)
     return scale
 
 
