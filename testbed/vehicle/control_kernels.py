@@ -40,8 +40,9 @@ from testbed.common.geometry import (
     quat_multiply,
     quat_rotate_inverse,
 )
-from testbed.vehicle import pilot, thrust_kernels
+from testbed.vehicle import pilot, row_kernels, thrust_kernels
 from testbed.vehicle.pilot import level_to_body, trim_targets
+from testbed.vehicle.row_kernels import put_row
 from testbed.vehicle.thrust_kernels import put_wrench
 
 __all__ = [
@@ -320,13 +321,7 @@ def pilot_rows(
         return
     target = (targets[1], targets[2], targets[3], targets[4])
     depth, q = trim_targets(targets[0], target, trims, dt_s, depth_hold, attitude_hold)
-    changed = False
-    for j, value in enumerate((depth, q[0], q[1], q[2], q[3])):
-        if targets[j] != value:
-            targets[j] = value
-            changed = True
-    if changed:
-        targets_tick[0] = tick
+    put_row(targets, targets_tick, tick, (depth, q[0], q[1], q[2], q[3]))
 
 
 @functools.cache
@@ -360,5 +355,5 @@ def warm_up() -> None:
 
 jit.refresh_stale_caches(
     (attitude_update, depth_update, attitude_rows, depth_rows, pilot_rows),
-    (geometry, jit, pilot, thrust_kernels),
+    (geometry, jit, pilot, row_kernels, thrust_kernels),
 )

@@ -34,6 +34,8 @@ from numba.extending import register_jitable
 
 from testbed.common import geometry, jit
 from testbed.common.geometry import Quaternion, Vec3, quat_multiply
+from testbed.vehicle import row_kernels
+from testbed.vehicle.row_kernels import put_row
 
 __all__ = [
     "ARDUSUB_PA_PER_M",
@@ -125,13 +127,7 @@ def imu_sample(
     p = rates_rad_s[0] + g * n3
     q = rates_rad_s[1] + g * n4
     r = rates_rad_s[2] + g * n5
-    changed = False
-    for j, value in enumerate((time_s, w, x, y, z, p, q, r)):
-        if row[j] != value:
-            row[j] = value
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    put_row(row, tick_cell, tick, (float(time_s), w, x, y, z, p, q, r))
     return True
 
 
@@ -157,13 +153,7 @@ def depth_sample(
     pressure = baro_pressure_pa(depth_m, params[0], surface, STANDARD_GRAVITY_M_S2)
     pressure += params[2] * draws[i]
     depth = baro_depth_m(pressure, params[3], surface)
-    changed = False
-    for j, value in enumerate((time_s, pressure, depth)):
-        if row[j] != value:
-            row[j] = value
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    put_row(row, tick_cell, tick, (float(time_s), pressure, depth))
     return True
 
 
@@ -185,15 +175,17 @@ def position_sample(
         return False
     cursor[0] = i + 3
     x, y, z = position_ned_m
-    changed = False
-    for j, value in enumerate(
-        (time_s, x + noise_m * draws[i], y + noise_m * draws[i + 1], z + noise_m * draws[i + 2])
-    ):
-        if row[j] != value:
-            row[j] = value
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    put_row(
+        row,
+        tick_cell,
+        tick,
+        (
+            float(time_s),
+            x + noise_m * draws[i],
+            y + noise_m * draws[i + 1],
+            z + noise_m * draws[i + 2],
+        ),
+    )
     return True
 
 
@@ -212,13 +204,7 @@ def odometry_rows(
     (0 without one), depth from the depth sensor, attitude from the IMU."""
     north, east = (fix[1], fix[2]) if has_fix else (0.0, 0.0)
     sampled = max(imu[0], depth[0])
-    changed = False
-    for j, value in enumerate((sampled, north, east, depth[2], imu[1], imu[2], imu[3], imu[4])):
-        if row[j] != value:
-            row[j] = value
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    put_row(row, tick_cell, tick, (sampled, north, east, depth[2], imu[1], imu[2], imu[3], imu[4]))
 
 
 @functools.cache
@@ -237,5 +223,5 @@ def warm_up() -> None:
 
 
 jit.refresh_stale_caches(
-    (imu_sample, depth_sample, position_sample, odometry_rows), (geometry, jit)
+    (imu_sample, depth_sample, position_sample, odometry_rows), (geometry, jit, row_kernels)
 )

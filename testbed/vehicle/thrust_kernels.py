@@ -9,7 +9,9 @@ classes around them keep the validation (shapes, finite values) and the configur
 Every kernel is ``numba.njit(cache=True)``: compiled once per machine and loaded from the cache
 beside this file afterwards (sweep workers and repeated runs do not recompile). They live in one
 module because numba's cache does not follow calls into other files: a kernel calling one
-defined elsewhere would keep a stale copy of it after that file changed.
+defined elsewhere would keep a stale copy of it after that file changed. The one exception is the
+frame store's write rule (:func:`~.row_kernels.put_row`), whose file
+:func:`~testbed.common.jit.refresh_stale_caches` watches for the kernels that compile it in.
 
 Units: forces [N], wrenches (X, Y, Z, K, M, N) [N, N·m] in the body FRD frame, currents [A],
 PWM pulses [µs], times [s]. A lookup table is a (2, k) array: row 0 the strictly increasing
@@ -32,6 +34,10 @@ import math
 
 import numba
 import numpy as np
+
+from testbed.common import jit
+from testbed.vehicle import row_kernels
+from testbed.vehicle.row_kernels import put_row
 
 __all__ = [
     "CURRENTS",
@@ -375,13 +381,7 @@ def put_wrench(
 ) -> None:  # pragma: no cover - compiled
     """A force intent's wrench row (X, Y, Z, K, M, N) [N, N·m], FRD; its tick moves only when a
     value changed."""
-    changed = False
-    for j, value in enumerate((x, y, z, k, m, n)):
-        if row[j] != value:
-            row[j] = value
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    put_row(row, tick_cell, tick, (x, y, z, k, m, n))
 
 
 @numba.njit(cache=True)
@@ -465,16 +465,15 @@ def put_wrench_pair(
     """:func:`interval_wrench` of the interval, written with ``requested`` (6,) into an
     AppliedWrench row (requested, achieved); returns the achieved wrench [N, N·m], FRD."""
     w = interval_wrench(matrix, start, end, weight)
-    changed = False
-    for j in range(6):
-        if row[j] != requested[j]:
-            row[j] = requested[j]
-            changed = True
-        if row[6 + j] != w[j]:
-            row[6 + j] = w[j]
-            changed = True
-    if changed:
-        tick_cell[0] = tick
+    r0, r1, r2, r3, r4, r5 = (
+        requested[0],
+        requested[1],
+        requested[2],
+        requested[3],
+        requested[4],
+        requested[5],
+    )
+    put_row(row, tick_cell, tick, (r0, r1, r2, r3, r4, r5, w[0], w[1], w[2], w[3], w[4], w[5]))
     return w
 
 
@@ -500,3 +499,6 @@ def actuate_rows(
         start[i] = forces[i]
     lag_step(forces, command, gain, held, blend)
     return put_wrench_pair(matrix, start, forces, weight, requested, row, tick_cell, tick)
+
+
+jit.refresh_stale_caches((put_wrench, put_wrench_pair, allocate_rows, actuate_rows), (row_kernels,))
