@@ -22,6 +22,16 @@ physics truth enters through :class:`PlantTruth` and only :func:`read_sensors` r
 of a run, such as the recorder, read it too, from outside the schedule's control path).
 Controller objects and the allocator are mutable resources; components stay frozen values.
 
+The frame's own components (the sensor readings, the control targets, the force intents, the
+thruster output, the applied wrench, the odometry) live in the vehicle's frame store
+(:mod:`testbed.ecs.store`): the world shows them as frozen components with change ticks, and
+the systems' compiled kernels write their rows directly (the sensors' models, the pilot
+interface, the depth and attitude loops, the allocation, the thrusters, the odometry), each
+system a short shell around its kernel. The event systems (ingest, failsafe, the position
+loop, the autonomy's) set components from Python as before. A row is found with
+:func:`vehicle_row` once the vehicle has the component; rows are never freed (the vehicle's
+components are never removed).
+
 Size: over the 500-line guideline, kept whole: the systems run in this order in one frame and
 share these resources; split, the frame's order would be read across files.
 """
