@@ -12,8 +12,12 @@ one built from the row), queries filter on the rows' ticks and origins, removals
 
 A compiled frame writes a row's fields and then its tick, a tick newer than the row's (the
 world's tick while its system runs: each system runs at a tick of its own), and leaves a row
-whose value is unchanged alone, so that readers are not woken. It writes origin 0 (LOCAL).
-This is stage 1 of the plan in ``docs/performance.md`` (the production compiled frame).
+whose value is unchanged alone, so that readers are not woken. It leaves the origin as it is
+(the vehicle's rows are its own: LOCAL). Within one system run, a component is either set from
+Python or written by a kernel, not both: a kernel's write at the tick of a Python ``set`` would
+leave the object that was set cached (the vehicle's systems set a component's first value from
+a scratch row for this reason). Stage 1 of the plan in ``docs/performance.md``; the vehicle
+keeps its frame's components here (stages 2 and 3).
 
 Fields a table holds: ``float``, ``int`` (exact within ±2⁵³), ``bool``, enums (their index in
 the enum) and tuples of floats of the length the prototype has, all in the row; and ``str``
