@@ -3,20 +3,21 @@ can read and write, seen through the world's API as frozen components with chang
 
 A :class:`FrameStore` holds one :class:`Table` per registered component type: ``values``, a
 ``(capacity, width)`` float64 array with one row per entity holding the component's fields
-(:class:`Layout`), ``ticks``, a ``(capacity,)`` int64 array with the world tick at which each
-row last changed (0: a free row), and ``origins``, ``(capacity,)`` int8 (0 LOCAL, 1 REMOTE).
+(:class:`Layout`), ``marks``, a ``(capacity, 2)`` int64 array with the world tick at which
+each row last changed (0: a free row; the column is also the view ``ticks``) and the row's
+write count, and ``origins``, ``(capacity,)`` int8 (0 LOCAL, 1 REMOTE).
 :meth:`~testbed.ecs.world.World.use_store` makes the world keep those types in the tables.
 Everything the world offers works the same for them: ``set`` records a change only for a value
 that differs, ``get`` returns the object that was set (or, after a write into the table, a new
 one built from the row), queries filter on the rows' ticks and origins, removals are logged.
 
-A compiled frame writes a row's fields and then its tick, a tick newer than the row's (the
-world's tick while its system runs: each system runs at a tick of its own), and leaves a row
-whose value is unchanged alone, so that readers are not woken. It leaves the origin as it is
-(the vehicle's rows are its own: LOCAL). Within one system run, a component is either set from
-Python or written by a kernel, not both: a kernel's write at the tick of a Python ``set`` would
-leave the object that was set cached (the vehicle's systems set a component's first value from
-a scratch row for this reason). Stage 1 of the plan in ``docs/performance.md``; the vehicle
+A compiled frame writes a row's fields and then its mark: the change tick (the world's tick
+while its system runs: each system runs at a tick of its own) and one more write in the row's
+write count; it leaves a row whose value is unchanged alone, so that readers are not woken,
+and leaves the origin as it is (the vehicle's rows are its own: LOCAL). The write count, not
+the tick, tells a slot that the object it keeps is stale, so a kernel may write a row at the
+tick a Python ``set`` wrote it at (between frames, the next frame's first system runs at the
+tick of the writes made before it). Stage 1 of the plan in ``docs/performance.md``; the vehicle
 keeps its frame's components here (stages 2 and 3).
 
 Fields a table holds: ``float``, ``int`` (exact within ±2⁵³), ``bool``, enums (their index in
@@ -147,11 +148,13 @@ class Layout:
 
 
 class Table:
-    """One component type's rows: ``values`` (capacity, width) float64, ``ticks`` (capacity,)
-    int64 (0 for a free row), ``origins`` (capacity,) int8 (0 LOCAL, 1 REMOTE), and ``texts``,
-    each row's ``str`` fields."""
+    """One component type's rows: ``values`` (capacity, width) float64; ``marks`` (capacity, 2)
+    int64, each row's change tick (0 for a free row; also the view ``ticks``) and write count
+    (one more at every write, from Python or from a kernel: what tells a cached object from a
+    stale one); ``origins`` (capacity,) int8 (0 LOCAL, 1 REMOTE); and ``texts``, each row's
+    ``str`` fields."""
 
-    __slots__ = ("_free", "capacity", "layout", "origins", "texts", "ticks", "values")
+    __slots__ = ("_free", "capacity", "layout", "marks", "origins", "texts", "ticks", "values")
 
     def __init__(self, layout: Layout, capacity: int) -> None:
         if capacity < 1:
@@ -159,7 +162,8 @@ class Table:
         self.layout = layout
         self.capacity = capacity
         self.values = np.zeros((capacity, layout.width))
-        self.ticks = np.zeros(capacity, dtype=np.int64)
+        self.marks = np.zeros((capacity, 2), dtype=np.int64)
+        self.ticks = self.marks[:, 0]
         self.origins = np.zeros(capacity, dtype=np.int8)
         self.texts: list[tuple[str, ...]] = [()] * capacity
         self._free = list(range(capacity - 1, -1, -1))  # the lowest row first
@@ -176,37 +180,46 @@ class Table:
             )
         return self._free.pop()
 
-    def write(self, row: int, value: object) -> None:
-        """Put ``value`` into ``row`` (its fields; not its tick)."""
+    def write(self, row: int, value: object) -> int:
+        """Put ``value`` into ``row`` (its fields; not its tick) and count the write.
+
+        Returns:
+            The row's write count after it.
+        """
         self.texts[row] = self.layout.write(self.values[row], value)
+        marks = self.marks
+        count = int(marks[row, 1]) + 1
+        marks[row, 1] = count
+        return count
 
     def read(self, row: int) -> object:
         """A new component built from ``row``."""
         return self.layout.read(self.values[row], self.texts[row])
 
     def release(self, row: int) -> None:
-        """Free ``row`` (its tick goes back to 0)."""
-        self.ticks[row] = 0
+        """Free ``row`` (its tick goes back to 0; its write count carries on)."""
+        self.marks[row, 0] = 0
         self._free.append(row)
 
 
 class RowView:
     """One entity's row of a table, as a compiled frame writes it: ``values``, the row's
-    ``(width,)`` view, and ``tick``, a ``(1,)`` view of its change tick (write the fields, then
-    the tick, only when a field changed; see the module docstring)."""
+    ``(width,)`` view, and ``mark``, a ``(2,)`` view of its change tick and write count (write
+    the fields, then, only when a field changed, the tick and one more write; see the module
+    docstring)."""
 
-    __slots__ = ("tick", "values")
+    __slots__ = ("mark", "values")
 
     def __init__(self, table: Table, row: int) -> None:
         self.values = table.values[row]
-        self.tick = table.ticks[row : row + 1]
+        self.mark = table.marks[row]
 
     @classmethod
     def detached(cls, width: int) -> RowView:
         """A row of ``width`` floats of its own, in no table (a scratch row)."""
         view = cls.__new__(cls)
         view.values = np.zeros(width)
-        view.tick = np.zeros(1, dtype=np.int64)
+        view.mark = np.zeros(2, dtype=np.int64)
         return view
 
 
@@ -250,12 +263,12 @@ def _origins() -> tuple[Origin, Origin]:
 
 class StoreSlot(Slot):
     """A slot whose value, change tick and origin live in a table row (see the module
-    docstring); ``added`` stays an attribute. The value last set from Python is kept and
-    returned while the row's tick is the one it was set at."""
+    docstring); ``added`` stays an attribute. The value last set from Python, or last built from
+    the row, is kept and returned while the row's write count is the one it was kept at."""
 
-    __slots__ = ("_cached", "_cached_tick", "_row", "_table")
+    __slots__ = ("_cached", "_count", "_row", "_table")
     _cached: object
-    _cached_tick: int | None
+    _count: int
 
     def __init__(self, table: Table, row: int, slot: Slot) -> None:
         self._table = table
@@ -270,11 +283,12 @@ class StoreSlot(Slot):
         cached = self._cached
         if cached is GONE:
             return GONE
-        tick = self._cached_tick
-        if tick is None or tick == self._table.ticks[self._row]:
+        table, row = self._table, self._row
+        count = table.marks[row, 1]
+        if count == self._count:
             return cached
-        cached = self._cached = self._table.read(self._row)
-        self._cached_tick = int(self._table.ticks[self._row])
+        cached = self._cached = table.read(row)
+        self._count = int(count)
         return cached
 
     @value.setter
@@ -282,19 +296,16 @@ class StoreSlot(Slot):
         if component is GONE:
             self._table.release(self._row)
         else:
-            self._table.write(self._row, component)
+            self._count = self._table.write(self._row, component)
         self._cached = component
-        self._cached_tick = None  # until the change tick is set (World.set sets it next)
 
     @property
     def changed(self) -> int:
-        return int(self._table.ticks[self._row])
+        return int(self._table.marks[self._row, 0])
 
     @changed.setter
     def changed(self, tick: int) -> None:
-        self._table.ticks[self._row] = tick
-        if self._cached_tick is None:
-            self._cached_tick = tick
+        self._table.marks[self._row, 0] = tick
 
     @property
     def origin(self) -> Origin:

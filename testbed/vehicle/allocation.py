@@ -208,10 +208,10 @@ class Allocator:
             self._current_table,
             self._pwm_table,
         )
-        ticks, n = np.zeros(8, dtype=np.int64), self._n
-        allocate_rows(np.zeros((8, 6)), ticks, np.zeros(6), self._stuck_wrench, self._pinv,
+        marks, n = np.zeros((8, 2), dtype=np.int64), self._n
+        allocate_rows(np.zeros((8, 6)), marks, np.zeros(6), self._stuck_wrench, self._pinv,
                       self._limits, self._work.copy(), self._thrusters, self._current_table,
-                      self._pwm_table, np.zeros(3 * n + 1), ticks[:1], 1, np.zeros(n))  # fmt: skip
+                      self._pwm_table, np.zeros(3 * n + 1), marks[0], 1, np.zeros(n))  # fmt: skip
 
     # ----------------------------------------------------------------- properties
 
@@ -417,7 +417,7 @@ class Allocator:
             limits[2] = self._slew * dt_s
             scale = allocate_rows(
                 intents.values,
-                intents.ticks,
+                intents.marks,
                 requested,
                 self._stuck_wrench,
                 self._pinv,
@@ -427,16 +427,16 @@ class Allocator:
                 self._current_table,
                 self._pwm_table,
                 output.values,
-                output.tick,
+                output.mark,
                 tick,
                 commanded,
             )
             if scale != scale:
                 raise ValueError(f"wrench must be finite, got {requested.tolist()}")
             return scale
-        sum_rows(intents.values, intents.ticks, requested)
+        sum_rows(intents.values, intents.marks, requested)
         scale = self.step(requested, dt_s)
-        put_output(self._work, scale, output.values, output.tick, tick, commanded)
+        put_output(self._work, scale, output.values, output.mark, tick, commanded)
         return scale
 
     @property

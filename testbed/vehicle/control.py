@@ -321,7 +321,7 @@ class AttitudeController:
             dt_s + 0.0,
             axes,
             intent.values,
-            intent.tick,
+            intent.mark,
             tick,
         )
 
@@ -403,7 +403,7 @@ class DepthController:
             imu.values,
             dt_s + 0.0,
             intent.values,
-            intent.tick,
+            intent.mark,
             tick,
         )
 

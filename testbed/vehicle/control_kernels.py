@@ -261,14 +261,14 @@ def depth_rows(
     imu: np.ndarray,
     dt_s: float,
     intent: np.ndarray,
-    intent_tick: np.ndarray,
+    intent_mark: np.ndarray,
     tick: int,
 ) -> None:  # pragma: no cover - compiled
     """:func:`depth_update` of the rows' target depth, measured depth and attitude, written as
     the depth loop's force intent (X, Y, Z, 0, 0, 0) [N]."""
     attitude = (imu[1], imu[2], imu[3], imu[4])
     fx, fy, fz = depth_update(state, gains, targets[0], reading[2], attitude, dt_s, feedforward_n)
-    put_wrench(intent, intent_tick, tick, fx, fy, fz, 0.0, 0.0, 0.0)
+    put_wrench(intent, intent_mark, tick, fx, fy, fz, 0.0, 0.0, 0.0)
 
 
 @numba.njit(cache=True)
@@ -280,7 +280,7 @@ def attitude_rows(
     dt_s: float,
     axes: tuple[bool, bool, bool],
     intent: np.ndarray,
-    intent_tick: np.ndarray,
+    intent_mark: np.ndarray,
     tick: int,
 ) -> None:  # pragma: no cover - compiled
     """:func:`attitude_update` of the rows' target attitude, measured attitude and rates,
@@ -289,7 +289,7 @@ def attitude_rows(
     current = (imu[1], imu[2], imu[3], imu[4])
     rates = (imu[5], imu[6], imu[7])
     tx, ty, tz = attitude_update(state, gains, target, current, rates, dt_s, axes)
-    put_wrench(intent, intent_tick, tick, 0.0, 0.0, 0.0, tx, ty, tz)
+    put_wrench(intent, intent_mark, tick, 0.0, 0.0, 0.0, tx, ty, tz)
 
 
 @numba.njit(cache=True)
@@ -302,8 +302,8 @@ def pilot_rows(
     targets: np.ndarray,
     dt_s: float,
     intent: np.ndarray,
-    intent_tick: np.ndarray,
-    targets_tick: np.ndarray,
+    intent_mark: np.ndarray,
+    targets_mark: np.ndarray,
     tick: int,
 ) -> None:  # pragma: no cover - compiled
     """The pilot interface's frame on the rows: its force intent from the sticks' level wrench
@@ -313,15 +313,15 @@ def pilot_rows(
     if depth_hold:
         attitude = (imu[1], imu[2], imu[3], imu[4])
         fx, fy, fz = level_to_body((wrench[0], wrench[1], wrench[2]), attitude)
-        put_wrench(intent, intent_tick, tick, fx, fy, fz, wrench[3], wrench[4], wrench[5])
+        put_wrench(intent, intent_mark, tick, fx, fy, fz, wrench[3], wrench[4], wrench[5])
     else:
         x, y, z, k, m, n = wrench
-        put_wrench(intent, intent_tick, tick, x, y, z, k, m, n)
+        put_wrench(intent, intent_mark, tick, x, y, z, k, m, n)
     if not (depth_hold or attitude_hold):
         return
     target = (targets[1], targets[2], targets[3], targets[4])
     depth, q = trim_targets(targets[0], target, trims, dt_s, depth_hold, attitude_hold)
-    put_row(targets, targets_tick, tick, (depth, q[0], q[1], q[2], q[3]))
+    put_row(targets, targets_mark, tick, (depth, q[0], q[1], q[2], q[3]))
 
 
 @functools.cache
@@ -333,7 +333,7 @@ def warm_up() -> None:
     pid_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.01, 0.0, False)
     attitude_update(np.zeros(ATTITUDE_STATE_SIZE), gains, level, level, zero, 0.01, (True,) * 3)
     depth_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.0, level, 0.01, 0.0)
-    row, tick_cell, imu = np.zeros(6), np.zeros(1, dtype=np.int64), np.zeros(8)
+    row, mark, imu = np.zeros(6), np.zeros(2, dtype=np.int64), np.zeros(8)
     depth_rows(
         np.zeros(PID_STATE_SIZE),
         gains[0],
@@ -343,13 +343,13 @@ def warm_up() -> None:
         imu,
         0.01,
         row,
-        tick_cell,
+        mark,
         1,
     )
     wrench, trims, targets = (0.0,) * 6, (0.0,) * 4, np.array([0.0, 1.0, 0.0, 0.0, 0.0])
-    pilot_rows(wrench, trims, True, True, imu, targets, 0.01, row, tick_cell, tick_cell, 1)
+    pilot_rows(wrench, trims, True, True, imu, targets, 0.01, row, mark, mark, 1)
     attitude_rows(
-        np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, tick_cell, 1
+        np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, mark, 1
     )
 
 

@@ -90,7 +90,7 @@ def imu_sample(
     rates_rad_s: Vec3,
     time_s: float,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> bool:  # pragma: no cover - compiled
     """One IMU reading (the model of :class:`~.sensors.Imu`) into an ImuReading row.
@@ -101,7 +101,7 @@ def imu_sample(
         params: (:data:`IMU_PARAMS_SIZE`,) the model's parameters.
         quaternion_wxyz, rates_rad_s: the truth.
         time_s: the sample's time [s].
-        row, tick_cell, tick: the row, its change tick and the tick to write.
+        row, mark, tick: the row, its change tick and the tick to write.
     """
     i = cursor[0]
     if i + 6 > draws.size:
@@ -127,7 +127,7 @@ def imu_sample(
     p = rates_rad_s[0] + g * n3
     q = rates_rad_s[1] + g * n4
     r = rates_rad_s[2] + g * n5
-    put_row(row, tick_cell, tick, (float(time_s), w, x, y, z, p, q, r))
+    put_row(row, mark, tick, (float(time_s), w, x, y, z, p, q, r))
     return True
 
 
@@ -139,7 +139,7 @@ def depth_sample(
     depth_m: float,
     time_s: float,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> bool:  # pragma: no cover - compiled
     """One pressure-depth reading (the model of :class:`~.sensors.DepthSensor`) into a
@@ -153,7 +153,7 @@ def depth_sample(
     pressure = baro_pressure_pa(depth_m, params[0], surface, STANDARD_GRAVITY_M_S2)
     pressure += params[2] * draws[i]
     depth = baro_depth_m(pressure, params[3], surface)
-    put_row(row, tick_cell, tick, (float(time_s), pressure, depth))
+    put_row(row, mark, tick, (float(time_s), pressure, depth))
     return True
 
 
@@ -165,7 +165,7 @@ def position_sample(
     position_ned_m: Vec3,
     time_s: float,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> bool:  # pragma: no cover - compiled
     """One position fix (the true NED position [m] plus white noise of 1σ ``noise_m``) into a
@@ -177,7 +177,7 @@ def position_sample(
     x, y, z = position_ned_m
     put_row(
         row,
-        tick_cell,
+        mark,
         tick,
         (
             float(time_s),
@@ -196,7 +196,7 @@ def odometry_rows(
     fix: np.ndarray,
     has_fix: bool,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> None:  # pragma: no cover - compiled
     """The vehicle's odometry from its readings' rows into an Odometry row: sampled at the
@@ -204,7 +204,7 @@ def odometry_rows(
     (0 without one), depth from the depth sensor, attitude from the IMU."""
     north, east = (fix[1], fix[2]) if has_fix else (0.0, 0.0)
     sampled = max(imu[0], depth[0])
-    put_row(row, tick_cell, tick, (sampled, north, east, depth[2], imu[1], imu[2], imu[3], imu[4]))
+    put_row(row, mark, tick, (sampled, north, east, depth[2], imu[1], imu[2], imu[3], imu[4]))
 
 
 @functools.cache
@@ -212,14 +212,14 @@ def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel here, once per process (the sensors
     call it when they are built, so the first frame of a timed run does not)."""
     draws, cursor = np.zeros(8), np.zeros(1, dtype=np.int64)
-    tick_cell = np.zeros(1, dtype=np.int64)
+    mark = np.zeros(2, dtype=np.int64)
     level, zero = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    imu_sample(draws, cursor, np.zeros(3), np.zeros(6), level, zero, 0.0, np.zeros(8), tick_cell, 1)
+    imu_sample(draws, cursor, np.zeros(3), np.zeros(6), level, zero, 0.0, np.zeros(8), mark, 1)
     cursor[0] = 0
-    depth_sample(draws, cursor, np.ones(4), 0.0, 0.0, np.zeros(3), tick_cell, 1)
+    depth_sample(draws, cursor, np.ones(4), 0.0, 0.0, np.zeros(3), mark, 1)
     cursor[0] = 0
-    position_sample(draws, cursor, 0.0, zero, 0.0, np.zeros(4), tick_cell, 1)
-    odometry_rows(np.zeros(8), np.zeros(3), np.zeros(4), False, np.zeros(8), tick_cell, 1)
+    position_sample(draws, cursor, 0.0, zero, 0.0, np.zeros(4), mark, 1)
+    odometry_rows(np.zeros(8), np.zeros(3), np.zeros(4), False, np.zeros(8), mark, 1)
 
 
 jit.refresh_stale_caches(

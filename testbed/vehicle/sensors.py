@@ -227,7 +227,7 @@ class Imu:
             rates_rad_s,
             time_s,
             row.values,
-            row.tick,
+            row.mark,
             tick,
         ):
             normals.ready(6)
@@ -312,7 +312,7 @@ class DepthSensor:
             depth_m,
             time_s,
             row.values,
-            row.tick,
+            row.mark,
             tick,
         ):
             normals.ready(1)
@@ -375,7 +375,7 @@ class PositionFix:
             position_ned_m,
             time_s,
             row.values,
-            row.tick,
+            row.mark,
             tick,
         ):
             normals.ready(3)

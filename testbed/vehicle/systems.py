@@ -357,7 +357,7 @@ def set_intent(world: World, controllers: Controllers, source: str, wrench: Wren
     """Write ``source``'s :class:`ForceIntent` wrench [N, N·m], FRD, into its row (a change
     only when it differs)."""
     row = controllers.intent_rows[source]
-    put_wrench(row.values, row.tick, world.tick, *wrench)
+    put_wrench(row.values, row.mark, world.tick, *wrench)
 
 
 # ------------------------------------------------------------------------------ PRE_UPDATE
@@ -514,8 +514,8 @@ def run_pilot_interface(world: World) -> None:
         row.values,
         world.resource(SimClock).dt_s,
         intent.values,
-        intent.tick,
-        row.tick,
+        intent.mark,
+        row.mark,
         world.tick,
     )
     if targets is None and hold:
@@ -746,7 +746,7 @@ def publish_odometry(world: World) -> None:
     row = odometry or RowView.detached(_ODOMETRY.width)
     fix_values = imu.values if fix is None else fix.values  # read only with a fix
     odometry_rows(
-        imu.values, depth.values, fix_values, fix is not None, row.values, row.tick, world.tick
+        imu.values, depth.values, fix_values, fix is not None, row.values, row.mark, world.tick
     )
     if odometry is None:
         world.set(ctl.vehicle, _ODOMETRY.read(row.values))

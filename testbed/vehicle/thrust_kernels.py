@@ -351,18 +351,18 @@ def interval_wrench(
 # ------------------------------------------------------------------ component rows
 #
 # The frame's store-backed components (:mod:`testbed.ecs.store`): a kernel writes a row's fields
-# and then, only when a field changed, the row's change tick (``tick_cell``, the row's one-element
+# and then, only when a field changed, the row's change tick (``mark``, the row's one-element
 # view of its table's ticks) with the tick of the system that runs it.
 
 
 @numba.njit(cache=True)
-def sum_rows(rows: np.ndarray, ticks: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """Σ of the live rows (tick > 0) of a (rows, 6) wrench table into ``out`` (6,), row by row
-    from 0.0 in row order (the force intents' sum, [N, N·m], body FRD)."""
+def sum_rows(rows: np.ndarray, marks: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """Σ of the live rows (change tick ``marks[r, 0]`` > 0) of a (rows, 6) wrench table into
+    ``out`` (6,), row by row from 0.0 in row order (the force intents' sum, [N, N·m], FRD)."""
     for j in range(6):
         out[j] = 0.0
     for r in range(rows.shape[0]):
-        if ticks[r] > 0:
+        if marks[r, 0] > 0:
             for j in range(6):
                 out[j] += rows[r, j]
 
@@ -370,7 +370,7 @@ def sum_rows(rows: np.ndarray, ticks: np.ndarray, out: np.ndarray) -> None:  # p
 @numba.njit(cache=True)
 def put_wrench(
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
     x: float,
     y: float,
@@ -381,7 +381,7 @@ def put_wrench(
 ) -> None:  # pragma: no cover - compiled
     """A force intent's wrench row (X, Y, Z, K, M, N) [N, N·m], FRD; its tick moves only when a
     value changed."""
-    put_row(row, tick_cell, tick, (x, y, z, k, m, n))
+    put_row(row, mark, tick, (x, y, z, k, m, n))
 
 
 @numba.njit(cache=True)
@@ -389,7 +389,7 @@ def put_output(
     work: np.ndarray,
     scale: float,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
     commanded: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
@@ -407,13 +407,14 @@ def put_output(
                 changed = True
     row[3 * n] = scale
     if changed:
-        tick_cell[0] = tick
+        mark[0] = tick
+        mark[1] += 1
 
 
 @numba.njit(cache=True)
 def allocate_rows(
     intents: np.ndarray,
-    intent_ticks: np.ndarray,
+    intent_marks: np.ndarray,
     requested: np.ndarray,
     offset: np.ndarray,
     pinv: np.ndarray,
@@ -423,7 +424,7 @@ def allocate_rows(
     current_table: np.ndarray,
     pwm_table: np.ndarray,
     output: np.ndarray,
-    output_tick: np.ndarray,
+    output_mark: np.ndarray,
     tick: int,
     commanded: np.ndarray,
 ) -> float:  # pragma: no cover - compiled
@@ -431,7 +432,7 @@ def allocate_rows(
     ``requested``, :func:`allocate_pinv` of it with ``limits`` = (f_lo, f_hi, slew step, current
     cap, tolerance), and :func:`put_output` (with ``commanded``). Returns the scale, NaN for a
     sum that is not finite (nothing is written then)."""
-    sum_rows(intents, intent_ticks, requested)
+    sum_rows(intents, intent_marks, requested)
     scale = allocate_pinv(
         requested,
         offset,
@@ -447,7 +448,7 @@ def allocate_rows(
         pwm_table,
     )
     if scale == scale:
-        put_output(work, scale, output, output_tick, tick, commanded)
+        put_output(work, scale, output, output_mark, tick, commanded)
     return scale
 
 
@@ -459,7 +460,7 @@ def put_wrench_pair(
     weight: float,
     requested: np.ndarray,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
     """:func:`interval_wrench` of the interval, written with ``requested`` (6,) into an
@@ -473,7 +474,7 @@ def put_wrench_pair(
         requested[4],
         requested[5],
     )
-    put_row(row, tick_cell, tick, (r0, r1, r2, r3, r4, r5, w[0], w[1], w[2], w[3], w[4], w[5]))
+    put_row(row, mark, tick, (r0, r1, r2, r3, r4, r5, w[0], w[1], w[2], w[3], w[4], w[5]))
     return w
 
 
@@ -489,7 +490,7 @@ def actuate_rows(
     weight: float,
     requested: np.ndarray,
     row: np.ndarray,
-    tick_cell: np.ndarray,
+    mark: np.ndarray,
     tick: int,
 ) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
     """One frame's interval of the thrusters: ``start`` ← ``forces``, :func:`lag_step` of
@@ -498,7 +499,7 @@ def actuate_rows(
     for i in range(forces.size):
         start[i] = forces[i]
     lag_step(forces, command, gain, held, blend)
-    return put_wrench_pair(matrix, start, forces, weight, requested, row, tick_cell, tick)
+    return put_wrench_pair(matrix, start, forces, weight, requested, row, mark, tick)
 
 
 jit.refresh_stale_caches((put_wrench, put_wrench_pair, allocate_rows, actuate_rows), (row_kernels,))

@@ -146,9 +146,9 @@ class ThrusterDynamics:
         # compiled (or loaded) now, on scratch forces, not in the first frame of a timed run
         lag_step(np.zeros(n_thrusters), self._forces, self._gain, self._held, 0.0)
         scratch, row = np.zeros(n_thrusters), np.zeros(12)
-        matrix, ticks = np.zeros((6, n_thrusters)), np.zeros(1, dtype=np.int64)
+        matrix, mark = np.zeros((6, n_thrusters)), np.zeros(2, dtype=np.int64)
         actuate_rows(scratch, scratch.copy(), scratch, self._gain, self._held, 0.0, matrix, 0.5,
-                     row[:6], row, ticks, 1)  # fmt: skip
+                     row[:6], row, mark, 1)  # fmt: skip
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
@@ -276,7 +276,7 @@ class ThrusterDynamics:
             weight,
             requested,
             applied.values,
-            applied.tick,
+            applied.mark,
             tick,
         )
 

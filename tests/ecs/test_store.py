@@ -3,8 +3,9 @@ seen as changes.
 
 The reference-model state machine of ``test_world_model.py`` runs again on a world that keeps
 two of its three types in a :class:`FrameStore`, with one more rule: a write straight into a
-table row and its tick, as a compiled frame makes it (the model records it as a LOCAL change
-at the present tick). Every invariant of that test must hold after every step.
+table row and its mark (tick and write count), as a compiled frame makes it (the model records
+it as a change at the present tick, the origin left as it was), also at the tick of a Python
+``set`` just made. Every invariant of that test must hold after every step.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import precondition, rule
 
-from testbed.ecs import Entity, Origin, World
-from testbed.ecs.store import FrameStore, Layout
+from testbed.ecs import Entity, World
+from testbed.ecs.store import FrameStore, Layout, Table
 from tests.ecs.test_world_model import TYPES, VALUES, A, B, WorldModel
 
 STORED = (A, B)
@@ -38,21 +39,25 @@ class StoredWorldModel(WorldModel):
     @precondition(lambda self: any(cls in r for r in self.model.values() for cls in STORED))
     @rule(data=st.data(), value=VALUES)
     def frame_writes_a_row(self, data: st.DataObject, value: int) -> None:
-        """A compiled frame's write: the row's field, then its tick, only for a new value."""
+        """A compiled frame's write: the row's field, then its mark, only for a new value."""
         cls = data.draw(st.sampled_from(STORED))
         holders = sorted(e for e, records in self.model.items() if cls in records)
         if not holders:
             return
         entity = data.draw(st.sampled_from(holders))
         record = self.model[entity][cls]
-        if record.value == cls(value) or record.changed >= self.tick:
-            return  # a frame leaves an unchanged row alone, and writes at a tick of its own
+        if record.value == cls(value):
+            return  # a frame leaves an unchanged row alone
         table = self.store.table(cls)
         row = _row_of(self.world, Entity(entity), cls)
         table.values[row, 0] = value
-        table.ticks[row] = self.tick
-        table.origins[row] = 0
-        record.value, record.changed, record.origin = cls(value), self.tick, Origin.LOCAL
+        frame_marks(table, row, self.tick)
+        record.value, record.changed = cls(value), self.tick
+
+
+def frame_marks(table: Table, row: int, tick: int) -> None:
+    """What a compiled frame writes after a row's fields: the tick and one more write."""
+    table.marks[row] = (tick, table.marks[row, 1] + 1)
 
 
 def _row_of(world: World, entity: Entity, cls: type[Any]) -> int:
@@ -106,8 +111,8 @@ def test_a_value_set_from_python_is_the_object_get_returns_until_a_frame_writes(
     assert world.set(entity, Reading(1.0, (1.0, 0.0, 0.0, 0.0), 3, True, Mode.HOLD)) is False
     assert world.get(entity, Reading) is value  # an equal value records nothing, keeps the object
     world.advance()
-    table.values[0, 0] = 2.0  # a frame's write: the field, then a newer tick
-    table.ticks[0] = world.tick
+    table.values[0, 0] = 2.0  # a frame's write: the field, then its mark
+    frame_marks(table, 0, world.tick)
     got = world.get(entity, Reading)
     assert got == Reading(2.0, (1.0, 0.0, 0.0, 0.0), 3, True, Mode.HOLD)
     assert world.get(entity, Reading) is got  # built once per change
@@ -147,7 +152,7 @@ def test_a_label_is_kept_beside_its_row_and_survives_a_frames_write() -> None:
     depth = world.spawn(Labelled("depth", (0.0, 0.0)))
     world.advance()
     table.values[0] = (3.0, 4.0)  # a frame writes the wrench, never the label
-    table.ticks[0] = world.tick
+    frame_marks(table, 0, world.tick)
     assert world.get(pilot, Labelled) == Labelled("pilot", (3.0, 4.0))
     assert world.get(depth, Labelled) == Labelled("depth", (0.0, 0.0))
     with pytest.raises(TypeError, match=r"Labelled\.source: a str, got 7"):
