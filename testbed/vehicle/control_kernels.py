@@ -66,6 +66,7 @@ __all__ = [
     "depth_update",
     "pid_update",
     "pilot_rows",
+    "put_targets",
     "warm_up",
 ]
 
@@ -324,6 +325,16 @@ def pilot_rows(
     put_row(targets, targets_mark, tick, (depth, q[0], q[1], q[2], q[3]))
 
 
+@numba.njit(cache=True)
+def put_targets(
+    row: np.ndarray, mark: np.ndarray, tick: int, depth_m: float, quaternion_wxyz: Quaternion
+) -> None:  # pragma: no cover - compiled
+    """A ControlTargets row: the depth target [m, + down] and the attitude target, body → NED
+    (:func:`~.row_kernels.put_row`)."""
+    w, x, y, z = quaternion_wxyz
+    put_row(row, mark, tick, (float(depth_m), float(w), float(x), float(y), float(z)))
+
+
 @functools.cache
 def warm_up() -> None:
     """Compile (or load from the disk cache) every kernel here, once per process: the
@@ -348,12 +359,13 @@ def warm_up() -> None:
     )
     wrench, trims, targets = (0.0,) * 6, (0.0,) * 4, np.array([0.0, 1.0, 0.0, 0.0, 0.0])
     pilot_rows(wrench, trims, True, True, imu, targets, 0.01, row, mark, mark, 1)
+    put_targets(targets, mark, 1, 0.0, (1.0, 0.0, 0.0, 0.0))
     attitude_rows(
         np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, mark, 1
     )
 
 
 jit.refresh_stale_caches(
-    (attitude_update, depth_update, attitude_rows, depth_rows, pilot_rows),
+    (attitude_update, depth_update, attitude_rows, depth_rows, pilot_rows, put_targets),
     (geometry, jit, pilot, row_kernels, thrust_kernels),
 )

@@ -40,8 +40,9 @@ from testbed.vehicle.nav_sensors import (
     MotionCaptureConfig,
     NavSource,
 )
+from testbed.vehicle.sensor_kernels import put_position
 from testbed.vehicle.sensors import PositionFix
-from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
+from testbed.vehicle.systems import Controllers, PlantTruth, SimClock, vehicle_row
 
 MIN_FIX_SIGMA_M = 1e-4
 """Smallest 1σ [m] a position fix is given in the filter (a noiseless fix is 0.1 mm)."""
@@ -218,7 +219,8 @@ def estimate_navigation(world: World) -> None:
     Does nothing until the vehicle has an IMU reading (the localizer needs its attitude).
     """
     nav = world.resource(Navigation)
-    vehicle = world.resource(Controllers).vehicle
+    ctl = world.resource(Controllers)
+    vehicle = ctl.vehicle
     imu = world.get(vehicle, ImuReading)
     if imu is None:
         return
@@ -241,4 +243,8 @@ def estimate_navigation(world: World) -> None:
     world.set(vehicle, estimate)
     # the estimate is the vehicle's position reading: GUIDED's loop, the odometry the operator
     # is sent and the GoTo support check read it as they read a position fix
-    world.set(vehicle, PositionReading(estimate.time_s, estimate.position_ned_m))
+    row = vehicle_row(world, ctl, PositionReading)
+    if row is None:
+        world.set(vehicle, PositionReading(estimate.time_s, estimate.position_ned_m))
+    else:
+        put_position(row.values, row.mark, world.tick, estimate.time_s, estimate.position_ned_m)

@@ -48,6 +48,7 @@ __all__ = [
     "imu_sample",
     "odometry_rows",
     "position_sample",
+    "put_position",
     "warm_up",
 ]
 
@@ -190,6 +191,16 @@ def position_sample(
 
 
 @numba.njit(cache=True)
+def put_position(
+    row: np.ndarray, mark: np.ndarray, tick: int, time_s: float, position_ned_m: Vec3
+) -> None:  # pragma: no cover - compiled
+    """A PositionReading row: its time [s] and NED position [m] (a position source's own, such
+    as the navigation filter's estimate; :func:`~.row_kernels.put_row`)."""
+    x, y, z = position_ned_m
+    put_row(row, mark, tick, (float(time_s), float(x), float(y), float(z)))
+
+
+@numba.njit(cache=True)
 def odometry_rows(
     imu: np.ndarray,
     depth: np.ndarray,
@@ -220,8 +231,10 @@ def warm_up() -> None:
     cursor[0] = 0
     position_sample(draws, cursor, 0.0, zero, 0.0, np.zeros(4), mark, 1)
     odometry_rows(np.zeros(8), np.zeros(3), np.zeros(4), False, np.zeros(8), mark, 1)
+    put_position(np.zeros(4), mark, 1, 0.0, zero)
 
 
 jit.refresh_stale_caches(
-    (imu_sample, depth_sample, position_sample, odometry_rows), (geometry, jit, row_kernels)
+    (imu_sample, depth_sample, position_sample, odometry_rows, put_position),
+    (geometry, jit, row_kernels),
 )

@@ -85,13 +85,14 @@ class NormalDraws:
     advance it, after :meth:`ready` made enough draws available.
     """
 
-    __slots__ = ("_rng", "block", "buffer", "cursor")
+    __slots__ = ("_listed", "_rng", "block", "buffer", "cursor")
 
     def __init__(self, rng: np.random.Generator, block: int = 1024) -> None:
         self._rng = rng
         self.block = block
         self.buffer = np.zeros(0)
         self.cursor = np.zeros(1, dtype=np.int64)
+        self._listed: list[float] = []  # the buffer as floats, for the Python readers
 
     def ready(self, count: int) -> None:
         """Make at least ``count`` draws available from the cursor (the rest of the block, then
@@ -100,6 +101,7 @@ class NormalDraws:
         if start + count > self.buffer.size:
             fresh = self._rng.standard_normal(max(self.block, count))
             self.buffer = np.concatenate((self.buffer[start:], fresh))
+            self._listed = self.buffer.tolist()
             self.cursor[0] = 0
 
     def take(self) -> float:
@@ -113,11 +115,13 @@ class NormalDraws:
 
     def take_many(self, count: int) -> list[float]:
         """The next ``count`` draws (the same as ``count`` calls of :meth:`take`)."""
-        self.ready(count)
-        start = int(self.cursor[0])
-        self.cursor[0] = start + count
-        draws: list[float] = self.buffer[start : start + count].tolist()
-        return draws
+        cursor = self.cursor
+        start = int(cursor[0])
+        if start + count > len(self._listed):
+            self.ready(count)
+            start = 0
+        cursor[0] = start + count
+        return self._listed[start : start + count]
 
 
 class SampleClock:

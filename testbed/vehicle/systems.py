@@ -81,7 +81,7 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     failsafe_level,
 )
-from testbed.vehicle.control_kernels import pilot_rows
+from testbed.vehicle.control_kernels import pilot_rows, put_targets
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensor_kernels import odometry_rows
@@ -110,8 +110,10 @@ __all__ = [
     "read_sensors",
     "run_pilot_interface",
     "set_intent",
+    "set_targets",
     "shaped_sticks",
     "supervise_failsafe",
+    "vehicle_row",
     "wrench_of",
 ]
 
@@ -343,14 +345,32 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
 
 
 def vehicle_row(world: World, ctl: Controllers, cls: type) -> RowView | None:
-    """The vehicle's ``cls`` row (a store-backed type), or None while it has no ``cls``.
+    """The vehicle's ``cls`` row, or None while it has no ``cls`` (or when ``world`` does not
+    keep ``cls`` in a frame store: a world made without the vehicle's, as in tests of a single
+    system; the writers then set components from Python).
 
     The vehicle's store-backed components are never removed, so a row once found stays valid.
     """
     row = ctl.rows.get(cls)
     if row is None and world.has(ctl.vehicle, cls):
-        row = ctl.rows[cls] = world.row_view(ctl.vehicle, cls)
+        try:
+            row = ctl.rows[cls] = world.row_view(ctl.vehicle, cls)
+        except LookupError:  # not store-backed in this world
+            return None
     return row
+
+
+def set_targets(
+    world: World, ctl: Controllers, depth_m: float, quaternion_wxyz: Quaternion
+) -> None:
+    """The vehicle's :class:`ControlTargets` (depth [m, + down], attitude body → NED): set as
+    its component the first time, then written into its row
+    (:func:`~.control_kernels.put_targets`; a change only when they differ)."""
+    row = vehicle_row(world, ctl, ControlTargets)
+    if row is None:
+        world.set(ctl.vehicle, ControlTargets(depth_m, quaternion_wxyz))
+    else:
+        put_targets(row.values, row.mark, world.tick, depth_m, quaternion_wxyz)
 
 
 def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
@@ -417,7 +437,8 @@ def ingest_commands(world: World) -> None:
         if request.armed and not was_armed:
             world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
             if not world.has(vehicle, ControlTargets):
-                world.set(vehicle, _measured_targets(world, vehicle))
+                measured = _measured_targets(world, vehicle)
+                set_targets(world, ctl, measured.depth_m, measured.quaternion_wxyz)
     for _, mode in world.query1(ModeRequest, changed=True):
         ctl.last_contact_s = now
         if ctl.autonomous:
@@ -433,15 +454,15 @@ def ingest_commands(world: World) -> None:
                 targets = ControlTargets(measured.depth_m, targets.quaternion_wxyz)
             if mode.mode is not ControlMode.MANUAL:
                 targets = ControlTargets(targets.depth_m, measured.quaternion_wxyz)
-            world.set(vehicle, targets)
+            set_targets(world, ctl, targets.depth_m, targets.quaternion_wxyz)
     for _, depth_sp in world.query1(DepthSetpoint, changed=True):
         ctl.last_contact_s = now
         targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
-        world.set(vehicle, ControlTargets(depth_sp.depth_m, targets.quaternion_wxyz))
+        set_targets(world, ctl, depth_sp.depth_m, targets.quaternion_wxyz)
     for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
         ctl.last_contact_s = now
         targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
-        world.set(vehicle, ControlTargets(targets.depth_m, quat_normalize(att_sp.quaternion_wxyz)))
+        set_targets(world, ctl, targets.depth_m, quat_normalize(att_sp.quaternion_wxyz))
 
 
 # --------------------------------------------------------------------------------- UPDATE
@@ -473,13 +494,14 @@ def _supervise(world: World, ctl: Controllers) -> None:
         level = FailsafeLevel.SURFACE
     if level is not status.level:
         if level is not FailsafeLevel.NOMINAL and status.level is FailsafeLevel.NOMINAL:
-            world.set(vehicle, _measured_targets(world, vehicle))
+            measured = _measured_targets(world, vehicle)
+            set_targets(world, ctl, measured.depth_m, measured.quaternion_wxyz)
         status = FailsafeStatus(level, now)
         world.set(vehicle, status)
     if level is FailsafeLevel.SURFACE:
         targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
         depth = max(0.0, targets.depth_m - ctl.failsafe.ascent_rate_m_s * clock.dt_s)
-        world.set(vehicle, ControlTargets(depth, targets.quaternion_wxyz))
+        set_targets(world, ctl, depth, targets.quaternion_wxyz)
         reading = world.get(vehicle, DepthReading)
         if reading is not None and reading.depth_m <= ctl.failsafe.surfaced_depth_m:
             world.set(vehicle, Armed(False))
@@ -610,7 +632,7 @@ def control_position(world: World) -> None:
     if setpoint.use_yaw:
         q = quat_from_euler(0.0, 0.0, setpoint.yaw_rad)
     target = setpoint.position_ned_m
-    world.set(vehicle, ControlTargets(max(0.0, target[2]), q))
+    set_targets(world, ctl, max(0.0, target[2]), q)
     m = ctl.axis_maxima
     fx, fy = loop.update(
         (target[0], target[1]),
