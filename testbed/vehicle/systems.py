@@ -121,7 +121,8 @@ Wrench6 = tuple[float, float, float, float, float, float]
 ZERO6: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
 _ODOMETRY = Layout(Odometry(0.0, (0.0, 0.0, 0.0), LEVEL))
-_CONTROL_TARGETS = Layout(ControlTargets(0.0, LEVEL))
+_UNUSED_TARGETS = RowView.detached(Layout(ControlTargets(0.0, LEVEL)).width)
+"""The pilot kernel's targets row outside the hold modes (neither read nor written then)."""
 _LEVEL_IMU = np.array([0.0, *LEVEL, 0.0, 0.0, 0.0])
 """An ImuReading row reading level (the pilot's attitude before the IMU's first reading)."""
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
@@ -345,9 +346,10 @@ def _measured_targets(world: World, vehicle: Entity) -> ControlTargets:
 
 
 def vehicle_row(world: World, ctl: Controllers, cls: type) -> RowView | None:
-    """The vehicle's ``cls`` row, or None while it has no ``cls`` (or when ``world`` does not
-    keep ``cls`` in a frame store: a world made without the vehicle's, as in tests of a single
-    system; the writers then set components from Python).
+    """The vehicle's ``cls`` row, or None while it has no ``cls``, and None in a world that
+    does not keep ``cls`` in a frame store (the frame's systems need the vehicle's store, which
+    :class:`~testbed.vehicle.vehicle.Vehicle` makes; a system that also sets its component from
+    Python, such as the navigation filter's position reading, then does only that).
 
     The vehicle's store-backed components are never removed, so a row once found stays valid.
     """
@@ -520,12 +522,11 @@ def run_pilot_interface(world: World) -> None:
     cache = shaped_sticks(ctl, sticks)
     imu = vehicle_row(world, ctl, ImuReading)
     targets = vehicle_row(world, ctl, ControlTargets)
-    hold = depth_hold or attitude_hold
-    row = targets
-    if row is None:  # no targets yet: trim the measured ones in a row of its own
-        row = RowView.detached(_CONTROL_TARGETS.width)
-        if hold:
-            _CONTROL_TARGETS.write(row.values, _measured_targets(world, vehicle))
+    if targets is None and (depth_hold or attitude_hold):  # the first: measured, trimmed below
+        measured = _measured_targets(world, vehicle)
+        set_targets(world, ctl, measured.depth_m, measured.quaternion_wxyz)
+        targets = vehicle_row(world, ctl, ControlTargets)
+    row = _UNUSED_TARGETS if targets is None else targets  # read and written in a hold mode
     intent = ctl.intent_rows["pilot"]
     pilot_rows(
         cache.wrench,
@@ -540,8 +541,6 @@ def run_pilot_interface(world: World) -> None:
         row.mark,
         world.tick,
     )
-    if targets is None and hold:
-        world.set(vehicle, _CONTROL_TARGETS.read(row.values))
 
 
 def shaped_sticks(ctl: Controllers, sticks: tuple[float, ...]) -> _PilotCache:
