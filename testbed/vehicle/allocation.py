@@ -399,8 +399,8 @@ class Allocator:
                 summed in row order (:func:`~testbed.vehicle.thrust_kernels.sum_rows`).
             dt_s: time since the previous command [s] (> 0; the slew limit applies).
             requested: (6,) receives the sum.
-            output: the ThrusterOutput row (forces, PWM, currents, scale), its tick set to
-                ``tick`` when a value changed.
+            output: the ThrusterOutput row (forces, PWM, currents, scale), marked at ``tick``
+                when a value changed (:mod:`testbed.ecs.store`'s write rule).
             tick: the running system's world tick.
             commanded: (n,) receives the commanded forces [N].
 

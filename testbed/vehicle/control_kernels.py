@@ -249,7 +249,7 @@ def depth_update(
 # The loops on the frame store's rows (:mod:`testbed.ecs.store`; field order of the components):
 # ControlTargets (depth_m, quaternion_wxyz), DepthReading (time_s, pressure_pa, depth_m),
 # ImuReading (time_s, quaternion_wxyz, rates_rad_s); the output is the loop's ForceIntent row
-# (its tick moves only when the wrench changed, :func:`~.thrust_kernels.put_wrench`).
+# (marked only when the wrench changed, :func:`~.thrust_kernels.put_wrench`).
 
 
 @numba.njit(cache=True)

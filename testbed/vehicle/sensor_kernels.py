@@ -102,7 +102,7 @@ def imu_sample(
         params: (:data:`IMU_PARAMS_SIZE`,) the model's parameters.
         quaternion_wxyz, rates_rad_s: the truth.
         time_s: the sample's time [s].
-        row, mark, tick: the row, its change tick and the tick to write.
+        row, mark, tick: the row, its mark (change tick and write count) and the tick to write.
     """
     i = cursor[0]
     if i + 6 > draws.size:

@@ -351,8 +351,8 @@ def interval_wrench(
 # ------------------------------------------------------------------ component rows
 #
 # The frame's store-backed components (:mod:`testbed.ecs.store`): a kernel writes a row's fields
-# and then, only when a field changed, the row's change tick (``mark``, the row's one-element
-# view of its table's ticks) with the tick of the system that runs it.
+# and then, only when a field changed, the row's mark (``mark``, the row's (2,) view of its
+# change tick and write count: the tick of the system that runs it, and one more write).
 
 
 @numba.njit(cache=True)
@@ -379,7 +379,7 @@ def put_wrench(
     m: float,
     n: float,
 ) -> None:  # pragma: no cover - compiled
-    """A force intent's wrench row (X, Y, Z, K, M, N) [N, N·m], FRD; its tick moves only when a
+    """A force intent's wrench row (X, Y, Z, K, M, N) [N, N·m], FRD; marked only when a
     value changed."""
     put_row(row, mark, tick, (x, y, z, k, m, n))
 
@@ -394,7 +394,7 @@ def put_output(
     commanded: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """A ThrusterOutput row (forces, PWM, currents, scale) from ``work``'s first three rows and
-    ``scale``; its tick moves only when a value changed. ``commanded`` (n,) gets the forces."""
+    ``scale``; marked only when a value changed. ``commanded`` (n,) gets the forces."""
     n = work.shape[1]
     for i in range(n):
         commanded[i] = work[FORCES, i]

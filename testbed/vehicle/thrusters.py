@@ -256,7 +256,7 @@ class ThrusterDynamics:
             weight: the end forces' weight in the interval's mean force
                 (:func:`~testbed.vehicle.systems.mean_force_weight`).
             requested: (6,) the wrench that was asked for [N, N·m] (the row's first half).
-            applied: the AppliedWrench row, its tick set to ``tick`` when it changed.
+            applied: the AppliedWrench row, marked at ``tick`` when it changed.
             tick: the running system's world tick.
 
         Returns:
