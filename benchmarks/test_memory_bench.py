@@ -64,7 +64,10 @@ def _report(duration_s: float, mb: float, short_mb: float) -> None:
 def test_peak_rss_600s(short_run_mb: float, tmp_path: Path) -> None:
     mb = peak_rss_mb(600.0, tmp_path)
     _report(600.0, mb, short_run_mb)
-    assert mb < 150.0  # measured 102-103 MB (docs/performance.md); 706 MB before the columns
+    # what a long run adds to a short one (numba and its compiled kernels alone take ≈ 120 MB
+    # of every process's peak since issue 13): 26 MB measured 2026-12-06, 21 MB before numba,
+    # ≈ 590 MB before the compact columns (docs/performance.md)
+    assert mb - short_run_mb < 50.0
 
 
 @pytest.mark.benchmark
@@ -72,4 +75,5 @@ def test_peak_rss_600s(short_run_mb: float, tmp_path: Path) -> None:
 def test_peak_rss_3600s(short_run_mb: float, tmp_path: Path) -> None:
     mb = peak_rss_mb(3600.0, tmp_path)
     _report(3600.0, mb, short_run_mb)
-    assert mb < 300.0  # measured 254 MB against an aim of 250 MB (docs/performance.md)
+    # 173 MB over the 60-s run measured (254 MB peak against an aim of 250 MB, before numba)
+    assert mb - short_run_mb < 200.0
