@@ -64,8 +64,8 @@ def _report(duration_s: float, mb: float, short_mb: float) -> None:
 def test_peak_rss_600s(short_run_mb: float, tmp_path: Path) -> None:
     mb = peak_rss_mb(600.0, tmp_path)
     _report(600.0, mb, short_run_mb)
-    # what a long run adds to a short one (numba and its compiled kernels alone take ≈ 120 MB
-    # of every process's peak since issue 13): 26 MB measured 2026-12-06, 21 MB before numba,
+    # what a long run adds to a short one (every process's peak is ≈ 120 MB higher since numba
+    # came in, issue 13): 26 MB measured 2026-12-06, 21 MB before numba,
     # ≈ 590 MB before the compact columns (docs/performance.md)
     assert mb - short_run_mb < 50.0
 
