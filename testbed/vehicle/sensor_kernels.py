@@ -3,8 +3,8 @@
 One implementation of each model (described in :mod:`.sensors`, whose classes keep the
 configuration, the sample clocks and the draws, and call these). Each kernel writes a reading's
 row as the frame store lays it out (:mod:`testbed.ecs.store`; the field order of the reading's
-dataclass) and, when a value changed, the row's change tick; a sensor sampled outside a world
-writes a scratch row of its own.
+dataclass) and, when a value changed, the row's mark (:func:`~.row_kernels.put_row`); a sensor
+sampled outside a world writes a scratch row of its own.
 
 Noise comes from a block of standard normal draws (:class:`~.sensors.NormalDraws`): a kernel
 takes its draws at ``cursor[0]`` and advances it, and returns False, having done nothing, when
