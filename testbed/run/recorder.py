@@ -109,13 +109,22 @@ class VehicleObserver:
 
     def __call__(self, world: World) -> None:
         now = world.resource(SimClock).time_s
-        ctl = world.resource(Controllers)
-        status = world.get(ctl.vehicle, FailsafeStatus)
+        if world.changed_any(FailsafeStatus, MissionStatus):  # since this system's last run
+            self._note_changes(world, now)
+        if now < self._next_sample_s - 1e-9:
+            return
+        self._next_sample_s += self._sample_period_s
+        self._recorder.rows.append(self.row(world, now, float(self._last_failsafe)))
+
+    def _note_changes(self, world: World, now: float) -> None:
+        """Events for a new failsafe level and for mission goals given or reached."""
+        vehicle = world.resource(Controllers).vehicle
+        status = world.get(vehicle, FailsafeStatus)
         level = 0 if status is None else int(status.level)
         if level != self._last_failsafe:
             self._recorder.event(now, "vehicle", "failsafe", status.level.name if status else "")
             self._last_failsafe = level
-        mission = world.get(ctl.vehicle, MissionStatus)
+        mission = world.get(vehicle, MissionStatus)
         if mission is not None and (mission.goals, mission.reached) != self._last_mission:
             goals, reached = self._last_mission
             if mission.goals != goals:
@@ -123,10 +132,6 @@ class VehicleObserver:
             if mission.reached != reached:
                 self._recorder.event(now, "vehicle", "mission_reached", str(mission.reached))
             self._last_mission = (mission.goals, mission.reached)
-        if now < self._next_sample_s - 1e-9:
-            return
-        self._next_sample_s += self._sample_period_s
-        self._recorder.rows.append(self.row(world, now, float(level)))
 
     def row(self, world: World, now: float, failsafe: float) -> tuple[float, ...]:
         """One row of :data:`SERIES_COLUMNS` at vehicle time ``now`` [s], in their order."""
