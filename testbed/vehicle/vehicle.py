@@ -371,7 +371,7 @@ class Vehicle:
         zero6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         rest = ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0)  # disarmed
         store = FrameStore()
-        store.add(ForceIntent("", zero6), capacity=8)
+        store.add(ForceIntent("", zero6), capacity=16)  # five sources here, room for more
         store.add(rest, capacity=1)
         store.add(AppliedWrench(zero6, zero6), capacity=1)
         for reading in (
