@@ -273,7 +273,8 @@ class Actuation:
             set by the vehicle before each frame.
         commanded_forces_n: (n,) forces commanded this frame [N] (0 when disarmed; written in
             place by the allocation).
-        actual_forces_n: (n,) the thrusters' actual forces at the end of the interval [N].
+        actual_forces_n: (n,) the thrusters' actual forces [N] (the plant's own array,
+            :attr:`~.ThrusterDynamics.live_forces_n`: at the end of the interval once actuated).
         requested: (6,) the summed intents of this frame [N, N·m].
         plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
         mean_weight: ``((interval_s, time_constant_s), c)``, the last weight of the interval's
@@ -288,7 +289,6 @@ class Actuation:
     applied: RowView
     interval_s: float = 0.01
     commanded_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    actual_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     requested: np.ndarray = field(default_factory=lambda: np.zeros(6))
     plant_wrench: Wrench6 = ZERO6
     mean_weight: tuple[tuple[float, float], float] = ((math.nan, math.nan), 0.5)
@@ -298,10 +298,12 @@ class Actuation:
         n = self.matrix.shape[1]
         if self.commanded_forces_n.size == 0:
             self.commanded_forces_n = np.zeros(n)
-        if self.actual_forces_n.size == 0:
-            self.actual_forces_n = np.zeros(n)
         # compiled (or loaded) now, not in the first frame of a timed run (pure: no state)
         interval_wrench(self.matrix, self.actual_forces_n, self.actual_forces_n, 0.0)
+
+    @property
+    def actual_forces_n(self) -> np.ndarray:
+        return self.dynamics.live_forces_n
 
 
 # -------------------------------------------------------------------------------- helpers
@@ -729,7 +731,6 @@ def actuate_thrusters(world: World) -> None:
     act.plant_wrench = dynamics.step_applied(
         act.commanded_forces_n, h, act.matrix, c, act.requested, act.applied, world.tick
     )
-    act.actual_forces_n = dynamics.live_forces_n
 
 
 def meter_power(world: World) -> None:

@@ -718,7 +718,6 @@ class Vehicle:
         # a fault between frames takes effect at once: the rest of the interval applies the
         # plant's forces as they now are (a dead or stuck thruster changes instantly)
         act = self.actuation
-        act.actual_forces_n = self.dynamics.forces_n
         act.plant_wrench = wrench_of(act.actual_forces_n, act.matrix)
 
     def _refresh_maxima(self) -> None:
