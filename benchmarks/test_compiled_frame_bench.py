@@ -217,7 +217,7 @@ def _recorded_frames(sim_s: float) -> list[_Frame]:
                 world.resource(SimClock).dt_s,
                 world.resource(Actuation).interval_s,
                 (flags.armed, flags.depth_hold, flags.attitude_hold),
-                world.resource(Actuation).plant_wrench,
+                tuple(world.resource(Actuation).plant_wrench.tolist()),
                 world.resource(PowerMeter).current_a,
             )
         )

@@ -32,6 +32,7 @@ frame conversions cannot move out without spreading that knowledge.
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import sys
 import tempfile
@@ -49,7 +50,14 @@ from testbed.vehicle.arm import ArmModel
 from testbed.vehicle.arm_body import G_M_S2, RHO_KG_M3, ArmBody, arm_links
 from testbed.vehicle.camera import CameraConfig, CameraPose
 from testbed.vehicle.hydrodynamics import HydroModel, coefficients, load_model
-from testbed.vehicle.plant_kernels import pybullet_state, pybullet_wrench
+from testbed.vehicle.plant_kernels import (
+    LOAD_CURRENT,
+    LOAD_NU_DOT,
+    LOAD_WRENCH,
+    N_LOADS,
+    pybullet_state,
+    pybullet_wrench,
+)
 from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
 from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
@@ -95,8 +103,8 @@ FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 Quat = tuple[float, float, float, float]
-_Raw = tuple[Vec3, tuple[float, float, float, float], Vec3, Vec3]
-"""pybullet's (position, orientation xyzw, linear velocity, angular velocity), world z-up."""
+_Raw = tuple[Vec3, tuple[float, float, float, float], tuple[Vec3, Vec3]]
+"""pybullet's (position, orientation xyzw, (linear velocity, angular velocity)), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
 _Coupling = tuple[Sequence[float], Sequence[float], Sequence[float], Vec3, Vec3]
 """The last step's hull velocity, angular velocity, rotation, force and torque (world)."""
@@ -188,7 +196,7 @@ class OpenLoopResult:
     nu: FloatArray
 
 
-def _frozen(values: Sequence[float]) -> FloatArray:
+def _frozen(values: Sequence[float] | FloatArray) -> FloatArray:
     array = np.array(values, dtype=float)
     array.setflags(write=False)
     return array
@@ -244,12 +252,13 @@ class Physics:
         self.pool = pool
         self._current_process = CurrentProcess(self.current, rng)
         self._current_ned = self._current_process.velocity_ned
+        # the applied wrench (held), the current and the last step's ν̇ (plant_kernels' offsets)
+        self._loads = np.zeros(N_LOADS)
         self._current_varies = self.current.varies
         self._next_current_update_s = self.current.update_period_s
         self._start_position = tuple(float(c) for c in start_position_ned)
         self._start_euler = tuple(float(c) for c in start_euler_rad)
         self._steps = 0
-        self._nu_dot: Sequence[float] = (0.0,) * 6
         self._cached: BodyState | None = None
         # pybullet's pose and velocity as read since the last step (reused by the next step)
         self._raw: _Raw | None = None
@@ -399,31 +408,58 @@ class Physics:
             self._seed_reaction = self._arm_static_reaction()
         self._steps = 0
         self._next_current_update_s = self.current.update_period_s
-        self._nu_dot = (0.0,) * 6
+        self._loads[:] = 0.0
+        self._loads[LOAD_CURRENT : LOAD_CURRENT + 3] = self._current_ned
         self._cached = None
         self._raw = None
         self._floats = None
 
-    def step(self, wrench_body: Sequence[float] | FloatArray) -> None:
+    @property
+    def held_wrench(self) -> FloatArray:
+        """(6,) the body wrench every step applies until it is written again [N, N·m], FRD,
+        moments about the CoG: the plant's own array (a vehicle's actuation writes it in
+        place once a frame; :meth:`step` with a wrench writes it too)."""
+        return self._loads[LOAD_WRENCH : LOAD_WRENCH + 6]
+
+    def step(self, wrench_body: Sequence[float] | FloatArray | None = None) -> None:
         """Advance one ``dt_s`` with the applied wrench held constant.
 
         Args:
-            wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
+            wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG, held from now
+                on; None (the vehicle's frame path) applies :attr:`held_wrench` as it is.
         """
-        if type(wrench_body) is tuple:  # the frame's: six floats from a compiled kernel
-            wrench = wrench_body
-        else:
-            fx, fy, fz, mx, my, mz = wrench_body  # as floats (+ 0.0): one compiled signature
-            wrench = (fx + 0.0, fy + 0.0, fz + 0.0, mx + 0.0, my + 0.0, mz + 0.0)
-        raw = self._raw
+        if wrench_body is not None:
+            self._loads[LOAD_WRENCH : LOAD_WRENCH + 6] = wrench_body
+        self.step_until(-math.inf)
+
+    def step_until(self, until_s: float) -> float:
+        """Step once with :attr:`held_wrench`, then again while the time is before ``until_s``.
+
+        Args:
+            until_s: the time to reach [s] (a vehicle's next frame, or the end of its advance).
+
+        Returns:
+            The time now [s]: the first step's time at or after ``until_s``, or one step later
+            than before when that was already reached.
+        """
+        raw = self._raw  # read since the last step (by state_floats): still current
         self._raw = None
         self._floats = None
-        self._nu_dot = self._advance(wrench, self._current_ned, raw)
-        self._steps += 1
         self._cached = None
-        if self._current_varies and self._steps * self.dt_s >= self._next_current_update_s:
-            self._next_current_update_s += self.current.update_period_s
-            self._current_ned = self._current_process.advance(self.current.update_period_s)
+        advance, dt, varies = self._advance, self.dt_s, self._current_varies
+        steps = self._steps
+        while True:
+            advance(raw)
+            raw = None
+            steps += 1
+            self._steps = steps
+            now = steps * dt
+            if varies and now >= self._next_current_update_s:
+                self._next_current_update_s += self.current.update_period_s
+                self._current_ned = self._current_process.advance(self.current.update_period_s)
+                self._loads[LOAD_CURRENT : LOAD_CURRENT + 3] = self._current_ned
+            if now >= until_s:
+                return now
 
     def state(self) -> BodyState:
         """The state now as a :class:`BodyState` (arrays, Euler angles): :meth:`state_floats`
@@ -436,7 +472,7 @@ class Physics:
                 quaternion_wxyz=_frozen(quat),
                 euler_rad=_frozen(euler_from_quat(quat)),
                 nu=_frozen(nu),
-                nu_dot=_frozen(self._nu_dot),
+                nu_dot=_frozen(self._loads[LOAD_NU_DOT : LOAD_NU_DOT + 6]),
             )
         return self._cached
 
@@ -454,7 +490,7 @@ class Physics:
             raw = self._raw
             if raw is None:
                 raw = self._raw = self._read()
-            position, orientation, linear, angular = raw
+            position, orientation, (linear, angular) = raw
             state = pybullet_state(self._cog, position, orientation, linear, angular)
             floats = self._floats = (self._steps * self.dt_s, *state)
         return floats
@@ -529,7 +565,7 @@ class Physics:
 
     # --- internals ---------------------------------------------------------------------------
 
-    def _make_stepper(self) -> Callable[[Vec6, Vec3, _Raw | None], Vec6]:
+    def _make_stepper(self) -> Callable[[_Raw | None], None]:
         """One step: pybullet's reads, the compiled :func:`~.plant_kernels.pybullet_wrench`,
         force, torque and pybullet's step, the floor's five pybullet calls (attribute lookups
         bound once: this runs 240 times a simulated second); with an arm, the coupled step
@@ -554,24 +590,23 @@ class Physics:
             )
         )
 
-        def advance(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
+        loads = self._loads
+
+        def advance(raw: _Raw | None) -> None:
             if raw is None:
                 (_, _, height), orientation = get_pose(body, cid)
-                linear, angular = get_velocity(body, cid)
+                velocity = get_velocity(body, cid)
             else:  # read since the last step (by state_floats): still current
-                (_, _, height), orientation, linear, angular = raw
-            force, torque, nu_dot = pybullet_wrench(
-                fossen, rigid, height, orientation, linear, angular, wrench_body, current_ned
-            )
+                (_, _, height), orientation, velocity = raw
+            force, torque = pybullet_wrench(fossen, rigid, loads, height, orientation, velocity)
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
             apply_torque(body, -1, torque, link_frame, cid)
             step_simulation(cid)
-            return nu_dot
 
         # Compile (or load from numba's cache) here, not inside the first step of a timed run:
-        # both kernels are pure, so a call on a resting, level body changes nothing.
+        # pure but for ν̇, which the reset clears.
         level, zero3 = (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
-        pybullet_wrench(fossen, rigid, 0.0, level, zero3, zero3, (0.0,) * 6, zero3)
+        pybullet_wrench(fossen, rigid, np.zeros(N_LOADS), 0.0, level, (zero3, zero3))
         pybullet_state(model.cog_m, zero3, level, zero3, zero3)
         if self.arm is None:
             return advance
@@ -583,12 +618,16 @@ class Physics:
         inertia = model.inertia_kg_m2  # FRD and FLU share the diagonal
         memory = self._coupling
 
-        def advance_arm(wrench_body: Vec6, current_ned: Vec3, raw: _Raw | None) -> Vec6:
+        scratch = np.zeros(N_LOADS)  # the hull's loads with the trim and the arm's reaction
+        w, c = LOAD_WRENCH, LOAD_CURRENT
+
+        def advance_arm(raw: _Raw | None) -> None:
             if raw is None:
                 (_, _, height), orientation = get_pose(body, cid)
-                linear, angular = get_velocity(body, cid)
+                velocity = get_velocity(body, cid)
             else:
-                (_, _, height), orientation, linear, angular = raw
+                (_, _, height), orientation, velocity = raw
+            linear, angular = velocity
             rotation = rotation_of(orientation)
             last = memory[0]
             if last is None:  # nothing measured yet: the resting arm's weight and buoyancy
@@ -596,19 +635,20 @@ class Physics:
             else:
                 reaction = _measured_reaction(last, linear, angular, rotation, m, inertia, dt)
             self.arm_reaction_frd = reaction
-            load = [w + t for w, t in zip(wrench_body, self._trim_wrench(rotation), strict=True)]
+            held = loads[w : w + 6].tolist()
+            load = [a + t for a, t in zip(held, self._trim_wrench(rotation), strict=True)]
             if coupled:
-                load = [w + r for w, r in zip(load, reaction, strict=True)]
-            wrench = (load[0], load[1], load[2], load[3], load[4], load[5])
-            force, torque, nu_dot = pybullet_wrench(
-                fossen, rigid, height, orientation, linear, angular, wrench, current_ned
-            )
+                load = [a + r for a, r in zip(load, reaction, strict=True)]
+            scratch[w : w + 6] = load
+            scratch[c : c + 3] = loads[c : c + 3]
+            force, torque = pybullet_wrench(fossen, rigid, scratch, height, orientation, velocity)
+            loads[LOAD_NU_DOT : LOAD_NU_DOT + 6] = scratch[LOAD_NU_DOT : LOAD_NU_DOT + 6]
             rx, ry, rz, rk, rm, rn = reaction  # FRD → FLU: (x, −y, −z)
             force = (force[0] - rx, force[1] + ry, force[2] + rz)
             torque = (torque[0] - rk, torque[1] + rm, torque[2] + rn)
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
             apply_torque(body, -1, torque, link_frame, cid)
-            arm.apply_loads(current_ned)
+            arm.apply_loads(self._current_ned)
             arm.hold_limits(dt)
             step_simulation(cid)
             memory[0] = (
@@ -618,7 +658,6 @@ class Physics:
                 _rotated(rotation, force),
                 _rotated(rotation, torque),
             )
-            return nu_dot
 
         return advance_arm
 
@@ -698,8 +737,7 @@ class Physics:
         self._check_open()
         cid = self.client_id
         pos, orn = pybullet.getBasePositionAndOrientation(self.body_id, cid)
-        lin, ang = pybullet.getBaseVelocity(self.body_id, cid)
-        return (pos, orn, lin, ang)
+        return (pos, orn, pybullet.getBaseVelocity(self.body_id, cid))
 
 
 def _rotated(rotation: Sequence[float], v: Sequence[float]) -> Vec3:

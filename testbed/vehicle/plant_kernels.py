@@ -42,6 +42,14 @@ LINEAR, QUADRATIC = 30, 36  # Fossen's damping derivatives, ≤ 0 (6 each)
 MASS_INVERSE = 42  # (M_RB + M_A)⁻¹, row-major (36)
 N_COEFFICIENTS = 78
 
+# Offsets into a plant's load array (what a step reads and writes besides pybullet's state, one
+# argument to unbox per step), kept by testbed.vehicle.physics.Physics.
+
+LOAD_WRENCH = 0  # the applied body wrench [N, N·m], FRD, about the CoG (6), held between writes
+LOAD_CURRENT = 6  # the water velocity [m/s], NED (3)
+LOAD_NU_DOT = 9  # written by each step: ν̇ at CO [m/s², rad/s²], FRD (6)
+N_LOADS = 15
+
 
 @numba.njit(cache=True)
 def fossen_acceleration(
@@ -237,13 +245,11 @@ def pybullet_state(
 def pybullet_wrench(
     fossen: FloatArray,
     rigid: FloatArray,
+    loads: FloatArray,
     height: float,
     orientation: tuple[float, float, float, float],
-    linear: Vec3,
-    angular: Vec3,
-    wrench: Vec6,
-    current_ned: Vec3,
-) -> tuple[Vec3, Vec3, Vec6]:  # pragma: no cover - compiled (called by Physics)
+    velocity: tuple[Vec3, Vec3],
+) -> tuple[Vec3, Vec3]:  # pragma: no cover - compiled (called by Physics)
     """The body force and torque that give pybullet's rigid body Fossen's acceleration.
 
     From pybullet's state (the CoG's height z-up, its orientation, the CoG's world velocity and
@@ -257,16 +263,17 @@ def pybullet_wrench(
         fossen: the model's :func:`~testbed.vehicle.hydrodynamics.coefficients`.
         rigid: (11,) m, Ixx, Iyy, Izz, r_g (3), r_b − r_g (3), 1/hull height [kg, kg·m², m,
             1/m] (an array: one argument to unbox per call).
+        loads: (:data:`N_LOADS`,) the applied body wrench and the current read at
+            :data:`LOAD_WRENCH` and :data:`LOAD_CURRENT`; ν̇ written at :data:`LOAD_NU_DOT`.
         height: pybullet's base (CoG) z, up [m].
         orientation: pybullet's base quaternion (x, y, z, w), body FLU → world.
-        linear: the CoG's velocity, pybullet's world [m/s].
-        angular: angular velocity, pybullet's world [rad/s].
-        wrench: applied body wrench [N, N·m], FRD, about the CoG.
-        current_ned: water velocity [m/s], NED.
+        velocity: pybullet's ``getBaseVelocity`` as it comes: the CoG's velocity and the
+            angular velocity, pybullet's world [m/s, rad/s].
 
     Returns:
-        (force, torque) in the body FLU frame [N, N·m], and ν̇ at CO (FRD) [m/s², rad/s²].
+        (force, torque) in the body FLU frame [N, N·m].
     """
+    linear, angular = velocity
     m, ixx, iyy, izz = rigid[0], rigid[1], rigid[2], rigid[3]
     xg, yg, zg, dbx, dby, dbz, inv_height = (
         rigid[4],
@@ -281,15 +288,19 @@ def pybullet_wrench(
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
     ug, vg, wg, p, q, r = body_velocity(rotation, linear, angular)
     gx, gy, gz = -r20, r21, r22  # NED down in the body: the last row of R_ned
-    cn, ce, cd = current_ned
+    cn, ce, cd = loads[LOAD_CURRENT], loads[LOAD_CURRENT + 1], loads[LOAD_CURRENT + 2]
     uc = r00 * cn - r10 * ce - r20 * cd
     vc = -(r01 * cn - r11 * ce - r21 * cd)
     wc = -(r02 * cn - r12 * ce - r22 * cd)
     # submerged fraction from the CoB's depth (the CoG's is −height)
     scale = min(1.0, max(0.0, 0.5 + (gx * dbx + gy * dby + gz * dbz - height) * inv_height))
     nu = (ug - q * zg + r * yg, vg - r * xg + p * zg, wg - p * yg + q * xg, p, q, r)
+    w = LOAD_WRENCH
+    wrench = (loads[w], loads[w + 1], loads[w + 2], loads[w + 3], loads[w + 4], loads[w + 5])
     nu_dot = fossen_acceleration(fossen, nu, (gx, gy, gz), (uc, vc, wc), scale, wrench)
     du, dv, dw, dp, dq, dr = nu_dot
+    for i in range(6):
+        loads[LOAD_NU_DOT + i] = nu_dot[i]
     force = (
         m * (du + dq * zg - dr * yg + q * wg - r * vg),
         -m * (dv + dr * xg - dp * zg + r * ug - p * wg),
@@ -300,4 +311,4 @@ def pybullet_wrench(
         -iyy * dq - (ixx - izz) * r * p,
         -izz * dr - (iyy - ixx) * p * q,
     )
-    return force, torque, nu_dot
+    return force, torque

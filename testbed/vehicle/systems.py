@@ -276,7 +276,8 @@ class Actuation:
         actual_forces_n: (n,) the thrusters' actual forces [N] (the plant's own array,
             :attr:`~.ThrusterDynamics.live_forces_n`: at the end of the interval once actuated).
         requested: (6,) the summed intents of this frame [N, N·m].
-        plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD.
+        plant_wrench: (6,) the wrench the physics applies until the next frame [N, N·m], FRD
+            (the plant's :attr:`~.physics.Physics.held_wrench`, written in place).
         mean_weight: ``((interval_s, time_constant_s), c)``, the last weight of the interval's
             mean force (see :func:`actuate_thrusters`), kept while both stay the same.
     """
@@ -290,7 +291,7 @@ class Actuation:
     interval_s: float = 0.01
     commanded_forces_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
     requested: np.ndarray = field(default_factory=lambda: np.zeros(6))
-    plant_wrench: Wrench6 = ZERO6
+    plant_wrench: np.ndarray = field(default_factory=lambda: np.zeros(6))
     mean_weight: tuple[tuple[float, float], float] = ((math.nan, math.nan), 0.5)
 
     def __post_init__(self) -> None:
@@ -728,8 +729,15 @@ def actuate_thrusters(world: World) -> None:
     else:
         c = mean_force_weight(h, key[1])
         act.mean_weight = (key, c)
-    act.plant_wrench = dynamics.step_applied(
-        act.commanded_forces_n, h, act.matrix, c, act.requested, act.applied, world.tick
+    dynamics.step_applied(
+        act.commanded_forces_n,
+        h,
+        act.matrix,
+        c,
+        act.requested,
+        act.applied,
+        world.tick,
+        act.plant_wrench,
     )
 
 

@@ -492,14 +492,17 @@ def actuate_rows(
     row: np.ndarray,
     mark: np.ndarray,
     tick: int,
-) -> tuple[float, float, float, float, float, float]:  # pragma: no cover - compiled
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
     """One frame's interval of the thrusters: ``start`` ← ``forces``, :func:`lag_step` of
     ``forces`` in place (its arguments), then :func:`put_wrench_pair` of the interval (its
-    arguments). Returns the interval's wrench [N, N·m], FRD."""
+    arguments), its wrench [N, N·m], FRD, also written into ``out`` (6,)."""
     for i in range(forces.size):
         start[i] = forces[i]
     lag_step(forces, command, gain, held, blend)
-    return put_wrench_pair(matrix, start, forces, weight, requested, row, mark, tick)
+    w = put_wrench_pair(matrix, start, forces, weight, requested, row, mark, tick)
+    for i in range(6):
+        out[i] = w[i]
 
 
 jit.refresh_stale_caches((put_wrench, put_wrench_pair, allocate_rows, actuate_rows), (row_kernels,))

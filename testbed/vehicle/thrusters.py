@@ -148,7 +148,7 @@ class ThrusterDynamics:
         scratch, row = np.zeros(n_thrusters), np.zeros(12)
         matrix, mark = np.zeros((6, n_thrusters)), np.zeros(2, dtype=np.int64)
         actuate_rows(scratch, scratch.copy(), scratch, self._gain, self._held, 0.0, matrix, 0.5,
-                     row[:6], row, mark, 1)  # fmt: skip
+                     row[:6], row, mark, 1, row[6:])  # fmt: skip
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
@@ -243,7 +243,8 @@ class ThrusterDynamics:
         requested: np.ndarray,
         applied: RowView,
         tick: int,
-    ) -> tuple[float, float, float, float, float, float]:
+        out: np.ndarray,
+    ) -> None:
         """:meth:`step` in place over a frame's interval, with the wrench of the interval's mean
         forces written into an AppliedWrench row (the frame's path,
         :func:`~testbed.vehicle.systems.actuate_thrusters`; one compiled call,
@@ -258,14 +259,12 @@ class ThrusterDynamics:
             requested: (6,) the wrench that was asked for [N, N·m] (the row's first half).
             applied: the AppliedWrench row, marked at ``tick`` when it changed.
             tick: the running system's world tick.
-
-        Returns:
-            (6,) the interval's wrench [N, N·m], FRD.
+            out: (6,) float64, written with the interval's wrench [N, N·m], FRD.
 
         Raises:
             ValueError: negative dt_s.
         """
-        return actuate_rows(
+        actuate_rows(
             self._forces,
             self._start,
             commanded_forces_n,
@@ -278,6 +277,7 @@ class ThrusterDynamics:
             applied.values,
             applied.mark,
             tick,
+            out,
         )
 
     def _blend_over(self, dt_s: float) -> float:

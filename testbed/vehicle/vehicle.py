@@ -425,6 +425,7 @@ class Vehicle:
             store.table(ForceIntent),
             world.row_view(self.entity, ThrusterOutput),
             world.row_view(self.entity, AppliedWrench),
+            plant_wrench=self.physics.held_wrench,
         )
         self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
         self.truth = PlantTruth()
@@ -478,15 +479,13 @@ class Vehicle:
         compose. See the module docstring for the frame timing.
         """
         physics = self.physics
-        step_physics = physics.step
-        actuation = self.actuation
         limit = until_s - 1e-9
         now = physics.time_s
         while now < limit:
             if now >= self._next_control_s - 1e-9:
                 self._frame()
-            step_physics(actuation.plant_wrench)
-            now = physics.time_s
+            # to the next frame (or the limit) with the actuation's wrench, Physics.held_wrench
+            now = physics.step_until(min(limit, self._next_control_s - 1e-9))
 
     def _frame(self) -> None:
         physics = self.physics
@@ -718,7 +717,7 @@ class Vehicle:
         # a fault between frames takes effect at once: the rest of the interval applies the
         # plant's forces as they now are (a dead or stuck thruster changes instantly)
         act = self.actuation
-        act.plant_wrench = wrench_of(act.actual_forces_n, act.matrix)
+        act.plant_wrench[:] = wrench_of(act.actual_forces_n, act.matrix)
 
     def _refresh_maxima(self) -> None:
         self.controllers.axis_maxima = tuple(float(v) for v in self.allocator.axis_maxima())
