@@ -1,6 +1,6 @@
-"""What compiled kernels that call plain functions of other modules need from numba.
+"""What compiled kernels need from numba beyond ``numba.njit``.
 
-Two things, both about calling one formula from both sides:
+Calling one formula from both sides:
 
 * :func:`math.fmod`, which numba does not compile, implemented for compiled callers with
   ``numpy.fmod`` (the C library's ``fmod`` either way, so both sides get the same bits); this
@@ -12,21 +12,113 @@ Two things, both about calling one formula from both sides:
   across files name those files, and their caches are emptied when one of them is newer than
   the saved index (numba then compiles afresh and saves again).
 
+Calling a kernel every frame:
+
+* :func:`entry`, a kernel's machine code for one declared signature, called without numba's
+  dispatcher. A dispatcher call works out the type of every argument and picks the machine
+  code that matches (0.1–0.4 µs a call, most for tuples; a frame makes about fourteen such
+  calls, about 4 µs of a 36-µs frame); the machine code's own entry point only converts the
+  arguments. It does not check them: an array of another dtype, dimension or layout than
+  declared is misread, not refused. So only a call site whose arguments have those types by
+  construction (the frame's own arrays, made once) calls an entry, with the types declared
+  beside the call (the aliases below). Numbers and tuples are safe: the entry converts them
+  or raises (a tuple of the wrong length, a string). With ``TESTBED_CHECK_KERNELS=1`` in the
+  environment every entry also checks its array arguments against its declaration and raises
+  :class:`TypeError` on a mismatch (the tests run the frame that way too).
+
 numba and numpy only.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+import os
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, TypeVar, cast
 
+import numba
 import numpy as np
+from numba import types
 from numba.extending import overload
 
-__all__ = ["refresh_stale_caches"]
+__all__ = [
+    "BOOL",
+    "CONST_TABLE",
+    "CONST_VECTOR",
+    "F64",
+    "I64",
+    "INTS",
+    "MARK",
+    "MARKS",
+    "TABLE",
+    "VECTOR",
+    "entry",
+    "floats",
+    "refresh_stale_caches",
+    "tuple_of",
+]
+
+F64 = types.float64
+I64 = types.int64
+BOOL = types.boolean
+VECTOR = types.Array(types.float64, 1, "C")
+"""A contiguous float64 vector (a store row, a kernel's state)."""
+CONST_VECTOR = types.Array(types.float64, 1, "C", readonly=True)
+TABLE = types.Array(types.float64, 2, "C")
+"""A contiguous float64 matrix (a store table, a configuration matrix)."""
+CONST_TABLE = types.Array(types.float64, 2, "C", readonly=True)
+INTS = types.Array(types.int64, 1, "C")
+"""A contiguous int64 vector."""
+MARK = INTS
+"""A store row's (tick, write count)."""
+MARKS = types.Array(types.int64, 2, "C")
+CHECKED = os.environ.get("TESTBED_CHECK_KERNELS", "") not in ("", "0")
+"""Whether entries check their arguments (``TESTBED_CHECK_KERNELS``, read at import)."""
+
+
+def tuple_of(item: types.Type, n: int) -> types.Type:
+    """A tuple of ``n`` items of one type."""
+    return types.UniTuple(item, n)  # type: ignore[no-untyped-call]  # numba's, untyped
+
+
+def floats(n: int) -> types.Type:
+    """A tuple of ``n`` floats."""
+    return tuple_of(types.float64, n)
+
+
+Kernel = TypeVar("Kernel", bound=Callable[..., Any])
+
+
+def entry(kernel: Kernel, *signature: types.Type) -> Kernel:
+    """``kernel``'s machine code for ``signature`` (compiled, or loaded from numba's disk cache,
+    now), to call without the dispatcher (module docstring: the caller guarantees the types).
+
+    Args:
+        kernel: a ``numba.njit`` dispatcher.
+        signature: the numba type of each argument, in order.
+
+    Returns:
+        The compiled function (typed as ``kernel``); with :data:`CHECKED`, a wrapper that
+        first checks the arguments' types.
+    """
+    dispatcher: Any = kernel
+    dispatcher.compile(signature)
+    code: Callable[..., Any] = dispatcher.get_overload(signature)
+    if not CHECKED:
+        return cast(Kernel, code)
+    name, typeof = dispatcher.__name__, numba.typeof
+    arrays = [(i, t) for i, t in enumerate(signature) if isinstance(t, types.Array)]
+
+    def checked(*args: Any) -> Any:
+        for i, declared in arrays:  # numbers and tuples the entry converts or refuses itself
+            given = typeof(args[i])  # type: ignore[no-untyped-call]  # numba's, untyped
+            if given != declared:
+                raise TypeError(f"{name}: argument {i} is {given}, declared {declared}")
+        return code(*args)
+
+    return cast(Kernel, checked)
 
 
 @overload(math.fmod)

@@ -38,6 +38,8 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from testbed.common import jit
+from testbed.common.jit import CONST_TABLE, I64, MARK, MARKS, TABLE, VECTOR
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thrust_kernels import (
     FORCES,
@@ -87,6 +89,27 @@ _LSQ_REGULARISATION = 1e-4
 """Weight of ‖f‖ in the lsq objective, to pick the least-effort solution among equals."""
 
 AllocationMethod = Literal["pinv", "lsq"]
+
+# The frame's allocation kernel, called without numba's dispatcher (testbed.common.jit.entry):
+# the store's intents and rows and the allocator's own arrays, contiguous float64 (int64 marks;
+# the T200 tables read-only).
+_ALLOCATE_ROWS = jit.entry(
+    allocate_rows,
+    TABLE,
+    MARKS,
+    VECTOR,
+    VECTOR,
+    TABLE,
+    VECTOR,
+    TABLE,
+    TABLE,
+    CONST_TABLE,
+    CONST_TABLE,
+    VECTOR,
+    MARK,
+    I64,
+    VECTOR,
+)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -208,10 +231,6 @@ class Allocator:
             self._current_table,
             self._pwm_table,
         )
-        marks, n = np.zeros((8, 2), dtype=np.int64), self._n
-        allocate_rows(np.zeros((8, 6)), marks, np.zeros(6), self._stuck_wrench, self._pinv,
-                      self._limits, self._work.copy(), self._thrusters, self._current_table,
-                      self._pwm_table, np.zeros(3 * n + 1), marks[0], 1, np.zeros(n))  # fmt: skip
 
     # ----------------------------------------------------------------- properties
 
@@ -415,7 +434,7 @@ class Allocator:
         if self.method == "pinv":  # the common case, one compiled call
             limits = self._limits
             limits[2] = self._slew * dt_s
-            scale = allocate_rows(
+            scale = _ALLOCATE_ROWS(
                 intents.values,
                 intents.marks,
                 requested,

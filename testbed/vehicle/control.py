@@ -24,7 +24,9 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from testbed.common import jit
 from testbed.common.geometry import Quaternion, Vec3
+from testbed.common.jit import BOOL, F64, I64, MARK, TABLE, VECTOR, floats
 from testbed.config import check, check_range
 
 if TYPE_CHECKING:
@@ -45,7 +47,6 @@ from testbed.vehicle.control_kernels import (
     depth_rows,
     depth_update,
     pid_update,
-    warm_up,
 )
 
 __all__ = [
@@ -59,6 +60,22 @@ __all__ = [
     "failsafe_level",
     "pid_gains_array",
 ]
+
+# The loops' kernels, called without numba's dispatcher (testbed.common.jit.entry): states,
+# gains and rows are the controllers' and the store's contiguous float64 arrays.
+_GAINS3 = TABLE  # the attitude loop's three axes' gains, stacked
+_AXES = jit.tuple_of(BOOL, 3)  # which of roll, pitch, yaw are controlled
+_PID_UPDATE = jit.entry(pid_update, VECTOR, VECTOR, F64, F64, F64, BOOL)
+_ATTITUDE_UPDATE = jit.entry(
+    attitude_update, VECTOR, _GAINS3, floats(4), floats(4), floats(3), F64, _AXES
+)
+_DEPTH_UPDATE = jit.entry(depth_update, VECTOR, VECTOR, F64, F64, floats(4), F64, F64)
+_ATTITUDE_ROWS = jit.entry(
+    attitude_rows, VECTOR, _GAINS3, VECTOR, VECTOR, F64, _AXES, VECTOR, MARK, I64
+)
+_DEPTH_ROWS = jit.entry(
+    depth_rows, VECTOR, VECTOR, F64, VECTOR, VECTOR, VECTOR, F64, VECTOR, MARK, I64
+)
 
 
 # --------------------------------------------------------------------------------------------
@@ -130,7 +147,13 @@ class PID:
     def __init__(self, gains: PidGains, state: np.ndarray | None = None) -> None:
         self._config = gains
         self._gains = pid_gains_array(gains)
-        self._state = np.zeros(PID_STATE_SIZE) if state is None else state
+        if state is None:
+            state = np.zeros(PID_STATE_SIZE)
+        elif not (state.shape == (PID_STATE_SIZE,) and state.dtype == np.float64):
+            raise ValueError(f"a PID's state must be ({PID_STATE_SIZE},) float64")
+        elif not state.flags.c_contiguous:  # the kernels are called on it without checks
+            raise ValueError("a PID's state must be one contiguous block")
+        self._state = state
         self._state[:] = 0.0
 
     @property
@@ -187,7 +210,7 @@ class PID:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         has_rate = error_rate is not None
         rate = float(error_rate) if error_rate is not None else 0.0
-        return pid_update(self._state, self._gains, float(error), float(dt_s), rate, has_rate)
+        return _PID_UPDATE(self._state, self._gains, float(error), float(dt_s), rate, has_rate)
 
 
 def pid_gains_array(gains: PidGains) -> np.ndarray:
@@ -248,7 +271,6 @@ class AttitudeController:
     __slots__ = ("_gains", "_state", "pids")
 
     def __init__(self, gains: AttitudeGains) -> None:
-        warm_up()
         self._state = np.zeros(ATTITUDE_STATE_SIZE)
         axes = (gains.roll, gains.pitch, gains.yaw)
         n = PID_STATE_SIZE
@@ -285,7 +307,7 @@ class AttitudeController:
         """
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        return attitude_update(
+        return _ATTITUDE_UPDATE(
             self._state,
             self._gains,
             _floats4(target),
@@ -313,7 +335,7 @@ class AttitudeController:
         """
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        attitude_rows(
+        _ATTITUDE_ROWS(
             self._state,
             self._gains,
             targets.values,
@@ -338,7 +360,6 @@ class DepthController:
     __slots__ = ("_pid_gains", "_pid_state", "feedforward_n", "pid")
 
     def __init__(self, gains: PidGains, feedforward_n: float = 0.0) -> None:
-        warm_up()
         self.pid = PID(gains)
         self._pid_state, self._pid_gains = self.pid.state_array, self.pid.gains_array
         self.feedforward_n = feedforward_n
@@ -366,7 +387,7 @@ class DepthController:
         """
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        return depth_update(
+        return _DEPTH_UPDATE(
             self._pid_state,
             self._pid_gains,
             float(target_depth_m),
@@ -394,7 +415,7 @@ class DepthController:
         """
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        depth_rows(
+        _DEPTH_ROWS(
             self._pid_state,
             self._pid_gains,
             float(self.feedforward_n),

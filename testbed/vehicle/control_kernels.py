@@ -25,7 +25,6 @@ forces [N]; body FRD, world NED; quaternions ``(w, x, y, z)`` body → NED.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numba
@@ -67,7 +66,6 @@ __all__ = [
     "pid_update",
     "pilot_rows",
     "put_targets",
-    "warm_up",
 ]
 
 INTEGRAL, P_TERM, I_TERM, D_TERM, LAST_ERROR, HAS_LAST, D_FILTERED = range(7)
@@ -333,36 +331,6 @@ def put_targets(
     (:func:`~.row_kernels.put_row`)."""
     w, x, y, z = quaternion_wxyz
     put_row(row, mark, tick, (float(depth_m), float(w), float(x), float(y), float(z)))
-
-
-@functools.cache
-def warm_up() -> None:
-    """Compile (or load from the disk cache) every kernel here, once per process: the
-    controllers call it when they are built, so the first frame of a timed run does not."""
-    gains = np.zeros((3, PID_GAINS_SIZE))
-    level, zero = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    pid_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.01, 0.0, False)
-    attitude_update(np.zeros(ATTITUDE_STATE_SIZE), gains, level, level, zero, 0.01, (True,) * 3)
-    depth_update(np.zeros(PID_STATE_SIZE), gains[0], 0.0, 0.0, level, 0.01, 0.0)
-    row, mark, imu = np.zeros(6), np.zeros(2, dtype=np.int64), np.zeros(8)
-    depth_rows(
-        np.zeros(PID_STATE_SIZE),
-        gains[0],
-        0.0,
-        np.zeros(5),
-        np.zeros(3),
-        imu,
-        0.01,
-        row,
-        mark,
-        1,
-    )
-    wrench, trims, targets = (0.0,) * 6, (0.0,) * 4, np.array([0.0, 1.0, 0.0, 0.0, 0.0])
-    pilot_rows(wrench, trims, True, True, imu, targets, 0.01, row, mark, mark, 1)
-    put_targets(targets, mark, 1, 0.0, (1.0, 0.0, 0.0, 0.0))
-    attitude_rows(
-        np.zeros(ATTITUDE_STATE_SIZE), gains, np.zeros(5), imu, 0.01, (True,) * 3, row, mark, 1
-    )
 
 
 jit.refresh_stale_caches(

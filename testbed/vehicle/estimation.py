@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from testbed.common import jit
 from testbed.common.geometry import (
     Quaternion,
     Vec3,
@@ -63,6 +64,7 @@ from testbed.common.geometry import (
     quat_rotate_inverse,
     rotation_matrix,
 )
+from testbed.common.jit import F64, TABLE, VECTOR
 from testbed.config import check_range
 from testbed.vehicle.filter_kernels import GATED, SINGULAR, gated_update, propagate
 from testbed.vehicle.nav_sensors import Measurement
@@ -84,6 +86,11 @@ _OBSERVED = {"position_ned": slice(0, 3), "velocity_body": slice(3, 6), "depth":
 _COUNTERS = ("accepted", "rejected", "invalid", "stale", "rollbacks", "reacquired")
 _NO_INPUT = np.zeros(0)
 """The prediction's input when there is none (constant velocity)."""
+
+# The filter's kernels, called without numba's dispatcher (testbed.common.jit.entry): x, P, the
+# model's matrices and a measurement's arrays are the filter's own contiguous float64 arrays.
+_PROPAGATE = jit.entry(propagate, VECTOR, TABLE, TABLE, TABLE, TABLE, VECTOR)
+_GATED_UPDATE = jit.entry(gated_update, VECTOR, TABLE, TABLE, VECTOR, VECTOR, F64)
 
 
 @dataclass(frozen=True, slots=True)
@@ -252,10 +259,6 @@ class KalmanNavigator:
         self._streaks: dict[str, int] = {}
         # F, G, Q by time step [ns]: frames land 2 or 3 physics steps apart, so a handful
         self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        # compile (or load) the kernels now, not in the first frame of a timed run (both pure)
-        f, g, qm = _transition(0.01, config.accel_noise_m2_s3)
-        propagate(self._x, self._p, f, g, qm, _NO_INPUT)
-        gated_update(self._x, self._p, _H_DEPTH, np.zeros(1), np.ones(1), math.inf)
 
     # ------------------------------------------------------------------- accessors
 
@@ -312,7 +315,7 @@ class KalmanNavigator:
             raise ValueError(f"predict to {time_s} s is before the filter's time {self._t} s")
         if dt <= _TIME_EPS_S:
             return
-        accel = None if accel_ned is None else np.asarray(accel_ned, dtype=np.float64)
+        accel = None if accel_ned is None else np.ascontiguousarray(accel_ned, dtype=np.float64)
         self._x, self._p = self._propagate(self._x, self._p, dt, accel)
         self._t = float(time_s)
         self._history.append(_Step(self._t, accel, self._x, self._p))
@@ -328,7 +331,7 @@ class KalmanNavigator:
                 self._cache.clear()
             matrices = self._cache[key] = _transition(dt, self.config.accel_noise_m2_s3)
         f, g, qm = matrices
-        return propagate(x, p, f, g, qm, _NO_INPUT if accel is None else accel)
+        return _PROPAGATE(x, p, f, g, qm, _NO_INPUT if accel is None else accel)
 
     def _trim(self) -> None:
         horizon = self._t - self.config.history_s
@@ -406,7 +409,7 @@ class KalmanNavigator:
         if reset:  # the innovation does not depend on P
             p = self._reset_spread(p, m.kind, z - h @ x)
         limit = self._gates[len(z)] if gate else math.inf
-        x, p, _, status = gated_update(x, p, h, z, sigma, limit)
+        x, p, _, status = _GATED_UPDATE(x, p, h, z, sigma, limit)
         if status == SINGULAR:
             self._counts["invalid"] += 1
             return False

@@ -49,6 +49,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 
+from testbed.common import jit
+from testbed.common.jit import CONST_VECTOR, F64, floats
 from testbed.config import build, check, check_range, check_ranges, load_toml, named_table
 from testbed.vehicle.hydrodynamics import HydroModel, coefficients
 from testbed.vehicle.plant_kernels import fossen_acceleration
@@ -68,6 +70,11 @@ _ZERO3 = (0.0, 0.0, 0.0)
 _ZERO6: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 MAX_KP_1_S = 1000.0
 """Largest accepted Kp [1/s]: 100× the packaged gains."""
+
+_FOSSEN_ACCELERATION = jit.entry(
+    fossen_acceleration, CONST_VECTOR, floats(6), floats(3), floats(3), F64, floats(6)
+)
+"""The model's right-hand side without numba's dispatcher (its read-only coefficients)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -309,7 +316,7 @@ class IsmcController:
         self.robust = robust = _vec6([rho * math.tanh(s / width) for s in sliding])
 
         gx, gy, gz = down_body
-        free = fossen_acceleration(
+        free = _FOSSEN_ACCELERATION(
             self._coefficients, nu, (float(gx), float(gy), float(gz)), _ZERO3, 1.0, _ZERO6
         )
         # τ_CO = M·(Kp·v_e − ν̇_free) + ρ·tanh(s/λ): −M·ν̇_free = C(ν)ν + D(ν)ν + g(η)

@@ -24,6 +24,8 @@ from typing import Protocol
 
 import numpy as np
 
+from testbed.common import jit
+from testbed.common.jit import F64, I64, MARK, VECTOR, floats
 from testbed.config import check_range
 from testbed.ecs import World
 from testbed.vehicle.components import DepthReading, ImuReading, PositionReading
@@ -57,6 +59,9 @@ __all__ = [
     "depth_measurement",
     "estimate_navigation",
 ]
+
+_PUT_POSITION = jit.entry(put_position, VECTOR, MARK, I64, F64, floats(3))
+"""The estimate's position row writer without numba's dispatcher (a store row and its mark)."""
 
 
 # --------------------------------------------------------------------------------- localizer
@@ -247,4 +252,4 @@ def estimate_navigation(world: World) -> None:
     if row is None:
         world.set(vehicle, PositionReading(estimate.time_s, estimate.position_ned_m))
     else:
-        put_position(row.values, row.mark, world.tick, estimate.time_s, estimate.position_ned_m)
+        _PUT_POSITION(row.values, row.mark, world.tick, estimate.time_s, estimate.position_ned_m)

@@ -44,6 +44,7 @@ from types import ModuleType
 import numpy as np
 from numpy.typing import NDArray
 
+from testbed.common import jit
 from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
 from testbed.config import check
 from testbed.vehicle.arm import ArmModel
@@ -106,6 +107,7 @@ Quat = tuple[float, float, float, float]
 _Raw = tuple[Vec3, tuple[float, float, float, float], tuple[Vec3, Vec3]]
 """pybullet's (position, orientation xyzw, (linear velocity, angular velocity)), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
+VEC3 = jit.floats(3)
 _Coupling = tuple[Sequence[float], Sequence[float], Sequence[float], Vec3, Vec3]
 """The last step's hull velocity, angular velocity, rotation, force and torque (world)."""
 
@@ -264,7 +266,9 @@ class Physics:
         self._raw: _Raw | None = None
         self._floats: tuple[float, Vec3, Quat, Vec6] | None = None
 
-        self._cog = model.cog_m
+        xg, yg, zg = model.cog_m
+        self._cog = (float(xg), float(yg), float(zg))
+        self._state_of = jit.entry(pybullet_state, *(jit.floats(3),) * 2, jit.floats(4), VEC3, VEC3)
         self.arm_model = arm
         self.arm_coupling = arm_coupling
         self.arm: ArmBody | None = None
@@ -491,7 +495,7 @@ class Physics:
             if raw is None:
                 raw = self._raw = self._read()
             position, orientation, (linear, angular) = raw
-            state = pybullet_state(self._cog, position, orientation, linear, angular)
+            state = self._state_of(self._cog, position, orientation, linear, angular)
             floats = self._floats = (self._steps * self.dt_s, *state)
         return floats
 
@@ -587,10 +591,21 @@ class Physics:
                 *model.cog_m,
                 *(b - g for b, g in zip(model.cob_m, model.cog_m, strict=True)),
                 1.0 / model.hull_size_m[2],
-            )
+            ),
+            dtype=np.float64,
         )
 
         loads = self._loads
+        # what pybullet gives: floats, (x, y, z, w), (linear, angular)
+        wrench_of = jit.entry(
+            pybullet_wrench,
+            jit.CONST_VECTOR,
+            jit.VECTOR,
+            jit.VECTOR,
+            jit.F64,
+            jit.floats(4),
+            jit.tuple_of(VEC3, 2),
+        )
 
         def advance(raw: _Raw | None) -> None:
             if raw is None:
@@ -598,16 +613,11 @@ class Physics:
                 velocity = get_velocity(body, cid)
             else:  # read since the last step (by state_floats): still current
                 (_, _, height), orientation, velocity = raw
-            force, torque = pybullet_wrench(fossen, rigid, loads, height, orientation, velocity)
+            force, torque = wrench_of(fossen, rigid, loads, height, orientation, velocity)
             apply_force(body, -1, force, _ZERO3, link_frame, cid)
             apply_torque(body, -1, torque, link_frame, cid)
             step_simulation(cid)
 
-        # Compile (or load from numba's cache) here, not inside the first step of a timed run:
-        # pure but for ν̇, which the reset clears.
-        level, zero3 = (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
-        pybullet_wrench(fossen, rigid, np.zeros(N_LOADS), 0.0, level, (zero3, zero3))
-        pybullet_state(model.cog_m, zero3, level, zero3, zero3)
         if self.arm is None:
             return advance
         # With the arm: its measured reaction coupled into (or cancelled from) the hull's
@@ -641,7 +651,7 @@ class Physics:
                 load = [a + r for a, r in zip(load, reaction, strict=True)]
             scratch[w : w + 6] = load
             scratch[c : c + 3] = loads[c : c + 3]
-            force, torque = pybullet_wrench(fossen, rigid, scratch, height, orientation, velocity)
+            force, torque = wrench_of(fossen, rigid, scratch, height, orientation, velocity)
             loads[LOAD_NU_DOT : LOAD_NU_DOT + 6] = scratch[LOAD_NU_DOT : LOAD_NU_DOT + 6]
             rx, ry, rz, rk, rm, rn = reaction  # FRD → FLU: (x, −y, −z)
             force = (force[0] - rx, force[1] + ry, force[2] + rz)

@@ -25,7 +25,6 @@ FRD. The quaternion product is :mod:`testbed.common.geometry`'s own, compiled in
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numba
@@ -49,7 +48,6 @@ __all__ = [
     "odometry_rows",
     "position_sample",
     "put_position",
-    "warm_up",
 ]
 
 STANDARD_GRAVITY_M_S2 = 9.80665
@@ -216,22 +214,6 @@ def odometry_rows(
     north, east = (fix[1], fix[2]) if has_fix else (0.0, 0.0)
     sampled = max(imu[0], depth[0])
     put_row(row, mark, tick, (sampled, north, east, depth[2], imu[1], imu[2], imu[3], imu[4]))
-
-
-@functools.cache
-def warm_up() -> None:
-    """Compile (or load from the disk cache) every kernel here, once per process (the sensors
-    call it when they are built, so the first frame of a timed run does not)."""
-    draws, cursor = np.zeros(8), np.zeros(1, dtype=np.int64)
-    mark = np.zeros(2, dtype=np.int64)
-    level, zero = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    imu_sample(draws, cursor, np.zeros(3), np.zeros(6), level, zero, 0.0, np.zeros(8), mark, 1)
-    cursor[0] = 0
-    depth_sample(draws, cursor, np.ones(4), 0.0, 0.0, np.zeros(3), mark, 1)
-    cursor[0] = 0
-    position_sample(draws, cursor, 0.0, zero, 0.0, np.zeros(4), mark, 1)
-    odometry_rows(np.zeros(8), np.zeros(3), np.zeros(4), False, np.zeros(8), mark, 1)
-    put_position(np.zeros(4), mark, 1, 0.0, zero)
 
 
 jit.refresh_stale_caches(

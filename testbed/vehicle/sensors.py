@@ -26,11 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from testbed.common import jit
 from testbed.common.components import DepthReading, ImuReading, PositionReading
 from testbed.common.geometry import Quaternion, Vec3
+from testbed.common.jit import F64, I64, INTS, MARK, VECTOR, floats
 from testbed.config import check_range
 from testbed.ecs.store import Layout, RowView
-from testbed.vehicle import sensor_kernels
 from testbed.vehicle.sensor_kernels import (
     ARDUSUB_PA_PER_M,
     SEA_LEVEL_PA,
@@ -74,6 +75,16 @@ SURFACE_PRESSURE_RANGE_PA = (5.0e4, 1.5e5)
 
 def _check_rate(rate_hz: float) -> None:
     check_range(rate_hz, "rate_hz", *SENSOR_RATE_RANGE_HZ, "Hz")
+
+
+# The sensor kernels, called without numba's dispatcher (testbed.common.jit.entry): the draws'
+# buffer and cursor, the sensor's arrays and the row are the frame's own float64/int64 vectors.
+_DRAWS = (VECTOR, INTS)
+_IMU_SAMPLE = jit.entry(
+    imu_sample, *_DRAWS, VECTOR, VECTOR, floats(4), floats(3), F64, VECTOR, MARK, I64
+)
+_DEPTH_SAMPLE = jit.entry(depth_sample, *_DRAWS, VECTOR, F64, F64, VECTOR, MARK, I64)
+_POSITION_SAMPLE = jit.entry(position_sample, *_DRAWS, F64, floats(3), F64, VECTOR, MARK, I64)
 
 
 class NormalDraws:
@@ -193,7 +204,6 @@ class Imu:
         # stationary start: the correlated error already has its steady-state spread
         self._errors = np.array([s * self._normals.take() for s in sigmas])
         self._scratch = _Scratch(_IMU)
-        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -222,7 +232,7 @@ class Imu:
         """:meth:`sample`, written into an ImuReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
         normals = self._normals
-        while not imu_sample(
+        while not _IMU_SAMPLE(
             normals.buffer,
             normals.cursor,
             self._errors,
@@ -293,7 +303,6 @@ class DepthSensor:
             ]
         )
         self._scratch = _Scratch(_DEPTH)
-        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -309,7 +318,7 @@ class DepthSensor:
         """:meth:`sample`, written into a DepthReading row at ``tick`` (a frame's path)."""
         self._clock.advance(time_s)
         normals = self._normals
-        while not depth_sample(
+        while not _DEPTH_SAMPLE(
             normals.buffer,
             normals.cursor,
             self._params,
@@ -355,7 +364,6 @@ class PositionFix:
         self._normals = NormalDraws(rng)
         self._clock = SampleClock(config.rate_hz)
         self._scratch = _Scratch(_POSITION)
-        sensor_kernels.warm_up()
 
     def due(self, time_s: float) -> bool:
         """Whether a reading is due at ``time_s``."""
@@ -372,7 +380,7 @@ class PositionFix:
         self._clock.advance(time_s)
         normals = self._normals
         noise = self.config.noise_m
-        while not position_sample(
+        while not _POSITION_SAMPLE(
             normals.buffer,
             normals.cursor,
             noise,

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from testbed.common import jit
 from testbed.common.geometry import (
     Quaternion,
     euler_from_quat,
@@ -51,6 +52,7 @@ from testbed.common.geometry import (
     quat_normalize,
     yaw_only,
 )
+from testbed.common.jit import BOOL, F64, I64, MARK, VECTOR, floats
 from testbed.ecs import Entity, Phase, Schedule, System, World
 from testbed.ecs.store import Layout, RowView, Table
 from testbed.vehicle.allocation import Allocator
@@ -130,6 +132,14 @@ _FLAG_TYPES = (Armed, ActiveMode, FailsafeStatus)
 """What the modes in effect follow from (:func:`_update_flags`)."""
 _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
 """What :func:`ingest_commands` reacts to."""
+# The systems' kernels, called without numba's dispatcher (testbed.common.jit.entry): rows and
+# marks are the store's contiguous float64/int64 vectors, the rest floats, bools and tuples.
+_PUT_WRENCH = jit.entry(put_wrench, VECTOR, MARK, I64, *(F64,) * 6)
+_PUT_TARGETS = jit.entry(put_targets, VECTOR, MARK, I64, F64, floats(4))
+_PILOT_ROWS = jit.entry(
+    pilot_rows, floats(6), floats(4), BOOL, BOOL, VECTOR, VECTOR, F64, VECTOR, MARK, MARK, I64
+)
+_ODOMETRY_ROWS = jit.entry(odometry_rows, VECTOR, VECTOR, VECTOR, BOOL, VECTOR, MARK, I64)
 
 
 # ------------------------------------------------------------------------------ resources
@@ -375,14 +385,14 @@ def set_targets(
     if row is None:
         world.set(ctl.vehicle, ControlTargets(depth_m, quaternion_wxyz))
     else:
-        put_targets(row.values, row.mark, world.tick, depth_m, quaternion_wxyz)
+        _PUT_TARGETS(row.values, row.mark, world.tick, depth_m, quaternion_wxyz)
 
 
 def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
     """Write ``source``'s :class:`ForceIntent` wrench [N, N·m], FRD, into its row (a change
     only when it differs)."""
     row = controllers.intent_rows[source]
-    put_wrench(row.values, row.mark, world.tick, *wrench)
+    _PUT_WRENCH(row.values, row.mark, world.tick, *wrench)
 
 
 # ------------------------------------------------------------------------------ PRE_UPDATE
@@ -531,7 +541,7 @@ def run_pilot_interface(world: World) -> None:
         targets = vehicle_row(world, ctl, ControlTargets)
     row = _UNUSED_TARGETS if targets is None else targets  # read and written in a hold mode
     intent = ctl.intent_rows["pilot"]
-    pilot_rows(
+    _PILOT_ROWS(
         cache.wrench,
         cache.trims,
         depth_hold,  # translation in the level (yaw-only) frame, rotated into the body
@@ -775,7 +785,7 @@ def publish_odometry(world: World) -> None:
     # the first is set as a component (from a row of its own), the rest written into its row
     row = odometry or RowView.detached(_ODOMETRY.width)
     fix_values = imu.values if fix is None else fix.values  # read only with a fix
-    odometry_rows(
+    _ODOMETRY_ROWS(
         imu.values, depth.values, fix_values, fix is not None, row.values, row.mark, world.tick
     )
     if odometry is None:

@@ -19,6 +19,8 @@ from importlib import resources
 
 import numpy as np
 
+from testbed.common import jit
+from testbed.common.jit import CONST_TABLE, F64, VECTOR
 from testbed.vehicle.thrust_kernels import lookup, lookup_many, total_current
 from testbed.vehicle.thruster_config import Handedness
 
@@ -54,6 +56,9 @@ ZERO_FORCE_N = 1e-9
 
 _TABLE_RESOURCE = "t200_12v.csv"
 _TABLE_VOLTAGE_V = 12.0
+
+_TOTAL_CURRENT = jit.entry(total_current, VECTOR, F64, CONST_TABLE)
+"""The power meter's kernel without numba's dispatcher (forces and the read-only table)."""
 
 
 class T200:
@@ -274,8 +279,9 @@ class T200:
         return _lookup_array(forces_n, self._current_table)
 
     def total_current_a(self, forces_n: np.ndarray) -> float:
-        """Σ current [A] drawn by (n,) float64 forces [N] (the power meter's, per frame)."""
-        return total_current(forces_n, 1.0, self._current_table)
+        """Σ current [A] drawn by (n,) contiguous float64 forces [N] (the power meter's, per
+        frame: called without numba's type checks, :func:`testbed.common.jit.entry`)."""
+        return _TOTAL_CURRENT(forces_n, 1.0, self._current_table)
 
     def __repr__(self) -> str:
         return (

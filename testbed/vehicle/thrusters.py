@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from testbed.common import jit
+from testbed.common.jit import F64, I64, MARK, TABLE, VECTOR
 from testbed.vehicle.t200 import (
     DEAD_BAND_US,
     NEUTRAL_PWM_US,
@@ -70,6 +72,12 @@ dynamics (6136 s + 108700) / (s³ + 89 s² + 9258 s + 108700) identified by von 
 """
 
 FaultMode = Literal["dead", "stuck", "degraded"]
+
+# The frame's thruster kernel, called without numba's dispatcher (testbed.common.jit.entry): the
+# plant's, the actuation's and the store's contiguous float64 arrays (int64 mark).
+_ACTUATE_ROWS = jit.entry(
+    actuate_rows, *(VECTOR,) * 5, F64, TABLE, F64, VECTOR, VECTOR, MARK, I64, VECTOR
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,10 +153,6 @@ class ThrusterDynamics:
         self._blend = (math.nan, math.nan, 1.0)  # (dt_s, τ, 1 - exp(-dt/τ)) of the last step
         # compiled (or loaded) now, on scratch forces, not in the first frame of a timed run
         lag_step(np.zeros(n_thrusters), self._forces, self._gain, self._held, 0.0)
-        scratch, row = np.zeros(n_thrusters), np.zeros(12)
-        matrix, mark = np.zeros((6, n_thrusters)), np.zeros(2, dtype=np.int64)
-        actuate_rows(scratch, scratch.copy(), scratch, self._gain, self._held, 0.0, matrix, 0.5,
-                     row[:6], row, mark, 1, row[6:])  # fmt: skip
         if initial_forces_n is not None:
             self.reset(initial_forces_n)
 
@@ -250,6 +254,9 @@ class ThrusterDynamics:
         :func:`~testbed.vehicle.systems.actuate_thrusters`; one compiled call,
         :func:`~testbed.vehicle.thrust_kernels.actuate_rows`).
 
+        The kernel is called without numba's type checks (:func:`testbed.common.jit.entry`):
+        every array is contiguous float64 (the mark int64), as the frame's are.
+
         Args:
             commanded_forces_n: (n,) float64 command held over the interval [N].
             dt_s: the interval [s], >= 0.
@@ -264,7 +271,7 @@ class ThrusterDynamics:
         Raises:
             ValueError: negative dt_s.
         """
-        actuate_rows(
+        _ACTUATE_ROWS(
             self._forces,
             self._start,
             commanded_forces_n,
