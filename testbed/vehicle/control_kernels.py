@@ -65,6 +65,8 @@ __all__ = [
     "depth_update",
     "pid_update",
     "pilot_rows",
+    "put_attitude_target",
+    "put_depth_target",
     "put_targets",
 ]
 
@@ -333,7 +335,33 @@ def put_targets(
     put_row(row, mark, tick, (float(depth_m), float(w), float(x), float(y), float(z)))
 
 
+@numba.njit(cache=True)
+def put_depth_target(
+    row: np.ndarray, mark: np.ndarray, tick: int, depth_m: float
+) -> None:  # pragma: no cover - compiled
+    """:func:`put_targets` of a new depth target [m, + down], the attitude target kept."""
+    put_row(row, mark, tick, (float(depth_m), row[1], row[2], row[3], row[4]))
+
+
+@numba.njit(cache=True)
+def put_attitude_target(
+    row: np.ndarray, mark: np.ndarray, tick: int, quaternion_wxyz: Quaternion
+) -> None:  # pragma: no cover - compiled
+    """:func:`put_targets` of a new attitude target (body → NED), the depth target kept."""
+    w, x, y, z = quaternion_wxyz
+    put_row(row, mark, tick, (row[0], float(w), float(x), float(y), float(z)))
+
+
 jit.refresh_stale_caches(
-    (attitude_update, depth_update, attitude_rows, depth_rows, pilot_rows, put_targets),
+    (
+        attitude_update,
+        depth_update,
+        attitude_rows,
+        depth_rows,
+        pilot_rows,
+        put_targets,
+        put_depth_target,
+        put_attitude_target,
+    ),
     (geometry, jit, pilot, row_kernels, thrust_kernels),
 )

@@ -83,7 +83,12 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     failsafe_level,
 )
-from testbed.vehicle.control_kernels import pilot_rows, put_targets
+from testbed.vehicle.control_kernels import (
+    pilot_rows,
+    put_attitude_target,
+    put_depth_target,
+    put_targets,
+)
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
 from testbed.vehicle.sensor_kernels import odometry_rows
@@ -136,6 +141,8 @@ _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, Attitu
 # marks are the store's contiguous float64/int64 vectors, the rest floats, bools and tuples.
 _PUT_WRENCH = jit.entry(put_wrench, VECTOR, MARK, I64, *(F64,) * 6)
 _PUT_TARGETS = jit.entry(put_targets, VECTOR, MARK, I64, F64, floats(4))
+_PUT_DEPTH_TARGET = jit.entry(put_depth_target, VECTOR, MARK, I64, F64)
+_PUT_ATTITUDE_TARGET = jit.entry(put_attitude_target, VECTOR, MARK, I64, floats(4))
 _PILOT_ROWS = jit.entry(
     pilot_rows, floats(6), floats(4), BOOL, BOOL, VECTOR, VECTOR, F64, VECTOR, MARK, MARK, I64
 )
@@ -388,6 +395,26 @@ def set_targets(
         _PUT_TARGETS(row.values, row.mark, world.tick, depth_m, quaternion_wxyz)
 
 
+def _set_depth_target(world: World, ctl: Controllers, depth_m: float) -> None:
+    """:func:`set_targets` of a new depth target [m, + down], the attitude target kept."""
+    row = vehicle_row(world, ctl, ControlTargets)
+    if row is None:
+        targets = world.get(ctl.vehicle, ControlTargets) or _measured_targets(world, ctl.vehicle)
+        set_targets(world, ctl, depth_m, targets.quaternion_wxyz)
+    else:
+        _PUT_DEPTH_TARGET(row.values, row.mark, world.tick, depth_m)
+
+
+def _set_attitude_target(world: World, ctl: Controllers, quaternion_wxyz: Quaternion) -> None:
+    """:func:`set_targets` of a new attitude target (body → NED), the depth target kept."""
+    row = vehicle_row(world, ctl, ControlTargets)
+    if row is None:
+        targets = world.get(ctl.vehicle, ControlTargets) or _measured_targets(world, ctl.vehicle)
+        set_targets(world, ctl, targets.depth_m, quaternion_wxyz)
+    else:
+        _PUT_ATTITUDE_TARGET(row.values, row.mark, world.tick, quaternion_wxyz)
+
+
 def set_intent(world: World, controllers: Controllers, source: str, wrench: Wrench6) -> None:
     """Write ``source``'s :class:`ForceIntent` wrench [N, N·m], FRD, into its row (a change
     only when it differs)."""
@@ -472,12 +499,10 @@ def ingest_commands(world: World) -> None:
             set_targets(world, ctl, targets.depth_m, targets.quaternion_wxyz)
     for _, depth_sp in world.query1(DepthSetpoint, changed=True):
         ctl.last_contact_s = now
-        targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
-        set_targets(world, ctl, depth_sp.depth_m, targets.quaternion_wxyz)
+        _set_depth_target(world, ctl, depth_sp.depth_m)
     for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
         ctl.last_contact_s = now
-        targets = world.get(vehicle, ControlTargets) or _measured_targets(world, vehicle)
-        set_targets(world, ctl, targets.depth_m, quat_normalize(att_sp.quaternion_wxyz))
+        _set_attitude_target(world, ctl, quat_normalize(att_sp.quaternion_wxyz))
 
 
 # --------------------------------------------------------------------------------- UPDATE
