@@ -373,6 +373,34 @@ def test_varying_current_is_reproducible_and_needs_a_generator(wu: HydroModel) -
     assert np.linalg.norm(finals[0][:2]) > 0.0
 
 
+def test_stepping_to_a_time_is_stepping_one_at_a_time(wu: HydroModel) -> None:
+    """``step_until`` (the vehicle's path: the held wrench, many steps a call) ends at the first
+    step at or after its time and leaves the plant exactly where single steps do, with the
+    current's variation drawn at the same steps."""
+    current = WaterCurrent(variation_std_mps=(0.1, 0.1, 0.0), update_period_s=0.05)
+    wrench = (12.0, -3.0, 5.0, 0.4, -0.2, 1.0)
+    with (
+        Physics(wu, current=current, rng=np.random.default_rng(3)) as one,
+        Physics(wu, current=current, rng=np.random.default_rng(3)) as many,
+    ):
+        for _ in range(100):
+            one.step(wrench)
+        many.held_wrench[:] = wrench
+        reached = 0.0
+        for until_s in (0.1, 0.1, 0.25, 100 * many.dt_s - 1e-9):
+            before = many.time_s
+            reached = many.step_until(until_s)
+            if before >= until_s:  # already there: one step
+                assert reached == pytest.approx(before + many.dt_s, abs=1e-12)
+            else:  # the first step at or after it
+                assert until_s <= reached < until_s + many.dt_s
+        assert reached == one.time_s == many.time_s
+        assert one.state_floats() == many.state_floats()
+        assert np.array_equal(one.state().nu_dot, many.state().nu_dot)
+        assert one.current_ned == many.current_ned != current.velocity_ned_mps
+        assert many.held_wrench.tolist() == list(wrench)  # held, not consumed
+
+
 # --- scene ----------------------------------------------------------------------------------
 
 
