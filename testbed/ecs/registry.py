@@ -320,18 +320,20 @@ def replicated_entries(
             continue
         type_id = entry.type_id
         for entity, slot in column.pairs():
-            value = slot.value
-            if value is GONE or entity not in marked:
+            if entity not in marked:
                 continue
+            tick = slot.changed  # read first: a store row's value is rebuilt only if sent
             if fresh and entity in fresh:
                 kind = added
-            elif slot.changed <= since or slot.origin is not LOCAL:
+            elif tick <= since or slot.origin is not LOCAL:
                 continue
             elif slot.added > since:
                 kind = added
             else:
                 kind = changed
-            changes.append((entity, type_id, kind, entry, value, slot.changed))
+            value = slot.value
+            if value is not GONE:
+                changes.append((entity, type_id, kind, entry, value, tick))
     log = world._removals
     if log and log[-1].tick > since:
         _removed_entries(world, since, entries, changes)

@@ -284,11 +284,11 @@ class StoreSlot(Slot):
         if cached is GONE:
             return GONE
         table, row = self._table, self._row
-        count = table.marks[row, 1]
+        count = table.marks.item(row, 1)  # a Python int (half the cost of indexing)
         if count == self._count:
             return cached
         cached = self._cached = table.read(row)
-        self._count = int(count)
+        self._count = count
         return cached
 
     @value.setter
@@ -301,7 +301,7 @@ class StoreSlot(Slot):
 
     @property
     def changed(self) -> int:
-        return int(self._table.marks[self._row, 0])
+        return self._table.marks.item(self._row, 0)
 
     @changed.setter
     def changed(self, tick: int) -> None:
@@ -309,7 +309,7 @@ class StoreSlot(Slot):
 
     @property
     def origin(self) -> Origin:
-        return _origins()[int(self._table.origins[self._row])]
+        return _origins()[self._table.origins.item(self._row)]
 
     @origin.setter
     def origin(self, origin: Origin) -> None:
