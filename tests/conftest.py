@@ -4,6 +4,12 @@ Under CI (``CI`` set in the environment) hypothesis runs derandomized: the same 
 run, so a submission's CI result does not depend on the draw. Local runs keep hypothesis's
 random exploration (and its example database) to find new counterexamples.
 
+The tests run the compiled kernels' entries checked (``TESTBED_CHECK_KERNELS=1``, set here
+before anything imports :mod:`testbed.common.jit`, and inherited by the processes tests start):
+every array a frame passes to a kernel is held to its declared type, so a call site that passes
+another is an error in the tests rather than a misread. Production runs skip the check;
+``tests/common/test_jit_entry.py`` runs scenarios both ways and compares their bits.
+
 Strategies and reference helpers that several test modules use live in ``tests/strategies.py``
 (``from tests.strategies import …``): under ``--import-mode=importlib`` test modules cannot
 import each other, and fixtures cannot feed ``@given``.
@@ -12,6 +18,8 @@ import each other, and fixtures cannot feed ``@given``.
 from __future__ import annotations
 
 import os
+
+os.environ.setdefault("TESTBED_CHECK_KERNELS", "1")  # before testbed.common.jit is imported
 
 import pytest
 from hypothesis import settings

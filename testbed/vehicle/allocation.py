@@ -213,7 +213,9 @@ class Allocator:
         self._failures: dict[int, ThrusterFault] = {}
         self._axis_maxima: np.ndarray | None = None
         # allocate_rows' limits: f_lo, f_hi, the slew step (set per call), cap, tolerance
-        self._limits = np.array([self._f_lo, self._f_hi, -1.0, 0.0, CURRENT_TOLERANCE_A])
+        self._limits = np.array(
+            [self._f_lo, self._f_hi, -1.0, 0.0, CURRENT_TOLERANCE_A], dtype=np.float64
+        )
         self._rebuild()
         # Compile (or load from numba's cache) the per-frame kernel now, on a scratch copy of
         # the work rows, not in the first frame of a timed run (as Physics and the loops do).

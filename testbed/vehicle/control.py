@@ -226,7 +226,8 @@ def pid_gains_array(gains: PidGains) -> np.ndarray:
             gains.derivative_tau_s,
             _ANTI_WINDUP_CODES[gains.anti_windup],
             gains.tracking_time_s,
-        ]
+        ],
+        dtype=np.float64,
     )
 
 

@@ -248,7 +248,7 @@ class KalmanNavigator:
             raise ValueError("initial position and velocity must have 3 components each")
         variances = [config.initial_position_sigma_m**2] * 3
         variances += [config.initial_velocity_sigma_m_s**2] * 3
-        self._p = np.diag(variances)
+        self._p = np.diag(np.array(variances, dtype=np.float64))
         self._history: list[_Step] = [_Step(self._t, None, self._x.copy(), self._p.copy())]
         # chdtri(k, q): the x with P(χ²_k > x) = q, i.e. chi2.ppf(1 − q, k); scipy.special here
         # rather than scipy.stats at import (≈ 1 s of every process's start-up otherwise)

@@ -107,7 +107,7 @@ Quat = tuple[float, float, float, float]
 _Raw = tuple[Vec3, tuple[float, float, float, float], tuple[Vec3, Vec3]]
 """pybullet's (position, orientation xyzw, (linear velocity, angular velocity)), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
-VEC3 = jit.floats(3)
+_VEC3 = jit.floats(3)
 _Coupling = tuple[Sequence[float], Sequence[float], Sequence[float], Vec3, Vec3]
 """The last step's hull velocity, angular velocity, rotation, force and torque (world)."""
 
@@ -268,7 +268,8 @@ class Physics:
 
         xg, yg, zg = model.cog_m
         self._cog = (float(xg), float(yg), float(zg))
-        self._state_of = jit.entry(pybullet_state, *(jit.floats(3),) * 2, jit.floats(4), VEC3, VEC3)
+        # the CoG, then pybullet's reads: position, (x, y, z, w), linear and angular velocity
+        self._state_of = jit.entry(pybullet_state, _VEC3, _VEC3, jit.floats(4), _VEC3, _VEC3)
         self.arm_model = arm
         self.arm_coupling = arm_coupling
         self.arm: ArmBody | None = None
@@ -380,7 +381,7 @@ class Physics:
             euler_rad: (3,) roll, pitch, yaw [rad] (default: the start attitude).
             nu: (6,) body velocity [u v w p q r] at CO [m/s, rad/s], FRD (default: rest).
 
-        The water current keeps its state.
+        The water current keeps its state; the held wrench is cleared (:attr:`held_wrench`).
         """
         self._check_open()
         px, py, pz = position_ned if position_ned is not None else self._start_position
@@ -604,7 +605,7 @@ class Physics:
             jit.VECTOR,
             jit.F64,
             jit.floats(4),
-            jit.tuple_of(VEC3, 2),
+            jit.tuple_of(_VEC3, 2),
         )
 
         def advance(raw: _Raw | None) -> None:

@@ -200,9 +200,11 @@ class Imu:
         decay = math.exp(-self._clock.period_s / tau) if tau > 0 else 0.0
         innovation = math.sqrt(1.0 - decay * decay)
         sigmas = (config.attitude_noise_rad, config.attitude_noise_rad, config.heading_noise_rad)
-        self._params = np.array([decay, innovation, *sigmas, config.gyro_noise_rad_s])
+        self._params = np.array(
+            [decay, innovation, *sigmas, config.gyro_noise_rad_s], dtype=np.float64
+        )
         # stationary start: the correlated error already has its steady-state spread
-        self._errors = np.array([s * self._normals.take() for s in sigmas])
+        self._errors = np.array([s * self._normals.take() for s in sigmas], dtype=np.float64)
         self._scratch = _Scratch(_IMU)
 
     def due(self, time_s: float) -> bool:
@@ -300,7 +302,8 @@ class DepthSensor:
                 config.surface_pressure_pa,
                 config.noise_pa,
                 config.spec_grav,
-            ]
+            ],
+            dtype=np.float64,  # whole numbers in a config too: the kernel reads float64
         )
         self._scratch = _Scratch(_DEPTH)
 

@@ -120,3 +120,43 @@ def test_the_frames_kernels_get_the_arrays_they_declare(tmp_path: Path) -> None:
         checked = (tmp_path / "checked" / name).read_bytes()
         assert checked == (tmp_path / "plain" / name).read_bytes(), name
         assert checked.count(b"\n") > 10, name  # the runs recorded something
+
+
+def test_whole_numbers_in_configs_reach_the_kernels_as_floats() -> None:
+    """A config written with whole numbers (TOML integers) gives the kernels the same float64
+    arrays as one written with decimals (an int64 array at a float64 entry would be misread,
+    its bits taken for tiny floats)."""
+    from testbed.vehicle.control import PID, PidGains
+    from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+    from testbed.vehicle.nav_sensors import Measurement
+    from testbed.vehicle.sensors import DepthSensor, DepthSensorConfig
+
+    def depth_readings(config: DepthSensorConfig) -> list[float]:
+        sensor = DepthSensor(config, np.random.default_rng(4))
+        return [sensor.sample(0.01 * k, 2.0).depth_m for k in range(1, 20)]
+
+    whole = DepthSensorConfig(
+        rate_hz=100, noise_pa=20, water_density_kg_m3=1000, spec_grav=1, surface_pressure_pa=101325
+    )
+    decimal = DepthSensorConfig(
+        rate_hz=100.0,
+        noise_pa=20.0,
+        water_density_kg_m3=1000.0,
+        spec_grav=1.0,
+        surface_pressure_pa=101325.0,
+    )
+    assert depth_readings(whole) == depth_readings(decimal)
+    assert depth_readings(whole)[0] == pytest.approx(2.0, abs=0.02)
+
+    def estimate(config: FilterConfig) -> tuple[float, ...]:
+        nav = KalmanNavigator(config)
+        nav.predict(0.5)
+        nav.update(Measurement("fix", "position_ned", 0.5, (1.0, 2.0, 3.0), (0.1, 0.1, 0.1)))
+        return nav.estimate().position_ned_m
+
+    whole_filter = FilterConfig(initial_position_sigma_m=10, initial_velocity_sigma_m_s=1)
+    assert estimate(whole_filter) == estimate(FilterConfig())
+    assert estimate(whole_filter)[0] == pytest.approx(1.0, abs=0.01)
+
+    whole_pid, decimal_pid = PID(PidGains(kp=2, ki=1)), PID(PidGains(kp=2.0, ki=1.0))
+    assert whole_pid.update(0.5, 0.01) == decimal_pid.update(0.5, 0.01) == pytest.approx(1.005)
