@@ -109,12 +109,24 @@ def entry(kernel: Kernel, *signature: types.Type) -> Kernel:
     if not CHECKED:
         return cast(Kernel, code)
     name, typeof = dispatcher.__name__, numba.typeof
-    arrays = [(i, t) for i, t in enumerate(signature) if isinstance(t, types.Array)]
+    # what numba.typeof would say, checked on the array itself (typeof costs microseconds)
+    arrays = [
+        (i, t, np.dtype(str(t.dtype)), t.ndim, not t.mutable)
+        for i, t in enumerate(signature)
+        if isinstance(t, types.Array) and t.layout == "C"
+    ]
 
     def checked(*args: Any) -> Any:
-        for i, declared in arrays:  # numbers and tuples the entry converts or refuses itself
-            given = typeof(args[i])  # type: ignore[no-untyped-call]  # numba's, untyped
-            if given != declared:
+        for i, declared, dtype, ndim, readonly in arrays:  # numbers and tuples: the entry's
+            a = args[i]
+            if not (
+                type(a) is np.ndarray
+                and a.dtype == dtype
+                and a.ndim == ndim
+                and a.flags.c_contiguous
+                and a.flags.writeable is not readonly
+            ):
+                given = typeof(a)  # type: ignore[no-untyped-call]  # numba's, untyped
                 raise TypeError(f"{name}: argument {i} is {given}, declared {declared}")
         return code(*args)
 
