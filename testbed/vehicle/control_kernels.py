@@ -40,7 +40,7 @@ from testbed.common.geometry import (
     quat_rotate_inverse,
 )
 from testbed.vehicle import pilot, row_kernels, thrust_kernels
-from testbed.vehicle.pilot import level_to_body, trim_targets
+from testbed.vehicle.pilot import level_to_body, level_wrench, stick_trims, trim_targets
 from testbed.vehicle.row_kernels import put_row
 from testbed.vehicle.thrust_kernels import put_wrench
 
@@ -65,6 +65,7 @@ __all__ = [
     "depth_update",
     "pid_update",
     "pilot_rows",
+    "pilot_shape",
     "put_attitude_target",
     "put_depth_target",
     "put_targets",
@@ -294,9 +295,28 @@ def attitude_rows(
 
 
 @numba.njit(cache=True)
+def pilot_shape(
+    sticks: tuple[float, ...],
+    axis_maxima: tuple[float, ...],
+    gains: np.ndarray,
+    precision: bool,
+    depth_hold: bool,
+    attitude_hold: bool,
+) -> tuple[
+    tuple[float, float, float, float, float, float], tuple[float, float, float, float]
+]:  # pragma: no cover - compiled
+    """The sticks' level wrench and trims in a mode (:func:`~.pilot.level_wrench`,
+    :func:`~.pilot.stick_trims`; ``gains`` laid out by :func:`~.pilot.pilot_gains_array`)."""
+    wrench = level_wrench(sticks, axis_maxima, gains, precision, depth_hold, attitude_hold)
+    return wrench, stick_trims(sticks, gains, precision)
+
+
+@numba.njit(cache=True)
 def pilot_rows(
-    wrench: tuple[float, float, float, float, float, float],
-    trims: tuple[float, float, float, float],
+    sticks: tuple[float, ...],
+    axis_maxima: tuple[float, ...],
+    gains: np.ndarray,
+    precision: bool,
     depth_hold: bool,
     attitude_hold: bool,
     imu: np.ndarray,
@@ -308,9 +328,10 @@ def pilot_rows(
     tick: int,
 ) -> None:  # pragma: no cover - compiled
     """The pilot interface's frame on the rows: its force intent from the sticks' level wrench
-    (:func:`~.pilot.pilot_level_wrench`; in depth hold the force rotated into the body with the
-    ImuReading row's attitude, :func:`~.pilot.level_to_body`), and in a hold mode the
-    ControlTargets row moved by the trims (:func:`~.pilot.trim_targets`)."""
+    (:func:`pilot_shape`; in depth hold the force rotated into the body with the ImuReading
+    row's attitude, :func:`~.pilot.level_to_body`), and in a hold mode the ControlTargets row
+    moved by the trims (:func:`~.pilot.trim_targets`)."""
+    wrench, trims = pilot_shape(sticks, axis_maxima, gains, precision, depth_hold, attitude_hold)
     if depth_hold:
         attitude = (imu[1], imu[2], imu[3], imu[4])
         fx, fy, fz = level_to_body((wrench[0], wrench[1], wrench[2]), attitude)
@@ -359,6 +380,7 @@ jit.refresh_stale_caches(
         attitude_rows,
         depth_rows,
         pilot_rows,
+        pilot_shape,
         put_targets,
         put_depth_target,
         put_attitude_target,

@@ -14,6 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from numba.extending import register_jitable
 
 from testbed.common.geometry import (
@@ -31,12 +32,16 @@ from testbed.config import check_range, check_ranges
 
 __all__ = [
     "MAX_PILOT_GAIN",
+    "N_PILOT_GAINS",
     "PilotGains",
     "level_to_body",
+    "level_wrench",
+    "pilot_gains_array",
     "pilot_level_wrench",
     "pilot_trims",
     "pilot_wrench",
     "shape_stick",
+    "stick_trims",
     "trim_targets",
 ]
 
@@ -106,6 +111,27 @@ class PilotGains:
             check_ranges(getattr(self, name), name, 0.0, 10.0, "rad/s")
 
 
+# PilotGains as the kernels read it (pilot_gains_array): offsets into one float64 array
+_SCALE, _PRECISION_SCALE, _DEAD_ZONE = 0, 1, 2
+_TRANSLATION, _DEPTH_HOLD_TRANSLATION, _DEPTH_HOLD_TRANSLATION_PRECISION = 3, 6, 9
+_TORQUE, _ATTITUDE_HOLD_TORQUE = 12, 15
+_DEPTH_TRIM = 18  # normal, precision
+_ATTITUDE_TRIM, _ATTITUDE_TRIM_PRECISION = 20, 23
+N_PILOT_GAINS = 26
+
+
+def pilot_gains_array(gains: PilotGains) -> np.ndarray:
+    """``gains`` as :func:`level_wrench` and :func:`stick_trims` read them: (26,) float64, the
+    fields in declaration order, each tuple spread."""
+    values = [gains.normal_scale, gains.precision_scale, gains.dead_zone]
+    values += [*gains.translation, *gains.depth_hold_translation]
+    values += [*gains.depth_hold_translation_precision, *gains.torque]
+    values += [*gains.attitude_hold_torque, *gains.depth_trim_m_s]
+    values += [*gains.attitude_trim_rad_s, *gains.attitude_trim_precision_rad_s]
+    return np.array(values, dtype=np.float64)
+
+
+@register_jitable
 def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
     """Cubic stick shaping ``sign(x)·|x|³·scale`` with ``x`` clipped to [−1, 1].
 
@@ -129,10 +155,10 @@ def pilot_level_wrench(
 ) -> Wrench:
     """The pilot's force/torque intent before attitude enters: :func:`pilot_wrench` at level.
 
-    It depends on the sticks and the mode only (a cache of it holds while they do, at the
-    operator's rate rather than the control rate). In depth hold its force is in the yaw-only
+    It depends on the sticks and the mode only. In depth hold its force is in the yaw-only
     (level) frame, to be rotated into the body by :func:`level_to_body`; otherwise it is the
-    body wrench itself.
+    body wrench itself. The law is :func:`level_wrench` (compiled into the pilot interface's
+    kernel).
 
     Args:
         sticks: (6,) stick positions in [−1, 1]: surge, sway, heave, roll, pitch, yaw.
@@ -147,15 +173,37 @@ def pilot_level_wrench(
         (6,) wrench (X, Y, Z, K, M, N) [N, N·m]: force in the level frame (depth hold) or the
         body frame, torque in the body frame, FRD.
     """
-    scale = gains.precision_scale if precision else gains.normal_scale
-    dz = gains.dead_zone
-    u = [shape_stick(sticks[k], scale, dz) * axis_maxima[k] for k in range(6)]
+    g = pilot_gains_array(gains).tolist()  # Python floats in, Python floats out
+    return level_wrench(sticks, axis_maxima, g, precision, depth_hold, attitude_hold)
+
+
+@register_jitable
+def level_wrench(
+    sticks: Sequence[float],
+    axis_maxima: Sequence[float],
+    gains: Sequence[float] | np.ndarray,
+    precision: bool,
+    depth_hold: bool,
+    attitude_hold: bool,
+) -> Wrench:
+    """:func:`pilot_level_wrench` with the gains as :func:`pilot_gains_array` lays them out
+    (the law, for Python and compiled callers): each shaped stick times its axis maximum [N,
+    N·m] and the mode's per-axis gain."""
+    g = gains
+    scale = g[_PRECISION_SCALE] if precision else g[_SCALE]
+    dz = g[_DEAD_ZONE]
+    u0 = shape_stick(sticks[0], scale, dz) * axis_maxima[0]
+    u1 = shape_stick(sticks[1], scale, dz) * axis_maxima[1]
+    u2 = shape_stick(sticks[2], scale, dz) * axis_maxima[2]
+    u3 = shape_stick(sticks[3], scale, dz) * axis_maxima[3]
+    u4 = shape_stick(sticks[4], scale, dz) * axis_maxima[4]
+    u5 = shape_stick(sticks[5], scale, dz) * axis_maxima[5]
     if depth_hold:
-        tg = gains.depth_hold_translation_precision if precision else gains.depth_hold_translation
+        t = _DEPTH_HOLD_TRANSLATION_PRECISION if precision else _DEPTH_HOLD_TRANSLATION
     else:
-        tg = gains.translation
-    rg = gains.attitude_hold_torque if attitude_hold else gains.torque
-    return (u[0] * tg[0], u[1] * tg[1], u[2] * tg[2], u[3] * rg[0], u[4] * rg[1], u[5] * rg[2])
+        t = _TRANSLATION
+    r = _ATTITUDE_HOLD_TORQUE if attitude_hold else _TORQUE
+    return (u0 * g[t], u1 * g[t + 1], u2 * g[t + 2], u3 * g[r], u4 * g[r + 1], u5 * g[r + 2])
 
 
 @register_jitable
@@ -219,13 +267,23 @@ def pilot_trims(
         (depth [m/s, + down] from heave, roll, pitch, yaw [rad/s] about the target's body axes
         (roll, pitch) and world down (yaw)).
     """
-    dz = gains.dead_zone
-    rates = gains.attitude_trim_precision_rad_s if precision else gains.attitude_trim_rad_s
+    return stick_trims(sticks, pilot_gains_array(gains).tolist(), precision)
+
+
+@register_jitable
+def stick_trims(
+    sticks: Sequence[float], gains: Sequence[float] | np.ndarray, precision: bool
+) -> tuple[float, float, float, float]:
+    """:func:`pilot_trims` with the gains as :func:`pilot_gains_array` lays them out (the law,
+    for Python and compiled callers)."""
+    g = gains
+    dz = g[_DEAD_ZONE]
+    r = _ATTITUDE_TRIM_PRECISION if precision else _ATTITUDE_TRIM
     return (
-        shape_stick(sticks[2], 1.0, dz) * gains.depth_trim_m_s[1 if precision else 0],
-        shape_stick(sticks[3], 1.0, dz) * rates[0],
-        shape_stick(sticks[4], 1.0, dz) * rates[1],
-        shape_stick(sticks[5], 1.0, dz) * rates[2],
+        shape_stick(sticks[2], 1.0, dz) * g[_DEPTH_TRIM + (1 if precision else 0)],
+        shape_stick(sticks[3], 1.0, dz) * g[r],
+        shape_stick(sticks[4], 1.0, dz) * g[r + 1],
+        shape_stick(sticks[5], 1.0, dz) * g[r + 2],
     )
 
 

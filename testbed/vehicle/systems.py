@@ -85,12 +85,13 @@ from testbed.vehicle.control import (
 )
 from testbed.vehicle.control_kernels import (
     pilot_rows,
+    pilot_shape,
     put_attitude_target,
     put_depth_target,
     put_targets,
 )
 from testbed.vehicle.guidance import PositionController
-from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_level_wrench, pilot_trims
+from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_gains_array
 from testbed.vehicle.sensor_kernels import odometry_rows
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench
@@ -143,9 +144,9 @@ _PUT_WRENCH = jit.entry(put_wrench, VECTOR, MARK, I64, *(F64,) * 6)
 _PUT_TARGETS = jit.entry(put_targets, VECTOR, MARK, I64, F64, floats(4))
 _PUT_DEPTH_TARGET = jit.entry(put_depth_target, VECTOR, MARK, I64, F64)
 _PUT_ATTITUDE_TARGET = jit.entry(put_attitude_target, VECTOR, MARK, I64, floats(4))
-_PILOT_ROWS = jit.entry(
-    pilot_rows, floats(6), floats(4), BOOL, BOOL, VECTOR, VECTOR, F64, VECTOR, MARK, MARK, I64
-)
+_PILOT_MODE = (floats(6), floats(6), VECTOR, BOOL, BOOL, BOOL)  # sticks, maxima, gains, flags
+_PILOT_ROWS = jit.entry(pilot_rows, *_PILOT_MODE, VECTOR, VECTOR, F64, VECTOR, MARK, MARK, I64)
+_PILOT_SHAPE = jit.entry(pilot_shape, *_PILOT_MODE)
 _ODOMETRY_ROWS = jit.entry(odometry_rows, VECTOR, VECTOR, VECTOR, BOOL, VECTOR, MARK, I64)
 
 
@@ -241,8 +242,9 @@ class Controllers:
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
         flags_tick: the world tick they were last worked out at (0: never).
-        shaped: the pilot interface's level wrench and trims for the current sticks and mode
-            (a cache: sticks change at the operator's rate, frames run at the control rate).
+        pilot_gains: ``pilot`` as the pilot interface's kernel reads it
+            (:func:`~testbed.vehicle.pilot.pilot_gains_array`; fixed at construction, as
+            ``pilot`` is).
         autonomous: the vehicle flies itself (:mod:`testbed.vehicle.autonomy`): it owns its
             mode (operator mode requests are not applied) and a link HOLD keeps GUIDED flying.
         velocity_control: in GUIDED the autonomy's velocity controller (the ISMC) flies all
@@ -262,10 +264,13 @@ class Controllers:
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
     flags_tick: int = 0
-    shaped: _PilotCache | None = None
+    pilot_gains: np.ndarray = field(init=False)
     position: PositionController = field(default_factory=PositionController)
     autonomous: bool = False
     velocity_control: bool = False
+
+    def __post_init__(self) -> None:
+        self.pilot_gains = pilot_gains_array(self.pilot)
 
     @property
     def attitude_axes(self) -> tuple[bool, bool, bool]:
@@ -557,7 +562,6 @@ def run_pilot_interface(world: World) -> None:
         return
     vehicle = ctl.vehicle
     depth_hold, attitude_hold = flags.depth_hold, flags.attitude_hold
-    cache = shaped_sticks(ctl, sticks)
     imu = vehicle_row(world, ctl, ImuReading)
     targets = vehicle_row(world, ctl, ControlTargets)
     if targets is None and (depth_hold or attitude_hold):  # the first: measured, trimmed below
@@ -567,8 +571,10 @@ def run_pilot_interface(world: World) -> None:
     row = _UNUSED_TARGETS if targets is None else targets  # read and written in a hold mode
     intent = ctl.intent_rows["pilot"]
     _PILOT_ROWS(
-        cache.wrench,
-        cache.trims,
+        sticks,
+        ctl.axis_maxima,
+        ctl.pilot_gains,
+        flags.precision,
         depth_hold,  # translation in the level (yaw-only) frame, rotated into the body
         attitude_hold,
         _LEVEL_IMU if imu is None else imu.values,
@@ -581,49 +587,16 @@ def run_pilot_interface(world: World) -> None:
     )
 
 
-def shaped_sticks(ctl: Controllers, sticks: tuple[float, ...]) -> _PilotCache:
-    """The pilot's level wrench (``.wrench``) and trims (``.trims``) for ``sticks`` in the
-    present mode (:func:`~testbed.vehicle.pilot.pilot_level_wrench`,
-    :func:`~testbed.vehicle.pilot.pilot_trims`), kept in ``ctl.shaped`` while they hold."""
-    cache = ctl.shaped
-    if cache is None or not cache.holds(ctl, sticks):
-        cache = ctl.shaped = _PilotCache(ctl, sticks)
-    return cache
-
-
-class _PilotCache:
-    """:func:`~testbed.vehicle.pilot.pilot_level_wrench` and
-    :func:`~testbed.vehicle.pilot.pilot_trims` of one set of sticks in one mode, kept while
-    the sticks (the same object), the mode, the axis maxima and the gains stay the same."""
-
-    __slots__ = ("axis_maxima", "gains", "modes", "sticks", "trims", "wrench")
-
-    def __init__(self, ctl: Controllers, sticks: tuple[float, ...]) -> None:
-        flags = ctl.flags
-        self.sticks = sticks
-        self.modes = (flags.precision, flags.depth_hold, flags.attitude_hold)
-        self.axis_maxima = ctl.axis_maxima
-        self.gains = gains = ctl.pilot
-        w = pilot_level_wrench(
-            sticks,
-            ctl.axis_maxima,
-            gains=gains,
-            precision=flags.precision,
-            depth_hold=flags.depth_hold,
-            attitude_hold=flags.attitude_hold,
-        )
-        self.wrench: Wrench6 = w
-        self.trims = pilot_trims(sticks, gains=gains, precision=flags.precision)
-
-    def holds(self, ctl: Controllers, sticks: tuple[float, ...]) -> bool:
-        """Whether this cache is of these sticks in the present mode, maxima and gains."""
-        flags = ctl.flags
-        return (
-            self.sticks is sticks
-            and self.modes == (flags.precision, flags.depth_hold, flags.attitude_hold)
-            and self.axis_maxima is ctl.axis_maxima
-            and self.gains is ctl.pilot
-        )
+def shaped_sticks(
+    ctl: Controllers, sticks: tuple[float, ...]
+) -> tuple[Wrench6, tuple[float, float, float, float]]:
+    """The pilot's level wrench and trims for ``sticks`` in the present mode (the pilot
+    interface's law, compiled: :func:`~testbed.vehicle.control_kernels.pilot_shape`)."""
+    flags = ctl.flags
+    gains, maxima = ctl.pilot_gains, ctl.axis_maxima
+    return _PILOT_SHAPE(
+        sticks, maxima, gains, flags.precision, flags.depth_hold, flags.attitude_hold
+    )
 
 
 def control_position(world: World) -> None:

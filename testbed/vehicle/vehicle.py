@@ -553,10 +553,8 @@ class Vehicle:
         """
         ctl = self.controllers
         flags = ctl.flags
-        held = sticks if type(sticks) is tuple else tuple(sticks)  # the pilot's own: cached
-        shaped = shaped_sticks(ctl, held)
-        wrench = shaped.wrench
-        depth_rate, _, _, yaw_rate = shaped.trims
+        held = sticks if type(sticks) is tuple else tuple(sticks)
+        wrench, (depth_rate, _, _, yaw_rate) = shaped_sticks(ctl, held)
         model = self.model
 
         def steady(axis: int, force: float) -> float:

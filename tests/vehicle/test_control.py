@@ -252,6 +252,33 @@ def test_pilot_trims_are_cubic_stick_times_the_full_stick_rates() -> None:
     assert precise[3] == pytest.approx(0.125 * math.radians(60.0))
 
 
+def test_the_compiled_pilot_shape_gives_the_python_laws_bits() -> None:
+    """The pilot interface's kernel (:func:`pilot_shape`, the laws compiled) against the same
+    laws run by CPython (two implementations of the IEEE operations), over random sticks, every
+    mode, and gains written with whole numbers."""
+    from testbed.vehicle.control_kernels import pilot_shape
+    from testbed.vehicle.pilot import pilot_gains_array, pilot_level_wrench
+
+    rng = np.random.default_rng(5)
+    maxima = (80.0, 80.0, 120.0, 0.0, 12.0, 20.0)
+    for gains in (PilotGains(), PilotGains(translation=(1, 2, 1), dead_zone=0, normal_scale=1)):
+        for _ in range(50):
+            sticks = tuple(float(v) for v in rng.uniform(-1.3, 1.3, 6))
+            modes = tuple(bool(b) for b in rng.integers(0, 2, 3))
+            precision, depth_hold, attitude_hold = modes
+            wrench, trims = pilot_shape(sticks, maxima, pilot_gains_array(gains), *modes)
+            assert wrench == pilot_level_wrench(
+                sticks,
+                maxima,
+                gains=gains,
+                precision=precision,
+                depth_hold=depth_hold,
+                attitude_hold=attitude_hold,
+            )
+            assert trims == pilot_trims(sticks, gains=gains, precision=precision)
+            assert all(type(v) is float for v in (*wrench, *trims))
+
+
 # -------------------------------------------------------------------------- failsafe
 
 
