@@ -217,8 +217,8 @@ class Allocator:
             [self._f_lo, self._f_hi, -1.0, 0.0, CURRENT_TOLERANCE_A], dtype=np.float64
         )
         self._rebuild()
-        # Compile (or load from numba's cache) the per-frame kernel now, on a scratch copy of
-        # the work rows, not in the first frame of a timed run (as Physics and the loops do).
+        # Compile (or load from numba's cache) step's kernel now, on a scratch copy of the work
+        # rows, not inside a timed run (the frame's own, allocate_rows, is bound at import).
         allocate_pinv(
             np.zeros(6),
             self._stuck_wrench,

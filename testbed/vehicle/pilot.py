@@ -32,7 +32,6 @@ from testbed.config import check_range, check_ranges
 
 __all__ = [
     "MAX_PILOT_GAIN",
-    "N_PILOT_GAINS",
     "PilotGains",
     "level_to_body",
     "level_wrench",
@@ -116,8 +115,7 @@ _SCALE, _PRECISION_SCALE, _DEAD_ZONE = 0, 1, 2
 _TRANSLATION, _DEPTH_HOLD_TRANSLATION, _DEPTH_HOLD_TRANSLATION_PRECISION = 3, 6, 9
 _TORQUE, _ATTITUDE_HOLD_TORQUE = 12, 15
 _DEPTH_TRIM = 18  # normal, precision
-_ATTITUDE_TRIM, _ATTITUDE_TRIM_PRECISION = 20, 23
-N_PILOT_GAINS = 26
+_ATTITUDE_TRIM, _ATTITUDE_TRIM_PRECISION = 20, 23  # 26 in all
 
 
 def pilot_gains_array(gains: PilotGains) -> np.ndarray:

@@ -29,9 +29,6 @@ from testbed.vehicle.t200 import (
     ZERO_FORCE_N,
 )
 from testbed.vehicle.thrust_kernels import actuate_rows, lag_step
-
-if TYPE_CHECKING:
-    from testbed.ecs.store import RowView
 from testbed.vehicle.thruster_config import (
     Handedness,
     ThrusterConfig,
@@ -41,6 +38,9 @@ from testbed.vehicle.thruster_config import (
     mate_rov_to_frd,
     read_thruster_config,
 )
+
+if TYPE_CHECKING:
+    from testbed.ecs.store import RowView
 
 __all__ = [
     "DEAD_BAND_US",
