@@ -20,9 +20,9 @@ __all__ = ["put_row"]
 
 @register_jitable
 def put_row(row: np.ndarray, mark: np.ndarray, tick: int, values: Any) -> None:
-    """Write ``values`` (a tuple of floats, the row's fields in order) into ``row`` and, when a
-    value changed, mark it (``mark``, the row's (2,) view of its change tick and write count:
-    ``tick``, and one more write)."""
+    """Write ``values`` (floats, a tuple or an array: the row's fields in order) into ``row``
+    and, when a value changed, mark it (``mark``, the row's (2,) view of its change tick and
+    write count: ``tick``, and one more write)."""
     changed = False
     for j, value in enumerate(values):
         if row[j] != value:

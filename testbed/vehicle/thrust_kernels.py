@@ -394,21 +394,16 @@ def put_output(
     commanded: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """A ThrusterOutput row (forces, PWM, currents, scale) from ``work``'s first three rows and
-    ``scale``; marked only when a value changed. ``commanded`` (n,) gets the forces."""
+    ``scale`` (:func:`~.row_kernels.put_row`). ``commanded`` (n,) gets the forces."""
     n = work.shape[1]
+    values = np.empty(3 * n + 1)
     for i in range(n):
         commanded[i] = work[FORCES, i]
-    changed = row[3 * n] != scale
     for k in range(3):
         for i in range(n):
-            x = work[k, i]
-            if row[k * n + i] != x:
-                row[k * n + i] = x
-                changed = True
-    row[3 * n] = scale
-    if changed:
-        mark[0] = tick
-        mark[1] += 1
+            values[k * n + i] = work[k, i]
+    values[3 * n] = scale
+    put_row(row, mark, tick, values)
 
 
 @numba.njit(cache=True)
