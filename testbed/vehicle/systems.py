@@ -242,6 +242,8 @@ class Controllers:
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
         flags_tick: the world tick they were last worked out at (0: never).
+        ignored_setpoints: operator setpoints that could not be applied (an attitude of zero
+            norm), counted and otherwise ignored (the targets stay as they were).
         pilot_gains: ``pilot`` as the pilot interface's kernel reads it
             (:func:`~testbed.vehicle.pilot.pilot_gains_array`; fixed at construction, as
             ``pilot`` is).
@@ -264,6 +266,7 @@ class Controllers:
     last_contact_s: float = 0.0
     flags: ControlFlags = field(default_factory=ControlFlags)
     flags_tick: int = 0
+    ignored_setpoints: int = 0
     pilot_gains: np.ndarray = field(init=False)
     position: PositionController = field(default_factory=PositionController)
     autonomous: bool = False
@@ -507,7 +510,12 @@ def ingest_commands(world: World) -> None:
         _set_depth_target(world, ctl, depth_sp.depth_m)
     for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
         ctl.last_contact_s = now
-        _set_attitude_target(world, ctl, quat_normalize(att_sp.quaternion_wxyz))
+        try:
+            attitude = quat_normalize(att_sp.quaternion_wxyz)
+        except ValueError:  # a zero quaternion from the link: a value, not an error
+            ctl.ignored_setpoints += 1
+            continue
+        _set_attitude_target(world, ctl, attitude)
 
 
 # --------------------------------------------------------------------------------- UPDATE

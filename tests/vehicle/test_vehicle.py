@@ -15,6 +15,7 @@ from testbed.vehicle.components import (
     ActiveMode,
     AppliedWrench,
     Armed,
+    AttitudeSetpoint,
     CommandStatus,
     ControlMode,
     ControlTargets,
@@ -234,6 +235,26 @@ def test_stale_or_reordered_commands_are_ignored() -> None:
         status = get(v, CommandStatus)
         assert status.seq == seq  # type: ignore[union-attr]
         assert status.latency_s == pytest.approx(0.25, abs=0.011)  # type: ignore[union-attr]
+
+
+def test_a_zero_attitude_setpoint_from_the_link_is_counted_and_ignored() -> None:
+    """A peer's attitude setpoint of zero norm (well-formed bytes, no attitude) leaves the
+    targets as they were and the vehicle flying; it is counted, and the next valid one holds."""
+    with make() as v:
+        hold(v, 0.5, yaw_rad=0.3)
+        v.advance(0.5)
+        before = get(v, ControlTargets)
+        v.world.set(v.operator_entity, AttitudeSetpoint((0.0, 0.0, 0.0, 0.0)))
+        v.advance(1.0)
+        assert v.controllers.ignored_setpoints == 1
+        assert get(v, ControlTargets) == before
+        assert get(v, Armed) == Armed(True)
+        v.set_attitude(quat_from_euler(0.0, 0.0, -0.2))
+        v.advance(1.5)
+        targets = get(v, ControlTargets)
+        assert isinstance(targets, ControlTargets)
+        assert targets.quaternion_wxyz == pytest.approx(quat_from_euler(0.0, 0.0, -0.2))
+        assert v.controllers.ignored_setpoints == 1
 
 
 def test_failsafe_holds_then_surfaces_and_disarms() -> None:
