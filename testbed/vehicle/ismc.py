@@ -38,7 +38,8 @@ FRD already, so nothing is converted, and the gains, per-axis magnitudes, are th
 either frame.
 
 The gains per vehicle model are package data (``data/ismc.toml``, :func:`load_ismc_gains`).
-Pure: no ECS, no randomness, no pybullet; plain float tuples in the 10-ms control frame.
+Pure: no ECS, no randomness, no pybullet. The law itself runs compiled on the controller's state
+array (:mod:`testbed.vehicle.ismc_kernels`), called once a control period.
 """
 
 from __future__ import annotations
@@ -49,11 +50,20 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 
+import numpy as np
+
 from testbed.common import jit
-from testbed.common.jit import CONST_VECTOR, F64, floats
+from testbed.common.jit import CONST_VECTOR, F64, TABLE, VECTOR, floats
 from testbed.config import build, check, check_range, check_ranges, load_toml, named_table
 from testbed.vehicle.hydrodynamics import HydroModel, coefficients
-from testbed.vehicle.plant_kernels import fossen_acceleration
+from testbed.vehicle.ismc_kernels import (
+    ARMED,
+    INTEGRAL,
+    ROBUST,
+    SLIDING,
+    STATE_SIZE,
+    ismc_step,
+)
 
 __all__ = [
     "IsmcController",
@@ -66,15 +76,25 @@ __all__ = [
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 
-_ZERO3 = (0.0, 0.0, 0.0)
-_ZERO6: Vec6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 MAX_KP_1_S = 1000.0
 """Largest accepted Kp [1/s]: 100× the packaged gains."""
 
-_FOSSEN_ACCELERATION = jit.entry(
-    fossen_acceleration, CONST_VECTOR, floats(6), floats(3), floats(3), F64, floats(6)
+_ISMC_STEP = jit.entry(
+    ismc_step,
+    CONST_VECTOR,
+    TABLE,
+    floats(3),
+    floats(6),
+    F64,
+    F64,
+    VECTOR,
+    floats(6),
+    floats(6),
+    floats(3),
+    F64,
 )
-"""The model's right-hand side without numba's dispatcher (its read-only coefficients)."""
+"""The law without numba's dispatcher (the model's read-only coefficients, its mass matrix
+and the controller's state are its own contiguous float64 arrays)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,48 +226,51 @@ def _scaled6(values: Sequence[float], factor: float) -> Vec6:
 class IsmcController:
     """The ISMC's state: v_e(0) at arming and ∫v_e (module docstring for the law and frames).
 
+    The law runs compiled (:func:`~testbed.vehicle.ismc_kernels.ismc_step`) on the state array
+    :attr:`state`; this class holds the model, the gains and the checks of the inputs.
+
     Attributes:
         model: the controller's model of the vehicle (its belief, not the plant's truth).
         gains: the gains.
-        sliding: (6,) s of the last update [m/s, rad/s] (zeros before the first).
-        integral: (6,) ∫v_e dt since arming [m, rad].
-        robust: (6,) the last ρ·tanh(s/λ) [N, N·m], about CO.
+        state: (:data:`~.ismc_kernels.STATE_SIZE`,) the kernel's state: v_e(0), the last v_e,
+            ∫v_e, s, ρ·tanh(s/λ) and whether armed (:mod:`~testbed.vehicle.ismc_kernels`).
     """
 
-    __slots__ = (
-        "_coefficients",
-        "_cog",
-        "_error0",
-        "_last_error",
-        "_mass_rows",
-        "gains",
-        "integral",
-        "model",
-        "robust",
-        "sliding",
-    )
+    __slots__ = ("_coefficients", "_cog", "_kp", "_mass", "gains", "model", "state")
 
     def __init__(self, model: HydroModel, gains: IsmcGains) -> None:
         self.model = model
         self.gains = gains
         self._coefficients = coefficients(model)
-        self._mass_rows = tuple(_vec6(row.tolist()) for row in model.mass_matrix)
-        self._cog = model.cog_m
-        self._error0: Vec6 | None = None
-        self._last_error: Vec6 = _ZERO6
-        self.integral: Vec6 = _ZERO6
-        self.sliding: Vec6 = _ZERO6
-        self.robust: Vec6 = _ZERO6
+        self._mass = np.ascontiguousarray(model.mass_matrix, dtype=np.float64)
+        x, y, z = model.cog_m
+        self._cog = (float(x), float(y), float(z))
+        self._kp = _vec6(gains.kp)
+        self.state = np.zeros(STATE_SIZE)
 
     @property
     def armed(self) -> bool:
         """True once an update has stored v_e(0) since the last :meth:`reset`."""
-        return self._error0 is not None
+        return bool(self.state[ARMED] != 0.0)
+
+    @property
+    def sliding(self) -> Vec6:
+        """(6,) s of the last update [m/s, rad/s] (zeros before the first)."""
+        return _vec6(self.state[SLIDING : SLIDING + 6].tolist())
+
+    @property
+    def integral(self) -> Vec6:
+        """(6,) ∫v_e dt since arming [m, rad]."""
+        return _vec6(self.state[INTEGRAL : INTEGRAL + 6].tolist())
+
+    @property
+    def robust(self) -> Vec6:
+        """(6,) the last ρ·tanh(s/λ) [N, N·m], about CO."""
+        return _vec6(self.state[ROBUST : ROBUST + 6].tolist())
 
     def reset(self) -> None:
         """Disarm: forget v_e(0) and the integral; the next update arms (s = 0 there)."""
-        self._error0 = None
-        self.integral = self.sliding = self.robust = _ZERO6
+        self.state[:] = 0.0
 
     def update(
         self,
@@ -280,65 +303,21 @@ class IsmcController:
             ValueError: ``dt_s`` is not a positive finite number (after arming), or a vector
                 has the wrong length.
         """
-        nu = _vec6(v)
-        c0, c1, c2, c3, c4, c5 = v_cmd
-        error: Vec6 = (
-            c0 - nu[0],
-            c1 - nu[1],
-            c2 - nu[2],
-            c3 - nu[3],
-            c4 - nu[4],
-            c5 - nu[5],
-        )
-        kp = self.gains.kp
-        error0 = self._error0
-        if error0 is None:
-            self._error0 = error0 = error
-            integral = _ZERO6
-        else:
-            if not (dt_s > 0.0 and math.isfinite(dt_s)):
-                raise ValueError(f"dt_s must be > 0 and finite, got {dt_s}")
-            i, held = self.integral, self._last_error
-            integral = (
-                i[0] + held[0] * dt_s,
-                i[1] + held[1] * dt_s,
-                i[2] + held[2] * dt_s,
-                i[3] + held[3] * dt_s,
-                i[4] + held[4] * dt_s,
-                i[5] + held[5] * dt_s,
-            )
-        self.integral = integral
-        self._last_error = error
-        self.sliding = sliding = _vec6(
-            [e - e0 + k * s for e, e0, k, s in zip(error, error0, kp, integral, strict=True)]
-        )
-        rho, width = self.gains.rho, self.gains.lambda_
-        self.robust = robust = _vec6([rho * math.tanh(s / width) for s in sliding])
-
+        state = self.state
+        if state[ARMED] != 0.0 and not (dt_s > 0.0 and math.isfinite(dt_s)):
+            raise ValueError(f"dt_s must be > 0 and finite, got {dt_s}")
         gx, gy, gz = down_body
-        free = _FOSSEN_ACCELERATION(
-            self._coefficients, nu, (float(gx), float(gy), float(gz)), _ZERO3, 1.0, _ZERO6
-        )
-        # τ_CO = M·(Kp·v_e − ν̇_free) + ρ·tanh(s/λ): −M·ν̇_free = C(ν)ν + D(ν)ν + g(η)
-        demand = [k * e - a for k, e, a in zip(kp, error, free, strict=True)]
-        tau = [
-            row[0] * demand[0]
-            + row[1] * demand[1]
-            + row[2] * demand[2]
-            + row[3] * demand[3]
-            + row[4] * demand[4]
-            + row[5] * demand[5]
-            + extra
-            for row, extra in zip(self._mass_rows, robust, strict=True)
-        ]
-        fx, fy, fz = tau[0], tau[1], tau[2]
-        xg, yg, zg = self._cog
-        # moment about the CoG = moment about CO − r_g × F
-        return (
-            fx,
-            fy,
-            fz,
-            tau[3] - (yg * fz - zg * fy),
-            tau[4] - (zg * fx - xg * fz),
-            tau[5] - (xg * fy - yg * fx),
+        gains = self.gains
+        return _ISMC_STEP(
+            self._coefficients,
+            self._mass,
+            self._cog,
+            self._kp,
+            gains.rho,
+            gains.lambda_,
+            state,
+            _vec6(v_cmd),
+            _vec6(v),
+            (float(gx), float(gy), float(gz)),
+            float(dt_s),
         )
