@@ -165,9 +165,13 @@ def _number(obj: dict[str, Any], key: str, low: float, high: float) -> float | R
     value = obj.get(key)
     if isinstance(value, bool) or not isinstance(value, int | float):
         return Rejected("malformed", f"{key}: expected a number")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond any float (JSON integers have no bound)
+        number = math.inf
     if not (math.isfinite(number) and low <= number <= high):
-        return Rejected("range", f"{key}: must be in [{low:g}, {high:g}], got {value!r}")
+        shown = f"{number!r}" if isinstance(value, int) and math.isinf(number) else f"{value!r}"
+        return Rejected("range", f"{key}: must be in [{low:g}, {high:g}], got {shown}")
     return number
 
 

@@ -83,6 +83,11 @@ def test_malformed_messages_are_rejected_as_malformed(text: str | bytes) -> None
         '{"t": "sticks", "x": NaN, "y": 0, "z": 0, "yaw": 0}',
         '{"t": "sticks", "x": 0, "y": -Infinity, "z": 0, "yaw": 0}',
         '{"t": "sticks", "x": 0, "y": 0, "z": 1e308, "yaw": 0}',
+        # an integer beyond any float: JSON integers are unbounded (float() would overflow)
+        '{"t": "sticks", "x": 1' + "0" * 400 + ', "y": 0, "z": 0, "yaw": 0}',
+        '{"t": "goto", "x": -1' + "0" * 400 + ', "y": 0}',
+        '{"t": "lat", "pixels_ms": 1' + "0" * 400 + ', "rtt_ms": 1}',
+        '{"t": "ping", "c": 1' + "0" * 400 + "}",
         '{"t": "mode", "mode": "guided"}',
         '{"t": "image", "roi": [50, 0, 40, 10], "shift": 0, "budget": 10}',
         '{"t": "image", "roi": [0, 0, 2000, 10], "shift": 0, "budget": 10}',
