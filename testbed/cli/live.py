@@ -20,7 +20,8 @@ Ctrl-C (or SIGTERM, or ``--duration`` reached) ends the session and writes what 
 writes (``metrics.json``, ``events.csv``, ``series.csv``, plots unless ``--no-plots``) with
 a ``live`` section in ``metrics.json``; a session ended by Ctrl-C is marked ``"complete":
 false`` with the ``sim_s`` it reached, and the command ends with one line,
-``testbed live: session ended at t = … s; results in DIR``, exit code 0 (SIGTERM: 143).
+``testbed live: session ended at t = … s; results in DIR``, exit code 130 (SIGTERM: 143;
+``--duration`` reached: 0), as every command that Ctrl-C ends.
 
 A user's mistake (bad option, a port that cannot be bound) is one line and exit code 2.
 """
@@ -35,11 +36,10 @@ from typing import Any
 
 from testbed.cli.options import (
     EXIT_OK,
-    EXIT_TERMINATED,
     Subparsers,
-    Terminated,
     add_set_option,
     check_seed,
+    exit_code_of,
     open_modem_ports,
 )
 from testbed.config import ConfigError
@@ -134,9 +134,7 @@ def _run_live(args: argparse.Namespace) -> int:
         print(
             f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr
         )
-        if isinstance(result.stopped, Terminated):
-            return EXIT_TERMINATED
-        return EXIT_OK
+        return EXIT_OK if result.stopped is None else exit_code_of(result.stopped)
 
 
 def _open_ports(args: argparse.Namespace) -> dict[str, Any] | None:

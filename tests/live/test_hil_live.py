@@ -72,7 +72,7 @@ def test_a_live_session_runs_over_hil_ports(tmp_path: Path) -> None:
                 else:
                     raise AssertionError("the outage was not refused on HIL ports")
             proc.send_signal(signal.SIGINT)
-            assert proc.wait(timeout=300) == 0  # progress timeout, not a latency bound
+            assert proc.wait(timeout=300) == 130  # Ctrl-C; the timeout bounds progress, not latency
         finally:
             if proc.poll() is None:
                 proc.kill()
