@@ -9,8 +9,8 @@ a short timeout; serial through :class:`~testbed.hil.SerialTransport`'s writer t
 URLs (MAVProxy's and ArduPilot SITL's words):
 
 * ``udpout:HOST:PORT`` — send to HOST:PORT from an ephemeral local port and take what comes
-  back (SITL's ``--out``; the default, ``udpout:127.0.0.1:14550``, is where QGroundControl and
-  MAVProxy listen);
+  back from it only (SITL's ``--out``; the default, ``udpout:127.0.0.1:14550``, is where
+  QGroundControl and MAVProxy listen);
 * ``udpin:HOST:PORT`` — listen on HOST:PORT, answer the last sender;
 * ``tcpin:HOST:PORT`` — listen for one TCP client at a time (a new one replaces the old);
 * ``serial:PORT[,BAUD]`` or a pyserial URL (``/dev/ttyUSB0``, ``socket://…``, ``loop://``) —
@@ -33,6 +33,10 @@ from testbed.hil import RawAdapter, Received, SerialTransport
 __all__ = [
     "DEFAULT_BAUD",
     "DEFAULT_URL",
+    "INBOX_PACKETS",
+    "INGEST_BYTES_PER_FRAME",
+    "MAX_UDP_DATAGRAM",
+    "Intake",
     "Link",
     "SerialLink",
     "TcpServerLink",
@@ -45,6 +49,17 @@ DEFAULT_URL = "udpout:127.0.0.1:14550"
 DEFAULT_BAUD = 115200
 _READ_TIMEOUT_S = 0.1
 _MAX_DATAGRAM = 65535
+INBOX_PACKETS = 256
+"""Reads a link's inbox holds at most; a read that finds it full is dropped and counted
+(``inbox_full``): a flood costs the reader thread a count, not the run its memory."""
+MAX_UDP_DATAGRAM = 4096
+"""Longest UDP datagram queued [B] (≈ 15 full MAVLink 2 packets; ground stations and routers
+send one packet a datagram); a longer one is dropped and counted (``oversize``), so a backlog
+of a full inbox is at most ≈ 1 MiB, 64 frames' share."""
+INGEST_BYTES_PER_FRAME = 16384
+"""Bytes an :class:`Intake` hands a frame from one link (≈ 1.6 MB/s at 100 Hz, hundreds of
+times a ground station's uplink; decoding that much garbage costs ≈ 2 ms): what is left waits
+in the inbox for the next frame, so a flood cannot stall the frame loop."""
 
 
 class Link(Protocol):
@@ -87,10 +102,55 @@ def parse_url(url: str) -> tuple[str, str, int]:
     return "serial", name, int(baud) if baud else DEFAULT_BAUD
 
 
+class Intake:
+    """A frame's share of one link's reads: at most ``max_bytes`` a call, oldest first. A read
+    longer than what is left of the share is split and its rest handed out first next time
+    (the decoder continues a packet across calls), so neither a flood nor one huge datagram
+    can stall the frame loop; what waits stays in order.
+
+    Args:
+        inbox: the link's :attr:`Link.inbox`.
+        max_bytes: the share [B], > 0.
+    """
+
+    __slots__ = ("_carry", "_inbox", "max_bytes")
+
+    def __init__(
+        self, inbox: queue.Queue[Received], max_bytes: int = INGEST_BYTES_PER_FRAME
+    ) -> None:
+        if max_bytes <= 0:
+            raise ValueError(f"max_bytes must be > 0, got {max_bytes}")
+        self._inbox = inbox
+        self.max_bytes = max_bytes
+        self._carry: Received | None = None
+
+    def take(self) -> list[Received]:
+        """This frame's reads (their ``read_ns`` kept; a split read's first part not ``end``)."""
+        taken: list[Received] = []
+        budget = self.max_bytes
+        while budget > 0:
+            received = self._carry
+            self._carry = None
+            if received is None:
+                try:
+                    received = self._inbox.get_nowait()
+                except queue.Empty:
+                    break
+            data = received.data
+            if len(data) > budget:
+                self._carry = Received(data[budget:], received.read_ns, received.end)
+                received = Received(data[:budget], received.read_ns)
+            taken.append(received)
+            budget -= len(received.data)
+        return taken
+
+
 class _Counted:
     def __init__(self, url: str) -> None:
         self.url = url
-        self.inbox: queue.Queue[Received] = queue.Queue()
+        self.inbox: queue.Queue[Received] = queue.Queue(maxsize=INBOX_PACKETS)
+        self.inbox_full = 0
+        self.oversize = 0
         self.bytes_in = 0
         self.bytes_out = 0
         self.packets_in = 0
@@ -105,9 +165,13 @@ class _Counted:
         self._threads.append(thread)
 
     def _queue(self, data: bytes) -> None:
+        try:
+            self.inbox.put_nowait(Received(data, time.perf_counter_ns()))
+        except queue.Full:  # a flood: counted, not kept
+            self.inbox_full += 1
+            return
         self.bytes_in += len(data)
         self.packets_in += 1
-        self.inbox.put(Received(data, time.perf_counter_ns()))
 
     def counters(self) -> dict[str, int]:
         return {
@@ -116,6 +180,8 @@ class _Counted:
             "packets_in": self.packets_in,
             "packets_out": self.packets_out,
             "dropped": self.dropped,
+            "inbox_full": self.inbox_full,
+            "oversize": self.oversize,
         }
 
     def _join(self) -> None:
@@ -125,7 +191,8 @@ class _Counted:
 
 
 class UdpLink(_Counted):
-    """UDP: ``udpout`` sends to a fixed peer; ``udpin`` listens and answers the last sender.
+    """UDP: ``udpout`` sends to a fixed peer and takes datagrams from that peer only (a
+    connected socket); ``udpin`` listens and answers the last sender.
 
     Args:
         url: the link's URL (for the record).
@@ -143,8 +210,11 @@ class UdpLink(_Counted):
         try:
             if listen:
                 self._sock.bind((host, port))
-            elif host in ("127.0.0.1", "::1", "localhost"):  # never listen beyond loopback
-                self._sock.bind(("::1" if family == socket.AF_INET6 else "127.0.0.1", 0))
+            else:
+                # connected: the local address is the one that routes to the peer (loopback for
+                # a local peer, never every interface), and the kernel drops datagrams from
+                # anyone but the peer
+                self._sock.connect((host, port))
         except OSError:
             self._sock.close()
             raise
@@ -165,6 +235,9 @@ class UdpLink(_Counted):
                 continue  # e.g. ICMP port unreachable from a peer not listening yet
             if self.local_address is not None:
                 self._peer = sender
+            if len(data) > MAX_UDP_DATAGRAM:
+                self.oversize += 1
+                continue
             self._queue(data)
 
     def send(self, data: bytes) -> bool:
@@ -173,7 +246,10 @@ class UdpLink(_Counted):
             self.dropped += 1
             return False
         try:
-            self._sock.sendto(data, peer)
+            if self.local_address is None:
+                self._sock.send(data)  # connected to the peer
+            else:
+                self._sock.sendto(data, peer)
         except OSError:
             self.dropped += 1
             return False

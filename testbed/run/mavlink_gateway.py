@@ -43,7 +43,7 @@ from testbed.channel import Medium, Trace
 from testbed.ecs import Origin, Phase, Schedule, World
 from testbed.hil import LinkEndpoint, latency_summary_ms
 from testbed.mavlink import EndpointOptions
-from testbed.mavlink.links import Link
+from testbed.mavlink.links import Intake, Link
 from testbed.mavlink.shore import LinkFacts, ShoreEndpoint
 from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
@@ -147,6 +147,7 @@ class GatewayNode:
         )
         self.links = list(links)
         self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
+        self.intakes = [Intake(link.inbox) for link in self.links]
         self.read_ns: dict[float, int] = {}
         """Sample time of each stick command the endpoint wrote → its datagram's read [ns]."""
         self.lateness_ns: deque[int] = deque(maxlen=_SAMPLES)
@@ -165,14 +166,14 @@ class GatewayNode:
             yield env.timeout(period_s)
 
     def serve(self, now_s: float) -> None:
-        """Drain every link into the endpoint, update it and send what it queued."""
+        """Drain each link into the endpoint (up to
+        :data:`~testbed.mavlink.links.INGEST_BYTES_PER_FRAME`; the rest next time), update it
+        and send what it queued."""
         start = time.perf_counter_ns()
         endpoint = self.endpoint
         station = self.station
-        for link, channel in zip(self.links, self.channels, strict=True):
-            inbox = link.inbox
-            while not inbox.empty():
-                received = inbox.get_nowait()
+        for intake, channel in zip(self.intakes, self.channels, strict=True):
+            for received in intake.take():
                 arrived_s = now_s - max(0.0, (start - received.read_ns) * 1e-9)
                 if endpoint.receive(channel, received.data, now_s, arrived_s):
                     command = station.latest_command()

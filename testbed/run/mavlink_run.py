@@ -46,7 +46,7 @@ from testbed.ecs import Phase, World
 from testbed.hil import latency_summary_ms
 from testbed.mavlink import EndpointOptions, VehicleEndpoint
 from testbed.mavlink.ardusub import sticks_from_rc
-from testbed.mavlink.links import Link
+from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
 from testbed.run.interrupts import interrupt_of
 from testbed.run.realtime import rt_lateness_ns
@@ -129,6 +129,7 @@ class MavlinkVehicleNode:
         )
         self.links = list(links)
         self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
+        self.intakes = [Intake(link.inbox) for link in self.links]
         observer = VehicleObserver(
             recorder,
             EndpointPilot(self.endpoint),
@@ -167,7 +168,8 @@ class MavlinkVehicleNode:
             vehicle.advance(t_frame + 0.5 * vehicle.physics.dt_s)
 
     def _ingest(self, world: World) -> None:
-        """PRE_UPDATE: every packet the links' reader threads queued, into the endpoint."""
+        """PRE_UPDATE: the packets the links' reader threads queued, into the endpoint (up to
+        :data:`~testbed.mavlink.links.INGEST_BYTES_PER_FRAME` a link; the rest next frame)."""
         now = world.resource(SimClock).time_s
         env = self.env
         if isinstance(env, simpy.rt.RealtimeEnvironment):
@@ -175,10 +177,8 @@ class MavlinkVehicleNode:
         self._ingest_ns = start = time.perf_counter_ns()
         reads = self._frame_reads
         reads.clear()
-        for link, channel in zip(self.links, self.channels, strict=True):
-            inbox = link.inbox
-            while not inbox.empty():
-                received = inbox.get_nowait()
+        for intake, channel in zip(self.intakes, self.channels, strict=True):
+            for received in intake.take():
                 age_s = max(0.0, (start - received.read_ns) * 1e-9)
                 arrived_s = now - age_s
                 if self.endpoint.receive(channel, received.data, now, arrived_s):
