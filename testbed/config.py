@@ -35,6 +35,7 @@ __all__ = [
     "named_table",
     "parse_override",
     "read_text",
+    "to_float",
 ]
 
 
@@ -119,6 +120,24 @@ def check_ranges(
     """:func:`check_range` on each element of a tuple field (keys ``key[0]``, ``key[1]``, …)."""
     for i, value in enumerate(values):
         check_range(value, f"{key}[{i}]", low, high, unit, **options)
+
+
+def to_float(value: Any, source: str, key: str) -> float:
+    """A decoded document's number as a float (TOML and JSON integers included).
+
+    Raises:
+        ConfigError: not a number (a bool is not), or an integer beyond any float (those
+            formats' integers have no bound): ``"<source>: <key>: ..."``.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
+    try:
+        return float(value)
+    except OverflowError:
+        bits = value.bit_length()
+        raise ConfigError(
+            f"{source}: {key}: a {bits}-bit integer, beyond any float (±1.8e308)"
+        ) from None
 
 
 def read_text(path: str | Path) -> str:
@@ -310,11 +329,10 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
             raise ConfigError(f"{source}: {key}: expected an integer, got {value!r}")
         return value
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
-        if math.isnan(value):
+        number = to_float(value, source, key)
+        if math.isnan(number):
             raise ConfigError(f"{source}: {key}: expected a number, got nan")
-        return float(value)
+        return number
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{source}: {key}: expected a string, got {value!r}")

@@ -49,6 +49,7 @@ def test_build_converts_and_defaults() -> None:
         ({"kind": "a", "inner": {"rate_hz": -1}}, "f.toml: inner.rate_hz: must be > 0"),
         ({"kind": "a", "inner": {"rate": 1}}, "f.toml: inner.rate: unknown key"),
         ({"kind": "a", "limit": "x"}, "f.toml: limit: expected a number"),
+        ({"kind": "a", "limit": 10**400}, "f.toml: limit: a 1329-bit integer, beyond any float"),
         ({"kind": "a", "inner": 3}, "f.toml: inner: expected a table"),
     ],
 )

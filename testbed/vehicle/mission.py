@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.common.geometry import Vec3, wrap_angle
-from testbed.config import ConfigError, read_text
+from testbed.config import ConfigError, read_text, to_float
 
 __all__ = [
     "TOOL_FRAMES",
@@ -340,7 +340,9 @@ def _parse_text(text: str, source: str) -> Mission:
 
     try:
         data = json.loads(text, object_pairs_hook=no_duplicates)
-    except json.JSONDecodeError as err:
+    except ConfigError:  # a key given twice
+        raise
+    except ValueError as err:  # JSONDecodeError, or an integer past Python's 4300-digit limit
         raise ConfigError(f"{source}: malformed JSON: {err}") from None
     return parse_mission(data, source)
 
@@ -408,11 +410,10 @@ def _keys(data: Any, key: str, known: Sequence[str], required: Sequence[str], so
 
 
 def _number(value: Any, key: str, source: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ConfigError(f"{source}: {key}: must be finite, got {value}")
-    return float(value)
+    number = to_float(value, source, key)
+    if not math.isfinite(number):
+        raise ConfigError(f"{source}: {key}: must be finite, got {number}")
+    return number
 
 
 def _string(value: Any, key: str, source: str) -> str:

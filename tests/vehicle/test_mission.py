@@ -139,6 +139,10 @@ def _mutate(data: dict[str, Any], edit: str) -> str:
         text = text.replace('"name": "test"', '"name": "test", "name": "again"')
     elif edit == "malformed":
         text = text[:-5]
+    elif edit == "integer beyond any float":  # JSON integers have no bound
+        text = text.replace('"y": 2.0', '"y": 1' + "0" * 400)
+    elif edit == "integer beyond conversion":  # past Python's 4300-digit int parsing limit
+        text = text.replace('"y": 2.0', '"y": 1' + "0" * 5000)
     return text
 
 
@@ -159,6 +163,8 @@ BAD_INPUTS = [
     ("infinity", "waypoints[2].transform.y: must be finite"),
     ("duplicate key", "name: key given twice"),
     ("malformed", "malformed JSON"),
+    ("integer beyond any float", "waypoints[2].transform.y: a 1329-bit integer, beyond any float"),
+    ("integer beyond conversion", "malformed JSON: Exceeds the limit (4300 digits)"),
 ]
 
 
