@@ -29,6 +29,7 @@ A user's mistake (bad option, a port that cannot be bound) is one line and exit 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -126,10 +127,8 @@ def _run_live(args: argparse.Namespace) -> int:
             from testbed.report.run_plots import write_run_plots
 
             plots = write_run_plots
-        try:
-            write_run(result, out, plots=plots)
-        except KeyboardInterrupt:  # a second Ctrl-C while plotting: the data files first
-            write_run(result, out, plots=None)
+        with contextlib.suppress(KeyboardInterrupt):  # a second Ctrl-C while plotting
+            write_run(result, out, plots=plots)  # writes the data and metrics.json anyway
         reached = result.metrics["sim_s"]
         print(
             f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr

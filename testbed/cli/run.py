@@ -168,7 +168,13 @@ def finish_run(
         from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
 
         writer = write_run_plots
-    write_run(result, out, plots=writer)
+    try:
+        write_run(result, out, plots=writer)
+    except KeyboardInterrupt as interrupt:  # the run finished; its results are written
+        print(
+            f"testbed: interrupted while plotting; results without plots in {out}", file=sys.stderr
+        )
+        return exit_code_of(interrupt)
     if result.stopped is not None:
         reached = result.metrics["sim_s"]
         print(

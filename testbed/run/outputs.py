@@ -131,6 +131,10 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
 
     Returns:
         The files written, ``metrics.json`` last.
+
+    Raises:
+        KeyboardInterrupt: an interrupt while the plots were drawn, raised again once the data
+            files and ``metrics.json`` (listing the plots made before it) are written.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     previous = _previous_files(out_dir)
@@ -141,6 +145,7 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
         _replace_from(recorder.write_events_csv, out_dir / "events.csv"),
         _replace_from(recorder.write_series_csv, out_dir / "series.csv"),
     ]
+    interrupted: KeyboardInterrupt | None = None
     if plots is not None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
         try:
@@ -148,6 +153,8 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
                 target = out_dir / made.name
                 os.replace(made, target)
                 written.append(target)
+        except KeyboardInterrupt as interrupt:  # Ctrl-C while plotting: the results first
+            interrupted = interrupt
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     names = {path.name for path in written}
@@ -159,4 +166,6 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
     document["complete"] = result.stopped is None
     document["files"] = {path.name: path.stat().st_size for path in written}
     written.append(write_json_atomic(out_dir / METRICS_FILE, document))
+    if interrupted is not None:
+        raise interrupted
     return written

@@ -73,3 +73,22 @@ def test_a_run_interrupted_inside_a_kernels_callback_keeps_what_ran(
     metrics = check_set(tmp_path / "run")
     assert metrics["complete"] is False
     assert metrics["sim_s"] == pytest.approx(result.metrics["sim_s"])
+
+
+def test_an_interrupt_while_plotting_a_finished_run_keeps_its_results(tmp_path: Path) -> None:
+    """Ctrl-C lands while a finished run's plots are drawn: the data files and metrics.json are
+    written anyway (the run is complete; it lists the plots made before), then the interrupt
+    goes on up (``testbed run`` ends with one line and 130)."""
+    result = run_scenario(load_scenario("s100-teleop-v1", ["duration_s=12"]), seed=0)
+    assert result.stopped is None
+
+    def plots(_: object, staging: Path) -> list[Path]:  # interrupted after its first figure
+        (staging / "first.png").write_bytes(b"png")
+        raise KeyboardInterrupt
+
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        write_run(result, out, plots=plots)
+    metrics = check_set(out)  # exactly the files beside it: no half-drawn plot, no staging
+    assert metrics["complete"] is True
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}
