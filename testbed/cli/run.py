@@ -162,6 +162,7 @@ def finish_run(
         summary: formats the summary (default :func:`format_summary`).
     """
     from testbed.run.outputs import write_run
+    from testbed.run.trials import remove_trials
 
     writer = None
     if plots and result.stopped is None:
@@ -170,6 +171,7 @@ def finish_run(
         writer = write_run_plots
     try:
         write_run(result, out, plots=writer)
+        remove_trials(out)  # an earlier trials run's results (--force)
     except KeyboardInterrupt as interrupt:  # the run finished; its results are written
         print(
             f"testbed: interrupted while plotting; results without plots in {out}", file=sys.stderr

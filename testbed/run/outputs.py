@@ -8,7 +8,9 @@ false for one ended early by Ctrl-C or SIGTERM, whose ``sim_s`` says how far it 
 ``"files"``, the sibling files of this run with their sizes. A directory without
 ``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json`` names
 exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
-anything else is written, and the previous run's files that this run does not write again.
+anything else is written, and the previous run's files that this run does not write again
+(:mod:`testbed.run.trials` also removes earlier trials' results, and a single run's when trials
+replace it: :func:`remove_run_results`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ __all__ = [
     "claimed_out_dir",
     "json_ready",
     "prepare_out_dir",
+    "remove_run_results",
     "write_json_atomic",
     "write_run",
 ]
@@ -118,6 +121,18 @@ def _previous_files(out_dir: Path) -> list[str]:
     except (OSError, ValueError, AttributeError):
         return []
     return [name for name in files if isinstance(name, str) and "/" not in name]
+
+
+def remove_run_results(out_dir: Path) -> None:
+    """Remove a run's results from ``out_dir``: its ``metrics.json`` (first) and the files it
+    lists; nothing else there is touched. What ``--force`` replaces when the new results take
+    another shape (trials after a single run, or the other way round)."""
+    previous = _previous_files(out_dir)
+    with contextlib.suppress(FileNotFoundError):
+        (out_dir / METRICS_FILE).unlink()
+    for name in previous:
+        with contextlib.suppress(OSError):
+            (out_dir / name).unlink()
 
 
 def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = None) -> list[Path]:

@@ -16,6 +16,7 @@ not its recording. Nothing here parses arguments or prints: :mod:`testbed.cli.ru
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from testbed.run.interrupts import interrupt_of
-from testbed.run.outputs import PlotWriter, write_json_atomic, write_run
+from testbed.run.outputs import PlotWriter, remove_run_results, write_json_atomic, write_run
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import Scenario
 
@@ -36,12 +37,14 @@ __all__ = [
     "TrialTrack",
     "TrialsResult",
     "headline",
+    "remove_trials",
     "run_trials",
     "trial_dir",
     "trials_document",
 ]
 
 TRIALS_FILE = "trials.json"
+TRIALS_PLOT = "trials.png"
 
 HEADLINE: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("rtf", ("rtf",)),
@@ -237,7 +240,28 @@ def run_trials(
             on_trial(k, result)
     document = trials_document(scenario, first, finished, interrupted)
     files.append(write_json_atomic(out / TRIALS_FILE, document))
+    written = len(finished) if interrupted is None else interrupted
+    remove_trials(out, keep=written, keep_summary=True)  # an earlier run's, under --force
+    remove_run_results(out)
     if trials_plot is not None and stopped is None and tracks:
         title = f"{scenario.id}: {len(tracks)} trials, seeds {first}…{first + len(tracks) - 1}"
-        files.append(trials_plot(tracks, out / "trials.png", title))
+        files.append(trials_plot(tracks, out / TRIALS_PLOT, title))
+    else:
+        (out / TRIALS_PLOT).unlink(missing_ok=True)  # an earlier run's figure of other trials
     return TrialsResult(scenario, document, tracks, stopped, reached_s, files)
+
+
+def remove_trials(out: Path, *, keep: int = 0, keep_summary: bool = False) -> None:
+    """Remove earlier trials' results from ``out`` (``--force``): each ``trial-K`` directory
+    with ``K > keep`` loses its run's results (:func:`~testbed.run.outputs.remove_run_results`)
+    and goes if that leaves it empty; ``trials.json`` and ``trials.png`` go too unless
+    ``keep_summary``. Nothing that is not a run's result is touched."""
+    for path in out.glob("trial-*"):
+        number = path.name.removeprefix("trial-")
+        if path.is_dir() and number.isdigit() and int(number) > keep:
+            remove_run_results(path)
+            with contextlib.suppress(OSError):
+                path.rmdir()
+    if not keep_summary:
+        for name in (TRIALS_FILE, TRIALS_PLOT):
+            (out / name).unlink(missing_ok=True)

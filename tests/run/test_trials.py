@@ -197,3 +197,36 @@ def test_cli_trials_print_a_line_per_trial_and_the_mean(
     assert lines[2].startswith("2 trials (mean ± std over trials): position error mean ")
     assert (out / "trial-2" / "metrics.json").is_file() and (out / TRIALS_FILE).is_file()
     assert not (out / "trials.png").exists()
+
+
+def _results(out: Path) -> set[str]:
+    return {str(p.relative_to(out)) for p in out.rglob("*")}
+
+
+def test_force_replaces_the_earlier_results_whatever_their_shape(tmp_path: Path) -> None:
+    """--force into a directory that holds another run's results leaves only the new run's
+    (a mixed set would be read as one): three trials → one trial → a single run → two trials.
+    A file of the user's own in the directory is never touched."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine", encoding="utf-8")
+
+    def run(trials: int) -> set[str]:
+        scenario = str(write_scenario(tmp_path, trials))
+        code = main(["run", scenario, "--out", str(out), "--no-plots", "--force"])
+        assert code == 0
+        return _results(out)
+
+    single = {"notes.txt", "metrics.json", "events.csv", "series.csv"}
+    trial = {"metrics.json", "events.csv", "series.csv"}
+
+    def trials_set(n: int) -> set[str]:
+        dirs = {f"trial-{k}" for k in range(1, n + 1)}
+        inside = {f"trial-{k}/{name}" for k in range(1, n + 1) for name in trial}
+        return {"notes.txt", TRIALS_FILE} | dirs | inside
+
+    assert run(3) == trials_set(3)
+    assert run(2) == trials_set(2)
+    assert run(1) == single
+    assert run(2) == trials_set(2)
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
