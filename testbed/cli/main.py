@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import _thread
 import argparse
+import errno
 import signal
 import sys
 import threading
@@ -27,7 +28,14 @@ from testbed.cli.hil import add_hil_parser
 from testbed.cli.link import add_link_parser
 from testbed.cli.live import add_live_parser
 from testbed.cli.mavlink import add_mavlink_parser
-from testbed.cli.options import EXIT_OK, EXIT_USAGE, Parser, Terminated, exit_code_of
+from testbed.cli.options import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    Parser,
+    Terminated,
+    exit_code_of,
+)
 from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
 from testbed.cli.sweep import add_plot_parser, add_sweep_parser
 from testbed.config import ConfigError
@@ -103,8 +111,13 @@ def _signalled(signum: int, frame: FrameType | None) -> None:
     raise _interrupt_for(signum)
 
 
+_STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
+"""What a disk says when results cannot be written: one line, not a traceback."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI. Returns the process exit code: 0 ok, 2 bad input, 130 Ctrl-C, 143 SIGTERM.
+    """Run the CLI. Returns the process exit code: 0 ok, 1 the storage failed (a full disk:
+    one line naming the file), 2 bad input, 130 Ctrl-C, 143 SIGTERM.
 
     SIGTERM is raised as :class:`~testbed.cli.options.Terminated` (a ``KeyboardInterrupt``), so
     a command keeps what it finished the same way for both. A command that has something to
@@ -127,6 +140,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. `testbed run | head`: the reader left, nothing to report
         sys.stderr.close()
         return EXIT_OK
+    except OSError as err:
+        if err.errno not in _STORAGE_ERRORS:
+            raise
+        where = f" {err.filename}" if err.filename else ""
+        print(f"testbed: cannot write{where}: {err.strerror}", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt as interrupt:
         print("testbed: interrupted", file=sys.stderr)
         return exit_code_of(interrupt)

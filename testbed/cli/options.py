@@ -14,6 +14,7 @@ if TYPE_CHECKING:
     from testbed.hil import LinkEndpoint, PortSettings
 
 __all__ = [
+    "EXIT_FAILED",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
     "EXIT_TERMINATED",
@@ -30,6 +31,8 @@ __all__ = [
 ]
 
 EXIT_OK = 0
+EXIT_FAILED = 1
+"""The system refused what a command had to do (a full or failing disk)."""
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 """Ended by SIGINT (Ctrl-C): 128 + 2, as shells report it."""

@@ -97,11 +97,17 @@ def json_ready(value: Any) -> Any:
 
 
 def _replace_from(write: Callable[[Path], object], path: Path) -> Path:
-    """Write through ``write(tmp)`` to a temporary name beside ``path``, then rename."""
+    """Write through ``write(tmp)`` to a temporary name beside ``path``, then rename.
+
+    Raises:
+        OSError: the write failed (a full disk): its ``filename`` is ``path``.
+    """
     tmp = path.with_name(f"{_TMP_PREFIX}{path.name}")
     try:
         write(tmp)
         os.replace(tmp, path)
+    except OSError as err:  # name the file the user knows, not the temporary one
+        raise OSError(err.errno, err.strerror, str(path)) from err
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

@@ -97,3 +97,25 @@ def test_an_interrupt_before_anything_is_written_leaves_no_directory(
     given.mkdir()
     assert main(["run", "--out", str(given), "--no-plots"]) == 130
     assert given.is_dir() and not any(given.iterdir())
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The disk fills while the results are written (ENOSPC from the series writer, as a full
+    filesystem gives it): one line naming the file, exit 1, no traceback."""
+    import errno
+
+    from testbed.run.recorder import Recorder
+
+    def full(self: Recorder, path: Path) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(Recorder, "write_series_csv", full)
+    out = tmp_path / "run"
+    code = main(["run", "--set", "duration_s=12", "--out", str(out), "--no-plots"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert len(err) == 1 and err[0].startswith("testbed: cannot write "), err
+    assert err[0].endswith(f"{out / 'series.csv'}: No space left on device"), err
+    assert not (out / "metrics.json").exists()  # no finished result claimed
