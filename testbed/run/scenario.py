@@ -66,6 +66,7 @@ from testbed.vehicle.thruster_config import known_thruster_configs, load_thruste
 from testbed.vehicle.vehicle import VehicleConfig
 
 __all__ = [
+    "ID_PATTERN",
     "MAX_DURATION_S",
     "MAX_PHYSICS_STEPS",
     "MAX_SERIES_ROWS",
@@ -97,7 +98,9 @@ vehicle.control_rate_hz)``, a row at most once a frame): ≈ 3.1 GB at 39 column
 MAX_TRIALS = 100
 """Most trials (runs with consecutive seeds) one scenario may ask for."""
 
-_ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
+ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
+"""A versioned id (``s100-teleop-v1``): scenarios' and sweeps' (a sweep's names its default
+results folder, so it can hold no path separator or ``..``)."""
 _PACKAGE = "testbed"
 _SCENARIO_DIR = "scenarios"
 
@@ -138,9 +141,9 @@ class Scenario:
 
     def __post_init__(self) -> None:
         check(
-            _ID_PATTERN.match(self.id) is not None,
+            ID_PATTERN.match(self.id) is not None,
             "id",
-            f"must match {_ID_PATTERN.pattern} (e.g. 's100-teleop-v1'), got {self.id!r}",
+            f"must match {ID_PATTERN.pattern} (e.g. 's100-teleop-v1'), got {self.id!r}",
         )
         check(
             self.schema == SCHEMA_VERSION,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -20,10 +20,13 @@ from typing import Any, Literal, TextIO
 
 import numpy as np
 
-from testbed.config import ConfigError, build, check, load_toml
+from testbed.config import ConfigError, build, check, load_toml, parse_override
 
 __all__ = [
     "DEFAULT_METRICS",
+    "MAX_RANGE_NUM",
+    "MAX_RUNS",
+    "MAX_SEEDS",
     "RESERVED_COLUMNS",
     "SCHEMA_VERSION",
     "RangeSpec",
@@ -48,6 +51,16 @@ DEFAULT_METRICS = (
     "odometry_age_s.mean",
     "energy_wh",
 )
+MAX_RUNS = 100_000
+"""Most runs (grid points × seeds) one sweep may hold. Every grid point is loaded once before
+the first run (≈ 5–9 ms each: up to ≈ 15 min here), every run's row stays in memory while the
+sweep runs (a few kB each: ≈ 0.5 GB here), and 100,000 runs of 60 s take ≈ 14 h on two cores;
+a larger study is several sweeps."""
+MAX_SEEDS = 10_000
+"""Most seeds per grid point (the count, or the list's length): far more than a confidence
+interval needs; checked before the seed list is built."""
+MAX_RANGE_NUM = 10_000
+"""Most values of one range axis (``num``): checked before numpy allocates them."""
 _SIGNIFICANT_DIGITS = 12
 _SWEEP_DIR = "scenarios/sweeps"
 
@@ -59,7 +72,7 @@ class RangeSpec:
     Attributes:
         scale: ``"linear"`` (evenly spaced) or ``"log"`` (evenly spaced exponents).
         start, stop: the end values, both included; > 0 for ``"log"``.
-        num: number of values, ≥ 1 (1 gives ``start``).
+        num: number of values, in [1, :data:`MAX_RANGE_NUM`] (1 gives ``start``).
         include: extra values merged in (e.g. ``[0.0]`` in front of a log range of BER).
     """
 
@@ -73,6 +86,7 @@ class RangeSpec:
         check(math.isfinite(self.start), "start", f"must be finite, got {self.start}")
         check(math.isfinite(self.stop), "stop", f"must be finite, got {self.stop}")
         check(self.num >= 1, "num", f"must be ≥ 1, got {self.num}")
+        check(self.num <= MAX_RANGE_NUM, "num", f"must be ≤ {MAX_RANGE_NUM}, got {self.num}")
         if self.scale == "log":
             check(self.start > 0.0, "start", f"must be > 0 on a log scale, got {self.start}")
             check(self.stop > 0.0, "stop", f"must be > 0 on a log scale, got {self.stop}")
@@ -100,11 +114,21 @@ class _SweepFile:
     metrics: tuple[str, ...] = DEFAULT_METRICS
 
     def __post_init__(self) -> None:
+        from testbed.run.scenario import ID_PATTERN  # slow to import: loaded with the scenarios
+
         check(self.schema == SCHEMA_VERSION, "schema", f"unsupported version {self.schema}")
+        check(  # it names the default results folder, sweeps/<id>/
+            ID_PATTERN.match(self.id) is not None,
+            "id",
+            f"must match {ID_PATTERN.pattern} (e.g. 'ber-vs-lag-v1'), got {self.id!r}",
+        )
         if isinstance(self.seeds, int):
             check(self.seeds >= 1, "seeds", f"must be ≥ 1 (a count) or a list, got {self.seeds}")
+            check(self.seeds <= MAX_SEEDS, "seeds", f"must be ≤ {MAX_SEEDS}, got {self.seeds}")
         else:
             check(len(self.seeds) > 0, "seeds", "must not be empty")
+            count = len(self.seeds)
+            check(count <= MAX_SEEDS, "seeds", f"must hold ≤ {MAX_SEEDS} seeds, got {count}")
             check(all(s >= 0 for s in self.seeds), "seeds", "must be ≥ 0")
             check(len(set(self.seeds)) == len(self.seeds), "seeds", "must not repeat")
         check(bool(self.grid), "grid", "must have at least one axis")
@@ -190,16 +214,52 @@ def toml_literal(value: Any) -> str:
     raise TypeError(f"cannot write {value!r} as TOML")  # TOML data holds no other types
 
 
-def _flatten_table(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level."""
+def _flatten_table(
+    table: Mapping[str, Any], prefix: str = "", *, keep_empty: bool = False
+) -> dict[str, Any]:
+    """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level. An
+    empty table is dropped, or with ``keep_empty`` kept as a value (the grid refuses it)."""
     flat: dict[str, Any] = {}
     for key, value in table.items():
         dotted = f"{prefix}{key}"
-        if isinstance(value, Mapping) and "scale" not in value:
-            flat.update(_flatten_table(value, f"{dotted}."))
+        if isinstance(value, Mapping) and "scale" not in value and (value or not keep_empty):
+            flat.update(_flatten_table(value, f"{dotted}.", keep_empty=keep_empty))
         else:
             flat[dotted] = value
     return flat
+
+
+def _fixed_and_swept(fixed: Iterable[str], swept: Sequence[str]) -> tuple[str, str] | None:
+    """The first ``(fixed key, swept key)`` pair that sets the same scenario value (the same
+    key, or one inside the other: ``link`` and ``link.ber``), or None. The grid point's
+    override comes last, so a fixed value there would be silently lost."""
+    for key in fixed:
+        for axis in swept:
+            if key == axis or key.startswith(f"{axis}.") or axis.startswith(f"{key}."):
+                return key, axis
+    return None
+
+
+def _override_keys(overrides: Sequence[str]) -> list[str]:
+    """The dotted scenario keys that ``KEY=VALUE`` overrides set (an inline table's leaves)."""
+    keys: list[str] = []
+    for text in overrides:
+        path, value = parse_override(text)
+        keys.extend(_flatten_table({".".join(path): value}))
+    return keys
+
+
+def _repeated_value(values: Sequence[Any]) -> Any | None:
+    """The first value of a grid list equal to an earlier one (numbers by value: ``0`` and
+    ``0.0`` are one point), or None."""
+    seen: set[Any] = set()
+    for value in values:
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        key = ("number", float(value)) if number else ("value", toml_literal(value))
+        if key in seen:
+            return value
+        seen.add(key)
+    return None
 
 
 def load_sweep(
@@ -216,8 +276,9 @@ def load_sweep(
 
     Raises:
         ConfigError: one line naming the file and key: missing file, malformed TOML, unknown or
-            missing key, bad value, a key both fixed and swept, or a grid point whose scenario
-            does not load (named by its values).
+            missing key, bad value, a key both fixed (``[set]`` or ``--set``) and swept, a
+            repeated grid value, more than :data:`MAX_RUNS` runs, or a grid point whose
+            scenario does not load (named by its values).
     """
     from testbed.run.scenario import load_scenario
 
@@ -240,22 +301,39 @@ def load_sweep(
     scenario = top.scenario
     if base_dir is not None and (scenario.endswith(".toml") or "/" in scenario):
         scenario = str((base_dir / scenario).resolve())
-    fixed = [f"{k}={toml_literal(v)}" for k, v in _flatten_table(top.set).items()]
+    fixed_values = _flatten_table(top.set)
+    fixed = [f"{k}={toml_literal(v)}" for k, v in fixed_values.items()]
     axes = []
-    for key, spec in _flatten_table(top.grid).items():
+    for key, spec in _flatten_table(top.grid, keep_empty=True).items():
         where = f"grid.{key}"
         if key in RESERVED_COLUMNS:
             raise ConfigError(f"{source}: {where}: {key!r} cannot be swept (use seeds)")
-        if key in _flatten_table(top.set):
+        if _fixed_and_swept(fixed_values, [key]) is not None:
             raise ConfigError(f"{source}: {where}: also fixed in [set]")
         values: tuple[Any, ...]
-        if isinstance(spec, Mapping):
+        if isinstance(spec, Mapping) and spec:
             values = build(RangeSpec, spec, source=source, prefix=f"{where}.").values()
         elif isinstance(spec, list) and spec:
             values = tuple(spec)
+            if (twice := _repeated_value(values)) is not None:
+                raise ConfigError(
+                    f"{source}: {where}: must not repeat a value, got {toml_literal(twice)} twice"
+                )
         else:
             raise ConfigError(f"{source}: {where}: expected a non-empty array or a range table")
         axes.append((key, values))
+    if not axes:
+        raise ConfigError(f"{source}: grid: must have at least one axis")
+    clash = _fixed_and_swept(_override_keys(overrides), [key for key, _ in axes])
+    if clash is not None:
+        raise ConfigError(f"--set: {clash[0]}: also swept in [grid]")
+    seed_count = top.seeds if isinstance(top.seeds, int) else len(top.seeds)
+    points = math.prod(len(values) for _, values in axes)
+    if points * seed_count > MAX_RUNS:
+        raise ConfigError(
+            f"{source}: grid, seeds: {points} points × {seed_count} seeds = "
+            f"{points * seed_count} runs, more than the {MAX_RUNS} a sweep may hold"
+        )
     seeds = tuple(range(top.seeds)) if isinstance(top.seeds, int) else top.seeds
     sweep = Sweep(
         id=top.id,

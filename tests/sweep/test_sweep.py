@@ -127,6 +127,19 @@ def test_toml_literal_round_trips_through_set_parsing(value: object) -> None:
         ('"link.wobble" = [1]', "link.wobble: unknown key"),
         ('"seed" = [1, 2]', "grid.seed: 'seed' cannot be swept"),
         ('"duration_s" = [5.0]', "grid.duration_s: also fixed in [set]"),
+        ('"link.ber" = [0.0, 1e-3, 0.0]', "grid.link.ber: must not repeat a value, got 0.0 twice"),
+        ('"link.ber" = [0, 0.0]', "grid.link.ber: must not repeat a value, got 0.0 twice"),
+        ('"link" = {}', "grid.link: expected a non-empty array or a range table"),
+        ("[grid.link]", "grid.link: expected a non-empty array or a range table"),
+        (
+            '"link.ber" = { scale = "linear", start = 0.0, stop = 1e-3, num = 100000000000 }',
+            "grid.link.ber.num: must be ≤ 10000, got 100000000000",
+        ),
+        (
+            '"link.ber" = { scale = "linear", start = 0.0, stop = 1e-3, num = 10000 }\n'
+            '"link.ipg_s" = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5]',
+            "grid, seeds: 110000 points × 1 seeds = 110000 runs, more than the 100000",
+        ),
     ],
 )
 def test_bad_sweep_files_exit_2_with_one_line(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -9,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from testbed.cli.main import main
-from testbed.sweep import load_sweep
+from testbed.sweep import expand, load_sweep
 from testbed.sweep.spec import check_points
 
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
@@ -58,6 +59,73 @@ def test_an_unreachable_scheduler_is_one_line(
     argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--dask", "tcp://127.0.0.1:9"]
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2
     _one_line(capsys, "--dask: cannot reach tcp://127.0.0.1:9")
+
+
+@pytest.mark.parametrize("sweep_id", ["../../escaped-v1", "/tmp/abs-v1", "a/b-v1", "Big-v1", "x"])
+def test_a_sweep_id_must_be_a_versioned_id(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    sweep_id: str,
+) -> None:
+    """The id names the default results folder, sweeps/<id>/: it may not leave it."""
+    path = tmp_path / "s.toml"
+    path.write_text(_sweep(tmp_path).read_text().replace('"checks-v1"', json.dumps(sweep_id)))
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", str(path), *SHORT]) == 2
+    err = capsys.readouterr().err
+    expected = f"{path}: id: must match ^[a-z0-9-]+-v[0-9]+$ (e.g. 'ber-vs-lag-v1'), got "
+    assert err == f"testbed: error: {expected}{sweep_id!r}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["checks.toml", "s.toml"]
+
+
+TEN_BER = "0.0, 1e-6, 1e-5, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2"
+
+
+@pytest.mark.parametrize(
+    ("seeds", "grid", "fragment"),
+    [
+        ("10000000000", "[0.0, 1e-3]", "seeds: must be ≤ 10000, got 10000000000"),
+        (repr(list(range(10001))), "[0.0, 1e-3]", "seeds: must hold ≤ 10000 seeds, got 10001"),
+        (
+            "10000",
+            f"[{TEN_BER}, 2e-2]",
+            "grid, seeds: 11 points × 10000 seeds = 110000 runs, more than the 100000 a sweep "
+            "may hold",
+        ),
+    ],
+)
+def test_sizes_over_the_limits_exit_2_before_anything_is_built(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    seeds: str,
+    grid: str,
+    fragment: str,
+) -> None:
+    """Refused before the seed list is built (10^10 seeds: a MemoryError) and before the
+    points are checked (110,000 points: ≈ 15 min)."""
+    monkeypatch.setattr("testbed.sweep.spec.check_points", lambda *a: pytest.fail("checked"))
+    path = _sweep(tmp_path, f'"link.ber" = {grid}', metrics=f"[]\nseeds = {seeds}")
+    assert main(["sweep", str(path), *SHORT, "--out", str(tmp_path / "out")]) == 2
+    _one_line(capsys, f"{path}: {fragment}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_run_limit_is_inclusive(tmp_path: Path) -> None:
+    path = _sweep(tmp_path, f'"link.ber" = [{TEN_BER}]', metrics="[]\nseeds = 10000")
+    assert len(expand(load_sweep(str(path), SHORT[1::2]))) == 100_000  # 10 points × 10,000
+
+
+@pytest.mark.parametrize("override", ["link.ber=0.5", "link={ber = 0.5}"])
+def test_set_of_a_swept_key_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], override: str
+) -> None:
+    """The grid point's value comes after --set: the --set would be silently lost."""
+    argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--set", override]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == "testbed: error: --set: link.ber: also swept in [grid]\n"
+    assert not (tmp_path / "out").exists()
 
 
 def test_resume_of_a_folder_without_a_sweep_exits_2(
@@ -110,15 +178,15 @@ def test_a_grid_point_bad_only_in_combination_fails_before_the_first_run(
 
 
 def test_a_bad_value_of_a_large_grid_is_named_at_once(tmp_path: Path) -> None:
-    """A 200,000-point grid whose last value of the first axis is bad: found by the one-value
-    pass (≈ 600 loads), not after the whole product."""
+    """A 100,000-point grid (the most a sweep may hold) whose last value of the first axis is
+    bad: found by the one-value pass (≈ 700 loads), not after the whole product."""
     ber = ", ".join(repr(i * 1e-6) for i in range(199)) + ", 2.0"
-    gaps = ", ".join(repr(0.5 + i * 0.001) for i in range(1000))
+    gaps = ", ".join(repr(0.5 + i * 0.001) for i in range(500))
     path = _sweep(tmp_path, f'"link.ber" = [{ber}]\n"link.ipg_s" = [{gaps}]')
     start = time.process_time()
     with pytest.raises(Exception, match=r"grid point link.ber=2.0, link.ipg_s=0.5: --set"):
         load_sweep(str(path), ['link.ipg="fixed"'])
-    per_load = (time.process_time() - start) / 1200
+    per_load = (time.process_time() - start) / 700
     assert per_load > 0.0
 
 
