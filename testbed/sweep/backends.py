@@ -46,6 +46,7 @@ __all__ = [
     "die_with_parent",
     "execute_run",
     "outcomes",
+    "scheduler_client",
     "sigint_blocked",
 ]
 
@@ -78,12 +79,19 @@ def _scenario_values(scenario: Scenario) -> dict[str, Any]:
 
 
 def execute_run(spec: RunSpec) -> RunOutcome:
-    """Load and run one (point, seed); any exception becomes a failed outcome, never a raise."""
+    """Load and run one (point, seed); any exception becomes a failed outcome, never a raise.
+
+    An interrupt is not a failure of the run: a run that Ctrl-C (or the CLI's SIGTERM) stopped
+    part way (:attr:`~testbed.run.runner.RunResult.stopped`) raises that interrupt, so the
+    caller stops too instead of taking its partial metrics for a run's.
+    """
     try:
         from testbed.run.runner import run_scenario
         from testbed.run.scenario import load_scenario
 
         result = run_scenario(load_scenario(spec.scenario, spec.overrides), seed=spec.seed)
+        if result.stopped is not None:
+            raise result.stopped
         flat = flatten_metrics(result.metrics)
         for key in EXCLUDED_METRICS:
             flat.pop(key, None)
@@ -176,31 +184,86 @@ def _pool_outcomes(specs: Sequence[RunSpec], workers: int) -> Iterator[RunOutcom
 
 
 _DASK_ADDRESS = re.compile(
-    r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[\w.-]+):\d{1,5}$"
+    r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[\w.-]+):(?P<port>\d{1,5})$"
 )
+_MAX_PORT = 65535
 
 
 def check_dask_address(address: str) -> None:
-    """``--dask``: ``local`` or ``[scheme://]host:port``; else :class:`ConfigError`."""
-    if address != "local" and _DASK_ADDRESS.match(address) is None:
+    """``--dask``: ``local`` or ``[scheme://]host:port`` with a port in [1, 65535]; else
+    :class:`ConfigError`."""
+    if address == "local":
+        return
+    match = _DASK_ADDRESS.match(address)
+    if match is None:
         raise ConfigError(
             f"--dask: expected 'local' or a scheduler address like tcp://host:8786, got {address!r}"
         )
+    port = int(match["port"])
+    if not 1 <= port <= _MAX_PORT:
+        raise ConfigError(f"--dask: port must be in [1, {_MAX_PORT}], got {port} in {address!r}")
 
 
-def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iterator[RunOutcome]:
-    """Run on a dask.distributed cluster (``"local"`` starts a LocalCluster of ``workers``)."""
+def _distributed() -> Any:
+    """The ``distributed`` module (untyped for mypy; used through Any), imported when asked."""
     import importlib
+
+    return importlib.import_module("distributed")
+
+
+def _connect(address: str) -> Any:
+    """A client of the scheduler at ``address``, connected (within 10 s).
+
+    Raises:
+        ConfigError: a bad address, or a scheduler that cannot be reached (one line).
+    """
+    check_dask_address(address)
+    try:
+        return _distributed().Client(address, timeout=10)
+    except Exception as err:  # OSError, TimeoutError, ValueError: one line, not a trace
+        message = " ".join(str(err).split()) or type(err).__name__
+        raise ConfigError(f"--dask: cannot reach {address}: {message}") from None
+
+
+@contextlib.contextmanager
+def scheduler_client(dask: str | None) -> Iterator[Any]:
+    """The client of a remote scheduler (``--dask ADDRESS``), connected on entering and closed
+    on leaving; None for the process pool and ``"local"`` (their workers start with the runs).
+
+    A sweep enters it before it writes anything, so an unreachable scheduler leaves the
+    results directory as it was.
+
+    Raises:
+        ConfigError: the scheduler cannot be reached (on entering).
+    """
+    if dask is None or dask == "local":
+        yield None
+        return
+    client = _connect(dask)
+    try:
+        yield client
+    finally:
+        with contextlib.suppress(Exception):
+            client.close(timeout=10)
+
+
+def _dask_outcomes(
+    specs: Sequence[RunSpec], address: str, workers: int, client: Any = None
+) -> Iterator[RunOutcome]:
+    """Run on a dask.distributed cluster (``"local"`` starts a LocalCluster of ``workers``).
+
+    A remote scheduler's ``client`` (:func:`scheduler_client`) stays its caller's to close;
+    without one it is connected here and closed at the end."""
     import logging
 
-    # distributed is untyped for mypy; used through Any
-    distributed: Any = importlib.import_module("distributed")
+    distributed = _distributed()
     Client, LocalCluster = distributed.Client, distributed.LocalCluster  # noqa: N806  # classes
     as_completed = distributed.as_completed
 
     check_dask_address(address)
     cluster = None
     finished = False
+    own_client = client is None
     if address == "local":
         os.environ[PARENT_PID_ENV] = str(os.getpid())  # read by the preload in each worker
         # the event-loop thread that starts the worker processes inherits the blocked SIGINT,
@@ -215,12 +278,8 @@ def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iter
                 preload=["testbed.sweep.worker_setup"],
             )
             client = Client(cluster)
-    else:
-        try:
-            client = Client(address, timeout=10)
-        except Exception as err:  # OSError, TimeoutError, ValueError: one line, not a trace
-            message = " ".join(str(err).split()) or type(err).__name__
-            raise ConfigError(f"--dask: cannot reach {address}: {message}") from None
+    elif own_client:
+        client = _connect(address)
     try:
         futures = [client.submit(execute_run, spec, pure=False) for spec in specs]
         for future in as_completed(futures):
@@ -231,8 +290,9 @@ def _dask_outcomes(specs: Sequence[RunSpec], address: str, workers: int) -> Iter
             logging.getLogger("distributed").setLevel(logging.CRITICAL + 1)
         if cluster is not None and not finished:
             _kill_local_workers(cluster)
-        with contextlib.suppress(Exception):
-            client.close(timeout=10)
+        if own_client:
+            with contextlib.suppress(Exception):
+                client.close(timeout=10)
         if cluster is not None:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=10)
@@ -248,7 +308,9 @@ def _kill_local_workers(cluster: Any) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
-def outcomes(specs: Sequence[RunSpec], workers: int, dask: str | None) -> Iterator[RunOutcome]:
+def outcomes(
+    specs: Sequence[RunSpec], workers: int, dask: str | None, client: Any = None
+) -> Iterator[RunOutcome]:
     """Run ``specs`` and yield their outcomes as they finish.
 
     A generator: the pool or cluster starts only when it is iterated, i.e. when there is work.
@@ -257,10 +319,13 @@ def outcomes(specs: Sequence[RunSpec], workers: int, dask: str | None) -> Iterat
         specs: the runs.
         workers: local processes, or LocalCluster workers.
         dask: None for the process pool; a scheduler address; or ``"local"``.
+        client: the remote scheduler's client, already connected (:func:`scheduler_client`);
+            None: connected when iterated.
 
     Raises:
-        ConfigError: a scheduler address that cannot be reached (when iterated).
+        ConfigError: a scheduler address that cannot be reached (when iterated, without
+            ``client``).
     """
     if dask is None:
         return _pool_outcomes(specs, workers)
-    return _dask_outcomes(specs, dask, workers)
+    return _dask_outcomes(specs, dask, workers, client)

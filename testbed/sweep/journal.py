@@ -2,9 +2,10 @@
 
 The journal holds one JSON line per finished run, appended in batches with one ``write`` and an
 ``fsync`` (:func:`append_rows`); a torn last line (a kill in the middle of a write) is cut off
-by :func:`read_journal` with ``repair``. Tables are written whole by write-and-rename
-(:func:`write_atomic`), so a reader never sees a partial row. :func:`results_csv` is the
-``results.csv`` text: one row per (point, seed), sorted.
+by :func:`read_journal` with ``repair``; any other line that is not a record the sweep wrote
+(the file was edited or damaged) is refused, named by its line number. Tables are written whole
+by write-and-rename (:func:`write_atomic`), so a reader never sees a partial row.
+:func:`results_csv` is the ``results.csv`` text: one row per (point, seed), sorted.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -30,23 +32,67 @@ __all__ = [
 ]
 
 
-def read_journal(path: Path, *, repair: bool = False) -> list[dict[str, Any]]:
-    """The rows in ``runs.jsonl``; with ``repair``, cut off a torn tail (no final newline).
+_STATUSES = ("ok", "failed")
+
+
+def read_journal(
+    path: Path, sweep: Sweep | None = None, *, repair: bool = False
+) -> list[dict[str, Any]]:
+    """The rows in ``runs.jsonl`` (none if it does not exist); with ``repair``, cut off a torn
+    tail (no final newline).
+
+    Every complete line must be a record as :mod:`testbed.sweep.runner` writes it: a JSON object
+    with an integer ``point`` and ``seed`` ≥ 0 (with ``sweep``: one of its points and seeds),
+    ``status`` ``"ok"`` or ``"failed"`` and a string ``error``.
 
     Raises:
-        ConfigError: a complete line that is not a JSON record (the file was edited).
+        ConfigError: the file cannot be read (a directory, no permission), or a complete line
+            is not such a record: ``<path>: line N: damaged record …`` (the file was edited).
     """
-    data = path.read_bytes() if path.exists() else b""
-    complete = data[: data.rfind(b"\n") + 1]
     try:
-        rows = [json.loads(line) for line in complete.splitlines()]
-    except ValueError:
-        raise ConfigError(f"{path}: damaged record (not written by testbed sweep)") from None
+        data = path.read_bytes() if path.exists() else b""
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read the journal: {err.strerror or err}") from None
+    complete = data[: data.rfind(b"\n") + 1]
+    points = None if sweep is None else math.prod(len(values) for _, values in sweep.axes)
+    seeds = None if sweep is None else set(sweep.seeds)
+    rows = []
+    for number, line in enumerate(complete.splitlines(), start=1):
+        row = _record(line, points, seeds)
+        if row is None:
+            raise ConfigError(
+                f"{path}: line {number}: damaged record (not written by testbed sweep)"
+            )
+        rows.append(row)
     if repair and len(complete) < len(data):
         with path.open("r+b") as handle:
             handle.truncate(len(complete))
             os.fsync(handle.fileno())
     return rows
+
+
+def _record(line: bytes, points: int | None, seeds: set[int] | None) -> dict[str, Any] | None:
+    """The journal record on ``line``, or None if it is not one (of ``points`` points and
+    these ``seeds``, when given)."""
+    try:
+        row = json.loads(line)
+    except ValueError:  # not JSON, or not UTF-8
+        return None
+    if not isinstance(row, dict):
+        return None
+    point, seed = row.get("point"), row.get("seed")
+    if not isinstance(point, int) or not _count(point) or not _count(seed):
+        return None
+    if row.get("status") not in _STATUSES or not isinstance(row.get("error"), str):
+        return None
+    if (points is not None and point >= points) or (seeds is not None and seed not in seeds):
+        return None
+    return row
+
+
+def _count(value: Any) -> bool:
+    """``value`` is an integer ≥ 0 (not a bool)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
 def append_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:

@@ -8,8 +8,9 @@ is the few lines a person reads afterwards.
 Interrupted (a KeyboardInterrupt: Ctrl-C, or SIGTERM through the CLI's handler) or broken, it stops
 the backend's workers, writes the runs that finished to the journal, regenerates both tables
 from the journal and re-raises: ``--resume`` then runs exactly the missing (point, seed)s.
-Before the first run it checks that every aggregated metric is one a run produces
-(:func:`check_metrics`).
+Before it writes anything it checks the directory and its journal, that every aggregated metric
+is one a run produces (:func:`check_metrics`) and that a remote scheduler answers: a mistake,
+an unreachable scheduler or an interrupt there leaves the directory as it was.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing import Any, TextIO
 
 from testbed.config import ConfigError
 from testbed.sweep.aggregate import aggregate_rows
-from testbed.sweep.backends import execute_run, outcomes
+from testbed.sweep.backends import RunOutcome, execute_run, outcomes, scheduler_client
 from testbed.sweep.journal import (
     append_rows,
     csv_text,
@@ -82,32 +83,67 @@ def run_sweep(
         stream: progress output (default: stderr).
 
     Raises:
-        ConfigError: ``out`` holds another sweep, or a sweep and no ``resume``; bad workers.
+        ConfigError: ``out`` holds another sweep, or a sweep and no ``resume``; a damaged
+            journal; bad workers; an unknown metric; an unreachable scheduler. Nothing is
+            written then.
+        KeyboardInterrupt: Ctrl-C or SIGTERM; before the runs start, nothing is written.
     """
     stream = sys.stderr if stream is None else stream
     workers = workers if workers is not None else (os.cpu_count() or 1)
     if workers < 1:
         raise ConfigError(f"--workers: must be ≥ 1, got {workers}")
-    manifest = out / "sweep.json"
-    journal = out / "runs.jsonl"
     identity = json.dumps(sweep.identity(), indent=1, sort_keys=True) + "\n"
+    _check_out(sweep, out, identity, resume)
+    journal = out / "runs.jsonl"
+    done = {(r["point"], r["seed"]) for r in read_journal(journal, sweep)}
+    specs = [s for s in expand(sweep) if (s.point, s.seed) not in done]
+    if specs:
+        check_metrics(sweep)
+    with scheduler_client(dask if specs else None) as client:
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomic(out / "sweep.json", identity)
+        rows = read_journal(journal, sweep, repair=True)  # the same rows, a torn tail cut
+        stream_of = outcomes(specs, workers, dask, client) if specs else iter(())
+        return _record(sweep, out, specs, rows, stream_of, flush_interval_s, stream)
+
+
+def _check_out(sweep: Sweep, out: Path, identity: str, resume: bool) -> None:
+    """``out`` may take this sweep: it holds none (without ``resume``), or this very one
+    (``identity``, with ``resume``). Reads only.
+
+    Raises:
+        ConfigError: otherwise, or ``sweep.json`` cannot be read.
+    """
+    manifest = out / "sweep.json"
     if manifest.exists():
         if not resume:
             raise ConfigError(f"--out: {out} already holds a sweep (add --resume to continue)")
-        if manifest.read_text(encoding="utf-8") != identity:
+        try:
+            held = manifest.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as err:
+            reason = getattr(err, "strerror", None) or "not UTF-8"
+            raise ConfigError(f"{manifest}: cannot read: {reason}") from None
+        if held != identity:
             raise ConfigError(f"--resume: {out} holds a different sweep than {sweep.source}")
     elif resume:
         what = "does not exist" if not out.exists() else "holds no sweep (no sweep.json)"
         raise ConfigError(f"--resume: {out} {what}; drop --resume to start the sweep there")
     elif out.exists() and not out.is_dir():
         raise ConfigError(f"--out: {out} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
-    write_atomic(manifest, identity)
-    rows = read_journal(journal, repair=True)
-    done = {(r["point"], r["seed"]) for r in rows}
-    specs = [s for s in expand(sweep) if (s.point, s.seed) not in done]
-    if specs:
-        check_metrics(sweep)
+
+
+def _record(
+    sweep: Sweep,
+    out: Path,
+    specs: list[RunSpec],
+    rows: list[dict[str, Any]],
+    stream_of: Iterator[RunOutcome],
+    flush_interval_s: float,
+    stream: TextIO,
+) -> SweepSummary:
+    """Take the outcomes of ``specs`` as they come, append them to the journal (after ``rows``,
+    those it holds) in batches, rewrite the tables; on an interrupt keep what finished."""
+    journal = out / "runs.jsonl"
     points = sweep.points
     total = len(points) * len(sweep.seeds)
     progress = Progress(total, total - len(specs), stream, sweep.id)
@@ -132,7 +168,6 @@ def run_sweep(
             columns.update(dict.fromkeys(entry))
         write_atomic(out / "aggregate.csv", csv_text(list(columns), table))
 
-    stream_of = outcomes(specs, workers, dask) if specs else iter(())
     try:
         for outcome in stream_of:
             status = "ok" if outcome.metrics is not None else "failed"
@@ -220,6 +255,7 @@ def check_metrics(sweep: Sweep) -> None:
 
     Raises:
         ConfigError: a metric no probed run produces, listing the known ones.
+        KeyboardInterrupt: Ctrl-C or SIGTERM during a dry run (which stops it part way).
     """
     first = expand(dataclasses.replace(sweep, seeds=sweep.seeds[:1]))[0]
     short = (f"duration_s={DRY_RUN_S!r}", "metrics.settle_s=0.0")

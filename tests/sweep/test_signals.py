@@ -1,5 +1,6 @@
 """Real signals to a real ``testbed sweep`` (pool and ``--dask local``): exit codes, the one line,
-a journal of complete rows that ``--resume`` completes exactly, and no process left behind.
+a journal of complete rows that ``--resume`` completes exactly, and no process left behind. Last,
+a Ctrl-C landing, deterministically, in the dry run made before the first run.
 
 Every sweep runs ``s100-teleop-v1`` for 8 simulated seconds, 3 BER values × 8 seeds (24 runs):
 still running when the first journal line appears. Waits are bounded by multiples of the time
@@ -17,10 +18,12 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from testbed.sweep import read_journal
+from testbed.cli.main import main
+from testbed.sweep import execute_run, read_journal
 from tests.processes import default_sigint
 
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
@@ -234,3 +237,69 @@ def test_dask_local_sigterm_exits_143_with_one_line_and_no_orphan(tmp_path: Path
         _check_interrupted(sweep, code, 128 + signal.SIGTERM, err)
     finally:
         sweep.kill_leftovers()
+
+
+# --- Ctrl-C before the first run ----------------------------------------------------------------
+
+
+def _ctrl_c_in_the_first_simulation(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Raise a KeyboardInterrupt (what the CLI's SIGINT handler raises) inside the next
+    simulation run in this process, once; make a run list that starts afterwards fail the test.
+    Returns the count of simulations entered (one element each)."""
+    import simpy
+
+    real_run = simpy.Environment.run
+    entered: list[int] = []
+
+    def ctrl_c_once(self: simpy.Environment, until: Any = None) -> Any:
+        entered.append(1)
+        if len(entered) == 1:
+            raise KeyboardInterrupt
+        return real_run(self, until)
+
+    monkeypatch.setattr(simpy.Environment, "run", ctrl_c_once)
+    monkeypatch.setattr("testbed.sweep.runner.outcomes", lambda *args: pytest.fail("runs began"))
+    return entered
+
+
+def test_ctrl_c_during_the_metric_check_exits_130_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The dry run that lists the metrics (check_metrics) runs in the sweep's own process:
+    interrupted, it stops early and returns what it ran, as every run does; the sweep must
+    stop there too, not take it for a finished run and go on with the runs."""
+    path = tmp_path / "signals.toml"
+    path.write_text(SWEEP, encoding="utf-8")
+    out = tmp_path / "out"
+    entered = _ctrl_c_in_the_first_simulation(monkeypatch)
+    assert main(["sweep", str(path), *SHORT, "--workers", "2", "--out", str(out)]) == 130
+    assert entered == [1]  # the dry run, and nothing after it
+    err = capsys.readouterr().err
+    assert err == "testbed: interrupted before the first run; nothing written\n"
+    assert not out.exists()  # a rerun is not refused as "already holds a sweep"
+
+
+def test_ctrl_c_during_the_metric_check_of_a_resume_keeps_the_journal(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "signals.toml"
+    path.write_text(SWEEP.replace("seeds = 8", "seeds = 1"), encoding="utf-8")
+    out = tmp_path / "out"
+    with monkeypatch.context() as inline:  # the 3 runs in this process
+        inline.setattr(
+            "testbed.sweep.runner.outcomes",
+            lambda specs, *_: (execute_run(spec) for spec in specs),
+        )
+        assert main(["sweep", str(path), *SHORT, "--out", str(out)]) == 0
+    journal = out / "runs.jsonl"
+    journal.write_bytes(b"".join(journal.read_bytes().splitlines(keepends=True)[:2]))
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    entered = _ctrl_c_in_the_first_simulation(monkeypatch)
+    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 130
+    assert entered == [1]
+    resume = f"testbed sweep {path} {' '.join(SHORT)} --out {out} --resume"
+    assert capsys.readouterr().err == (
+        f"testbed: interrupted after 2 of 3 runs; journal kept in {out}; resume with: {resume}\n"
+    )
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before

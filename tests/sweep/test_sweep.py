@@ -295,6 +295,57 @@ def test_a_torn_last_journal_line_is_cut_and_the_run_redone(
     assert (out / "results.csv").read_bytes() == (pool_out / "results.csv").read_bytes()
 
 
+_RECORD = {"point": 0, "seed": 0, "link.ber": 0.0, "status": "ok", "error": ""}
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        b"[1, 2]",
+        b'"a string"',
+        b"{}",
+        json.dumps(_RECORD | {"point": 99}).encode(),  # no such point (3 points)
+        json.dumps(_RECORD | {"seed": 7}).encode(),  # no such seed (seeds 0 and 1)
+        json.dumps(_RECORD | {"point": -1}).encode(),
+        json.dumps(_RECORD | {"point": "0"}).encode(),
+        json.dumps(_RECORD | {"seed": True}).encode(),
+        json.dumps(_RECORD | {"status": "maybe"}).encode(),
+        json.dumps({k: v for k, v in _RECORD.items() if k != "error"}).encode(),
+        b"\xff\xfe not UTF-8",
+    ],
+)
+def test_a_damaged_journal_record_exits_2_naming_its_line(
+    pool_sweep: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    line: bytes,
+) -> None:
+    path, pool_out = pool_sweep
+    out = tmp_path / "damaged"
+    shutil.copytree(pool_out, out)
+    journal = out / "runs.jsonl"
+    data = journal.read_bytes()
+    journal.write_bytes(data + line + b"\n")  # line 7, after the 6 runs
+    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    damaged = "line 7: damaged record (not written by testbed sweep)"
+    assert err == f"testbed: error: {journal}: {damaged}\n"
+    assert journal.read_bytes() == data + line + b"\n"  # left as it was
+
+
+def test_a_journal_that_is_a_directory_exits_2_naming_it(
+    pool_sweep: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path, pool_out = pool_sweep
+    out = tmp_path / "dir"
+    shutil.copytree(pool_out, out)
+    (out / "runs.jsonl").unlink()
+    (out / "runs.jsonl").mkdir()
+    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"testbed: error: {out / 'runs.jsonl'}: cannot read the journal: Is a directory\n"
+
+
 def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(tmp_path: Path) -> None:
     path = _write_sweep(tmp_path, seeds=6)
     killed, fresh = tmp_path / "killed", tmp_path / "fresh"
@@ -349,7 +400,7 @@ def test_a_failing_point_is_recorded_and_the_sweep_completes(
     monkeypatch.setattr("testbed.run.runner.run_scenario", flaky)
     monkeypatch.setattr(
         "testbed.sweep.runner.outcomes",
-        lambda specs, workers, dask: (execute_run(spec) for spec in specs),
+        lambda specs, *_: (execute_run(spec) for spec in specs),
     )
     out = tmp_path / "out"
     assert main(["sweep", str(path), *SHORT, "--out", str(out)]) == 1

@@ -41,6 +41,8 @@ def _one_line(capsys: pytest.CaptureFixture[str], fragment: str) -> None:
     [
         (["--dask", "not-an-address"], "--dask: expected 'local' or a scheduler address"),
         (["--dask", "tcp://host"], "--dask: expected 'local'"),
+        (["--dask", "tcp://localhost:99999"], "--dask: port must be in [1, 65535], got 99999"),
+        (["--dask", "tcp://localhost:0"], "--dask: port must be in [1, 65535], got 0"),
         (["--resume"], "does not exist; drop --resume"),
     ],
 )
@@ -53,12 +55,16 @@ def test_bad_options_exit_2_before_any_work(
     assert not out.exists()
 
 
-def test_an_unreachable_scheduler_is_one_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def test_an_unreachable_scheduler_is_one_line_and_leaves_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """Refused before anything is written: a rerun without --dask is not "already holds a
+    sweep". No run may start either (the dry run of the metric check is made first)."""
+    monkeypatch.setattr("testbed.sweep.runner.outcomes", lambda *args: pytest.fail("runs started"))
     argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--dask", "tcp://127.0.0.1:9"]
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2
     _one_line(capsys, "--dask: cannot reach tcp://127.0.0.1:9")
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("sweep_id", ["../../escaped-v1", "/tmp/abs-v1", "a/b-v1", "Big-v1", "x"])
