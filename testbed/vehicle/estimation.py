@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -64,9 +64,20 @@ from testbed.common.geometry import (
     quat_rotate_inverse,
     rotation_matrix,
 )
-from testbed.common.jit import F64, TABLE, VECTOR
+from testbed.common.jit import BOOL, F64, I64, INTS, TABLE, VECTOR, floats
 from testbed.config import check_range
-from testbed.vehicle.filter_kernels import GATED, SINGULAR, gated_update, propagate
+from testbed.vehicle import filter_history as history
+from testbed.vehicle.filter_history import (
+    ACCEPTED,
+    APPLIED,
+    GATED,
+    INVALID,
+    NEEDS_RESET,
+    NEEDS_ROWS,
+    REACQUIRED,
+    REJECTED,
+    TIME_EPS_S,
+)
 from testbed.vehicle.nav_sensors import Measurement
 
 __all__ = [
@@ -77,20 +88,40 @@ __all__ = [
 ]
 
 LEVEL: Quaternion = (1.0, 0.0, 0.0, 0.0)
-_TIME_EPS_S = 1e-9
-_CACHED_STEPS = 16  # time steps whose F, G, Q are kept
 _H_POSITION = np.hstack([np.eye(3), np.zeros((3, 3))])
 _H_DEPTH = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
 _DIMS = {"position_ned": 3, "velocity_body": 3, "depth": 1}
+_KINDS = ("position_ned", "velocity_body", "depth")
+"""The measurement kinds by the code the stored updates keep."""
+_KIND_CODES = {kind: code for code, kind in enumerate(_KINDS)}
 _OBSERVED = {"position_ned": slice(0, 3), "velocity_body": slice(3, 6), "depth": slice(2, 3)}
-_COUNTERS = ("accepted", "rejected", "invalid", "stale", "rollbacks", "reacquired")
-_NO_INPUT = np.zeros(0)
-"""The prediction's input when there is none (constant velocity)."""
+_NO_INPUT = (0.0, 0.0, 0.0)
+"""What the prediction kernel is given for its input when there is none (it is not read)."""
+_FIRST_ROWS = 64
+"""Stored steps, and stored updates, the history starts with room for (doubled when full)."""
 
-# The filter's kernels, called without numba's dispatcher (testbed.common.jit.entry): x, P, the
-# model's matrices and a measurement's arrays are the filter's own contiguous float64 arrays.
-_PROPAGATE = jit.entry(propagate, VECTOR, TABLE, TABLE, TABLE, TABLE, VECTOR)
-_GATED_UPDATE = jit.entry(gated_update, VECTOR, TABLE, TABLE, VECTOR, VECTOR, F64)
+# The history's kernels, called without numba's dispatcher (testbed.common.jit.entry): the
+# arrays are the filter's own contiguous float64 (int64: the ledger) arrays, z and σ tuples of
+# three floats (a depth's padded), H the (dim, 6) arrays made here.
+_HISTORY = (TABLE, TABLE, TABLE, INTS)
+_PREDICT = jit.entry(history.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64)
+_APPLY = jit.entry(
+    history.apply_measurement, *_HISTORY, VECTOR, F64, I64, TABLE, floats(3), floats(3), F64, F64
+)
+_STAGE = jit.entry(history.stage_measurement, *_HISTORY, F64, VECTOR, F64)
+_COMMIT_RESET = jit.entry(
+    history.commit_reset,
+    *_HISTORY,
+    VECTOR,
+    VECTOR,
+    I64,
+    TABLE,
+    floats(3),
+    floats(3),
+    TABLE,
+    F64,
+)
+_RESUME = jit.entry(history.resume_replay, *_HISTORY, VECTOR, TABLE, F64)
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,33 +217,12 @@ class FilterCounters:
     reacquired: int = 0
 
 
-@dataclass(slots=True)
-class _Step:
-    """One stored filter instant: the input that reached it, its accepted updates, x, P."""
-
-    time_s: float
-    accel: np.ndarray | None
-    x: np.ndarray
-    p: np.ndarray
-    updates: list[tuple[Measurement, Quaternion, bool]] = field(default_factory=list)
-    """(measurement, attitude, whether it re-acquired) in the order they were applied."""
-
-
-def _transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """F (6, 6), G (6, 3) and Q (6, 6) of the constant-velocity model over ``dt`` [s]."""
-    eye = np.eye(3)
-    f = np.eye(6)
-    f[:3, 3:] = dt * eye
-    g = np.vstack([0.5 * dt * dt * eye, dt * eye])
-    qm = np.empty((6, 6))
-    qm[:3, :3] = (q * dt**3 / 3.0) * eye
-    qm[:3, 3:] = qm[3:, :3] = (q * dt * dt / 2.0) * eye
-    qm[3:, 3:] = (q * dt) * eye
-    return f, g, qm
-
-
 class KalmanNavigator:
     """The position/velocity Kalman filter of the module docstring.
+
+    The stored steps live in arrays this filter owns and compiled kernels work on
+    (:mod:`.filter_history`, which describes them); a prediction and a measurement's update,
+    roll-back and replay included, are one kernel call each.
 
     Args:
         config: noise figures.
@@ -223,13 +233,16 @@ class KalmanNavigator:
 
     __slots__ = (
         "_cache",
-        "_counts",
         "_gates",
-        "_history",
-        "_p",
+        "_ledger",
+        "_newest",
+        "_q",
+        "_scratch",
+        "_steps",
         "_streaks",
+        "_summary",
         "_t",
-        "_x",
+        "_updates",
         "config",
     )
 
@@ -243,22 +256,35 @@ class KalmanNavigator:
     ) -> None:
         self.config = config
         self._t = float(time_s)
-        self._x = np.array([*position_ned_m, *velocity_ned_m_s], dtype=np.float64)
-        if self._x.shape != (6,):
+        x = np.array([*position_ned_m, *velocity_ned_m_s], dtype=np.float64)
+        if x.shape != (6,):
             raise ValueError("initial position and velocity must have 3 components each")
         variances = [config.initial_position_sigma_m**2] * 3
         variances += [config.initial_velocity_sigma_m_s**2] * 3
-        self._p = np.diag(np.array(variances, dtype=np.float64))
-        self._history: list[_Step] = [_Step(self._t, None, self._x.copy(), self._p.copy())]
+        p = np.diag(np.array(variances, dtype=np.float64))
+        self._steps = np.zeros((_FIRST_ROWS, history.STEP_WIDTH))
+        self._updates = np.zeros((_FIRST_ROWS, history.UPDATE_WIDTH))
+        self._cache = np.zeros((history.CACHE_SLOTS, history.CACHE_WIDTH))
+        self._ledger = np.zeros(history.LEDGER_SIZE, dtype=np.int64)
+        self._newest = np.zeros(history.NEWEST_WIDTH)
+        self._summary = self._newest[: history.NEWEST_P]
+        """x and its 1σ, what :meth:`estimate` reads."""
+        self._scratch = np.zeros(history.STEP_WIDTH)
+        self._q = float(config.accel_noise_m2_s3)
+        first = self._steps[0]  # the initial state, the first stored step (no input)
+        first[history.STEP_TIME] = self._t
+        first[history.STEP_X : history.STEP_X + 6] = x
+        first[history.STEP_P :] = p.ravel()
+        self._ledger[history.END] = 1
+        history.publish(first, self._newest)
         # chdtri(k, q): the x with P(χ²_k > x) = q, i.e. chi2.ppf(1 − q, k); scipy.special here
         # rather than scipy.stats at import (≈ 1 s of every process's start-up otherwise)
         from scipy.special import chdtri
 
-        self._gates = {dim: float(chdtri(dim, 1.0 - config.gate_probability)) for dim in (1, 3)}
-        self._counts = {k: 0 for k in _COUNTERS}
+        gates = {dim: float(chdtri(dim, 1.0 - config.gate_probability)) for dim in (1, 3)}
+        self._gates = (math.nan, gates[1], math.nan, gates[3])
+        """The gate by dim z."""
         self._streaks: dict[str, int] = {}
-        # F, G, Q by time step [ns]: frames land 2 or 3 physics steps apart, so a handful
-        self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------------- accessors
 
@@ -270,24 +296,23 @@ class KalmanNavigator:
     @property
     def state(self) -> np.ndarray:
         """(6,) copy of x: NED position [m] and velocity [m/s]."""
-        return self._x.copy()
+        return self._newest[:6].copy()
 
     @property
     def covariance(self) -> np.ndarray:
         """(6, 6) copy of P."""
-        return self._p.copy()
+        return self._newest[history.NEWEST_P :].reshape(6, 6).copy()
 
     @property
     def counters(self) -> FilterCounters:
         """Measurement counts since construction."""
-        return FilterCounters(**self._counts)
+        return FilterCounters(*self._ledger[ACCEPTED : ACCEPTED + 6].tolist())
 
     def estimate(
         self, quaternion_wxyz: Quaternion = LEVEL, rates_rad_s: Vec3 = (0.0, 0.0, 0.0)
     ) -> NavigationEstimate:
         """The newest estimate, with the given IMU attitude (body → NED) and rates [rad/s]."""
-        n, e, d, vn, ve, vd = self._x.tolist()
-        s0, s1, s2, s3, s4, s5 = (math.sqrt(max(v, 0.0)) for v in self._p.diagonal().tolist())
+        n, e, d, vn, ve, vd, s0, s1, s2, s3, s4, s5 = self._summary.tolist()
         v_ned = (vn, ve, vd)
         return NavigationEstimate(
             time_s=self._t,
@@ -308,39 +333,48 @@ class KalmanNavigator:
         A ``time_s`` equal to the newest state's does nothing.
 
         Raises:
-            ValueError: ``time_s`` is earlier than the newest state (local misuse).
+            ValueError: ``time_s`` is earlier than the newest state, or ``accel_ned`` has
+                neither 3 components nor none (local misuse).
         """
         dt = time_s - self._t
-        if dt < -_TIME_EPS_S:
+        if dt < -TIME_EPS_S:
             raise ValueError(f"predict to {time_s} s is before the filter's time {self._t} s")
-        if dt <= _TIME_EPS_S:
+        if dt <= TIME_EPS_S:
             return
-        accel = None if accel_ned is None else np.ascontiguousarray(accel_ned, dtype=np.float64)
-        self._x, self._p = self._propagate(self._x, self._p, dt, accel)
-        self._t = float(time_s)
-        self._history.append(_Step(self._t, accel, self._x, self._p))
-        self._trim()
+        accel: tuple[float, ...] = ()
+        if accel_ned is not None:
+            accel = accel_ned if type(accel_ned) is tuple else tuple(accel_ned)
+            if len(accel) != 3 and len(accel) != 0:
+                raise ValueError(f"an acceleration input has 3 components, not {len(accel)}")
+        self._predict(float(time_s), hold_input=False, accel=accel)
 
-    def _propagate(
-        self, x: np.ndarray, p: np.ndarray, dt: float, accel: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        key = round(dt * 1e9)  # frames' dt jitter by ~1 ulp; 1 ns is far below any step
-        matrices = self._cache.get(key)
-        if matrices is None:
-            if len(self._cache) >= _CACHED_STEPS:
-                self._cache.clear()
-            matrices = self._cache[key] = _transition(dt, self.config.accel_noise_m2_s3)
-        f, g, qm = matrices
-        return _PROPAGATE(x, p, f, g, qm, _NO_INPUT if accel is None else accel)
+    def _predict(self, time_s: float, *, hold_input: bool, accel: tuple[float, ...]) -> None:
+        """Store the step at ``time_s`` [s] (:func:`~.filter_history.predict_step`) predicted
+        with ``accel`` (3 components, or none: constant velocity) or the newest step's input."""
+        has_input = len(accel) == 3
+        accel = accel if has_input else _NO_INPUT
+        history_s = self.config.history_s
+        while True:
+            status = _PREDICT(
+                self._steps,
+                self._updates,
+                self._cache,
+                self._ledger,
+                self._newest,
+                time_s,
+                hold_input,
+                has_input,
+                accel,
+                self._q,
+                history_s,
+            )
+            if status < NEEDS_ROWS:
+                break
+            self._grow(status)
+        self._t = time_s
 
-    def _trim(self) -> None:
-        horizon = self._t - self.config.history_s
-        history = self._history
-        drop = 0
-        while drop < len(history) - 1 and history[drop + 1].time_s <= horizon:
-            drop += 1
-        if drop:
-            del history[:drop]
+    def _grow(self, status: int) -> None:
+        self._steps, self._updates = history.grown(self._steps, self._updates, self._ledger, status)
 
     # ---------------------------------------------------------------------- update
 
@@ -356,76 +390,134 @@ class KalmanNavigator:
             Whether it was applied (``False``: malformed, gated out or older than the history;
             see :attr:`counters`).
         """
-        if not self._valid(measurement):
-            self._counts["invalid"] += 1
+        m = measurement
+        kind, value, sigma = m.kind, m.value, m.sigma
+        dim = _DIMS.get(kind)
+        if dim is None or len(value) != dim or len(sigma) != dim:
+            self._ledger[INVALID] += 1
             return False
-        if measurement.kind == "velocity_body":
-            try:
-                quaternion_wxyz = quat_normalize(quaternion_wxyz)
-            except ValueError:  # a zero attitude from the AHRS: data, not misuse
-                self._counts["invalid"] += 1
+        if kind == "velocity_body":
+            if not _finite(m):  # checked before the attitude, as the kernel would
+                self._ledger[INVALID] += 1
                 return False
-        t = measurement.time_s
-        if t > self._t + _TIME_EPS_S:
-            self.predict(t, self._history[-1].accel)
-        if t >= self._t - _TIME_EPS_S:
-            step = self._history[-1]
-            ok = self._apply(step, measurement, quaternion_wxyz, gate=True)
-            self._x, self._p = step.x, step.p
-            return ok
-        return self._rollback(measurement, quaternion_wxyz)
-
-    def _valid(self, m: Measurement) -> bool:
-        dim = _DIMS.get(m.kind)
-        if dim is None or len(m.value) != dim or len(m.sigma) != dim:
-            return False
-        if not math.isfinite(m.time_s):
-            return False
-        isfinite = math.isfinite
-        return all(map(isfinite, m.value)) and all(map(isfinite, m.sigma)) and min(m.sigma) > 0.0
-
-    def _apply(
-        self,
-        step: _Step,
-        m: Measurement,
-        quaternion: Quaternion,
-        *,
-        gate: bool,
-        reset: bool = False,
-    ) -> bool:
-        """Update ``step``'s posterior in place with ``m``; record it when applied.
-
-        ``reset`` widens the observed states' spread first (a re-acquisition); ``gate=False``
-        applies without the gate (re-acquisitions and replays, counted already).
-        """
-        x, p = step.x, step.p
-        if m.kind == "velocity_body":
+            try:
+                quaternion = quat_normalize(quaternion_wxyz)
+            except ValueError:  # a zero attitude from the AHRS: data, not misuse
+                self._ledger[INVALID] += 1
+                return False
             h = np.zeros((3, 6))
             h[:, 3:] = np.array(rotation_matrix(quaternion)).T  # R: body → NED; H = [0 Rᵀ]
         else:
-            h = _H_POSITION if m.kind == "position_ned" else _H_DEPTH
-        z = np.array(m.value, dtype=np.float64)
-        sigma = np.array(m.sigma, dtype=np.float64)
-        if reset:  # the innovation does not depend on P
-            p = self._reset_spread(p, m.kind, z - h @ x)
-        limit = self._gates[len(z)] if gate else math.inf
-        x, p, _, status = _GATED_UPDATE(x, p, h, z, sigma, limit)
-        if status == SINGULAR:
-            self._counts["invalid"] += 1
-            return False
-        if status == GATED:
-            if self._reacquire(m):
-                self._counts["reacquired"] += 1
-                self._counts["accepted"] += 1
-                return self._apply(step, m, quaternion, gate=False, reset=True)
-            self._counts["rejected"] += 1
-            return False
-        step.x, step.p = x, p
-        step.updates.append((m, quaternion, reset))
-        if gate:
+            h = _H_POSITION if kind == "position_ned" else _H_DEPTH
+        t = m.time_s
+        if t > self._t + TIME_EPS_S:  # newer than the filter: predict to it, input held
+            if not _finite(m):
+                self._ledger[INVALID] += 1
+                return False
+            self._predict(float(t), hold_input=True, accel=())
+        if dim == 1:
+            value, sigma = (value[0], 0.0, 0.0), (sigma[0], 1.0, 1.0)
+        else:
+            value = value if type(value) is tuple else tuple(value)
+            sigma = sigma if type(sigma) is tuple else tuple(sigma)
+        code = _KIND_CODES[kind]
+        while True:
+            status = _APPLY(
+                self._steps,
+                self._updates,
+                self._cache,
+                self._ledger,
+                self._newest,
+                t,
+                code,
+                h,
+                value,
+                sigma,
+                self._gates[dim],
+                self._q,
+            )
+            if status < NEEDS_ROWS:
+                break
+            self._grow(status)
+        if status == APPLIED:
             self._streaks[m.source] = 0
-            self._counts["accepted"] += 1
+            return True
+        if status == NEEDS_RESET:
+            self._streaks[m.source] = 0
+            self._replay_resets(status)
+            return True
+        if status == GATED:
+            return self._gated(m, code, h, value, sigma)
+        return False  # invalid, singular or stale: counted
+
+    def _gated(
+        self,
+        m: Measurement,
+        code: int,
+        h: np.ndarray,
+        value: tuple[float, ...],
+        sigma: tuple[float, ...],
+    ) -> bool:
+        """A gate rejection: counted, or (module docstring) a re-acquisition applied."""
+        if not self._reacquire(m):
+            self._ledger[REJECTED] += 1
+            return False
+        self._ledger[REACQUIRED] += 1
+        self._ledger[ACCEPTED] += 1
+        q = self._q
+        while True:
+            status = _STAGE(
+                self._steps, self._updates, self._cache, self._ledger, m.time_s, self._scratch, q
+            )
+            if status < NEEDS_ROWS:
+                break
+            self._grow(status)
+        scratch = self._scratch
+        x = scratch[history.STEP_X : history.STEP_X + 6].copy()
+        p = scratch[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
+        z = np.array(m.value, dtype=np.float64)
+        reset_p = self._reset_spread(p, m.kind, z - h @ x)  # the innovation does not depend on P
+        status = _COMMIT_RESET(
+            self._steps,
+            self._updates,
+            self._cache,
+            self._ledger,
+            self._newest,
+            scratch,
+            code,
+            h,
+            value,
+            sigma,
+            reset_p,
+            q,
+        )
+        if status != APPLIED and status != NEEDS_RESET:
+            return False  # singular: counted
+        self._replay_resets(status)
         return True
+
+    def _replay_resets(self, status: int) -> None:
+        """Resume a replay that stopped at stored re-acquisitions, resetting P for each."""
+        while status == NEEDS_RESET:
+            step = self._steps[self._ledger[history.RESUME_STEP]]
+            u = int(step[history.STEP_FIRST_UPDATE]) + int(self._ledger[history.RESUME_UPDATE])
+            record = self._updates[u]
+            dim = int(record[history.UPDATE_DIM])
+            h = record[history.UPDATE_H : history.UPDATE_H + 6 * dim].reshape(dim, 6).copy()
+            z = record[history.UPDATE_Z : history.UPDATE_Z + dim].copy()
+            x = step[history.STEP_X : history.STEP_X + 6].copy()
+            p = step[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
+            kind = _KINDS[int(record[history.UPDATE_KIND])]
+            reset_p = self._reset_spread(p, kind, z - h @ x)
+            status = _RESUME(
+                self._steps,
+                self._updates,
+                self._cache,
+                self._ledger,
+                self._newest,
+                reset_p,
+                self._q,
+            )
 
     def _reacquire(self, m: Measurement) -> bool:
         """Count a gate rejection of ``m``'s source; whether this one re-acquires instead."""
@@ -451,40 +543,10 @@ class KalmanNavigator:
         p[idx, idx] = max(sigma * sigma, float(np.max(np.square(innovation))))
         return p
 
-    def _rollback(self, m: Measurement, quaternion: Quaternion) -> bool:
-        history = self._history
-        t = m.time_s
-        if t < history[0].time_s - _TIME_EPS_S:
-            self._counts["stale"] += 1
-            return False
-        # the last stored step at or before t
-        i = len(history) - 1
-        while history[i].time_s > t + _TIME_EPS_S:
-            i -= 1
-        base = history[i]
-        if abs(base.time_s - t) <= _TIME_EPS_S:
-            target = _Step(base.time_s, base.accel, base.x, base.p, list(base.updates))
-            replace = True
-        else:  # split the interval (base, next] at t; the next step's input held over both
-            accel = history[i + 1].accel
-            x, p = self._propagate(base.x, base.p, t - base.time_s, accel)
-            target = _Step(t, accel, x, p)
-            replace = False
-        if not self._apply(target, m, quaternion, gate=True):
-            return False  # history untouched
-        self._counts["rollbacks"] += 1
-        if replace:
-            history[i] = target
-        else:
-            i += 1
-            history.insert(i, target)
-        prev = target
-        for j in range(i + 1, len(history)):
-            step = history[j]
-            x, p = self._propagate(prev.x, prev.p, step.time_s - prev.time_s, step.accel)
-            replayed = _Step(step.time_s, step.accel, x, p)
-            for old, q, reset in step.updates:
-                self._apply(replayed, old, q, gate=False, reset=reset)
-            history[j] = prev = replayed
-        self._x, self._p = prev.x, prev.p
-        return True
+
+def _finite(m: Measurement) -> bool:
+    """Whether a measurement's time, values and σ are finite and its σ > 0."""
+    if not math.isfinite(m.time_s):
+        return False
+    isfinite = math.isfinite
+    return all(map(isfinite, m.value)) and all(map(isfinite, m.sigma)) and min(m.sigma) > 0.0
