@@ -42,6 +42,8 @@ time — splitting that interval if it falls inside one — applies the update, 
 through the stored steps (their inputs and their previously accepted measurements, which are
 re-applied without a second gate) to the present. The result equals a filter that received the
 measurement at its true time. Measurements older than the history are dropped and counted.
+The steps are kept in float64 arrays, and the bookkeeping around the arithmetic
+(:mod:`~testbed.vehicle.filter_kernels`) is compiled too (:mod:`~testbed.vehicle.filter_replay`).
 
 The filter is the default localizer's (:class:`~testbed.vehicle.localization.KalmanLocalizer`;
 the seam for a user's own algorithm is :class:`~testbed.vehicle.localization.Localizer`). No ECS
@@ -67,6 +69,7 @@ from testbed.common.geometry import (
 from testbed.common.jit import BOOL, F64, I64, INTS, TABLE, VECTOR, floats
 from testbed.config import check_range
 from testbed.vehicle import filter_history as history
+from testbed.vehicle import filter_replay as replay
 from testbed.vehicle.filter_history import (
     ACCEPTED,
     APPLIED,
@@ -104,13 +107,13 @@ _FIRST_ROWS = 64
 # arrays are the filter's own contiguous float64 (int64: the ledger) arrays, z and σ tuples of
 # three floats (a depth's padded), H the (dim, 6) arrays made here.
 _HISTORY = (TABLE, TABLE, TABLE, INTS)
-_PREDICT = jit.entry(history.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64)
+_PREDICT = jit.entry(replay.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64)
 _APPLY = jit.entry(
-    history.apply_measurement, *_HISTORY, VECTOR, F64, I64, TABLE, floats(3), floats(3), F64, F64
+    replay.apply_measurement, *_HISTORY, VECTOR, F64, I64, TABLE, floats(3), floats(3), F64, F64
 )
-_STAGE = jit.entry(history.stage_measurement, *_HISTORY, F64, VECTOR, F64)
+_STAGE = jit.entry(replay.stage_measurement, *_HISTORY, F64, VECTOR, F64)
 _COMMIT_RESET = jit.entry(
-    history.commit_reset,
+    replay.commit_reset,
     *_HISTORY,
     VECTOR,
     VECTOR,
@@ -121,7 +124,7 @@ _COMMIT_RESET = jit.entry(
     TABLE,
     F64,
 )
-_RESUME = jit.entry(history.resume_replay, *_HISTORY, VECTOR, TABLE, F64)
+_RESUME = jit.entry(replay.resume_replay, *_HISTORY, VECTOR, TABLE, F64)
 
 
 @dataclass(frozen=True, slots=True)
@@ -220,9 +223,9 @@ class FilterCounters:
 class KalmanNavigator:
     """The position/velocity Kalman filter of the module docstring.
 
-    The stored steps live in arrays this filter owns and compiled kernels work on
-    (:mod:`.filter_history`, which describes them); a prediction and a measurement's update,
-    roll-back and replay included, are one kernel call each.
+    The stored steps live in arrays this filter owns (:mod:`.filter_history` lays them out);
+    a prediction, and a measurement's update with its roll-back and replay, are one call each
+    of a compiled kernel (:mod:`.filter_replay`).
 
     Args:
         config: noise figures.
@@ -314,15 +317,15 @@ class KalmanNavigator:
         """The newest estimate, with the given IMU attitude (body → NED) and rates [rad/s]."""
         n, e, d, vn, ve, vd, s0, s1, s2, s3, s4, s5 = self._summary.tolist()
         v_ned = (vn, ve, vd)
-        return NavigationEstimate(
-            time_s=self._t,
-            position_ned_m=(n, e, d),
-            velocity_ned_m_s=v_ned,
-            velocity_body_m_s=quat_rotate_inverse(quaternion_wxyz, v_ned),
-            quaternion_wxyz=quaternion_wxyz,
-            rates_rad_s=rates_rad_s,
-            position_sigma_m=(s0, s1, s2),
-            velocity_sigma_m_s=(s3, s4, s5),
+        return NavigationEstimate(  # by position, in the fields' order (keywords: 0.6 µs more)
+            self._t,
+            (n, e, d),
+            v_ned,
+            quat_rotate_inverse(quaternion_wxyz, v_ned),
+            quaternion_wxyz,
+            rates_rad_s,
+            (s0, s1, s2),
+            (s3, s4, s5),
         )
 
     # --------------------------------------------------------------------- predict
@@ -346,10 +349,10 @@ class KalmanNavigator:
             accel = accel_ned if type(accel_ned) is tuple else tuple(accel_ned)
             if len(accel) != 3 and len(accel) != 0:
                 raise ValueError(f"an acceleration input has 3 components, not {len(accel)}")
-        self._predict(float(time_s), hold_input=False, accel=accel)
+        self._predict(float(time_s), False, accel)
 
-    def _predict(self, time_s: float, *, hold_input: bool, accel: tuple[float, ...]) -> None:
-        """Store the step at ``time_s`` [s] (:func:`~.filter_history.predict_step`) predicted
+    def _predict(self, time_s: float, hold_input: bool, accel: tuple[float, ...]) -> None:
+        """Store the step at ``time_s`` [s] (:func:`~.filter_replay.predict_step`) predicted
         with ``accel`` (3 components, or none: constant velocity) or the newest step's input."""
         has_input = len(accel) == 3
         accel = accel if has_input else _NO_INPUT
@@ -414,7 +417,7 @@ class KalmanNavigator:
             if not _finite(m):
                 self._ledger[INVALID] += 1
                 return False
-            self._predict(float(t), hold_input=True, accel=())
+            self._predict(float(t), True, ())  # the input held
         if dim == 1:
             value, sigma = (value[0], 0.0, 0.0), (sigma[0], 1.0, 1.0)
         else:
