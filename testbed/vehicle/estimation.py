@@ -107,23 +107,13 @@ _FIRST_ROWS = 64
 # arrays are the filter's own contiguous float64 (int64: the ledger) arrays, z and σ tuples of
 # three floats (a depth's padded), H the (dim, 6) arrays made here.
 _HISTORY = (TABLE, TABLE, TABLE, INTS)
+"""steps, updates, cache, ledger (:mod:`.filter_history`)."""
 _PREDICT = jit.entry(replay.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64)
-_APPLY = jit.entry(
-    replay.apply_measurement, *_HISTORY, VECTOR, F64, I64, TABLE, floats(3), floats(3), F64, F64
-)
+_MEASUREMENT = (I64, TABLE, floats(3), floats(3))
+"""Its kind's code, H, z and σ."""
+_APPLY = jit.entry(replay.apply_measurement, *_HISTORY, VECTOR, F64, *_MEASUREMENT, F64, F64)
 _STAGE = jit.entry(replay.stage_measurement, *_HISTORY, F64, VECTOR, F64)
-_COMMIT_RESET = jit.entry(
-    replay.commit_reset,
-    *_HISTORY,
-    VECTOR,
-    VECTOR,
-    I64,
-    TABLE,
-    floats(3),
-    floats(3),
-    TABLE,
-    F64,
-)
+_COMMIT_RESET = jit.entry(replay.commit_reset, *_HISTORY, VECTOR, VECTOR, *_MEASUREMENT, TABLE, F64)
 _RESUME = jit.entry(replay.resume_replay, *_HISTORY, VECTOR, TABLE, F64)
 
 
@@ -235,17 +225,15 @@ class KalmanNavigator:
     """
 
     __slots__ = (
-        "_cache",
+        "_arrays",
         "_gates",
         "_ledger",
         "_newest",
         "_q",
         "_scratch",
-        "_steps",
         "_streaks",
         "_summary",
         "_t",
-        "_updates",
         "config",
     )
 
@@ -265,16 +253,18 @@ class KalmanNavigator:
         variances = [config.initial_position_sigma_m**2] * 3
         variances += [config.initial_velocity_sigma_m_s**2] * 3
         p = np.diag(np.array(variances, dtype=np.float64))
-        self._steps = np.zeros((_FIRST_ROWS, history.STEP_WIDTH))
-        self._updates = np.zeros((_FIRST_ROWS, history.UPDATE_WIDTH))
-        self._cache = np.zeros((history.CACHE_SLOTS, history.CACHE_WIDTH))
+        steps = np.zeros((_FIRST_ROWS, history.STEP_WIDTH))
+        updates = np.zeros((_FIRST_ROWS, history.UPDATE_WIDTH))
+        cache = np.zeros((history.CACHE_SLOTS, history.CACHE_WIDTH))
         self._ledger = np.zeros(history.LEDGER_SIZE, dtype=np.int64)
         self._newest = np.zeros(history.NEWEST_WIDTH)
+        self._arrays = (steps, updates, cache, self._ledger, self._newest)
+        """The kernels' first five arguments (steps and updates are replaced as they grow)."""
         self._summary = self._newest[: history.NEWEST_P]
         """x and its 1σ, what :meth:`estimate` reads."""
         self._scratch = np.zeros(history.STEP_WIDTH)
         self._q = float(config.accel_noise_m2_s3)
-        first = self._steps[0]  # the initial state, the first stored step (no input)
+        first = steps[0]  # the initial state, the first stored step (no input)
         first[history.STEP_TIME] = self._t
         first[history.STEP_X : history.STEP_X + 6] = x
         first[history.STEP_P :] = p.ravel()
@@ -359,17 +349,7 @@ class KalmanNavigator:
         history_s = self.config.history_s
         while True:
             status = _PREDICT(
-                self._steps,
-                self._updates,
-                self._cache,
-                self._ledger,
-                self._newest,
-                time_s,
-                hold_input,
-                has_input,
-                accel,
-                self._q,
-                history_s,
+                *self._arrays, time_s, hold_input, has_input, accel, self._q, history_s
             )
             if status < NEEDS_ROWS:
                 break
@@ -377,7 +357,10 @@ class KalmanNavigator:
         self._t = time_s
 
     def _grow(self, status: int) -> None:
-        self._steps, self._updates = history.grown(self._steps, self._updates, self._ledger, status)
+        """Give ``steps`` or ``updates`` twice the rows (a kernel's NEEDS_ROWS, NEEDS_RECORDS)."""
+        steps, updates, cache, ledger, newest = self._arrays
+        steps, updates = history.grown(steps, updates, ledger, status)
+        self._arrays = (steps, updates, cache, ledger, newest)
 
     # ---------------------------------------------------------------------- update
 
@@ -425,20 +408,7 @@ class KalmanNavigator:
             sigma = sigma if type(sigma) is tuple else tuple(sigma)
         code = _KIND_CODES[kind]
         while True:
-            status = _APPLY(
-                self._steps,
-                self._updates,
-                self._cache,
-                self._ledger,
-                self._newest,
-                t,
-                code,
-                h,
-                value,
-                sigma,
-                self._gates[dim],
-                self._q,
-            )
+            status = _APPLY(*self._arrays, t, code, h, value, sigma, self._gates[dim], self._q)
             if status < NEEDS_ROWS:
                 break
             self._grow(status)
@@ -469,9 +439,7 @@ class KalmanNavigator:
         self._ledger[ACCEPTED] += 1
         q = self._q
         while True:
-            status = _STAGE(
-                self._steps, self._updates, self._cache, self._ledger, m.time_s, self._scratch, q
-            )
+            status = _STAGE(*self._arrays[:4], m.time_s, self._scratch, q)
             if status < NEEDS_ROWS:
                 break
             self._grow(status)
@@ -480,20 +448,7 @@ class KalmanNavigator:
         p = scratch[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
         z = np.array(m.value, dtype=np.float64)
         reset_p = self._reset_spread(p, m.kind, z - h @ x)  # the innovation does not depend on P
-        status = _COMMIT_RESET(
-            self._steps,
-            self._updates,
-            self._cache,
-            self._ledger,
-            self._newest,
-            scratch,
-            code,
-            h,
-            value,
-            sigma,
-            reset_p,
-            q,
-        )
+        status = _COMMIT_RESET(*self._arrays, scratch, code, h, value, sigma, reset_p, q)
         if status != APPLIED and status != NEEDS_RESET:
             return False  # singular: counted
         self._replay_resets(status)
@@ -502,9 +457,10 @@ class KalmanNavigator:
     def _replay_resets(self, status: int) -> None:
         """Resume a replay that stopped at stored re-acquisitions, resetting P for each."""
         while status == NEEDS_RESET:
-            step = self._steps[self._ledger[history.RESUME_STEP]]
+            steps, updates = self._arrays[:2]
+            step = steps[self._ledger[history.RESUME_STEP]]
             u = int(step[history.STEP_FIRST_UPDATE]) + int(self._ledger[history.RESUME_UPDATE])
-            record = self._updates[u]
+            record = updates[u]
             dim = int(record[history.UPDATE_DIM])
             h = record[history.UPDATE_H : history.UPDATE_H + 6 * dim].reshape(dim, 6).copy()
             z = record[history.UPDATE_Z : history.UPDATE_Z + dim].copy()
@@ -512,15 +468,7 @@ class KalmanNavigator:
             p = step[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
             kind = _KINDS[int(record[history.UPDATE_KIND])]
             reset_p = self._reset_spread(p, kind, z - h @ x)
-            status = _RESUME(
-                self._steps,
-                self._updates,
-                self._cache,
-                self._ledger,
-                self._newest,
-                reset_p,
-                self._q,
-            )
+            status = _RESUME(*self._arrays, reset_p, self._q)
 
     def _reacquire(self, m: Measurement) -> bool:
         """Count a gate rejection of ``m``'s source; whether this one re-acquires instead."""

@@ -124,7 +124,8 @@ def test_long_history_with_crowded_steps_equals_numpy_in_time_order() -> None:
             events.append((m.time_s, m))
     assert nav.counters.rollbacks == (100 - 8) + (63 - 5)
     # the arrays grew from their first 64 rows (and were compacted in between: 1.5 s is ≈ 190)
-    assert nav._steps.shape[0] > 64 and nav._updates.shape[0] > 64
+    steps, updates = nav._arrays[:2]
+    assert steps.shape[0] > 64 and updates.shape[0] > 64
     events.sort(key=lambda event: event[0])  # stable: a late fix after its step's own updates
     x, p = _numpy_filter(config, frames, events)
     np.testing.assert_allclose(nav.state, x, rtol=1e-9, atol=1e-12)
