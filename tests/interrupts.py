@@ -8,6 +8,11 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import Any
 
+import numpy as np
+
+from testbed.common import jit
+from testbed.vehicle.filter_kernels import propagate
+
 
 @contextmanager
 def interrupt_at_line(k: int, function: Callable[..., Any]) -> Iterator[dict[str, int]]:
@@ -45,3 +50,31 @@ def interrupt_at_line(k: int, function: Callable[..., Any]) -> Iterator[dict[str
         pass
     finally:
         sys.settrace(previous)
+
+
+_PREDICTION = jit.entry(propagate, jit.VECTOR, *[jit.TABLE] * 4, jit.VECTOR)
+_X, _P, _G = np.zeros(6), np.eye(6), np.zeros((6, 3))
+
+
+def call_back() -> None:
+    """Call a compiled kernel that hands new arrays back, which numba does by calling back into
+    Python (``numba.core.serialize._numba_unpickle``): the filter's prediction, called as the
+    frame calls its kernels (at the machine code's entry, :func:`testbed.common.jit.entry`).
+
+    The navigation filter's kernels did that every frame; since its bookkeeping was compiled
+    (they return only a status) no kernel of a run calls back, so the tests of an interrupt in
+    a kernel's callback bring their own (:func:`calling_back`). An exception raised in a
+    process's first callback crashes it (the CLI puts signals off there); in a later one it
+    comes out as ``SystemError``, caused by it.
+    """
+    _PREDICTION(_X, _P, _P, _G, _P, np.zeros(0))
+
+
+def calling_back(method: Callable[..., Any]) -> Callable[..., Any]:
+    """``method``, first making a kernel's callback (:func:`call_back`)."""
+
+    def method_calling_back(*args: Any, **kwargs: Any) -> Any:
+        call_back()
+        return method(*args, **kwargs)
+
+    return method_calling_back

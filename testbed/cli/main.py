@@ -78,7 +78,7 @@ def _put_off(signum: int, frame: FrameType | None) -> bool:
 
     Python runs a handler wherever the program is, also in numba's own Python code: its
     compiler, and the callbacks its compiled kernels make (``_numba_unpickle``, each time a
-    kernel hands a new array back: the navigation filter's, every frame). An exception raised
+    kernel hands a new array back, as the navigation filter's did every frame). An exception raised
     in a kernel's first callback crashes the process (a segmentation fault, seen), in a later
     one it comes out as ``SystemError``. So while any frame of the stack is numba's, the signal
     is sent again a moment later, from a thread of its own (sent from the handler, it would be

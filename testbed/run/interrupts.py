@@ -3,7 +3,7 @@
 Ctrl-C (or the CLI's SIGTERM, raised as a ``KeyboardInterrupt``) is raised wherever the program
 is, also inside Python code that compiled code called back into: numba's kernels call
 ``numba.core.serialize._numba_unpickle`` (each time one hands a new array back: the
-navigation filter's, every frame), and report an exception raised there as their own
+navigation filter's did every frame), and report an exception raised there as their own
 ``SystemError("... returned a result with an exception set")``, caused by it. A run that keeps
 its work on an interrupt recognises it there too (:func:`interrupt_of`).
 """

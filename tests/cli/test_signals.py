@@ -259,7 +259,12 @@ IN_A_CALLBACK = """
 import importlib, signal, sys
 import simpy
 from numba.core import serialize
+from testbed.vehicle.localization import KalmanLocalizer
+from tests.interrupts import calling_back
 cli = importlib.import_module("testbed.cli.main")
+# a kernel calling back when the filter is built and every frame, as the filter's own did
+KalmanLocalizer.__init__ = calling_back(KalmanLocalizer.__init__)
+KalmanLocalizer.step = calling_back(KalmanLocalizer.step)
 callback = serialize._numba_unpickle.__code__
 in_run = sys.argv.pop(1) == "run"  # the first callback once the clock runs, else the first
 arrived = []
@@ -291,12 +296,13 @@ sys.exit(cli.main(sys.argv[1:]))
 def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_result(
     tmp_path: Path,
 ) -> None:
-    # Without putting it off, this ended in a segmentation fault (the navigation filter's
-    # kernels call back into Python to hand back each new array; the first such call cannot
-    # take an exception). The kernels make their first callbacks while the vehicle is built
-    # (they are compiled there, before the clock starts): one line and 143, and the put-off
-    # signal lands in the program's own code, still building (nothing to keep) or just started
-    # (a marked partial set); a SIGTERM in the first callback once the clock runs keeps what ran.
+    # Without putting it off, this ended in a segmentation fault (a compiled kernel calls back
+    # into Python to hand back each new array; the first such call cannot take an exception).
+    # The script adds such a kernel to the navigation filter (tests.interrupts.calling_back; the
+    # filter's own kernels called back until they returned only a status), called while the
+    # vehicle is built and every frame. A SIGTERM in the first callback: one line and 143, and
+    # the put-off signal lands in the program's own code, still building (nothing to keep) or
+    # just started (a marked partial set); in the first once the clock runs: what ran is kept.
     def sigterm_in_first_callback(mode: str, out: Path) -> str:
         """The one stderr line of a run that took SIGTERM in its first callback (``mode``:
         while the vehicle is built, or once the clock runs), after its exit code 143."""

@@ -2,9 +2,9 @@
 Ctrl-C does: what ran is kept, marked partial.
 
 numba's kernels call back into Python (``numba.core.serialize._numba_unpickle``) each time
-one hands a new array back, e.g. the navigation filter's every frame; a KeyboardInterrupt raised
-there (as a real signal's handler can be, at any Python line) comes out of the kernel as
-``SystemError``, caused by it.
+one hands a new array back (here a kernel the test adds to the navigation filter's frame,
+:func:`tests.interrupts.calling_back`); a KeyboardInterrupt raised there (as a real signal's
+handler can be, at any Python line) comes out of the kernel as ``SystemError``, caused by it.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from testbed.run.interrupts import interrupt_of
 from testbed.run.outputs import write_run
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
-from tests.interrupts import interrupt_at_line
+from testbed.vehicle.localization import KalmanLocalizer
+from tests.interrupts import call_back, calling_back, interrupt_at_line
 from tests.processes import check_set
 
 
@@ -65,6 +66,8 @@ def test_a_run_interrupted_inside_a_kernels_callback_keeps_what_ran(
                 seen.update(raised)
 
     monkeypatch.setattr(simpy.Environment, "run", run_with_an_interrupt)
+    monkeypatch.setattr(KalmanLocalizer, "step", calling_back(KalmanLocalizer.step))
+    call_back()  # the process's first callback, which cannot take an exception: not in the run
     result = run_scenario(scenario, seed=0)
     assert seen["raised"] == 1  # the kernel did call back, and was interrupted there
     assert isinstance(result.stopped, KeyboardInterrupt)
