@@ -348,8 +348,19 @@ class KalmanNavigator:
         accel = accel if has_input else _NO_INPUT
         history_s = self.config.history_s
         while True:
+            steps, updates, cache, ledger, newest = self._arrays  # (a star call costs 0.08 µs)
             status = _PREDICT(
-                *self._arrays, time_s, hold_input, has_input, accel, self._q, history_s
+                steps,
+                updates,
+                cache,
+                ledger,
+                newest,
+                time_s,
+                hold_input,
+                has_input,
+                accel,
+                self._q,
+                history_s,
             )
             if status < NEEDS_ROWS:
                 break
@@ -408,7 +419,21 @@ class KalmanNavigator:
             sigma = sigma if type(sigma) is tuple else tuple(sigma)
         code = _KIND_CODES[kind]
         while True:
-            status = _APPLY(*self._arrays, t, code, h, value, sigma, self._gates[dim], self._q)
+            steps, updates, cache, ledger, newest = self._arrays
+            status = _APPLY(
+                steps,
+                updates,
+                cache,
+                ledger,
+                newest,
+                t,
+                code,
+                h,
+                value,
+                sigma,
+                self._gates[dim],
+                self._q,
+            )
             if status < NEEDS_ROWS:
                 break
             self._grow(status)
