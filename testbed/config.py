@@ -133,8 +133,8 @@ def to_float(value: Any, source: str, key: str) -> float:
         raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
     try:
         return float(value)
-    except OverflowError:
-        bits = value.bit_length()
+    except OverflowError:  # only an int overflows
+        bits = int(value).bit_length()
         raise ConfigError(
             f"{source}: {key}: a {bits}-bit integer, beyond any float (±1.8e308)"
         ) from None
