@@ -424,13 +424,14 @@ def plot_pair(
 
     Raises:
         ConfigError: the file cannot be read, or ``x``, ``y`` or ``hue`` is not a column
-            (naming it and listing the known ones), or ``y`` has no numeric value.
+            (naming it and listing the known ones), or ``y`` has no numeric value, or a cell
+            of ``y`` is neither empty nor a number (naming its row).
     """
     results = read_results(results_csv)
     for option, column in (("--x", x), ("--y", y), ("--hue", hue)):
         if column is not None:
             results.require(column, option)
-    values = results.numbers(y)
+    values = results.metric(y, "--y")
     if not np.isfinite(values).any():
         raise ConfigError(f"{results.path}: --y: column {y!r} has no numeric value in ok rows")
     raw_x = [row[x] for row in results.rows]

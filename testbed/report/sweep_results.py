@@ -29,12 +29,14 @@ class Results:
         columns: every column, in file order.
         grid: the grid keys (the columns between ``seed`` and ``status``).
         rows: the rows with ``status = ok``, cells as the file's strings.
+        row_numbers: each of ``rows``' place in the file, for messages (the head is row 1).
     """
 
     path: Path
     columns: tuple[str, ...]
     grid: tuple[str, ...]
     rows: tuple[dict[str, str], ...]
+    row_numbers: tuple[int, ...]
 
     def require(self, column: str, option: str) -> None:
         """Raise a one-line :class:`ConfigError` unless ``column`` exists.
@@ -49,6 +51,26 @@ class Results:
     def numbers(self, column: str) -> np.ndarray:
         """``column`` of every row as floats; NaN for an empty or non-numeric cell."""
         return np.array([_number(row.get(column, "")) for row in self.rows], dtype=float)
+
+    def metric(self, column: str, option: str) -> np.ndarray:
+        """``column`` of every row as floats, NaN for an empty cell (a metric the run did not
+        give); unlike :meth:`numbers`, any other cell must be a number.
+
+        Raises:
+            ConfigError: a cell that is not a number, naming its row, ``option`` and the column.
+        """
+        values = np.full(len(self.rows), math.nan)
+        for index, (number, row) in enumerate(zip(self.row_numbers, self.rows, strict=True)):
+            cell = row.get(column, "")
+            if cell:
+                try:
+                    values[index] = float(cell)
+                except ValueError:
+                    raise ConfigError(
+                        f"{self.path}: row {number}: {option}: column {column!r} holds "
+                        f"{cell[:40]!r}, not a number"
+                    ) from None
+        return values
 
     def labels(self, columns: Sequence[str]) -> list[str]:
         """Per row, ``key=value`` of ``columns`` joined by ``, `` (``""`` for no columns)."""
@@ -106,8 +128,9 @@ def read_results(results_csv: Path | str) -> Results:
 
     Raises:
         ConfigError: a missing file, a binary or garbled one (not UTF-8, NUL bytes, rows the
-            CSV reader rejects, rows longer than the head), or one without the
-            ``point, seed, …, status, error`` head.
+            CSV reader rejects, a row with more or fewer cells than the head: ``row N:
+            expected M fields, got K``), or one without the ``point, seed, …, status, error``
+            head.
     """
     path = Path(results_csv)
     try:
@@ -123,9 +146,20 @@ def read_results(results_csv: Path | str) -> Results:
         raise ConfigError(f"{path}: {_NOT_RESULTS} (line {reader.line_num}: {err})") from None
     if columns[:2] != ("point", "seed") or "status" not in columns:
         raise ConfigError(f"{path}: {_NOT_RESULTS} (no point, seed, status)")
+    width = len(columns)
     for number, row in enumerate(all_rows, start=2):
-        if None in row:  # more cells than columns: DictReader keeps them under None
-            raise ConfigError(f"{path}: {_NOT_RESULTS} (row {number} has more cells than the head)")
-    rows = tuple(row for row in all_rows if row.get("status") == "ok")
+        extra = row.get(None)
+        if extra is not None:  # more cells than columns: DictReader keeps them under None
+            raise ConfigError(
+                f"{path}: row {number}: expected {width} fields, got {width + len(extra)} "
+                "(more cells than the head)"
+            )
+        missing = sum(row.get(column) is None for column in columns)  # filled with None
+        if missing:
+            raise ConfigError(
+                f"{path}: row {number}: expected {width} fields, got {width - missing}"
+            )
+    ok = [(number, row) for number, row in enumerate(all_rows, start=2) if row["status"] == "ok"]
     grid = columns[2 : columns.index("status")]
-    return Results(path, columns, grid, rows)
+    rows = tuple(row for _, row in ok)
+    return Results(path, columns, grid, rows, tuple(number for number, _ in ok))

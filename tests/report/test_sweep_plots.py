@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,8 @@ def _write_results(path: Path) -> Path:
                         0.05 + wobble,
                     ]
                     writer.writerow([point, seed, ber, gap, "ok", "", gap, *values])
-                writer.writerow([point, 3, ber, gap, "failed", "RuntimeError: boom"])
+                empty = [""] * (1 + len(metrics))  # as testbed sweep writes a failed run
+                writer.writerow([point, 3, ber, gap, "failed", "RuntimeError: boom", *empty])
                 point += 1
     return path
 
@@ -254,6 +256,62 @@ def test_missing_or_foreign_file_is_a_config_error(tmp_path: Path) -> None:
         text = source.read_text(encoding="utf-8").replace("link.ber", "link.bitrate_bps", 1)
         source.write_text(text, encoding="utf-8")
         plot_ber_sweep(source, tmp_path)
+
+
+def _replace_row(source: Path, index: int, edit: Callable[[list[str]], list[str]]) -> None:
+    """Rewrite data row ``index`` (0 = the first after the head) of ``source`` with ``edit``."""
+    with source.open(encoding="utf-8", newline="") as handle:
+        rows = list(csv.reader(handle))
+    rows[1 + index] = edit(rows[1 + index])
+    with source.open("w", encoding="utf-8", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+
+
+@pytest.mark.parametrize(
+    ("index", "edit", "message"),
+    [  # row 2 of the file is the first data row; the head has 17 columns
+        (1, lambda row: row[:10], "row 3: expected 17 fields, got 10"),
+        (3, lambda row: row[:6], "row 5: expected 17 fields, got 6"),  # a failed run's row
+        (0, lambda row: [*row, "9"], "row 2: expected 17 fields, got 18"),
+    ],
+)
+def test_cli_plot_of_a_ragged_results_file_exits_2_naming_the_row(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    index: int,
+    edit: Callable[[list[str]], list[str]],
+    message: str,
+) -> None:
+    source = _write_results(tmp_path / "ragged.csv")
+    _replace_row(source, index, edit)
+    argv = ["plot", str(source), "--x", "link.ber", "--y", "command_lag_s.mean"]
+    assert main([*argv, "--out", str(tmp_path / "p.png")]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1
+    assert err == f"testbed: error: {source}: {message}" + (
+        " (more cells than the head)\n" if "18" in message else "\n"
+    )
+    assert not (tmp_path / "p.png").exists()
+
+
+def test_cli_plot_of_a_non_numeric_metric_cell_exits_2_naming_row_and_column(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = _write_results(tmp_path / "results.csv")
+    lag = 11  # command_lag_s.mean
+    _replace_row(source, 1, lambda row: [*row[:lag], "abc", *row[lag + 1 :]])
+    argv = ["plot", str(source), "--x", "link.ber", "--y", "command_lag_s.mean"]
+    assert main([*argv, "--out", str(tmp_path / "p.png")]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"testbed: error: {source}: row 3: --y: column 'command_lag_s.mean' holds 'abc', "
+        "not a number\n"
+    )
+    # an empty metric cell (a run without that value) and a non-numeric x (categorical) are fine
+    _replace_row(source, 1, lambda row: [*row[:lag], "", *row[lag + 1 :]])
+    _replace_row(source, 2, lambda row: [*row[:2], "ecs-4h", *row[3:]])
+    assert main([*argv, "--out", str(tmp_path / "p.png")]) == 0
+    assert (tmp_path / "p.png").read_bytes()[:8] == PNG_MAGIC
 
 
 # --- end to end -----------------------------------------------------------------------------------
