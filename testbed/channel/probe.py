@@ -36,6 +36,7 @@ from testbed.channel.trace import EventKind, Trace
 from testbed.protocol import MAX_PAYLOAD, Frame, FrameDecoder, encode_frame, frame_overhead
 
 __all__ = [
+    "MAX_FRAMES",
     "SEQ_BYTES",
     "LatencyStats",
     "ProbeResult",
@@ -46,6 +47,11 @@ __all__ = [
 
 SEQ_BYTES = 4
 """Sequence number at the start of each probe payload (u32, big-endian)."""
+
+MAX_FRAMES = 1_000_000
+"""Most frames one probe sends: a PER resolution of 1e-6, in about 20 s of wall time (≈ 50 k
+frames/s) and ≈ 100 MB for the per-frame records; far more would run for hours or not fit
+in memory (the per-frame tables grow with it)."""
 
 
 def frame_size_limits() -> tuple[int, int]:
@@ -146,7 +152,7 @@ def run_probe(
 
     Args:
         config: the link.
-        frames: number of frames, ≥ 1.
+        frames: number of frames, 1..:data:`MAX_FRAMES`.
         frame_bytes: total frame size incl. preamble, length, sequence number and CRC [B],
             within :func:`frame_size_limits`.
         interval_s: time between frames handed to the sender [s], > 0.
@@ -160,8 +166,8 @@ def run_probe(
         ValueError: an argument out of range (local misuse; the CLI checks before calling).
     """
     lo, hi = frame_size_limits()
-    if frames < 1:
-        raise ValueError(f"frames must be ≥ 1, got {frames}")
+    if not 1 <= frames <= MAX_FRAMES:
+        raise ValueError(f"frames must be in [1, {MAX_FRAMES}], got {frames}")
     if not lo <= frame_bytes <= hi:
         raise ValueError(f"frame_bytes must be in [{lo}, {hi}], got {frame_bytes}")
     if not (interval_s > 0.0 and math.isfinite(interval_s)):

@@ -20,7 +20,9 @@ def add_link_parser(sub: Subparsers) -> None:
     )
     link.add_argument("--preset", default="s100", help="link preset (default: s100)")
     add_set_option(link, "override a link parameter, e.g. --set ber=1e-4 (repeatable)")
-    link.add_argument("--frames", type=int, default=1000, help="frames to send (default: 1000)")
+    link.add_argument(
+        "--frames", type=int, default=1000, help="frames to send, 1..1000000 (default: 1000)"
+    )
     link.add_argument(
         "--size", type=int, default=60, help="frame size in bytes, all included (default: 60)"
     )
@@ -41,11 +43,11 @@ def _run_link(args: argparse.Namespace) -> int:
     import math
 
     from testbed.channel.config import load_link_config
-    from testbed.channel.probe import format_report, frame_size_limits, run_probe
+    from testbed.channel.probe import MAX_FRAMES, format_report, frame_size_limits, run_probe
 
     lo, hi = frame_size_limits()
-    if args.frames < 1:
-        raise ConfigError(f"--frames: must be ≥ 1, got {args.frames}")
+    if not 1 <= args.frames <= MAX_FRAMES:
+        raise ConfigError(f"--frames: must be 1..{MAX_FRAMES} (one probe), got {args.frames}")
     if not lo <= args.size <= hi:
         raise ConfigError(f"--size: a probe frame must be {lo}..{hi} bytes, got {args.size}")
     if not (args.interval > 0.0 and math.isfinite(args.interval)):

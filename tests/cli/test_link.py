@@ -79,6 +79,8 @@ def test_text_output(capsys: pytest.CaptureFixture[str]) -> None:
         (["--frames", "0"], "--frames"),
         (["--frames", "-4"], "--frames"),
         (["--frames", "abc"], "--frames"),
+        (["--frames", "1000000000000"], "--frames: must be 1..1000000"),  # was a MemoryError
+        (["--frames", "1000001"], "--frames: must be 1..1000000"),
         (["--interval", "0"], "--interval"),
         (["--interval", "-1"], "--interval"),
         (["--seed", "-1"], "--seed"),
