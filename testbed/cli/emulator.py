@@ -10,6 +10,7 @@ from testbed.cli.options import (
     Subparsers,
     add_set_option,
     check_distance,
+    check_duration,
     check_seed,
     exit_code_of,
 )
@@ -53,7 +54,7 @@ def add_modem_emulator_parser(sub: Subparsers) -> None:
         "--duration",
         type=float,
         default=None,
-        help="stop after this many seconds (default: run until Ctrl-C)",
+        help="stop after this many seconds, at most 86400 (default: run until Ctrl-C)",
     )
     emu.set_defaults(handler=_run_modem_emulator)
 
@@ -69,11 +70,8 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
     if not (args.time_factor > 0.0 and math.isfinite(args.time_factor)):
         raise ConfigError(f"--time-factor: must be > 0, got {args.time_factor}")
     check_distance(args.distance)
-    if args.duration is not None and not (args.duration >= 0.0 and math.isfinite(args.duration)):
-        raise ConfigError(
-            f"--duration: must be a finite time ≥ 0 s (omit it to run until Ctrl-C), "
-            f"got {args.duration}"
-        )
+    if args.duration is not None:
+        check_duration(args.duration, low_open=False, note=" (omit it to run until Ctrl-C)")
     check_seed(args.seed)
     config = load_link_config(args.preset, args.overrides)
     with ModemEmulator(

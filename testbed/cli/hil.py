@@ -8,11 +8,12 @@ Usage (any pyserial URL as a port: ``/dev/ttyUSB0``, ``socket://host:9200``, ``r
 
 The first form runs the operator and the simulated vehicle on this computer, each on its own
 modem (the paper's Fig. 4a); the other two run one node each, for two computers. Options:
-``--set K=V`` (repeatable), ``--seed``, ``--duration S``, ``--out DIR``, ``--force``,
-``--baud``, ``--rtscts``, ``--m64-channel``, ``--no-plots``. Outputs are those of ``testbed run``
-(``metrics.json``, ``events.csv``, ``series.csv``, plots), written as ``testbed run`` writes
-them (:func:`testbed.run.outputs.write_run`: ``metrics.json`` last, with ``"complete"`` and
-``"files"``), plus the ``hil`` section of ``metrics.json`` (see
+``--set K=V`` (repeatable), ``--seed``, ``--duration S`` (at most a day, 86400 s, as ``testbed
+run``), ``--out DIR``, ``--force``, ``--baud``, ``--rtscts``, ``--m64-channel`` (with ``--modem
+m64`` only: an option that would be ignored is an error), ``--no-plots``. Outputs are those of
+``testbed run`` (``metrics.json``, ``events.csv``, ``series.csv``, plots), written as ``testbed
+run`` writes them (:func:`testbed.run.outputs.write_run`: ``metrics.json`` last, with
+``"complete"`` and ``"files"``), plus the ``hil`` section of ``metrics.json`` (see
 :func:`testbed.run.realtime.hil_metrics`).
 
 ``--out`` is checked before any port is opened (creatable, writable, empty unless
@@ -30,13 +31,19 @@ runs.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers, check_seed, open_modem_ports
+from testbed.cli.options import (
+    Subparsers,
+    check_baud,
+    check_duration,
+    check_only_with,
+    check_seed,
+    open_modem_ports,
+)
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -82,13 +89,17 @@ def add_hil_arguments(parser: argparse.ArgumentParser) -> None:
         "--baud",
         type=int,
         default=None,
-        help="port speed in bit/s (default by modem: s100 9600, evologics 19200, m64 115200)",
+        help="port speed in bit/s, 50..12000000 (default by modem: s100 9600, evologics 19200, "
+        "m64 115200)",
     )
     parser.add_argument(
         "--rtscts", action="store_true", help="RTS/CTS hardware flow control (S100: unpaced)"
     )
     parser.add_argument(
-        "--m64-channel", type=int, default=4, help="Water Linked channel 1-7 (default: 4)"
+        "--m64-channel",
+        type=int,
+        default=None,
+        help="Water Linked channel 1-7, with --modem m64 only (default: 4)",
     )
     parser.add_argument(
         "--set",
@@ -100,7 +111,10 @@ def add_hil_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=None, help="random seed (vehicle sensors)")
     parser.add_argument(
-        "--duration", type=float, default=None, help="seconds to run (default: the scenario's)"
+        "--duration",
+        type=float,
+        default=None,
+        help="seconds to run, at most 86400 (default: the scenario's)",
     )
     parser.add_argument(
         "--out", type=Path, default=None, help="output directory (default: runs/hil-…)"
@@ -159,27 +173,26 @@ def run_hil_command(args: argparse.Namespace) -> int:
 
     mode, scenario_name = _words(args.words)
     ports = _ports(args, mode)
-    if args.baud is not None and args.baud <= 0:
-        raise ConfigError(f"--baud: must be > 0, got {args.baud}")
-    if not 1 <= args.m64_channel <= 7:
+    check_baud(args.baud)
+    check_only_with(
+        {"--m64-channel": args.m64_channel is not None}, args.modem == "m64", "--modem m64"
+    )
+    if args.m64_channel is not None and not 1 <= args.m64_channel <= 7:
         raise ConfigError(f"--m64-channel: must be 1..7, got {args.m64_channel}")
     check_seed(args.seed)
     scenario = load_scenario(scenario_name, args.overrides)
     duration = scenario.duration_s if args.duration is None else args.duration
     settle = scenario.metrics.settle_s
-    if not (math.isfinite(duration) and duration > settle):
-        raise ConfigError(
-            f"--duration: must exceed the scenario's metrics.settle_s ({settle:g} s), "
-            f"got {duration:g}"
-        )
+    check_duration(duration, low_s=settle, note=" (above the scenario's metrics.settle_s)")
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):  # before any port is opened or any time is spent
-        modem, baud, rtscts, channel = args.modem, args.baud, args.rtscts, args.m64_channel
+        modem, baud, rtscts = args.modem, args.baud, args.rtscts
+        channel = {} if args.m64_channel is None else {"m64_channel": args.m64_channel}
         endpoints = open_modem_ports(
             {
-                role: (option, PortSettings(url, modem, role, baud, rtscts, channel))
+                role: (option, PortSettings(url, modem, role, baud, rtscts, **channel))
                 for role, (option, url) in ports.items()
             }
         )

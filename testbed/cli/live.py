@@ -13,8 +13,10 @@ free port). The first line on stdout is ``testbed live: console on URL``. Defaul
 image settings are replaced by the person at the console. With ``--operator-port`` and
 ``--vehicle-port`` (any pyserial URL, e.g. the PTYs of ``testbed modem-emulator``) the link is
 real: each node's frames go through its modem as in ``testbed hil`` (``--modem``, default
-s100), ``metrics.json`` gets ``testbed hil``'s ``hil`` section, and the console's link controls
-(BER, gap, outage, distance) are refused — they act on the simulated link only.
+s100, only with the ports: an option that would be ignored is an error), ``metrics.json`` gets
+``testbed hil``'s ``hil`` section, and the console's link controls (BER, gap, outage,
+distance) are refused — they act on the simulated link only. ``--duration`` is at most a day
+(86400 s), as in ``testbed run``.
 
 Ctrl-C (or SIGTERM, or ``--duration`` reached) ends the session and writes what ``testbed run``
 writes (``metrics.json``, ``events.csv``, ``series.csv``, plots unless ``--no-plots``) with
@@ -39,6 +41,8 @@ from testbed.cli.options import (
     EXIT_OK,
     Subparsers,
     add_set_option,
+    check_duration,
+    check_only_with,
     check_seed,
     exit_code_of,
     open_modem_ports,
@@ -48,8 +52,8 @@ from testbed.config import ConfigError
 __all__ = ["DEFAULT_SCENARIO", "add_live_parser"]
 
 DEFAULT_SCENARIO = "s100-video-v1"
-_MAX_DURATION_S = 86_400.0
 _MODEMS = ("s100", "evologics", "m64", "raw")  # = testbed.hil.MODEM_KINDS
+_BOTH_PORTS = "--operator-port and --vehicle-port"
 
 
 def add_live_parser(sub: Subparsers) -> None:
@@ -74,7 +78,7 @@ def add_live_parser(sub: Subparsers) -> None:
         "--duration",
         type=float,
         default=3600.0,
-        help="session length [s] (default 3600; Ctrl-C ends it earlier)",
+        help="session length [s], at most 86400 (default 3600; Ctrl-C ends it earlier)",
     )
     live.add_argument("--seed", type=int, default=None, help="random seed (default: scenario's)")
     live.add_argument("--out", type=Path, default=None, help="output directory")
@@ -82,7 +86,12 @@ def add_live_parser(sub: Subparsers) -> None:
     live.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     live.add_argument("--operator-port", default=None, help="HIL: the operator's modem port")
     live.add_argument("--vehicle-port", default=None, help="HIL: the vehicle's modem port")
-    live.add_argument("--modem", choices=_MODEMS, default="s100", help="HIL: modem on the ports")
+    live.add_argument(
+        "--modem",
+        choices=_MODEMS,
+        default=None,
+        help="HIL: modem on the ports, with --operator-port/--vehicle-port only (default: s100)",
+    )
     live.set_defaults(handler=_run_live)
 
 
@@ -97,8 +106,9 @@ def _run_live(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port: must be 0..65535, got {args.port}")
-    if not 0.0 < args.duration <= _MAX_DURATION_S:
-        raise ConfigError(f"--duration: must be in (0, {_MAX_DURATION_S:g}] s, got {args.duration}")
+    check_duration(args.duration)
+    ports = _port_options(args)
+    modem = args.modem or "s100"
     scenario = load_scenario(args.scenario, args.overrides)
     out = args.out or Path("runs") / f"{scenario.id}-live-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):
@@ -107,10 +117,10 @@ def _run_live(args: argparse.Namespace) -> int:
         except OSError as err:
             raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
         try:
-            endpoints = _open_ports(args)
+            endpoints = _open_ports(ports, modem)
             hub = Hub()
             session = LiveSession(
-                scenario, hub, seed=args.seed, pilot=None, endpoints=endpoints, modem=args.modem
+                scenario, hub, seed=args.seed, pilot=None, endpoints=endpoints, modem=modem
             )
         except BaseException:
             sock.close()
@@ -136,24 +146,34 @@ def _run_live(args: argparse.Namespace) -> int:
         return EXIT_OK if result.stopped is None else exit_code_of(result.stopped)
 
 
-def _open_ports(args: argparse.Namespace) -> dict[str, Any] | None:
-    """The HIL endpoints of ``--operator-port``/``--vehicle-port``, or None for the simulated
-    link; a port that cannot be opened is a :class:`ConfigError` naming its option."""
+def _port_options(args: argparse.Namespace) -> dict[str, str] | None:
+    """Role → URL of ``--operator-port``/``--vehicle-port`` (both or neither), or None for the
+    simulated link; checked before anything is opened.
+
+    Raises:
+        ConfigError: one port without the other, the same port twice, ``--modem`` without them.
+    """
     ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
     if not any(ports.values()):
+        check_only_with({"--modem": args.modem is not None}, False, _BOTH_PORTS)
         return None
     for role, url in ports.items():
         if not url:
             raise ConfigError(f"--{role}-port: required with --{_other(role)}-port")
     if args.operator_port == args.vehicle_port:
         raise ConfigError("--vehicle-port: must differ from --operator-port")
+    return ports
+
+
+def _open_ports(ports: dict[str, str] | None, modem: str) -> dict[str, Any] | None:
+    """The HIL endpoints of the ports (:func:`_port_options`), or None for the simulated link;
+    a port that cannot be opened is a :class:`ConfigError` naming its option."""
+    if ports is None:
+        return None
     from testbed.hil import PortSettings
 
     return open_modem_ports(
-        {
-            role: (f"--{role}-port", PortSettings(url, args.modem, role))
-            for role, url in ports.items()
-        }
+        {role: (f"--{role}-port", PortSettings(url, modem, role)) for role, url in ports.items()}
     )
 
 

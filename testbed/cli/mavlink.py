@@ -11,7 +11,9 @@ preset: ``s100``, ``m64``, ``s2c``, ``tether``) both nodes run in real time over
 link with the scenario's codec and medium access, and the endpoint is a gateway on the operator
 node (:func:`testbed.run.mavlink_gateway.run_gateway`); ``--operator-port`` and
 ``--vehicle-port`` (with ``--modem``, ``--baud``, ``--rtscts`` as in ``testbed hil``) put the
-two nodes' frames through real serial modems instead. ``--gcs`` (repeatable) names a link:
+two nodes' frames through real serial modems instead: not with ``--link``, and those three
+options only with the ports (an option that would be ignored is an error). ``--duration`` is at
+most a day (86400 s), as in ``testbed run``. ``--gcs`` (repeatable) names a link:
 ``udpout:HOST:PORT`` (default ``udpout:127.0.0.1:14550``, where QGroundControl and MAVProxy
 listen), ``udpin:HOST:PORT``, ``tcpin:HOST:PORT`` or ``serial:PORT[,BAUD]`` / a pyserial URL;
 addresses are 127.0.0.1 unless given. Options: ``--set K=V`` (repeatable), ``--seed``,
@@ -28,13 +30,20 @@ prints one line and exits 2; Ctrl-C or SIGTERM ends the session with one line, k
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from testbed.cli.options import Subparsers, add_set_option, check_seed, open_modem_ports
+from testbed.cli.options import (
+    Subparsers,
+    add_set_option,
+    check_baud,
+    check_duration,
+    check_only_with,
+    check_seed,
+    open_modem_ports,
+)
 from testbed.config import ConfigError
 
 __all__ = ["add_mavlink_parser", "format_mavlink_summary", "run_mavlink_command"]
@@ -68,14 +77,17 @@ def add_mavlink_parser(sub: Subparsers) -> None:
         "udpin:HOST:PORT, tcpin:HOST:PORT, serial:PORT[,BAUD]",
     )
     parser.add_argument(
-        "--duration", type=float, default=None, help="seconds to run (default: the scenario's)"
+        "--duration",
+        type=float,
+        default=None,
+        help="seconds to run, at most 86400 (default: the scenario's)",
     )
     parser.add_argument(
         "--link",
         default=None,
         metavar="PRESET",
         help="gateway through the narrow link: both nodes in real time over this channel preset "
-        "(s100, m64, s2c, tether), MAVLink on the operator node",
+        "(s100, m64, s2c, tether), MAVLink on the operator node; not with the modem ports",
     )
     parser.add_argument(
         "--operator-port", default=None, help="gateway over real modems: the operator's port"
@@ -84,10 +96,20 @@ def add_mavlink_parser(sub: Subparsers) -> None:
         "--vehicle-port", default=None, help="gateway over real modems: the vehicle's port"
     )
     parser.add_argument(
-        "--modem", choices=_MODEMS, default="s100", help="modem on the ports (default: s100)"
+        "--modem",
+        choices=_MODEMS,
+        default=None,
+        help="modem on the ports, with --operator-port/--vehicle-port only (default: s100)",
     )
-    parser.add_argument("--baud", type=int, default=None, help="modem port speed [bit/s]")
-    parser.add_argument("--rtscts", action="store_true", help="RTS/CTS flow control")
+    parser.add_argument(
+        "--baud",
+        type=int,
+        default=None,
+        help="modem port speed [bit/s], 50..12000000, with the ports only (default by modem)",
+    )
+    parser.add_argument(
+        "--rtscts", action="store_true", help="RTS/CTS flow control, with the modem ports only"
+    )
     add_set_option(parser, "override a scenario key, e.g. --set vehicle.thrusters=bluerov2-heavy")
     parser.add_argument("--seed", type=int, default=None, help="random seed (vehicle sensors)")
     parser.add_argument(
@@ -115,8 +137,15 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
         raise ConfigError(f"{missing}: required with the other modem port")
     if hil and args.operator_port == args.vehicle_port:
         raise ConfigError("--vehicle-port: must differ from --operator-port")
-    if args.baud is not None and args.baud <= 0:
-        raise ConfigError(f"--baud: must be > 0, got {args.baud}")
+    if hil and args.link is not None:
+        raise ConfigError(
+            "--link: not with --operator-port and --vehicle-port (the modems are the link)"
+        )
+    given = {"--modem": args.modem is not None, "--baud": args.baud is not None}
+    given["--rtscts"] = args.rtscts
+    check_only_with(given, hil, "--operator-port and --vehicle-port")
+    check_baud(args.baud)
+    modem = args.modem or "s100"
     overrides = list(args.overrides)
     if args.link is not None:
         from testbed.channel import preset_names
@@ -136,8 +165,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     scenario = load_scenario(args.scenario, overrides)
     duration = scenario.duration_s if args.duration is None else args.duration
-    if not (math.isfinite(duration) and duration > 0.0):
-        raise ConfigError(f"--duration: must be > 0 s, got {duration:g}")
+    check_duration(duration)
     out = args.out
     if out is None:
         out = Path("runs") / f"mavlink-{scenario.id}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -147,7 +175,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
             for url in urls:
                 try:
                     links.append(open_link(url))
-                except OSError as err:
+                except (OSError, ValueError, LookupError, OverflowError) as err:  # pyserial's
                     reason = " ".join(str(err).split()) or type(err).__name__
                     raise ConfigError(f"--gcs: cannot open {url}: {reason}") from None
         except BaseException:
@@ -156,10 +184,10 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
             raise
         endpoints: dict[str, Any] = {}
         if hil:
-            endpoints = _open_modems(args, ports, links)
+            endpoints = _open_modems(args, modem, ports, links)
         where = ", ".join(urls)
         if gateway:
-            via = f"{args.modem} modems" if hil else f"the {scenario.link.preset} link"
+            via = f"{modem} modems" if hil else f"the {scenario.link.preset} link"
             what = f"gateway to the vehicle through {via} ({scenario.link.codec})"
         else:
             what = "ArduSub vehicle (sysid 1)"
@@ -177,7 +205,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 duration_s=duration,
                 hil=endpoints or None,
-                modem=args.modem if hil else "",
+                modem=modem if hil else "",
             )
         else:
             result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
@@ -187,7 +215,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
 
 
 def _open_modems(
-    args: argparse.Namespace, ports: dict[str, str], links: list[Any]
+    args: argparse.Namespace, modem: str, ports: dict[str, str], links: list[Any]
 ) -> dict[str, Any]:
     """The two HIL modem endpoints (on failure the links and what opened are closed)."""
     from testbed.hil import PortSettings
@@ -197,7 +225,7 @@ def _open_modems(
             {
                 role: (
                     f"--{role}-port",
-                    PortSettings(url, args.modem, role, args.baud, args.rtscts),
+                    PortSettings(url, modem, role, args.baud, args.rtscts),
                 )
                 for role, url in ports.items()
             }

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TypeAlias
 
-from testbed.config import ConfigError
+from testbed.config import ConfigError, FieldError, check_range
 
 if TYPE_CHECKING:
     from testbed.hil import LinkEndpoint, PortSettings
@@ -23,7 +23,10 @@ __all__ = [
     "Subparsers",
     "Terminated",
     "add_set_option",
+    "check_baud",
     "check_distance",
+    "check_duration",
+    "check_only_with",
     "check_out_dir",
     "check_seed",
     "exit_code_of",
@@ -79,6 +82,48 @@ def check_distance(distance_m: float) -> None:
         raise ConfigError(f"--distance: must be ≥ 0 m, got {distance_m}")
 
 
+def check_duration(
+    duration_s: float, *, low_s: float = 0.0, low_open: bool = True, note: str = ""
+) -> None:
+    """``--duration``: a time in (``low_s``, one day] s, the longest a scenario may run
+    (:data:`testbed.run.sections.MAX_DURATION_S`, ``testbed run``'s limit); ``low_open=False``
+    admits ``low_s`` itself. ``note`` (e.g. where the lower bound comes from) ends the message.
+
+    Raises:
+        ConfigError: ``--duration: must be in (0, 86400] s, got 1e+300`` and ``note``.
+    """
+    from testbed.run.sections import MAX_DURATION_S
+
+    try:
+        check_range(duration_s, "--duration", low_s, MAX_DURATION_S, "s", low_open=low_open)
+    except FieldError as err:
+        raise ConfigError(f"{err}{note}") from None
+
+
+def check_baud(baud: int | None) -> None:
+    """``--baud``: absent (the modem's default) or in :data:`testbed.hil.BAUD_RANGE` bit/s;
+    else :class:`ConfigError` (checked before pyserial, which overflows above 2^31 − 1)."""
+    from testbed.hil import BAUD_RANGE
+
+    low, high = BAUD_RANGE
+    if baud is not None and not low <= baud <= high:
+        raise ConfigError(f"--baud: must be in [{low}, {high}] bit/s, got {baud}")
+
+
+def check_only_with(options: Mapping[str, bool], used: bool, condition: str) -> None:
+    """Options that take effect only under ``condition``: the first given one (``name →
+    given``) is a :class:`ConfigError` unless ``used``, rather than silently ignored.
+
+    Raises:
+        ConfigError: e.g. ``--modem: only used with --operator-port and --vehicle-port``.
+    """
+    if used:
+        return
+    for option, given in options.items():
+        if given:
+            raise ConfigError(f"{option}: only used with {condition}")
+
+
 def check_out_dir(out: Path) -> None:
     """``--out``: a directory or nothing yet; else :class:`ConfigError`."""
     if out.exists() and not out.is_dir():
@@ -94,8 +139,9 @@ def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str,
     """
     from testbed.hil import PORT_ERRORS, open_endpoint
 
-    # pyserial: OSError (no such port), ValueError (unknown URL scheme), KeyError (bad option)…
-    errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError)
+    # pyserial: OSError (no such port), ValueError (unknown URL scheme), KeyError (bad option),
+    # OverflowError (a baud rate its termios call cannot hold)…
+    errors: tuple[type[Exception], ...] = (*PORT_ERRORS, LookupError, OverflowError)
     endpoints: dict[str, LinkEndpoint] = {}
     try:
         for role, (option, settings) in ports.items():

@@ -30,6 +30,7 @@ from .adapters import (
     Write,
 )
 from .endpoint import (
+    BAUD_RANGE,
     DEFAULT_BAUD,
     MODEM_KINDS,
     PortSettings,
@@ -52,6 +53,7 @@ from .transport import (
 )
 
 __all__ = [
+    "BAUD_RANGE",
     "CRC8_CHECK_VALUE",
     "DEFAULT_BAUD",
     "M64_PACKET_SIZE",

@@ -31,6 +31,7 @@ from .m64 import M64Adapter
 from .transport import LinkEndpoint, PortLike, SerialTransport
 
 __all__ = [
+    "BAUD_RANGE",
     "DEFAULT_BAUD",
     "EVOLOGICS_ADDRESS",
     "M64_ROLE",
@@ -56,6 +57,10 @@ nodes of 2021, REFERENCE §1.10), M64 115200 8N1 (REFERENCE §1.12). The EvoLogi
 common serial setting, not a verified default: check the modem (or use its TCP port,
 ``socket://host:9200``)."""
 
+BAUD_RANGE = (50, 12_000_000)
+"""Accepted port speeds [bit/s]: from 50 (B50, the slowest POSIX rate) to 12 Mbit/s (an FTDI
+FT232H, the fastest common USB serial adapter). pyserial itself overflows above 2^31 − 1."""
+
 EVOLOGICS_ADDRESS = {"operator": 2, "vehicle": 1}
 """Acoustic address by role (telerobotics: ROV 1, operator 2)."""
 
@@ -76,7 +81,8 @@ class PortSettings:
         m64_channel: Water Linked acoustic channel, 1..7 (both ends the same).
 
     Raises:
-        ValueError: unknown modem or role, non-positive baud rate, channel out of range.
+        ValueError: unknown modem or role, baud rate outside :data:`BAUD_RANGE`, channel out
+            of range.
     """
 
     url: str
@@ -91,8 +97,9 @@ class PortSettings:
             raise ValueError(f"modem must be one of {MODEM_KINDS}, got {self.modem!r}")
         if self.role not in ROLES:
             raise ValueError(f"role must be one of {ROLES}, got {self.role!r}")
-        if self.baudrate is not None and self.baudrate <= 0:
-            raise ValueError(f"baudrate must be > 0, got {self.baudrate}")
+        low, high = BAUD_RANGE
+        if self.baudrate is not None and not low <= self.baudrate <= high:
+            raise ValueError(f"baudrate must be in [{low}, {high}], got {self.baudrate}")
         if not 1 <= self.m64_channel <= 7:
             raise ValueError(f"m64_channel must be in 1..7, got {self.m64_channel}")
 

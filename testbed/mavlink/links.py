@@ -28,7 +28,7 @@ import threading
 import time
 from typing import Any, Protocol
 
-from testbed.hil import RawAdapter, Received, SerialTransport
+from testbed.hil import BAUD_RANGE, RawAdapter, Received, SerialTransport
 
 __all__ = [
     "DEFAULT_BAUD",
@@ -85,7 +85,8 @@ def parse_url(url: str) -> tuple[str, str, int]:
     """``(kind, host or port name, port number or baud)`` of a link URL.
 
     Raises:
-        ValueError: an unknown scheme, a missing or bad port number.
+        ValueError: an unknown scheme, a missing or bad port number, a baud rate outside
+            :data:`testbed.hil.BAUD_RANGE`.
     """
     for kind in ("udpout", "udpin", "tcpin"):
         if url.startswith(kind + ":"):
@@ -97,8 +98,9 @@ def parse_url(url: str) -> tuple[str, str, int]:
     if not rest or (rest == url and ":" in url and "://" not in url):
         raise ValueError(f"{url!r}: expected udpout:, udpin:, tcpin:, serial: or a pyserial URL")
     name, _, baud = rest.partition(",")
-    if baud and (not baud.isdigit() or int(baud) <= 0):
-        raise ValueError(f"{url!r}: baud must be a positive integer, got {baud!r}")
+    low, high = BAUD_RANGE
+    if baud and not (baud.isdigit() and low <= int(baud) <= high):
+        raise ValueError(f"{url!r}: baud must be an integer in [{low}, {high}], got {baud!r}")
     return "serial", name, int(baud) if baud else DEFAULT_BAUD
 
 

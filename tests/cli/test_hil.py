@@ -5,13 +5,17 @@
 
 from __future__ import annotations
 
+import os
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from testbed.cli.hil import format_hil_summary
 from testbed.cli.main import main
+from testbed.cli.options import open_modem_ports
+from testbed.config import ConfigError
 
 MISSING = "/dev/does-not-exist-testbed"
 
@@ -34,7 +38,7 @@ def exit_code(argv: list[str]) -> int:
         (["hil", "vehicle"], "--port"),
         (["hil", "operator", "--port", "loop://", "--operator-port", "x"], "--operator-port"),
         (["hil", "vehicle", "--port", "loop://", "--baud", "0"], "--baud"),
-        (["hil", "vehicle", "--port", "loop://", "--m64-channel", "9"], "--m64-channel"),
+        (["hil", "vehicle", "--port", "loop://", "--modem", "m64", "--m64-channel", "9"], "--m64"),
         (["hil", "vehicle", "--port", "loop://", "--modem", "s300"], "--modem"),
         (["hil", "vehicle", "--port", "loop://", "--duration", "5"], "--duration"),
         (["hil", "vehicle", "--port", "loop://", "--seed", "-1"], "--seed"),
@@ -51,6 +55,64 @@ def test_bad_input_is_one_line_naming_the_option(
     assert out == ""
     assert err.count("\n") == 1 and option in err
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [  # checked before any port is opened (MISSING would fail there, naming --port)
+        (["--duration", "1e300"], "--duration: must be in (10, 86400] s, got 1e+300"),
+        (["--duration", "86401"], "--duration: must be in (10, 86400] s, got 86401"),
+        (["--baud", "1000000000000"], "--baud: must be in [50, 12000000] bit/s, got 1000000000000"),
+        (["--baud", "49"], "--baud: must be in [50, 12000000] bit/s, got 49"),
+        (["--m64-channel", "3"], "--m64-channel: only used with --modem m64"),
+        (
+            ["--modem", "evologics", "--m64-channel", "4"],
+            "--m64-channel: only used with --modem m64",
+        ),
+    ],
+)
+def test_out_of_range_or_unused_options_are_refused_before_the_ports(
+    options: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["hil", "vehicle", "--port", MISSING, *options]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"testbed: error: {message}") and err.count("\n") == 1
+
+
+@pytest.fixture
+def pty_pair() -> Iterator[tuple[str, str]]:
+    """Two real serial devices (the slave ends of two pseudo-terminals)."""
+    fds = [os.openpty() for _ in range(2)]
+    try:
+        yield os.ttyname(fds[0][1]), os.ttyname(fds[1][1])
+    finally:
+        for pair in fds:
+            for fd in pair:
+                os.close(fd)
+
+
+def test_a_baud_rate_pyserial_cannot_hold_is_one_line_not_an_overflow(
+    pty_pair: tuple[str, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    operator, vehicle = pty_pair
+    argv = ["hil", "--operator-port", operator, "--vehicle-port", vehicle, "--out", str(tmp_path)]
+    assert main([*argv, "--baud", "1000000000000"]) == 2  # pyserial: OverflowError at 2^31
+    err = capsys.readouterr().err
+    assert err == "testbed: error: --baud: must be in [50, 12000000] bit/s, got 1000000000000\n"
+
+
+def test_an_overflow_or_value_error_from_pyserial_names_the_port_option(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from testbed import hil
+    from testbed.hil import PortSettings
+
+    def refuse(settings: PortSettings) -> None:
+        raise OverflowError("signed integer is greater than maximum")
+
+    monkeypatch.setattr(hil, "open_endpoint", refuse)
+    with pytest.raises(ConfigError, match=r"^--port: cannot open x: signed integer is greater"):
+        open_modem_ports({"vehicle": ("--port", PortSettings("x", "s100", "vehicle"))})
 
 
 def test_a_port_that_fails_to_open_closes_the_one_already_open(

@@ -22,7 +22,7 @@ import pytest
 from tests.processes import check_set, default_sigint
 
 WAIT_S = 120.0
-LONG = ["--duration", "100000", "--set", "metrics.settle_s=30"]
+LONG = ["--duration", "86400", "--set", "metrics.settle_s=30"]
 """Hours of wall time, settling for 30 s: a signal after ~2 s ends it before settle_s."""
 
 
@@ -67,7 +67,7 @@ def test_interrupt_before_settling_keeps_a_marked_partial_result(
     assert proc.returncode == code, stderr
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("testbed: interrupted at t = "), stderr
-    assert lines[0].endswith(f"of 100000 s; partial results in {out}")
+    assert lines[0].endswith(f"of 86400 s; partial results in {out}")
     assert stdout == ""
     metrics = check_set(out)
     assert metrics["complete"] is False
@@ -92,7 +92,7 @@ def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> 
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "old.txt").write_text("x")
     # ports that exist nowhere: the --out check comes first, before they are opened; a
-    # session of 100000 s would take a day: returning at all shows nothing ran
+    # session of 86400 s would take a day: returning at all shows nothing ran
     args = ["hil", "--operator-port", "loop://", "--vehicle-port", "/dev/null/x", *LONG]
     done = subprocess.run(
         [sys.executable, "-m", "testbed", *args, "--out", str(tmp_path / out)],

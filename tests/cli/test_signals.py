@@ -161,7 +161,7 @@ def test_modem_emulator_rejects_an_endless_duration_in_one_line() -> None:
         timeout=WAIT_S,
     )
     assert done.returncode == 2 and done.stderr.count("\n") == 1
-    assert done.stderr.startswith("testbed: error: --duration: must be a finite time")
+    assert done.stderr.startswith("testbed: error: --duration: must be in [0, 86400] s, got inf")
 
 
 SWALLOWED = """

@@ -197,3 +197,13 @@ def test_cli_bad_input_is_one_line_exit_2(
     out, err = capsys.readouterr()
     assert out == ""
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("duration", ["1e11", "1e300", "inf", "nan"])  # 1e11, 1e300: OverflowError
+def test_cli_duration_is_at_most_a_day_as_in_testbed_run(
+    capsys: pytest.CaptureFixture[str], duration: str
+) -> None:
+    assert main(["modem-emulator", "--duration", duration]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("testbed: error: --duration: must be in [0, 86400] s, got ")
+    assert err.count("\n") == 1

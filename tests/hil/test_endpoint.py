@@ -15,6 +15,7 @@ import serial
 
 from testbed.cli.hil import _MODEMS
 from testbed.hil import (
+    BAUD_RANGE,
     DEFAULT_BAUD,
     MODEM_KINDS,
     EvoLogicsAdapter,
@@ -43,6 +44,9 @@ def test_settings_check_their_values_and_give_the_modems_default_speed() -> None
         PortSettings("loop://", "s100", "rov")
     with pytest.raises(ValueError):
         PortSettings("loop://", "s100", "operator", baudrate=0)
+    assert PortSettings("loop://", "s100", "operator", baudrate=BAUD_RANGE[1]).baud == 12_000_000
+    with pytest.raises(ValueError, match="baudrate must be in"):  # pyserial overflows above 2^31
+        PortSettings("loop://", "s100", "operator", baudrate=BAUD_RANGE[1] + 1)
     with pytest.raises(ValueError):
         PortSettings("loop://", "s100", "operator", m64_channel=8)
     assert set(_MODEMS) == set(MODEM_KINDS)  # the CLI offers every modem

@@ -9,6 +9,8 @@ import pytest
 
 from testbed.cli.main import main
 
+BOGUS = ["--set", "link.bogus=1"]
+
 
 @pytest.mark.parametrize(
     ("args", "names"),
@@ -18,6 +20,10 @@ from testbed.cli.main import main
         (["--seed", "-1"], "--seed"),
         (["no-such-scenario"], "unknown scenario"),
         (["--set", "link.bogus=1"], "bogus"),
+        (["--duration", "1e300"], "--duration: must be in (0, 86400] s, got 1e+300"),
+        # checked before the scenario is loaded (link.bogus would fail there, naming bogus)
+        (["--modem", "m64", *BOGUS], "--modem: only used with --operator-port and --vehicle-port"),
+        (["--operator-port", "/dev/no-a", *BOGUS], "--vehicle-port: required"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(

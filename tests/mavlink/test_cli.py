@@ -11,6 +11,9 @@ import pytest
 
 from testbed.cli.main import main
 
+NO_GCS = ["--gcs", "serial:/dev/no-such-port"]
+"""A ground-station link that cannot be opened."""
+
 
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
@@ -26,8 +29,34 @@ def free_udp_port() -> int:
         (["--gcs", "udpin:127.0.0.1:99999"], "--gcs: 'udpin:127.0.0.1:99999': expected"),
         (["--gcs", "udpout:nowhere"], "--gcs: 'udpout:nowhere': expected"),
         (["--gcs", "serial:/dev/no-such-port"], "--gcs: cannot open serial:/dev/no-such-port"),
-        (["--duration", "-1"], "--duration: must be > 0 s"),
+        (["--duration", "-1"], "--duration: must be in (0, 86400] s, got -1"),
         (["--set", "vehicle.supply_voltage_v=99"], "vehicle.supply_voltage_v"),
+        # checked before any link is opened: NO_GCS would fail there (the run never starts)
+        ([*NO_GCS, "--duration", "1e300"], "--duration: must be in (0, 86400] s, got 1e+300"),
+        ([*NO_GCS, "--modem", "m64"], "--modem: only used with --operator-port and --vehicle-port"),
+        ([*NO_GCS, "--baud", "9600"], "--baud: only used with --operator-port and --vehicle-port"),
+        ([*NO_GCS, "--rtscts"], "--rtscts: only used with --operator-port and --vehicle-port"),
+        (
+            [
+                *NO_GCS,
+                "--link",
+                "s100",
+                "--operator-port",
+                "/dev/no-a",
+                "--vehicle-port",
+                "/dev/no-b",
+            ],
+            "--link: not with --operator-port and --vehicle-port",
+        ),
+        (
+            [*NO_GCS, "--operator-port", "/dev/no-a", "--vehicle-port", "/dev/no-b", "--baud", "0"],
+            "--baud: must be in [50, 12000000] bit/s, got 0",
+        ),
+        (
+            ["--gcs", "serial:/dev/no-such-port,1000000000000"],  # pyserial: OverflowError
+            "baud must be an integer in [50, 12000000], got '1000000000000'",
+        ),
+        (["--gcs", "bogus://x"], "--gcs: cannot open bogus://x: invalid URL"),  # a ValueError
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(
