@@ -161,18 +161,27 @@ def add_plot_parser(sub: Subparsers) -> None:
         "--y", required=True, metavar="METRIC", help="y column, e.g. command_age_s.mean"
     )
     plot.add_argument("--hue", default=None, metavar="KEY", help="colour by this column")
-    plot.add_argument("--out", type=Path, default=None, help="PNG path")
+    plot.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="PNG path (.png added to a name without one), or an existing directory to write "
+        "<y>_vs_<x>.png into (default: RESULTS' folder)",
+    )
     plot.set_defaults(handler=_run_plot)
 
 
-def plot_out_path(out: Path) -> Path:
-    """``testbed plot --out``: the PNG path actually written (``.png`` added to a name without
-    an extension), checked before any work: the extension, and a creatable, writable parent.
+def plot_out_path(out: Path, name: str) -> Path:
+    """``testbed plot --out``: the PNG path actually written, checked before any work: in an
+    existing directory, ``name`` there; else ``out`` (``.png`` added to a name without an
+    extension) with that extension and a creatable, writable parent.
 
     Raises:
         ConfigError: another extension, a parent that is a file or not writable.
     """
-    if out.suffix == "":
+    if out.is_dir():  # before ".png" is added: `--out plots` writes into plots/
+        out = out / name
+    elif out.suffix == "":
         out = out.with_name(out.name + ".png")
     if out.suffix.lower() != ".png":
         raise ConfigError(f"--out: {out}: unsupported extension {out.suffix!r} (writes .png)")
@@ -189,10 +198,8 @@ def _run_plot(args: argparse.Namespace) -> int:
     from testbed.report.sweep_plots import default_plot_name, plot_pair
     from testbed.report.sweep_results import check_results_file
 
-    out = args.out
-    if out is None:
-        out = args.results.parent / default_plot_name(args.x, args.y)
-    out = plot_out_path(out)
+    name = default_plot_name(args.x, args.y)
+    out = plot_out_path(args.results.parent / name if args.out is None else args.out, name)
     check_results_file(args.results)
     print(plot_pair(args.results, args.x, args.y, args.hue, out))
     return EXIT_OK

@@ -228,6 +228,20 @@ def test_cli_plot_writes_next_to_the_results(
     assert capsys.readouterr().out.strip() == str(written) and written.is_file()
 
 
+def test_cli_plot_into_an_existing_directory_writes_y_vs_x_there(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = _write_results(tmp_path / "results.csv")
+    plots = tmp_path / "plots"
+    plots.mkdir()
+    argv = ["plot", str(source), "--x", "link.ber", "--y", "command_lag_s.mean"]
+    assert main([*argv, "--out", str(plots)]) == 0
+    written = plots / "command_lag_s.mean_vs_link.ber.png"
+    assert capsys.readouterr().out.strip() == str(written)
+    assert written.read_bytes()[:8] == PNG_MAGIC
+    assert not (tmp_path / "plots.png").exists()  # not next to the directory
+
+
 @pytest.mark.parametrize(
     ("option", "column"), [("--x", "link.bre"), ("--y", "command_lag"), ("--hue", "ipg")]
 )
