@@ -121,7 +121,7 @@ def make_vehicle_node(
     for fault in scenario.faults.thrusters:
 
         def fail(_: simpy.Event, fault: Any = fault) -> None:
-            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value or None)
+            vehicle.fail_thruster(fault.thruster, fault.mode, fault.value)
             recorder.event(env.now, "vehicle", "thruster_fault", f"{fault.thruster} {fault.mode}")
 
         env.timeout(fault.t_s).callbacks.append(fail)

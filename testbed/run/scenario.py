@@ -343,11 +343,12 @@ def _from_data(
         for i, fault in enumerate(faults.thrusters):
             key = f"faults.thrusters[{i}].thruster"
             _check_name(fault.thruster, names, where, key, "thruster", f" of {vehicle.thrusters}")
-            if fault.mode == "stuck" and not low <= fault.value <= high:
+            stuck_at = fault.value if fault.mode == "stuck" else None
+            if stuck_at is not None and not low <= stuck_at <= high:
                 raise ConfigError(
                     f"{where}: faults.thrusters[{i}].value: a stuck T200 at "
                     f"{vehicle.supply_voltage_v:g} V holds [{low:g}, {high:g}] N, "
-                    f"got {fault.value:g}"
+                    f"got {stuck_at:g}"
                 )
     try:
         return Scenario(

@@ -277,26 +277,32 @@ class ThrusterFault:
     Attributes:
         t_s: when it fails [s], in [0, duration_s).
         thruster: a thruster name of the scenario's layout.
-        mode: ``"dead"`` (no force), ``"stuck"`` (holds ``value`` [N]) or ``"degraded"``
-            (force scaled by ``value`` in [0, 1]).
-        value: the stuck force [N], in [−100, 100], or degraded factor; must stay 0 for
-            ``"dead"``.
+        mode: ``"dead"`` (no force), ``"stuck"`` (holds ``value`` [N], or without one the
+            force it has when it fails) or ``"degraded"`` (force scaled by ``value`` in
+            [0, 1]).
+        value: the stuck force [N], in [−100, 100], or the degraded factor (required); left
+            out for ``"dead"``. 0 is a value like any other (a stuck thruster at 0 N, a
+            degraded one giving nothing).
     """
 
     t_s: float
     thruster: str
     mode: Literal["dead", "stuck", "degraded"]
-    value: float = 0.0
+    value: float | None = None
 
     def __post_init__(self) -> None:
         check_time(self.t_s, "t_s")
         check(bool(self.thruster), "thruster", "must not be empty")
-        limit = MAX_STUCK_FORCE_N
-        check_range(self.value, "value", -limit, limit)
+        value = self.value
         if self.mode == "dead":
-            check(self.value == 0.0, "value", "not used when mode = 'dead' (leave it out)")
-        if self.mode == "degraded":
-            check(0.0 <= self.value <= 1.0, "value", f"must be in [0, 1], got {self.value}")
+            check(value in (None, 0.0), "value", "not used when mode = 'dead' (leave it out)")
+        elif self.mode == "degraded":
+            check(value is not None, "value", "the degraded factor is required, in [0, 1]")
+        if value is not None:
+            limit = MAX_STUCK_FORCE_N
+            check_range(value, "value", -limit, limit)
+            if self.mode == "degraded":
+                check(0.0 <= value <= 1.0, "value", f"must be in [0, 1], got {value}")
 
 
 @dataclass(frozen=True, slots=True)

@@ -112,6 +112,33 @@ def test_thruster_failure_keeps_attitude_control() -> None:
     assert np.percentile(after, 95) < 3 * np.percentile(before, 95) + 1.0
 
 
+def test_a_fault_value_of_zero_reaches_the_vehicle_as_zero(monkeypatch: pytest.MonkeyPatch) -> None:
+    """0 is a value like any other: a thruster stuck at 0 N, one degraded to nothing (a falsy
+    0.0 used to become "no value": stuck then held its force, degraded raised)."""
+    from testbed.vehicle.vehicle import Vehicle
+
+    calls: list[tuple[Any, ...]] = []
+    fail = Vehicle.fail_thruster
+
+    def recorded(self: Vehicle, thruster: Any, mode: Any, value: Any = None, **kw: Any) -> None:
+        calls.append((thruster, mode, value))
+        fail(self, thruster, mode, value, **kw)
+
+    monkeypatch.setattr(Vehicle, "fail_thruster", recorded)
+    faults = (
+        "faults.thrusters=[{t_s = 12.0, thruster = 'LateralFrontLeft', mode = 'degraded', "
+        "value = 0.0}, {t_s = 13.0, thruster = 'LateralFrontRight', mode = 'stuck', value = 0.0}, "
+        "{t_s = 14.0, thruster = 'LateralBackLeft', mode = 'stuck'}]"
+    )
+    result = run("s100-thruster-failure-v1", "duration_s=16", "metrics.settle_s=1", faults)
+    assert result.metrics["events"]["thruster_fault"] == 3
+    assert calls == [
+        ("LateralFrontLeft", "degraded", 0.0),
+        ("LateralFrontRight", "stuck", 0.0),
+        ("LateralBackLeft", "stuck", None),  # no value: it holds the force it has
+    ]
+
+
 def test_outage_longer_than_the_failsafe_timeout_holds_depth() -> None:
     scenario = load_scenario("s100-outage-v1")
     result = run_scenario(scenario)
