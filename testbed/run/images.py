@@ -271,18 +271,24 @@ def image_metrics(log: ImageLog, sim_s: float) -> dict[str, Any]:
 
     Keys: ``captured``, ``completed``, ``per_minute`` (completed per minute of simulated time),
     ``latency_s`` {``mean``, ``p95``, ``max``} from capture to completion, ``bytes_delivered``
-    (coded bytes of the completed images), ``psnr_db`` {``mean``, ``min``} of each completed
-    image against its capture (finite values; a lossless image counts as 99 dB), and the
-    transfer counters.
+    (coded bytes of the completed images), ``undecodable`` (completed images whose bits decode
+    to no picture of the captured size: a budget too small for the coder's header),
+    ``psnr_db`` {``mean``, ``min``} of each other completed image against its capture (a
+    lossless image counts as 99 dB; NaN when there is none), and the transfer counters.
     """
     latencies: list[float] = []
     psnrs: list[float] = []
+    undecodable = 0
     for image in log.received:
         source = log.captured.get(image.number)
         if source is None:
             continue
         latencies.append(image.t_s - source.t_s)
-        psnrs.append(min(99.0, psnr_db(source.pixels, image.pixels)))
+        psnr = psnr_db(source.pixels, image.pixels)
+        if math.isnan(psnr):  # decoded to another shape (a budget too small for the header)
+            undecodable += 1
+        else:
+            psnrs.append(min(99.0, psnr))
     nan = math.nan
     latency = np.asarray(latencies, dtype=float)
     quality = np.asarray([p for p in psnrs if math.isfinite(p)], dtype=float)
@@ -296,6 +302,7 @@ def image_metrics(log: ImageLog, sim_s: float) -> dict[str, Any]:
             "max": float(latency.max()) if latency.size else nan,
         },
         "bytes_delivered": sum(image.encoded_bytes for image in log.received),
+        "undecodable": undecodable,
         "psnr_db": {
             "mean": float(quality.mean()) if quality.size else nan,
             "min": float(quality.min()) if quality.size else nan,

@@ -177,3 +177,28 @@ def test_run_summary_says_n_a_for_a_yaw_error_it_could_not_measure(clean_run: Ru
     assert f"yaw error std {yaw['std']:.2f} deg" in format_summary(clean_run.metrics, Path("out"))
     unmeasured = {**clean_run.metrics, "attitude_error_deg": {**attitude, "yaw": {"std": math.nan}}}
     assert "yaw error std n/a deg;" in format_summary(unmeasured, Path("out"))
+
+
+def test_an_image_that_decodes_to_no_picture_is_counted_not_scored_lossless() -> None:
+    """A budget too small for the coder's header completes an image whose bits decode to a
+    (0, 0) picture: it is counted ``undecodable`` and left out of the PSNR (it used to score
+    99 dB, "lossless", because min(99, NaN) is 99)."""
+    from testbed.run.images import CapturedImage, ImageLog, ReceivedImage, image_metrics
+
+    rng = np.random.default_rng(1)
+    frame = rng.integers(0, 256, (24, 32), dtype=np.uint8)
+    noisy = np.clip(frame.astype(int) + rng.integers(-8, 9, frame.shape), 0, 255).astype(np.uint8)
+    log = ImageLog()
+    for number in range(3):
+        log.captured[number] = CapturedImage(number, float(number), frame, 10)
+    log.received.append(ReceivedImage(0, 0.5, np.zeros((0, 0), dtype=np.uint8), 1))
+    log.received.append(ReceivedImage(1, 1.5, noisy, 10))
+    log.received.append(ReceivedImage(2, 2.5, frame.copy(), 10))
+    metrics = image_metrics(log, 60.0)
+    error = frame.astype(float) - noisy.astype(float)
+    expected = 10.0 * math.log10(255.0**2 / float(np.mean(error * error)))
+    assert metrics["completed"] == 3 and metrics["undecodable"] == 1
+    assert metrics["psnr_db"]["min"] == pytest.approx(expected)
+    assert metrics["psnr_db"]["mean"] == pytest.approx((expected + 99.0) / 2)
+    only_undecodable = ImageLog(captured=dict(log.captured), received=log.received[:1])
+    assert math.isnan(image_metrics(only_undecodable, 60.0)["psnr_db"]["mean"])
