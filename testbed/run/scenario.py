@@ -70,6 +70,7 @@ __all__ = [
     "MAX_DURATION_S",
     "MAX_PHYSICS_STEPS",
     "MAX_SERIES_ROWS",
+    "MAX_TOKEN_SLOTS",
     "MAX_TRIALS",
     "SCHEMA_VERSION",
     "FaultsSection",
@@ -97,6 +98,11 @@ MAX_SERIES_ROWS = 10_000_000
 vehicle.control_rate_hz)``, a row at most once a frame): ≈ 3.1 GB at 39 columns × 8 B."""
 MAX_TRIALS = 100
 """Most trials (runs with consecutive seeds) one scenario may ask for."""
+MAX_TOKEN_SLOTS = 10_000_000
+"""Most token slots a fixed-gap run may hold (``duration_s / link.ipg_s``): the operator sends a
+frame every gap whether or not the last one got through, so a gap of 1 ns on a 10-s run is
+10¹⁰ frames queued (it ran for days, growing memory). 10⁷ slots is ≈ 10 min of wall time; the
+whole :data:`MAX_DURATION_S` allows gaps from 8.64 ms."""
 
 ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
 """A versioned id (``s100-teleop-v1``): scenarios' and sweeps' (a sweep's names its default
@@ -114,8 +120,8 @@ class Scenario:
         description: one line for listings and reports.
         schema: scenario schema version; only :data:`SCHEMA_VERSION` is accepted.
         duration_s: simulated time [s], in (0, :data:`MAX_DURATION_S`] (one day), with at
-            most :data:`MAX_PHYSICS_STEPS` physics steps and :data:`MAX_SERIES_ROWS` series
-            rows.
+            most :data:`MAX_PHYSICS_STEPS` physics steps, :data:`MAX_TOKEN_SLOTS` fixed-gap
+            token slots and :data:`MAX_SERIES_ROWS` series rows.
         seed: default seed, ≥ 0.
         trials: how many runs ``testbed run`` makes, with seeds ``seed, seed + 1, …``
             (:mod:`testbed.run.trials`), in [1, :data:`MAX_TRIALS`].
@@ -190,6 +196,15 @@ class Scenario:
             f"{self.duration_s:g} s at vehicle.physics_dt_s = {vehicle.physics_dt_s:g} s is "
             f"{steps:.3g} physics steps, more than the {MAX_PHYSICS_STEPS:.0e} allowed",
         )
+        link = self.link
+        if link.mac == "token" and link.ipg == "fixed":
+            slots = self.duration_s / link.ipg_s
+            check(
+                slots <= MAX_TOKEN_SLOTS,
+                "link.ipg_s",
+                f"{link.ipg_s:g} s over duration_s = {self.duration_s:g} s is {slots:.3g} token "
+                f"slots, more than the {MAX_TOKEN_SLOTS:.0e} allowed",
+            )
         rate = min(self.metrics.sample_rate_hz, vehicle.control_rate_hz)
         rows = self.duration_s * rate
         check(

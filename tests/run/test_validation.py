@@ -334,6 +334,16 @@ def test_run_budget_bounds_duration_with_the_physics_step() -> None:
     assert longest.duration_s == 86400.0
 
 
+def test_run_budget_bounds_a_fixed_token_gap() -> None:
+    """The operator sends a frame every fixed gap whether or not the last got through: a 1-ns
+    gap on a 10-s run queued 10^10 frames (it ran for days, memory growing)."""
+    fixed = ["link.ipg=fixed", "metrics.settle_s=1"]
+    with pytest.raises(ConfigError, match=r"--set: link.ipg_s: 1e-09 s .* 1e\+10 token slots"):
+        load_scenario("s100-teleop-v1", ["duration_s=10", *fixed, "link.ipg_s=1e-9"])
+    day = load_scenario("s100-teleop-v1", ["duration_s=86400", *fixed, "link.ipg_s=0.00864"])
+    assert day.duration_s / day.link.ipg_s == pytest.approx(1e7)  # the limit itself: ok
+
+
 def test_cli_bad_supply_voltage_exits_2_naming_the_key(
     capsys: pytest.CaptureFixture[str], tmp_path: Any
 ) -> None:
