@@ -348,6 +348,11 @@ def _from_data(
     layouts = known_thruster_configs()
     _check_name(vehicle.thrusters, layouts, where, "vehicle.thrusters", "thruster layout")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
+    if operator.depth_m is not None and link.codec != "changeset":
+        raise ConfigError(
+            f"{where}: operator.depth_m: only used when link.codec = 'changeset' (the teleop "
+            "and MAVLink orders carry no depth setpoint: depth hold keeps the depth at arming)"
+        )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
     faults = build(FaultsSection, top.faults, source=where, prefix="faults.")
     metrics = build(MetricsSection, top.metrics, source=where, prefix="metrics.")

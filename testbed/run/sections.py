@@ -165,8 +165,9 @@ class OperatorSection:
     Attributes:
         mode: control mode requested at start.
         arm_at_s: when the operator requests arming [s], in [0, duration_s).
-        depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only), in
-            [0, 1000]; None = hold the depth at arming.
+        depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only, over the
+            change-set codec: the teleop and MAVLink orders carry none), in [0, 1000]; None =
+            hold the depth at arming.
         precision: precision (fine) stick mode.
     """
 

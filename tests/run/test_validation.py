@@ -355,3 +355,12 @@ def test_cli_bad_supply_voltage_exits_2_naming_the_key(
         "testbed: error: --set: vehicle.supply_voltage_v: must be in [12, 20] V, got 25.0\n"
     )
     assert not out.exists()
+
+
+@pytest.mark.parametrize("scenario_id", ["s100-teleop-v1", "s100-mavlink-raw-v1"])
+def test_a_depth_setpoint_the_codec_cannot_carry_is_refused(scenario_id: str) -> None:
+    """The teleop and MAVLink orders carry no depth setpoint: operator.depth_m there was
+    silently ignored (the same run whatever its value); the change-set codec carries it."""
+    with pytest.raises(ConfigError, match=r"^--set: operator.depth_m: only used when link.codec"):
+        load_scenario(scenario_id, ["operator.depth_m=5"])
+    assert load_scenario("tether-teleop-v1", ["operator.depth_m=5"]).operator.depth_m == 5.0
