@@ -185,6 +185,14 @@ class Scenario:
             "operator.mode",
             "the attitude pilot needs 'stabilize' or 'depth_hold', got 'manual'",
         )
+        if self.pilot.kind == "attitude":  # a held setpoint is no news: it is not sent again
+            period, hold = 1.0 / self.pilot.setpoint_rate_hz, self.vehicle.failsafe.hold_after_s
+            check(
+                period < hold,
+                "pilot.setpoint_rate_hz",
+                f"a setpoint every {period:g} s is no fresher than vehicle.failsafe.hold_after_s "
+                f"({hold:g} s): the failsafe would hold between setpoints (raise one of them)",
+            )
 
     def _check_budget(self) -> None:
         """The run's size is bounded, so every accepted scenario finishes."""

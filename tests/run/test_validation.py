@@ -364,3 +364,13 @@ def test_a_depth_setpoint_the_codec_cannot_carry_is_refused(scenario_id: str) ->
     with pytest.raises(ConfigError, match=r"^--set: operator.depth_m: only used when link.codec"):
         load_scenario(scenario_id, ["operator.depth_m=5"])
     assert load_scenario("tether-teleop-v1", ["operator.depth_m=5"]).operator.depth_m == 5.0
+
+
+def test_attitude_setpoints_slower_than_the_failsafe_are_refused() -> None:
+    """The attitude pilot's setpoints are its only contact (a held one is not sent again): at
+    0.5 Hz against the 1-s hold the failsafe held and released every second over a perfect
+    tether. Raising the hold admits the slow rate."""
+    with pytest.raises(ConfigError, match=r"^--set: pilot.setpoint_rate_hz: a setpoint every 2 s"):
+        load_scenario("ecs-rollpitch-6dof-v1", ["pilot.setpoint_rate_hz=0.5"])
+    slow = ["pilot.setpoint_rate_hz=0.5", "vehicle.failsafe.hold_after_s=2.5"]
+    assert load_scenario("ecs-rollpitch-6dof-v1", slow).pilot.setpoint_rate_hz == 0.5
