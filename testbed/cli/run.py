@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -192,8 +193,11 @@ def finish_run(
 def format_summary(metrics: dict[str, Any], out: Path) -> str:
     """A few lines a person reads after a run."""
 
-    def ms(value: float | None) -> str:
-        return "n/a" if value is None or value != value else f"{1000 * value:.0f} ms"
+    def ms(value: float | None) -> str:  # n/a where metrics.json has null (NaN, infinite)
+        return "n/a" if value is None or not math.isfinite(value) else f"{1000 * value:.0f} ms"
+
+    def per(value: float | None) -> str:
+        return "n/a" if value is None or not math.isfinite(value) else f"{100 * value:.2f} %"
 
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
     lag, age = metrics["command_lag_s"], metrics["command_age_s"]
@@ -202,9 +206,9 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"{metrics['scenario']} seed {metrics['seed']}: {metrics['sim_s']:.0f} s simulated in "
         f"{metrics['wall_s']:.1f} s ({metrics['rtf']:.0f}x real time)",
         f"  uplink   {up['frames_delivered']}/{up['frames_sent']} frames, PER "
-        f"{100 * up['per']:.2f} %, {up['goodput_bps']:.0f} bit/s",
+        f"{per(up['per'])}, {up['goodput_bps']:.0f} bit/s",
         f"  downlink {down['frames_delivered']}/{down['frames_sent']} frames, PER "
-        f"{100 * down['per']:.2f} %, {down['goodput_bps']:.0f} bit/s",
+        f"{per(down['per'])}, {down['goodput_bps']:.0f} bit/s",
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
         f"  yaw error std {_num(yaw['std'], digits=2)} deg; energy {metrics['energy_wh']:.3f} Wh",

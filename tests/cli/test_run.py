@@ -119,3 +119,20 @@ def test_a_full_disk_is_one_line_naming_the_file_and_exit_1(
     assert len(err) == 1 and err[0].startswith("testbed: cannot write "), err
     assert err[0].endswith(f"{out / 'series.csv'}: No space left on device"), err
     assert not (out / "metrics.json").exists()  # no finished result claimed
+
+
+def test_the_summary_shows_n_a_where_metrics_json_has_null(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Nothing gets through (BER 0.5): no PER to speak of on the silent side and no command
+    age; the summary says n/a, as metrics.json says null (it printed 'PER nan %' and
+    'inf ms')."""
+    out = tmp_path / "run"
+    argv = ["run", "--set", "link.ber=0.5", "--set", "duration_s=20", "--out", str(out)]
+    assert main([*argv, "--no-plots"]) == 0
+    text = capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["link"]["downlink"]["per"] is None
+    assert metrics["command_age_s"]["mean"] is None
+    assert "downlink 0/0 frames, PER n/a," in text and "command age mean n/a;" in text
+    assert "nan" not in text and "inf" not in text
