@@ -185,6 +185,13 @@ class Scenario:
             "operator.mode",
             "the attitude pilot needs 'stabilize' or 'depth_hold', got 'manual'",
         )
+        if self.vehicle.arm is None:
+            for i, goal in enumerate(self.pilot.goals):
+                check(
+                    goal.frame != "end_effector",
+                    f"pilot.goals[{i}].frame",
+                    "an 'end_effector' goal needs an arm on the vehicle (vehicle.arm)",
+                )
         if self.pilot.kind == "attitude":  # a held setpoint is no news: it is not sent again
             period, hold = 1.0 / self.pilot.setpoint_rate_hz, self.vehicle.failsafe.hold_after_s
             check(

@@ -374,3 +374,12 @@ def test_attitude_setpoints_slower_than_the_failsafe_are_refused() -> None:
         load_scenario("ecs-rollpitch-6dof-v1", ["pilot.setpoint_rate_hz=0.5"])
     slow = ["pilot.setpoint_rate_hz=0.5", "vehicle.failsafe.hold_after_s=2.5"]
     assert load_scenario("ecs-rollpitch-6dof-v1", slow).pilot.setpoint_rate_hz == 0.5
+
+
+def test_an_end_effector_goal_needs_an_arm() -> None:
+    """It was accepted on a vehicle without an arm and flown as a body goal."""
+    goal = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, 1.0], frame = 'end_effector'}]"
+    with pytest.raises(ConfigError, match=r"^--set: pilot.goals\[0\].frame: an 'end_effector'"):
+        load_scenario("s100-supervised-v1", [goal])
+    armed = load_scenario("uvms-waypoint-v1")
+    assert armed.vehicle.arm is not None
