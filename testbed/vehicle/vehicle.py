@@ -217,7 +217,7 @@ class VehicleConfig:
         sensors: sensor models.
         current: water current.
         start_position_ned_m: (3,) initial body-origin position [m], NED, each in
-            [−1e4, 1e4].
+            [−1e4, 1e4], the depth (down) ≥ 0: in the water.
         start_euler_rad: (3,) initial roll, pitch, yaw [rad], each in [−2π, 2π].
         camera: the forward camera (disabled by default); when enabled, the physics client
             also holds the pool's scenery (visual only: the dynamics are the same).
@@ -272,6 +272,12 @@ class VehicleConfig:
         check_range(self.thruster_time_constant_s, "thruster_time_constant_s", 0.0, 10.0, "s")
         limit = MAX_POSITION_M
         check_ranges(self.start_position_ned_m, "start_position_ned_m", -limit, limit, "m")
+        depth = self.start_position_ned_m[2]
+        check(
+            depth >= 0.0,
+            "start_position_ned_m",
+            f"the depth (down, the third) must be ≥ 0 m (in the water), got {depth}",
+        )
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
 
     @property

@@ -383,3 +383,11 @@ def test_an_end_effector_goal_needs_an_arm() -> None:
         load_scenario("s100-supervised-v1", [goal])
     armed = load_scenario("uvms-waypoint-v1")
     assert armed.vehicle.arm is not None
+
+
+def test_a_vehicle_cannot_start_above_the_surface() -> None:
+    """It was accepted 10 km up and fell at a water-drag terminal velocity."""
+    with pytest.raises(ConfigError, match=r"^--set: vehicle.start_position_ned_m: the depth"):
+        load_scenario("s100-teleop-v1", ["vehicle.start_position_ned_m=[0.0, 0.0, -10000.0]"])
+    surface = load_scenario("s100-teleop-v1", ["vehicle.start_position_ned_m=[0.0, 0.0, 0.0]"])
+    assert surface.vehicle.start_position_ned_m[2] == 0.0
