@@ -24,10 +24,11 @@ SCENARIO = "tether-teleop-v1"
 _CHILD = """
 import resource, sys
 from pathlib import Path
-from testbed.run.runner import run_scenario, write_outputs
+from testbed.run.outputs import write_run
+from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 scenario = load_scenario(sys.argv[1], [f"duration_s={sys.argv[2]}"])
-write_outputs(run_scenario(scenario), Path(sys.argv[3]))
+write_run(run_scenario(scenario), Path(sys.argv[3]))
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)  # KiB on Linux
 """
 

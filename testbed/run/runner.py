@@ -4,22 +4,20 @@
 subsystem (the link's bit errors, the vehicle's sensors and current), builds one simpy
 ``Environment``, the medium with both modems, the vehicle node and the operator node, schedules
 the scenario's faults, runs for the scenario's duration and reduces the recording to metrics
-(:func:`compute_metrics`). :func:`write_outputs` writes ``metrics.json``, ``events.csv``,
-``series.csv`` and the plots. Same scenario and seed ⇒ the same ``metrics.json`` byte for byte,
-apart from ``wall_s`` and ``rtf``.
+(:func:`compute_metrics`); :func:`testbed.run.outputs.write_run` writes ``metrics.json``,
+``events.csv``, ``series.csv`` and the plots. Same scenario and seed ⇒ the same ``metrics.json``
+byte for byte, apart from ``wall_s`` and ``rtf``.
 """
 
 from __future__ import annotations
 
 import contextlib
 import gc
-import json
 import math
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,7 +53,6 @@ __all__ = [
     "mission_metrics",
     "run_scenario",
     "tally_images",
-    "write_outputs",
 ]
 
 _MODES = {
@@ -462,33 +459,3 @@ def mission_metrics(
         "goals_reached": None if status is None else status.reached,
         "orders_acknowledged": orders_acknowledged,
     }
-
-
-def _json_ready(value: Any) -> Any:
-    """NaN and infinities become null (strict JSON); containers are converted recursively."""
-    if isinstance(value, dict):
-        return {k: _json_ready(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_ready(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def write_outputs(result: RunResult, out_dir: Path) -> list[Path]:
-    """Write ``metrics.json``, ``events.csv`` and ``series.csv`` (the plots are
-    :func:`testbed.report.run_plots.write_run_plots`'s).
-
-    Returns:
-        The files written.
-    """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    metrics_path = out_dir / "metrics.json"
-    text = json.dumps(_json_ready(result.metrics), indent=2, allow_nan=False)
-    metrics_path.write_text(text + "\n", encoding="utf-8")
-    events_path = out_dir / "events.csv"
-    result.recorder.write_events_csv(events_path)
-    series_path = out_dir / "series.csv"
-    result.recorder.write_series_csv(series_path)
-    written = [metrics_path, events_path, series_path]
-    return written

@@ -1,6 +1,6 @@
 """Every packaged scenario is deterministic: the same seed writes the same files, byte for byte.
 
-Each scenario runs twice, shortened, in this process; ``write_outputs`` (no plots) writes
+Each scenario runs twice, shortened, in this process; ``write_run`` (no plots) writes
 ``metrics.json``, ``events.csv`` and ``series.csv`` for each run, and the two sets must be
 identical but for the wall-clock lines of ``metrics.json`` (``wall_s``, ``rtf``). The test is
 parametrized over :func:`~testbed.run.scenario.scenario_names`, so a new scenario is covered
@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from testbed.run.runner import run_scenario, write_outputs
+from testbed.run.outputs import write_run
+from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario, scenario_names
 
 WALL_CLOCK_KEYS = ("wall_s", "rtf")
@@ -39,7 +40,7 @@ SHORTENING: dict[str, list[str]] = {
 def run_and_write(name: str, out: Path, seed: int | None = None) -> dict[str, bytes]:
     """Run the shortened scenario ``name`` and return its written outputs, wall clock removed."""
     scenario = load_scenario(name, SHORTENING.get(name, DEFAULT_SHORTENING))
-    write_outputs(run_scenario(scenario, seed=seed), out)
+    write_run(run_scenario(scenario, seed=seed), out)
     files = {file: (out / file).read_bytes() for file in OUTPUTS}
     lines = files["metrics.json"].splitlines(keepends=True)
     kept = [line for line in lines if not line.lstrip().startswith(_quoted(WALL_CLOCK_KEYS))]

@@ -19,7 +19,8 @@ from testbed.channel import load_link_config
 from testbed.config import ConfigError
 from testbed.imaging import decode, encode
 from testbed.report.run_plots import write_run_plots
-from testbed.run.runner import RunResult, run_scenario, write_outputs
+from testbed.run.outputs import write_run
+from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import load_scenario
 
 GAP_S = 0.6
@@ -94,7 +95,7 @@ def test_images_metrics_and_strip(clean_run: RunResult, tmp_path: Path) -> None:
     )
     assert 20.0 < metrics["psnr_db"]["mean"] < 60.0  # lossy at 600 B, not garbage
     assert metrics["latency_s"]["p95"] >= metrics["latency_s"]["mean"] > 0.0
-    written = write_outputs(clean_run, tmp_path) + write_run_plots(clean_run, tmp_path)
+    written = write_run(clean_run, tmp_path, plots=write_run_plots)
     assert tmp_path / "images.png" in written and (tmp_path / "images.png").stat().st_size > 5000
     on_disk = json.loads((tmp_path / "metrics.json").read_text())
     assert on_disk["images"]["completed"] == metrics["completed"]

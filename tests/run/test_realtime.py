@@ -54,8 +54,9 @@ import testbed
 from testbed.channel import Delivery, EventKind, LinkConfig, Trace, load_link_config
 from testbed.hil import LinkEndpoint, PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
+from testbed.run.outputs import write_run
 from testbed.run.realtime import POLL_S, FrameLedger, HilModem, run_hil
-from testbed.run.runner import RunResult, write_outputs
+from testbed.run.runner import RunResult
 from testbed.run.scenario import load_scenario
 
 IDLE_S = 0.003
@@ -605,7 +606,7 @@ def window(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Window]:
             )
             clock_started = (called, time.monotonic() - result.metrics["wall_s"])
         single_dir = root / "single"
-        write_outputs(result, single_dir)
+        write_run(result, single_dir)
     finally:
         outputs = {}
         for name, child in children.items():

@@ -156,10 +156,10 @@ def test_outage_longer_than_the_failsafe_timeout_holds_depth() -> None:
 
 
 def test_metrics_json_is_strict_json(tmp_path: Any) -> None:
-    from testbed.run.runner import write_outputs
+    from testbed.run.outputs import write_run
 
     result = run("ecs-yaw-4h-v1", "duration_s=5", "metrics.settle_s=1")
-    written = write_outputs(result, tmp_path)
+    written = write_run(result, tmp_path)
     metrics = json.loads((tmp_path / "metrics.json").read_text(), parse_constant=_reject)
     assert metrics["command_lag_s"]["n"] == 0 and metrics["command_lag_s"]["mean"] is None
     assert {p.name for p in written} == {"metrics.json", "events.csv", "series.csv"}

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from testbed.run.runner import run_scenario, write_outputs
+from testbed.run.outputs import write_run
+from testbed.run.runner import run_scenario
 from testbed.run.scenario import Scenario, load_scenario
 from testbed.vehicle.arm import load_arm_model
 from testbed.vehicle.arm_kinematics import end_effector_ned, link_centres_body
@@ -121,7 +122,7 @@ def test_waypoint_leg_reaches_its_target_and_the_tpik_moves_the_joints() -> None
 
 def short_run(scenario: Scenario, seed: int, out: Path) -> tuple[dict[str, FloatArray], bytes]:
     result = run_scenario(scenario, seed=seed)
-    write_outputs(result, out)
+    write_run(result, out)
     return result.recorder.series(), (out / "series.csv").read_bytes()
 
 
