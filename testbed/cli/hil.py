@@ -42,6 +42,7 @@ from testbed.cli.options import (
     check_duration,
     check_only_with,
     check_seed,
+    format_value,
     open_modem_ports,
 )
 from testbed.config import ConfigError
@@ -223,15 +224,13 @@ def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:
     """A few lines a person reads after a HIL run (NaN shows as n/a)."""
 
     def ms(value: float | None, digits: int = 0) -> str:
-        if value is None or value != value:
-            return "n/a"
-        return f"{1000 * value:.{digits}f} ms"
+        return format_value(value, 1000.0, digits, " ms")
 
     def count(value: float | None) -> str:
-        return "n/a" if value is None or value != value else f"{value:.0f}"
+        return format_value(value, digits=0)
 
     def percent(value: float | None) -> str:
-        return "n/a" if value is None or value != value else f"{100 * value:.2f} %"
+        return format_value(value, 100.0, 2, " %")
 
     hil = metrics["hil"]
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]

@@ -42,6 +42,7 @@ from testbed.cli.options import (
     check_duration,
     check_only_with,
     check_seed,
+    format_value,
     open_modem_ports,
 )
 from testbed.config import ConfigError
@@ -240,7 +241,7 @@ def format_mavlink_summary(metrics: dict[str, Any], out: Path) -> str:
     """A few lines a person reads after a MAVLink session (NaN shows as n/a)."""
 
     def ms(value: float | None) -> str:
-        return "n/a" if value is None or value != value else f"{value:.1f} ms"
+        return format_value(value, digits=1, unit=" ms")
 
     section = metrics["mavlink"]
     latency = section["gcs_to_thruster_ms"]

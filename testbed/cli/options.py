@@ -30,6 +30,7 @@ __all__ = [
     "check_out_dir",
     "check_seed",
     "exit_code_of",
+    "format_value",
     "open_modem_ports",
 ]
 
@@ -74,6 +75,14 @@ def check_seed(seed: int | None) -> None:
     """``--seed``: absent (the default) or ≥ 0; else :class:`ConfigError`."""
     if seed is not None and seed < 0:
         raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
+
+
+def format_value(value: float | None, scale: float = 1.0, digits: int = 3, unit: str = "") -> str:
+    """A summary's figure: ``scale · value`` to ``digits`` places with ``unit``, or ``n/a``
+    where metrics.json has null (None, NaN, infinite)."""
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    return f"{scale * value:.{digits}f}{unit}"
 
 
 def check_distance(distance_m: float) -> None:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_seed, exit_code_of
+from testbed.cli.options import format_value as _num
 
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
@@ -111,10 +111,6 @@ def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool)
     return EXIT_OK
 
 
-def _num(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
-    return "n/a" if value is None or value != value else f"{scale * value:.{digits}f}"
-
-
 def format_trial(trial: int, metrics: dict[str, Any]) -> str:
     """One line for a finished trial: seed, real-time factor, mission error and command lag."""
     from testbed.run.trials import headline
@@ -193,11 +189,11 @@ def finish_run(
 def format_summary(metrics: dict[str, Any], out: Path) -> str:
     """A few lines a person reads after a run."""
 
-    def ms(value: float | None) -> str:  # n/a where metrics.json has null (NaN, infinite)
-        return "n/a" if value is None or not math.isfinite(value) else f"{1000 * value:.0f} ms"
+    def ms(value: float | None) -> str:
+        return _num(value, 1000.0, 0, " ms")
 
     def per(value: float | None) -> str:
-        return "n/a" if value is None or not math.isfinite(value) else f"{100 * value:.2f} %"
+        return _num(value, 100.0, 2, " %")
 
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
     lag, age = metrics["command_lag_s"], metrics["command_age_s"]
@@ -218,10 +214,8 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         latency, psnr = images["latency_s"]["mean"], images["psnr_db"]["mean"]
         lines.append(
             f"  images {images['completed']}/{images['captured']} completed "
-            f"({images['per_minute']:.1f}/min), latency mean "
-            + ("n/a" if latency is None or latency != latency else f"{latency:.1f} s")
-            + ", PSNR mean "
-            + ("n/a" if psnr is None or psnr != psnr else f"{psnr:.1f} dB")
+            f"({images['per_minute']:.1f}/min), latency mean {_num(latency, digits=1, unit=' s')}"
+            f", PSNR mean {_num(psnr, digits=1, unit=' dB')}"
         )
     mission = metrics.get("mission")
     if mission is not None:
