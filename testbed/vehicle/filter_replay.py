@@ -78,7 +78,7 @@ __all__ = [
 
 
 @numba.njit(cache=True)
-def _stage(
+def stage_measurement(
     steps: FloatArray,
     updates: FloatArray,
     cache: FloatArray,
@@ -87,9 +87,10 @@ def _stage(
     scratch: FloatArray,
     q: float,
 ) -> int:  # pragma: no cover - compiled
-    """Find the step a measurement at ``time_s`` updates (ledger TARGET, SPLIT) and copy its
-    prior into ``scratch``: the stored step, or the interval split at ``time_s`` (the next
-    step's input held over both parts). Returns :data:`APPLIED` when staged, else
+    """Find the step a measurement at ``time_s`` [s] updates (ledger TARGET, SPLIT) and copy its
+    prior into the step row ``scratch`` (x at :data:`STEP_X`, P at :data:`STEP_P`): the stored
+    step, or the interval split at ``time_s`` (the next step's input held over both parts); for
+    :func:`apply_measurement` and :func:`commit_reset`. Returns :data:`APPLIED` when staged, else
     :data:`STALE_STATUS` (counted), :data:`NEEDS_ROWS` or :data:`NEEDS_RECORDS`."""
     target, split = locate(steps, ledger, time_s)
     if target < 0:
@@ -292,7 +293,7 @@ def apply_measurement(
         ledger[INVALID] += 1
         return INVALID_STATUS
     scratch = np.empty(STEP_WIDTH)
-    status = _stage(steps, updates, cache, ledger, time_s, scratch, q)
+    status = stage_measurement(steps, updates, cache, ledger, time_s, scratch, q)
     if status != APPLIED:
         return status
     record, z, s = make_record(kind, False, h, value, sigma)
@@ -305,23 +306,6 @@ def apply_measurement(
         return SINGULAR
     ledger[ACCEPTED] += 1
     return _commit(steps, updates, cache, ledger, newest, scratch, x, p, record, q)
-
-
-@numba.njit(cache=True)
-def stage_measurement(
-    steps: FloatArray,
-    updates: FloatArray,
-    cache: FloatArray,
-    ledger: IntArray,
-    time_s: float,
-    scratch: FloatArray,
-    q: float,
-) -> int:  # pragma: no cover - compiled
-    """The prior a measurement at ``time_s`` [s] updates, into the step row ``scratch`` (x at
-    :data:`STEP_X`, P at :data:`STEP_P`), for :func:`commit_reset`. Returns :data:`APPLIED`
-    when staged, else :data:`STALE_STATUS` (counted), :data:`NEEDS_ROWS` or
-    :data:`NEEDS_RECORDS`."""
-    return _stage(steps, updates, cache, ledger, time_s, scratch, q)
 
 
 @numba.njit(cache=True)
