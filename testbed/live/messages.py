@@ -304,6 +304,8 @@ class InputCounters:
         out_of_range: well-formed but a value outside its domain.
         flooded: shed by the rate limit.
         not_pilot: control messages from a read-only viewer, ignored.
+        bad_requests: HTTP requests the server could not parse (garbled bytes on the socket,
+            answered 400 Bad Request) or that asked for an upgrade other than WebSocket.
     """
 
     accepted: int = 0
@@ -311,6 +313,7 @@ class InputCounters:
     out_of_range: int = 0
     flooded: int = 0
     not_pilot: int = 0
+    bad_requests: int = 0
 
     def count(self, parsed: Message | Rejected) -> None:
         """Count a parse result."""
@@ -330,6 +333,7 @@ class InputCounters:
             "out_of_range": self.out_of_range,
             "flooded": self.flooded,
             "not_pilot": self.not_pilot,
+            "bad_requests": self.bad_requests,
         }
 
 

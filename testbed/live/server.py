@@ -11,6 +11,11 @@ when the pilot leaves, the oldest viewer becomes the pilot. Each connection gets
 published state (the newest only, if it falls behind: a slow viewer never holds up another or
 the simulation).
 
+Bytes that are not HTTP at all (a garbled request line, a malformed chunked body) are answered
+400 by uvicorn's parser (httptools: its h11 alternative logged a traceback for a malformed body
+that arrives while the app answers) and counted ``bad_requests``; the warning uvicorn would log
+for each is not printed, so a flood of them cannot fill the pilot's terminal.
+
 Browser input is data: each text frame is size-checked, rate-limited
 (:class:`~testbed.live.messages.RateLimit`), parsed (:func:`~testbed.live.messages.parse_message`)
 and counted; sticks go to the :class:`~testbed.operator.live_pilot.LivePilot`'s queue, other
@@ -22,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import socket
 import threading
 import time
@@ -38,6 +44,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from testbed.live.hub import Hub
 from testbed.live.messages import (
     MAX_MESSAGE_BYTES,
+    InputCounters,
     LatencyReport,
     Ping,
     RateLimit,
@@ -50,6 +57,26 @@ from testbed.operator.live_pilot import LivePilot
 __all__ = ["ConsoleServer", "bind", "build_app"]
 
 _CENTRE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_UVICORN_LOG = "uvicorn.error"
+"""uvicorn's logger for its protocols' warnings."""
+_BAD_REQUEST_WARNINGS = frozenset(
+    {"Invalid HTTP request received.", "Unsupported upgrade request."}
+)
+"""What uvicorn's HTTP protocol logs for a request it answers 400 (or cannot upgrade)."""
+
+
+class _BadRequestCounter(logging.Filter):
+    """Counts uvicorn's bad-request warnings into ``counters.bad_requests`` and drops them."""
+
+    def __init__(self, counters: InputCounters) -> None:
+        super().__init__()
+        self._counters = counters
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.msg in _BAD_REQUEST_WARNINGS:
+            self._counters.bad_requests += 1
+            return False
+        return True
 
 
 def _static(name: str) -> str:
@@ -226,9 +253,14 @@ class ConsoleServer:
         self.sock = sock
         self.app, self.console = build_app(hub, pilot)
         config = uvicorn.Config(
-            self.app, log_level="warning", lifespan="off", ws_max_size=16 * MAX_MESSAGE_BYTES
+            self.app,
+            http="httptools",
+            log_level="warning",
+            lifespan="off",
+            ws_max_size=16 * MAX_MESSAGE_BYTES,
         )
         self.server = uvicorn.Server(config)
+        self._bad_requests = _BadRequestCounter(hub.counters)
         self._thread = threading.Thread(target=self._serve, name="live-console", daemon=True)
 
     @property
@@ -239,6 +271,7 @@ class ConsoleServer:
 
     def start(self) -> None:
         """Serve from now on (returns at once)."""
+        logging.getLogger(_UVICORN_LOG).addFilter(self._bad_requests)
         self._thread.start()
 
     def _serve(self) -> None:
@@ -266,3 +299,4 @@ class ConsoleServer:
         self.server.should_exit = True
         self._thread.join(timeout_s)
         self.sock.close()
+        logging.getLogger(_UVICORN_LOG).removeFilter(self._bad_requests)

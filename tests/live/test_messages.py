@@ -141,6 +141,7 @@ def test_counters_sort_rejections() -> None:
         "out_of_range": 1,
         "flooded": 0,
         "not_pilot": 0,
+        "bad_requests": 0,
     }
 
 
