@@ -89,6 +89,7 @@ def _import_pybullet_quietly() -> ModuleType:
 pybullet = _import_pybullet_quietly()
 
 __all__ = [
+    "POOL_LIMITS_M",
     "BodyState",
     "OpenLoopResult",
     "Physics",
@@ -134,6 +135,11 @@ def quaternion_pybullet_to_ned(q_xyzw: Sequence[float]) -> tuple[float, float, f
     return (w, x, -y, -z)
 
 
+POOL_LIMITS_M = {"length_m": 50.0, "width_m": 50.0, "depth_m": 20.0, "wall_thickness_m": 5.0}
+"""Largest pool dimensions [m]: an Olympic pool or a large test tank (the camera's textures grow
+with the area, at 2 cm a texel)."""
+
+
 @dataclass(frozen=True, slots=True)
 class PoolScene:
     """A rectangular pool: floor and four walls as static bodies, contact on.
@@ -154,9 +160,9 @@ class PoolScene:
     wall_thickness_m: float = 0.5
 
     def __post_init__(self) -> None:
-        for key in ("length_m", "width_m", "depth_m", "wall_thickness_m"):
+        for key, high in POOL_LIMITS_M.items():
             value = getattr(self, key)
-            check(value > 0.0, key, f"must be > 0, got {value}")
+            check(0.0 < value <= high, key, f"must be in (0, {high:g}] m, got {value}")
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -220,7 +220,11 @@ class VehicleConfig:
             [−1e4, 1e4], the depth (down) ≥ 0: in the water.
         start_euler_rad: (3,) initial roll, pitch, yaw [rad], each in [−2π, 2π].
         camera: the forward camera (disabled by default); when enabled, the physics client
-            also holds the pool's scenery (visual only: the dynamics are the same).
+            also holds the pool's scenery (visual only) for it to see, and the pool is solid
+            (:attr:`pool_in_use`).
+        pool: a rectangular pool whose floor and walls the hull collides with (the origin at
+            the centre of its surface); None = open water, or the default pool when the camera
+            is on (the camera sees the pool, so the vehicle cannot pass through it).
         navigation: the localization (navigation sources and the filter,
             :mod:`testbed.vehicle.localization`); None = none. Its estimate is the vehicle's
             position reading; a ``sensors.position`` fix becomes one of its sources.
@@ -249,6 +253,7 @@ class VehicleConfig:
     start_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.5)
     start_euler_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    pool: PoolScene | None = None
     navigation: NavigationConfig | None = None
     autonomy: AutonomyConfig | None = None
     arm: ArmConfig | None = None
@@ -279,6 +284,25 @@ class VehicleConfig:
             f"the depth (down, the third) must be ≥ 0 m (in the water), got {depth}",
         )
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
+        pool = self.pool_in_use
+        if pool is not None:
+            x, y, z = self.start_position_ned_m
+            inside = abs(x) <= 0.5 * pool.length_m and abs(y) <= 0.5 * pool.width_m
+            check(
+                inside and z <= pool.depth_m,
+                "start_position_ned_m",
+                f"must be inside the pool (|north| ≤ {0.5 * pool.length_m:g} m, |east| ≤ "
+                f"{0.5 * pool.width_m:g} m, depth ≤ {pool.depth_m:g} m), got "
+                f"{list(self.start_position_ned_m)}",
+            )
+
+    @property
+    def pool_in_use(self) -> PoolScene | None:
+        """The solid pool the vehicle flies in: ``pool``; with the camera on and no ``pool``,
+        the default one (the scenery the camera renders); else None (open water)."""
+        if self.pool is None and self.camera.enabled:
+            return PoolScene()
+        return self.pool
 
     @property
     def navigation_in_use(self) -> NavigationConfig | None:
@@ -344,9 +368,11 @@ class Vehicle:
         self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
         self.model = load_model(config.model, added_mass_coriolis=config.added_mass_coriolis)
         arm_model = None if config.arm is None else config.arm.arm_model()
+        pool = config.pool_in_use
         self.physics = Physics(
             self.model,
             dt_s=config.physics_dt_s,
+            pool=pool,
             start_position_ned=config.start_position_ned_m,
             start_euler_rad=config.start_euler_rad,
             current=config.current,
@@ -356,8 +382,7 @@ class Vehicle:
             arm_trim=config.arm is None or config.arm.trim,
         )
         camera = config.camera
-        if camera.enabled:
-            pool = PoolScene()
+        if camera.enabled and pool is not None:  # the camera's pool is the solid one
             self.physics.add_scenery(pool_scenery(pool.length_m, pool.width_m, pool.depth_m))
         # spawned only when drawn from, so runs without camera noise keep their streams
         self._camera_rng = rng.spawn(1)[0] if camera.enabled and camera.noise_std_grey else None

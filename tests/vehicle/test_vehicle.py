@@ -381,3 +381,54 @@ def test_vehicle_world_replicates_state_not_intents() -> None:
         assert not [
             c for c in replicated_changes(world, 0, registry) if c.component in {MovementCommand}
         ]
+
+
+# ------------------------------------------------------------------------------- the pool
+
+
+def _fly(vehicle: Vehicle, sticks: tuple[float, ...], until_s: float) -> None:
+    vehicle.arm()
+    vehicle.set_mode(ControlMode.MANUAL)
+    run_with_sticks(vehicle, until_s, sticks)
+
+
+def test_the_pool_the_camera_sees_is_solid() -> None:
+    """Full down stick with the camera on: the hull comes to rest on the floor the camera
+    renders (its box's bottom face on the floor's top: depth − hull height / 2), never below."""
+    camera = load_vehicle_config({"camera": {"enabled": True}})
+    pool = camera.pool_in_use
+    assert pool is not None  # the camera's default pool
+    with Vehicle(camera, np.random.default_rng(3)) as v:
+        _fly(v, (0.0, 0.0, 1.0, 0.0, 0.0, 0.0), 25.0)
+        resting = pool.depth_m - v.model.hull_size_m[2] / 2
+        assert v.state().position_ned[2] == pytest.approx(resting, abs=0.01)
+        assert abs(v.state().nu[2]) < 0.01
+
+
+def test_a_pool_without_a_camera_stops_the_vehicle_at_its_wall() -> None:
+    """Full forward stick in a 4-m pool: the bow's face stops at the north wall's inner face
+    (length / 2 − hull length / 2 from the centre)."""
+    config = load_vehicle_config(
+        {
+            "pool": {"length_m": 4.0, "width_m": 4.0, "depth_m": 2.0},
+            "start_position_ned_m": [0, 0, 1],
+        }
+    )
+    with Vehicle(config, np.random.default_rng(3)) as v:
+        _fly(v, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), 12.0)
+        north = v.state().position_ned[0]
+        assert north == pytest.approx(2.0 - v.model.hull_size_m[0] / 2, abs=0.03)
+    with Vehicle(
+        load_vehicle_config({"start_position_ned_m": [0, 0, 1]}), np.random.default_rng(3)
+    ) as v:
+        _fly(v, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), 12.0)
+        assert v.state().position_ned[0] > 5.0  # open water: nothing in the way
+
+
+def test_pool_keys_are_checked_in_one_line() -> None:
+    with pytest.raises(ConfigError, match=r"length_m: must be in \(0, 50\] m"):
+        load_vehicle_config({"pool": {"length_m": 1e3}})
+    with pytest.raises(ConfigError, match="start_position_ned_m: must be inside the pool"):
+        load_vehicle_config({"pool": {"depth_m": 2.0}, "start_position_ned_m": [0, 0, 2.5]})
+    with pytest.raises(ConfigError, match="start_position_ned_m: must be inside the pool"):
+        load_vehicle_config({"camera": {"enabled": True}, "start_position_ned_m": [6, 0, 1]})
