@@ -23,10 +23,13 @@ GoTo order) is a goal that starts or replaces the mission's plan; a new
 heading; a new :class:`GoalCancel` (the order header's cancel bit) drops the plan and holds
 the present pose; armed before any order, the vehicle holds station where it is. The tree's
 disarm fallback (``disarm_requested``) is a level: the operator's
-last arm request was a disarm, or the link failsafe reached SURFACE (latched until the operator
-asks to arm again). A vehicle under autonomy owns its mode: the operator's mode requests and
-sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD keeps
-the mission flying.
+last arm request was a disarm, or the link failsafe disarmed the vehicle (latched until the
+operator asks to arm again). A vehicle under autonomy owns its mode: the operator's mode requests
+and sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD
+keeps the mission flying. The link's SURFACE level takes the vehicle from the mission as it does
+without autonomy: the depth and attitude loops climb at the failsafe's ascent rate from where
+the vehicle is, level at its heading, and the failsafe disarms it at the surface (a vehicle
+disarmed at depth would sink if it is heavy in water, as the von Benzon Heavy is by 1 N).
 """
 
 from __future__ import annotations
@@ -195,7 +198,8 @@ class Autonomy:
         seen: the operator's last goal, heading, cancel and end-effector goal already handed
             to the tree.
         last_arm: the operator's last arm request seen.
-        link_disarmed: the link failsafe reached SURFACE; latched until a new arm request.
+        link_disarmed: the link failsafe surfaced and disarmed the vehicle; latched until a new
+            arm request.
         goals: goals given to the tree (mission start, GoTo, KeepHeading).
         cancels: cancels given to the tree.
         cancelled: the last supervision was a cancel (cleared by the next goal).
@@ -288,8 +292,8 @@ def _watch_link(world: World, auto: Autonomy, ctl: Controllers) -> None:
         if request.armed:
             auto.link_disarmed = False
     status = world.get(ctl.vehicle, FailsafeStatus)
-    if status is not None and status.level is FailsafeLevel.SURFACE:
-        auto.link_disarmed = True
+    if status is not None and status.level is FailsafeLevel.SURFACE and not ctl.flags.armed:
+        auto.link_disarmed = True  # the failsafe surfaced the vehicle and disarmed it
 
 
 def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> None:

@@ -546,7 +546,10 @@ def _supervise(world: World, ctl: Controllers) -> None:
     if status.level is FailsafeLevel.SURFACE:
         level = FailsafeLevel.SURFACE
     if level is not status.level:
-        if level is not FailsafeLevel.NOMINAL and status.level is FailsafeLevel.NOMINAL:
+        # from here: the loops' targets start from what the sensors read (also entering SURFACE
+        # under autonomy, whose mission flew on through the HOLD and left the targets behind)
+        fresh = status.level is FailsafeLevel.NOMINAL or ctl.autonomous
+        if level is not FailsafeLevel.NOMINAL and fresh:
             measured = _measured_targets(world, vehicle)
             set_targets(world, ctl, measured.depth_m, measured.quaternion_wxyz)
         status = FailsafeStatus(level, now)

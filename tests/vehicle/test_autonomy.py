@@ -8,12 +8,14 @@ operator's intents on its operator entity as a link would, and steps it frame by
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
 import numpy as np
 import pytest
 
+from testbed.common.geometry import euler_from_quat
 from testbed.config import ConfigError, build
 from testbed.ecs import Origin
 from testbed.vehicle.autonomy import Autonomy
@@ -89,11 +91,14 @@ def test_an_operator_disarm_holds_until_the_operator_arms_again() -> None:
     assert step_until(v, armed, t1 + 1.0) - t1 <= TICK_S + FRAME_S + 1e-9
 
 
-def test_the_link_failsafe_disarms_within_one_tick_of_surface() -> None:
-    """No operator contact at all: HOLD at 0.5 s (the mission flies on), SURFACE at 1 s; the
-    tree's disarm fallback disarms at its first tick after SURFACE is entered."""
+def test_the_link_failsafe_surfaces_the_vehicle_then_the_tree_keeps_it_disarmed() -> None:
+    """No operator contact at all: HOLD at 0.5 s (the mission flies on), SURFACE at 1 s: the
+    loops climb from the depth the vehicle is at, at the failsafe's ascent rate, and the
+    failsafe disarms it at ``surfaced_depth_m`` (the Heavy is 1 N heavy in water: disarmed at
+    depth it would sink); the tree's disarm fallback then latches within one tick and never
+    re-arms without an operator's arm request."""
     data = heavy()
-    data["failsafe"] = {"hold_after_s": 0.5, "surface_after_s": 1.0}
+    data["failsafe"] = {"hold_after_s": 0.5, "surface_after_s": 1.0, "ascent_rate_m_s": 0.25}
     v = vehicle(data)
     step_until(v, armed, 0.5)
 
@@ -102,10 +107,17 @@ def test_the_link_failsafe_disarms_within_one_tick_of_surface() -> None:
         return status is not None and status.level is FailsafeLevel.SURFACE
 
     t_surface = step_until(v, surfacing, 2.0)
-    t_disarm = step_until(v, lambda v: not armed(v), 3.0)
-    assert 0.0 < t_disarm - t_surface <= TICK_S + FRAME_S + 1e-9
-    v.advance(t_disarm + 1.0)
-    assert not armed(v)  # latched: no re-arming without an operator's arm request
+    depth_at_surface = v.truth.position_ned_m[2]
+    assert depth_at_surface > 0.9  # still at the mission's depth: nothing disarmed it there
+    t_disarm = step_until(v, lambda v: not armed(v), 20.0)
+    assert v.truth.position_ned_m[2] <= 0.15 + 0.05  # disarmed at the surface, not at depth
+    climb_s = (depth_at_surface - 0.15) / 0.25  # the target's ramp; the loop lags it a little
+    assert climb_s <= t_disarm - t_surface <= climb_s + 2.0
+    auto = v.world.resource(Autonomy)
+    step_until(v, lambda v: v.world.resource(Autonomy).link_disarmed, t_disarm + TICK_S)
+    v.advance(t_disarm + 3.0)
+    assert not armed(v)  # latched: no re-arming
+    assert auto.context.disarm_count == 1  # the fallback ran once, and holds
 
 
 def test_a_goal_is_flown_and_reached_and_a_cancel_holds_where_the_vehicle_is() -> None:
@@ -164,3 +176,39 @@ def test_the_ismc_removes_a_buoyancy_error_the_nominal_law_leaves(
 def test_a_mission_needs_a_known_mission_file() -> None:
     with pytest.raises(ConfigError, match="no such packaged mission"):
         build(VehicleConfig, heavy(mission="no-such-mission"), source="test")
+
+
+def test_surfacing_starts_from_where_the_mission_left_the_vehicle(tmp_path: Any) -> None:
+    """The mission dives from 1 m to 2 m and turns to 90° through a link HOLD; SURFACE then
+    climbs from the depth and heading the vehicle is at, not from the targets of the HOLD's
+    start (1 m, heading 0), which the mission left behind."""
+    mission = {
+        "name": "dive",
+        "parent": "map",
+        "child": "base_link",
+        "waypoints": [
+            {"time_from_start": 0.0, "transform": _pose(1.0, 0.0)},
+            {"time_from_start": 4.0, "transform": _pose(2.0, math.pi / 2)},
+        ],
+    }
+    path = tmp_path / "dive.json"
+    path.write_text(json.dumps(mission))
+    data = heavy(mission=str(path))
+    data["failsafe"] = {"hold_after_s": 0.5, "surface_after_s": 6.0, "ascent_rate_m_s": 0.1}
+    v = vehicle(data)
+
+    def surfacing(v: Vehicle) -> bool:
+        status = v.world.get(v.entity, FailsafeStatus)
+        return status is not None and status.level is FailsafeLevel.SURFACE
+
+    step_until(v, surfacing, 7.0)
+    depth, yaw = v.truth.position_ned_m[2], euler_from_quat(v.truth.quaternion_wxyz)[2]
+    assert depth > 1.8 and yaw > 1.0  # where the mission took it (its yaw lags the plan)
+    t0 = v.clock.time_s
+    v.advance(t0 + 2.0)  # the ramp: 0.2 m up in 2 s, the heading held
+    assert v.truth.position_ned_m[2] == pytest.approx(depth - 0.2, abs=0.1)
+    assert abs(euler_from_quat(v.truth.quaternion_wxyz)[2] - yaw) < 0.1
+
+
+def _pose(z: float, yaw: float) -> dict[str, float]:
+    return {"x": 0.0, "y": 0.0, "z": z, "rx": 0.0, "ry": 0.0, "rz": yaw}
