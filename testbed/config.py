@@ -36,6 +36,7 @@ __all__ = [
     "parse_override",
     "read_text",
     "to_float",
+    "user_file",
 ]
 
 
@@ -167,6 +168,25 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: malformed TOML: {err}") from None
+
+
+def user_file(name: str, known: Iterable[str], what: str) -> Path | None:
+    """Where a named data file comes from: None for a packaged ``name`` (one of ``known``), else
+    the user's own TOML file at the path ``name``.
+
+    Raises:
+        ConfigError: neither a packaged name nor an existing ``.toml`` file (the message lists
+            the packaged ones); ``what`` says what the files hold (e.g. "vehicle model").
+    """
+    names = list(known)
+    if name in names:
+        return None
+    path = Path(name)
+    if path.suffix == ".toml" and path.is_file():
+        return path
+    raise ConfigError(
+        f"unknown {what} {name!r} (packaged: {', '.join(names)}; or a path to a .toml file)"
+    )
 
 
 def named_table(tables: Mapping[str, Any], name: str, source: str, what: str) -> dict[str, Any]:

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -60,9 +60,9 @@ from testbed.run.sections import (
     SineTerm,
     ThrusterFault,
 )
-from testbed.vehicle.hydrodynamics import known_models
+from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.t200 import T200
-from testbed.vehicle.thruster_config import known_thruster_configs, load_thruster_config
+from testbed.vehicle.thruster_config import load_thruster_config
 from testbed.vehicle.vehicle import VehicleConfig
 
 __all__ = [
@@ -359,9 +359,8 @@ def _from_data(
     top = build(_ScenarioFile, data, source=where)
     link = _build_link(top.link, where, given_link_keys)
     vehicle = build(VehicleConfig, top.vehicle, source=where, prefix="vehicle.")
-    _check_name(vehicle.model, known_models(), where, "vehicle.model", "vehicle model")
-    layouts = known_thruster_configs()
-    _check_name(vehicle.thrusters, layouts, where, "vehicle.thrusters", "thruster layout")
+    _check_file(load_model, vehicle.model, where, "vehicle.model")
+    _check_file(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
     if operator.depth_m is not None and link.codec != "changeset":
         raise ConfigError(
@@ -431,6 +430,15 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
             when = "link.mac = 'free' or link.codec = 'changeset'"
             raise ConfigError(f"{where}: link.{key}: only used when {when}")
     return section
+
+
+def _check_file(load: Callable[[str], object], name: str, where: str, key: str) -> None:
+    """Load a named data file (packaged, or the user's own at a path) now, so a bad name or a
+    bad file is a one-line error naming ``key`` before anything runs."""
+    try:
+        load(name)
+    except ConfigError as err:
+        raise ConfigError(f"{where}: {key}: {err}") from None
 
 
 def _check_name(

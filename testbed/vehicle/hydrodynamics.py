@@ -31,7 +31,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from testbed.config import ConfigError, build, check, load_toml
+from testbed.config import build, check, load_toml, user_file
 from testbed.vehicle.plant_kernels import N_COEFFICIENTS, fossen_acceleration
 from testbed.vehicle.water_current import WaterCurrent
 
@@ -152,21 +152,23 @@ def load_model(
     *,
     added_mass_coriolis: Literal["full", "isotropic", "off"] | None = None,
 ) -> HydroModel:
-    """Load a packaged vehicle model by name.
+    """Load a vehicle model: a packaged one by name, or the user's own TOML file (the packaged
+    files' layout) at the path ``name``.
 
     Args:
-        name: the model (``testbed/vehicle/data/models/NAME.toml``).
+        name: a packaged model (``testbed/vehicle/data/models/NAME.toml``) or a ``.toml`` path.
         added_mass_coriolis: overrides the file's :attr:`HydroModel.added_mass_coriolis`.
 
     Raises:
-        ConfigError: unknown name (the message lists the known ones) or a bad file.
+        ConfigError: neither a packaged name nor a file (the message lists the packaged ones),
+            or a bad file (the message names the file and the key).
     """
-    known = known_models()
-    if name not in known:
-        raise ConfigError(f"unknown vehicle model {name!r} (known: {', '.join(known)})")
-    entry = _models_dir().joinpath(f"{name}.toml")
-    with resources.as_file(entry) as path:
-        model = build(HydroModel, load_toml(path), source=str(path))
+    own = user_file(name, known_models(), "vehicle model")
+    if own is not None:
+        model = build(HydroModel, load_toml(own), source=str(own))
+    else:
+        with resources.as_file(_models_dir().joinpath(f"{name}.toml")) as path:
+            model = build(HydroModel, load_toml(path), source=str(path))
     if added_mass_coriolis is not None:
         model = dataclasses.replace(model, added_mass_coriolis=added_mass_coriolis)
     return model

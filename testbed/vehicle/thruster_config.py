@@ -26,7 +26,7 @@ from typing import Literal
 
 import numpy as np
 
-from testbed.config import ConfigError, FieldError, build, check, load_toml
+from testbed.config import ConfigError, FieldError, build, check, load_toml, user_file
 
 __all__ = [
     "Handedness",
@@ -200,14 +200,16 @@ def known_thruster_configs() -> tuple[str, ...]:
 
 
 def load_thruster_config(name: str) -> ThrusterConfig:
-    """Load a packaged thruster configuration by name (e.g. ``"bluerov2"``).
+    """Load a thruster configuration: a packaged one by name (e.g. ``"bluerov2"``), or the
+    user's own TOML file (:func:`read_thruster_config`'s layout) at the path ``name``.
 
     Raises:
-        ConfigError: unknown name (the message lists the known ones) or a bad file.
+        ConfigError: neither a packaged name nor a file (the message lists the packaged ones),
+            or a bad file (the message names the file and the key).
     """
-    known = known_thruster_configs()
-    if name not in known:
-        raise ConfigError(f"unknown thruster configuration {name!r} (known: {', '.join(known)})")
+    own = user_file(name, known_thruster_configs(), "thruster configuration")
+    if own is not None:
+        return read_thruster_config(own)
     with resources.as_file(_data_dir().joinpath(f"{name}.toml")) as path:
         return read_thruster_config(path)
 

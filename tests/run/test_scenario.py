@@ -423,7 +423,10 @@ def test_ipg_policies() -> None:
         # names
         ("link.preset=s999", "--set: link.preset: unknown link preset 's999' (known: m64, s100"),
         ("vehicle.model=nautilus", "--set: vehicle.model: unknown vehicle model 'nautilus'"),
-        ("vehicle.thrusters=octo", "--set: vehicle.thrusters: unknown thruster layout 'octo'"),
+        (
+            "vehicle.thrusters=octo",
+            "--set: vehicle.thrusters: unknown thruster configuration 'octo'",
+        ),
         (
             "faults.thrusters=[{t_s=1, thruster='Foo', mode='dead'}]",
             "--set: faults.thrusters[0].thruster: unknown thruster 'Foo' of bluerov2 "
