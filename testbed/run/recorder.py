@@ -37,7 +37,13 @@ from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus, MissionStatus, PoseTarget
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
-from testbed.vehicle.systems import Controllers, PlantTruth, PowerMeter, SimClock
+from testbed.vehicle.systems import (
+    Controllers,
+    PlantTruth,
+    PowerMeter,
+    SimClock,
+    applied_sticks,
+)
 
 __all__ = [
     "SERIES_COLUMNS",
@@ -46,6 +52,7 @@ __all__ = [
     "Recorder",
     "SeriesRows",
     "VehicleObserver",
+    "failsafe_engagements",
 ]
 
 OPERATOR = "operator"
@@ -137,7 +144,7 @@ class VehicleObserver:
         """One row of :data:`SERIES_COLUMNS` at vehicle time ``now`` [s], in their order."""
         ctl = world.resource(Controllers)
         truth = world.resource(PlantTruth)
-        sticks = ctl.sticks
+        sticks = applied_sticks(ctl)  # centred in a failsafe: what the vehicle flies
         pilot = self._pilot.sample(now).sticks
         roll, pitch, yaw = euler_from_quat(truth.quaternion_wxyz)
         targets = world.get(ctl.vehicle, ControlTargets)
@@ -298,6 +305,19 @@ class NodeEvent:
     node: str
     kind: str
     detail: str = ""
+
+
+def failsafe_engagements(events: Sequence[NodeEvent]) -> int:
+    """Times the failsafe engaged: its level left NOMINAL (a HOLD that went on to SURFACE is
+    one engagement; the return to NOMINAL is not another)."""
+    count = 0
+    level = "NOMINAL"
+    for event in events:
+        if event.kind == "failsafe":
+            if level == "NOMINAL" and event.detail != "NOMINAL":
+                count += 1
+            level = event.detail
+    return count
 
 
 @dataclass(slots=True)

@@ -40,7 +40,7 @@ from testbed.run.metrics import (
     tracked_positions,
 )
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
-from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.recorder import Recorder, VehicleObserver, failsafe_engagements
 from testbed.run.scenario import Scenario
 from testbed.vehicle.vehicle import Vehicle
 
@@ -383,7 +383,7 @@ def compute_metrics(
         "energy_wh": energy_wh,
         "frames_rejected": dict(recorder.frames_rejected),
         "events": {
-            "failsafe": sum(1 for e in recorder.events if e.kind == "failsafe"),
+            "failsafe": failsafe_engagements(recorder.events),
             "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
         },
     }

@@ -107,6 +107,7 @@ __all__ = [
     "SimClock",
     "actuate_thrusters",
     "allocate_thrust",
+    "applied_sticks",
     "build_schedule",
     "control_attitude",
     "control_depth",
@@ -567,8 +568,8 @@ def run_pilot_interface(world: World) -> None:
     """Sticks → pilot force intent; in hold modes the sticks also trim the targets."""
     ctl = world.resource(Controllers)
     flags = ctl.flags
-    sticks = ZERO6 if flags.failsafe or flags.guided else ctl.sticks
-    if not flags.armed or not any(sticks):
+    sticks = applied_sticks(ctl)
+    if not any(sticks):
         set_intent(world, ctl, "pilot", ZERO6)
         return
     vehicle = ctl.vehicle
@@ -596,6 +597,15 @@ def run_pilot_interface(world: World) -> None:
         row.mark,
         world.tick,
     )
+
+
+def applied_sticks(ctl: Controllers) -> tuple[float, ...]:
+    """The sticks the pilot interface flies this frame: the operator's last, or all centred
+    while disarmed, in a failsafe or in GUIDED (where the sticks are ignored)."""
+    flags = ctl.flags
+    if not flags.armed or flags.failsafe or flags.guided:
+        return ZERO6
+    return ctl.sticks
 
 
 def shaped_sticks(

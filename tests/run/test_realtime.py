@@ -929,7 +929,8 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
         )
     else:
         assert lag_s > hold_s, seen  # only such a stall arms it that late (the arm is at t ≈ 1 s)
-    assert metrics["events"]["failsafe"] == len(failsafe) >= 2
+    assert len(levels) >= 2  # held, and let go
+    assert metrics["events"]["failsafe"] == levels.count("HOLD")  # engagements, not changes
     assert max(recorder.commands_applied.values()) > first_back_s  # orders flow again
     assert metrics["link"]["uplink"]["per"] > 0.0  # the orders lost count
 

@@ -153,6 +153,12 @@ def test_outage_longer_than_the_failsafe_timeout_holds_depth() -> None:
     holding = (t >= failsafes[0].t_s) & (t <= failsafes[1].t_s)
     assert holding.sum() > 10
     assert np.ptp(depth[holding]) < 0.05  # depth held within 5 cm while the link is out
+    # the hold flies centred sticks, and the series says so while the pilot's keep moving
+    applied = np.stack([series[f"rx_{axis}"][holding] for axis in ("x", "y", "z", "yaw")])
+    pilot = np.stack([series[f"cmd_{axis}"][holding] for axis in ("x", "y", "z", "yaw")])
+    assert not applied.any() and pilot.any()
+    assert not np.stack([series[f"ref_{v}"][holding] for v in ("u", "v", "w", "r")]).any()
+    assert result.metrics["events"]["failsafe"] == 1  # one engagement (held, then let go)
 
 
 def test_metrics_json_is_strict_json(tmp_path: Any) -> None:
