@@ -17,11 +17,12 @@ NED). ``child`` names the frame the waypoints are for: Angler's tool frame
 (:data:`TOOL_FRAMES`), ``base_link`` (:data:`BODY_FRAMES`) the body's; any other name is refused
 (a typo must not quietly fly the hull instead of the jaws).
 
-**Checks.** Missing or unknown keys, unknown frame names, non-numbers, non-finite numbers, an
-empty waypoint list, a negative first time and repeated or decreasing times (Angler's library
-has repeated ones; they make a zero-length segment) are :class:`~testbed.config.ConfigError`\\ s
-whose one-line message names the file and the field path, e.g. ``missions/square.json:
-waypoints[2].time_from_start: must be > 3 s (the previous waypoint's), got 3``.
+**Checks.** Missing or unknown keys, unknown frame names, non-numbers, non-finite numbers, a
+waypoint above the surface (``z < 0``), an empty waypoint list, a negative first time and
+repeated or decreasing times (Angler's library has repeated ones; they make a zero-length
+segment) are :class:`~testbed.config.ConfigError`\\ s whose one-line message names the file
+and the field path, e.g. ``missions/square.json: waypoints[2].time_from_start: must be > 3 s
+(the previous waypoint's), got 3``.
 
 **Trajectories.** :func:`plan` prepends the vehicle's pose at ``t = 0`` when the first waypoint
 is later than 0 (as Angler does), then interpolates linearly: position per axis, yaw along the
@@ -391,6 +392,11 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
         x, y, z, rx, ry, rz = (
             _number(transform[k], f"{key}.transform.{k}", source) for k in _TRANSFORM_KEYS
         )
+        if z < 0.0:
+            raise ConfigError(
+                f"{source}: {key}.transform.z: must be ≥ 0 m (z is down: {z:g} m is above the "
+                "surface)"
+            )
         points.append(
             Waypoint(
                 t,

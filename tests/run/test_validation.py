@@ -408,3 +408,12 @@ def test_an_arm_under_the_pid_controller_is_refused(
     assert "vehicle.arm" in err and err.count("\n") == 1
     assert not out.exists()
     assert load_scenario("heavy-waypoint-v1", [pid]).vehicle.autonomy is not None  # no arm: ok
+
+
+def test_a_supervisor_goal_above_the_surface_is_refused() -> None:
+    """The GoTo was sent and flown: the hull broached."""
+    goal = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, -2.0]}]"
+    with pytest.raises(ConfigError, match=r"^--set: pilot.goals\[0\].position_ned_m: the depth"):
+        load_scenario("s100-supervised-v1", [goal])
+    surface = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, 0.0]}]"
+    assert load_scenario("s100-supervised-v1", [surface]).pilot is not None

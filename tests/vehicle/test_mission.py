@@ -136,6 +136,8 @@ def _mutate(data: dict[str, Any], edit: str) -> str:
         data["child"] = "gripper"
     elif edit == "unknown parent":
         data["parent"] = "odom"
+    elif edit == "above the surface":
+        points[2]["transform"]["z"] = -3.0
     text = json.dumps(data)
     if edit == "nan":
         text = text.replace('"y": 2.0', '"y": NaN')
@@ -172,6 +174,7 @@ BAD_INPUTS = [
     ),
     ("unknown child", "child: unknown frame 'gripper' (accepted: base_link, alpha_standard_"),
     ("unknown parent", "parent: unknown frame 'odom' (accepted: map)"),
+    ("above the surface", "waypoints[2].transform.z: must be ≥ 0 m (z is down: -3 m is above"),
     ("nan", "waypoints[2].transform.y: must be finite"),
     ("infinity", "waypoints[2].transform.y: must be finite"),
     ("duplicate key", "name: key given twice"),
