@@ -401,6 +401,8 @@ def compute_metrics(
             status=mission_status,
             orders_acknowledged=goals_acked,
             goals_refused=None if autonomy is None else autonomy.refused,
+            ready_s=None if autonomy is None else autonomy.ready_s,
+            ready_sigma_m=autonomy_config.ready_sigma_m,
             reached_s=[e.t_s for e in recorder.events if e.kind == "mission_reached"],
         )
     return metrics
@@ -414,6 +416,8 @@ def mission_metrics(
     status: MissionStatus | None,
     orders_acknowledged: int | None,
     goals_refused: int | None = None,
+    ready_s: float | None = None,
+    ready_sigma_m: float | None = None,
     reached_s: Sequence[float] = (),
 ) -> dict[str, Any]:
     """The ``"mission"`` key of ``metrics.json`` (vehicles under autonomy).
@@ -436,6 +440,10 @@ def mission_metrics(
         status: the vehicle's mission status at the end (goals given and reached), or None.
         orders_acknowledged: goals the operator saw acknowledged, or None.
         goals_refused: the operator's goals the vehicle refused (above the surface), or None.
+        ready_s: when the navigation estimate first was within ``ready_sigma_m`` [s] (the
+            tree's first tick: nothing arms or flies before), None if never (NaN in the dict:
+            null in the file).
+        ready_sigma_m: the autonomy's ``ready_sigma_m`` [m] (reported beside ``ready_s``).
     """
     t = series["t_s"]
     body = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
@@ -465,4 +473,6 @@ def mission_metrics(
         "goals_reached": None if status is None else status.reached,
         "orders_acknowledged": orders_acknowledged,
         "goals_refused": goals_refused,
+        "ready_s": math.nan if ready_s is None else ready_s,
+        "ready_sigma_m": math.nan if ready_sigma_m is None else ready_sigma_m,
     }

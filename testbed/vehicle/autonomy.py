@@ -194,6 +194,8 @@ class Autonomy:
         ismc: the velocity controller (None with controller ``"pid"``).
         next_tick_s: vehicle time of the next tree tick [s].
         navigating: the estimate has been good enough to start from (``ready_sigma_m``).
+        ready_s: vehicle time the estimate first was (the tree's first tick) [s]; None while
+            it never was (no arming, no mission: the run reports it).
         started: the mission's start event was given.
         seen: the operator's last goal, heading, cancel and end-effector goal already handed
             to the tree.
@@ -211,6 +213,7 @@ class Autonomy:
     ismc: IsmcController | None
     next_tick_s: float = 0.0
     navigating: bool = False
+    ready_s: float | None = None
     started: bool = False
     seen: tuple[object, object, object, object] = (None, None, None, None)
     last_arm: ArmRequest | None = None
@@ -262,7 +265,7 @@ def run_mission(world: World) -> None:
         if max(estimate.position_sigma_m) > auto.config.ready_sigma_m:
             return
         auto.navigating = True
-        auto.next_tick_s = now
+        auto.ready_s = auto.next_tick_s = now
     auto.next_tick_s += auto.config.tree.tick_period_s
     context = auto.context
     context.time_s = now
