@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -112,17 +113,20 @@ def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool)
 
 
 def format_trial(trial: int, metrics: dict[str, Any]) -> str:
-    """One line for a finished trial: seed, real-time factor, mission error and command lag."""
+    """One line for a finished trial: seed, real-time factor, mission error and command lag
+    (and, when it never started, why: :func:`never_ready`)."""
     from testbed.run.trials import headline
 
     h = headline(metrics)
-    return (
+    line = (
         f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
         f"position error mean {_num(h['position_error_mean_m'])} m, "
         f"final {_num(h['position_error_final_m'])} m; "
         f"converged at {_num(h['time_to_converge_s'], digits=1)} s; "
         f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
     )
+    never = never_ready(metrics.get("mission") or {})
+    return line if never is None else f"{line}; {never}"
 
 
 def format_trials_summary(document: dict[str, Any], out: Path) -> str:
@@ -227,8 +231,28 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             f"{_count(mission['goals_reached'])}/{_count(mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
+        if (never := never_ready(mission)) is not None:
+            lines.append(f"  {never}")
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def never_ready(mission: dict[str, Any]) -> str | None:
+    """The line saying a mission never started because navigation was never ready (its
+    position σ never came within ``ready_sigma_m``), or None when it was (or is not known)."""
+    if "ready_s" not in mission or not _missing(mission["ready_s"]):
+        return None
+    sigma = mission.get("ready_sigma_m")
+    limit = "" if _missing(sigma) else f" = {sigma:g} m"
+    return (
+        f"mission never started: navigation not ready (position σ > ready_sigma_m{limit} "
+        "for the whole run)"
+    )
+
+
+def _missing(value: float | None) -> bool:
+    """A figure that is not there: None (metrics.json's null) or NaN (before writing)."""
+    return value is None or math.isnan(value)
 
 
 def _count(value: int | None) -> str:

@@ -14,7 +14,8 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     travels, roll and pitch setpoints cannot); a changed :class:`PositionSetpoint` becomes a
     ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
     heading), which the vehicle flies as that setpoint in GUIDED — refused (counted
-    unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED; a
+    unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED, and a
+    goal above the surface (a negative depth, either goal order); a
     changed :class:`EndEffectorSetpoint` becomes an ``EndEffectorGoTo`` (the extension's code
     8: 1 cm, the tool yaw in 0.01° or none), which the vehicle writes back as that setpoint
     (its mode untouched; refused without a position fix too, the target being in the fix's
@@ -382,7 +383,7 @@ class TeleopVehicleEnd:
             command = MovementCommand(self._seq, now_s, (x, y, z, 0.0, 0.0, yaw))
             world.set(intents, command, origin=Origin.REMOTE)
         elif isinstance(order, GoTo | EndEffectorGoTo):
-            if not has_fix:  # a goal in the position fix's frame
+            if not has_fix or order.z_cm < 0:  # a goal in the fix's frame, in the water
                 self.counters.unsupported += 1
                 return False
             world.set(intents, _goal_setpoint(order), origin=Origin.REMOTE)

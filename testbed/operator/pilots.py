@@ -224,7 +224,7 @@ class GoalStep:
     Attributes:
         t_s: operator time the order is given [s], ≥ 0.
         position_ned_m: (3,) goal [m], world NED, each in [−300, 300] (the GoTo order's int16
-            cm); None with ``cancel``.
+            cm), the depth (third) ≥ 0 (not above the surface); None with ``cancel``.
         yaw_deg: goal heading [deg], in [−360, 360]; None keeps the vehicle's (or the
             tool's) heading.
         cancel: cancel the goal in force, of either frame (the vehicle holds where it is).
@@ -248,6 +248,12 @@ class GoalStep:
         if self.position_ned_m is not None:
             for value in self.position_ned_m:
                 check_range(value, "position_ned_m", -MAX_GOAL_M, MAX_GOAL_M, "m")
+            depth = self.position_ned_m[2]
+            check(
+                depth >= 0.0,
+                "position_ned_m",
+                f"the depth (down, the third) must be ≥ 0 m (in the water), got {depth:g}",
+            )
         if self.yaw_deg is not None:
             check_range(self.yaw_deg, "yaw_deg", -360.0, 360.0, "deg")
         check(

@@ -42,6 +42,7 @@ from testbed.run.metrics import (
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver, failsafe_engagements
 from testbed.run.scenario import Scenario
+from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -236,6 +237,7 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
         },
         mission_status=vehicle.world.get(vehicle.entity, MissionStatus),
         goals_acked=goals_acked(operator_node),
+        autonomy=vehicle.world.resource(Autonomy) if vehicle.world.has_resource(Autonomy) else None,
     )
     return RunResult(scenario, seed, metrics, recorder, stopped)
 
@@ -301,13 +303,14 @@ def compute_metrics(
     payload_bytes: dict[str, int],
     mission_status: MissionStatus | None = None,
     goals_acked: int | None = None,
+    autonomy: Autonomy | None = None,
 ) -> dict[str, Any]:
     """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
 
-    ``mission_status`` (the vehicle's :class:`MissionStatus` at the end) and ``goals_acked``
-    (:func:`goals_acked`) feed, with the recorder's ``mission_reached`` events, the
-    ``"mission"`` key of a vehicle under autonomy (:func:`mission_metrics`); None = not known
-    here (null in the file).
+    ``mission_status`` (the vehicle's :class:`MissionStatus` at the end), ``goals_acked``
+    (:func:`goals_acked`) and the vehicle's ``autonomy`` resource at the end feed, with the
+    recorder's ``mission_reached`` events, the ``"mission"`` key of a vehicle under autonomy
+    (:func:`mission_metrics`); None = not known here (null in the file).
     """
     series = recorder.series()
     t = series["t_s"]
@@ -389,14 +392,17 @@ def compute_metrics(
     }
     if scenario.images.enabled:
         metrics["images"] = image_metrics(recorder.images, sim_s)
-    autonomy = scenario.vehicle.autonomy
-    if autonomy is not None:
+    autonomy_config = scenario.vehicle.autonomy
+    if autonomy_config is not None:
         metrics["mission"] = mission_metrics(
             series,
             settle,
-            autonomy.tree.goal_tolerance_m,
+            autonomy_config.tree.goal_tolerance_m,
             status=mission_status,
             orders_acknowledged=goals_acked,
+            goals_refused=None if autonomy is None else autonomy.refused,
+            ready_s=None if autonomy is None else autonomy.ready_s,
+            ready_sigma_m=autonomy_config.ready_sigma_m,
             reached_s=[e.t_s for e in recorder.events if e.kind == "mission_reached"],
         )
     return metrics
@@ -409,6 +415,9 @@ def mission_metrics(
     *,
     status: MissionStatus | None,
     orders_acknowledged: int | None,
+    goals_refused: int | None = None,
+    ready_s: float | None = None,
+    ready_sigma_m: float | None = None,
     reached_s: Sequence[float] = (),
 ) -> dict[str, Any]:
     """The ``"mission"`` key of ``metrics.json`` (vehicles under autonomy).
@@ -430,6 +439,11 @@ def mission_metrics(
         tolerance_m: the mission tree's goal tolerance [m].
         status: the vehicle's mission status at the end (goals given and reached), or None.
         orders_acknowledged: goals the operator saw acknowledged, or None.
+        goals_refused: the operator's goals the vehicle refused (above the surface), or None.
+        ready_s: when the navigation estimate first was within ``ready_sigma_m`` [s] (the
+            tree's first tick: nothing arms or flies before), None if never (NaN in the dict:
+            null in the file).
+        ready_sigma_m: the autonomy's ``ready_sigma_m`` [m] (reported beside ``ready_s``).
     """
     t = series["t_s"]
     body = np.column_stack([series["north_m"], series["east_m"], series["down_m"]])
@@ -458,4 +472,7 @@ def mission_metrics(
         "goals": None if status is None else status.goals,
         "goals_reached": None if status is None else status.reached,
         "orders_acknowledged": orders_acknowledged,
+        "goals_refused": goals_refused,
+        "ready_s": math.nan if ready_s is None else ready_s,
+        "ready_sigma_m": math.nan if ready_sigma_m is None else ready_sigma_m,
     }

@@ -21,10 +21,12 @@ Supervision (the operator's intents, over either codec): a new :class:`PositionS
 GoTo order) is a goal that starts or replaces the mission's plan; a new
 :class:`AttitudeSetpoint` (KeepHeading) re-aims the current goal, or holds here at that
 heading; a new :class:`GoalCancel` (the order header's cancel bit) drops the plan and holds
-the present pose; armed before any order, the vehicle holds station where it is. The tree's
-disarm fallback (``disarm_requested``) is a level: the operator's
-last arm request was a disarm, or the link failsafe disarmed the vehicle (latched until the
-operator asks to arm again). A vehicle under autonomy owns its mode: the operator's mode requests
+the present pose; armed before any order, the vehicle holds station where it is. A goal
+(either frame) above the surface (a negative depth) is a remote value the tree never gets: it
+is counted (:attr:`Autonomy.refused`, ``mission.goals_refused``) and the vehicle flies on. The
+tree's disarm fallback (``disarm_requested``) is a level: the operator's last arm request was a
+disarm, or the link failsafe disarmed the vehicle (latched until the operator asks to arm
+again). A vehicle under autonomy owns its mode: the operator's mode requests
 and sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD
 keeps the mission flying. The link's SURFACE level takes the vehicle from the mission as it does
 without autonomy: the depth and attitude loops climb at the failsafe's ascent rate from where
@@ -194,6 +196,8 @@ class Autonomy:
         ismc: the velocity controller (None with controller ``"pid"``).
         next_tick_s: vehicle time of the next tree tick [s].
         navigating: the estimate has been good enough to start from (``ready_sigma_m``).
+        ready_s: vehicle time the estimate first was (the tree's first tick) [s]; None while
+            it never was (no arming, no mission: the run reports it).
         started: the mission's start event was given.
         seen: the operator's last goal, heading, cancel and end-effector goal already handed
             to the tree.
@@ -201,6 +205,7 @@ class Autonomy:
         link_disarmed: the link failsafe surfaced and disarmed the vehicle; latched until a new
             arm request.
         goals: goals given to the tree (mission start, GoTo, KeepHeading).
+        refused: the operator's goals not given to the tree (above the surface).
         cancels: cancels given to the tree.
         cancelled: the last supervision was a cancel (cleared by the next goal).
     """
@@ -211,11 +216,13 @@ class Autonomy:
     ismc: IsmcController | None
     next_tick_s: float = 0.0
     navigating: bool = False
+    ready_s: float | None = None
     started: bool = False
     seen: tuple[object, object, object, object] = (None, None, None, None)
     last_arm: ArmRequest | None = None
     link_disarmed: bool = False
     goals: int = 0
+    refused: int = 0
     cancels: int = 0
     cancelled: bool = False
 
@@ -261,7 +268,7 @@ def run_mission(world: World) -> None:
         if max(estimate.position_sigma_m) > auto.config.ready_sigma_m:
             return
         auto.navigating = True
-        auto.next_tick_s = now
+        auto.ready_s = auto.next_tick_s = now
     auto.next_tick_s += auto.config.tree.tick_period_s
     context = auto.context
     context.time_s = now
@@ -304,12 +311,16 @@ def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> N
     if mission is not None and not auto.started and context.time_s >= auto.config.start_s:
         auto.started = context.start_requested = True
         auto.goals += 1
-    if isinstance(goal, PositionSetpoint) and goal != seen_goal:
+    new_goal = isinstance(goal, PositionSetpoint) and goal != seen_goal and _in_water(auto, goal)
+    new_reach = (
+        isinstance(reach, EndEffectorSetpoint) and reach != seen_reach and _in_water(auto, reach)
+    )
+    if isinstance(goal, PositionSetpoint) and new_goal:
         yaw = goal.yaw_rad if goal.use_yaw else None
         context.goal = GoalRequest(goal.position_ned_m, yaw)
         auto.goals += 1
         auto.cancelled = False
-    elif isinstance(reach, EndEffectorSetpoint) and reach != seen_reach:
+    elif isinstance(reach, EndEffectorSetpoint) and new_reach:
         yaw = reach.yaw_rad if reach.use_yaw else None
         context.goal = GoalRequest(reach.position_ned_m, yaw, end_effector=True)
         auto.goals += 1
@@ -329,6 +340,16 @@ def _supervise_goals(world: World, auto: Autonomy, context: MissionContext) -> N
 
 
 _SUPERVISION = (PositionSetpoint, AttitudeSetpoint, GoalCancel, EndEffectorSetpoint)
+
+
+def _in_water(auto: Autonomy, goal: PositionSetpoint | EndEffectorSetpoint) -> bool:
+    """The new goal's depth (NED down, the third coordinate [m]) is at or below the surface
+    (≥ 0); else it is counted refused (a remote value: never raised, never given to the
+    tree)."""
+    if goal.position_ned_m[2] >= 0.0:
+        return True
+    auto.refused += 1
+    return False
 
 
 def _latest(world: World, kind: type[object]) -> object | None:

@@ -11,15 +11,18 @@ A mission file (Angler's ``preplanned_end_effector_planner`` library format) is:
 **world NED metres** (x north, y east, z down: ``z = 1`` is 1 m deep) and converts nothing.
 ``rx, ry, rz`` are Euler angles ``xyz`` [rad] (extrinsic x, y, z, which is the Z-Y-X
 roll–pitch–yaw of :mod:`testbed.common.geometry`), so ``rz`` is the yaw, clockwise from north.
-``parent`` is a name only (kept for Angler compatibility). ``child`` names the frame the
-waypoints are for: Angler's tool frame ``alpha_standard_jaws_tool`` (or ``end_effector``) makes
-them the arm's end effector's (:data:`TOOL_FRAMES`), anything else (``base_link``) the body's.
+``parent`` must be ``map`` (:data:`PARENT_FRAMES`; kept for Angler compatibility, read as world
+NED). ``child`` names the frame the waypoints are for: Angler's tool frame
+``alpha_standard_jaws_tool`` (or ``end_effector``) makes them the arm's end effector's
+(:data:`TOOL_FRAMES`), ``base_link`` (:data:`BODY_FRAMES`) the body's; any other name is refused
+(a typo must not quietly fly the hull instead of the jaws).
 
-**Checks.** Missing or unknown keys, non-numbers, non-finite numbers, an empty waypoint list, a
-negative first time and repeated or decreasing times (Angler's library has repeated ones; they
-make a zero-length segment) are :class:`~testbed.config.ConfigError`\\ s whose one-line message
-names the file and the field path, e.g. ``missions/square.json: waypoints[2].time_from_start:
-must be > 3 s (the previous waypoint's), got 3``.
+**Checks.** Missing or unknown keys, unknown frame names, non-numbers, non-finite numbers, a
+waypoint above the surface (``z < 0``), an empty waypoint list, a negative first time and
+repeated or decreasing times (Angler's library has repeated ones; they make a zero-length
+segment) are :class:`~testbed.config.ConfigError`\\ s whose one-line message names the file
+and the field path, e.g. ``missions/square.json: waypoints[2].time_from_start: must be > 3 s
+(the previous waypoint's), got 3``.
 
 **Trajectories.** :func:`plan` prepends the vehicle's pose at ``t = 0`` when the first waypoint
 is later than 0 (as Angler does), then interpolates linearly: position per axis, yaw along the
@@ -47,6 +50,8 @@ from testbed.common.geometry import Vec3, wrap_angle
 from testbed.config import ConfigError, read_text, to_float
 
 __all__ = [
+    "BODY_FRAMES",
+    "PARENT_FRAMES",
     "TOOL_FRAMES",
     "Mission",
     "Trajectory",
@@ -64,6 +69,10 @@ __all__ = [
 _PACKAGE_DIR = ("scenarios", "missions")
 TOOL_FRAMES = ("alpha_standard_jaws_tool", "end_effector")
 """``child`` frame names that put a mission's waypoints on the arm's end effector."""
+BODY_FRAMES = ("base_link",)
+"""``child`` frame names that put a mission's waypoints on the vehicle's body origin."""
+PARENT_FRAMES = ("map",)
+"""``parent`` frame names: the world frame the waypoints are given in (read as NED)."""
 _TOP_KEYS = ("name", "parent", "child", "waypoints")
 _WAYPOINT_KEYS = ("time_from_start", "transform", "velocity", "acceleration")
 _TRANSFORM_KEYS = ("x", "y", "z", "rx", "ry", "rz")
@@ -101,9 +110,10 @@ class Mission:
 
     Attributes:
         name: the mission's ``name``.
-        parent: Angler's reference frame name (read as world NED here).
+        parent: Angler's reference frame name (:data:`PARENT_FRAMES`; read as world NED).
         child: Angler's controlled frame name: a tool frame (:data:`TOOL_FRAMES`) makes the
-            waypoints the end effector's (:attr:`end_effector`), anything else the body's.
+            waypoints the end effector's (:attr:`end_effector`), a body frame
+            (:data:`BODY_FRAMES`) the body's.
         waypoints: the points, times strictly increasing.
         source: the file the mission came from (for messages).
     """
@@ -359,8 +369,8 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
     """
     _keys(data, "", _TOP_KEYS, _TOP_KEYS, source)
     name = _string(data["name"], "name", source)
-    parent = _string(data["parent"], "parent", source)
-    child = _string(data["child"], "child", source)
+    parent = _frame(data["parent"], "parent", PARENT_FRAMES, source)
+    child = _frame(data["child"], "child", BODY_FRAMES + TOOL_FRAMES, source)
     raw_points = data["waypoints"]
     if not isinstance(raw_points, list) or not raw_points:
         raise ConfigError(f"{source}: waypoints: expected a non-empty array, got {raw_points!r}")
@@ -382,6 +392,11 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
         x, y, z, rx, ry, rz = (
             _number(transform[k], f"{key}.transform.{k}", source) for k in _TRANSFORM_KEYS
         )
+        if z < 0.0:
+            raise ConfigError(
+                f"{source}: {key}.transform.z: must be ≥ 0 m (z is down: {z:g} m is above the "
+                "surface)"
+            )
         points.append(
             Waypoint(
                 t,
@@ -420,6 +435,19 @@ def _string(value: Any, key: str, source: str) -> str:
     if not isinstance(value, str):
         raise ConfigError(f"{source}: {key}: expected a string, got {value!r}")
     return value
+
+
+def _frame(value: Any, key: str, known: Sequence[str], source: str) -> str:
+    """The frame name ``value`` of field ``key``, one of ``known``.
+
+    Raises:
+        ConfigError: not a string, or not a known name (the message lists them).
+    """
+    name = _string(value, key, source)
+    if name not in known:
+        accepted = ", ".join(known)
+        raise ConfigError(f"{source}: {key}: unknown frame {name!r} (accepted: {accepted})")
+    return name
 
 
 def _six(value: Any, key: str, source: str) -> Vec6 | None:

@@ -232,7 +232,9 @@ class VehicleConfig:
             None = none (the operator flies it). Without ``navigation`` it gets the default
             one (:attr:`navigation_in_use`: the position fix if fitted, else motion capture).
         arm: a manipulator on the hull (:mod:`testbed.vehicle.manipulation`); None = none.
-            Under autonomy its mission tree arms it and flies end-effector goals with TPIK.
+            Under autonomy its mission tree arms it and flies end-effector goals with TPIK,
+            whose vehicle twist only the ISMC flies: an arm needs ``autonomy.controller =
+            "ismc"`` (the PID path takes a position, not a body twist).
     """
 
     model: str = "bluerov2"
@@ -284,6 +286,7 @@ class VehicleConfig:
             f"the depth (down, the third) must be ≥ 0 m (in the water), got {depth}",
         )
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
+        self._check_arm_controller()
         pool = self.pool_in_use
         if pool is not None:
             x, y, z = self.start_position_ned_m
@@ -295,6 +298,19 @@ class VehicleConfig:
                 f"{0.5 * pool.width_m:g} m, depth ≤ {pool.depth_m:g} m), got "
                 f"{list(self.start_position_ned_m)}",
             )
+
+    def _check_arm_controller(self) -> None:
+        """Refuse an arm under the PID controller: TPIK's output is a body twist [m/s, rad/s]
+        that only the ISMC flies; the PID path's position loop would leave the hull with no
+        horizontal control while the arm waits on it."""
+        if self.arm is None or self.autonomy is None:
+            return
+        check(
+            self.autonomy.controller == "ismc",
+            "autonomy.controller",
+            f"{self.autonomy.controller!r} cannot fly vehicle.arm's end-effector missions "
+            '(TPIK\'s body twist needs "ismc"); use controller = "ismc" or drop vehicle.arm',
+        )
 
     @property
     def pool_in_use(self) -> PoolScene | None:

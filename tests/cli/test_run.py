@@ -136,3 +136,27 @@ def test_the_summary_shows_n_a_where_metrics_json_has_null(
     assert metrics["command_age_s"]["mean"] is None
     assert "downlink 0/0 frames, PER n/a," in text and "command age mean n/a;" in text
     assert "nan" not in text and "inf" not in text
+
+
+def test_a_mission_that_never_started_says_why(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """USBL alone (σ 0.5 m, 0.5 Hz) never gets the position σ to ready_sigma_m (0.5 m): the
+    tree never ticks, the vehicle drifts, and the run said nothing (every figure n/a, exit 0).
+    metrics.json now has ready_s null beside ready_sigma_m and the summary says why; with
+    motion capture ready_s is the first tick's time."""
+    usbl = "vehicle.navigation={acoustic={rate_hz=0.5, noise_m=0.5, delay_s=0.75}}"
+    common = ["run", "heavy-waypoint-v1", "--set", "trials=1", "--set", "duration_s=20"]
+    out = tmp_path / "usbl"
+    assert main([*common, "--set", usbl, "--no-plots", "--out", str(out)]) == 0
+    mission = json.loads((out / "metrics.json").read_text())["mission"]
+    assert mission["ready_s"] is None and mission["ready_sigma_m"] == 0.5
+    summary = capsys.readouterr().out
+    assert "mission never started: navigation not ready (position σ > ready_sigma_m = 0.5 m" in (
+        summary
+    )
+    mocap = tmp_path / "mocap"
+    assert main([*common, "--no-plots", "--out", str(mocap)]) == 0
+    mission = json.loads((mocap / "metrics.json").read_text())["mission"]
+    assert 0.0 <= mission["ready_s"] <= 0.1  # motion capture: ready at once
+    assert "never started" not in capsys.readouterr().out

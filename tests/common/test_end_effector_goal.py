@@ -319,3 +319,16 @@ def test_a_bad_frame_in_a_scenario_is_a_config_error_naming_the_key() -> None:
         build(PilotSection, bad, source="s.toml", prefix="pilot.")
     cancel = {"kind": "supervisor", "goals": [{"t_s": 1.0, "cancel": True, "frame": "vehicle"}]}
     assert build(PilotSection, cancel, source="s.toml", prefix="pilot.").goals[0].cancel
+
+
+@pytest.mark.parametrize("order", [GoTo(100, 0, -200, 0), EndEffectorGoTo(100, 0, -1)])
+def test_a_goal_above_the_surface_is_refused_and_counted(order: GoTo | EndEffectorGoTo) -> None:
+    """A remote value: counted unsupported as a goal without a fix is, never raised; the
+    vehicle's intents are untouched. A goal at the surface (z = 0) is taken."""
+    world, _, intents, end = vehicle_end()
+    payload = OperatorMessage(False, False, 0, True, False, order).encode()
+    assert end.apply_order(payload, 1.0) is False
+    assert end.counters.unsupported == 1 and world.components(intents) == ()
+    assert end.order_ack_bit is False  # not applied, so not acknowledged
+    surface = OperatorMessage(False, False, 0, True, False, GoTo(100, 0, 0, 0)).encode()
+    assert end.apply_order(surface, 2.0) is True

@@ -58,6 +58,7 @@ def test_a_goto_is_taken_up_one_order_latency_and_at_most_a_tick_after_it_is_sen
     assert 0.0 <= taken - delivered <= TICK_S + FRAME_S
     mission = result.metrics["mission"]
     assert mission["goals"] == 1 and mission["orders_acknowledged"] == 1
+    assert mission["goals_refused"] == 0
 
 
 def test_the_goal_is_reached_and_the_vehicle_reports_ready(one_goto: RunResult) -> None:

@@ -391,3 +391,29 @@ def test_a_vehicle_cannot_start_above_the_surface() -> None:
         load_scenario("s100-teleop-v1", ["vehicle.start_position_ned_m=[0.0, 0.0, -10000.0]"])
     surface = load_scenario("s100-teleop-v1", ["vehicle.start_position_ned_m=[0.0, 0.0, 0.0]"])
     assert surface.vehicle.start_position_ned_m[2] == 0.0
+
+
+def test_an_arm_under_the_pid_controller_is_refused(
+    capsys: pytest.CaptureFixture[str], tmp_path: Any
+) -> None:
+    """TPIK's vehicle twist is flown only by the ISMC: with controller = "pid" an arm's
+    mission left the hull with no horizontal control (it drifted 4.5 m with the current, the
+    end effector 1.6 m off, no goal reached) and no word of it."""
+    out = tmp_path / "run"
+    pid = "vehicle.autonomy.controller=pid"
+    code = main(["run", "uvms-waypoint-v1", "--set", pid, "--no-plots", "--out", str(out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("testbed: error: --set: vehicle.autonomy.controller: 'pid' cannot fly")
+    assert "vehicle.arm" in err and err.count("\n") == 1
+    assert not out.exists()
+    assert load_scenario("heavy-waypoint-v1", [pid]).vehicle.autonomy is not None  # no arm: ok
+
+
+def test_a_supervisor_goal_above_the_surface_is_refused() -> None:
+    """The GoTo was sent and flown: the hull broached."""
+    goal = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, -2.0]}]"
+    with pytest.raises(ConfigError, match=r"^--set: pilot.goals\[0\].position_ned_m: the depth"):
+        load_scenario("s100-supervised-v1", [goal])
+    surface = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, 0.0]}]"
+    assert load_scenario("s100-supervised-v1", [surface]).pilot is not None

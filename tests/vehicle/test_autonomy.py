@@ -212,3 +212,21 @@ def test_surfacing_starts_from_where_the_mission_left_the_vehicle(tmp_path: Any)
 
 def _pose(z: float, yaw: float) -> dict[str, float]:
     return {"x": 0.0, "y": 0.0, "z": z, "rx": 0.0, "ry": 0.0, "rz": yaw}
+
+
+def test_a_remote_goal_above_the_surface_is_counted_refused_and_not_flown() -> None:
+    """A GoTo to 2 m above the surface broached the hull: the tree planned and flew it. It is a
+    remote value: counted refused, never raised, the vehicle holds where it was."""
+    v = vehicle(heavy())
+    v.advance(2.0)
+    above = PositionSetpoint((1.0, 0.0, -2.0), 0.0, True)
+    v.world.set(v.operator_entity, above, origin=Origin.REMOTE)
+    v.advance(12.0)
+    auto = v.world.resource(Autonomy)
+    assert auto.refused == 1 and auto.goals == 0
+    assert math.dist(v.truth.position_ned_m, (0.0, 0.0, 1.0)) < 0.05  # held, not broached
+    goal = PositionSetpoint((0.5, 0.0, 1.0), 0.0, True)  # a later goal in the water is flown
+    v.world.set(v.operator_entity, goal, origin=Origin.REMOTE)
+    v.advance(20.0)
+    assert (auto.refused, auto.goals) == (1, 1)
+    assert math.dist(v.truth.position_ned_m, goal.position_ned_m) < 0.05

@@ -130,6 +130,14 @@ def _mutate(data: dict[str, Any], edit: str) -> str:
         points[0]["time_from_start"] = -1.0
     elif edit == "empty waypoints":
         data["waypoints"] = []
+    elif edit == "tool frame typo":  # one letter off Angler's tool frame: flew the hull
+        data["child"] = "alpha_standard_jaw_tool"
+    elif edit == "unknown child":
+        data["child"] = "gripper"
+    elif edit == "unknown parent":
+        data["parent"] = "odom"
+    elif edit == "above the surface":
+        points[2]["transform"]["z"] = -3.0
     text = json.dumps(data)
     if edit == "nan":
         text = text.replace('"y": 2.0', '"y": NaN')
@@ -159,6 +167,14 @@ BAD_INPUTS = [
     ("short velocity", "waypoints[2].velocity: expected an array of 6 numbers"),
     ("negative first time", "waypoints[0].time_from_start: must be ≥ 0 s"),
     ("empty waypoints", "waypoints: expected a non-empty array"),
+    (
+        "tool frame typo",
+        "child: unknown frame 'alpha_standard_jaw_tool' "
+        "(accepted: base_link, alpha_standard_jaws_tool, end_effector)",
+    ),
+    ("unknown child", "child: unknown frame 'gripper' (accepted: base_link, alpha_standard_"),
+    ("unknown parent", "parent: unknown frame 'odom' (accepted: map)"),
+    ("above the surface", "waypoints[2].transform.z: must be ≥ 0 m (z is down: -3 m is above"),
     ("nan", "waypoints[2].transform.y: must be finite"),
     ("infinity", "waypoints[2].transform.y: must be finite"),
     ("duplicate key", "name: key given twice"),
