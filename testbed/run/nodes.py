@@ -27,7 +27,7 @@ from typing import Any, Protocol
 
 import simpy
 
-from testbed.channel import Delivery, IpgPolicy
+from testbed.channel import Delivery, IpgPolicy, decode_delivery
 from testbed.channel.mac import TokenSlave, run_periodic_sender, run_token_master
 from testbed.common.components import Odometry
 from testbed.ecs import Phase, World
@@ -87,9 +87,7 @@ class LinkPort:
         modem.on_receive = self._receive
 
     def _receive(self, delivery: Delivery) -> None:
-        last = delivery.part == delivery.parts - 1  # a whole transmission has arrived
-        events = self.decoder.feed_packet(delivery.data, packet_end=last)
-        for item in events:
+        for item in decode_delivery(self.decoder, delivery):
             if isinstance(item, Frame):
                 self._recorder.frames_decoded[self._direction] += 1
                 self.payload_bytes += len(item.payload)
