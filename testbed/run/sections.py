@@ -111,7 +111,8 @@ class LinkSection:
         codec: ``"teleop"`` (the paper's compact orders and replies), ``"changeset"`` (the ECS
             paper's full change-set sync) or ``"mavlink-raw"`` (MAVLink itself, the baseline).
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
-            (each node sends at its own rate).
+            (each node sends at its own rate; refused with the teleop codec, whose vehicle only
+            answers orders).
         ipg: the token master's inter-packet-gap policy.
         ipg_s: the gap [s] when ``ipg == "fixed"``, in (0, 60].
         uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or

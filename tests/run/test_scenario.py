@@ -383,6 +383,10 @@ def test_ipg_policies() -> None:
         ("link.ipg_s=0", "--set: link.ipg_s: must be in (0, 60] s, got 0"),
         ("link.ipg_s=2", "--set: link.ipg_s: only used when link.ipg = 'fixed'"),
         ("link.uplink_rate_hz=5", "--set: link.uplink_rate_hz: only used when"),
+        (  # the teleop vehicle only answers orders: it would never send under free access
+            "link.mac=free",
+            "--set: link.mac: 'free' does not work with link.codec = 'teleop'",
+        ),
         ("vehicle.control_rate_hz=0", "--set: vehicle.control_rate_hz: must be in [1, 1000] Hz"),
         ("operator.arm_at_s=-1", "--set: operator.arm_at_s: must be in [0, 86400] s"),
         ("operator.arm_at_s=500", "--set: operator.arm_at_s: must be < duration_s"),
