@@ -329,7 +329,12 @@ def compute_metrics(
     axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
     flying = after & (series["armed"] > 0.5)
     signal = {
-        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
+        axis: signal_lag_s(
+            t[flying],
+            series[f"cmd_{axis}"][flying],
+            series[f"rx_{axis}"][flying],
+            max_lag_s=link.signal_lag_window_s,
+        )
         if flying.sum() > 10
         else math.nan
         for axis, _ in axes
