@@ -85,7 +85,8 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
     ``D`` = the mean of ``command_lag_s.mean`` over the line's runs at its smallest BER (0 in
     the shipped sweeps; the lag of a delivered order does not depend on BER) and ``L`` = the
     uplink's mean frame length (13 B, the move order). ``ber_vs_per.png`` carries
-    :func:`closed_form_per` with ``L`` = each direction's median ``mean_frame_bytes``.
+    :func:`closed_form_per` with ``L`` = each direction's median ``mean_frame_bytes`` (the
+    frames' own bytes: bit errors in a modem's packet padding cost no frame).
 
     Args:
         results_csv: the sweep's ``results.csv``.

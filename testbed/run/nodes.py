@@ -82,6 +82,7 @@ class LinkPort:
         self.pending: list[tuple[bytes, int]] = []
         self.payload_bytes = 0
         self._direction = direction
+        self._sends = "downlink" if direction == "uplink" else "uplink"
         self._recorder = recorder
         self._on_frame = on_frame
         modem.on_receive = self._receive
@@ -103,7 +104,9 @@ class LinkPort:
 
     def send(self, payload: bytes) -> int:
         """Frame ``payload`` and hand it to the modem; returns the frame id."""
-        self.modem.send(encode_frame(payload))
+        frame = encode_frame(payload)
+        self._recorder.frame_bytes_sent[self._sends] += len(frame)
+        self.modem.send(frame)
         return self.modem.last_frame_id
 
     def rejected(self, count: int = 1) -> None:

@@ -98,6 +98,19 @@ def test_signal_lag_beyond_five_seconds_is_measured_on_the_m64() -> None:
         assert lag != pytest.approx(SIGNAL_LAG_WINDOW_S, abs=1e-6)
 
 
+def test_mean_frame_bytes_are_the_frames_own_and_on_air_adds_the_padding() -> None:
+    """On the M64 a 13-B order goes out as two 8-B packets (16 B on the air) and a 20-B reply as
+    three (24 B); bit errors act on the 13 and 20 B, so that is what a PER closed form takes."""
+    metrics = run("m64-teleop-v1", "duration_s=30").metrics
+    reply_bytes = len(encode_frame(bytes(14)))  # 2-B header + 12-B state, no image chunk
+    for direction, frame in (("uplink", ORDER_FRAME_BYTES), ("downlink", reply_bytes)):
+        link = metrics["link"][direction]
+        assert link["mean_frame_bytes"] == frame
+        assert link["mean_on_air_bytes"] == 8 * math.ceil(frame / 8)
+    s100 = run("s100-teleop-v1", "duration_s=20").metrics["link"]["uplink"]  # sent whole
+    assert s100["mean_frame_bytes"] == s100["mean_on_air_bytes"] == ORDER_FRAME_BYTES
+
+
 def test_signal_lag_below_the_sampling_step_is_refined() -> None:
     """The tether's lag (≈ 2-ms command lag + half the 10-ms send period) is below the 50-ms
     step of its 20-Hz series: measured by interpolation, neither 0 nor a whole step."""
