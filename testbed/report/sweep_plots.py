@@ -348,7 +348,15 @@ def _plot_per(
         per = results.numbers(f"link.{direction}.per")
         frame = results.numbers(f"link.{direction}.mean_frame_bytes")
         for (label, mask), colour in zip(groups, colours, strict=True):
-            draw(ax, axis, ber[mask], 100 * per[mask], color=colour, label=label or None)
+            draw(
+                ax,
+                axis,
+                ber[mask],
+                100 * per[mask],
+                color=colour,
+                label=label or None,
+                bounds=(0.0, 100.0),
+            )
         if np.isfinite(frame).any():
             length = float(np.nanmedian(frame))
             ax.plot(
@@ -371,7 +379,7 @@ def _plot_per(
         ax.legend(fontsize="small")
     if axis is not None:
         axis.apply(axes[0])
-    footnote(fig, _BARS_NOTE + "; dashed: independent bit errors")
+    footnote(fig, _BARS_NOTE + " (within 0–100 %); dashed: independent bit errors")
     _title(fig, results, "BER vs packet error rate")
     return save(fig, path)
 
