@@ -6,7 +6,8 @@ The link is simpy's ``Cable`` shape: a :class:`Medium` apart from the nodes, eac
 
 - :mod:`~testbed.channel.config` — :class:`LinkConfig` and the packaged presets
   (``s100``, ``m64``, ``s2c``, ``tether``) loaded by :func:`load_link_config`.
-- :mod:`~testbed.channel.medium` — :class:`Medium`, :class:`Modem`, :class:`Delivery`.
+- :mod:`~testbed.channel.medium` — :class:`Medium`, :class:`Modem`, :class:`Delivery`,
+  :func:`decode_delivery` (every simulated receiver's decoding rule).
 - :mod:`~testbed.channel.errors` — independent and Gilbert–Elliott bit errors.
 - :mod:`~testbed.channel.mac` — token passing (the paper's) and free access, as simpy processes.
 - :mod:`~testbed.channel.trace` — typed link events, and what became of each frame
@@ -30,7 +31,7 @@ from .mac import (
     run_token_master,
     run_token_slave,
 )
-from .medium import Delivery, Medium, Modem, ModemCounters, Position
+from .medium import Delivery, Medium, Modem, ModemCounters, Position, decode_delivery
 from .outcomes import (
     RECEPTION_OUTCOMES,
     DirectionCounts,
@@ -67,6 +68,7 @@ __all__ = [
     "Propagation",
     "Trace",
     "Transmission",
+    "decode_delivery",
     "direction_counts",
     "frame_outcomes",
     "load_link_config",

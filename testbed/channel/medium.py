@@ -43,8 +43,9 @@ import simpy
 from testbed.channel.config import LinkConfig
 from testbed.channel.errors import BitErrors
 from testbed.channel.trace import BROADCAST, EventKind, Trace
+from testbed.protocol import CorruptFrame, Frame, FrameDecoder
 
-__all__ = ["Delivery", "Medium", "Modem", "ModemCounters", "Position"]
+__all__ = ["Delivery", "Medium", "Modem", "ModemCounters", "Position", "decode_delivery"]
 
 Position = Callable[[], tuple[float, float, float]]
 """A node's position [m], world NED, read at each transmission."""
@@ -80,6 +81,25 @@ class Delivery(NamedTuple):
     part: int = 0
     parts: int = 1
     bit_errors: int = 0
+
+
+def decode_delivery(decoder: FrameDecoder, delivery: Delivery) -> list[Frame | CorruptFrame]:
+    """Feed one received copy to a node's decoder, flushing it when a transmission is complete.
+
+    The one decoding rule of every simulated receiver (the run's nodes and ``testbed link``):
+    the last packet of a transmission ends a modem packet, so a candidate still waiting for the
+    length its (corrupted) length byte claims is given up there
+    (:meth:`~testbed.protocol.FrameDecoder.feed_packet`) instead of holding later frames.
+
+    Args:
+        decoder: the receiving node's frame decoder.
+        delivery: the copy the medium handed over.
+
+    Returns:
+        The decoder's events, in stream order.
+    """
+    last = delivery.part == delivery.parts - 1
+    return decoder.feed_packet(delivery.data, packet_end=last)
 
 
 @dataclass(slots=True)

@@ -298,7 +298,10 @@ class DirectionCounts:
         frames_settled: transmitted frames whose every packet reached an outcome at the
             receiver (delivered, corrupted or lost) by the end of the trace: the frames a
             packet error rate is taken over.
-        mean_frame_bytes: mean size of the frames handed to the modem [B]; NaN if none.
+        mean_on_air_bytes: mean size on the air of the frames handed to the modem, packet
+            padding included (the trace's ``enqueue`` sizes) [B]; NaN if none. Bit errors
+            follow the frame's own bytes, not the padding: a PER closed form takes the frame's
+            length, which the trace does not hold.
     """
 
     frames_sent: int
@@ -308,7 +311,7 @@ class DirectionCounts:
     frames_out_of_range: int
     frames_corrupted: int
     frames_settled: int
-    mean_frame_bytes: float
+    mean_on_air_bytes: float
 
 
 def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> DirectionCounts:
@@ -340,7 +343,7 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
     enqueued = mine & (kind == KIND_CODE[EventKind.ENQUEUE])
     sent = int(np.count_nonzero(enqueued))
     sizes = columns.size_bytes[enqueued].astype(np.int64)
-    mean_frame_bytes = float(np.mean(sizes)) if sent else math.nan
+    mean_on_air_bytes = float(np.mean(sizes)) if sent else math.nan
     del sizes
     del enqueued
     dropped = int(np.count_nonzero(mine & (kind == KIND_CODE[EventKind.DROP])))
@@ -382,5 +385,5 @@ def direction_counts(events: Iterable[LinkEvent], src: str, dst: str) -> Directi
         frames_out_of_range=lost(FrameOutcome.OUT_OF_RANGE),
         frames_corrupted=lost(FrameOutcome.CORRUPTED),
         frames_settled=int(np.count_nonzero(settled_packets >= packets_sent)),
-        mean_frame_bytes=mean_frame_bytes,
+        mean_on_air_bytes=mean_on_air_bytes,
     )

@@ -3,8 +3,10 @@
 A sender hands ``frames`` frames of ``frame_bytes`` bytes to its modem, one every ``interval_s``;
 each frame is ``encode_frame`` of a payload starting with a 4-byte big-endian sequence number, so
 the receiver, which runs :class:`~testbed.protocol.FrameDecoder` on every delivered copy, can
-match what it decodes to what was sent. Latency is measured from handing the frame to the link to
-the decoder yielding it.
+match what it decodes to what was sent. It decodes exactly as the run's nodes do
+(:func:`~testbed.channel.medium.decode_delivery`: the decoder is flushed at the end of each
+transmission), so a frame behind a corrupted length byte is not held for later frames. Latency
+is measured from handing the frame to the link to the decoder yielding it.
 
 Outcome of each frame (they add up to ``frames_sent``):
 
@@ -31,7 +33,7 @@ import simpy
 
 from testbed.channel.config import LinkConfig
 from testbed.channel.mac import run_periodic_sender
-from testbed.channel.medium import Delivery, Medium
+from testbed.channel.medium import Delivery, Medium, decode_delivery
 from testbed.channel.trace import EventKind, Trace
 from testbed.protocol import MAX_PAYLOAD, Frame, FrameDecoder, encode_frame, frame_overhead
 
@@ -205,7 +207,7 @@ def run_probe(
                     latencies_s.append(now - sent_at_s[seq])
 
     def on_receive(delivery: Delivery) -> None:
-        accept(decoder.feed(delivery.data), delivery.t_delivered_s)
+        accept(decode_delivery(decoder, delivery), delivery.t_delivered_s)
 
     receiver.on_receive = on_receive
     env.process(
@@ -214,7 +216,6 @@ def run_probe(
     wall_start = time.perf_counter()
     env.run()
     sim_s = float(env.now)
-    accept(decoder.flush(), sim_s)  # frames held behind a corrupted length byte
     wall_s = time.perf_counter() - wall_start
 
     delivered = len(latencies_s)

@@ -36,7 +36,7 @@ from testbed.report.figures import no_data, save
 from testbed.report.images import plot_image_strip
 from testbed.report.mission_plots import has_target, plot_mission
 from testbed.report.timeline import TIMELINE_WINDOW_S, plot_timeline
-from testbed.run.metrics import signal_lag_s
+from testbed.run.metrics import SIGNAL_LAG_WINDOW_S, signal_lag_s
 from testbed.run.recorder import NodeEvent, Recorder
 from testbed.run.runner import RunResult
 from testbed.vehicle.autonomy import resolve_mission
@@ -83,7 +83,13 @@ _STICKS = (
 )
 
 
-def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> Path:
+def plot_speeds(
+    series: Mapping[str, np.ndarray],
+    path: Path,
+    *,
+    title: str,
+    max_lag_s: float = SIGNAL_LAG_WINDOW_S,
+) -> Path:
     """Draw the pilot's sticks (operator) against those the vehicle applies, one axis per row.
 
     Sticks are normalised to [−1, 1]. Each row's legend gives the delay that best aligns the
@@ -93,6 +99,8 @@ def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> 
         series: :meth:`Recorder.series` columns (``t_s``, ``cmd_*``, ``rx_*``).
         path: PNG file to write.
         title: the run's title.
+        max_lag_s: upper end of the lag search [s] (the scenario's
+            :attr:`~testbed.run.sections.LinkSection.signal_lag_window_s`).
 
     Returns:
         ``path``.
@@ -108,8 +116,8 @@ def plot_speeds(series: Mapping[str, np.ndarray], path: Path, *, title: str) -> 
             continue
         cmd = np.asarray(series[f"cmd_{axis}"], dtype=float)
         rx = np.asarray(series[f"rx_{axis}"], dtype=float)
-        lag = signal_lag_s(t, cmd, rx) if t.size >= 3 else math.nan
-        lag_text = "lag n/a (constant)" if math.isnan(lag) else f"lag ≈ {lag:.2f} s"
+        lag = signal_lag_s(t, cmd, rx, max_lag_s) if t.size >= 3 else math.nan
+        lag_text = "lag n/a" if math.isnan(lag) else f"lag ≈ {lag:.2f} s"
         commanded, received = "commanded (operator)", f"received (vehicle), {lag_text}"
         ax.plot(t, cmd, drawstyle="steps-post", color="tab:blue", lw=1.6, label=commanded)
         ax.plot(t, rx, drawstyle="steps-post", color="tab:red", lw=1.2, ls="--", label=received)
@@ -325,6 +333,7 @@ def write_plots(
     attitude_experiment: bool,
     settle_s: float,
     timeline_window_s: float = TIMELINE_WINDOW_S,
+    max_lag_s: float = SIGNAL_LAG_WINDOW_S,
 ) -> list[Path]:
     """Write the run's PNG plots into ``out_dir`` (created if missing).
 
@@ -335,6 +344,7 @@ def write_plots(
         attitude_experiment: also write ``attitude_errors.png``.
         settle_s: start of the attitude error window [s of simulated time].
         timeline_window_s: length of the timeline's window from the first transmission [s].
+        max_lag_s: upper end of the stick-lag search in ``speeds.png`` [s].
 
     Returns:
         The files written: ``timeline.png``, ``speeds.png``, ``state.png`` and, for attitude
@@ -346,7 +356,7 @@ def write_plots(
         plot_timeline(
             recorder.trace, out_dir / "timeline.png", title=title, window_s=timeline_window_s
         ),
-        plot_speeds(series, out_dir / "speeds.png", title=title),
+        plot_speeds(series, out_dir / "speeds.png", title=title, max_lag_s=max_lag_s),
         plot_state(series, recorder.events, out_dir / "state.png", title=title),
     ]
     if attitude_experiment:
@@ -366,6 +376,7 @@ def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
         title=title,
         attitude_experiment=scenario.pilot.kind == "attitude",
         settle_s=scenario.metrics.settle_s,
+        max_lag_s=scenario.link.signal_lag_window_s,
     )
     if scenario.images.enabled:
         written.append(

@@ -2,7 +2,8 @@
 
 :func:`draw` joins the per-x medians over seeds with a line and puts the 95 % Student-t
 interval of the mean as error bars at the means (:func:`line` computes them; the same interval
-as ``aggregate.csv``). :class:`LogAxis` is a log x axis on which 0 can sit: one decade below the
+as ``aggregate.csv``, kept within the quantity's bounds when it has some: a PER's in
+[0, 100] %). :class:`LogAxis` is a log x axis on which 0 can sit: one decade below the
 smallest positive value, labelled ``0``, with a break mark on the axis.
 """
 
@@ -14,40 +15,45 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.axes import Axes
 
-from testbed.run.metrics import mean_ci95_half_width
+from testbed.run.metrics import mean_ci95
 
 __all__ = ["Line", "LogAxis", "draw", "line"]
 
 
 @dataclass(frozen=True, slots=True)
 class Line:
-    """Per distinct x: the median, the mean and the half-width of its 95 % t interval.
+    """Per distinct x: the median, the mean and its 95 % t interval.
 
     Attributes:
         x: the distinct finite x values, ascending.
         median: median of y per x.
         mean: mean of y per x.
-        half: half-width of the 95 % t interval of the mean per x; NaN with fewer than two
-            values.
+        low: low end of the 95 % t interval of the mean per x (:func:`mean_ci95`); NaN with
+            fewer than two values.
+        high: its high end, likewise.
     """
 
     x: np.ndarray
     median: np.ndarray
     mean: np.ndarray
-    half: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
 
 
-def line(x: np.ndarray, y: np.ndarray) -> Line:
-    """The :class:`Line` of the pairs where both ``x`` and ``y`` are finite."""
+def line(x: np.ndarray, y: np.ndarray, bounds: tuple[float, float] | None = None) -> Line:
+    """The :class:`Line` of the pairs where both ``x`` and ``y`` are finite; intervals within
+    ``bounds`` (the values ``y`` can take) when given."""
     keep = np.isfinite(x) & np.isfinite(y)
     xs = np.unique(x[keep])
-    med, mean, half = [], [], []
+    med, mean, low, high = [], [], [], []
     for value in xs:
         ys = y[keep & (x == value)]
         med.append(float(np.median(ys)))
         mean.append(float(ys.mean()))
-        half.append(mean_ci95_half_width(ys))
-    return Line(xs, np.array(med), np.array(mean), np.array(half))
+        interval = mean_ci95(ys, bounds)
+        low.append(interval[0])
+        high.append(interval[1])
+    return Line(xs, np.array(med), np.array(mean), np.array(low), np.array(high))
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,19 +112,22 @@ def draw(
     *,
     color: str,
     label: str | None,
+    bounds: tuple[float, float] | None = None,
 ) -> None:
-    """Medians joined by a line, 95 % t intervals of the mean as bars (at the mean)."""
-    stats = line(x, y)
+    """Medians joined by a line, 95 % t intervals of the mean as bars (at the mean), within
+    ``bounds`` (the values ``y`` can take, e.g. ``(0, 100)`` for a percentage) when given."""
+    stats = line(x, y, bounds)
     if stats.x.size == 0:
         return
     xs = axis.place(stats.x) if axis is not None else stats.x
     ax.plot(xs, stats.median, marker="o", ms=4, color=color, label=label)
-    bars = np.isfinite(stats.half)
+    bars = np.isfinite(stats.low)
     if bars.any():
+        mean = stats.mean[bars]
         ax.errorbar(
             xs[bars],
-            stats.mean[bars],
-            yerr=stats.half[bars],
+            mean,
+            yerr=np.vstack([mean - stats.low[bars], stats.high[bars] - mean]),
             fmt="none",
             capsize=3,
             lw=1.0,

@@ -85,7 +85,8 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
     ``D`` = the mean of ``command_lag_s.mean`` over the line's runs at its smallest BER (0 in
     the shipped sweeps; the lag of a delivered order does not depend on BER) and ``L`` = the
     uplink's mean frame length (13 B, the move order). ``ber_vs_per.png`` carries
-    :func:`closed_form_per` with ``L`` = each direction's median ``mean_frame_bytes``.
+    :func:`closed_form_per` with ``L`` = each direction's median ``mean_frame_bytes`` (the
+    frames' own bytes: bit errors in a modem's packet padding cost no frame).
 
     Args:
         results_csv: the sweep's ``results.csv``.
@@ -347,7 +348,15 @@ def _plot_per(
         per = results.numbers(f"link.{direction}.per")
         frame = results.numbers(f"link.{direction}.mean_frame_bytes")
         for (label, mask), colour in zip(groups, colours, strict=True):
-            draw(ax, axis, ber[mask], 100 * per[mask], color=colour, label=label or None)
+            draw(
+                ax,
+                axis,
+                ber[mask],
+                100 * per[mask],
+                color=colour,
+                label=label or None,
+                bounds=(0.0, 100.0),
+            )
         if np.isfinite(frame).any():
             length = float(np.nanmedian(frame))
             ax.plot(
@@ -370,7 +379,7 @@ def _plot_per(
         ax.legend(fontsize="small")
     if axis is not None:
         axis.apply(axes[0])
-    footnote(fig, _BARS_NOTE + "; dashed: independent bit errors")
+    footnote(fig, _BARS_NOTE + " (within 0–100 %); dashed: independent bit errors")
     _title(fig, results, "BER vs packet error rate")
     return save(fig, path)
 

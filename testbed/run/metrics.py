@@ -37,9 +37,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 __all__ = [
+    "SIGNAL_LAG_WINDOW_S",
     "age_of_information",
     "distribution",
     "error_statistics",
+    "is_probability",
+    "mean_ci95",
     "mean_ci95_half_width",
     "position_error",
     "signal_lag_s",
@@ -95,6 +98,41 @@ def mean_ci95_half_width(values: Sequence[float] | np.ndarray) -> float:
     if n < 2:
         return math.nan
     return float(stats.t.ppf(0.975, n - 1)) * float(array.std(ddof=1)) / math.sqrt(n)
+
+
+def is_probability(name: str) -> bool:
+    """Whether a flattened metric (``link.uplink.per``) is a probability, within [0, 1]."""
+    return name.rsplit(".", 1)[-1] == "per"
+
+
+def mean_ci95(
+    values: Sequence[float] | np.ndarray, bounds: tuple[float, float] | None = None
+) -> tuple[float, float]:
+    """The 95 % Student-t confidence interval of the mean of ``values``, within ``bounds``.
+
+    ``mean ± t(0.975, n − 1) · s / √n`` (:func:`mean_ci95_half_width`), clipped to ``bounds``
+    when given: the mean of a bounded quantity (a probability: ``(0, 1)``) lies within its
+    bounds, so the part of the interval outside them holds no possible value. Clipping keeps
+    the coverage (the true mean is inside the clipped interval whenever it is inside the
+    unclipped one) and removes the impossible values a t interval reaches with few seeds (two
+    runs with PER 0.02 and 0.12 give −0.29…0.43).
+
+    Args:
+        values: the samples.
+        bounds: ``(low, high)`` the quantity cannot leave, or None.
+
+    Returns:
+        ``(low, high)``, in the unit of ``values``; NaNs with fewer than two values.
+    """
+    array = np.asarray(values, dtype=float)
+    half = mean_ci95_half_width(array)
+    if math.isnan(half):
+        return math.nan, math.nan
+    mean = float(array.mean())
+    low, high = mean - half, mean + half
+    if bounds is not None:
+        low, high = max(low, bounds[0]), min(high, bounds[1])
+    return low, high
 
 
 def age_of_information(
@@ -154,22 +192,37 @@ def age_of_information(
     return {"mean": area / covered, "p95": float(np.percentile(ages, 95))}
 
 
+SIGNAL_LAG_WINDOW_S = 5.0
+"""Default upper end of :func:`signal_lag_s`'s search [s]."""
+
+
 def signal_lag_s(
     t_s: Sequence[float] | np.ndarray,
     commanded: Sequence[float] | np.ndarray,
     received: Sequence[float] | np.ndarray,
-    max_lag_s: float = 5.0,
+    max_lag_s: float = SIGNAL_LAG_WINDOW_S,
 ) -> float:
     """The delay that best aligns ``received`` with ``commanded`` (cross-correlation) [s].
 
     Both signals are sampled at the same increasing times ``t_s``, not necessarily uniform
     (vehicle frames land 2 or 3 physics steps apart); they are first resampled by linear
-    interpolation onto a uniform grid with the mean spacing. The lag maximising the normalised
-    cross-correlation of the mean-removed signals over ``[0, max_lag_s]`` is found on that grid
-    and refined by a parabola through the peak and its neighbours.
+    interpolation onto a uniform grid with the mean spacing ``dt``. The normalised
+    cross-correlation of the mean-removed signals is computed for shifts of ``−dt`` to
+    ``max_lag_s`` on that grid; its peak is refined by a parabola through the peak and its two
+    neighbours, at zero shift too (hence the one negative shift), so a lag below the sampling
+    step is measured, not rounded to 0 or ``dt``. A peak at either end of the search (at
+    ``−dt``, the received signal leading, or at ``max_lag_s``, the true lag possibly beyond it)
+    is no measurement: NaN.
+
+    Args:
+        t_s: (n,) sample times [s], increasing.
+        commanded: (n,) the pilot's signal.
+        received: (n,) the signal the vehicle applied, same units.
+        max_lag_s: upper end of the search [s] (capped at the series' length).
 
     Returns:
-        The lag [s], or NaN when either signal is constant (nothing to align).
+        The lag [s], within ``(−dt/2, max_lag_s)``; NaN when either signal is constant (nothing
+        to align), when fewer than 3 samples, or when the peak is at an end of the search.
     """
     t = np.asarray(t_s, dtype=float)
     a = np.asarray(commanded, dtype=float)
@@ -185,20 +238,25 @@ def signal_lag_s(
     if not a.any() or not b.any():
         return math.nan
     max_shift = min(round(max_lag_s / dt), t.size - 2)
-    scores = np.empty(max_shift + 1)
-    for shift in range(max_shift + 1):
-        x = a[: a.size - shift]
-        y = b[shift:]
-        denom = math.sqrt(float(x @ x) * float(y @ y))
-        scores[shift] = float(x @ y) / denom if denom > 0.0 else -math.inf
+    shifts = range(-1, max_shift + 1)
+    scores = np.array([_correlation(a, b, shift) for shift in shifts])
     k = int(np.argmax(scores))
-    offset = 0.0
-    if 0 < k < max_shift:
-        left, mid, right = scores[k - 1], scores[k], scores[k + 1]
-        curvature = left - 2.0 * mid + right
-        if curvature < 0.0:
-            offset = 0.5 * (left - right) / curvature
-    return (k + offset) * dt
+    if not 0 < k < scores.size - 1:
+        return math.nan  # the peak is at an end of the search window
+    left, mid, right = scores[k - 1], scores[k], scores[k + 1]
+    curvature = left - 2.0 * mid + right
+    offset = 0.5 * (left - right) / curvature if -math.inf < curvature < 0.0 else 0.0
+    return (shifts[k] + offset) * dt
+
+
+def _correlation(a: np.ndarray, b: np.ndarray, shift: int) -> float:
+    """Normalised correlation of ``a`` with ``b`` delayed by ``shift`` samples (any sign)."""
+    if shift >= 0:
+        x, y = a[: a.size - shift], b[shift:]
+    else:
+        x, y = a[-shift:], b[: b.size + shift]
+    denom = math.sqrt(float(x @ x) * float(y @ y))
+    return float(x @ y) / denom if denom > 0.0 else -math.inf
 
 
 def position_error(

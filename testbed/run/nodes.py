@@ -27,7 +27,7 @@ from typing import Any, Protocol
 
 import simpy
 
-from testbed.channel import Delivery, IpgPolicy
+from testbed.channel import Delivery, IpgPolicy, decode_delivery
 from testbed.channel.mac import TokenSlave, run_periodic_sender, run_token_master
 from testbed.common.components import Odometry
 from testbed.ecs import Phase, World
@@ -82,14 +82,13 @@ class LinkPort:
         self.pending: list[tuple[bytes, int]] = []
         self.payload_bytes = 0
         self._direction = direction
+        self._sends = "downlink" if direction == "uplink" else "uplink"
         self._recorder = recorder
         self._on_frame = on_frame
         modem.on_receive = self._receive
 
     def _receive(self, delivery: Delivery) -> None:
-        last = delivery.part == delivery.parts - 1  # a whole transmission has arrived
-        events = self.decoder.feed_packet(delivery.data, packet_end=last)
-        for item in events:
+        for item in decode_delivery(self.decoder, delivery):
             if isinstance(item, Frame):
                 self._recorder.frames_decoded[self._direction] += 1
                 self.payload_bytes += len(item.payload)
@@ -105,7 +104,9 @@ class LinkPort:
 
     def send(self, payload: bytes) -> int:
         """Frame ``payload`` and hand it to the modem; returns the frame id."""
-        self.modem.send(encode_frame(payload))
+        frame = encode_frame(payload)
+        self._recorder.frame_bytes_sent[self._sends] += len(frame)
+        self.modem.send(frame)
         return self.modem.last_frame_id
 
     def rejected(self, count: int = 1) -> None:

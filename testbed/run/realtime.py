@@ -421,8 +421,9 @@ def hil_metrics(
     rejected), ``frames_dropped`` (sender's queue full or port down), ``frames_outage``
     (refused or discarded in a scenario outage window), ``per`` (1 − delivered / settled, where
     settled counts the frames the ledger knows arrived or were lost), ``goodput_bps`` and
-    ``mean_frame_bytes``. ``frames_collided`` and ``frames_out_of_range`` are null: only the
-    simulator's trace knows why a frame vanished on the air. A count that needs the end not
+    ``mean_frame_bytes`` (the frames' own bytes). ``frames_collided``, ``frames_out_of_range``
+    and ``mean_on_air_bytes`` are null: only the simulator's trace knows why a frame vanished on
+    the air, and a real modem's packet padding is its own. A count that needs the end not
     running here is null too, and so is ``per`` unless both nodes run here.
 
     ``duration_s`` is the time the run reached (``sim_s``): less than asked for a run ended
@@ -522,6 +523,7 @@ def _direction(
             if sender is not None and sender.frames_offered
             else nan
         ),
+        "mean_on_air_bytes": nan,
     }
 
 

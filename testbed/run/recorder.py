@@ -338,6 +338,8 @@ class Recorder:
             at the receiver.
         frames_rejected: link direction → payloads that decoded as frames but were refused by
             the codec (garbled past the CRC, or written by the wrong side).
+        frame_bytes_sent: link direction → bytes of the frames the sender handed to its modem
+            [B], framing included, packet padding not (the modem adds that).
         events: node events in time order.
         rows: series rows (see :data:`SERIES_COLUMNS`): a :class:`SeriesRows`, or any list of
             row tuples.
@@ -352,6 +354,7 @@ class Recorder:
     odometry_updates: FloatPairs = field(default_factory=FloatPairs)
     frames_decoded: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     frames_rejected: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
+    frame_bytes_sent: dict[str, int] = field(default_factory=lambda: {"uplink": 0, "downlink": 0})
     events: list[NodeEvent] = field(default_factory=list)
     rows: SeriesRows | list[tuple[float, ...]] = field(default_factory=SeriesRows)
     images: ImageLog = field(default_factory=ImageLog)

@@ -268,10 +268,19 @@ def tally_images(
 
 
 def _link_direction(
-    trace: Trace, src: str, dst: str, decoded: int, payload_bytes: int, sim_s: float
+    trace: Trace,
+    src: str,
+    dst: str,
+    decoded: int,
+    payload_bytes: int,
+    frame_bytes: int,
+    sim_s: float,
 ) -> dict[str, Any]:
     """Per-direction frame counts from the trace (:func:`testbed.channel.direction_counts`:
     a frame counts once, by its worst packet); delivered = frames the receiver decoded.
+
+    ``mean_frame_bytes`` is the frames' own mean length (``frame_bytes`` over the frames sent),
+    the length bit errors act on; ``mean_on_air_bytes`` adds the modem's packet padding.
 
     ``per`` = 1 − delivered / settled, over the frames whose every packet had reached the
     receiver (or been lost) when the run ended: a frame still queued or on the air at the end
@@ -288,7 +297,8 @@ def _link_direction(
         "frames_out_of_range": counts.frames_out_of_range,
         "per": 1.0 - decoded / counts.frames_settled if counts.frames_settled else math.nan,
         "goodput_bps": 8.0 * payload_bytes / sim_s if sim_s > 0.0 else math.nan,
-        "mean_frame_bytes": counts.mean_frame_bytes,
+        "mean_frame_bytes": frame_bytes / counts.frames_sent if counts.frames_sent else math.nan,
+        "mean_on_air_bytes": counts.mean_on_air_bytes,
     }
 
 
@@ -332,7 +342,12 @@ def compute_metrics(
     axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
     flying = after & (series["armed"] > 0.5)
     signal = {
-        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
+        axis: signal_lag_s(
+            t[flying],
+            series[f"cmd_{axis}"][flying],
+            series[f"rx_{axis}"][flying],
+            max_lag_s=link.signal_lag_window_s,
+        )
         if flying.sum() > 10
         else math.nan
         for axis, _ in axes
@@ -365,6 +380,7 @@ def compute_metrics(
                 "vehicle",
                 recorder.frames_decoded["uplink"],
                 payload_bytes["uplink"],
+                recorder.frame_bytes_sent["uplink"],
                 sim_s,
             ),
             "downlink": _link_direction(
@@ -373,6 +389,7 @@ def compute_metrics(
                 "operator",
                 recorder.frames_decoded["downlink"],
                 payload_bytes["downlink"],
+                recorder.frame_bytes_sent["downlink"],
                 sim_s,
             ),
         },

@@ -419,6 +419,11 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
     channel_data = _merge(base, {k: v for k, v in table.items() if k in _CHANNEL_KEYS})
     build(LinkConfig, channel_data, source=where, prefix="link.")  # errors name link.<key>
     section = build(LinkSection, {**options, "channel": channel_data}, source=where, prefix="link.")
+    if section.codec == "teleop" and section.mac == "free":
+        raise ConfigError(
+            f"{where}: link.mac: 'free' does not work with link.codec = 'teleop' (its vehicle only "
+            "answers orders, on a token-passing link: use link.mac = 'token' or another codec)"
+        )
     if "ipg_s" in given and section.ipg != "fixed":
         raise ConfigError(f"{where}: link.ipg_s: only used when link.ipg = 'fixed'")
     if "snapshot_period_s" in given and section.codec != "changeset":

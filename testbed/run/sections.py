@@ -31,6 +31,8 @@ from testbed.operator.pilots import (
     SineTerm,
     SupervisorPilot,
 )
+from testbed.protocol import OPERATOR_HEADER_SIZE, Move, frame_overhead
+from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 
 __all__ = [
     "MAX_DURATION_S",
@@ -111,7 +113,8 @@ class LinkSection:
         codec: ``"teleop"`` (the paper's compact orders and replies), ``"changeset"`` (the ECS
             paper's full change-set sync) or ``"mavlink-raw"`` (MAVLink itself, the baseline).
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
-            (each node sends at its own rate).
+            (each node sends at its own rate; refused with the teleop codec, whose vehicle only
+            answers orders).
         ipg: the token master's inter-packet-gap policy.
         ipg_s: the gap [s] when ``ipg == "fixed"``, in (0, 60].
         uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or
@@ -151,6 +154,28 @@ class LinkSection:
         if self.ipg == "fixed":
             return Fixed(self.ipg_s)
         return _IPG_CONSTANTS[self.ipg]
+
+    @property
+    def signal_lag_window_s(self) -> float:
+        """Upper end of the stick-lag search [s]: twice the closed-form worst lag of a clean
+        link, one order period plus one order's delivery (intrinsic delay and airtime of each
+        packet, the queue gaps between them, propagation over ``max_range_m`` when finite),
+        and never less than :data:`~testbed.run.metrics.SIGNAL_LAG_WINDOW_S`."""
+        channel = self.channel
+        order_bytes = frame_overhead() + OPERATOR_HEADER_SIZE + Move.BODY_SIZE  # 13 B
+        reach_m = channel.max_range_m
+        packet = channel.packet_bytes or order_bytes
+        packets = math.ceil(order_bytes / packet)
+        delivery_s = (
+            packets * (channel.intrinsic_delay_s + channel.airtime_s(packet))
+            + (packets - 1) * channel.queue_gap_s
+            + (channel.propagation.delay_s(reach_m) if math.isfinite(reach_m) else 0.0)
+        )
+        if self.mac == "token":
+            period_s = self.ipg_policy.gap_after(order_bytes)
+        else:
+            period_s = 1.0 / self.uplink_rate_hz
+        return max(SIGNAL_LAG_WINDOW_S, 2.0 * (period_s + delivery_s))
 
     @property
     def rates_used(self) -> bool:

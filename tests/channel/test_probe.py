@@ -94,3 +94,26 @@ def test_same_seed_same_result() -> None:
 def test_bad_arguments_raise(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError):
         run_probe(S100, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("preset", "size", "interval"), [("s100", 13, 1.0), ("m64", 20, 4.0)])
+def test_high_ber_delivered_frames_wait_for_no_later_frame(
+    preset: str, size: int, interval: float
+) -> None:
+    # At BER 1e-2 about one frame in ten has a corrupted length byte; the probe decodes as the
+    # run's nodes do (flush at the end of each transmission), so every delivered frame arrives
+    # after exactly its own delay + airtime (a frame held behind a corrupted candidate would
+    # arrive one or more intervals later).
+    config = load_link_config(preset, ["ber=1e-2"])
+    r = run_probe(config, frames=3000, frame_bytes=size, interval_s=interval, seed=1)
+    if preset == "s100":
+        closed_form = I_S + 8 * size / config.bitrate_bps
+    else:  # 20 B → 3 packets of 8 B, a guard gap apart, no distance
+        closed_form = 3 * 8 * 8 / config.bitrate_bps + 2 * config.queue_gap_s
+    assert r.frames_delivered > 0
+    assert r.latency_s.mean == pytest.approx(closed_form, abs=1e-9)
+    assert r.latency_s.max == pytest.approx(closed_form, abs=1e-9)
+    # and the PER is still the closed form over the frame's bits
+    per = 1.0 - (1.0 - 1e-2) ** (8 * size)
+    lo, hi = stats.binom.interval(0.999, 3000, per)
+    assert lo / 3000 <= r.per <= hi / 3000

@@ -166,7 +166,7 @@ def test_direction_counts_of_the_operators_frames_at_the_vehicle() -> None:
         frames_out_of_range=1,  # 3
         frames_corrupted=1,  # 6, although its second packet is still on the air
         frames_settled=6,  # 0, 1, 2, 3, 9, 10; not 5 and 6 (on the air), 4 and 7 (never sent)
-        mean_frame_bytes=(20 + 40 + 20 + 20 + 100 + 40 + 40 + 40 + 40 + 40) / 10,
+        mean_on_air_bytes=(20 + 40 + 20 + 20 + 100 + 40 + 40 + 40 + 40 + 40) / 10,
     )
 
 
@@ -185,7 +185,7 @@ def test_direction_counts_take_only_the_named_receivers_copies() -> None:
 def test_direction_counts_of_an_empty_trace() -> None:
     counts = direction_counts(Trace(), OP, VEH)
     assert (counts.frames_sent, counts.frames_settled, counts.frames_dropped) == (0, 0, 0)
-    assert math.isnan(counts.mean_frame_bytes)
+    assert math.isnan(counts.mean_on_air_bytes)
 
 
 def test_an_interrupt_anywhere_in_a_flush_loses_and_repeats_no_event() -> None:

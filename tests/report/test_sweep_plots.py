@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from testbed.cli.main import main
 from testbed.config import ConfigError
@@ -20,7 +21,7 @@ from testbed.report.closed_forms import (
     closed_form_images_per_minute,
     closed_form_per,
 )
-from testbed.report.sweep_axes import LogAxis
+from testbed.report.sweep_axes import LogAxis, draw, line
 from testbed.report.sweep_plots import image_rate_model, plot_ber_sweep, plot_pair
 from testbed.report.sweep_results import read_results
 from testbed.run.metrics import age_of_information
@@ -99,6 +100,22 @@ def test_closed_form_age_matches_the_formula_and_a_simulated_sawtooth() -> None:
     updates = [(s + lag, s) for s in kept]
     measured = age_of_information(updates, 10.0, float(sampled[-1]), grid_s=1.0)["mean"]
     assert measured == pytest.approx(formula, rel=0.01)
+
+
+def test_error_bars_of_a_percentage_stay_within_0_and_100() -> None:
+    """PER 2 % and 12 % at one BER: the t interval 7 ± 63.5 % is drawn from 0 %, not −56.5 %."""
+    x, y = np.array([1e-3, 1e-3, 1e-2, 1e-2]), np.array([2.0, 12.0, 90.0, 99.0])
+    free = line(x, y)
+    bounded = line(x, y, (0.0, 100.0))
+    assert free.low[0] < 0.0 and free.high[1] > 100.0
+    assert bounded.low[0] == 0.0 and bounded.high[0] == pytest.approx(free.high[0])
+    assert bounded.high[1] == 100.0 and bounded.low[1] == pytest.approx(free.low[1])
+    fig = Figure()
+    ax = fig.subplots()
+    draw(ax, None, x, y, color="k", label=None, bounds=(0.0, 100.0))
+    (bars,) = [c for c in ax.collections if len(c.get_segments())]
+    ends = np.concatenate([seg[:, 1] for seg in bars.get_segments()])
+    assert ends.min() == 0.0 and ends.max() == 100.0
 
 
 def test_ber_zero_sits_one_decade_below_the_smallest_positive_value() -> None:

@@ -71,6 +71,37 @@ def test_signal_lag_of_a_staircase_hold_is_about_half_the_hold_plus_delay() -> N
     assert signal_lag_s(t, commanded, received) == pytest.approx(delay + period / 2, abs=0.02)
 
 
+def _delayed(t: np.ndarray, lag_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """A pilot-like signal and the same signal ``lag_s`` later (exact, not interpolated)."""
+
+    def f(x: np.ndarray) -> np.ndarray:
+        return np.sin(2 * np.pi * x / 23.0) + 0.4 * np.sin(2 * np.pi * x / 7.3 + 1.0)
+
+    return f(t), f(t - lag_s)
+
+
+def test_signal_lag_beyond_the_search_window_is_no_measurement() -> None:
+    t = np.arange(0.0, 120.0, 0.05)
+    commanded, received = _delayed(t, 5.1)
+    assert math.isnan(signal_lag_s(t, commanded, received, max_lag_s=5.0))  # not 5.0
+    assert signal_lag_s(t, commanded, received, max_lag_s=10.0) == pytest.approx(5.1, abs=0.005)
+
+
+def test_signal_lag_leading_the_command_is_no_measurement() -> None:
+    t = np.arange(0.0, 120.0, 0.05)
+    commanded, received = _delayed(t, -0.5)  # received ahead of the command: no delay
+    assert math.isnan(signal_lag_s(t, commanded, received))
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.004, 0.012, 0.02, 0.03])
+def test_signal_lag_below_the_sampling_step_is_interpolated(lag: float) -> None:
+    """20-Hz samples (50 ms apart), lags of 0 to 30 ms: the peak at zero or one shift is refined
+    by the parabola through its neighbours (one negative shift included), to a few ms."""
+    t = np.arange(0.0, 120.0, 0.05)
+    commanded, received = _delayed(t, lag)
+    assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.002)
+
+
 def test_signal_lag_of_a_constant_is_nan() -> None:
     t = np.arange(0.0, 10.0, 0.1)
     assert math.isnan(signal_lag_s(t, np.ones_like(t), np.sin(t)))

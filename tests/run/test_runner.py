@@ -16,6 +16,7 @@ import pytest
 from testbed.channel import load_link_config
 from testbed.protocol import encode_frame
 from testbed.report.closed_forms import aoi_periodic_closed_form
+from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import load_scenario
 
@@ -81,6 +82,43 @@ def test_signal_lag_is_delay_plus_half_the_gap() -> None:
     expected = metrics["command_lag_s"]["mean"] + metrics["ipg_s"] / 2
     for axis in ("x", "y", "z", "yaw"):
         assert metrics["signal_lag_s"][axis] == pytest.approx(expected, abs=0.03)
+
+
+def test_signal_lag_beyond_five_seconds_is_measured_on_the_m64() -> None:
+    """On the M64 (T = 6 s, D ≈ 2.1 s) D + T/2 ≈ 5.1 s, beyond the default 5-s search: the
+    window follows the link's closed form, so the lag is measured, not stuck at the search's
+    end (it was exactly 5.0 on every axis)."""
+    scenario = load_scenario("m64-teleop-v1", ["link.ber=0"])
+    metrics = run_scenario(scenario).metrics
+    expected = metrics["command_lag_s"]["mean"] + metrics["ipg_s"] / 2
+    assert expected > SIGNAL_LAG_WINDOW_S and scenario.link.signal_lag_window_s > 2 * expected
+    for axis in ("x", "y", "z", "yaw"):
+        lag = metrics["signal_lag_s"][axis]
+        assert lag == pytest.approx(expected, abs=0.15)  # a 6-s staircase: D + T/2 is rough
+        assert lag != pytest.approx(SIGNAL_LAG_WINDOW_S, abs=1e-6)
+
+
+def test_mean_frame_bytes_are_the_frames_own_and_on_air_adds_the_padding() -> None:
+    """On the M64 a 13-B order goes out as two 8-B packets (16 B on the air) and a 20-B reply as
+    three (24 B); bit errors act on the 13 and 20 B, so that is what a PER closed form takes."""
+    metrics = run("m64-teleop-v1", "duration_s=30").metrics
+    reply_bytes = len(encode_frame(bytes(14)))  # 2-B header + 12-B state, no image chunk
+    for direction, frame in (("uplink", ORDER_FRAME_BYTES), ("downlink", reply_bytes)):
+        link = metrics["link"][direction]
+        assert link["mean_frame_bytes"] == frame
+        assert link["mean_on_air_bytes"] == 8 * math.ceil(frame / 8)
+    s100 = run("s100-teleop-v1", "duration_s=20").metrics["link"]["uplink"]  # sent whole
+    assert s100["mean_frame_bytes"] == s100["mean_on_air_bytes"] == ORDER_FRAME_BYTES
+
+
+def test_signal_lag_below_the_sampling_step_is_refined() -> None:
+    """The tether's lag (≈ 2-ms command lag + half the 10-ms send period) is below the 50-ms
+    step of its 20-Hz series: measured by interpolation, neither 0 nor a whole step."""
+    metrics = run("tether-teleop-v1", "duration_s=30").metrics
+    expected = metrics["command_lag_s"]["mean"] + 0.5 / 100.0
+    for axis in ("x", "y", "z", "yaw"):
+        assert 0.0 < metrics["signal_lag_s"][axis] < 0.025
+        assert metrics["signal_lag_s"][axis] == pytest.approx(expected, abs=0.01)
 
 
 @pytest.mark.parametrize(

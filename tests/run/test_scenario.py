@@ -14,6 +14,7 @@ import pytest
 
 from testbed.channel import TELEROBOTICS_2021, Fixed, load_link_config
 from testbed.config import ConfigError
+from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 from testbed.run.scenario import (
     LinkOutage,
     PilotSection,
@@ -166,6 +167,18 @@ def test_tether_and_m64_change_only_the_link_and_what_it_needs() -> None:
     m64 = load_scenario("m64-teleop-v1")
     assert dataclasses.replace(m64.vehicle, failsafe=base.vehicle.failsafe) == base.vehicle
     assert (m64.link.preset, m64.link.codec, m64.link.mac) == ("m64", "teleop", "token")
+
+
+def test_signal_lag_window_is_twice_an_order_period_and_delivery() -> None:
+    m64 = load_scenario("m64-teleop-v1").link
+    c = m64.channel
+    # 6-s gap; the 13-B order is 2 packets of 8 B (1 s each), a 0.1-s queue gap apart, then
+    # propagation over the 200-m range at 1500 m/s.
+    delivery_s = 2 * c.airtime_s(8) + c.queue_gap_s + c.max_range_m / c.propagation.speed_mps
+    assert m64.signal_lag_window_s == pytest.approx(2 * (6.0 + delivery_s))
+    # The S100 and the tether are well inside the default window.
+    assert load_scenario("s100-teleop-v1").link.signal_lag_window_s == SIGNAL_LAG_WINDOW_S
+    assert load_scenario("tether-teleop-v1").link.signal_lag_window_s == SIGNAL_LAG_WINDOW_S
 
 
 def test_m64_gap_fits_a_fragmented_exchange() -> None:
@@ -383,6 +396,10 @@ def test_ipg_policies() -> None:
         ("link.ipg_s=0", "--set: link.ipg_s: must be in (0, 60] s, got 0"),
         ("link.ipg_s=2", "--set: link.ipg_s: only used when link.ipg = 'fixed'"),
         ("link.uplink_rate_hz=5", "--set: link.uplink_rate_hz: only used when"),
+        (  # the teleop vehicle only answers orders: it would never send under free access
+            "link.mac=free",
+            "--set: link.mac: 'free' does not work with link.codec = 'teleop'",
+        ),
         ("vehicle.control_rate_hz=0", "--set: vehicle.control_rate_hz: must be in [1, 1000] Hz"),
         ("operator.arm_at_s=-1", "--set: operator.arm_at_s: must be in [0, 86400] s"),
         ("operator.arm_at_s=500", "--set: operator.arm_at_s: must be < duration_s"),

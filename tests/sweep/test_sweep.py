@@ -6,6 +6,7 @@ Every sweep here runs ``s100-teleop-v1`` for 8 simulated seconds (≈ 0.15 s of 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -171,6 +172,26 @@ def _toy_sweep() -> Sweep:
         metrics=("m",),
         source="toy",
     )
+
+
+def test_interval_of_a_probability_stays_within_zero_and_one() -> None:
+    """Two seeds with PER 0.02 and 0.12: mean 0.07, s = 0.0707, t(0.975, 1) = 12.706205, so
+    the t interval is 0.07 ± 0.635 = (−0.565, 0.705); a PER cannot be below 0, so the interval
+    is (0, 0.705). The same numbers as another metric keep their t interval."""
+    sweep = dataclasses.replace(_toy_sweep(), metrics=("link.uplink.per", "m"))
+    rows = [
+        {"point": 0, "seed": s, "status": "ok", "error": "", "link.uplink.per": v, "m": v}
+        for s, v in ((0, 0.02), (1, 0.12))
+    ]
+    (point, _) = aggregate_rows(sweep, rows)
+    half = 12.7062047 * math.sqrt(0.005) / math.sqrt(2)
+    assert point["m.ci_low"] == pytest.approx(0.07 - half) and point["m.ci_low"] < 0
+    assert point["link.uplink.per.ci_low"] == 0.0
+    assert point["link.uplink.per.ci_high"] == pytest.approx(0.07 + half)
+    near_one = [dict(r, **{"link.uplink.per": 1 - r["m"]}) for r in rows]
+    (point, _) = aggregate_rows(sweep, near_one)
+    assert point["link.uplink.per.ci_high"] == 1.0
+    assert point["link.uplink.per.ci_low"] == pytest.approx(0.93 - half)
 
 
 def test_aggregate_median_p95_and_student_t_interval_by_hand() -> None:
