@@ -17,8 +17,10 @@ Outcome of each frame (they add up to ``frames_sent``):
 - *corrupted*: everything else that reached the receiver but was not decoded (bit errors; or a
   clean frame lost behind a corrupted one, exactly as a real decoder would lose it).
 
-PER is 1 − delivered / sent; goodput counts payload bits of delivered frames over the simulated
-time (until the last delivery).
+PER is the frame error rate on the air, 1 − delivered / transmitted (the frames sent less those
+dropped), as a run's metrics define it; frames the sender's FIFO dropped are their own rate,
+``drop_rate`` = dropped / sent. Goodput counts payload bits of delivered frames over the
+simulated time (until the last delivery).
 """
 
 from __future__ import annotations
@@ -102,6 +104,7 @@ class ProbeResult:
     frames_dropped: int
     frames_out_of_range: int
     per: float
+    drop_rate: float
     goodput_bps: float
     latency_s: LatencyStats
     sim_s: float
@@ -117,6 +120,7 @@ class ProbeResult:
             "frames_collided": self.frames_collided,
             "frames_dropped": self.frames_dropped,
             "per": self.per,
+            "drop_rate": self.drop_rate,
             "goodput_bps": self.goodput_bps,
             "latency_s": {
                 "mean": self.latency_s.mean,
@@ -237,13 +241,18 @@ def run_probe(
         frames_collided=collided,
         frames_dropped=dropped,
         frames_out_of_range=out_of_range,
-        per=1.0 - delivered / frames,
+        per=1.0 - delivered / (frames - dropped) if frames > dropped else math.nan,
+        drop_rate=dropped / frames,
         goodput_bps=delivered * payload_bits / sim_s if sim_s > 0.0 else 0.0,
         latency_s=latency,
         sim_s=sim_s,
         wall_s=wall_s,
         rtf=sim_s / wall_s,
     )
+
+
+def _percent(fraction: float) -> str:
+    return "n/a" if math.isnan(fraction) else f"{fraction * 100:.3f} %"
 
 
 def _ms(value: float | None) -> str:
@@ -260,7 +269,9 @@ def format_report(result: ProbeResult) -> str:
             f"  sent {result.frames_sent}  delivered {result.frames_delivered}  "
             f"corrupted {result.frames_corrupted}  collided {result.frames_collided}  "
             f"dropped {result.frames_dropped}  out of range {result.frames_out_of_range}",
-            f"  PER {result.per * 100:.3f} %  goodput {result.goodput_bps:.1f} bit/s",
+            f"  PER {_percent(result.per)} of {result.frames_sent - result.frames_dropped} "
+            f"transmitted  dropped {_percent(result.drop_rate)} of {result.frames_sent} sent  "
+            f"goodput {result.goodput_bps:.1f} bit/s",
             f"  latency mean {_ms(lat.mean)}  p50 {_ms(lat.p50)}  p95 {_ms(lat.p95)}  "
             f"max {_ms(lat.max)}",
             f"  simulated {result.sim_s:.1f} s in {result.wall_s:.3f} s "

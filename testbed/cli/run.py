@@ -206,9 +206,9 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"{metrics['scenario']} seed {metrics['seed']}: {metrics['sim_s']:.0f} s simulated in "
         f"{metrics['wall_s']:.1f} s ({metrics['rtf']:.0f}x real time)",
         f"  uplink   {up['frames_delivered']}/{up['frames_sent']} frames, PER "
-        f"{per(up['per'])}, {up['goodput_bps']:.0f} bit/s",
+        f"{per(up['per'])}{_dropped(up)}, {up['goodput_bps']:.0f} bit/s",
         f"  downlink {down['frames_delivered']}/{down['frames_sent']} frames, PER "
-        f"{per(down['per'])}, {down['goodput_bps']:.0f} bit/s",
+        f"{per(down['per'])}{_dropped(down)}, {down['goodput_bps']:.0f} bit/s",
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
         f"  yaw error std {_num(yaw['std'], digits=2)} deg; energy {metrics['energy_wh']:.3f} Wh",
@@ -253,6 +253,15 @@ def never_ready(mission: dict[str, Any]) -> str | None:
 def _missing(value: float | None) -> bool:
     """A figure that is not there: None (metrics.json's null) or NaN (before writing)."""
     return value is None or math.isnan(value)
+
+
+def _dropped(direction: dict[str, Any]) -> str:
+    """``", dropped N (P %)"``: frames the sender's FIFO dropped (never on the air, so not in
+    the PER), or nothing when none were."""
+    dropped = direction["frames_dropped"]
+    if not dropped:
+        return ""
+    return f", dropped {dropped} ({_num(direction['drop_rate'], 100.0, 1, ' %')}) at the sender"
 
 
 def _count(value: int | None) -> str:

@@ -284,7 +284,8 @@ def _link_direction(
 
     ``per`` = 1 − delivered / settled, over the frames whose every packet had reached the
     receiver (or been lost) when the run ended: a frame still queued or on the air at the end
-    is neither delivered nor lost.
+    is neither delivered nor lost, and a frame the sender's FIFO dropped was never on the air
+    (``drop_rate`` = dropped / sent counts those).
     """
     counts = direction_counts(trace.events, src, dst)
     return {
@@ -296,6 +297,7 @@ def _link_direction(
         "frames_outage": counts.frames_outage,
         "frames_out_of_range": counts.frames_out_of_range,
         "per": 1.0 - decoded / counts.frames_settled if counts.frames_settled else math.nan,
+        "drop_rate": counts.frames_dropped / counts.frames_sent if counts.frames_sent else math.nan,
         "goodput_bps": 8.0 * payload_bytes / sim_s if sim_s > 0.0 else math.nan,
         "mean_frame_bytes": frame_bytes / counts.frames_sent if counts.frames_sent else math.nan,
         "mean_on_air_bytes": counts.mean_on_air_bytes,

@@ -63,6 +63,11 @@ def test_m64_packetised_latency() -> None:
 def test_overload_drops_and_range_loses_everything() -> None:
     r = run_probe(load_link_config("m64"), frames=100, frame_bytes=60, interval_s=1.0)
     assert r.frames_dropped > 50 and outcomes(r) == 100
+    # PER is the air's (as a run's): what the FIFO dropped never flew and has its own rate
+    transmitted = 100 - r.frames_dropped
+    assert r.drop_rate == r.frames_dropped / 100
+    assert r.per == 1.0 - r.frames_delivered / transmitted
+    assert r.per < 0.05  # m64's BER over the frames that flew, not the 50+ % dropped
     far = run_probe(S100, frames=20, distance_m=15.5)
     assert far.frames_out_of_range == 20 and far.frames_delivered == 0 and far.per == 1.0
     assert far.latency_s.mean is None

@@ -238,3 +238,29 @@ def test_change_set_snapshots_resync_a_lost_arm_request() -> None:
     armed_at = synced["t_s"][np.argmax(synced["armed"] > 0.5)]
     assert synced["armed"][-1] == 1.0 and 2.0 < armed_at < 5.1
     assert not never["armed"].any()
+
+
+def test_frames_the_sender_drops_are_not_in_the_per() -> None:
+    """Change sets at 20 Hz over a full-duplex S100 with no bit errors: the sender's FIFO drops
+    most of them, and the PER (on the air) stays 0; the drops have their own rate and words in
+    the summary."""
+    from pathlib import Path
+
+    from testbed.cli.run import format_summary
+
+    result = run(
+        "s100-teleop-v1",
+        "link.codec=changeset",
+        "link.mac=free",
+        "link.ber=0",
+        "link.duplex=full",  # no collisions either: only the FIFO loses frames
+        "link.uplink_rate_hz=20",
+        "operator.depth_m=1.0",
+        "duration_s=20",
+        "metrics.settle_s=5",
+    )
+    up = result.metrics["link"]["uplink"]
+    assert up["frames_dropped"] > up["frames_sent"] / 2
+    assert up["drop_rate"] == up["frames_dropped"] / up["frames_sent"]
+    assert up["per"] == 0.0  # nothing that flew was lost
+    assert "dropped" in format_summary(result.metrics, Path("out")).splitlines()[1]
