@@ -334,13 +334,15 @@ def compute_metrics(
         if link.mac == "token"
         else math.nan
     )
-    lags = [
-        applied - recorder.commands_sampled[seq]
+    sampled_s = recorder.commands_sampled
+    commands = [  # (applied, sampled) [s] of each delivered pilot command
+        (applied, sampled_s[seq])
         for seq, applied in sorted(recorder.commands_applied.items())
-        if seq in recorder.commands_sampled
+        if seq in sampled_s
     ]
-    if not lags:  # change-set codec: the sample time travels with the command
-        lags = [applied - sampled for applied, sampled in recorder.command_updates]
+    if not commands:  # change-set codec: the sample time travels with the command
+        commands = list(recorder.command_updates)
+    lags = [applied - sampled for applied, sampled in commands if applied >= settle]
     axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
     flying = after & (series["armed"] > 0.5)
     signal = {
