@@ -53,6 +53,7 @@ __all__ = [
     "make_vehicle_node",
     "mission_metrics",
     "run_scenario",
+    "stick_tracking",
     "tally_images",
 ]
 
@@ -329,20 +330,9 @@ def compute_metrics(
     ]
     if not lags:  # change-set codec: the sample time travels with the command
         lags = [applied - sampled for applied, sampled in recorder.command_updates]
-    axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
-    flying = after & (series["armed"] > 0.5)
-    signal = {
-        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
-        if flying.sum() > 10
-        else math.nan
-        for axis, _ in axes
-    }
-    rmse = {
-        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
-        if flying.any()
-        else math.nan
-        for axis, v in axes
-    }
+    signal, rmse = stick_tracking(
+        series, after, under_autonomy=scenario.vehicle.autonomy is not None
+    )
     attitude = {}
     for axis in ("roll", "pitch", "yaw"):
         values = series[f"err_{axis}_deg"][after]
@@ -406,6 +396,50 @@ def compute_metrics(
             reached_s=[e.t_s for e in recorder.events if e.kind == "mission_reached"],
         )
     return metrics
+
+
+_STICK_AXES = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
+"""The stick axes of the series (``cmd_*``, ``rx_*``) and the body velocity each asks for."""
+
+
+def stick_tracking(
+    series: dict[str, np.ndarray], after: np.ndarray, *, under_autonomy: bool
+) -> tuple[dict[str, float], dict[str, float]]:
+    """``signal_lag_s`` and ``velocity_tracking_rmse`` of ``metrics.json``: how the sticks the
+    vehicle applies follow the pilot's, and how its body velocity follows what they ask for.
+
+    Both are taken over the armed rows at or after the settle time (``after``). Under autonomy
+    the vehicle flies its mission and never the sticks (it records them centred: ``rx_*`` = 0,
+    ``ref_*`` = 0), so there is nothing to track: every axis is NaN (null in the file), not the
+    vehicle's RMS speed against a zero demand.
+
+    Args:
+        series: :meth:`Recorder.series` columns.
+        after: (n,) bool, the rows at or after ``metrics.settle_s``.
+        under_autonomy: the vehicle has ``[vehicle.autonomy]``.
+
+    Returns:
+        ``(signal_lag_s, velocity_tracking_rmse)``, each keyed ``x``, ``y``, ``z``, ``yaw``:
+        the lag [s] and the RMS velocity difference [m/s; rad/s for yaw], body FRD.
+    """
+    if under_autonomy:
+        nothing = {axis: math.nan for axis, _ in _STICK_AXES}
+        return nothing, dict(nothing)
+    t = series["t_s"]
+    flying = after & (series["armed"] > 0.5)
+    signal = {
+        axis: signal_lag_s(t[flying], series[f"cmd_{axis}"][flying], series[f"rx_{axis}"][flying])
+        if flying.sum() > 10
+        else math.nan
+        for axis, _ in _STICK_AXES
+    }
+    rmse = {
+        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
+        if flying.any()
+        else math.nan
+        for axis, v in _STICK_AXES
+    }
+    return signal, rmse
 
 
 def mission_metrics(
