@@ -34,9 +34,9 @@ from testbed.run.metrics import (
     distribution,
     error_statistics,
     position_error,
+    settling_time_s,
     signal_lag_s,
     summary,
-    time_to_converge_s,
     tracked_positions,
 )
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
@@ -461,10 +461,12 @@ def mission_metrics(
     ``"end_effector"`` when any row has one, else ``"body"``). ``position_error_m``
     (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
     ``estimate_error_m`` (``{mean, p95}`` of |estimate − truth| [m] on those rows that have an
-    estimate); ``samples`` counts the rows. ``time_to_converge_s``
-    (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's goal tolerance) is taken
-    over every armed row with a target, from the start (the settle time does not cut the
-    approach). ``completion_s``: when the tree last reported a goal reached [s], if the vehicle
+    estimate); ``samples`` counts the rows. ``final_target_s``: when the
+    target arrived at its final value (the last waypoint's time, a GoTo leg's end) [s];
+    ``time_to_converge_s``: from then until the error stays within the tree's goal tolerance to
+    the last row [s], a duration (:func:`~testbed.run.metrics.settling_time_s`: 0 when the vehicle
+    arrived with its target); both over every armed row with a target (the settle time does not
+    cut them). ``completion_s``: when the tree last reported a goal reached [s], if the vehicle
     ended ready (no goal in progress), else NaN (the last goal was never reached).
 
     Args:
@@ -488,14 +490,14 @@ def mission_metrics(
     error = position_error(truth[rows], target[rows])
     nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
+    settling, arrival = settling_time_s(t[flying], truth[flying], target[flying], tolerance_m)
     return {
         "frame": "end_effector" if reaching else "body",
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),
-        "time_to_converge_s": time_to_converge_s(
-            t[flying], position_error(truth[flying], target[flying]), tolerance_m
-        ),
+        "time_to_converge_s": settling,
+        "final_target_s": arrival,
         "completion_s": (
             reached_s[-1] if reached_s and status is not None and status.ready else math.nan
         ),
