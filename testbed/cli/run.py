@@ -232,6 +232,11 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             f"{_count(mission['goals_reached'])}/{_count(mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
+        if (heading := mission.get("yaw_error_deg")) is not None:
+            lines.append(
+                f"  mission yaw error (|truth − target|) mean {_num(heading['mean'], digits=2)} "
+                f"deg, p95 {_num(heading['p95'], digits=2)} deg"
+            )
         if (never := never_ready(mission)) is not None:
             lines.append(f"  {never}")
     lines.append(f"  wrote {out}/")

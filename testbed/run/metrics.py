@@ -51,6 +51,7 @@ __all__ = [
     "summary",
     "time_to_converge_s",
     "tracked_positions",
+    "yaw_error_deg",
 ]
 
 
@@ -363,3 +364,20 @@ def settling_time_s(
         np.asarray(truth, dtype=float)[rows], np.asarray(target, dtype=float)[rows]
     )
     return time_to_converge_s(t[rows], error, tolerance_m) - arrival, arrival
+
+
+def yaw_error_deg(
+    yaw_deg: Sequence[float] | np.ndarray, target_yaw_deg: Sequence[float] | np.ndarray
+) -> np.ndarray:
+    """The absolute heading error, wrapped: ``|wrap(ψ − ψ*)|`` row by row [deg], in [0, 180].
+
+    Args:
+        yaw_deg: (n,) true heading [deg, clockwise from north].
+        target_yaw_deg: (n,) target heading [deg], same convention.
+
+    Returns:
+        (n,) the shorter way round between them [deg]; NaN where either is NaN.
+    """
+    difference = np.asarray(yaw_deg, dtype=float) - np.asarray(target_yaw_deg, dtype=float)
+    wrapped: np.ndarray = np.abs((difference + 180.0) % 360.0 - 180.0)
+    return wrapped

@@ -38,6 +38,7 @@ from testbed.run.metrics import (
     signal_lag_s,
     summary,
     tracked_positions,
+    yaw_error_deg,
 )
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver, failsafe_engagements
@@ -461,7 +462,9 @@ def mission_metrics(
     ``"end_effector"`` when any row has one, else ``"body"``). ``position_error_m``
     (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
     ``estimate_error_m`` (``{mean, p95}`` of |estimate − truth| [m] on those rows that have an
-    estimate); ``samples`` counts the rows. ``final_target_s``: when the
+    estimate); ``samples`` counts the rows. ``yaw_error_deg`` (``{mean, std, p95}`` of
+    |wrap(ψ − ψ*)| [deg], the true heading against the pose target's, on those rows that have a
+    pose target: none while an end-effector target is flown). ``final_target_s``: when the
     target arrived at its final value (the last waypoint's time, a GoTo leg's end) [s];
     ``time_to_converge_s``: from then until the error stays within the tree's goal tolerance to
     the last row [s], a duration (:func:`~testbed.run.metrics.settling_time_s`: 0 when the vehicle
@@ -490,12 +493,14 @@ def mission_metrics(
     error = position_error(truth[rows], target[rows])
     nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
+    heading = yaw_error_deg(series["yaw_deg"][rows], series["target_yaw_deg"][rows])
     settling, arrival = settling_time_s(t[flying], truth[flying], target[flying], tolerance_m)
     return {
         "frame": "end_effector" if reaching else "body",
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),
+        "yaw_error_deg": distribution(heading[np.isfinite(heading)]),
         "time_to_converge_s": settling,
         "final_target_s": arrival,
         "completion_s": (

@@ -16,6 +16,7 @@ from testbed.run.metrics import (
     position_error,
     settling_time_s,
     time_to_converge_s,
+    yaw_error_deg,
 )
 from testbed.run.recorder import SERIES_COLUMNS
 from testbed.run.runner import mission_metrics
@@ -118,6 +119,28 @@ def test_final_target_and_settling_by_hand() -> None:
     assert math.isnan(settling) and arrival == 2.0
 
 
+def test_yaw_error_is_wrapped_and_absolute() -> None:
+    got = yaw_error_deg([179.0, -170.0, 10.0, 0.0, math.nan], [-179.0, 170.0, 30.0, 180.0, 0.0])
+    assert got[:4].tolist() == pytest.approx([2.0, 20.0, 20.0, 180.0])
+    assert math.isnan(got[4])
+
+
+def test_mission_yaw_error_against_the_pose_targets_heading() -> None:
+    """Truth heading against ``target_yaw_deg`` on the scored rows (armed, with a target, after
+    the settle time), the short way round: rows t = 1, 3, 4, 5 s have errors 2 (across ±180°),
+    0, 10 and 4 deg; t = 0 (50° off) is before the settle time, t = 2 s (90° off) disarmed."""
+    s = _series()
+    s["yaw_deg"] = np.array([50.0, 179.0, 90.0, 100.0, -5.0, 34.0])
+    s["target_yaw_deg"] = np.array([0.0, -179.0, 0.0, 100.0, 5.0, 30.0])
+    s["armed"][2] = 0.0
+    m = mission_metrics(s, 1.0, 0.2, status=None, orders_acknowledged=None)
+    errors = np.array([2.0, 0.0, 10.0, 4.0])  # t = 1, 3, 4, 5
+    heading = m["yaw_error_deg"]
+    assert heading["mean"] == pytest.approx(errors.mean())
+    assert heading["std"] == pytest.approx(errors.std())
+    assert heading["p95"] == pytest.approx(np.percentile(errors, 95))
+
+
 def _series(n: int = 6) -> dict[str, np.ndarray]:
     cols = {name: np.zeros(n) for name in SERIES_COLUMNS}
     cols["t_s"] = np.arange(n, dtype=float)
@@ -190,6 +213,7 @@ def test_mission_metrics_without_any_target_are_nan_and_unknown_status_null() ->
     assert all(math.isnan(v) for v in m["position_error_m"].values())
     assert math.isnan(m["time_to_converge_s"])
     assert math.isnan(m["final_target_s"])
+    assert all(math.isnan(v) for v in m["yaw_error_deg"].values())
     assert math.isnan(m["estimate_error_m"]["mean"])
     assert (m["goals"], m["goals_reached"], m["orders_acknowledged"]) == (None, None, 3)
 
