@@ -122,7 +122,7 @@ def format_trial(trial: int, metrics: dict[str, Any]) -> str:
         f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
         f"position error mean {_num(h['position_error_mean_m'])} m, "
         f"final {_num(h['position_error_final_m'])} m; "
-        f"converged at {_num(h['time_to_converge_s'], digits=1)} s; "
+        f"settled {_num(h['time_to_converge_s'], digits=2)} s after the final target; "
         f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
     )
     never = never_ready(metrics.get("mission") or {})
@@ -138,8 +138,8 @@ def format_trials_summary(document: dict[str, Any], out: Path) -> str:
 
     return (
         f"{document['trials_finished']} trials (mean ± std over trials): position error mean "
-        f"{pm('position_error_mean_m')} m, final {pm('position_error_final_m')} m; converged at "
-        f"{pm('time_to_converge_s', digits=1)} s; command lag mean "
+        f"{pm('position_error_mean_m')} m, final {pm('position_error_final_m')} m; settled "
+        f"{pm('time_to_converge_s', digits=2)} s after the final target; command lag mean "
         f"{pm('command_lag_mean_s', 1000.0, 0)} ms\n  wrote {out}/"
     )
 
@@ -226,11 +226,17 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         error = mission["position_error_m"]
         lines.append(
             f"  mission position error mean {_num(error['mean'])} m, std {_num(error['std'])} m, "
-            f"final {_num(error['final'])} m; converged at "
-            f"{_num(mission['time_to_converge_s'], digits=1)} s; goals reached "
+            f"final {_num(error['final'])} m; settled "
+            f"{_num(mission['time_to_converge_s'], digits=2)} s after the final target (at "
+            f"{_num(mission.get('final_target_s'), digits=1)} s); goals reached "
             f"{_count(mission['goals_reached'])}/{_count(mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
+        if (heading := mission.get("yaw_error_deg")) is not None:
+            lines.append(
+                f"  mission yaw error (|truth − target|) mean {_num(heading['mean'], digits=2)} "
+                f"deg, p95 {_num(heading['p95'], digits=2)} deg"
+            )
         if (never := never_ready(mission)) is not None:
             lines.append(f"  {never}")
     lines.append(f"  wrote {out}/")

@@ -5,9 +5,9 @@ vehicle's body origin against its pose target, or the arm's end effector against
 (with the body's path in grey on the single-run figure).
 
 - ``mission.png`` (:func:`plot_mission`, one run) — a top view, east across and north up, of the
-  true path, the navigation estimate (thin), the pose target (dashed) and the mission's
-  waypoints (markers); beside it the position error |truth − target| over time with the goal
-  tolerance and the settling time.
+  true path, the navigation estimate (thin; from ``mission.ready_s`` on), the pose target
+  (dashed) and the mission's waypoints (markers); beside it the position error |truth − target|
+  over time with the goal tolerance and the settling time.
 - ``trials.png`` (:func:`plot_trials`, repeated trials) — the same top view with one true path
   per trial, and the error over time of each trial.
 
@@ -29,7 +29,7 @@ from testbed.report.figures import no_data, save
 from testbed.run.metrics import position_error, tracked_positions
 from testbed.run.trials import TrialTrack
 
-__all__ = ["has_target", "mission_error", "plot_mission", "plot_trials"]
+__all__ = ["estimate_track", "has_target", "mission_error", "plot_mission", "plot_trials"]
 
 _TRUTH, _ESTIMATE, _TARGET = "tab:blue", "tab:orange", "k"
 
@@ -48,6 +48,31 @@ def mission_error(series: Mapping[str, np.ndarray]) -> np.ndarray:
     error = position_error(truth, target)
     error[np.asarray(series["armed"], dtype=float) <= 0.5] = np.nan
     return error
+
+
+def estimate_track(
+    series: Mapping[str, np.ndarray], ready_s: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The navigation estimate's (east, north) [m] per row, NaN before navigation was ready.
+
+    Until its first position fix the filter sits at north = east = 0 with σ 10 m; the mission
+    tree waits for σ ≤ ``ready_sigma_m`` (``mission.ready_s``), and so does the drawn estimate
+    (else a line runs from (0, 0) to the true start).
+
+    Args:
+        series: the ``t_s``, ``est_e`` and ``est_n`` columns.
+        ready_s: when the estimate was first ready [s]; NaN: never (nothing drawn); None: not
+            known (every row drawn).
+
+    Returns:
+        ``(east, north)``, (n,) each, copies.
+    """
+    east = np.array(series["est_e"], dtype=float)
+    north = np.array(series["est_n"], dtype=float)
+    if ready_s is not None:
+        early = ~(np.asarray(series["t_s"], dtype=float) >= ready_s)  # all rows when NaN
+        east[early] = north[early] = np.nan
+    return east, north
 
 
 def _top_view(ax: Axes) -> None:
@@ -78,6 +103,7 @@ def plot_mission(
     waypoints_ned: Sequence[Sequence[float]] = (),
     tolerance_m: float | None = None,
     settle_s: float | None = None,
+    ready_s: float | None = None,
 ) -> Path:
     """Draw one run's mission: top view of truth, estimate, target and waypoints; e(t).
 
@@ -89,6 +115,8 @@ def plot_mission(
         waypoints_ned: (k, 3) the mission's waypoints [m], NED (none: no markers).
         tolerance_m: the goal tolerance drawn on the error panel [m], or None.
         settle_s: the settling time marked on the error panel [s], or None.
+        ready_s: ``mission.ready_s`` [s]: the estimate is drawn from then on
+            (:func:`estimate_track`); None: all of it.
 
     Returns:
         ``path``.
@@ -107,7 +135,8 @@ def plot_mission(
         top.plot(truth[:, 1], truth[:, 0], color=_TRUTH, lw=1.6, label="end effector")
     else:
         top.plot(series["east_m"], series["north_m"], color=_TRUTH, lw=1.6, label="truth")
-        top.plot(series["est_e"], series["est_n"], color=_ESTIMATE, lw=0.7, label="estimate")
+        east, north = estimate_track(series, ready_s)
+        top.plot(east, north, color=_ESTIMATE, lw=0.7, label="estimate")
     top.plot(target[:, 1], target[:, 0], color=_TARGET, lw=1.2, ls="--", label="target")
     points = np.asarray(waypoints_ned, dtype=float).reshape(-1, 3)
     if points.size:

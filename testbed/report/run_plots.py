@@ -401,6 +401,7 @@ def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
                 else [w.position_ned for w in mission.waypoints],
                 tolerance_m=autonomy.tree.goal_tolerance_m,
                 settle_s=scenario.metrics.settle_s,
+                ready_s=result.metrics.get("mission", {}).get("ready_s"),
             )
         )
     return written

@@ -25,7 +25,10 @@ Mission metrics (vehicles under autonomy). The position error is the distance
 tree set (:func:`position_error`); :func:`error_statistics` reduces it to Angler's figures (mean
 and spread, and the error at the end of the run, its "final error"), and
 :func:`time_to_converge_s` gives the first instant after which it stays within the goal
-tolerance to the end.
+tolerance to the end. A trajectory-following vehicle rides along with its moving target and is
+within tolerance from the start, so convergence is counted from when the target arrives at its
+final value (:func:`final_target_s`: the last waypoint's time, a GoTo leg's end):
+:func:`settling_time_s` is the time from then until the error stays within tolerance.
 """
 
 from __future__ import annotations
@@ -41,14 +44,17 @@ __all__ = [
     "age_of_information",
     "distribution",
     "error_statistics",
+    "final_target_s",
     "is_probability",
     "mean_ci95",
     "mean_ci95_half_width",
     "position_error",
+    "settling_time_s",
     "signal_lag_s",
     "summary",
     "time_to_converge_s",
     "tracked_positions",
+    "yaw_error_deg",
 ]
 
 
@@ -353,3 +359,83 @@ def time_to_converge_s(
     outside = np.flatnonzero(~within)
     first = int(outside[-1]) + 1 if outside.size else 0
     return float(t[first])
+
+
+def final_target_s(
+    t_s: Sequence[float] | np.ndarray,
+    target: Sequence[Sequence[float]] | np.ndarray,
+    atol_m: float = 1e-6,
+) -> float:
+    """When a target track arrived at its final value: the time of the first sample from which
+    every later sample is within ``atol_m`` of the last one (per coordinate).
+
+    For a mission this is the last waypoint's time (the trajectory's end, after which the tree
+    holds that pose); for a GoTo, the end of its leg.
+
+    Args:
+        t_s: (n,) sample times [s], increasing.
+        target: (n, 3) target positions [m], NED; a row with a NaN counts as different.
+        atol_m: how far a coordinate may differ and still be the final value [m].
+
+    Returns:
+        That time [s]; NaN without samples or when the last one has no target.
+    """
+    t = np.asarray(t_s, dtype=float)
+    p = np.asarray(target, dtype=float).reshape(-1, 3)
+    if t.size != len(p):
+        raise ValueError(f"{t.size} times for {len(p)} target samples")
+    if t.size == 0 or not np.isfinite(p[-1]).all():
+        return math.nan
+    same = (np.abs(p - p[-1]) <= atol_m).all(axis=1)  # NaN compares False
+    moved = np.flatnonzero(~same)
+    return float(t[int(moved[-1]) + 1 if moved.size else 0])
+
+
+def settling_time_s(
+    t_s: Sequence[float] | np.ndarray,
+    truth: Sequence[Sequence[float]] | np.ndarray,
+    target: Sequence[Sequence[float]] | np.ndarray,
+    tolerance_m: float,
+) -> tuple[float, float]:
+    """How long after the target arrived at its final value the position error settled.
+
+    ``arrival`` = :func:`final_target_s` of ``target``; on the samples from then on, the
+    error to that (final) target is :func:`position_error`, and the settling time is
+    :func:`time_to_converge_s` of it minus ``arrival``: 0 when the vehicle arrived with its
+    target and stayed within tolerance, NaN when it ended outside.
+
+    Args:
+        t_s: (n,) sample times [s], increasing.
+        truth: (n, 3) positions flown [m], NED.
+        target: (n, 3) their targets [m], NED.
+        tolerance_m: the goal tolerance [m].
+
+    Returns:
+        ``(settling [s], arrival [s])``; both NaN when there is no final target.
+    """
+    t = np.asarray(t_s, dtype=float)
+    arrival = final_target_s(t, target)
+    if math.isnan(arrival):
+        return math.nan, math.nan
+    rows = t >= arrival
+    error = position_error(
+        np.asarray(truth, dtype=float)[rows], np.asarray(target, dtype=float)[rows]
+    )
+    return time_to_converge_s(t[rows], error, tolerance_m) - arrival, arrival
+
+
+def yaw_error_deg(
+    yaw_deg: Sequence[float] | np.ndarray, target_yaw_deg: Sequence[float] | np.ndarray
+) -> np.ndarray:
+    """The absolute heading error, wrapped: ``|wrap(ψ − ψ*)|`` row by row [deg], in [0, 180].
+
+    Args:
+        yaw_deg: (n,) true heading [deg, clockwise from north].
+        target_yaw_deg: (n,) target heading [deg], same convention.
+
+    Returns:
+        (n,) the shorter way round between them [deg]; NaN where either is NaN.
+    """
+    difference = np.asarray(yaw_deg, dtype=float) - np.asarray(target_yaw_deg, dtype=float)
+    wrapped: np.ndarray = np.abs((difference + 180.0) % 360.0 - 180.0)
+    return wrapped

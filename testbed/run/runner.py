@@ -30,14 +30,16 @@ from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.interrupts import interrupt_of
 from testbed.run.metrics import (
+    SIGNAL_LAG_WINDOW_S,
     age_of_information,
     distribution,
     error_statistics,
     position_error,
+    settling_time_s,
     signal_lag_s,
     summary,
-    time_to_converge_s,
     tracked_positions,
+    yaw_error_deg,
 )
 from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver, failsafe_engagements
@@ -53,6 +55,7 @@ __all__ = [
     "make_vehicle_node",
     "mission_metrics",
     "run_scenario",
+    "stick_tracking",
     "tally_images",
 ]
 
@@ -343,25 +346,12 @@ def compute_metrics(
     if not commands:  # change-set codec: the sample time travels with the command
         commands = list(recorder.command_updates)
     lags = [applied - sampled for applied, sampled in commands if applied >= settle]
-    axes = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
-    flying = after & (series["armed"] > 0.5)
-    signal = {
-        axis: signal_lag_s(
-            t[flying],
-            series[f"cmd_{axis}"][flying],
-            series[f"rx_{axis}"][flying],
-            max_lag_s=link.signal_lag_window_s,
-        )
-        if flying.sum() > 10
-        else math.nan
-        for axis, _ in axes
-    }
-    rmse = {
-        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
-        if flying.any()
-        else math.nan
-        for axis, v in axes
-    }
+    signal, rmse = stick_tracking(
+        series,
+        after,
+        under_autonomy=scenario.vehicle.autonomy is not None,
+        max_lag_s=link.signal_lag_window_s,
+    )
     attitude = {}
     for axis in ("roll", "pitch", "yaw"):
         values = series[f"err_{axis}_deg"][after]
@@ -429,6 +419,61 @@ def compute_metrics(
     return metrics
 
 
+_STICK_AXES = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
+"""The stick axes of the series (``cmd_*``, ``rx_*``) and the body velocity each asks for."""
+
+
+def stick_tracking(
+    series: dict[str, np.ndarray],
+    after: np.ndarray,
+    *,
+    under_autonomy: bool,
+    max_lag_s: float = SIGNAL_LAG_WINDOW_S,
+) -> tuple[dict[str, float], dict[str, float]]:
+    """``signal_lag_s`` and ``velocity_tracking_rmse`` of ``metrics.json``: how the sticks the
+    vehicle applies follow the pilot's, and how its body velocity follows what they ask for.
+
+    Both are taken over the armed rows at or after the settle time (``after``). Under autonomy
+    the vehicle flies its mission and never the sticks (it records them centred: ``rx_*`` = 0,
+    ``ref_*`` = 0), so there is nothing to track: every axis is NaN (null in the file), not the
+    vehicle's RMS speed against a zero demand.
+
+    Args:
+        series: :meth:`Recorder.series` columns.
+        after: (n,) bool, the rows at or after ``metrics.settle_s``.
+        under_autonomy: the vehicle has ``[vehicle.autonomy]``.
+        max_lag_s: the upper end of the lag's search [s] (the link's
+            :attr:`~testbed.run.scenario.LinkSection.signal_lag_window_s`).
+
+    Returns:
+        ``(signal_lag_s, velocity_tracking_rmse)``, each keyed ``x``, ``y``, ``z``, ``yaw``:
+        the lag [s] and the RMS velocity difference [m/s; rad/s for yaw], body FRD.
+    """
+    if under_autonomy:
+        nothing = {axis: math.nan for axis, _ in _STICK_AXES}
+        return nothing, dict(nothing)
+    t = series["t_s"]
+    flying = after & (series["armed"] > 0.5)
+    signal = {
+        axis: signal_lag_s(
+            t[flying],
+            series[f"cmd_{axis}"][flying],
+            series[f"rx_{axis}"][flying],
+            max_lag_s=max_lag_s,
+        )
+        if flying.sum() > 10
+        else math.nan
+        for axis, _ in _STICK_AXES
+    }
+    rmse = {
+        axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
+        if flying.any()
+        else math.nan
+        for axis, v in _STICK_AXES
+    }
+    return signal, rmse
+
+
 def mission_metrics(
     series: dict[str, np.ndarray],
     settle_s: float,
@@ -448,10 +493,14 @@ def mission_metrics(
     ``"end_effector"`` when any row has one, else ``"body"``). ``position_error_m``
     (``{mean, std, p95, final}`` of |truth − target| [m], 3-D) and
     ``estimate_error_m`` (``{mean, p95}`` of |estimate − truth| [m] on those rows that have an
-    estimate); ``samples`` counts the rows. ``time_to_converge_s``
-    (:func:`~testbed.run.metrics.time_to_converge_s` against the tree's goal tolerance) is taken
-    over every armed row with a target, from the start (the settle time does not cut the
-    approach). ``completion_s``: when the tree last reported a goal reached [s], if the vehicle
+    estimate); ``samples`` counts the rows. ``yaw_error_deg`` (``{mean, std, p95}`` of
+    |wrap(ψ − ψ*)| [deg], the true heading against the pose target's, on those rows that have a
+    pose target: none while an end-effector target is flown). ``final_target_s``: when the
+    target arrived at its final value (the last waypoint's time, a GoTo leg's end) [s];
+    ``time_to_converge_s``: from then until the error stays within the tree's goal tolerance to
+    the last row [s], a duration (:func:`~testbed.run.metrics.settling_time_s`: 0 when the vehicle
+    arrived with its target); both over every armed row with a target (the settle time does not
+    cut them). ``completion_s``: when the tree last reported a goal reached [s], if the vehicle
     ended ready (no goal in progress), else NaN (the last goal was never reached).
 
     Args:
@@ -475,14 +524,16 @@ def mission_metrics(
     error = position_error(truth[rows], target[rows])
     nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
+    heading = yaw_error_deg(series["yaw_deg"][rows], series["target_yaw_deg"][rows])
+    settling, arrival = settling_time_s(t[flying], truth[flying], target[flying], tolerance_m)
     return {
         "frame": "end_effector" if reaching else "body",
         "goal_tolerance_m": tolerance_m,
         "samples": int(np.count_nonzero(rows)),
         "position_error_m": error_statistics(error),
-        "time_to_converge_s": time_to_converge_s(
-            t[flying], position_error(truth[flying], target[flying]), tolerance_m
-        ),
+        "yaw_error_deg": distribution(heading[np.isfinite(heading)]),
+        "time_to_converge_s": settling,
+        "final_target_s": arrival,
         "completion_s": (
             reached_s[-1] if reached_s and status is not None and status.ready else math.nan
         ),

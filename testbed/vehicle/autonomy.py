@@ -381,7 +381,13 @@ def _apply_outputs(world: World, auto: Autonomy, ctl: Controllers, now: float) -
         world.remove(vehicle, PoseTarget)
     elif setpoint is not None:
         world.remove(vehicle, EndEffectorTarget)
-        target = PoseTarget(now, setpoint.position_ned, setpoint.yaw_rad, setpoint.velocity_ned)
+        target = PoseTarget(
+            now,
+            setpoint.position_ned,
+            setpoint.yaw_rad,
+            setpoint.velocity_ned,
+            setpoint.yaw_rate_rad_s,
+        )
         world.set(vehicle, target)
     elif not world.has(vehicle, PoseTarget):  # armed with no order yet: hold station here
         here = PoseTarget(now, context.estimate_position_ned, context.estimate_yaw_rad)
@@ -424,8 +430,15 @@ def control_velocity(world: World) -> None:
     vn, ve, vd = target.velocity_ned_m_s
     pn, pe, pd = target.position_ned_m
     position = (pn + vn * ahead, pe + ve * ahead, pd + vd * ahead)
+    yaw_rate = target.yaw_rate_rad_s
     twist = pose_twist(
-        position, target.yaw_rad, estimate.position_ned_m, q, auto.config.pose, (vn, ve, vd)
+        position,
+        target.yaw_rad + yaw_rate * ahead,
+        estimate.position_ned_m,
+        q,
+        auto.config.pose,
+        (vn, ve, vd),
+        yaw_rate,
     )
     _fly_twist(world, ctl, ismc, twist, nu, down, clock.dt_s)
 

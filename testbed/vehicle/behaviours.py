@@ -295,7 +295,11 @@ class _ExecuteTrajectory(_Node):
         sample = trajectory.sample(now - trajectory.start_time_s)
         end_effector = bool(bb.end_effector)
         bb.setpoint = PoseSetpoint(
-            sample.position_ned, sample.yaw_rad, sample.velocity_ned, end_effector
+            sample.position_ned,
+            sample.yaw_rad,
+            sample.velocity_ned,
+            end_effector,
+            sample.yaw_rate_rad_s,
         )
         bb.status = f"executing {trajectory.name}"
         if not sample.done:

@@ -107,9 +107,12 @@ class PoseTarget:
         yaw_rad: target heading [rad, clockwise from north].
         velocity_ned_m_s: (3,) the trajectory's velocity there [m/s], world NED (feed-forward;
             the position moves on at this velocity until the next tick).
+        yaw_rate_rad_s: the trajectory's heading rate there [rad/s] (feed-forward; the heading
+            moves on at this rate until the next tick).
     """
 
     time_s: float
     position_ned_m: tuple[float, float, float]
     yaw_rad: float
     velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw_rate_rad_s: float = 0.0

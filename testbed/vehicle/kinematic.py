@@ -4,13 +4,15 @@ A proportional law on the pose error, pure and stateless (:func:`pose_twist`)::
 
     v_ned  = v_ff + k_position · (p_target − p)          world velocity demand [m/s], NED
     (u v w) = Rᵀ · v_ned, norm-limited to max_speed_m_s   body FRD (R: body → NED)
-    ψ̇_d = k_yaw · wrap(ψ_target − ψ)   (0 without a target yaw), |ψ̇_d| ≤ max_yaw_rate_rad_s
+    ψ̇_d = ψ̇_ff + k_yaw · wrap(ψ_target − ψ)   (0 without a target yaw), |ψ̇_d| ≤ max_yaw_rate_rad_s
     φ̇_d = −k_level · φ,  θ̇_d = −k_level · θ,             |·| ≤ max_level_rate_rad_s
     (p q r) = T(φ, θ)⁻¹ · (φ̇_d, θ̇_d, ψ̇_d)                 Z-Y-X Euler rates → body rates
 
 with (φ, θ, ψ) the Z-Y-X Euler angles of the attitude and wrap into (−π, π]. While nothing
 saturates, each position axis closes as exp(−k_position·t) in the world (a feed-forward
-velocity is tracked with no lag) and yaw, roll and pitch as exp(−k·t). The norm limit keeps
+velocity is tracked with no lag) and yaw, roll and pitch as exp(−k·t); so does the heading
+error of a turning target, whose rate ψ̇_ff is fed forward (without it a target turning at ω
+is followed ω/k_yaw behind: 18° at 9°/s and k_yaw 0.5). The norm limit keeps
 the direction of the linear demand; T⁻¹ is regular at every attitude (T itself is singular at
 θ = ±90°, which the rates never need).
 
@@ -75,6 +77,7 @@ def pose_twist(
     quaternion_wxyz: Quaternion,
     gains: PoseGains,
     feedforward_velocity_ned: Sequence[float] | None = None,
+    feedforward_yaw_rate_rad_s: float = 0.0,
 ) -> Twist:
     """The body twist that moves the vehicle towards a target pose (module docstring).
 
@@ -87,6 +90,8 @@ def pose_twist(
         gains: the law's gains and limits.
         feedforward_velocity_ned: (3,) the trajectory's velocity at this instant [m/s], NED;
             None for a fixed target.
+        feedforward_yaw_rate_rad_s: the trajectory's heading rate at this instant [rad/s]
+            (ψ̇_ff; 0 for a fixed heading; ignored without a target yaw).
 
     Returns:
         (6,) body twist (u v w p q r) [m/s, rad/s], FRD: the ISMC's ``v_cmd``.
@@ -110,7 +115,10 @@ def pose_twist(
     if target_yaw_rad is None:
         yaw_rate = 0.0
     else:
-        yaw_rate = _clamp(g.k_yaw_1_s * wrap_angle(target_yaw_rad - yaw), g.max_yaw_rate_rad_s)
+        demand = g.k_yaw_1_s * wrap_angle(target_yaw_rad - yaw)
+        if feedforward_yaw_rate_rad_s:  # (adding 0.0 would turn a −0.0 demand into +0.0)
+            demand += feedforward_yaw_rate_rad_s
+        yaw_rate = _clamp(demand, g.max_yaw_rate_rad_s)
     roll_rate = _clamp(-g.k_level_1_s * roll, g.max_level_rate_rad_s)
     pitch_rate = _clamp(-g.k_level_1_s * pitch, g.max_level_rate_rad_s)
     # body rates from Z-Y-X Euler rates: ω = T(φ, θ)⁻¹·Θ̇ (Fossen 2011, §2.2.1)

@@ -144,12 +144,15 @@ class TrajectorySample:
         yaw_rad: desired heading [rad, clockwise from north], in (−π, π].
         velocity_ned: (3,) feed-forward velocity [m/s], world NED (zero while holding).
         done: the last waypoint's time has passed (the pose is now held).
+        yaw_rate_rad_s: feed-forward heading rate [rad/s] (the segment's slope; zero while
+            holding).
     """
 
     position_ned: Vec3
     yaw_rad: float
     velocity_ned: Vec3
     done: bool
+    yaw_rate_rad_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,7 +196,8 @@ class Trajectory:
         return wrap_angle(self.yaws_rad[-1])
 
     def sample(self, t_since_start_s: float) -> TrajectorySample:
-        """The pose and feed-forward velocity at ``t_since_start_s`` [s] after the start.
+        """The pose and feed-forward velocity and heading rate at ``t_since_start_s`` [s] after
+        the start.
 
         Before the first knot the first pose is held; after the last, the last one.
         """
@@ -212,7 +216,8 @@ class Trajectory:
         position = (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
         velocity = ((b[0] - a[0]) / dt, (b[1] - a[1]) / dt, (b[2] - a[2]) / dt)
         ya, yb = self.yaws_rad[i], self.yaws_rad[i + 1]
-        return TrajectorySample(position, wrap_angle(ya + f * (yb - ya)), velocity, False)
+        yaw = wrap_angle(ya + f * (yb - ya))
+        return TrajectorySample(position, yaw, velocity, False, (yb - ya) / dt)
 
 
 def plan(

@@ -86,12 +86,14 @@ class PoseSetpoint:
         yaw_rad: desired heading [rad, clockwise from north].
         velocity_ned: (3,) feed-forward velocity [m/s], world NED.
         end_effector: the position is the end effector's (the yaw stays the vehicle's).
+        yaw_rate_rad_s: feed-forward heading rate [rad/s] (the trajectory's).
     """
 
     position_ned: Vec3
     yaw_rad: float
     velocity_ned: Vec3 = _ZERO
     end_effector: bool = False
+    yaw_rate_rad_s: float = 0.0
 
 
 @dataclass(slots=True)

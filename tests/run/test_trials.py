@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -230,3 +231,21 @@ def test_force_replaces_the_earlier_results_whatever_their_shape(tmp_path: Path)
     assert run(1) == single
     assert run(2) == trials_set(2)
     assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+
+
+def test_the_estimate_is_drawn_from_when_navigation_was_ready() -> None:
+    """Before its first fix the filter sits at (0, 0): rows before ``ready_s`` are left out of
+    the drawn estimate (NaN), the rest kept as recorded; never ready: none; unknown: all."""
+    from testbed.report.mission_plots import estimate_track
+
+    series = {
+        "t_s": np.array([0.0, 0.05, 0.1, 0.15]),
+        "est_n": np.array([0.0, 0.0, -1.0, -1.01]),
+        "est_e": np.array([0.0, 0.0, 1.0, 1.02]),
+    }
+    east, north = estimate_track(series, 0.1)
+    assert np.isnan(east[:2]).all() and np.isnan(north[:2]).all()
+    assert east[2:].tolist() == [1.0, 1.02] and north[2:].tolist() == [-1.0, -1.01]
+    assert series["est_n"][0] == 0.0  # the series itself is left as recorded
+    assert np.isnan(estimate_track(series, math.nan)[0]).all()
+    assert estimate_track(series, None)[1].tolist() == series["est_n"].tolist()

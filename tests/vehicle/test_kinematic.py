@@ -113,3 +113,27 @@ def test_gains_are_validated() -> None:
         with pytest.raises(FieldError, match=key):
             PoseGains(**{key: value})
     assert PoseGains(k_level_1_s=0.0).k_level_1_s == 0.0
+
+
+def test_a_turning_target_is_followed_without_lag_with_its_rate_fed_forward() -> None:
+    """ψ*(t) = ω·t from ψ(0) = 0, integrating ψ̇ = r (level, so r = ψ̇_d) with the law's yaw rate:
+    with ψ̇_ff = ω the error stays 0; without it, it is the closed form
+    e(t) = (ω/k)·(1 − exp(−k·t)), 18° behind at 9°/s and k 0.5 once settled."""
+    gains = PoseGains(k_yaw_1_s=0.5)
+    omega, dt = math.radians(9.0), 1e-3
+    for feedforward in (True, False):
+        yaw = 0.0
+        for step in range(20_000):  # 20 s, explicit Euler
+            target = omega * step * dt
+            q = quat_from_euler(0.0, 0.0, yaw)
+            rate = omega if feedforward else 0.0
+            twist = pose_twist((0.0, 0.0, 0.0), target, (0.0, 0.0, 0.0), q, gains, None, rate)
+            yaw += twist[5] * dt
+        error = omega * 20.0 - yaw
+        if feedforward:
+            assert abs(error) < 1e-9
+        else:
+            # explicit Euler at 1 ms: within 0.1 % of the closed form
+            expected = omega / 0.5 * (1.0 - math.exp(-0.5 * 20.0))
+            assert error == pytest.approx(expected, rel=1e-3)
+            assert math.degrees(error) == pytest.approx(18.0, abs=0.02)

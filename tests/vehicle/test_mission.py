@@ -241,3 +241,21 @@ def test_packaged_missions_hold_the_documented_points() -> None:
     assert len(load_packaged_mission("station_keeping").waypoints) == 1
     waypoint = load_packaged_mission("waypoint").waypoints
     assert [p.position_ned for p in waypoint] == [(-1.0, 1.0, 0.5), (1.0, 1.0, 0.5)]
+
+
+def test_samples_carry_the_segments_heading_rate() -> None:
+    """The heading's feed-forward is the segment's slope, the short way across ±π: 0.283 rad in
+    4 s; zero before the start and while the end is held; π/2 in 2 s on a plan's second leg."""
+    mission = parse_mission(_doc(_point(0.0, 0.0, 0.0, 0.0, 3.0), _point(4.0, 0.0, 0.0, 0.0, -3.0)))
+    trajectory = plan(mission, (0.0, 0.0, 0.0), 0.0, 0.0)
+    assert math.isclose(trajectory.sample(1.0).yaw_rate_rad_s, (2.0 * math.pi - 6.0) / 4.0)
+    assert trajectory.sample(-1.0).yaw_rate_rad_s == 0.0
+    assert trajectory.sample(9.0).yaw_rate_rad_s == 0.0
+    mission = parse_mission(
+        _doc(_point(2.0, 2.0, 0.0, 1.0), _point(4.0, 2.0, 4.0, 1.0, math.pi / 2))
+    )
+    trajectory = plan(mission, (0.0, 0.0, 0.0), 0.0, start_time_s=100.0)
+    assert trajectory.sample(1.0).yaw_rate_rad_s == 0.0
+    assert math.isclose(trajectory.sample(3.0).yaw_rate_rad_s, math.pi / 4)
+    turn = single_goal((1.0, 1.0, 1.0), 0.0, (1.0, 1.0, 1.0), math.pi / 2, 0.5, 0.0)
+    assert math.isclose(turn.sample(1.0).yaw_rate_rad_s, 0.3)  # the GoTo's yaw rate
