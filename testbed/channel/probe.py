@@ -19,8 +19,10 @@ Outcome of each frame (they add up to ``frames_sent``):
 
 PER is the frame error rate on the air, 1 − delivered / transmitted (the frames sent less those
 dropped), as a run's metrics define it; frames the sender's FIFO dropped are their own rate,
-``drop_rate`` = dropped / sent. Goodput counts payload bits of delivered frames over the
-simulated time (until the last delivery).
+``drop_rate`` = dropped / sent. Goodput counts payload bits of delivered frames over the time
+the probe offered them (``frames`` × ``interval_s``), or until the last delivery if the link
+took longer, so on a clean link it equals the offered payload rate (dividing by the time to the
+last delivery alone made a short probe's goodput exceed what it offered).
 """
 
 from __future__ import annotations
@@ -243,7 +245,7 @@ def run_probe(
         frames_out_of_range=out_of_range,
         per=1.0 - delivered / (frames - dropped) if frames > dropped else math.nan,
         drop_rate=dropped / frames,
-        goodput_bps=delivered * payload_bits / sim_s if sim_s > 0.0 else 0.0,
+        goodput_bps=delivered * payload_bits / max(frames * interval_s, sim_s),
         latency_s=latency,
         sim_s=sim_s,
         wall_s=wall_s,

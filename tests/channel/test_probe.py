@@ -36,7 +36,7 @@ def test_clean_link_latency_and_goodput_are_the_closed_forms() -> None:
     assert r.latency_s.max == pytest.approx(latency, abs=1e-9)
     assert r.latency_s.p50 == pytest.approx(latency, abs=1e-9)
     assert r.sim_s == pytest.approx((n - 1) * interval + latency)
-    assert r.goodput_bps == pytest.approx(n * 8 * (size - 6) / r.sim_s)
+    assert r.goodput_bps == pytest.approx(8 * (size - 6) / interval)  # the offered payload rate
     assert r.wall_s > 0 and r.rtf == pytest.approx(r.sim_s / r.wall_s)
 
 
