@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import shlex
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_out_dir, exit_code_of
 from testbed.config import ConfigError
+
+if TYPE_CHECKING:
+    from testbed.sweep.spec import Sweep
 
 __all__ = ["add_plot_parser", "add_sweep_parser"]
 
@@ -45,6 +50,13 @@ def add_sweep_parser(sub: Subparsers) -> None:
         sweep, "override a scenario key in every run, e.g. --set duration_s=30 (repeatable)"
     )
     sweep.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        metavar="N",
+        help="run only the sweep's first N seeds at every point (a quick look; default: all)",
+    )
+    sweep.add_argument(
         "--workers", type=int, default=None, help="worker processes (default: one per core)"
     )
     sweep.add_argument(
@@ -66,6 +78,8 @@ def _resume_command(args: argparse.Namespace, out: Path) -> str:
     argv = ["testbed", "sweep", args.sweep]
     for override in args.overrides:
         argv += ["--set", override]
+    if args.seeds is not None:
+        argv += ["--seeds", str(args.seeds)]
     if args.workers is not None:
         argv += ["--workers", str(args.workers)]
     if args.dask is not None:
@@ -122,7 +136,7 @@ def _sweep(args: argparse.Namespace) -> int:
         raise ConfigError("--workers: a remote --dask cluster brings its own workers")
     if args.out is not None:
         _check_sweep_out(args.out, args.resume)
-    sweep = load_sweep(args.sweep, args.overrides, stream=sys.stderr)
+    sweep = first_seeds(load_sweep(args.sweep, args.overrides, stream=sys.stderr), args.seeds)
     out = args.out if args.out is not None else Path("sweeps") / sweep.id
     if args.out is None:
         _check_sweep_out(out, args.resume)
@@ -135,6 +149,21 @@ def _sweep(args: argparse.Namespace) -> int:
         paths = plot_ber_sweep(out / "results.csv", out)
         print(f"  plots: {', '.join(path.name for path in paths)}")
     return EXIT_OK if not summary.failed else 1
+
+
+def first_seeds(sweep: Sweep, count: int | None) -> Sweep:
+    """``sweep`` with only its first ``count`` seeds (None: all of them); its identity, which
+    ``--resume`` checks, then names those seeds.
+
+    Raises:
+        ConfigError: ``count`` below 1 or above the sweep's seed count.
+    """
+    if count is None:
+        return sweep
+    held = len(sweep.seeds)
+    if not 1 <= count <= held:
+        raise ConfigError(f"--seeds: must be in 1..{held} (the sweep's seeds), got {count}")
+    return dataclasses.replace(sweep, seeds=sweep.seeds[:count])
 
 
 def _check_sweep_out(out: Path, resume: bool) -> None:

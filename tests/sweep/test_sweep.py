@@ -435,3 +435,25 @@ def test_a_failing_point_is_recorded_and_the_sweep_completes(
     assert stdout.count("FAILED point") == 2 and "FAILED point 1 seed 1" in stdout
     aggregate = _rows(out / "aggregate.csv")
     assert [(a["n_ok"], a["n_failed"]) for a in aggregate] == [("2", "0"), ("0", "2")]
+
+
+def test_seeds_option_runs_the_first_seeds_and_resumes_only_the_same(
+    pool_sweep: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--seeds 1 runs seed 0 at every point: the very rows the full sweep holds for seed 0
+    (a second run of the same runs); --resume takes it with --seeds 1 only."""
+    path, pool_out = pool_sweep
+    out = tmp_path / "one"
+    assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out)]) == 0
+    rows = _rows(out / "results.csv")
+    assert [(r["point"], r["seed"]) for r in rows] == [("0", "0"), ("1", "0"), ("2", "0")]
+    full = [r for r in _rows(pool_out / "results.csv") if r["seed"] == "0"]
+    assert rows == full
+    capsys.readouterr()
+    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 2
+    assert "holds a different sweep" in capsys.readouterr().err
+    assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out), "--resume"]) == 0
+    for bad in ("0", "3"):
+        assert main(["sweep", str(path), *SHORT, "--seeds", bad, "--out", str(tmp_path / bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--seeds: must be in 1..2" in err
