@@ -285,6 +285,13 @@ def stick_trims(
     )
 
 
+SURFACE_HOLD_DEPTH_M = 0.15
+"""The shallowest depth target a hold keeps [m, + down]: ArduSub's at the surface (5 cm below
+its SURFACE_DEPTH of −10 cm). A target above it would ask a floating hull to climb out of the
+water: the BlueROV2 floats with its centre of buoyancy 0.12 m deep, so a 0-m target only winds
+the depth loop's integral up (thrust and pitch creeping) while the vehicle cannot move."""
+
+
 @register_jitable
 def trim_targets(
     depth_m: float,
@@ -296,9 +303,10 @@ def trim_targets(
 ) -> tuple[float, Quaternion]:
     """The hold targets after the sticks' trims (:func:`pilot_trims`) acted for ``dt_s`` [s].
 
-    In depth hold the depth target [m, + down] moves at the heave trim (never above the
-    surface); in attitude hold the attitude target (body → NED) turns about its own body axes by
-    the roll and pitch trims and about world down by the yaw trim, and is normalised.
+    In depth hold the depth target [m, + down] moves at the heave trim (never shallower than
+    :data:`SURFACE_HOLD_DEPTH_M`); in attitude hold the attitude target (body → NED) turns
+    about its own body axes by the roll and pitch trims and about world down by the yaw trim,
+    and is normalised.
 
     Returns:
         (depth [m], attitude (4,)).
@@ -306,7 +314,7 @@ def trim_targets(
     depth_rate, roll_rate, pitch_rate, yaw_rate = trims
     q = quaternion_wxyz
     if depth_hold:
-        depth_m = max(0.0, depth_m + depth_rate * dt_s)
+        depth_m = max(SURFACE_HOLD_DEPTH_M, depth_m + depth_rate * dt_s)
     if attitude_hold:
         roll = roll_rate * dt_s
         pitch = pitch_rate * dt_s

@@ -91,7 +91,12 @@ from testbed.vehicle.control_kernels import (
     put_targets,
 )
 from testbed.vehicle.guidance import PositionController
-from testbed.vehicle.pilot import PilotGains, level_to_body, pilot_gains_array
+from testbed.vehicle.pilot import (
+    SURFACE_HOLD_DEPTH_M,
+    PilotGains,
+    level_to_body,
+    pilot_gains_array,
+)
 from testbed.vehicle.sensor_kernels import odometry_rows
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench
@@ -405,7 +410,9 @@ def set_targets(
 
 
 def _set_depth_target(world: World, ctl: Controllers, depth_m: float) -> None:
-    """:func:`set_targets` of a new depth target [m, + down], the attitude target kept."""
+    """:func:`set_targets` of an operator's depth setpoint [m, + down] (no shallower than
+    :data:`~testbed.vehicle.pilot.SURFACE_HOLD_DEPTH_M`), the attitude target kept."""
+    depth_m = max(SURFACE_HOLD_DEPTH_M, depth_m)
     row = vehicle_row(world, ctl, ControlTargets)
     if row is None:
         targets = world.get(ctl.vehicle, ControlTargets) or _measured_targets(world, ctl.vehicle)
@@ -663,7 +670,7 @@ def control_position(world: World) -> None:
     if setpoint.use_yaw:
         q = quat_from_euler(0.0, 0.0, setpoint.yaw_rad)
     target = setpoint.position_ned_m
-    set_targets(world, ctl, max(0.0, target[2]), q)
+    set_targets(world, ctl, max(SURFACE_HOLD_DEPTH_M, target[2]), q)
     m = ctl.axis_maxima
     fx, fy = loop.update(
         (target[0], target[1]),

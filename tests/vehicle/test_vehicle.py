@@ -27,6 +27,7 @@ from testbed.vehicle.components import (
 )
 from testbed.vehicle.control import FailsafeConfig
 from testbed.vehicle.hydrodynamics import load_model
+from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M
 from testbed.vehicle.sensors import DepthSensorConfig, ImuConfig
 from testbed.vehicle.systems import SimClock
 from testbed.vehicle.vehicle import SensorsConfig, Vehicle, VehicleConfig, load_vehicle_config
@@ -432,3 +433,25 @@ def test_pool_keys_are_checked_in_one_line() -> None:
         load_vehicle_config({"pool": {"depth_m": 2.0}, "start_position_ned_m": [0, 0, 2.5]})
     with pytest.raises(ConfigError, match="start_position_ned_m: must be inside the pool"):
         load_vehicle_config({"camera": {"enabled": True}, "start_position_ned_m": [6, 0, 1]})
+
+
+def test_holding_up_at_the_surface_keeps_the_hull_in_the_water_without_winding_up() -> None:
+    """Full up stick in depth hold from 0.3 m, then let go at the surface: the target stops at
+    ArduSub's surface depth (0.15 m, where the BlueROV2's hull is still under: it floats at
+    0.12 m) and the vehicle goes back under and holds with a steady effort. A 0-m target
+    had the hull floating while the depth loop's integral wound the thrust up without end
+    (a review: 2.7 → 5.1 A over 20 s)."""
+    up = (0.0, 0.0, -1.0, 0.0, 0.0, 0.0)
+    with make(start_position_ned_m=(0.0, 0.0, 0.3), sensors=QUIET) as v:
+        hold(v, 0.3)
+        run_with_sticks(v, 15.0, up)
+        targets = get(v, ControlTargets)
+        assert isinstance(targets, ControlTargets) and targets.depth_m == SURFACE_HOLD_DEPTH_M
+        run_with_sticks(v, 30.0, (0.0,) * 6)  # let go
+        current_30 = v.power.current_a
+        run_with_sticks(v, 60.0, (0.0,) * 6)
+        depth = v.state().position_ned[2]
+        floating = (v.model.weight_n / v.model.buoyancy_n - 0.5) * v.model.hull_size_m[2]
+        assert depth > floating + 0.015  # under water, the loop holding it there
+        assert depth == pytest.approx(SURFACE_HOLD_DEPTH_M, abs=0.03)
+        assert v.power.current_a <= 1.1 * current_30  # a steady effort, nothing winding up
