@@ -66,8 +66,10 @@ from testbed.vehicle.components import (
     ControlTargets,
     DepthReading,
     DepthSetpoint,
+    EndEffectorSetpoint,
     FailsafeLevel,
     FailsafeStatus,
+    GoalCancel,
     ImuReading,
     ModeRequest,
     MovementCommand,
@@ -143,6 +145,9 @@ _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # 
 _FLAG_TYPES = (Armed, ActiveMode, FailsafeStatus)
 """What the modes in effect follow from (:func:`_update_flags`)."""
 _INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
+_GOAL_TYPES = (PositionSetpoint, EndEffectorSetpoint, GoalCancel)
+"""Operator orders read by the position loop or the mission tree: contact too (a GoTo that
+took a stick order's slot must not look like a silent link to the failsafe)."""
 """What :func:`ingest_commands` reacts to."""
 # The systems' kernels, called without numba's dispatcher (testbed.common.jit.entry): rows and
 # marks are the store's contiguous float64/int64 vectors, the rest floats, bools and tuples.
@@ -476,12 +481,14 @@ def read_sensors(world: World) -> None:
 
 def ingest_commands(world: World) -> None:
     """Apply new operator intents: sticks (newer seq only), arm, mode and setpoints."""
-    if not world.changed_any(*_INTENT_TYPES):  # most frames: nothing new arrived
+    if not world.changed_any(*_INTENT_TYPES, *_GOAL_TYPES):  # most frames: nothing new arrived
         return
     clock = world.resource(SimClock)
     ctl = world.resource(Controllers)
     vehicle = ctl.vehicle
     now = clock.time_s
+    if world.changed_any(*_GOAL_TYPES):
+        ctl.last_contact_s = now  # a goal order (the loops and the tree read it themselves)
     for _, cmd in world.query1(MovementCommand, changed=True):
         status = world.get(vehicle, CommandStatus)
         if status is None or cmd.seq > status.seq:

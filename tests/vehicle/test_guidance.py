@@ -15,6 +15,7 @@ from testbed.run.scenario import load_scenario
 from testbed.vehicle.components import (
     ArmRequest,
     ControlMode,
+    FailsafeStatus,
     ForceIntent,
     ModeRequest,
     PositionReading,
@@ -127,3 +128,29 @@ def test_guided_steers_by_the_fix_not_the_truth() -> None:
         p = vehicle.truth.position_ned_m
         assert p[0] - start[0] == pytest.approx(-1.0, abs=0.05)
         assert p[1] - start[1] == pytest.approx(0.0, abs=0.05)
+
+
+def test_goal_orders_keep_the_link_alive_for_the_failsafe() -> None:
+    """A ground station flying GUIDED sends goals, not sticks: each new goal is operator contact,
+    so goals 0.8 s apart keep the failsafe NOMINAL, while the same silence without them holds
+    after ``hold_after_s`` (through the narrow link a GoTo takes a stick order's slot, and the
+    vehicle went to HOLD for a third of a second at every target)."""
+
+    def levels(goals: bool) -> set[str]:
+        with _vehicle() as vehicle:
+            world, intents = vehicle.world, vehicle.operator_entity
+            hold_s = vehicle.config.failsafe.hold_after_s
+            world.set(intents, ArmRequest(True, 1))
+            world.set(intents, ModeRequest(ControlMode.GUIDED))
+            seen = set()
+            for k in range(1, 9):
+                if goals:
+                    world.set(intents, PositionSetpoint((0.1 * k, 0.0, 1.0)))
+                vehicle.advance(0.8 * k)
+                status = world.get(vehicle.entity, FailsafeStatus)
+                seen.add("NOMINAL" if status is None else status.level.name)
+            assert hold_s + 1.0 < 0.8 * 8  # long enough to hold without contact
+            return seen
+
+    assert levels(goals=True) == {"NOMINAL"}
+    assert "HOLD" in levels(goals=False)
