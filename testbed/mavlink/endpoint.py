@@ -31,6 +31,7 @@ are bounded (:data:`OUTBOX_LIMIT`).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -420,6 +421,8 @@ class VehicleEndpoint:
             critical=self.failsafe.active,
             clock_s=now_s,
         )
+        if math.isnan(snapshot.current_a):  # no thruster currents (a shore gateway)
+            snapshot = dataclasses.replace(snapshot, remaining_pct=-1)  # MAVLink: unknown
         self._snapshot = snapshot
         return snapshot
 
@@ -430,7 +433,8 @@ class VehicleEndpoint:
     def update(self, now_s: float) -> None:
         """Run the failsafes and queue what is due on every channel at ``now_s`` [s]."""
         snapshot = self.snapshot(now_s)
-        if self._last_update_s is not None and now_s > self._last_update_s:
+        known = not math.isnan(snapshot.current_a)
+        if known and self._last_update_s is not None and now_s > self._last_update_s:
             self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
         self._last_update_s = now_s
         self.failsafe.check(self, snapshot, now_s)

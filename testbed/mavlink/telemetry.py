@@ -33,7 +33,8 @@ from testbed.common.components import (
     PositionReading,
     ThrusterOutput,
 )
-from testbed.common.geometry import euler_from_quat
+from testbed.common.geometry import euler_from_quat, quat_conjugate, quat_multiply
+from testbed.common.hydrostatics import ardusub_pressure_pa
 from testbed.ecs import Entity, World
 from testbed.mavlink.ardusub import base_mode
 
@@ -65,36 +66,63 @@ _SENSORS = (
     | mav.MAV_SYS_STATUS_SENSOR_BATTERY
 )
 """SYS_STATUS sensor bits present, enabled and healthy (pressure = the depth sensor)."""
+_HEALTH = _SENSORS | mav.MAV_SYS_STATUS_GEOFENCE
+"""SYS_STATUS health bits: also the geofence's, which ArduPilot reports healthy while no fence
+is breached, present or not (MAVProxy's fence module announces "fence breach" without it)."""
+
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
 
 
 @dataclass(slots=True)
 class VelocityEstimator:
-    """NED velocity [m/s] from successive positions: finite differences, low-passed.
+    """NED velocity [m/s] from successive positions and body rates [rad/s] from successive
+    attitudes: finite differences, low-passed (a shore gateway's mirrored state has neither).
+
+    Body rates: the rotation q₀* ⊗ q₁ between successive attitudes (q body → NED: in the
+    earlier body frame), its angle about its axis over the step's time.
 
     Args:
         time_constant_s: first-order filter time constant [s].
     """
 
     time_constant_s: float = 0.3
-    velocity_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    _last: tuple[float, tuple[float, float, float]] | None = field(default=None, repr=False)
+    velocity_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
+    rates_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    _last: tuple[float, Vec3, Quat | None] | None = field(default=None, repr=False)
 
-    def update(self, t_s: float, position_ned_m: tuple[float, float, float]) -> None:
-        """Fold in the position at ``t_s`` [s] (ignored unless newer than the last)."""
+    def update(self, t_s: float, position_ned_m: Vec3, quaternion_wxyz: Quat | None = None) -> None:
+        """Fold in the position (and attitude, body → NED) at ``t_s`` [s] (ignored unless newer
+        than the last)."""
         last = self._last
         if last is not None and t_s <= last[0]:
             return
-        self._last = (t_s, position_ned_m)
+        self._last = (t_s, position_ned_m, quaternion_wxyz)
         if last is None:
             return
         dt = t_s - last[0]
         alpha = dt / (self.time_constant_s + dt)
-        (vn, ve, vd), (n1, e1, d1), (n0, e0, d0) = self.velocity_ned_m_s, position_ned_m, last[1]
-        self.velocity_ned_m_s = (
-            vn + alpha * ((n1 - n0) / dt - vn),
-            ve + alpha * ((e1 - e0) / dt - ve),
-            vd + alpha * ((d1 - d0) / dt - vd),
+        self.velocity_ned_m_s = _low_pass(
+            self.velocity_ned_m_s,
+            tuple((p1 - p0) / dt for p1, p0 in zip(position_ned_m, last[1], strict=True)),
+            alpha,
         )
+        q0 = last[2]
+        if q0 is not None and quaternion_wxyz is not None:
+            w, x, y, z = quat_multiply(quat_conjugate(q0), quaternion_wxyz)
+            half = math.hypot(x, y, z)  # sin of half the angle turned
+            # the angle over the step (the short way round) about the unit axis, per second
+            scale = 2.0 * math.atan2(half, abs(w)) / (half * dt) if half > 0.0 else 0.0
+            if w < 0.0:
+                scale = -scale
+            self.rates_rad_s = _low_pass(self.rates_rad_s, (scale * x, scale * y, scale * z), alpha)
+
+
+def _low_pass(state: Vec3, sample: tuple[float, ...], alpha: float) -> Vec3:
+    a, b, c = state
+    x, y, z = sample
+    return (a + alpha * (x - a), b + alpha * (y - b), c + alpha * (z - c))
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,13 +134,15 @@ class VehicleSnapshot:
         armed: the vehicle's armed state.
         custom_mode: ArduSub mode number.
         quaternion_wxyz: attitude, body → NED.
-        rates_rad_s: (p, q, r) body rates [rad/s], FRD.
+        rates_rad_s: (p, q, r) body rates [rad/s], FRD (estimated from the attitude without
+            an IMU reading: a shore gateway).
         depth_m: depth [m, positive down].
-        pressure_pa: external (depth sensor) absolute pressure [Pa].
+        pressure_pa: external (depth sensor) absolute pressure [Pa] (from the depth without a
+            reading: a shore gateway).
         position_ned_m: (3,) position [m], NED (x, y 0 without a position fix).
         velocity_ned_m_s: (3,) velocity [m/s], NED (estimated from the position).
         pwm_us: per-thruster pulse widths [µs] (empty before the first allocation).
-        current_a: total thruster current [A].
+        current_a: total thruster current [A]; NaN when unknown (a shore gateway).
         voltage_v: battery voltage [V].
         remaining_pct: battery remaining [%].
         rc_channels: (18,) RC inputs [µs], 0 = none.
@@ -197,19 +227,21 @@ def read_vehicle(
     position = (0.0, 0.0, 0.0) if odometry is None else odometry.position_ned_m
     if depth is not None:
         position = (position[0], position[1], depth.depth_m)
-    velocity.update(time_s if odometry is None else odometry.sampled_s, position)
+    # rates: the IMU's, else (a mirrored copy on shore) from the odometry's attitudes
+    velocity.update(time_s if odometry is None else odometry.sampled_s, position, q)
     return VehicleSnapshot(
         time_s=time_s,
         armed=armed is not None and armed.armed,
         custom_mode=int(mode.mode) if mode is not None else 19,
         quaternion_wxyz=q,
-        rates_rad_s=(0.0, 0.0, 0.0) if imu is None else imu.rates_rad_s,
+        rates_rad_s=velocity.rates_rad_s if imu is None else imu.rates_rad_s,
         depth_m=position[2],
-        pressure_pa=101325.0 if depth is None else depth.pressure_pa,
+        # a mirrored copy (shore gateway) has no reading: the pressure that gives its depth
+        pressure_pa=ardusub_pressure_pa(position[2]) if depth is None else depth.pressure_pa,
         position_ned_m=position,
         velocity_ned_m_s=velocity.velocity_ned_m_s,
         pwm_us=() if output is None else output.pwm_us,
-        current_a=0.0 if output is None else float(sum(output.currents_a)),
+        current_a=math.nan if output is None else float(sum(output.currents_a)),
         voltage_v=voltage_v,
         remaining_pct=remaining_pct,
         rc_channels=rc_channels,
@@ -223,6 +255,12 @@ def read_vehicle(
 
 def _i16(value: float) -> int:
     return max(-32768, min(32767, round(value)))
+
+
+def _centiamps(current_a: float) -> int:
+    """A current [A] as MAVLink's cA; −1 ("not measured") when unknown (NaN: a shore gateway,
+    whose narrow link carries no thruster currents)."""
+    return -1 if math.isnan(current_a) else _i16(current_a * 100.0)
 
 
 def _heartbeat(s: VehicleSnapshot) -> mav.MAVLink_message:
@@ -312,10 +350,10 @@ def _sys_status(s: VehicleSnapshot) -> mav.MAVLink_message:
     return mav.MAVLink_sys_status_message(
         _SENSORS,
         _SENSORS,
-        _SENSORS,
+        _HEALTH,
         100,
         round(s.voltage_v * 1000.0),
-        _i16(s.current_a * 100.0),
+        _centiamps(s.current_a),
         s.remaining_pct,
         0,
         0,
@@ -334,7 +372,7 @@ def _battery_status(s: VehicleSnapshot) -> mav.MAVLink_message:
         mav.MAV_BATTERY_TYPE_LION,
         32767,
         cells,
-        _i16(s.current_a * 100.0),
+        _centiamps(s.current_a),
         -1,
         -1,
         s.remaining_pct,

@@ -33,6 +33,7 @@ from numba.extending import register_jitable
 
 from testbed.common import geometry, jit
 from testbed.common.geometry import Quaternion, Vec3, quat_multiply
+from testbed.common.hydrostatics import ARDUSUB_PA_PER_M, SEA_LEVEL_PA, STANDARD_GRAVITY_M_S2
 from testbed.vehicle import row_kernels
 from testbed.vehicle.row_kernels import put_row
 
@@ -50,9 +51,6 @@ __all__ = [
     "put_position",
 ]
 
-STANDARD_GRAVITY_M_S2 = 9.80665
-SEA_LEVEL_PA = 101325.0
-ARDUSUB_PA_PER_M = 9800.0  # ArduSub's ρg for specific gravity 1
 
 DECAY, INNOVATION, SIGMA_ROLL, SIGMA_PITCH, SIGMA_HEADING, SIGMA_GYRO = range(6)
 IMU_PARAMS_SIZE = 6
