@@ -363,6 +363,11 @@ def compute_metrics(
         command_age = odometry_age = {"mean": math.nan, "p95": math.nan}
     metrics: dict[str, Any] = {
         "scenario": scenario.id,
+        "inputs": {  # what ran: enough to run it again
+            "source": scenario.source,
+            "overrides": list(scenario.overrides),
+            "files": dict(scenario.files),
+        },
         "seed": seed,
         "sim_s": sim_s,
         "wall_s": wall_s,

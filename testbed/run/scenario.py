@@ -26,6 +26,7 @@ holds the whole :class:`Scenario`, its cross-section checks and the loader.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -128,6 +129,10 @@ class Scenario:
         link, vehicle, operator, pilot, faults, metrics, images: the sections.
         source: where it was loaded from (a path or ``package:<id>``), for messages; not a
             TOML key.
+        overrides: the ``--set`` overrides applied on top of ``source``, in order.
+        files: SHA-256 (hex) of each user file the run reads, by path: the scenario file and
+            a model, thruster layout or mission given by path (packaged ones are named by the
+            package's version); taken when the scenario loads.
     """
 
     id: str
@@ -144,6 +149,8 @@ class Scenario:
     metrics: MetricsSection = field(default_factory=MetricsSection)
     images: ImagesSection = field(default_factory=ImagesSection)
     source: str
+    overrides: tuple[str, ...] = ()
+    files: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         check(
@@ -335,14 +342,37 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
     )
     if packaged_id is not None and scenario.id != packaged_id:
         raise ConfigError(f"{source}: id: must equal the file name, got {scenario.id!r}")
-    if not overrides:
-        return scenario
-    given = set()
-    for text_override in overrides:
-        path_parts, _ = parse_override(text_override)
-        if path_parts[0] == "link" and len(path_parts) > 1:
-            given.add(path_parts[1])
-    return _from_data(apply_overrides(data, overrides), "--set", source, given)
+    if overrides:
+        given = set()
+        for text_override in overrides:
+            path_parts, _ = parse_override(text_override)
+            if path_parts[0] == "link" and len(path_parts) > 1:
+                given.add(path_parts[1])
+        scenario = _from_data(apply_overrides(data, overrides), "--set", source, given)
+    own = [] if packaged_id is not None else [source]
+    return dataclasses.replace(
+        scenario, overrides=tuple(overrides), files=_digests([*own, *_user_files(scenario)])
+    )
+
+
+def _user_files(scenario: Scenario) -> list[str]:
+    """The data files given by path (a model, a thruster layout, a mission), not packaged."""
+    vehicle = scenario.vehicle
+    named = [vehicle.model, vehicle.thrusters]
+    if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
+        named.append(vehicle.autonomy.mission)
+    return [name for name in named if Path(name).suffix in (".toml", ".json")]
+
+
+def _digests(paths: Sequence[str]) -> tuple[tuple[str, str], ...]:
+    """``(path, SHA-256 hex)`` of each file, in order, once each (an unreadable one: "")."""
+    digests: dict[str, str] = {}
+    for path in paths:
+        try:
+            digests[path] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            digests[path] = ""
+    return tuple(digests.items())
 
 
 def _from_data(

@@ -50,8 +50,9 @@ __all__ = [
     "sigint_blocked",
 ]
 
-EXCLUDED_METRICS = ("scenario", "seed", "wall_s", "rtf")
-"""``metrics.json`` keys left out of result rows: already in the row, or wall-clock dependent."""
+EXCLUDED_METRICS = ("scenario", "inputs", "seed", "wall_s", "rtf")
+"""``metrics.json`` keys left out of result rows: already in the row or the sweep's files, or
+wall-clock dependent."""
 SCENARIO_KEYS = ("images.chunk_bytes", "images.selective_repeat")
 """Scenario values added to the rows of runs with images (after the metrics), so that plots of
 the rows need not know the sweep file: the chunk size and transfer mode of the closed forms."""
@@ -92,9 +93,8 @@ def execute_run(spec: RunSpec) -> RunOutcome:
         result = run_scenario(load_scenario(spec.scenario, spec.overrides), seed=spec.seed)
         if result.stopped is not None:
             raise result.stopped
-        flat = flatten_metrics(result.metrics)
-        for key in EXCLUDED_METRICS:
-            flat.pop(key, None)
+        kept = {k: v for k, v in result.metrics.items() if k not in EXCLUDED_METRICS}
+        flat = flatten_metrics(kept)
         for key, value in _scenario_values(result.scenario).items():
             flat.setdefault(key, value)
         return RunOutcome(spec.point, spec.seed, flat, "")

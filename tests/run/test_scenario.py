@@ -4,6 +4,7 @@ file and key."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import tomllib
 from importlib import resources
@@ -15,6 +16,7 @@ import pytest
 from testbed.channel import TELEROBOTICS_2021, Fixed, load_link_config
 from testbed.config import ConfigError
 from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
+from testbed.run.runner import run_scenario
 from testbed.run.scenario import (
     LinkOutage,
     PilotSection,
@@ -113,7 +115,27 @@ def test_load_by_path_equals_packaged(tmp_path: Path) -> None:
     path = write(tmp_path, text, "copy.toml")
     from_path = load_scenario(str(path))
     assert from_path.source == str(path)
-    assert from_path == dataclasses.replace(load_scenario("m64-teleop-v1"), source=str(path))
+    # the file's digest is recorded (what ran); a packaged scenario records none
+    assert from_path.files == ((str(path), hashlib.sha256(text.encode()).hexdigest()),)
+    packaged = load_scenario("m64-teleop-v1")
+    assert packaged.files == ()
+    assert from_path == dataclasses.replace(packaged, source=str(path), files=from_path.files)
+
+
+def test_a_run_records_what_ran(tmp_path: Path) -> None:
+    """metrics.json's inputs: the source, the --set overrides in order, and the digest of each
+    user file (here a thruster layout given by path)."""
+    layout = resources.files("testbed.vehicle").joinpath("data", "thrusters", "bluerov2.toml")
+    mine = write(tmp_path, layout.read_text(encoding="utf-8"), "mine.toml")
+    overrides = ["duration_s=12", "metrics.settle_s=1", f"vehicle.thrusters={mine}"]
+    scenario = load_scenario("s100-teleop-v1", overrides)
+    inputs = run_scenario(scenario).metrics["inputs"]
+    digest = hashlib.sha256(mine.read_bytes()).hexdigest()
+    assert inputs == {
+        "source": "package:s100-teleop-v1",
+        "overrides": overrides,
+        "files": {str(mine): digest},
+    }
 
 
 def test_default_scenario_is_the_papers_setup() -> None:
