@@ -3,10 +3,12 @@
 A :class:`Pilot` is sampled by the operator station once per operator frame
 (:func:`~testbed.operator.station.sample_pilot`) and returns a :class:`PilotSample`: six stick
 positions, or an attitude setpoint for setpoint-driven runs. The station turns that into the
-intents the link carries; a pilot never touches the link or the vehicle. Scripted pilots are
-pure functions of time, so observers of a run (the recorder) may sample them again to know what
-the pilot was commanding at any instant; a live pilot (a person at a console, a ground station)
-returns what it holds now.
+intents the link carries; a pilot never touches the link or the vehicle. The packaged pilots
+(:data:`PURE_PILOTS`) are pure functions of time, so observers of a run (the recorder) may
+sample them again to know what the pilot was commanding at any instant; any other pilot (a
+user's, which may keep state or draw random numbers; a live pilot returning what it holds now)
+is sampled by the operator station alone, and observers see those samples through a
+:class:`SampleHold`.
 
 Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig. 5),
 :class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints) and
@@ -29,12 +31,14 @@ from testbed.config import check, check_range
 __all__ = [
     "GOAL_FRAMES",
     "PERIOD_RANGE_S",
+    "PURE_PILOTS",
     "AttitudePilot",
     "GoalFrame",
     "GoalOrder",
     "GoalStep",
     "Pilot",
     "PilotSample",
+    "SampleHold",
     "ScriptedPilot",
     "SineTerm",
     "Sticks",
@@ -92,7 +96,16 @@ class PilotSample:
 
 
 class Pilot(Protocol):
-    """Anything that can be asked, at an operator time, what it commands."""
+    """Anything that can be asked, at an operator time, what it commands.
+
+    A run's operator station calls :meth:`sample` once per operator frame, at increasing
+    times. It need not be a pure function of ``t_s``: a pilot may keep state or draw from a
+    random generator (seed it yourself for repeatable runs). Only the packaged pilots
+    (:data:`PURE_PILOTS`), pure by construction, are sampled again by the recorder at the
+    vehicle's instants (the ``cmd_*`` columns); for any other pilot the recorder holds the
+    operator's own samples (:class:`SampleHold`), so it never advances the pilot's state and
+    the run does not depend on the recording rate.
+    """
 
     def sample(self, t_s: float) -> PilotSample:
         """What the pilot commands at operator time ``t_s`` [s]."""
@@ -295,3 +308,45 @@ class SupervisorPilot:
                 break
             goal = GoalOrder(index, step.position_ned_m, step.yaw_deg, step.frame)
         return PilotSample(_NO_STICKS, None, goal)
+
+
+PURE_PILOTS = (ScriptedPilot, AttitudePilot, SupervisorPilot)
+"""The pilots whose ``sample(t)`` is a pure function of ``t`` (observers may sample them again)."""
+
+
+class SampleHold:
+    """A pilot sampled by one caller, the operator station, with its samples held for observers.
+
+    :meth:`sample` forwards to ``pilot`` and keeps what it returned; :attr:`held` is a
+    :class:`Pilot` whose ``sample(t)`` returns the newest kept sample (centred sticks before the
+    first) without calling ``pilot``: sample and hold at the operator's frames. In a run, whose
+    clock only advances, the newest sample is the one taken at or before ``t``.
+
+    Args:
+        pilot: the pilot (any :class:`Pilot`, stateful or not).
+    """
+
+    def __init__(self, pilot: Pilot) -> None:
+        self.pilot = pilot
+        self._last = PilotSample(_NO_STICKS)
+        self.held: Pilot = _Held(self)
+
+    def sample(self, t_s: float) -> PilotSample:
+        """The pilot's sample at ``t_s`` [s], kept for :attr:`held`."""
+        self._last = self.pilot.sample(t_s)
+        return self._last
+
+    @property
+    def last(self) -> PilotSample:
+        """The newest sample taken (centred sticks before the first)."""
+        return self._last
+
+
+@dataclass(frozen=True, slots=True)
+class _Held:
+    """:attr:`SampleHold.held`: the newest sample, whatever ``t_s`` is asked."""
+
+    hold: SampleHold
+
+    def sample(self, t_s: float) -> PilotSample:
+        return self.hold.last

@@ -15,7 +15,7 @@ import contextlib
 import gc
 import math
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -26,6 +26,7 @@ import simpy
 from testbed.channel import Medium, Trace, direction_counts
 from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
+from testbed.operator.pilots import PURE_PILOTS, Pilot, SampleHold
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_metrics, image_source_factory
 from testbed.run.interrupts import interrupt_of
@@ -54,6 +55,7 @@ __all__ = [
     "make_operator_node",
     "make_vehicle_node",
     "mission_metrics",
+    "observed_pilot",
     "run_scenario",
     "stick_tracking",
     "tally_images",
@@ -95,9 +97,12 @@ def make_vehicle_node(
     rng: np.random.Generator,
     modem: LinkModem,
     recorder: Recorder,
+    *,
+    pilot: Pilot | None = None,
 ) -> VehicleNode:
     """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
-    scheduled. ``rng`` feeds the vehicle's sensors and current."""
+    scheduled. ``rng`` feeds the vehicle's sensors and current; ``pilot`` is what the recorder
+    samples for the ``cmd_*`` columns (default: the scenario's, a pure function of time)."""
     link = scenario.link
     factory = partial(Vehicle, scenario.vehicle, rng)
     node = VehicleNode(
@@ -114,7 +119,7 @@ def make_vehicle_node(
     vehicle = node.vehicle
     observer = VehicleObserver(
         recorder,
-        scenario.pilot.pilot(),
+        scenario.pilot.pilot() if pilot is None else pilot,
         vehicle.reference_velocity,
         scenario.metrics.sample_rate_hz,
     )
@@ -135,10 +140,12 @@ def make_operator_node(
     modem: LinkModem,
     recorder: Recorder,
     reply_odometry_s: dict[int, float],
+    *,
+    pilot: Pilot | None = None,
 ) -> OperatorNode:
     """The scenario's operator node on ``modem`` (simulated or HIL). ``reply_odometry_s`` is
     the vehicle node's map of reply frame → odometry sample time (recording only; empty when
-    the vehicle runs elsewhere)."""
+    the vehicle runs elsewhere); ``pilot`` replaces the scenario's."""
     link = scenario.link
     token = link.mac == "token"
     plan = SessionPlan(
@@ -149,7 +156,7 @@ def make_operator_node(
     )
     return OperatorNode(
         env,
-        OperatorStation(scenario.pilot.pilot(), plan),
+        OperatorStation(scenario.pilot.pilot() if pilot is None else pilot, plan),
         modem,
         codec=link.codec,
         ipg=link.ipg_policy if token else None,
@@ -182,17 +189,61 @@ def long_lived_frozen() -> Iterator[None]:
         gc.unfreeze()
 
 
-def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
+def observed_pilot(pilot: Pilot) -> tuple[Pilot, Pilot]:
+    """``(the operator's pilot, the recorder's view of it)``: a packaged pilot
+    (:data:`~testbed.operator.pilots.PURE_PILOTS`, a pure function of time) both times, as the
+    recorder may sample it again; any other pilot through a
+    :class:`~testbed.operator.pilots.SampleHold`, so that only the operator samples it (its
+    state, if it keeps any, advances at the operator's frames alone) and the recorder sees the
+    operator's samples, held between frames."""
+    if isinstance(pilot, PURE_PILOTS):
+        return pilot, pilot
+    hold = SampleHold(pilot)
+    return hold, hold.held
+
+
+VehicleSetup = Callable[[Vehicle], None]
+"""A user's hook on the built vehicle (:func:`run_scenario`'s ``vehicle_setup``)."""
+
+
+def run_scenario(
+    scenario: Scenario,
+    *,
+    seed: int | None = None,
+    pilot: Pilot | None = None,
+    vehicle_setup: VehicleSetup | None = None,
+) -> RunResult:
     """Simulate ``scenario`` once.
 
     Args:
         scenario: the loaded scenario.
         seed: overrides the scenario's seed.
+        pilot: replaces the scenario's pilot (``[pilot]`` is then unused): any object with
+            ``sample(t_s) -> PilotSample`` (:class:`~testbed.operator.pilots.Pilot`). The
+            operator station samples it once per operator frame, at increasing times; it may
+            keep state. Unless it is a packaged pilot, the recorder does not call it: the
+            ``cmd_*`` columns hold the operator's samples between frames. The same object is
+            used as is, so give each run a fresh one if it keeps state.
+        vehicle_setup: called once with the built
+            :class:`~testbed.vehicle.vehicle.Vehicle` before its first frame (the recorder's
+            system is already on its schedule). It may change the vehicle's own parts: put a
+            :class:`~testbed.vehicle.localization.Localizer` or a
+            :class:`~testbed.vehicle.nav_sensors.NavSource` in its
+            :class:`~testbed.vehicle.localization.Navigation` resource
+            (``vehicle.world.resource(Navigation)``, present when the vehicle has a
+            navigation or an autonomy), add a system to ``vehicle.schedule`` (an observer of
+            its world, a disturbance), read ``vehicle.config``. It may not step the vehicle,
+            replace its world or entity, or reach the link, the operator or the recorder. Keep
+            runs repeatable: any randomness from generators you seed yourself (the run's own
+            generators are not handed out), and no wall-clock time.
 
     Returns:
         The metrics and the recording.
     """
     seed = scenario.seed if seed is None else seed
+    operator_pilot, recorded_pilot = observed_pilot(
+        scenario.pilot.pilot() if pilot is None else pilot
+    )
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
     recorder = Recorder(trace=Trace())
@@ -205,12 +256,25 @@ def run_scenario(scenario: Scenario, *, seed: int | None = None) -> RunResult:
     holder: dict[str, VehicleNode] = {}
     vehicle_modem = medium.attach("vehicle", lambda: holder["node"].vehicle.truth.position_ned_m)
     rng = np.random.default_rng(vehicle_seed)
-    vehicle_node = make_vehicle_node(env, scenario, rng, vehicle_modem, recorder)
+    vehicle_node = make_vehicle_node(
+        env, scenario, rng, vehicle_modem, recorder, pilot=recorded_pilot
+    )
     holder["node"] = vehicle_node
+    if vehicle_setup is not None:
+        try:
+            vehicle_setup(vehicle_node.vehicle)
+        except BaseException:
+            vehicle_node.vehicle.close()
+            raise
     position = link.operator_position_ned_m
     operator_modem = medium.attach("operator", lambda: position)
     operator_node = make_operator_node(
-        env, scenario, operator_modem, recorder, vehicle_node.reply_odometry_s
+        env,
+        scenario,
+        operator_modem,
+        recorder,
+        vehicle_node.reply_odometry_s,
+        pilot=operator_pilot,
     )
     vehicle = vehicle_node.vehicle
     env.process(vehicle_node.run())
