@@ -22,7 +22,14 @@ from dataclasses import dataclass, field
 from importlib import resources
 from typing import Literal
 
-from testbed.config import ConfigError, apply_overrides, build, check, check_range, load_toml
+from testbed.config import (
+    apply_overrides,
+    build,
+    check,
+    check_range,
+    load_toml,
+    user_file,
+)
 
 __all__ = [
     "GilbertElliott",
@@ -199,26 +206,31 @@ def preset_names() -> list[str]:
 
 
 def load_link_config(preset: str, overrides: Sequence[str] = ()) -> LinkConfig:
-    """Load a packaged preset and apply ``KEY=VALUE`` overrides.
+    """Load a packaged preset, or the user's own preset file (the packaged files' layout), and
+    apply ``KEY=VALUE`` overrides.
 
     Args:
-        preset: preset name (``s100``, ``m64``, ``s2c``, ``tether``; see :func:`preset_names`).
+        preset: preset name (``s100``, ``m64``, ``s2c``, ``tether``; see :func:`preset_names`)
+            or the path of a ``.toml`` preset file.
         overrides: ``--set`` strings such as ``"ber=1e-4"`` or ``"propagation.speed_mps=1500"``.
 
     Returns:
         The checked link configuration.
 
     Raises:
-        ConfigError: unknown preset (naming it and the known ones), or an override with an
-            unknown key, a wrong type or a value out of range (naming the key).
+        ConfigError: neither a packaged preset nor a file (naming it and the packaged ones),
+            a bad preset file (naming the file and the key), or an override with an unknown
+            key, a wrong type or a value out of range (naming the key).
     """
-    known = preset_names()
-    if preset not in known:
-        raise ConfigError(f"preset {preset!r}: unknown link preset (known: {', '.join(known)})")
-    resource = resources.files(_PRESET_PACKAGE).joinpath(_PRESET_DIR).joinpath(f"{preset}.toml")
-    with resources.as_file(resource) as path:
-        data = load_toml(path)
-    source = f"preset {preset}"
+    own = user_file(preset, preset_names(), "link preset")
+    if own is not None:
+        data = load_toml(own)
+        source = str(own)
+    else:
+        resource = resources.files(_PRESET_PACKAGE).joinpath(_PRESET_DIR).joinpath(f"{preset}.toml")
+        with resources.as_file(resource) as path:
+            data = load_toml(path)
+        source = f"preset {preset}"
     base = build(LinkConfig, data, source=source)  # a broken preset is named as such
     if not overrides:
         return base

@@ -32,12 +32,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from testbed.channel import (
     LinkConfig,
     load_link_config,
-    preset_names,
 )
 from testbed.config import (
     ConfigError,
@@ -110,6 +109,7 @@ ID_PATTERN = re.compile(r"^[a-z0-9-]+-v[0-9]+$")
 results folder, so it can hold no path separator or ``..``)."""
 _PACKAGE = "testbed"
 _SCENARIO_DIR = "scenarios"
+T = TypeVar("T")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -131,8 +131,8 @@ class Scenario:
             TOML key.
         overrides: the ``--set`` overrides applied on top of ``source``, in order.
         files: SHA-256 (hex) of each user file the run reads, by path: the scenario file and
-            a model, thruster layout or mission given by path (packaged ones are named by the
-            package's version); taken when the scenario loads.
+            a link preset, model, thruster layout or mission given by path (packaged ones are
+            named by the package's version); taken when the scenario loads.
     """
 
     id: str
@@ -356,9 +356,10 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
 
 
 def _user_files(scenario: Scenario) -> list[str]:
-    """The data files given by path (a model, a thruster layout, a mission), not packaged."""
+    """The data files given by path (a link preset, a model, a thruster layout, a mission), not
+    packaged."""
     vehicle = scenario.vehicle
-    named = [vehicle.model, vehicle.thrusters]
+    named = [scenario.link.preset, vehicle.model, vehicle.thrusters]
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
         named.append(vehicle.autonomy.mission)
     return [name for name in named if Path(name).suffix in (".toml", ".json")]
@@ -444,8 +445,7 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
         raise ConfigError(f"{where}: link.{unknown[0]}: unknown key (known: {listed})")
     options = {k: v for k, v in table.items() if k in _LINK_OPTIONS}
     preset = options.get("preset", "s100")
-    _check_name(preset, preset_names(), where, "link.preset", "link preset")
-    base = dataclasses.asdict(load_link_config(preset))
+    base = dataclasses.asdict(_loaded(load_link_config, preset, where, "link.preset"))
     channel_data = _merge(base, {k: v for k, v in table.items() if k in _CHANNEL_KEYS})
     build(LinkConfig, channel_data, source=where, prefix="link.")  # errors name link.<key>
     section = build(LinkSection, {**options, "channel": channel_data}, source=where, prefix="link.")
@@ -470,8 +470,13 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
 def _check_file(load: Callable[[str], object], name: str, where: str, key: str) -> None:
     """Load a named data file (packaged, or the user's own at a path) now, so a bad name or a
     bad file is a one-line error naming ``key`` before anything runs."""
+    _loaded(load, name, where, key)
+
+
+def _loaded(load: Callable[[str], T], name: str, where: str, key: str) -> T:
+    """``load(name)``, its errors one line naming ``where`` and ``key``."""
     try:
-        load(name)
+        return load(name)
     except ConfigError as err:
         raise ConfigError(f"{where}: {key}: {err}") from None
 

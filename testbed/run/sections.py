@@ -108,7 +108,8 @@ class LinkSection:
     """The link between operator and vehicle.
 
     Attributes:
-        preset: channel preset name (:func:`testbed.channel.preset_names`).
+        preset: channel preset name (:func:`testbed.channel.preset_names`) or the path of a
+            ``.toml`` preset file of the user's.
         channel: the preset with every other key of the ``[link]`` table applied over it.
         codec: ``"teleop"`` (the paper's compact orders and replies), ``"changeset"`` (the ECS
             paper's full change-set sync) or ``"mavlink-raw"`` (MAVLink itself, the baseline).

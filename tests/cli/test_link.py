@@ -103,3 +103,30 @@ def exit_code(argv: list[str]) -> int | str | None:
         return main(argv)
     except SystemExit as stop:
         return stop.code
+
+
+def test_a_users_preset_file(tmp_path: object, capsys: pytest.CaptureFixture[str]) -> None:
+    """A preset file of one's own (a copy of s100 at 4800 bit/s) is the link probed, by
+    `testbed link --preset FILE` and by a scenario's link.preset: the latency is its closed
+    form, intrinsic delay + 8 · bytes / bitrate."""
+    from importlib import resources
+    from pathlib import Path
+
+    from testbed.channel import load_link_config
+    from testbed.run.scenario import load_scenario
+
+    text = resources.files("testbed.channel").joinpath("presets", "s100.toml").read_text()
+    path = Path(str(tmp_path)) / "fast.toml"
+    old = f"bitrate_bps = {load_link_config('s100').bitrate_bps:g}"
+    assert old in text
+    path.write_text(text.replace(old, "bitrate_bps = 4800"))
+    mine = load_link_config(str(path))
+    result = run_json(capsys, "--preset", str(path), "--frames", "50", "--size", "60")
+    latency = result["latency_s"]
+    assert isinstance(latency, dict)
+    assert latency["max"] == pytest.approx(mine.intrinsic_delay_s + 8 * 60 / 4800, abs=1e-9)
+    scenario = load_scenario("s100-teleop-v1", [f"link.preset={path}"])
+    assert scenario.link.channel.bitrate_bps == 4800
+    assert str(path) in dict(scenario.files)
+    assert main(["link", "--preset", str(path.with_name("none.toml"))]) == 2
+    assert "unknown link preset" in capsys.readouterr().err

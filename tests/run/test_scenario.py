@@ -460,7 +460,7 @@ def test_ipg_policies() -> None:
             "--set: faults.link_outages[1].start_s: must be ≥ the previous",
         ),
         # names
-        ("link.preset=s999", "--set: link.preset: unknown link preset 's999' (known: m64, s100"),
+        ("link.preset=s999", "--set: link.preset: unknown link preset 's999' (packaged: m64, s100"),
         ("vehicle.model=nautilus", "--set: vehicle.model: unknown vehicle model 'nautilus'"),
         (
             "vehicle.thrusters=octo",
