@@ -92,7 +92,12 @@ class PilotSample:
 
 
 class Pilot(Protocol):
-    """Anything that can be asked, at an operator time, what it commands."""
+    """Anything that can be asked, at an operator time, what it commands.
+
+    The station refuses a sample whose sticks are not six finite positions in [−1, 1]
+    (:func:`~testbed.operator.station.check_sticks`: a ValueError naming the pilot's type and
+    the axis), whatever codec carries them.
+    """
 
     def sample(self, t_s: float) -> PilotSample:
         """What the pilot commands at operator time ``t_s`` [s]."""
