@@ -126,7 +126,9 @@ def format_trial(trial: int, metrics: dict[str, Any]) -> str:
         f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
     )
     never = never_ready(metrics.get("mission") or {})
-    return line if never is None else f"{line}; {never}"
+    line = line if never is None else f"{line}; {never}"
+    gated = gate_rejections(metrics)
+    return line if gated is None else f"{line}; {gated}"
 
 
 def format_trials_summary(document: dict[str, Any], out: Path) -> str:
@@ -239,8 +241,32 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             )
         if (never := never_ready(mission)) is not None:
             lines.append(f"  {never}")
+    if (gated := gate_rejections(metrics)) is not None:
+        lines.append(f"  {gated}")
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def gate_rejections(metrics: dict[str, Any]) -> str | None:
+    """The line saying the navigation filter's χ² gate rejected measurements (how many, of
+    which source, and the key to look at: docs/autonomy.md), or None when it rejected none
+    (or there is no filter)."""
+    counts = (metrics.get("navigation") or {}).get("filter")
+    if not counts or not counts.get("rejected"):
+        return None
+    given = counts["accepted"] + counts["rejected"] + counts["invalid"] + counts["stale"]
+    by_source = (metrics["navigation"].get("by_source")) or {}
+    sources = ", ".join(
+        f"{name} {c['rejected']}/{c['accepted'] + c['rejected']}"
+        for name, c in by_source.items()
+        if c["rejected"]
+    )
+    which = f" ({sources})" if sources else ""
+    return (
+        f"navigation filter's gate rejected {counts['rejected']} of {given} measurements"
+        f"{which}, re-acquired {counts['reacquired']}: good fixes at a slow rate want a larger "
+        "vehicle.navigation.filter.accel_noise_m2_s3 (docs/autonomy.md)"
+    )
 
 
 def never_ready(mission: dict[str, Any]) -> str | None:
