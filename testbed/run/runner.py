@@ -436,14 +436,17 @@ def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
     ``delivered``: measurements handed to the localizer, by source (``"depth"`` for the depth
     sensor). ``filter``: the default localizer's counters
     (:class:`~testbed.vehicle.estimation.FilterCounters`: ``accepted``, ``rejected`` by the χ²
-    gate, ``invalid``, ``stale``, ``rollbacks``, ``reacquired``), and ``by_source``: its
-    ``accepted`` and ``rejected`` split by source; both None (null) for a localizer of
-    one's own.
+    gate, ``invalid``, ``stale``, ``rollbacks``, ``reacquired``), ``by_source``: its
+    ``accepted`` and ``rejected`` split by source, and ``gate_probability``: the gate's (the
+    filter rejects about 1 − that of good measurements by chance); all None (null) for a
+    localizer of one's own.
     """
     localizer = navigation.localizer
     filter_counts: dict[str, int] | None = None
     by_source: dict[str, dict[str, int]] | None = None
+    gate: float | None = None
     if isinstance(localizer, KalmanLocalizer):
+        gate = localizer.navigator.config.gate_probability
         filter_counts = dataclasses.asdict(localizer.navigator.counters)
         by_source = {
             name: {"accepted": accepted, "rejected": rejected}
@@ -453,6 +456,7 @@ def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
         "delivered": dict(sorted(navigation.delivered.items())),
         "filter": filter_counts,
         "by_source": by_source,
+        "gate_probability": gate,
     }
 
 

@@ -47,11 +47,12 @@ def test_a_gated_run_reports_the_filters_own_counters(monkeypatch: pytest.Monkey
     assert by_source["mocap"]["rejected"] == own.rejected  # the depth sensor is never gated here
     assert sum(c["accepted"] for c in by_source.values()) == own.accepted
     assert reported["delivered"]["mocap"] == sum(by_source["mocap"].values())
+    assert reported["gate_probability"] == scenario.vehicle.navigation.filter.gate_probability  # type: ignore[union-attr]
     line = gate_rejections(metrics)
     assert line is not None
     assert f"gate rejected {own.rejected} of " in line and "accel_noise_m2_s3" in line
     assert line in format_summary(metrics, Path("out"))
-    assert line in format_trial(1, metrics)
+    assert f"; navigation gate rejected {own.rejected} of " in format_trial(1, metrics)
 
 
 def test_no_line_without_rejections_or_a_filter() -> None:
@@ -59,3 +60,21 @@ def test_no_line_without_rejections_or_a_filter() -> None:
     assert gate_rejections({"navigation": {"filter": {**counts, "reacquired": 0}}}) is None
     assert gate_rejections({"navigation": {"filter": None, "by_source": None}}) is None
     assert gate_rejections({}) is None
+
+
+def test_rejections_by_chance_are_counted_without_advice() -> None:
+    # a packaged trial: 1 of 6998 good 100-Hz fixes, as a 0.9999 gate rejects by chance
+    def metrics(rejected: int) -> dict[str, object]:
+        counts = {"accepted": 13997, "rejected": rejected, "invalid": 0, "stale": 0}
+        return {
+            "navigation": {
+                "filter": {**counts, "rollbacks": 0, "reacquired": 0},
+                "by_source": {"mocap": {"accepted": 6997, "rejected": rejected}},
+                "gate_probability": 0.9999,
+            }
+        }
+
+    line = gate_rejections(metrics(1))
+    expected = "navigation filter's χ² gate rejected 1 of 13998 measurements (mocap 1/6998)"
+    assert line == f"{expected}, re-acquired 0"
+    assert "accel_noise_m2_s3" in (gate_rejections(metrics(15)) or "")
