@@ -126,7 +126,9 @@ def format_trial(trial: int, metrics: dict[str, Any]) -> str:
         f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
     )
     never = never_ready(metrics.get("mission") or {})
-    return line if never is None else f"{line}; {never}"
+    line = line if never is None else f"{line}; {never}"
+    gated = gate_rejections(metrics, brief=True)
+    return line if gated is None else f"{line}; {gated}"
 
 
 def format_trials_summary(document: dict[str, Any], out: Path) -> str:
@@ -239,8 +241,44 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             )
         if (never := never_ready(mission)) is not None:
             lines.append(f"  {never}")
+    if (gated := gate_rejections(metrics)) is not None:
+        lines.append(f"  {gated}")
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def gate_rejections(metrics: dict[str, Any], *, brief: bool = False) -> str | None:
+    """The line saying the navigation filter's χ² gate rejected measurements (how many, of
+    which source), or None when it rejected none (or there is no filter). When it rejected
+    far more than its ``1 − gate_probability`` of good measurements would be by chance (more
+    than 3 and ten times that), the line says which key to look at (docs/autonomy.md);
+    ``brief``: the count alone (a trial's line)."""
+    navigation = metrics.get("navigation") or {}
+    counts = navigation.get("filter")
+    if not counts or not counts.get("rejected"):
+        return None
+    rejected = counts["rejected"]
+    given = counts["accepted"] + counts["rejected"] + counts["invalid"] + counts["stale"]
+    if brief:
+        return f"navigation gate rejected {rejected} of {given}"
+    sources = ", ".join(
+        f"{name} {c['rejected']}/{c['accepted'] + c['rejected']}"
+        for name, c in (navigation.get("by_source") or {}).items()
+        if c["rejected"]
+    )
+    which = f" ({sources})" if sources else ""
+    line = (
+        f"navigation filter's χ² gate rejected {rejected} of {given} measurements{which}, "
+        f"re-acquired {counts['reacquired']}"
+    )
+    gate = navigation.get("gate_probability")
+    chance = (1.0 - gate) * (counts["accepted"] + rejected) if gate is not None else 0.0
+    if rejected > max(3.0, 10.0 * chance):
+        line += (
+            ": far more than chance; good fixes at a slow rate want a larger "
+            "vehicle.navigation.filter.accel_noise_m2_s3 (docs/autonomy.md)"
+        )
+    return line
 
 
 def never_ready(mission: dict[str, Any]) -> str | None:

@@ -105,6 +105,10 @@ class Pilot(Protocol):
     vehicle's instants (the ``cmd_*`` columns); for any other pilot the recorder holds the
     operator's own samples (:class:`SampleHold`), so it never advances the pilot's state and
     the run does not depend on the recording rate.
+
+    The station refuses a sample whose sticks are not six finite positions in [−1, 1]
+    (:func:`~testbed.operator.station.check_sticks`: a ValueError naming the pilot's type and
+    the axis), whatever codec carries them.
     """
 
     def sample(self, t_s: float) -> PilotSample:

@@ -37,14 +37,16 @@ from testbed.common.components import (
 )
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Entity, Phase, Replicate, Schedule, World
-from testbed.operator.pilots import Pilot, PilotSample
+from testbed.operator.pilots import Pilot, PilotSample, SampleHold
 
 __all__ = [
+    "STICK_AXES",
     "OperatorClock",
     "OperatorStation",
     "Pilot",
     "PilotSample",
     "SessionPlan",
+    "check_sticks",
     "request_session",
     "sample_pilot",
 ]
@@ -90,13 +92,48 @@ class _Session:
         self.seq = 0
 
 
+STICK_AXES = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+"""The names of the six sticks, in :data:`~testbed.operator.pilots.Sticks` order."""
+
+
+def check_sticks(pilot: Pilot, sticks: tuple[float, ...]) -> None:
+    """Refuse a stick sample that is not six finite positions in [−1, 1].
+
+    A pilot is local code, so a bad sample is its bug, not a value to clamp: it is refused
+    here, when the pilot is sampled, whatever codec carries the sticks (the teleop codec would
+    otherwise refuse it while encoding and the change-set codec carry a NaN to the vehicle).
+
+    Raises:
+        ValueError: naming the pilot's type and the axis.
+    """
+    inner = pilot.pilot if isinstance(pilot, SampleHold) else pilot  # the user's, not the hold
+    name = type(inner).__name__
+    if len(sticks) != len(STICK_AXES):
+        raise ValueError(f"pilot {name}: {len(sticks)} sticks sampled, expected 6")
+    for axis, value in zip(STICK_AXES, sticks, strict=True):
+        try:
+            ok = -1.0 <= float(value) <= 1.0  # a NaN fails the comparison
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(
+                f"pilot {name}: {axis} stick must be a finite number in [-1, 1], got {value!r}"
+            )
+
+
 def sample_pilot(world: World) -> None:
     """UPDATE: sample the pilot now; write the sticks (new seq) or the attitude setpoint, and
     a supervised goal (a position setpoint, an end-effector setpoint for a goal in the
-    ``"end_effector"`` frame, or a cancel) when a new one is in force."""
+    ``"end_effector"`` frame, or a cancel) when a new one is in force.
+
+    Raises:
+        ValueError: the pilot's sticks are not six finite positions in [−1, 1]
+            (:func:`check_sticks`).
+    """
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
     sample = session.pilot.sample(now)
+    check_sticks(session.pilot, sample.sticks)
     goal = sample.goal
     if goal is not None:
         if goal.position_ned_m is None:

@@ -12,6 +12,7 @@ byte for byte, apart from ``wall_s`` and ``rtf``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import math
 import time
@@ -46,6 +47,7 @@ from testbed.run.nodes import FRAME_OVERHEAD, LinkModem, OperatorNode, VehicleNo
 from testbed.run.recorder import Recorder, VehicleObserver, failsafe_engagements
 from testbed.run.scenario import Scenario
 from testbed.vehicle.autonomy import Autonomy
+from testbed.vehicle.localization import KalmanLocalizer, Navigation
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -305,6 +307,9 @@ def run_scenario(
         mission_status=vehicle.world.get(vehicle.entity, MissionStatus),
         goals_acked=goals_acked(operator_node),
         autonomy=vehicle.world.resource(Autonomy) if vehicle.world.has_resource(Autonomy) else None,
+        navigation=(
+            vehicle.world.resource(Navigation) if vehicle.world.has_resource(Navigation) else None
+        ),
     )
     return RunResult(scenario, seed, metrics, recorder, stopped)
 
@@ -383,13 +388,16 @@ def compute_metrics(
     mission_status: MissionStatus | None = None,
     goals_acked: int | None = None,
     autonomy: Autonomy | None = None,
+    navigation: Navigation | None = None,
 ) -> dict[str, Any]:
     """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
 
     ``mission_status`` (the vehicle's :class:`MissionStatus` at the end), ``goals_acked``
     (:func:`goals_acked`) and the vehicle's ``autonomy`` resource at the end feed, with the
     recorder's ``mission_reached`` events, the ``"mission"`` key of a vehicle under autonomy
-    (:func:`mission_metrics`); None = not known here (null in the file).
+    (:func:`mission_metrics`); None = not known here (null in the file). The vehicle's
+    ``navigation`` resource at the end, when it has one, is the ``"navigation"`` key
+    (:func:`navigation_metrics`).
     """
     series = recorder.series()
     t = series["t_s"]
@@ -485,7 +493,40 @@ def compute_metrics(
             ready_sigma_m=autonomy_config.ready_sigma_m,
             reached_s=[e.t_s for e in recorder.events if e.kind == "mission_reached"],
         )
+    if navigation is not None:
+        metrics["navigation"] = navigation_metrics(navigation)
     return metrics
+
+
+def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
+    """The ``"navigation"`` key of ``metrics.json`` (a vehicle with ``[vehicle.navigation]``):
+    what the sources delivered and what the filter did with it.
+
+    ``delivered``: measurements handed to the localizer, by source (``"depth"`` for the depth
+    sensor). ``filter``: the default localizer's counters
+    (:class:`~testbed.vehicle.estimation.FilterCounters`: ``accepted``, ``rejected`` by the χ²
+    gate, ``invalid``, ``stale``, ``rollbacks``, ``reacquired``), ``by_source``: its
+    ``accepted`` and ``rejected`` split by source, and ``gate_probability``: the gate's (the
+    filter rejects about 1 − that of good measurements by chance); all None (null) for a
+    localizer of one's own.
+    """
+    localizer = navigation.localizer
+    filter_counts: dict[str, int] | None = None
+    by_source: dict[str, dict[str, int]] | None = None
+    gate: float | None = None
+    if isinstance(localizer, KalmanLocalizer):
+        gate = localizer.navigator.config.gate_probability
+        filter_counts = dataclasses.asdict(localizer.navigator.counters)
+        by_source = {
+            name: {"accepted": accepted, "rejected": rejected}
+            for name, (accepted, rejected) in localizer.navigator.source_counters.items()
+        }
+    return {
+        "delivered": dict(sorted(navigation.delivered.items())),
+        "filter": filter_counts,
+        "by_source": by_source,
+        "gate_probability": gate,
+    }
 
 
 _STICK_AXES = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))

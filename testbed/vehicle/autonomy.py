@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Literal
 
 from testbed.common.geometry import euler_from_quat, quat_rotate_inverse
-from testbed.config import ConfigError, check_range
+from testbed.config import ConfigError, FieldError, check_range
 from testbed.ecs import World
 from testbed.vehicle.behaviours import MissionRunner
 from testbed.vehicle.components import (
@@ -166,8 +166,11 @@ class AutonomyConfig:
     def __post_init__(self) -> None:
         check_range(self.start_s, "start_s", 0.0, 1e6, "s")
         check_range(self.ready_sigma_m, "ready_sigma_m", 0.0, 100.0, "m", low_open=True)
-        if self.mission is not None:
-            resolve_mission(self.mission)  # a bad name or file fails here, naming it
+        if self.mission is not None:  # a bad name or file fails here, naming it and the key
+            try:
+                resolve_mission(self.mission)
+            except ConfigError as err:
+                raise FieldError("mission", str(err)) from None
 
 
 def resolve_mission(name: str) -> Mission:

@@ -226,6 +226,7 @@ class KalmanNavigator:
 
     __slots__ = (
         "_arrays",
+        "_by_source",
         "_gates",
         "_ledger",
         "_newest",
@@ -278,6 +279,8 @@ class KalmanNavigator:
         self._gates = (math.nan, gates[1], math.nan, gates[3])
         """The gate by dim z."""
         self._streaks: dict[str, int] = {}
+        self._by_source: dict[str, list[int]] = {}
+        """[accepted, rejected] by measurement source (the ledger's two, split by source)."""
 
     # ------------------------------------------------------------------- accessors
 
@@ -300,6 +303,20 @@ class KalmanNavigator:
     def counters(self) -> FilterCounters:
         """Measurement counts since construction."""
         return FilterCounters(*self._ledger[ACCEPTED : ACCEPTED + 6].tolist())
+
+    @property
+    def source_counters(self) -> dict[str, tuple[int, int]]:
+        """``(accepted, rejected)`` by measurement source since construction: the
+        :attr:`counters` ``accepted`` (re-acquisitions included) and ``rejected`` (the gate's),
+        split by :attr:`Measurement.source`; a source none of whose measurements was accepted
+        or gated is absent."""
+        return {name: (counts[0], counts[1]) for name, counts in sorted(self._by_source.items())}
+
+    def _count(self, source: str, slot: int) -> None:
+        counts = self._by_source.get(source)
+        if counts is None:
+            counts = self._by_source[source] = [0, 0]
+        counts[slot] += 1
 
     def estimate(
         self, quaternion_wxyz: Quaternion = LEVEL, rates_rad_s: Vec3 = (0.0, 0.0, 0.0)
@@ -439,9 +456,11 @@ class KalmanNavigator:
             self._grow(status)
         if status == APPLIED:
             self._streaks[m.source] = 0
+            self._count(m.source, 0)
             return True
         if status == NEEDS_RESET:
             self._streaks[m.source] = 0
+            self._count(m.source, 0)
             self._replay_resets(status)
             return True
         if status == GATED:
@@ -459,9 +478,11 @@ class KalmanNavigator:
         """A gate rejection: counted, or (module docstring) a re-acquisition applied."""
         if not self._reacquire(m):
             self._ledger[REJECTED] += 1
+            self._count(m.source, 1)
             return False
         self._ledger[REACQUIRED] += 1
         self._ledger[ACCEPTED] += 1
+        self._count(m.source, 0)
         q = self._q
         while True:
             status = _STAGE(*self._arrays[:4], m.time_s, self._scratch, q)

@@ -36,6 +36,8 @@ from testbed.vehicle.plant_kernels import N_COEFFICIENTS, fossen_acceleration
 from testbed.vehicle.water_current import WaterCurrent
 
 __all__ = [
+    "GRAVITY_RANGE_M_S2",
+    "WEIGHT_TOLERANCE",
     "HydroModel",
     "WaterCurrent",
     "body_acceleration",
@@ -51,6 +53,13 @@ Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 
 
+GRAVITY_RANGE_M_S2 = (9.78, 9.83)
+"""Standard gravity at sea level from the equator to the poles [m/s²]: a model's ``weight_n``
+must be ``mass_kg`` times some g in this range (the packaged models use 9.81 and 9.82)."""
+WEIGHT_TOLERANCE = 0.01
+"""Relative slack on ``weight_n`` beyond :data:`GRAVITY_RANGE_M_S2` (rounded figures)."""
+
+
 @dataclass(frozen=True, slots=True)
 class HydroModel:
     """One vehicle's rigid-body and hydrodynamic parameters (Fossen notation, SI units).
@@ -59,7 +68,8 @@ class HydroModel:
         name: model name (the TOML file's stem).
         source: where the figures come from.
         mass_kg: rigid-body mass m.
-        weight_n: weight W = m·g [N].
+        weight_n: weight W = m·g [N], g in [9.78, 9.83] m/s² (:data:`GRAVITY_RANGE_M_S2`),
+            within 1 % (:data:`WEIGHT_TOLERANCE`).
         buoyancy_n: buoyancy B = ρ·g·∇ [N] when fully submerged.
         cog_m: (3,) centre of gravity r_g from the body origin CO, FRD [m].
         cob_m: (3,) centre of buoyancy r_b from CO, FRD [m].
@@ -95,6 +105,15 @@ class HydroModel:
     def __post_init__(self) -> None:
         check(self.mass_kg > 0.0, "mass_kg", f"must be > 0, got {self.mass_kg}")
         check(self.weight_n > 0.0, "weight_n", f"must be > 0, got {self.weight_n}")
+        g_low, g_high = GRAVITY_RANGE_M_S2
+        low = self.mass_kg * g_low * (1.0 - WEIGHT_TOLERANCE)
+        high = self.mass_kg * g_high * (1.0 + WEIGHT_TOLERANCE)
+        check(
+            low <= self.weight_n <= high,
+            "weight_n",
+            f"must be mass_kg·g (W = m·g, g in [{g_low:g}, {g_high:g}] m/s², within 1 %): "
+            f"[{low:.4g}, {high:.4g}] N for {self.mass_kg:g} kg, got {self.weight_n:g}",
+        )
         check(self.buoyancy_n >= 0.0, "buoyancy_n", f"must be ≥ 0, got {self.buoyancy_n}")
         for i, value in enumerate(self.inertia_kg_m2):
             check(value > 0.0, f"inertia_kg_m2[{i}]", f"must be > 0, got {value}")

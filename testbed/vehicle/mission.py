@@ -9,8 +9,11 @@ A mission file (Angler's ``preplanned_end_effector_planner`` library format) is:
 
 **Frames.** Angler's ``map`` frame is z-up; this testbed reads every mission coordinate as
 **world NED metres** (x north, y east, z down: ``z = 1`` is 1 m deep) and converts nothing.
-``rx, ry, rz`` are Euler angles ``xyz`` [rad] (extrinsic x, y, z, which is the Z-Y-X
-roll–pitch–yaw of :mod:`testbed.common.geometry`), so ``rz`` is the yaw, clockwise from north.
+``rx, ry, rz`` are Euler angles ``xyz`` in **radians** (extrinsic x, y, z, which is the Z-Y-X
+roll–pitch–yaw of :mod:`testbed.common.geometry`), so ``rz`` is the yaw, clockwise from north,
+in [−2π, 2π]. Roll and pitch are not flown (the vehicle, and the arm's tool, are steered in
+position and yaw and kept level), so ``rx`` and ``ry`` must be 0 (within
+:data:`LEVEL_TOLERANCE_RAD`): a non-zero one is refused rather than silently flown level.
 ``parent`` must be ``map`` (:data:`PARENT_FRAMES`; kept for Angler compatibility, read as world
 NED). ``child`` names the frame the waypoints are for: Angler's tool frame
 ``alpha_standard_jaws_tool`` (or ``end_effector``) makes them the arm's end effector's
@@ -18,7 +21,8 @@ NED). ``child`` names the frame the waypoints are for: Angler's tool frame
 (a typo must not quietly fly the hull instead of the jaws).
 
 **Checks.** Missing or unknown keys, unknown frame names, non-numbers, non-finite numbers, a
-waypoint above the surface (``z < 0``), an empty waypoint list, a negative first time and
+waypoint above the surface (``z < 0``), a non-zero ``rx`` or ``ry``, an ``|rz|`` beyond 2π (degrees
+given for radians, most likely), an empty waypoint list, a negative first time and
 repeated or decreasing times (Angler's library has repeated ones; they make a zero-length
 segment) are :class:`~testbed.config.ConfigError`\\ s whose one-line message names the file
 and the field path, e.g. ``missions/square.json: waypoints[2].time_from_start: must be > 3 s
@@ -51,6 +55,7 @@ from testbed.config import ConfigError, read_text, to_float
 
 __all__ = [
     "BODY_FRAMES",
+    "LEVEL_TOLERANCE_RAD",
     "PARENT_FRAMES",
     "TOOL_FRAMES",
     "Mission",
@@ -76,6 +81,11 @@ PARENT_FRAMES = ("map",)
 _TOP_KEYS = ("name", "parent", "child", "waypoints")
 _WAYPOINT_KEYS = ("time_from_start", "transform", "velocity", "acceleration")
 _TRANSFORM_KEYS = ("x", "y", "z", "rx", "ry", "rz")
+
+LEVEL_TOLERANCE_RAD = 1e-6
+"""Largest ``|rx|``, ``|ry|`` [rad] a waypoint may have: roll and pitch are not flown (the pose
+law and the arm's TPIK steer position and yaw), so anything else is refused, not ignored; the
+tolerance lets a file converted from quaternions through rounding."""
 
 Vec6 = tuple[float, float, float, float, float, float]
 
@@ -401,6 +411,18 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
             raise ConfigError(
                 f"{source}: {key}.transform.z: must be ≥ 0 m (z is down: {z:g} m is above the "
                 "surface)"
+            )
+        for axis, angle in (("rx", rx), ("ry", ry)):
+            if abs(angle) > LEVEL_TOLERANCE_RAD:
+                raise ConfigError(
+                    f"{source}: {key}.transform.{axis}: must be 0 (roll and pitch are not "
+                    f"flown: the vehicle and the arm's tool keep level; only rz, the yaw, is), "
+                    f"got {angle:g} rad"
+                )
+        if abs(rz) > 2.0 * math.pi:
+            raise ConfigError(
+                f"{source}: {key}.transform.rz: must be in [-2π, 2π] (the yaw in radians, "
+                f"clockwise from north), got {rz:g}"
             )
         points.append(
             Waypoint(

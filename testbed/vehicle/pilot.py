@@ -134,8 +134,12 @@ def shape_stick(x: float, scale: float, dead_zone: float = 0.0) -> float:
     """Cubic stick shaping ``sign(x)·|x|³·scale`` with ``x`` clipped to [−1, 1].
 
     Inside the dead zone the output is 0; outside it the stick is used as is (mate-rov 2024
-    zeroes small inputs rather than rescaling the rest).
+    zeroes small inputs rather than rescaling the rest). A non-finite stick (NaN, ±inf) reads
+    as centred: it is no deflection, and clipping would turn it into a full stick (``max``
+    and ``min`` pass a NaN through to their other argument).
     """
+    if not math.isfinite(x):
+        return 0.0
     x = max(-1.0, min(1.0, x))
     if abs(x) < dead_zone:
         return 0.0

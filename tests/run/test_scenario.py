@@ -544,3 +544,24 @@ def test_missing_file_and_unknown_id(tmp_path: Path) -> None:
     message = error_of("s200-teleop-v1")
     assert message.startswith("scenario 's200-teleop-v1': unknown scenario id (known: ")
     assert all(name in message for name in PACKAGED)
+
+
+def test_a_missing_mission_names_the_scenario_and_the_key(tmp_path: Path) -> None:
+    # a review: "mission 'triangle.json': no such packaged mission … or file" named neither the
+    # scenario file nor the key, unlike the model's error
+    message = error_of("heavy-waypoint-v1", ("vehicle.autonomy.mission=triangle.json",))
+    assert message.startswith("--set: vehicle.autonomy.mission: mission 'triangle.json': no such")
+    text = resources.files("testbed").joinpath("scenarios", "heavy-waypoint-v1.toml").read_text()
+    assert text.count('mission = "waypoint"') == 1
+    path = write(tmp_path, text.replace('mission = "waypoint"', 'mission = "triangle.json"'))
+    message = error_of(str(path))
+    assert message.startswith(f"{path}: vehicle.autonomy.mission: mission 'triangle.json': ")
+    mission = tmp_path / "tilted.json"
+    mission.write_text(
+        '{"name": "t", "parent": "map", "child": "base_link", "waypoints": [{"time_from_start": '
+        '0, "transform": {"x": 0, "y": 0, "z": 1, "rx": 0.2, "ry": 0, "rz": 0}}]}'
+    )
+    message = error_of("heavy-waypoint-v1", (f"vehicle.autonomy.mission={mission}",))
+    assert message.startswith(
+        f"--set: vehicle.autonomy.mission: {mission}: waypoints[0].transform.rx: must be 0"
+    )

@@ -12,6 +12,7 @@ import pytest
 
 from testbed.config import ConfigError
 from testbed.vehicle.mission import (
+    LEVEL_TOLERANCE_RAD,
     Trajectory,
     load_mission,
     load_packaged_mission,
@@ -138,6 +139,12 @@ def _mutate(data: dict[str, Any], edit: str) -> str:
         data["parent"] = "odom"
     elif edit == "above the surface":
         points[2]["transform"]["z"] = -3.0
+    elif edit == "roll":  # not flown: was accepted and the vehicle flew level
+        points[2]["transform"]["rx"] = 0.1
+    elif edit == "pitch":
+        points[2]["transform"]["ry"] = -1e-5
+    elif edit == "yaw in degrees":  # radians: 90.0 was accepted silently
+        points[2]["transform"]["rz"] = 90.0
     text = json.dumps(data)
     if edit == "nan":
         text = text.replace('"y": 2.0', '"y": NaN')
@@ -175,6 +182,9 @@ BAD_INPUTS = [
     ("unknown child", "child: unknown frame 'gripper' (accepted: base_link, alpha_standard_"),
     ("unknown parent", "parent: unknown frame 'odom' (accepted: map)"),
     ("above the surface", "waypoints[2].transform.z: must be ≥ 0 m (z is down: -3 m is above"),
+    ("roll", "waypoints[2].transform.rx: must be 0 (roll and pitch are not flown: "),
+    ("pitch", "waypoints[2].transform.ry: must be 0 (roll and pitch are not flown: "),
+    ("yaw in degrees", "waypoints[2].transform.rz: must be in [-2π, 2π] (the yaw in radians"),
     ("nan", "waypoints[2].transform.y: must be finite"),
     ("infinity", "waypoints[2].transform.y: must be finite"),
     ("duplicate key", "name: key given twice"),
@@ -259,3 +269,13 @@ def test_samples_carry_the_segments_heading_rate() -> None:
     assert math.isclose(trajectory.sample(3.0).yaw_rate_rad_s, math.pi / 4)
     turn = single_goal((1.0, 1.0, 1.0), 0.0, (1.0, 1.0, 1.0), math.pi / 2, 0.5, 0.0)
     assert math.isclose(turn.sample(1.0).yaw_rate_rad_s, 0.3)  # the GoTo's yaw rate
+
+
+def test_rounding_in_roll_and_pitch_and_a_full_turn_of_yaw_are_accepted(tmp_path: Path) -> None:
+    point = _point(10.0, 0.0, 0.0, 1.0, rz=-2.0 * math.pi)
+    point["transform"]["rx"] = LEVEL_TOLERANCE_RAD
+    point["transform"]["ry"] = -1e-17  # a quaternion's rounding
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(_doc(point)), encoding="utf-8")
+    (waypoint,) = load_mission(path).waypoints
+    assert waypoint.euler_xyz_rad == (LEVEL_TOLERANCE_RAD, -1e-17, -2.0 * math.pi)

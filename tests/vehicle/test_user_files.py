@@ -71,3 +71,31 @@ def test_bad_user_files_are_one_line_errors(tmp_path: Path) -> None:
     assert "mass_kg" in message and "\n" not in message
     with pytest.raises(ConfigError, match=r"vehicle\.thrusters: unknown thruster configuration"):
         load_scenario("s100-teleop-v1", [f"vehicle.thrusters={tmp_path / 'none.toml'}"])
+
+
+@pytest.mark.parametrize(
+    ("mass", "weight", "refused"),
+    [
+        ("130.0", "127.5", True),  # a review: W = m·g held for g = 0.98 and the model ran
+        ("11.5", "110.0", True),  # 9.565 m/s², 1.4 % under 9.78
+        ("11.5", "114.3", True),  # 9.939 m/s², past 9.83 + 1 %
+        ("11.5", "112.8", False),  # packaged: 9.81
+        ("11.5", "112.4", False),  # 9.774 m/s²: 0.06 % under 9.78, rounding
+    ],
+)
+def test_a_models_weight_is_its_mass_times_g(
+    tmp_path: Path, mass: str, weight: str, refused: bool
+) -> None:
+    text = DATA.joinpath("models", "bluerov2.toml").read_text(encoding="utf-8")
+    assert text.count("mass_kg = 11.5") == 1 and text.count("weight_n = 112.8") == 1
+    text = text.replace("mass_kg = 11.5", f"mass_kg = {mass}")
+    path = tmp_path / "odd.toml"
+    path.write_text(text.replace("weight_n = 112.8", f"weight_n = {weight}"), encoding="utf-8")
+    if not refused:
+        assert load_model(str(path)).weight_n == float(weight)
+        return
+    with pytest.raises(ConfigError) as info:
+        load_scenario("s100-teleop-v1", [f"vehicle.model={path}"])
+    message = str(info.value)
+    assert message.startswith(f"--set: vehicle.model: {path}: weight_n: must be mass_kg·g ")
+    assert f"got {weight.removesuffix('.0')}" in message and "\n" not in message

@@ -455,3 +455,16 @@ def test_holding_up_at_the_surface_keeps_the_hull_in_the_water_without_winding_u
         assert depth > floating + 0.015  # under water, the loop holding it there
         assert depth == pytest.approx(SURFACE_HOLD_DEPTH_M, abs=0.03)
         assert v.power.current_a <= 1.1 * current_30  # a steady effort, nothing winding up
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_stick_from_the_link_is_no_deflection(bad: float) -> None:
+    # the vehicle's stick clip, max(−1, min(1, x)), made a NaN a full stick: a NaN over the
+    # change-set codec flew at full surge; any non-finite stick reads centred
+    with make(sensors=QUIET, start_position_ned_m=(0.0, 0.0, 1.0)) as v:
+        hold(v, 1.0)
+        sticks = (bad, bad, bad, bad, bad, bad)
+        assert v.reference_velocity(sticks) == (0.0, 0.0, 0.0, 0.0)
+        run_with_sticks(v, 3.0, sticks)
+        assert abs(v.state().nu[0]) < 0.02
+        assert get(v, AppliedWrench).requested[0] == pytest.approx(0.0, abs=1.0)  # type: ignore[union-attr]
