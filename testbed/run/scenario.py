@@ -327,7 +327,7 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
     packaged_id: str | None = None
     if text.endswith(".toml") or "/" in text or "\\" in text or Path(text).is_file():
         source = text
-        data = load_toml(text)
+        data = _paths_beside(load_toml(text), Path(text).parent)
     else:
         known = scenario_names()
         if text not in known:
@@ -353,6 +353,33 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
     return dataclasses.replace(
         scenario, overrides=tuple(overrides), files=_digests([*own, *_user_files(scenario)])
     )
+
+
+_FILE_KEYS = (
+    ("link", "preset"),
+    ("vehicle", "model"),
+    ("vehicle", "thrusters"),
+    ("vehicle", "autonomy", "mission"),
+)
+"""Keys that may name a user's file by path."""
+
+
+def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """A scenario file's data with the relative paths of its user files (a preset, model,
+    layout or mission ending in ``.toml``/``.json``) taken from the file's ``folder``, so a
+    scenario kept beside its files runs from anywhere (``--set`` paths stay the working
+    directory's, as on any command line)."""
+    for key in _FILE_KEYS:
+        table: Any = data
+        for part in key[:-1]:
+            table = table.get(part) if isinstance(table, dict) else None
+        value = table.get(key[-1]) if isinstance(table, dict) else None
+        if not isinstance(value, str):
+            continue
+        path = Path(value)
+        if not path.is_absolute() and path.suffix in (".toml", ".json"):
+            table[key[-1]] = str(folder / path)
+    return data
 
 
 def _user_files(scenario: Scenario) -> list[str]:

@@ -565,3 +565,27 @@ def test_a_missing_mission_names_the_scenario_and_the_key(tmp_path: Path) -> Non
     assert message.startswith(
         f"--set: vehicle.autonomy.mission: {mission}: waypoints[0].transform.rx: must be 0"
     )
+
+
+def test_a_scenario_file_finds_its_files_beside_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A scenario file naming `mine.toml` (a layout kept beside it) loads from any working
+    directory; a `--set` path is the working directory's, as on any command line."""
+    layout = resources.files("testbed.vehicle").joinpath("data", "thrusters", "bluerov2.toml")
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "mine.toml").write_text(layout.read_text(encoding="utf-8"), encoding="utf-8")
+    text = resources.files("testbed").joinpath("scenarios", "s100-teleop-v1.toml").read_text()
+    text = text.replace('thrusters = "bluerov2"', 'thrusters = "mine.toml"')
+    assert 'thrusters = "mine.toml"' in text
+    scenario_path = folder / "my-scenario.toml"
+    scenario_path.write_text(text, encoding="utf-8")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    scenario = load_scenario(str(scenario_path))
+    assert Path(scenario.vehicle.thrusters) == folder / "mine.toml"
+    assert str(folder / "mine.toml") in dict(scenario.files)
+    with pytest.raises(ConfigError, match=r"--set: vehicle\.thrusters: unknown thruster"):
+        load_scenario(str(scenario_path), ["vehicle.thrusters=mine.toml"])  # not in elsewhere/
