@@ -554,8 +554,9 @@ def test_a_missing_mission_names_the_scenario_and_the_key(tmp_path: Path) -> Non
     text = resources.files("testbed").joinpath("scenarios", "heavy-waypoint-v1.toml").read_text()
     assert text.count('mission = "waypoint"') == 1
     path = write(tmp_path, text.replace('mission = "waypoint"', 'mission = "triangle.json"'))
-    message = error_of(str(path))
-    assert message.startswith(f"{path}: vehicle.autonomy.mission: mission 'triangle.json': ")
+    message = error_of(str(path))  # looked for beside the scenario file
+    missing = tmp_path / "triangle.json"
+    assert message.startswith(f"{path}: vehicle.autonomy.mission: mission '{missing}': ")
     mission = tmp_path / "tilted.json"
     mission.write_text(
         '{"name": "t", "parent": "map", "child": "base_link", "waypoints": [{"time_from_start": '
