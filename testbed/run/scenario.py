@@ -418,8 +418,14 @@ def _from_data(
     link = _build_link(top.link, where, given_link_keys)
     vehicle = build(VehicleConfig, top.vehicle, source=where, prefix="vehicle.")
     _check_file(load_model, vehicle.model, where, "vehicle.model")
-    _check_file(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
+    layout = _loaded(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
+    if operator.mode == "depth_hold" and not layout.matrix[2].any():
+        raise ConfigError(
+            f"{where}: operator.mode: 'depth_hold' needs thrust along the body's z axis, and the "
+            f"layout {vehicle.thrusters!r} has none (no vertical thruster): use 'manual' or "
+            "'stabilize'"
+        )
     if operator.depth_m is not None and link.codec != "changeset":
         raise ConfigError(
             f"{where}: operator.depth_m: only used when link.codec = 'changeset' (the teleop "

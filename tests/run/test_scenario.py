@@ -590,3 +590,19 @@ def test_a_scenario_file_finds_its_files_beside_it(
     assert str(folder / "mine.toml") in dict(scenario.files)
     with pytest.raises(ConfigError, match=r"--set: vehicle\.thrusters: unknown thruster"):
         load_scenario(str(scenario_path), ["vehicle.thrusters=mine.toml"])  # not in elsewhere/
+
+
+def test_depth_hold_needs_a_layout_that_can_heave(tmp_path: Path) -> None:
+    """A layout of four horizontal thrusters cannot push along z: depth hold with it is refused
+    in one line (a review's vehicle floated from 1.0 m to the surface in 'depth hold');
+    manual flight with it loads."""
+    text = resources.files("testbed.vehicle").joinpath("data", "thrusters", "bluerov2.toml")
+    blocks = text.read_text(encoding="utf-8").split("[[thrusters]]")
+    flat = "[[thrusters]]".join(b for b in blocks if 'name = "Vertical' not in b)
+    assert flat.count("[[thrusters]]") == 4
+    path = write(tmp_path, flat, "flat.toml")
+    message = error_of("s100-teleop-v1", (f"vehicle.thrusters={path}",))
+    assert message.startswith("--set: operator.mode: 'depth_hold' needs thrust along")
+    assert "\n" not in message
+    manual = load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", "operator.mode=manual"])
+    assert manual.operator.mode == "manual"
