@@ -63,7 +63,8 @@ from testbed.run.interrupts import interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
-from testbed.run.runner import RunResult, compute_metrics, tally_images
+from testbed.run.run_metrics import compute_metrics
+from testbed.run.runner import RunResult, tally_images
 from testbed.run.scenario import Scenario
 from testbed.vehicle.systems import Controllers
 from testbed.vehicle.vehicle import Vehicle
@@ -349,7 +350,8 @@ class LiveSession:
         return console_state(self)
 
     def metrics(self, reached_s: float, wall_s: float) -> dict[str, Any]:
-        """``metrics.json``: :func:`~testbed.run.runner.compute_metrics`'s keys and ``live``."""
+        """``metrics.json``: :func:`~testbed.run.run_metrics.compute_metrics`'s keys and
+        ``live``."""
         payload = {
             "uplink": self.vehicle_node.port.payload_bytes,
             "downlink": self.operator_node.port.payload_bytes,

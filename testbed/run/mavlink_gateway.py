@@ -55,7 +55,8 @@ from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns, run_poll
 from testbed.run.recorder import Recorder, VehicleObserver
-from testbed.run.runner import RunResult, compute_metrics
+from testbed.run.run_metrics import compute_metrics
+from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario
 from testbed.vehicle.vehicle import Vehicle
 

@@ -51,7 +51,8 @@ from testbed.operator.pilots import PilotSample
 from testbed.run.interrupts import interrupt_of
 from testbed.run.realtime import rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
-from testbed.run.runner import RunResult, compute_metrics
+from testbed.run.run_metrics import compute_metrics
+from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario
 from testbed.vehicle.systems import SimClock
 from testbed.vehicle.vehicle import Vehicle, VehicleConfig

@@ -68,9 +68,9 @@ from testbed.run.interrupts import interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder
+from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import (
     RunResult,
-    compute_metrics,
     make_operator_node,
     make_vehicle_node,
     tally_images,
@@ -413,8 +413,8 @@ def hil_metrics(
     modem: str,
     lateness_ns: Sequence[int] | deque[int] = (),
 ) -> dict[str, Any]:
-    """The ``metrics.json`` of a HIL run: :func:`~testbed.run.runner.compute_metrics`'s keys, with
-    the link section rebuilt from what the endpoints observed, plus a ``hil`` section.
+    """The ``metrics.json`` of a HIL run: :func:`~testbed.run.run_metrics.compute_metrics`'s
+    keys, with the link section rebuilt from what the endpoints observed, plus a ``hil`` section.
 
     Link, per direction: ``frames_sent`` (handed to the sender's modem), ``frames_delivered``
     (decoded by the receiving node), ``frames_corrupted`` (candidates the receiver's decoder

@@ -19,7 +19,7 @@ from testbed.run.metrics import (
     yaw_error_deg,
 )
 from testbed.run.recorder import SERIES_COLUMNS
-from testbed.run.runner import mission_metrics
+from testbed.run.run_metrics import mission_metrics
 
 
 def test_position_error_is_the_3d_distance_nan_where_either_is_missing() -> None:

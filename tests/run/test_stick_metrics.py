@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from testbed.run.recorder import SERIES_COLUMNS, Recorder
-from testbed.run.runner import compute_metrics
+from testbed.run.run_metrics import compute_metrics
 from testbed.run.scenario import load_scenario
 
 
