@@ -31,6 +31,7 @@ __all__ = [
     "check_seed",
     "exit_code_of",
     "format_value",
+    "missing",
     "open_modem_ports",
 ]
 
@@ -77,11 +78,17 @@ def check_seed(seed: int | None) -> None:
         raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
 
 
+def missing(value: float | None) -> bool:
+    """A figure metrics.json has as null: None, NaN or infinite (before writing)."""
+    return value is None or not math.isfinite(value)
+
+
 def format_value(value: float | None, scale: float = 1.0, digits: int = 3, unit: str = "") -> str:
     """A summary's figure: ``scale · value`` to ``digits`` places with ``unit``, or ``n/a``
-    where metrics.json has null (None, NaN, infinite)."""
-    if value is None or not math.isfinite(value):
+    where metrics.json has null (:func:`missing`)."""
+    if missing(value):
         return "n/a"
+    assert value is not None
     return f"{scale * value:.{digits}f}{unit}"
 
 

@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_seed, exit_code_of
+from testbed.cli.options import (
+    EXIT_OK,
+    Subparsers,
+    add_set_option,
+    check_seed,
+    exit_code_of,
+    missing,
+)
 from testbed.cli.options import format_value as _num
 
 if TYPE_CHECKING:
@@ -284,19 +290,14 @@ def gate_rejections(metrics: dict[str, Any], *, brief: bool = False) -> str | No
 def never_ready(mission: dict[str, Any]) -> str | None:
     """The line saying a mission never started because navigation was never ready (its
     position σ never came within ``ready_sigma_m``), or None when it was (or is not known)."""
-    if "ready_s" not in mission or not _missing(mission["ready_s"]):
+    if "ready_s" not in mission or not missing(mission["ready_s"]):
         return None
     sigma = mission.get("ready_sigma_m")
-    limit = "" if _missing(sigma) else f" = {sigma:g} m"
+    limit = "" if missing(sigma) else f" = {sigma:g} m"
     return (
         f"mission never started: navigation not ready (position σ > ready_sigma_m{limit} "
         "for the whole run)"
     )
-
-
-def _missing(value: float | None) -> bool:
-    """A figure that is not there: None (metrics.json's null) or NaN (before writing)."""
-    return value is None or math.isnan(value)
 
 
 def _dropped(direction: dict[str, Any]) -> str:
