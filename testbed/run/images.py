@@ -165,6 +165,7 @@ def image_source_factory(images: ImagesSection) -> Callable[..., ImageSource]:
             height_px=camera.height_px,
             chunk_bytes=images.chunk_bytes,
             selective_repeat=images.selective_repeat,
+            settings=settings_schedule(images)[0][1],  # both ends configured alike
             on_image=on_image,
         )
 

@@ -62,11 +62,15 @@ class ImageSource:
         height_px: camera image height [px].
         chunk_bytes: image bytes per reply [B], 1..150.
         selective_repeat: the transfer mode (both ends must agree).
+        settings: the coder settings the vehicle is configured with, used until the operator's
+            first ``ImageSettings`` order arrives (a deployment configures both ends alike, so
+            a lost settings order does not change the first images); None = the whole budget
+            and no region of interest.
         on_image: called with each new :class:`CodedImage` (recording).
 
     Attributes:
         settings: the coder settings for the next image (the operator's latest
-            ``ImageSettings``; before any, the whole budget and no region of interest).
+            ``ImageSettings``; before any, the configured ones).
         sender: the chunking state machine.
     """
 
@@ -78,6 +82,7 @@ class ImageSource:
         height_px: int,
         chunk_bytes: int = 40,
         selective_repeat: bool = True,
+        settings: ImageSettings | None = None,
         on_image: Callable[[CodedImage], None] | None = None,
     ) -> None:
         self._capture = capture
@@ -85,7 +90,8 @@ class ImageSource:
         self.sender = ImageSender(chunk_bytes, selective_repeat=selective_repeat)
         self._limit = max_image_bytes(chunk_bytes)
         right, bottom = min(width_px - 1, 1023), min(height_px - 1, 1023)
-        self.settings = ImageSettings(0, 0, right, bottom, 0, True, self._limit)
+        whole = ImageSettings(0, 0, right, bottom, 0, True, self._limit)
+        self.settings = whole if settings is None else settings
         self.images = 0
         self.current: CodedImage | None = None
 

@@ -203,3 +203,20 @@ def test_an_image_that_decodes_to_no_picture_is_counted_not_scored_lossless() ->
     assert metrics["psnr_db"]["mean"] == pytest.approx((expected + 99.0) / 2)
     only_undecodable = ImageLog(captured=dict(log.captured), received=log.received[:1])
     assert math.isnan(image_metrics(only_undecodable, 60.0)["psnr_db"]["mean"])
+
+
+def test_images_before_the_settings_order_arrives_use_the_configured_budget() -> None:
+    """Both ends are configured from the scenario: when the operator's first settings orders
+    are lost (BER 1e-3, seed 64: 5 sent, 1 acknowledged), the vehicle's first image is still
+    coded within the 600-B budget, not the whole 64-chunk limit (2558 B, 74 s to send)."""
+    result = run(
+        "duration_s=120",
+        "link.ber=1e-3",
+        "images.budget_bytes=600",
+        "images.changes=[]",
+        seed=64,
+    )
+    counters = result.metrics["images"]
+    assert counters["settings_acknowledged"] < counters["settings_sent"]  # orders were lost
+    captured = result.recorder.images.captured.values()
+    assert captured and all(image.encoded_bytes <= 600 for image in captured)
