@@ -181,7 +181,7 @@ def add_plot_parser(sub: Subparsers) -> None:
         "plot",
         help="plot one column of a sweep's results.csv against another",
         description="Scatter a metric of every successful run against a grid key or another "
-        "metric, with the median per x and 95 %% t-intervals of the mean; one colour per --hue "
+        "metric, with the median per x and 95 % t-intervals of the mean; one colour per --hue "
         "value. Writes a PNG (default: RESULTS' folder, <y>_vs_<x>.png).",
     )
     plot.add_argument("results", type=Path, help="a results.csv written by testbed sweep")

@@ -45,7 +45,7 @@ def plot_image_strip(log: ImageLog, path: Path, *, title: str, count: int = 6) -
     """
     shown = [r for r in strip_selection(log.received, count) if r.number in log.captured]
     columns = max(1, len(shown))
-    figure = Figure(figsize=(2.2 * columns + 0.4, 4.6), dpi=DPI)
+    figure = Figure(figsize=(max(4.6, 2.2 * columns + 0.4), 4.6), dpi=DPI)  # room for the title
     FigureCanvasAgg(figure)
     figure.suptitle(f"{title}\nimages: captured (top) vs received (bottom)", fontsize=9)
     if not shown:
@@ -61,7 +61,10 @@ def plot_image_strip(log: ImageLog, path: Path, *, title: str, count: int = 6) -
         top.imshow(source.pixels, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         bottom.imshow(image.pixels, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         psnr = psnr_db(source.pixels, image.pixels)
-        quality = "lossless" if math.isinf(psnr) else f"{psnr:.1f} dB"
+        if math.isnan(psnr):  # its bits decode to no picture (a budget below the header)
+            quality = "undecodable"
+        else:
+            quality = "lossless" if math.isinf(psnr) else f"{psnr:.1f} dB"
         top.set_title(f"#{image.number} at {source.t_s:.1f} s", fontsize=8)
         bottom.set_title(
             f"+{image.t_s - source.t_s:.1f} s, {image.encoded_bytes} B, {quality}", fontsize=8

@@ -378,7 +378,7 @@ def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
         settle_s=scenario.metrics.settle_s,
         max_lag_s=scenario.link.signal_lag_window_s,
     )
-    if scenario.images.enabled:
+    if scenario.images.enabled and scenario.images.strip_images:  # 0: no strip
         written.append(
             plot_image_strip(
                 result.recorder.images,

@@ -22,20 +22,26 @@ and odometry). The strip of images is :mod:`testbed.report.images`'s.
 
 from __future__ import annotations
 
+import csv
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from testbed.config import check
+from testbed.imaging.header import BASE_SIZE as HEADER_BASE_BYTES
+from testbed.imaging.header import ROI_SIZE as HEADER_ROI_BYTES
 from testbed.operator.video import ImageConsole
 from testbed.protocol import ImageSettings, max_image_bytes
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import CodedImage, ImageSource
 
 __all__ = [
+    "IMAGE_COLUMNS",
     "CapturedImage",
     "ImageLog",
     "ImageSettingsChange",
@@ -43,9 +49,12 @@ __all__ = [
     "ReceivedImage",
     "image_console",
     "image_metrics",
+    "image_rows",
     "image_source_factory",
     "psnr_db",
+    "roi_psnr_db",
     "settings_schedule",
+    "write_images_csv",
 ]
 
 
@@ -148,6 +157,22 @@ class ImagesSection:
                     f"changes[{i}].t_s",
                     f"must be ≥ the previous change's t_s ({self.changes[i - 1].t_s})",
                 )
+        keys = ["budget_bytes", *(f"changes[{i}].budget_bytes" for i in range(len(self.changes)))]
+        for key, (_, settings) in zip(keys, settings_schedule(self), strict=True):
+            least = _least_budget(settings)
+            check(
+                settings.budget_bytes >= least,
+                key,
+                f"must be ≥ {least} (the coder's {least - 1}-B header"
+                f"{' with a region of interest' if settings.roi_shift else ''} and a byte of "
+                f"image), got {settings.budget_bytes}",
+            )
+
+
+def _least_budget(settings: ImageSettings) -> int:
+    """The smallest budget that codes any of the image [B]: the coder's header, one more."""
+    header = HEADER_BASE_BYTES + (HEADER_ROI_BYTES if settings.roi_shift else 0)
+    return header + 1
 
 
 def image_source_factory(images: ImagesSection) -> Callable[..., ImageSource]:
@@ -208,12 +233,15 @@ class CapturedImage:
         t_s: capture time [s].
         pixels: (h, w) uint8 grey, as rendered.
         encoded_bytes: coded size within the budget [B] (without the 2-B image CRC).
+        settings: the coder settings it was coded with (budget, region of interest, shift), or
+            None when not recorded.
     """
 
     number: int
     t_s: float
     pixels: np.ndarray
     encoded_bytes: int
+    settings: ImageSettings | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,7 +270,8 @@ class ImageLog:
         reply_images: downlink frame id → number of the image whose chunk the reply carried.
         received: completed images in completion order.
         counters: transfer counters (``chunks_sent``, ``chunks_received``, ``crc_failures``,
-            ``spoiled``, ``duplicates``, ``settings_sent``, ``settings_applied``).
+            ``spoiled``, ``duplicates``, ``inconsistent``, ``settings_sent``,
+            ``settings_acknowledged``).
     """
 
     captured: dict[int, CapturedImage] = field(default_factory=dict)
@@ -267,18 +296,118 @@ def psnr_db(reference: np.ndarray, image: np.ndarray) -> float:
     return math.inf if mse == 0.0 else 10.0 * math.log10(255.0**2 / mse)
 
 
-def image_metrics(log: ImageLog, sim_s: float) -> dict[str, Any]:
-    """The ``images`` section of ``metrics.json``.
+def roi_psnr_db(reference: np.ndarray, image: np.ndarray, settings: ImageSettings | None) -> float:
+    """:func:`psnr_db` inside the region of interest the image was coded with [dB], or NaN for
+    an image coded without one (no settings, or a shift of 0) or of another shape."""
+    if settings is None or settings.roi_shift == 0 or reference.shape != image.shape:
+        return math.nan
+    height, width = reference.shape[:2]
+    rows = slice(min(settings.y0, height - 1), min(settings.y1, height - 1) + 1)
+    columns = slice(min(settings.x0, width - 1), min(settings.x1, width - 1) + 1)
+    return psnr_db(reference[rows, columns], image[rows, columns])
 
-    Keys: ``captured``, ``completed``, ``per_minute`` (completed per minute of simulated time),
-    ``latency_s`` {``mean``, ``p95``, ``max``} from capture to completion, ``bytes_delivered``
-    (coded bytes of the completed images), ``undecodable`` (completed images whose bits decode
-    to no picture of the captured size: a budget too small for the coder's header),
-    ``psnr_db`` {``mean``, ``min``} of each other completed image against its capture (a
-    lossless image counts as 99 dB; NaN when there is none), and the transfer counters.
+
+IMAGE_COLUMNS = (
+    "number",
+    "captured_s",
+    "completed_s",
+    "latency_s",
+    "encoded_bytes",
+    "chunks",
+    "budget_bytes",
+    "roi",
+    "roi_shift",
+    "psnr_db",
+    "roi_psnr_db",
+)
+"""The columns of ``images.csv`` (:func:`image_rows`)."""
+
+
+def image_rows(log: ImageLog, chunk_bytes: int) -> list[list[object]]:
+    """One row per captured image, in capture order (the columns of :data:`IMAGE_COLUMNS`).
+
+    ``completed_s`` and ``latency_s`` (capture to completion) are empty for an image the
+    operator did not complete; ``chunks`` is the replies it takes, ⌈(coded + 2-B CRC) /
+    chunk⌉; ``roi`` is ``x0 y0 x1 y1`` (empty without one); ``psnr_db`` is empty for an image
+    not completed, ``undecodable`` for one whose bits decode to no picture, 99 for a lossless
+    one (as in ``metrics.json``); ``roi_psnr_db`` the same inside the region of interest.
+    """
+    completed = {image.number: image for image in log.received if image.number >= 0}
+    rows: list[list[object]] = []
+    for number in sorted(log.captured):
+        source = log.captured[number]
+        settings = source.settings
+        roi = ""
+        if settings is not None and settings.roi_shift:
+            roi = f"{settings.x0} {settings.y0} {settings.x1} {settings.y1}"
+        row: list[object] = [
+            number,
+            f"{source.t_s:.6f}",
+            "",
+            "",
+            source.encoded_bytes,
+            -(-(source.encoded_bytes + 2) // chunk_bytes),
+            "" if settings is None else settings.budget_bytes,
+            roi,
+            "" if settings is None else (settings.roi_shift if roi else 0),
+            "",
+            "",
+        ]
+        image = completed.get(number)
+        if image is not None:
+            row[2] = f"{image.t_s:.6f}"
+            row[3] = f"{image.t_s - source.t_s:.6f}"
+            psnr = psnr_db(source.pixels, image.pixels)
+            if math.isnan(psnr):
+                row[9] = "undecodable"
+            else:
+                row[9] = f"{min(99.0, psnr):.3f}"
+                inside = roi_psnr_db(source.pixels, image.pixels, settings)
+                row[10] = "" if math.isnan(inside) else f"{min(99.0, inside):.3f}"
+        rows.append(row)
+    return rows
+
+
+def write_images_csv(log: ImageLog, chunk_bytes: int, path: Path) -> None:
+    """Write ``images.csv``: :func:`image_rows` under the header :data:`IMAGE_COLUMNS`."""
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(IMAGE_COLUMNS)
+        writer.writerows(image_rows(log, chunk_bytes))
+
+
+def _summary(values: list[float], *keys: str) -> dict[str, float]:
+    """``mean``/``p95``/``max``/``min`` (those named) of ``values``; NaN for none."""
+    array = np.asarray(values, dtype=float)
+    if not array.size:
+        return dict.fromkeys(keys, math.nan)
+    reducers = {
+        "mean": lambda a: float(a.mean()),
+        "p95": lambda a: float(np.percentile(a, 95)),
+        "max": lambda a: float(a.max()),
+        "min": lambda a: float(a.min()),
+    }
+    return {key: reducers[key](array) for key in keys}
+
+
+def image_metrics(log: ImageLog, sim_s: float) -> dict[str, Any]:
+    """The ``images`` section of ``metrics.json``, over the whole run (images flow from the
+    first order; ``metrics.settle_s`` does not apply).
+
+    Keys: ``captured``, ``completed``, ``per_minute`` (completed per minute of simulated time:
+    the image in flight at the end, and the start-up before the first, count against it),
+    ``completion_interval_s`` {``mean``} between consecutive completions (60 / it is the
+    steady rate), ``latency_s`` {``mean``, ``p95``, ``max``} from capture to completion,
+    ``bytes_delivered`` (coded bytes of the completed images), ``undecodable`` (completed
+    images whose bits decode to no picture of the captured size: a budget too small for the
+    coder's header), ``psnr_db`` {``mean``, ``min``} of each other completed image against its
+    capture (a lossless image counts as 99 dB; NaN when there is none), ``roi_psnr_db``
+    {``mean``, ``min``} the same inside the region of interest, over the images coded with one,
+    and the transfer counters.
     """
     latencies: list[float] = []
     psnrs: list[float] = []
+    inside: list[float] = []
     undecodable = 0
     for image in log.received:
         source = log.captured.get(image.number)
@@ -288,25 +417,22 @@ def image_metrics(log: ImageLog, sim_s: float) -> dict[str, Any]:
         psnr = psnr_db(source.pixels, image.pixels)
         if math.isnan(psnr):  # decoded to another shape (a budget too small for the header)
             undecodable += 1
-        else:
-            psnrs.append(min(99.0, psnr))
-    nan = math.nan
-    latency = np.asarray(latencies, dtype=float)
-    quality = np.asarray([p for p in psnrs if math.isfinite(p)], dtype=float)
+            continue
+        psnrs.append(min(99.0, psnr))
+        roi = roi_psnr_db(source.pixels, image.pixels, source.settings)
+        if not math.isnan(roi):
+            inside.append(min(99.0, roi))
+    times = [image.t_s for image in log.received]
+    intervals = [later - earlier for earlier, later in itertools.pairwise(times)]
     return {
         "captured": len(log.captured),
         "completed": len(log.received),
-        "per_minute": 60.0 * len(log.received) / sim_s if sim_s > 0 else nan,
-        "latency_s": {
-            "mean": float(latency.mean()) if latency.size else nan,
-            "p95": float(np.percentile(latency, 95)) if latency.size else nan,
-            "max": float(latency.max()) if latency.size else nan,
-        },
+        "per_minute": 60.0 * len(log.received) / sim_s if sim_s > 0 else math.nan,
+        "completion_interval_s": _summary(intervals, "mean"),
+        "latency_s": _summary(latencies, "mean", "p95", "max"),
         "bytes_delivered": sum(image.encoded_bytes for image in log.received),
         "undecodable": undecodable,
-        "psnr_db": {
-            "mean": float(quality.mean()) if quality.size else nan,
-            "min": float(quality.min()) if quality.size else nan,
-        },
+        "psnr_db": _summary(psnrs, "mean", "min"),
+        "roi_psnr_db": _summary(inside, "mean", "min"),
         **{key: log.counters[key] for key in sorted(log.counters)},
     }

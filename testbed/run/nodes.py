@@ -214,7 +214,9 @@ class VehicleNode:
     def _captured(self, image: CodedImage) -> None:
         """Recording: the image source captured and coded a new image (stamped with the event
         clock, like every other record; the scene is the plant at its latest physics step)."""
-        record = CapturedImage(image.number, self.env.now, image.pixels, len(image.encoded))
+        record = CapturedImage(
+            image.number, self.env.now, image.pixels, len(image.encoded), image.settings
+        )
         self.recorder.images.captured[image.number] = record
 
     @property

@@ -1,13 +1,13 @@
 """A run's results directory, written so that what is there is never mixed or silently partial.
 
-:func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and
-writable, not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
-``events.csv``, ``series.csv`` and the plots, each under a temporary name renamed into place,
-and ``metrics.json`` **last**, carrying ``"complete"`` (true for a run that reached its end,
-false for one ended early by Ctrl-C or SIGTERM, whose ``sim_s`` says how far it got) and
-``"files"``, the sibling files of this run with their sizes. A directory without
-``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json`` names
-exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
+:func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and writable,
+not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
+``events.csv``, ``series.csv``, ``images.csv`` (image scenarios) and the plots, each under a
+temporary name renamed into place, and ``metrics.json`` **last**, carrying ``"complete"`` (true for
+a run that reached its end, false for one ended early by Ctrl-C or SIGTERM, whose ``sim_s`` says
+how far it got) and ``"files"``, the sibling files of this run with their sizes. A directory
+without ``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json``
+names exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
 anything else is written, and the previous run's files that this run does not write again
 (:mod:`testbed.run.trials` also removes earlier trials' results, and a single run's when trials
 replace it: :func:`remove_run_results`).
@@ -16,6 +16,7 @@ replace it: :func:`remove_run_results`).
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -26,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
+from testbed.run.images import write_images_csv
 from testbed.run.runner import RunResult
 
 __all__ = [
@@ -166,6 +168,11 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
         _replace_from(recorder.write_events_csv, out_dir / "events.csv"),
         _replace_from(recorder.write_series_csv, out_dir / "series.csv"),
     ]
+    images = result.scenario.images
+    if images.enabled:
+        log, chunk = recorder.images, images.chunk_bytes
+        write = functools.partial(write_images_csv, log, chunk)
+        written.append(_replace_from(write, out_dir / "images.csv"))
     interrupted: KeyboardInterrupt | None = None
     if plots is not None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))

@@ -8,6 +8,7 @@ form (one chunk per inter-packet gap, the last reply's airtime and delay), the c
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -54,20 +55,26 @@ def _same_image_as_the_coder_gives(result: RunResult, budget: int) -> None:
         np.testing.assert_array_equal(image.pixels, expected)
 
 
+def _clean_latency_s(encoded_bytes: int, number: int) -> float:
+    """Capture to completion of an image on the clean run's link [s] (closed form)."""
+    link = load_link_config("s100")
+    framed = encoded_bytes + 2  # image CRC
+    chunks = math.ceil(framed / CHUNK)
+    last_frame = REPLY_HEADER_FRAME_BYTES + framed - (chunks - 1) * CHUNK
+    delivery_s = link.intrinsic_delay_s + last_frame * 8.0 / link.bitrate_bps
+    # the capture happens when the order asking for chunk 0 lands; the first image's is the
+    # 16-B ImageSettings order, later chunk requests are 13-B moves that land sooner
+    early_s = (16 - 13) * 8.0 / link.bitrate_bps if number == 0 else 0.0
+    return (chunks - 1) * GAP_S + delivery_s - early_s
+
+
 def test_without_errors_each_image_takes_one_gap_per_chunk(clean_run: RunResult) -> None:
     link = load_link_config("s100")
     log = clean_run.recorder.images
     assert len(log.received) >= 4
     for image in log.received:
         source = log.captured[image.number]
-        framed = image.encoded_bytes + 2  # image CRC
-        chunks = math.ceil(framed / CHUNK)
-        last_frame = REPLY_HEADER_FRAME_BYTES + framed - (chunks - 1) * CHUNK
-        delivery_s = link.intrinsic_delay_s + last_frame * 8.0 / link.bitrate_bps
-        # the capture happens when the order asking for chunk 0 lands; the first image's is the
-        # 16-B ImageSettings order, later chunk requests are 13-B moves that land sooner
-        early_s = (16 - 13) * 8.0 / link.bitrate_bps if image.number == 0 else 0.0
-        expected = (chunks - 1) * GAP_S + delivery_s - early_s
+        expected = _clean_latency_s(image.encoded_bytes, image.number)
         assert image.t_s - source.t_s == pytest.approx(expected, abs=1e-6)
     # the next image is captured when the order acknowledging the last one arrives
     captures = sorted(c.t_s for c in log.captured.values())
@@ -220,3 +227,58 @@ def test_images_before_the_settings_order_arrives_use_the_configured_budget() ->
     assert counters["settings_acknowledged"] < counters["settings_sent"]  # orders were lost
     captured = result.recorder.images.captured.values()
     assert captured and all(image.encoded_bytes <= 600 for image in captured)
+
+
+def test_images_csv_lists_each_image_against_the_closed_form(
+    clean_run: RunResult, tmp_path: Path
+) -> None:
+    """``images.csv``: one row per capture; a completed image's latency is the clean link's
+    closed form, its PSNR the coder's own result at the budget, and the steady completion
+    interval is one gap per chunk (16 chunks of a 600-B image: 9.6 s, 6.25 a minute)."""
+    write_run(clean_run, tmp_path)
+    with (tmp_path / "images.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    log = clean_run.recorder.images
+    assert [int(r["number"]) for r in rows] == sorted(log.captured)
+    completed = [r for r in rows if r["completed_s"]]
+    assert len(completed) == len(log.received) >= 4
+    for row in completed:
+        number, size = int(row["number"]), int(row["encoded_bytes"])
+        assert float(row["latency_s"]) == pytest.approx(_clean_latency_s(size, number), abs=1e-5)
+        assert int(row["chunks"]) == math.ceil((size + 2) / CHUNK) == 16
+        assert row["budget_bytes"] == "600" and row["roi"] == "" and row["roi_psnr_db"] == ""
+        pixels = log.captured[number].pixels
+        error = pixels.astype(float) - decode(encode(pixels, 600)).astype(float)
+        expected = 10.0 * math.log10(255.0**2 / float(np.mean(error * error)))
+        assert float(row["psnr_db"]) == pytest.approx(expected, abs=1e-3)
+    interval = clean_run.metrics["images"]["completion_interval_s"]["mean"]
+    assert interval == pytest.approx(16 * GAP_S, abs=1e-6)
+
+
+def test_roi_psnr_is_the_psnr_inside_the_region() -> None:
+    """With a region of interest (raised 4 bit planes), ``roi_psnr_db`` is the PSNR of the
+    region's pixels alone, computed here from the coder; the ROI is sharper than the whole."""
+    roi = (40, 30, 119, 89)
+    result = run(
+        "duration_s=40",
+        "link.ber=0",
+        "images.budget_bytes=600",
+        f"images.roi={list(roi)}",
+        "images.roi_shift=4",
+        "images.changes=[]",
+    )
+    log = result.recorder.images
+    assert len(log.received) >= 2
+    inside: list[float] = []
+    for image in log.received:
+        pixels = log.captured[image.number].pixels
+        coded = decode(encode(pixels, 600, roi, 4))
+        x0, y0, x1, y1 = roi
+        error = pixels[y0 : y1 + 1, x0 : x1 + 1].astype(float) - coded[
+            y0 : y1 + 1, x0 : x1 + 1
+        ].astype(float)
+        inside.append(10.0 * math.log10(255.0**2 / float(np.mean(error * error))))
+    metrics = result.metrics["images"]
+    assert metrics["roi_psnr_db"]["mean"] == pytest.approx(float(np.mean(inside)), abs=1e-9)
+    assert metrics["roi_psnr_db"]["min"] == pytest.approx(min(inside), abs=1e-9)
+    assert metrics["roi_psnr_db"]["mean"] > metrics["psnr_db"]["mean"]
