@@ -73,6 +73,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
     check_seed(args.seed)
     scenario = load_scenario(args.scenario, args.overrides)
+    warn_token_cycle(scenario)
     out = args.out
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -82,6 +83,17 @@ def _run_scenario(args: argparse.Namespace) -> int:
             return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
         result = run_scenario(scenario, seed=args.seed)
         return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
+
+
+def warn_token_cycle(scenario: Scenario) -> None:
+    """One ``testbed: warning:`` line on stderr when the scenario's token gap is shorter than
+    a move order's round trip (:class:`~testbed.run.run_metrics.TokenCycle`); the run goes on,
+    since that may be what is studied, and ``metrics.json`` says ``reply_fits_gap: false``."""
+    from testbed.run.run_metrics import token_cycle
+
+    cycle = token_cycle(scenario)
+    if cycle is not None and not cycle.fits:
+        print(f"testbed: warning: {cycle.warning(scenario.link.ipg)}", file=sys.stderr)
 
 
 def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool) -> int:
@@ -301,12 +313,27 @@ def never_ready(mission: dict[str, Any]) -> str | None:
 
 
 def _dropped(direction: dict[str, Any]) -> str:
-    """``", dropped N (P %)"``: frames the sender's FIFO dropped (never on the air, so not in
-    the PER), or nothing when none were."""
+    """``" (collided N, …)"``: how the frames in the PER were lost when not by bit errors
+    alone (collisions, out of range, outages), then ``", dropped N (P %)"``: frames the sender's
+    FIFO dropped (never on the air, so not in the PER); nothing for what did not happen."""
+    causes = [
+        f"{label} {direction[key]}"
+        for key, label in _LOSS_CAUSES
+        if direction.get(key)  # keys only ever added: an older metrics.json may lack one
+    ]
+    lost = f" ({', '.join(causes)})" if causes else ""
     dropped = direction["frames_dropped"]
     if not dropped:
-        return ""
-    return f", dropped {dropped} ({_num(direction['drop_rate'], 100.0, 1, ' %')}) at the sender"
+        return lost
+    rate = _num(direction["drop_rate"], 100.0, 1, " %")
+    return f"{lost}, dropped {dropped} ({rate}) at the sender"
+
+
+_LOSS_CAUSES = (
+    ("frames_collided", "collided"),
+    ("frames_out_of_range", "out of range"),
+    ("frames_outage", "in an outage"),
+)
 
 
 def _count(value: int | None) -> str:

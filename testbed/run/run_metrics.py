@@ -11,12 +11,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from testbed.channel import Trace, direction_counts
 from testbed.common.components import MissionStatus
+from testbed.protocol import VEHICLE_HEADER_SIZE
 from testbed.run.images import image_metrics
 from testbed.run.metrics import (
     SIGNAL_LAG_WINDOW_S,
@@ -33,13 +35,75 @@ from testbed.run.metrics import (
 from testbed.run.nodes import FRAME_OVERHEAD
 from testbed.run.recorder import Recorder, failsafe_engagements
 from testbed.run.scenario import Scenario
+from testbed.run.sections import LONGEST_ORDER_FRAME_BYTES, ORDER_FRAME_BYTES
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import KalmanLocalizer, Navigation
 
-__all__ = ["compute_metrics", "mission_metrics", "navigation_metrics", "stick_tracking"]
+__all__ = [
+    "TokenCycle",
+    "compute_metrics",
+    "mission_metrics",
+    "navigation_metrics",
+    "stick_tracking",
+    "token_cycle",
+]
 
-_ORDER_PAYLOAD_BYTES = 7
-"""A ``Move`` order's payload [B] (2-byte header + 5-byte body): the IPG rules size on it."""
+
+@dataclass(frozen=True, slots=True)
+class TokenCycle:
+    """A token-passing teleop link's cycle against its gap rule (closed form, clean link).
+
+    Attributes:
+        order_frame_bytes: the order [B] whose cycle this is.
+        gap_s: the master's gap after that order [s].
+        round_trip_s: from the order's start to the end of its longest reply's arrival [s]
+            (:meth:`~testbed.run.sections.LinkSection.token_round_trip_s`), at the distance
+            between the operator's modem and the vehicle's start.
+        reply_frame_bytes: the longest reply's frame [B] (the state, plus an image chunk when
+            images are on).
+    """
+
+    order_frame_bytes: int
+    gap_s: float
+    round_trip_s: float
+    reply_frame_bytes: int
+
+    @property
+    def fits(self) -> bool:
+        """Whether each reply is in before the next order starts."""
+        return self.round_trip_s <= self.gap_s
+
+    def warning(self, ipg: str) -> str:
+        """One line for a cycle that does not fit (what happens and what to set instead)."""
+        return (
+            f"link: a {self.order_frame_bytes}-B order and its {self.reply_frame_bytes}-B reply "
+            f"take {self.round_trip_s:.3f} s, longer than the {ipg} gap of {self.gap_s:.3f} s: "
+            "orders go out before replies are in (collisions in half duplex, image chunks "
+            f"asked again); link.ipg = 'fixed' with link.ipg_s ≥ {self.round_trip_s:.3f} waits "
+            "for each reply"
+        )
+
+
+def token_cycle(scenario: Scenario) -> TokenCycle | None:
+    """The scenario's tightest :class:`TokenCycle` (a move order's or the longest order's,
+    whichever leaves the least time to spare), or None for a link without token-passing
+    teleop."""
+    link = scenario.link
+    if link.mac != "token" or link.codec != "teleop":
+        return None
+    chunk = scenario.images.chunk_bytes if scenario.images.enabled else 0
+    reply_bytes = FRAME_OVERHEAD + VEHICLE_HEADER_SIZE + chunk
+    distance_m = math.dist(scenario.vehicle.start_position_ned_m, link.operator_position_ned_m)
+    cycles = [
+        TokenCycle(
+            order_frame_bytes=order_bytes,
+            gap_s=link.ipg_policy.gap_after(order_bytes),
+            round_trip_s=link.token_round_trip_s(order_bytes, reply_bytes, distance_m),
+            reply_frame_bytes=reply_bytes,
+        )
+        for order_bytes in (ORDER_FRAME_BYTES, LONGEST_ORDER_FRAME_BYTES)
+    ]
+    return min(cycles, key=lambda cycle: cycle.gap_s - cycle.round_trip_s)
 
 
 def _link_direction(
@@ -107,11 +171,8 @@ def compute_metrics(
     settle = scenario.metrics.settle_s
     after = t >= settle
     link = scenario.link
-    ipg_s = (
-        link.ipg_policy.gap_after(_ORDER_PAYLOAD_BYTES + FRAME_OVERHEAD)
-        if link.mac == "token"
-        else math.nan
-    )
+    ipg_s = link.ipg_policy.gap_after(ORDER_FRAME_BYTES) if link.mac == "token" else math.nan
+    cycle = token_cycle(scenario)
     sampled_s = recorder.commands_sampled
     commands = [  # (applied, sampled) [s] of each delivered pilot command
         (applied, sampled_s[seq])
@@ -168,6 +229,8 @@ def compute_metrics(
             ),
         },
         "ipg_s": ipg_s,
+        "token_round_trip_s": math.nan if cycle is None else cycle.round_trip_s,
+        "reply_fits_gap": None if cycle is None else cycle.fits,
         "command_lag_s": summary(lags),
         "command_age_s": command_age,
         "signal_lag_s": signal,

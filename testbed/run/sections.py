@@ -31,8 +31,16 @@ from testbed.operator.pilots import (
     SineTerm,
     SupervisorPilot,
 )
-from testbed.protocol import OPERATOR_HEADER_SIZE, Move, frame_overhead
+from testbed.protocol import OPERATOR_HEADER_SIZE, ORDER_TYPES, Move, frame_overhead
 from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
+
+ORDER_FRAME_BYTES = frame_overhead() + OPERATOR_HEADER_SIZE + Move.BODY_SIZE
+"""A move order's frame [B] (13 with the default framing): the token gap rules size on it."""
+
+LONGEST_ORDER_FRAME_BYTES = (
+    frame_overhead() + OPERATOR_HEADER_SIZE + max(order.BODY_SIZE for order in ORDER_TYPES.values())
+)
+"""The longest order's frame [B] (16: an ``ImageSettings``, a ``GoTo``)."""
 
 __all__ = [
     "MAX_DURATION_S",
@@ -159,24 +167,43 @@ class LinkSection:
     @property
     def signal_lag_window_s(self) -> float:
         """Upper end of the stick-lag search [s]: twice the closed-form worst lag of a clean
-        link, one order period plus one order's delivery (intrinsic delay and airtime of each
-        packet, the queue gaps between them, propagation over ``max_range_m`` when finite),
-        and never less than :data:`~testbed.run.metrics.SIGNAL_LAG_WINDOW_S`."""
-        channel = self.channel
-        order_bytes = frame_overhead() + OPERATOR_HEADER_SIZE + Move.BODY_SIZE  # 13 B
-        reach_m = channel.max_range_m
-        packet = channel.packet_bytes or order_bytes
-        packets = math.ceil(order_bytes / packet)
-        delivery_s = (
-            packets * (channel.intrinsic_delay_s + channel.airtime_s(packet))
-            + (packets - 1) * channel.queue_gap_s
-            + (channel.propagation.delay_s(reach_m) if math.isfinite(reach_m) else 0.0)
-        )
+        link, one order period plus one order's delivery (:meth:`delivery_s`, propagation over
+        ``max_range_m`` when finite), and never less than
+        :data:`~testbed.run.metrics.SIGNAL_LAG_WINDOW_S`."""
+        reach_m = self.channel.max_range_m
+        delivery_s = self.delivery_s(ORDER_FRAME_BYTES, reach_m if math.isfinite(reach_m) else None)
         if self.mac == "token":
-            period_s = self.ipg_policy.gap_after(order_bytes)
+            period_s = self.ipg_policy.gap_after(ORDER_FRAME_BYTES)
         else:
             period_s = 1.0 / self.uplink_rate_hz
         return max(SIGNAL_LAG_WINDOW_S, 2.0 * (period_s + delivery_s))
+
+    def delivery_s(self, frame_bytes: int, distance_m: float | None) -> float:
+        """One frame's delivery on a clean, idle link [s]: each packet's intrinsic delay and
+        airtime, the queue gaps between the packets, and propagation over ``distance_m`` [m]
+        (None: left out)."""
+        channel = self.channel
+        packet = channel.packet_bytes or frame_bytes
+        packets = math.ceil(frame_bytes / packet)
+        return (
+            packets * (channel.intrinsic_delay_s + channel.airtime_s(packet))
+            + (packets - 1) * channel.queue_gap_s
+            + (0.0 if distance_m is None else channel.propagation.delay_s(distance_m))
+        )
+
+    def token_round_trip_s(
+        self, order_frame_bytes: int, reply_frame_bytes: int, distance_m: float
+    ) -> float:
+        """From an order's start to the end of its reply's arrival on a clean link [s]: the
+        order's delivery, the vehicle's queue gap (it answers once the order is in) and the
+        reply's delivery, both over ``distance_m`` [m]. The token master's gap after that order
+        must be at least this, or its next order goes out while the reply is still on its way
+        (a collision in half duplex, or a request that misses the reply's chunk)."""
+        return (
+            self.delivery_s(order_frame_bytes, distance_m)
+            + self.channel.queue_gap_s
+            + self.delivery_s(reply_frame_bytes, distance_m)
+        )
 
     @property
     def rates_used(self) -> bool:

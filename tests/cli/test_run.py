@@ -160,3 +160,32 @@ def test_a_mission_that_never_started_says_why(
     mission = json.loads((mocap / "metrics.json").read_text())["mission"]
     assert 0.0 <= mission["ready_s"] <= 0.1  # motion capture: ready at once
     assert "never started" not in capsys.readouterr().out
+
+
+def test_a_gap_shorter_than_the_round_trip_is_warned_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """68-B chunks on the S100 need 0.596 s a cycle, the 2021 rule gives 0.594 s: the run goes
+    on (the overlap may be what is studied) after one warning line naming the fix."""
+    argv = ["run", "s100-video-v1", "--set", "duration_s=15", "--set", "images.changes=[]"]
+    argv += ["--no-plots", "--out", str(tmp_path / "r")]
+    assert main([*argv, "--set", "images.chunk_bytes=68"]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line]
+    assert len(warnings) == 1 and warnings[0].startswith("testbed: warning: link: ")
+    assert "0.596 s" in warnings[0] and "link.ipg_s ≥ 0.596" in warnings[0]
+    assert main([*argv[:-1], str(tmp_path / "ok"), "--set", "images.chunk_bytes=67"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_the_summary_says_how_many_frames_in_the_per_collided(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The acoustic s2c preset under the 2021 gap: the replies collide with the next orders,
+    and the downlink line says so beside the PER (it read "PER 100.00 %" as if bit errors)."""
+    out = tmp_path / "r"
+    argv = ["run", "s100-teleop-v1", "--set", "link.preset=s2c", "--set", "duration_s=20"]
+    assert main([*argv, "--set", "metrics.settle_s=5", "--no-plots", "--out", str(out)]) == 0
+    down = json.loads((out / "metrics.json").read_text())["link"]["downlink"]
+    assert down["frames_collided"] > 0
+    line = next(li for li in capsys.readouterr().out.splitlines() if "downlink" in li)
+    assert f"(collided {down['frames_collided']})" in line

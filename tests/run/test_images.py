@@ -282,3 +282,29 @@ def test_roi_psnr_is_the_psnr_inside_the_region() -> None:
     assert metrics["roi_psnr_db"]["mean"] == pytest.approx(float(np.mean(inside)), abs=1e-9)
     assert metrics["roi_psnr_db"]["min"] == pytest.approx(min(inside), abs=1e-9)
     assert metrics["roi_psnr_db"]["mean"] > metrics["psnr_db"]["mean"]
+
+
+@pytest.mark.parametrize(("chunk", "fits"), [(67, True), (68, False)])
+def test_replies_overlap_orders_exactly_when_the_closed_form_round_trip_exceeds_the_gap(
+    chunk: int, fits: bool
+) -> None:
+    """The 2021 rule's 0.594-s gap after a 13-B move order holds the order, the vehicle's
+    queue gap and a reply of 20 + chunk bytes at 1900 bit/s for chunks up to 67 B
+    (0.5918 s); at 68 B (0.5960 s) the next order leaves before the reply is in, and asks
+    again for chunks already on their way. The simulated link agrees with the closed form."""
+    from testbed.run.run_metrics import token_cycle
+
+    overrides = ("duration_s=40", "link.ber=0", "images.changes=[]", f"images.chunk_bytes={chunk}")
+    scenario = load_scenario("s100-video-v1", overrides)
+    cycle = token_cycle(scenario)
+    assert cycle is not None and cycle.fits is fits
+    link = load_link_config("s100")
+    airtime_s = (13 + 20 + chunk) * 8.0 / link.bitrate_bps
+    assert cycle.round_trip_s == pytest.approx(
+        2 * link.intrinsic_delay_s + airtime_s + link.queue_gap_s, abs=1e-6
+    )
+    result = run_scenario(scenario)
+    assert result.metrics["reply_fits_gap"] is fits
+    assert result.metrics["token_round_trip_s"] == cycle.round_trip_s
+    duplicates = result.metrics["images"]["duplicates"]
+    assert (duplicates == 0) if fits else (duplicates >= 10)
