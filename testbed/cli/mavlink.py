@@ -44,6 +44,7 @@ from testbed.cli.options import (
     check_seed,
     format_value,
     open_modem_ports,
+    warn_token_cycle,
 )
 from testbed.config import ConfigError
 
@@ -165,6 +166,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
             raise ConfigError(f"--gcs: {err}") from None
     check_seed(args.seed)
     scenario = load_scenario(args.scenario, overrides)
+    warn_token_cycle(scenario)
     duration = scenario.duration_s if args.duration is None else args.duration
     check_duration(duration)
     out = args.out

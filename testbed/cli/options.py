@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TypeAlias
@@ -12,6 +13,7 @@ from testbed.config import ConfigError, FieldError, check_range
 
 if TYPE_CHECKING:
     from testbed.hil import LinkEndpoint, PortSettings
+    from testbed.run.scenario import Scenario
 
 __all__ = [
     "EXIT_FAILED",
@@ -33,6 +35,7 @@ __all__ = [
     "format_value",
     "missing",
     "open_modem_ports",
+    "warn_token_cycle",
 ]
 
 EXIT_OK = 0
@@ -171,3 +174,14 @@ def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str,
             endpoint.close()
         raise
     return endpoints
+
+
+def warn_token_cycle(scenario: Scenario) -> None:
+    """One ``testbed: warning:`` line on stderr when the scenario's token gap is shorter than
+    a move order's round trip (:class:`~testbed.run.run_metrics.TokenCycle`); the run goes on,
+    since that may be what is studied, and ``metrics.json`` says ``reply_fits_gap: false``."""
+    from testbed.run.run_metrics import token_cycle
+
+    cycle = token_cycle(scenario)
+    if cycle is not None and not cycle.fits:
+        print(f"testbed: warning: {cycle.warning(scenario.link.ipg)}", file=sys.stderr)

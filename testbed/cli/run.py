@@ -15,6 +15,7 @@ from testbed.cli.options import (
     check_seed,
     exit_code_of,
     missing,
+    warn_token_cycle,
 )
 from testbed.cli.options import format_value as _num
 
@@ -83,17 +84,6 @@ def _run_scenario(args: argparse.Namespace) -> int:
             return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
         result = run_scenario(scenario, seed=args.seed)
         return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
-
-
-def warn_token_cycle(scenario: Scenario) -> None:
-    """One ``testbed: warning:`` line on stderr when the scenario's token gap is shorter than
-    a move order's round trip (:class:`~testbed.run.run_metrics.TokenCycle`); the run goes on,
-    since that may be what is studied, and ``metrics.json`` says ``reply_fits_gap: false``."""
-    from testbed.run.run_metrics import token_cycle
-
-    cycle = token_cycle(scenario)
-    if cycle is not None and not cycle.fits:
-        print(f"testbed: warning: {cycle.warning(scenario.link.ipg)}", file=sys.stderr)
 
 
 def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool) -> int:
