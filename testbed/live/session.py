@@ -59,7 +59,7 @@ from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
-from testbed.run.interrupts import interrupt_of
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
@@ -236,8 +236,10 @@ class LiveSession:
             wall_s = time.perf_counter() - start
             self.vehicle.close()
         reached = duration_s if stopped is None else float(env.now)
+        with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+            metrics = self.metrics(reached, wall_s)
         return RunResult(
-            self.scenario, self.seed, self.metrics(reached, wall_s), self.recorder, stopped
+            self.scenario, self.seed, metrics, self.recorder, stopped or (late[0] if late else None)
         )
 
     def _poll(self, period_s: float) -> Generator[simpy.Event, Any, None]:

@@ -48,7 +48,7 @@ from testbed.mavlink import EndpointOptions, VehicleEndpoint
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
-from testbed.run.interrupts import interrupt_of
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.realtime import rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
@@ -244,18 +244,19 @@ def run_mavlink(
         for link in links:
             link.close()
     reached = float(env.now)  # the duration, unless interrupted or stopped
-    metrics = compute_metrics(
-        scenario,
-        seed,
-        recorder,
-        sim_s=reached,
-        wall_s=wall_s,
-        energy_wh=math.nan if node is None else node.vehicle.power.energy_j / 3600.0,
-        payload_bytes={"uplink": 0, "downlink": 0},
-    )
-    if node is not None:
-        metrics["mavlink"] = mavlink_metrics(node, reached)
-    return RunResult(scenario, seed, metrics, recorder, stopped)
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+        metrics = compute_metrics(
+            scenario,
+            seed,
+            recorder,
+            sim_s=reached,
+            wall_s=wall_s,
+            energy_wh=math.nan if node is None else node.vehicle.power.energy_j / 3600.0,
+            payload_bytes={"uplink": 0, "downlink": 0},
+        )
+        if node is not None:
+            metrics["mavlink"] = mavlink_metrics(node, reached)
+    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
 
 
 def mavlink_metrics(node: MavlinkVehicleNode, duration_s: float) -> dict[str, Any]:

@@ -64,7 +64,7 @@ from testbed.channel import Delivery, EventKind, Trace
 from testbed.channel.trace import BROADCAST
 from testbed.hil import LinkEndpoint, endpoint_report, latency_summary_ms
 from testbed.protocol import Frame, encode_frame
-from testbed.run.interrupts import interrupt_of
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder
@@ -376,22 +376,23 @@ def run_hil(
         for endpoint in endpoints.values():
             endpoint.close()
     reached = duration if stopped is None else float(env.now)
-    tally_images(recorder, vehicle_node, operator_node)
-    metrics = hil_metrics(
-        scenario,
-        seed,
-        recorder,
-        modems,
-        ledger,
-        duration_s=reached,
-        wall_s=wall_s,
-        vehicle_node=vehicle_node,
-        operator_node=operator_node,
-        poll_s=poll_s,
-        modem=modem,
-        lateness_ns=lateness_ns,
-    )
-    return RunResult(scenario, seed, metrics, recorder, stopped)
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+        tally_images(recorder, vehicle_node, operator_node)
+        metrics = hil_metrics(
+            scenario,
+            seed,
+            recorder,
+            modems,
+            ledger,
+            duration_s=reached,
+            wall_s=wall_s,
+            vehicle_node=vehicle_node,
+            operator_node=operator_node,
+            poll_s=poll_s,
+            modem=modem,
+            lateness_ns=lateness_ns,
+        )
+    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
 
 
 def _peer(role: str) -> str:

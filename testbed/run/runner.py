@@ -28,7 +28,7 @@ from testbed.ecs import Phase
 from testbed.operator.pilots import PURE_PILOTS, Pilot, SampleHold
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_source_factory
-from testbed.run.interrupts import interrupt_of
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
@@ -270,16 +270,36 @@ def run_scenario(
             env.run(until=scenario.duration_s)
     except BaseException as error:  # an interrupt: keep what ran (the caller writes it, marked)
         if (stopped := interrupt_of(error)) is None:
+            vehicle.close()
             raise
-    finally:
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
         vehicle.close()
-    wall_s = time.perf_counter() - start
-    tally_images(recorder, vehicle_node, operator_node)
-    metrics = compute_metrics(
+        wall_s = time.perf_counter() - start
+        tally_images(recorder, vehicle_node, operator_node)
+        metrics = _run_metrics(
+            scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, stopped
+        )
+    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+
+
+def _run_metrics(
+    scenario: Scenario,
+    seed: int,
+    recorder: Recorder,
+    vehicle_node: VehicleNode,
+    operator_node: OperatorNode,
+    wall_s: float,
+    now_s: float,
+    stopped: KeyboardInterrupt | None,
+) -> dict[str, Any]:
+    """:func:`compute_metrics` of a simulated run that reached ``now_s`` [s] (its end unless
+    ``stopped``)."""
+    vehicle = vehicle_node.vehicle
+    return compute_metrics(
         scenario,
         seed,
         recorder,
-        sim_s=scenario.duration_s if stopped is None else float(env.now),
+        sim_s=scenario.duration_s if stopped is None else float(now_s),
         wall_s=wall_s,
         energy_wh=vehicle_node.energy_wh,
         payload_bytes={
@@ -293,7 +313,6 @@ def run_scenario(
             vehicle.world.resource(Navigation) if vehicle.world.has_resource(Navigation) else None
         ),
     )
-    return RunResult(scenario, seed, metrics, recorder, stopped)
 
 
 def goals_acked(operator: OperatorNode) -> int | None:

@@ -9,6 +9,9 @@ handler can be, at any Python line) comes out of the kernel as ``SystemError``, 
 
 from __future__ import annotations
 
+import json
+import os
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -95,3 +98,33 @@ def test_an_interrupt_while_plotting_a_finished_run_keeps_its_results(tmp_path: 
     metrics = check_set(out)  # exactly the files beside it: no half-drawn plot, no staging
     assert metrics["complete"] is True
     assert set(metrics["files"]) == {"events.csv", "series.csv"}
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_after_the_simulation_ended_keeps_the_whole_run(
+    signum: signal.Signals, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any
+) -> None:
+    """Ctrl-C (or SIGTERM) while a finished run is reduced to its metrics: the run is reduced
+    whole and written, the command ends with its one line and 130/143 (it used to print
+    ``testbed: interrupted`` and write nothing, the simulation thrown away)."""
+    from testbed.cli.main import main
+    from testbed.run import runner
+
+    reduce = runner.compute_metrics
+    signalled = {"n": 0}
+
+    def reduce_with_a_signal(*args: Any, **kwargs: Any) -> Any:
+        signalled["n"] += 1
+        os.kill(os.getpid(), signum)  # delivered at the next Python line, here
+        return reduce(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "compute_metrics", reduce_with_a_signal)
+    out = tmp_path / "r"
+    argv = ["run", "s100-teleop-v1", "--set", "duration_s=12", "--no-plots", "--out", str(out)]
+    assert main(argv) == (130 if signum == signal.SIGINT else 143)
+    assert signalled["n"] == 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["sim_s"] == 12.0 and metrics["complete"] is False  # marked: it was cut
+    assert (out / "series.csv").read_text().count("\n") == 1 + 12 * 20  # 20 Hz rows, all
+    err = [line for line in capsys.readouterr().err.splitlines() if line]
+    assert len(err) == 1 and str(out) in err[0]
