@@ -121,33 +121,56 @@ def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool)
 
 
 def format_trial(trial: int, metrics: dict[str, Any]) -> str:
-    """One line for a finished trial: seed, real-time factor, mission error and command lag
-    (and, when it never started, why: :func:`never_ready`)."""
+    """One line for a finished trial: seed, real-time factor, then under autonomy the mission
+    error and command lag (and, when it never started, why: :func:`never_ready`), otherwise
+    the teleoperation figures (command lag and age, yaw error, energy)."""
     from testbed.run.trials import headline
 
     h = headline(metrics)
-    line = (
-        f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
+    line = f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
+    mission = metrics.get("mission")
+    if mission is None:
+        return line + (
+            f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0, ' ms')}, age mean "
+            f"{_num(h['command_age_mean_s'], 1000.0, 0, ' ms')}; yaw error std "
+            f"{_num(h['yaw_error_std_deg'], digits=2, unit=' deg')}; energy "
+            f"{_num(h['energy_wh'], unit=' Wh')}"
+        )
+    line += (
         f"position error mean {_num(h['position_error_mean_m'])} m, "
         f"final {_num(h['position_error_final_m'])} m; "
         f"settled {_num(h['time_to_converge_s'], digits=2)} s after the final target; "
         f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0)} ms"
     )
-    never = never_ready(metrics.get("mission") or {})
+    never = never_ready(mission)
     line = line if never is None else f"{line}; {never}"
     gated = gate_rejections(metrics, brief=True)
     return line if gated is None else f"{line}; {gated}"
 
 
 def format_trials_summary(document: dict[str, Any], out: Path) -> str:
-    """The mean ± std line over the trials (and where they were written)."""
+    """The mean ± std line over the trials (and where they were written): the mission's
+    figures under autonomy, the teleoperation figures otherwise."""
 
     def pm(name: str, scale: float = 1.0, digits: int = 3) -> str:
         figure = document["across_trials"][name]
         return f"{_num(figure['mean'], scale, digits)} ± {_num(figure['std'], scale, digits)}"
 
+    def pm_unit(name: str, unit: str, scale: float = 1.0, digits: int = 3) -> str:
+        """:func:`pm` with its unit, or ``n/a`` alone for a figure no trial measured."""
+        figure = document["across_trials"][name]
+        return "n/a" if figure["n"] == 0 else f"{pm(name, scale, digits)} {unit}"
+
+    head = f"{document['trials_finished']} trials (mean ± std over trials): "
+    if not document.get("mission", True):
+        return (
+            f"{head}command lag mean {pm_unit('command_lag_mean_s', 'ms', 1000.0, 0)}, age "
+            f"mean {pm_unit('command_age_mean_s', 'ms', 1000.0, 0)}; yaw error std "
+            f"{pm_unit('yaw_error_std_deg', 'deg', digits=2)}; energy "
+            f"{pm_unit('energy_wh', 'Wh')}\n  wrote {out}/"
+        )
     return (
-        f"{document['trials_finished']} trials (mean ± std over trials): position error mean "
+        f"{head}position error mean "
         f"{pm('position_error_mean_m')} m, final {pm('position_error_final_m')} m; settled "
         f"{pm('time_to_converge_s', digits=2)} s after the final target; command lag mean "
         f"{pm('command_lag_mean_s', 1000.0, 0)} ms\n  wrote {out}/"

@@ -61,7 +61,8 @@ class RunResult:
     Attributes:
         scenario: what was run.
         seed: the seed used.
-        metrics: the ``metrics.json`` content.
+        metrics: the ``metrics.json`` content as computed: NaN where the file has ``null``
+            (:func:`~testbed.run.outputs.write_run` converts them).
         recorder: everything recorded (for plots and further analysis).
         stopped: the interrupt (Ctrl-C, or SIGTERM raised as a ``KeyboardInterrupt``
             subclass) that ended the run before its end, or None; the metrics then cover

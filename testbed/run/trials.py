@@ -53,9 +53,14 @@ HEADLINE: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("position_error_std_m", ("mission", "position_error_m", "std")),
     ("time_to_converge_s", ("mission", "time_to_converge_s")),
     ("command_lag_mean_s", ("command_lag_s", "mean")),
+    ("command_age_mean_s", ("command_age_s", "mean")),
+    ("yaw_error_std_deg", ("attitude_error_deg", "yaw", "std")),
+    ("energy_wh", ("energy_wh",)),
 )
 """The per-trial figures of ``trials.json``: name → path of keys into ``metrics.json`` (NaN
-where the path is missing, e.g. the mission keys of a run without autonomy)."""
+where the path is missing, e.g. the mission keys of a run without autonomy). The mission
+figures summarise trials under autonomy (Angler's protocol), the command and yaw figures
+teleoperated ones."""
 
 WALL_CLOCK_KEYS = ("rtf",)
 """Headline figures that depend on the machine's speed (not reproducible from the seed)."""
@@ -176,6 +181,7 @@ def trials_document(
         "interrupted_trial": interrupted,
         "std_ddof": 1,
         "wall_clock_keys": list(WALL_CLOCK_KEYS),
+        "mission": scenario.vehicle.autonomy is not None,
         "trials": rows,
         "across_trials": across,
     }
@@ -243,7 +249,8 @@ def run_trials(
     written = len(finished) if interrupted is None else interrupted
     remove_trials(out, keep=written, keep_summary=True)  # an earlier run's, under --force
     remove_run_results(out)
-    if trials_plot is not None and stopped is None and tracks:
+    mission = scenario.vehicle.autonomy is not None  # the figure draws missions' tracks
+    if trials_plot is not None and stopped is None and tracks and mission:
         title = f"{scenario.id}: {len(tracks)} trials, seeds {first}…{first + len(tracks) - 1}"
         files.append(trials_plot(tracks, out / TRIALS_PLOT, title))
     else:

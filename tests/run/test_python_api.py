@@ -155,7 +155,9 @@ def test_readme_python_api_example_runs(tmp_path: Path, monkeypatch: pytest.Monk
     result = namespace["result"]
     assert isinstance(result, RunResult)
     assert result.seed == 1
-    assert len(namespace["frames"]) > 100  # type: ignore[arg-type]
+    assert len(namespace["frames"]) == 30 * 100  # type: ignore[arg-type]  # 30 s at 100 Hz
+    lag = result.metrics["signal_lag_s"]["x"]  # the step is after settle_s: a lag is measured
+    assert 0.0 < lag < result.scenario.link.signal_lag_window_s
     metrics = json.loads((tmp_path / "runs/step-pilot/metrics.json").read_text())
     assert metrics["complete"] is True
     assert set(np.unique(result.recorder.series()["cmd_x"])) == {0.0, 0.5}

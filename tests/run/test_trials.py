@@ -90,6 +90,9 @@ def test_trials_write_each_run_and_the_mean_over_them(scenario: Scenario, tmp_pa
     assert [row["dir"] for row in doc["trials"]] == ["trial-1", "trial-2", "trial-3"]
     for name, _ in HEADLINE:
         values = [row[name] for row in doc["trials"]]
+        if name == "yaw_error_std_deg":  # stick tracking: null under autonomy
+            assert values == [None] * 3 and doc["across_trials"][name]["n"] == 0
+            continue
         assert all(v is not None for v in values), name
         across = doc["across_trials"][name]
         assert across["mean"] == pytest.approx(float(np.mean(values)), rel=1e-12, abs=1e-15)
@@ -249,3 +252,29 @@ def test_the_estimate_is_drawn_from_when_navigation_was_ready() -> None:
     assert series["est_n"][0] == 0.0  # the series itself is left as recorded
     assert np.isnan(estimate_track(series, math.nan)[0]).all()
     assert estimate_track(series, None)[1].tolist() == series["est_n"].tolist()
+
+
+def test_trials_of_a_teleoperated_scenario_summarise_its_command_figures(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Trials without autonomy summarise what a teleoperated run measures (command lag and
+    age, yaw error, energy), each the mean and sample std of the trials' own metrics.json;
+    no mission figure and no trials figure (it draws mission tracks) — it used to print
+    n/a for every figure and draw an empty figure."""
+    out = tmp_path / "t"
+    argv = ["run", "s100-teleop-v1", "--set", "trials=3", "--set", "duration_s=20"]
+    assert main([*argv, "--out", str(out)]) == 0
+    runs = [json.loads((out / f"trial-{k}/metrics.json").read_text()) for k in (1, 2, 3)]
+    lags = np.array([m["command_lag_s"]["mean"] for m in runs])
+    yaw = np.array([m["attitude_error_deg"]["yaw"]["std"] for m in runs])
+    document = json.loads((out / TRIALS_FILE).read_text())
+    across = document["across_trials"]
+    assert document["mission"] is False
+    assert across["command_lag_mean_s"]["mean"] == pytest.approx(lags.mean())
+    assert across["yaw_error_std_deg"]["std"] == pytest.approx(yaw.std(ddof=1))
+    assert not (out / "trials.png").exists()
+    summary = capsys.readouterr().out.splitlines()[-2]
+    assert "position error" not in summary and "n/a" not in summary
+    assert (
+        f"command lag mean {1000 * lags.mean():.0f} ± {1000 * lags.std(ddof=1):.0f} ms" in summary
+    )
