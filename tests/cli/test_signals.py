@@ -9,6 +9,7 @@ never slept blindly.
 
 from __future__ import annotations
 
+import functools
 import signal
 import subprocess
 import sys
@@ -134,6 +135,17 @@ def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> 
     assert (tmp_path / "full" / "old.txt").read_text() == "x"
 
 
+def handles(pid: int, *signals: signal.Signals) -> bool:
+    """Whether process ``pid`` has handlers of its own installed for ``signals`` (Linux's
+    ``SigCgt`` mask in /proc/PID/status): until then a signal would kill it outright."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    caught = next(int(line.split()[1], 16) for line in status.splitlines() if "SigCgt" in line)
+    return all(caught >> (int(sig) - 1) & 1 for sig in signals)
+
+
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_link_and_modem_emulator_end_with_one_line(sig: signal.Signals, code: int) -> None:
     # the emulator runs until a signal; the probe of 10^6 frames (the most) takes ~20 s
@@ -144,8 +156,10 @@ def test_link_and_modem_emulator_end_with_one_line(sig: signal.Signals, code: in
         proc = start(args)
         if args[0] == "modem-emulator":
             assert proc.stdout is not None and proc.stdout.readline().startswith("A /dev/pts/")
-        else:
-            time.sleep(1.0)
+        else:  # the CLI has set its SIGTERM handler (a loaded host may take seconds)
+            ready = functools.partial(handles, proc.pid, signal.SIGINT, signal.SIGTERM)
+            wait_for(ready, "handlers", proc)
+            time.sleep(0.2)  # into the probe
         proc.send_signal(sig)
         _, stderr = proc.communicate(timeout=WAIT_S)
         assert proc.returncode == code, stderr

@@ -258,7 +258,13 @@ def test_pool_rows_match_a_direct_run(pool_sweep: tuple[Path, Path]) -> None:
     row = rows[5]
     assert not {"wall_s", "rtf", "scenario"} & set(row)  # wall-clock or constant: not in rows
     assert {k: row[k] for k in expected} == {
-        k: "" if v is None else repr(v) if isinstance(v, float) else str(v)
+        k: ""
+        if v is None
+        else ("true" if v else "false")
+        if isinstance(v, bool)
+        else repr(v)
+        if isinstance(v, float)
+        else str(v)
         for k, v in expected.items()
     }
     assert float(rows[4]["link.uplink.per"]) > 0.0  # BER 1e-3 loses orders; BER 0 does not
