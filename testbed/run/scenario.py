@@ -305,7 +305,9 @@ def scenario_names() -> list[str]:
     )
 
 
-def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
+def load_scenario(
+    name_or_path: str, overrides: Sequence[str] = (), *, overrides_source: str = "--set"
+) -> Scenario:
     """Load a packaged scenario by id, or a scenario file by path, and apply overrides.
 
     Args:
@@ -314,6 +316,8 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
             or naming an existing file).
         overrides: ``"a.b=value"`` strings (``--set``), e.g. ``"link.ber=1e-4"``,
             ``"vehicle.model=bluerov2-heavy"``, ``"pilot.x=[{amplitude=0.2, period_s=30}]"``.
+        overrides_source: what errors of the overridden scenario name as their source
+            (``--set``; a sweep names its file's ``[set]`` or grid point).
 
     Returns:
         The checked scenario.
@@ -348,7 +352,7 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
             path_parts, _ = parse_override(text_override)
             if path_parts[0] == "link" and len(path_parts) > 1:
                 given.add(path_parts[1])
-        scenario = _from_data(apply_overrides(data, overrides), "--set", source, given)
+        scenario = _from_data(apply_overrides(data, overrides), overrides_source, source, given)
     own = [] if packaged_id is not None else [source]
     return dataclasses.replace(
         scenario, overrides=tuple(overrides), files=_digests([*own, *_user_files(scenario)])

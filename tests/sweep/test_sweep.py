@@ -124,7 +124,7 @@ def test_toml_literal_round_trips_through_set_parsing(value: object) -> None:
             '"link.ber" = { scale = "cubic", start = 1.0, stop = 2.0, num = 3 }',
             "grid.link.ber.scale",
         ),
-        ('"link.ber" = [0.0, 2.0]', "grid point link.ber=2.0: --set: link.ber: must be in [0, 1]"),
+        ('"link.ber" = [0.0, 2.0]', "grid point link.ber=2.0: link.ber: must be in [0, 1]"),
         ('"link.wobble" = [1]', "link.wobble: unknown key"),
         ('"seed" = [1, 2]', "grid.seed: 'seed' cannot be swept"),
         ('"duration_s" = [5.0]', "grid.duration_s: also fixed in [set]"),
