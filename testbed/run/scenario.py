@@ -83,6 +83,7 @@ __all__ = [
     "SineTerm",
     "ThrusterFault",
     "load_scenario",
+    "scenario_digest",
     "scenario_names",
 ]
 
@@ -394,6 +395,17 @@ def _user_files(scenario: Scenario) -> list[str]:
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
         named.append(vehicle.autonomy.mission)
     return [name for name in named if Path(name).suffix in (".toml", ".json")]
+
+
+def scenario_digest(name_or_path: str) -> tuple[str, str]:
+    """``(source, SHA-256 hex)`` of a scenario file's content: ``package:<id>`` for a packaged
+    scenario (whose file a code update may change), else the path (as :func:`load_scenario`
+    records it in ``files``)."""
+    text = str(name_or_path)
+    if text.endswith(".toml") or "/" in text or "\\" in text or Path(text).is_file():
+        return _digests([text])[0]
+    with resources.as_file(_scenario_dir().joinpath(f"{text}.toml")) as path:
+        return f"package:{text}", _digests([str(path)])[0][1]
 
 
 def _digests(paths: Sequence[str]) -> tuple[tuple[str, str], ...]:

@@ -9,6 +9,7 @@ exactly; grid values travel to the runs that way.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -36,6 +37,7 @@ __all__ = [
     "describe_point",
     "expand",
     "load_sweep",
+    "sweep_description",
     "sweep_names",
     "toml_literal",
 ]
@@ -172,6 +174,9 @@ class Sweep:
         seeds: the seeds of every point.
         metrics: flattened metric names to aggregate (``command_lag_s.mean``).
         source: where it was loaded from, for messages.
+        inputs: ``(file, SHA-256 hex)`` of what the runs read: the scenario file
+            (``package:<id>`` for a packaged one) and every user file (model, layout, preset,
+            mission) that the base or any grid point names, sorted (:func:`load_sweep`).
     """
 
     id: str
@@ -182,6 +187,7 @@ class Sweep:
     seeds: tuple[int, ...]
     metrics: tuple[str, ...]
     source: str
+    inputs: tuple[tuple[str, str], ...] = ()
 
     @property
     def points(self) -> list[dict[str, Any]]:
@@ -191,16 +197,6 @@ class Sweep:
             dict(zip(keys, combo, strict=True))
             for combo in itertools.product(*(v for _, v in self.axes))
         ]
-
-    def identity(self) -> dict[str, Any]:
-        """What a results directory must match to be resumed (not the aggregated metrics)."""
-        return {
-            "id": self.id,
-            "scenario": self.scenario,
-            "overrides": list(self.overrides),
-            "axes": [[key, [toml_literal(v) for v in values]] for key, values in self.axes],
-            "seeds": list(self.seeds),
-        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -219,6 +215,13 @@ def sweep_names() -> list[str]:
     return sorted(
         e.name.removesuffix(".toml") for e in folder.iterdir() if e.name.endswith(".toml")
     )
+
+
+def sweep_description(name: str) -> str:
+    """The ``description`` of the packaged sweep ``name`` (as its file has it, unchecked)."""
+    entry = resources.files("testbed").joinpath(_SWEEP_DIR, f"{name}.toml")
+    with resources.as_file(entry) as path:
+        return str(load_toml(path).get("description", ""))
 
 
 def toml_literal(value: Any) -> str:
@@ -314,7 +317,7 @@ def load_sweep(
             repeated grid value, more than :data:`MAX_RUNS` runs, or a grid point whose
             scenario does not load (named by its values).
     """
-    from testbed.run.scenario import load_scenario
+    from testbed.run.scenario import load_scenario, scenario_digest
 
     text = str(name_or_path)
     base_dir: Path | None = None
@@ -378,10 +381,11 @@ def load_sweep(
         source=source,
     )
     # the base with the file's [set], then with --set too: each error names where it is
-    load_scenario(sweep.scenario, fixed, overrides_source=f"{source}: [set]")
-    load_scenario(sweep.scenario, sweep.overrides)
-    check_points(sweep, stream)
-    return sweep
+    files = dict([scenario_digest(sweep.scenario)])
+    files.update(load_scenario(sweep.scenario, fixed, overrides_source=f"{source}: [set]").files)
+    files.update(load_scenario(sweep.scenario, sweep.overrides).files)
+    files.update(check_points(sweep, stream))
+    return dataclasses.replace(sweep, inputs=tuple(sorted(files.items())))
 
 
 def _scenario_of(scenario: str, base_dir: Path | None, source: str) -> str:
@@ -407,7 +411,7 @@ def _scenario_of(scenario: str, base_dir: Path | None, source: str) -> str:
     return scenario
 
 
-def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
+def check_points(sweep: Sweep, stream: TextIO | None = None) -> dict[str, str]:
     """Load the scenario of every grid point through the scenario loader, before any run.
 
     First each axis value on its own (the other axes at their first value), so that a bad value
@@ -415,6 +419,9 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     grid order: the loader has cross-key rules (``link.ipg_s`` needs ``link.ipg = 'fixed'``,
     times must be < ``duration_s``, images need the camera and token MAC...), so a point made of
     values that are fine one by one may still not load. Each point is loaded once.
+
+    Returns:
+        ``{file: SHA-256 hex}`` of the user files the points read (their scenario's ``files``).
 
     Raises:
         ConfigError: ``<source>: grid point key=value, ...: <key>: <what is wrong>``.
@@ -429,17 +436,21 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     if stream is not None:
         progress = Progress(total, 0, stream, f"{sweep.id}: checking", unit="grid points")
     checked: set[tuple[int, ...]] = set()
+    files: dict[str, str] = {}
 
     def check_one(index: tuple[int, ...]) -> None:
         point = tuple(f"{keys[a]}={literals[a][i]}" for a, i in enumerate(index))
         where = f"{sweep.source}: grid point {', '.join(point)}"
         try:
-            load_scenario(sweep.scenario, (*sweep.overrides, *point), overrides_source=where)
+            scenario = load_scenario(
+                sweep.scenario, (*sweep.overrides, *point), overrides_source=where
+            )
         except ConfigError:
             if progress is not None:
                 progress.close()
             raise
         checked.add(index)
+        files.update(scenario.files)
         if progress is not None:
             progress.update(False)
 
@@ -455,6 +466,7 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     finally:
         if progress is not None:
             progress.close()
+    return files
 
 
 def _point_overrides(point: Mapping[str, Any]) -> tuple[str, ...]:
