@@ -111,13 +111,28 @@ def _signalled(signum: int, frame: FrameType | None) -> None:
     raise _interrupt_for(signum)
 
 
-_STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
-"""What a disk says when results cannot be written: one line, not a traceback."""
+_STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
+"""What a disk says when results cannot be written: one line, not a traceback (exit 1)."""
+
+_PATH_ERRORS = frozenset(
+    {
+        errno.ENAMETOOLONG,
+        errno.ENOENT,
+        errno.ENOTDIR,
+        errno.EISDIR,
+        errno.EACCES,
+        errno.EPERM,
+        errno.ELOOP,
+    }
+)
+"""What the system says of a path the user gave that cannot be written (a name too long, a
+folder under /proc, no permission): one line naming the path, exit 2, like bad input."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI. Returns the process exit code: 0 ok, 1 the storage failed (a full disk:
-    one line naming the file), 2 bad input, 130 Ctrl-C, 143 SIGTERM.
+    one line naming the file), 2 bad input (also a path that cannot be written: a name too
+    long, no permission; one line naming it), 130 Ctrl-C, 143 SIGTERM.
 
     SIGTERM is raised as :class:`~testbed.cli.options.Terminated` (a ``KeyboardInterrupt``), so
     a command keeps what it finished the same way for both. A command that has something to
@@ -141,6 +156,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.close()
         return EXIT_OK
     except OSError as err:
+        if err.errno in _PATH_ERRORS and err.filename:
+            print(f"testbed: error: cannot write {err.filename}: {err.strerror}", file=sys.stderr)
+            return EXIT_USAGE
         if err.errno not in _STORAGE_ERRORS:
             raise
         where = f" {err.filename}" if err.filename else ""

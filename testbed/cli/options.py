@@ -144,9 +144,13 @@ def check_only_with(options: Mapping[str, bool], used: bool, condition: str) -> 
 
 
 def check_out_dir(out: Path) -> None:
-    """``--out``: a directory or nothing yet; else :class:`ConfigError`."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a directory")
+    """``--out``: a directory or nothing yet; else :class:`ConfigError` (also when the path
+    cannot even be looked at: a name too long, a component that is not a directory…)."""
+    try:
+        if out.exists() and not out.is_dir():
+            raise ConfigError(f"--out: {out} exists and is not a directory")
+    except OSError as err:
+        raise ConfigError(f"--out: {out}: {err.strerror or err}") from None
 
 
 def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str, LinkEndpoint]:

@@ -32,6 +32,7 @@ are left out. A top-level module: only the CLI imports it; nothing here simulate
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -53,7 +54,8 @@ from testbed.report.closed_forms import (
 )
 from testbed.report.figures import footnote, note, save
 from testbed.report.sweep_axes import LogAxis, draw
-from testbed.report.sweep_results import Results, read_results, short_key
+from testbed.report.sweep_results import Results, read_results, short_key, sweep_label
+from testbed.run.metrics import metric_bounds
 
 __all__ = [
     "ImageRateModel",
@@ -66,6 +68,12 @@ __all__ = [
 
 _TRACKING_AXES = (("x", "m/s"), ("y", "m/s"), ("z", "m/s"), ("yaw", "rad/s"))
 _BARS_NOTE = "lines: medians over seeds; bars: 95 % t-interval of the mean"
+NON_NEGATIVE = (0.0, math.inf)
+"""Bounds of the plotted quantities that cannot be negative (lags, ages, counts, rates, RMS
+errors; :func:`~testbed.run.metrics.metric_bounds`): their error bars stop at 0."""
+draw_non_negative = functools.partial(draw, bounds=NON_NEGATIVE)
+""":func:`~testbed.report.sweep_axes.draw` of a quantity that cannot be negative (every
+quantity of the BER plots: lags, ages, rates, RMS errors, times)."""
 
 
 # --- the BER plots ------------------------------------------------------------------------------
@@ -77,7 +85,10 @@ def ber_key(results: Results) -> str | None:
 
 
 def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
-    """Draw ``ber_vs_lag.png``, ``ber_vs_per.png`` and ``ber_vs_tracking.png`` of a BER sweep.
+    """Draw ``ber_vs_lag.png``, ``ber_vs_per.png``, ``ber_vs_tracking.png`` (and
+    ``ber_vs_images.png``, ``ber_vs_mission.png`` when the rows have those metrics) of a BER
+    sweep; a plot none of whose metrics has a value in an ok row (every run failed, or the
+    scenario has no such metric: tracking under autonomy) is not drawn.
 
     One line per value of the other grid keys (e.g. the inter-packet gap). The age panel of
     ``ber_vs_lag.png`` carries, per line, the closed form :func:`closed_form_age_s` with
@@ -93,7 +104,7 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
         out_dir: where the PNGs go (created if missing).
 
     Returns:
-        The written paths.
+        The written paths (none when every run failed).
 
     Raises:
         ConfigError: the file cannot be read, or has no BER grid key.
@@ -109,15 +120,21 @@ def plot_ber_sweep(results_csv: Path | str, out_dir: Path | str) -> list[Path]:
     others = [k for k in results.grid if k != key]
     groups = results.groups(others)
     colours = [f"C{i % 10}" for i in range(len(groups))]
-    paths = [
-        _plot_lag(results, out / "ber_vs_lag.png", ber, axis, groups, colours),
-        _plot_per(results, out / "ber_vs_per.png", ber, axis, groups, colours),
-        _plot_tracking(results, out / "ber_vs_tracking.png", ber, axis, groups, colours),
-    ]
-    if "images.per_minute" in results.columns:
-        paths.append(_plot_images(results, out / "ber_vs_images.png", ber, axis, groups, colours))
-    if "mission.completion_s" in results.columns:
-        paths.append(_plot_mission(results, out / "ber_vs_mission.png", ber, axis, groups, colours))
+    plots = (
+        (("command_lag_s.mean", "command_age_s.mean"), "ber_vs_lag.png", _plot_lag),
+        (("link.uplink.per", "link.downlink.per"), "ber_vs_per.png", _plot_per),
+        (
+            tuple(f"velocity_tracking_rmse.{a}" for a, _ in _TRACKING_AXES),
+            "ber_vs_tracking.png",
+            _plot_tracking,
+        ),
+        (("images.per_minute",), "ber_vs_images.png", _plot_images),
+        (("mission.completion_s",), "ber_vs_mission.png", _plot_mission),
+    )
+    paths = []
+    for columns, name, plot in plots:  # a plot with nothing to draw is not drawn
+        if any(np.isfinite(results.numbers(c)).any() for c in columns if c in results.columns):
+            paths.append(plot(results, out / name, ber, axis, groups, colours))
     return paths
 
 
@@ -135,8 +152,8 @@ def _plot_mission(
     done = results.numbers("mission.completion_s")
     final = results.numbers("mission.position_error_m.final")
     for (label, mask), colour in zip(groups, colours, strict=True):
-        draw(done_ax, axis, ber[mask], done[mask], color=colour, label=label or None)
-        draw(error_ax, axis, ber[mask], final[mask], color=colour, label=label or None)
+        draw_non_negative(done_ax, axis, ber[mask], done[mask], color=colour, label=label or None)
+        draw_non_negative(error_ax, axis, ber[mask], final[mask], color=colour, label=label or None)
     done_ax.set_title("last goal reached")
     done_ax.set_ylabel("mission completion [s]")
     error_ax.set_title("final position error")
@@ -171,7 +188,7 @@ def _closed_form_at_zero(ax: Axes, axis: LogAxis | None, value: float, colour: s
 
 
 def _title(fig: Figure, results: Results, what: str) -> None:
-    fig.suptitle(f"{what} — {results.path.parent.name} ({len(results.rows)} runs ok)")
+    fig.suptitle(f"{what} — {sweep_label(results)} ({len(results.rows)} runs ok)")
 
 
 def _plot_lag(
@@ -191,8 +208,12 @@ def _plot_lag(
     frame_bytes = float(np.nanmedian(frame)) if np.isfinite(frame).any() else ORDER_FRAME_BYTES
     curve_ber = _ber_curve(ber, axis)
     for (label, mask), colour in zip(groups, colours, strict=True):
-        draw(lag_ax, axis, ber[mask], 1000 * lag[mask], color=colour, label=label or None)
-        draw(age_ax, axis, ber[mask], 1000 * age[mask], color=colour, label=label or None)
+        draw_non_negative(
+            lag_ax, axis, ber[mask], 1000 * lag[mask], color=colour, label=label or None
+        )
+        draw_non_negative(
+            age_ax, axis, ber[mask], 1000 * age[mask], color=colour, label=label or None
+        )
         ok = mask & np.isfinite(lag) & np.isfinite(ber)
         t = period[mask & np.isfinite(period)]
         if not ok.any() or t.size == 0:
@@ -306,8 +327,10 @@ def _plot_images(
     latency = results.numbers("images.latency_s.mean")
     curve_ber = _ber_curve(ber, axis)
     for (label, mask), colour in zip(groups, colours, strict=True):
-        draw(rate_ax, axis, ber[mask], rate[mask], color=colour, label=label or None)
-        draw(latency_ax, axis, ber[mask], latency[mask], color=colour, label=label or None)
+        draw_non_negative(rate_ax, axis, ber[mask], rate[mask], color=colour, label=label or None)
+        draw_non_negative(
+            latency_ax, axis, ber[mask], latency[mask], color=colour, label=label or None
+        )
         model = image_rate_model(results, mask)
         if model is None:
             continue
@@ -376,7 +399,8 @@ def _plot_per(
         ax.set_xlabel("bit error rate")
         ax.set_ylabel("packet error rate [%]")
         ax.grid(True, which="major", alpha=0.3)
-        ax.legend(fontsize="small")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize="small")
     if axis is not None:
         axis.apply(axes[0])
     footnote(fig, _BARS_NOTE + " (within 0–100 %); dashed: independent bit errors")
@@ -397,7 +421,7 @@ def _plot_tracking(
     for ax, (name, unit) in zip(axes, _TRACKING_AXES, strict=True):
         rmse = results.numbers(f"velocity_tracking_rmse.{name}")
         for (label, mask), colour in zip(groups, colours, strict=True):
-            draw(ax, axis, ber[mask], rmse[mask], color=colour, label=label or None)
+            draw_non_negative(ax, axis, ber[mask], rmse[mask], color=colour, label=label or None)
         if not np.isfinite(rmse).any():
             note(ax, f"no {name} tracking error")
         ax.set_title(f"{name}: asked-for vs true body velocity")
@@ -450,6 +474,7 @@ def plot_pair(
         ticks = list(dict.fromkeys(raw_x))  # categorical
         xs = np.array([ticks.index(cell) for cell in raw_x], dtype=float)
     axis = None if ticks else LogAxis.fit(xs)
+    bounds = metric_bounds(y)  # intervals within the values y can take (≥ 0, [0, 1], …)
     fig = Figure(figsize=(8.0, 5.0), layout="constrained")
     ax = fig.subplots()
     groups = results.groups([hue] if hue else [])
@@ -457,7 +482,7 @@ def plot_pair(
         colour = f"C{index % 10}"
         placed = axis.place(xs[mask]) if axis is not None else xs[mask]
         ax.scatter(placed, values[mask], s=12, alpha=0.35, color=colour)
-        draw(ax, axis, xs[mask], values[mask], color=colour, label=label or None)
+        draw(ax, axis, xs[mask], values[mask], color=colour, label=label or None, bounds=bounds)
     if ticks:
         ax.set_xticks(range(len(ticks)), ticks)
     if axis is not None:
@@ -467,7 +492,7 @@ def plot_pair(
     ax.grid(True, alpha=0.3)
     if hue:
         ax.legend(fontsize="small")
-    ax.set_title(f"{y} vs {x} — {results.path.parent.name} ({len(results.rows)} runs ok)")
+    ax.set_title(f"{y} vs {x} — {sweep_label(results)} ({len(results.rows)} runs ok)")
     footnote(fig, "dots: runs; " + _BARS_NOTE)
     out = Path(out_path)
     if out.suffix == "":  # what matplotlib would write: the returned path is the real one

@@ -8,6 +8,7 @@ column as numbers and splits the rows into the lines of a plot.
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -17,7 +18,7 @@ import numpy as np
 
 from testbed.config import ConfigError
 
-__all__ = ["Results", "check_results_file", "read_results", "short_key"]
+__all__ = ["Results", "check_results_file", "read_results", "short_key", "sweep_label"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,3 +164,14 @@ def read_results(results_csv: Path | str) -> Results:
     grid = columns[2 : columns.index("status")]
     rows = tuple(row for _, row in ok)
     return Results(path, columns, grid, rows, tuple(number for number, _ in ok))
+
+
+def sweep_label(results: Results) -> str:
+    """What a plot's title names: the id in the ``sweep.json`` beside ``results.csv`` (so the
+    same results give the same PNG whatever their folder is called), else the folder's name."""
+    try:
+        manifest = json.loads((results.path.parent / "sweep.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return results.path.parent.name
+    label = manifest.get("id") if isinstance(manifest, dict) else None
+    return label if isinstance(label, str) else results.path.parent.name

@@ -55,9 +55,9 @@ def prepare_out_dir(out: Path, *, force: bool = False) -> None:
         ConfigError: ``out`` is a file, cannot be created or written, or is a non-empty
             directory and ``force`` is false (one line naming ``--out``).
     """
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a directory")
     try:
+        if out.exists() and not out.is_dir():
+            raise ConfigError(f"--out: {out} exists and is not a directory")
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=out, prefix=_TMP_PREFIX):
             pass
@@ -74,7 +74,10 @@ def claimed_out_dir(out: Path, *, force: bool = False) -> Iterator[Path]:
     removed again if they are still empty: bad input found after the check (a port that does
     not open) or a Ctrl-C before anything was written leaves nothing behind. Whatever was
     written is kept."""
-    missing = [path for path in (out, *out.absolute().parents) if not path.exists()]
+    try:
+        missing = [path for path in (out, *out.absolute().parents) if not path.exists()]
+    except OSError as err:  # a name too long to look at
+        raise ConfigError(f"--out: {out}: cannot write there ({err.strerror or err})") from None
     prepare_out_dir(out, force=force)
     try:
         yield out

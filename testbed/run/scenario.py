@@ -83,6 +83,7 @@ __all__ = [
     "SineTerm",
     "ThrusterFault",
     "load_scenario",
+    "scenario_digest",
     "scenario_names",
 ]
 
@@ -305,7 +306,9 @@ def scenario_names() -> list[str]:
     )
 
 
-def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
+def load_scenario(
+    name_or_path: str, overrides: Sequence[str] = (), *, overrides_source: str = "--set"
+) -> Scenario:
     """Load a packaged scenario by id, or a scenario file by path, and apply overrides.
 
     Args:
@@ -314,6 +317,8 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
             or naming an existing file).
         overrides: ``"a.b=value"`` strings (``--set``), e.g. ``"link.ber=1e-4"``,
             ``"vehicle.model=bluerov2-heavy"``, ``"pilot.x=[{amplitude=0.2, period_s=30}]"``.
+        overrides_source: what errors of the overridden scenario name as their source
+            (``--set``; a sweep names its file's ``[set]`` or grid point).
 
     Returns:
         The checked scenario.
@@ -348,7 +353,7 @@ def load_scenario(name_or_path: str, overrides: Sequence[str] = ()) -> Scenario:
             path_parts, _ = parse_override(text_override)
             if path_parts[0] == "link" and len(path_parts) > 1:
                 given.add(path_parts[1])
-        scenario = _from_data(apply_overrides(data, overrides), "--set", source, given)
+        scenario = _from_data(apply_overrides(data, overrides), overrides_source, source, given)
     own = [] if packaged_id is not None else [source]
     return dataclasses.replace(
         scenario, overrides=tuple(overrides), files=_digests([*own, *_user_files(scenario)])
@@ -390,6 +395,17 @@ def _user_files(scenario: Scenario) -> list[str]:
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
         named.append(vehicle.autonomy.mission)
     return [name for name in named if Path(name).suffix in (".toml", ".json")]
+
+
+def scenario_digest(name_or_path: str) -> tuple[str, str]:
+    """``(source, SHA-256 hex)`` of a scenario file's content: ``package:<id>`` for a packaged
+    scenario (whose file a code update may change), else the path (as :func:`load_scenario`
+    records it in ``files``)."""
+    text = str(name_or_path)
+    if text.endswith(".toml") or "/" in text or "\\" in text or Path(text).is_file():
+        return _digests([text])[0]
+    with resources.as_file(_scenario_dir().joinpath(f"{text}.toml")) as path:
+        return f"package:{text}", _digests([str(path)])[0][1]
 
 
 def _digests(paths: Sequence[str]) -> tuple[tuple[str, str], ...]:

@@ -37,7 +37,13 @@ it.
 from __future__ import annotations
 
 from testbed.sweep.aggregate import aggregate_rows, flatten_metrics
-from testbed.sweep.backends import EXCLUDED_METRICS, SCENARIO_KEYS, RunOutcome, execute_run
+from testbed.sweep.backends import (
+    EXCLUDED_METRICS,
+    SCENARIO_KEYS,
+    RunOutcome,
+    WorkerLostError,
+    execute_run,
+)
 from testbed.sweep.journal import read_journal, results_csv
 from testbed.sweep.runner import SweepSummary, format_summary, run_sweep
 from testbed.sweep.spec import (
@@ -58,6 +64,7 @@ __all__ = [
     "RunSpec",
     "Sweep",
     "SweepSummary",
+    "WorkerLostError",
     "aggregate_rows",
     "execute_run",
     "expand",

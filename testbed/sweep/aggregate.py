@@ -3,8 +3,10 @@
 :func:`flatten_metrics` turns nested metrics into dotted columns (``link.uplink.per``);
 :func:`aggregate_rows` gives, per grid point and aggregated metric, the count, median, 95th
 percentile, mean and 95 % Student-t confidence interval of the mean over its seeds
-(``aggregate.csv``), clipped to [0, 1] for probabilities (``*.per``:
-:func:`~testbed.run.metrics.mean_ci95` says why).
+(``aggregate.csv``), clipped to the values the metric can take
+(:func:`~testbed.run.metrics.metric_bounds`: [0, 1] for probabilities such as ``*.per``, ≥ 0
+for counts, rates, sizes, durations and magnitudes; :func:`~testbed.run.metrics.mean_ci95`
+says why).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from testbed.config import ConfigError
-from testbed.run.metrics import is_probability, mean_ci95
+from testbed.run.metrics import mean_ci95, metric_bounds
 from testbed.sweep.journal import sorted_unique
 from testbed.sweep.spec import RESERVED_COLUMNS, Sweep
 
@@ -43,7 +45,8 @@ def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, A
 def aggregate_rows(sweep: Sweep, rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Per point: ``n_ok``, ``n_failed`` and, for each aggregated metric, ``n``, ``median``,
     ``p95``, ``mean``, ``ci_low``, ``ci_high`` (95 % Student-t interval of the mean, within
-    [0, 1] for a probability; None with fewer than two values). Missing values (None) are left
+    the metric's bounds, :func:`~testbed.run.metrics.metric_bounds`; None with fewer than two
+    values). Missing values (None) are left
     out per metric.
 
     Raises:
@@ -72,7 +75,7 @@ def aggregate_rows(sweep: Sweep, rows: Sequence[Mapping[str, Any]]) -> list[dict
                 stat.update(median=float(np.median(values)), mean=mean)
                 stat["p95"] = float(np.percentile(values, 95))
             if n >= 2:
-                low, high = mean_ci95(values, (0.0, 1.0) if is_probability(name) else None)
+                low, high = mean_ci95(values, metric_bounds(name))
                 stat.update(ci_low=low, ci_high=high)
             out[f"{name}.n"] = n
             out.update({f"{name}.{k}": v for k, v in stat.items()})

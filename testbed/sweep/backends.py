@@ -42,6 +42,7 @@ __all__ = [
     "EXCLUDED_METRICS",
     "SCENARIO_KEYS",
     "RunOutcome",
+    "WorkerLostError",
     "check_dask_address",
     "die_with_parent",
     "execute_run",
@@ -66,6 +67,11 @@ class RunOutcome:
     seed: int
     metrics: dict[str, Any] | None
     error: str
+
+
+class WorkerLostError(Exception):
+    """A worker process of the local pool died (killed by a signal: the OOM killer, a kill
+    -9): the pool cannot go on. The runs that finished are kept; ``--resume`` runs the rest."""
 
 
 def _scenario_values(scenario: Scenario) -> dict[str, Any]:
@@ -151,9 +157,11 @@ def _pool_outcomes(specs: Sequence[RunSpec], workers: int) -> Iterator[RunOutcom
     """Run on a local process pool (spawned interpreters); yield outcomes as they finish.
 
     Closed before the end (an interrupt), it kills the workers rather than waiting for the
-    runs in progress."""
+    runs in progress. A worker that dies (SIGKILL, the OOM killer) breaks the pool: the runs
+    that finished are still yielded, then :class:`WorkerLostError` is raised."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
 
     context = multiprocessing.get_context("spawn")
     finished = False
@@ -167,8 +175,18 @@ def _pool_outcomes(specs: Sequence[RunSpec], workers: int) -> Iterator[RunOutcom
     try:
         with sigint_blocked():
             futures = [executor.submit(execute_run, spec) for spec in specs]
+        broken = False
         for future in as_completed(futures):
-            yield future.result()
+            try:
+                outcome = future.result()
+            except BrokenProcessPool:  # a worker died: every run not finished fails with it
+                broken = True
+                continue
+            yield outcome  # runs that finished before the death are kept
+        if broken:
+            raise WorkerLostError(
+                "a worker process of the sweep died (killed by a signal: out of memory?)"
+            )
         finished = True
     finally:
         if not finished:
@@ -252,6 +270,11 @@ def _dask_outcomes(
 ) -> Iterator[RunOutcome]:
     """Run on a dask.distributed cluster (``"local"`` starts a LocalCluster of ``workers``).
 
+    A run whose result the client cannot get (its worker was lost more often than the
+    scheduler's ``allowed-failures``: ``KilledWorker``; a remote worker that cannot unpickle
+    it) is a failed outcome with that error, run again by ``--resume``; the sweep goes on
+    (the cluster replaces lost workers).
+
     A remote scheduler's ``client`` (:func:`scheduler_client`) stays its caller's to close;
     without one it is connected here and closed at the end."""
     import logging
@@ -282,8 +305,14 @@ def _dask_outcomes(
         client = _connect(address)
     try:
         futures = [client.submit(execute_run, spec, pure=False) for spec in specs]
+        spec_of = {future.key: spec for future, spec in zip(futures, specs, strict=True)}
         for future in as_completed(futures):
-            yield future.result()
+            try:
+                yield future.result()
+            except Exception as err:  # on the client: a lost worker (KilledWorker), a task
+                spec = spec_of[future.key]  # that cannot be unpickled there…: a failed run
+                message = " ".join(f"{type(err).__name__}: {err}".split())
+                yield RunOutcome(spec.point, spec.seed, None, f"dask: {message}")
         finished = True
     finally:
         if not finished:  # interrupted: what closing the comms logs (their tracebacks) is noise

@@ -10,10 +10,10 @@ by write-and-rename (:func:`write_atomic`), so a reader never sees a partial row
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -36,14 +36,16 @@ _STATUSES = ("ok", "failed")
 
 
 def read_journal(
-    path: Path, sweep: Sweep | None = None, *, repair: bool = False
+    path: Path, sweep: Sweep | None = None, *, repair: bool = False, renumber: bool = False
 ) -> list[dict[str, Any]]:
     """The rows in ``runs.jsonl`` (none if it does not exist); with ``repair``, cut off a torn
     tail (no final newline).
 
     Every complete line must be a record as :mod:`testbed.sweep.runner` writes it: a JSON object
-    with an integer ``point`` and ``seed`` ≥ 0 (with ``sweep``: one of its points and seeds),
-    ``status`` ``"ok"`` or ``"failed"`` and a string ``error``.
+    with an integer ``point`` and ``seed`` ≥ 0, ``status`` ``"ok"`` or ``"failed"`` and a string
+    ``error``; with ``sweep``, its grid values must be those of one of its points (numbers by
+    value) and its seed one of its seeds. Its ``point`` must be that point's number, or with
+    ``renumber`` (a grown sweep: values added to its grid) is set to it.
 
     Raises:
         ConfigError: the file cannot be read (a directory, no permission), or a complete line
@@ -54,11 +56,20 @@ def read_journal(
     except OSError as err:
         raise ConfigError(f"{path}: cannot read the journal: {err.strerror or err}") from None
     complete = data[: data.rfind(b"\n") + 1]
-    points = None if sweep is None else math.prod(len(values) for _, values in sweep.axes)
     seeds = None if sweep is None else set(sweep.seeds)
+    numbers = None
+    if sweep is not None:
+        keys = [key for key, _ in sweep.axes]
+        numbers = {_values_key(point, keys): i for i, point in enumerate(sweep.points)}
     rows = []
     for number, line in enumerate(complete.splitlines(), start=1):
-        row = _record(line, points, seeds)
+        row = _record(line, seeds)
+        if row is not None and sweep is not None and numbers is not None:
+            index = numbers.get(_values_key(row, keys))
+            if index is None or (index != row["point"] and not renumber):
+                row = None
+            else:
+                row["point"] = index
         if row is None:
             raise ConfigError(
                 f"{path}: line {number}: damaged record (not written by testbed sweep)"
@@ -71,9 +82,16 @@ def read_journal(
     return rows
 
 
-def _record(line: bytes, points: int | None, seeds: set[int] | None) -> dict[str, Any] | None:
-    """The journal record on ``line``, or None if it is not one (of ``points`` points and
-    these ``seeds``, when given)."""
+def _values_key(row: Mapping[str, Any], keys: Sequence[str]) -> str:
+    """The grid values of a row or point, as one canonical text (``0`` = ``0.0``)."""
+    from testbed.sweep.manifest import key_of
+
+    return key_of([row.get(key) for key in keys])
+
+
+def _record(line: bytes, seeds: set[int] | None) -> dict[str, Any] | None:
+    """The journal record on ``line``, or None if it is not one (of these ``seeds``, when
+    given)."""
     try:
         row = json.loads(line)
     except ValueError:  # not JSON, or not UTF-8
@@ -85,7 +103,7 @@ def _record(line: bytes, points: int | None, seeds: set[int] | None) -> dict[str
         return None
     if row.get("status") not in _STATUSES or not isinstance(row.get("error"), str):
         return None
-    if (points is not None and point >= points) or (seeds is not None and seed not in seeds):
+    if seeds is not None and seed not in seeds:
         return None
     return row
 
@@ -96,26 +114,49 @@ def _count(value: Any) -> bool:
 
 
 def append_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """Append rows as JSON lines in one write, then fsync."""
+    """Append rows as JSON lines in one write, then fsync.
+
+    Raises:
+        OSError: the write failed (a full disk); its ``filename`` is ``path``, and the file is
+            cut back to its length before the write, so no partial line stays in it.
+    """
     data = "".join(json.dumps(row, allow_nan=False) + "\n" for row in rows).encode()
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    except OSError as err:
+        raise OSError(err.errno, err.strerror, str(path)) from None
+    try:
+        length = os.fstat(fd).st_size
         view = memoryview(data)
         while view:
             view = view[os.write(fd, view) :]
         os.fsync(fd)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, length)
+        raise OSError(err.errno, err.strerror, str(path)) from None
     finally:
         os.close(fd)
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, fsync, and rename it over ``path``."""
+    """Write ``text`` to a temporary file beside ``path``, fsync, and rename it over ``path``.
+
+    Raises:
+        OSError: the write failed (a full disk): ``filename`` is ``path``, and the temporary
+            file is removed.
+    """
     tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", encoding="utf-8", newline="") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
+    try:
+        with tmp.open("w", encoding="utf-8", newline="") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise OSError(err.errno, err.strerror, str(path)) from None
 
 
 def _cell(value: Any) -> str:
@@ -141,10 +182,11 @@ def csv_text(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
 
 
 def sorted_unique(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
-    """One row per (point, seed), the first recorded, sorted by point then seed."""
+    """One row per (point, seed), the last recorded (a failed run retried on ``--resume`` is
+    recorded again), sorted by point then seed."""
     by_key: dict[tuple[int, int], Mapping[str, Any]] = {}
     for row in rows:
-        by_key.setdefault((row["point"], row["seed"]), row)
+        by_key[(row["point"], row["seed"])] = row
     return [by_key[key] for key in sorted(by_key)]
 
 

@@ -1,16 +1,18 @@
 """Driving a sweep: run what the results directory lacks, record it, write the tables.
 
-:func:`run_sweep` checks the directory against the sweep (``sweep.json``), skips every
-(point, seed) already in the journal, runs the rest on a backend, appends finished runs to the
-journal in batches and rewrites ``results.csv`` and ``aggregate.csv``. :func:`format_summary`
-is the few lines a person reads afterwards.
+:func:`run_sweep` checks the directory against the sweep (``sweep.json``,
+:mod:`~testbed.sweep.manifest`), skips every (point, seed) the journal holds a successful run
+of (a failed run is run again on ``--resume``), runs the rest on a backend, appends finished
+runs to the journal in batches and rewrites ``results.csv`` and ``aggregate.csv``.
+:func:`format_summary` is the few lines a person reads afterwards.
 
 Interrupted (a KeyboardInterrupt: Ctrl-C, or SIGTERM through the CLI's handler) or broken, it stops
 the backend's workers, writes the runs that finished to the journal, regenerates both tables
 from the journal and re-raises: ``--resume`` then runs exactly the missing (point, seed)s.
 Before it writes anything it checks the directory and its journal, that every aggregated metric
 is one a run produces (:func:`check_metrics`) and that a remote scheduler answers: a mistake,
-an unreachable scheduler or an interrupt there leaves the directory as it was.
+an unreachable scheduler or an interrupt there leaves the directory as it was. While it writes
+it holds an exclusive lock on the directory (:func:`out_lock`).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from testbed.sweep.journal import (
     sorted_unique,
     write_atomic,
 )
+from testbed.sweep.manifest import FORMAT, compare, manifest, manifest_text
 from testbed.sweep.progress import Progress
 from testbed.sweep.spec import RunSpec, Sweep, describe_point, expand, toml_literal
 
@@ -67,10 +70,11 @@ def run_sweep(
     workers: int | None = None,
     dask: str | None = None,
     resume: bool = False,
+    force: bool = False,
     flush_interval_s: float = 1.0,
     stream: TextIO | None = None,
 ) -> SweepSummary:
-    """Run every (point, seed) not yet recorded in ``out`` and write the tables.
+    """Run every (point, seed) that ``out`` holds no successful run of, and write the tables.
 
     Args:
         sweep: the loaded sweep.
@@ -78,58 +82,145 @@ def run_sweep(
             ``aggregate.csv``).
         workers: local processes (default: one per core), or LocalCluster workers.
         dask: None for the process pool; a scheduler address; or ``"local"``.
-        resume: continue a sweep already in ``out``; without it ``out`` must hold no sweep.
+        resume: continue the sweep in ``out`` (the same one, or the same with grid values or
+            seeds added: :func:`~testbed.sweep.manifest.compare`); its failed runs are run
+            again. Without it ``out`` must be empty.
+        force: start afresh in a non-empty ``out``: the files a sweep writes there are removed
+            first (not with ``resume``).
         flush_interval_s: how long finished runs may wait before they are written [s].
         stream: progress output (default: stderr).
 
     Raises:
-        ConfigError: ``out`` holds another sweep, or a sweep and no ``resume``; a damaged
-            journal; bad workers; an unknown metric; an unreachable scheduler. Nothing is
-            written then.
+        ConfigError: ``out`` is not empty (without ``resume`` or ``force``), holds another
+            sweep or a damaged ``sweep.json``, is in use by another sweep (a lock), or has a
+            damaged journal; bad workers; an unknown metric; an unreachable scheduler. Nothing
+            is written then.
+        WorkerLostError: a pool worker died (the runs that finished are kept).
+        OSError: the disk refused a write (its ``filename`` names the file).
         KeyboardInterrupt: Ctrl-C or SIGTERM; before the runs start, nothing is written.
     """
     stream = sys.stderr if stream is None else stream
     workers = workers if workers is not None else (os.cpu_count() or 1)
     if workers < 1:
         raise ConfigError(f"--workers: must be ≥ 1, got {workers}")
-    identity = json.dumps(sweep.identity(), indent=1, sort_keys=True) + "\n"
-    _check_out(sweep, out, identity, resume)
-    journal = out / "runs.jsonl"
-    done = {(r["point"], r["seed"]) for r in read_journal(journal, sweep)}
+    if force and resume:
+        raise ConfigError("--force: not with --resume (--force starts the sweep afresh)")
+    held, _ = _held_rows(sweep, out, resume, force)
+    done = {(r["point"], r["seed"]) for r in held if _ok(r)}
     specs = [s for s in expand(sweep) if (s.point, s.seed) not in done]
     if specs:
         check_metrics(sweep)
     with scheduler_client(dask if specs else None) as client:
         out.mkdir(parents=True, exist_ok=True)
-        write_atomic(out / "sweep.json", identity)
-        rows = read_journal(journal, sweep, repair=True)  # the same rows, a torn tail cut
-        stream_of = outcomes(specs, workers, dask, client) if specs else iter(())
-        return _record(sweep, out, specs, rows, stream_of, flush_interval_s, stream)
+        with out_lock(out):
+            rows, grown = _held_rows(sweep, out, resume, force)  # again: no other sweep now
+            if force:
+                remove_sweep_files(out)
+            journal = out / "runs.jsonl"
+            if grown:  # the rows renumbered (and a torn tail cut)
+                write_atomic(journal, "".join(json.dumps(r, allow_nan=False) + "\n" for r in rows))
+            elif resume:
+                read_journal(journal, sweep, repair=True)  # the same rows, a torn tail cut
+            write_atomic(out / "sweep.json", manifest_text(sweep))
+            done = {(r["point"], r["seed"]) for r in rows if _ok(r)}
+            specs = [s for s in expand(sweep) if (s.point, s.seed) not in done]
+            stream_of = outcomes(specs, workers, dask, client) if specs else iter(())
+            return _record(sweep, out, specs, rows, stream_of, flush_interval_s, stream)
 
 
-def _check_out(sweep: Sweep, out: Path, identity: str, resume: bool) -> None:
-    """``out`` may take this sweep: it holds none (without ``resume``), or this very one
-    (``identity``, with ``resume``). Reads only.
+def _ok(row: dict[str, Any]) -> bool:
+    return bool(row["status"] == "ok")
+
+
+LOCK_FILE = ".sweep.lock"
+"""The file in ``--out`` that a running sweep holds an exclusive ``flock`` on."""
+
+SWEEP_FILES = ("sweep.json", "runs.jsonl", "results.csv", "aggregate.csv")
+"""What a sweep writes in ``--out`` besides its plots (``ber_vs_*.png``) and its lock."""
+
+
+@contextlib.contextmanager
+def out_lock(out: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``out`` (``flock`` of :data:`LOCK_FILE`) inside: two sweeps
+    never write one folder.
 
     Raises:
-        ConfigError: otherwise, or ``sweep.json`` cannot be read.
+        ConfigError: another sweep holds it.
     """
-    manifest = out / "sweep.json"
-    if manifest.exists():
-        if not resume:
-            raise ConfigError(f"--out: {out} already holds a sweep (add --resume to continue)")
+    import fcntl
+
+    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
         try:
-            held = manifest.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as err:
-            reason = getattr(err, "strerror", None) or "not UTF-8"
-            raise ConfigError(f"{manifest}: cannot read: {reason}") from None
-        if held != identity:
-            raise ConfigError(f"--resume: {out} holds a different sweep than {sweep.source}")
-    elif resume:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(f"--out: {out} is in use by another testbed sweep") from None
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def remove_sweep_files(out: Path) -> None:
+    """``--force``: remove what an earlier sweep wrote in ``out`` (other files stay)."""
+    for path in [*(out / name for name in SWEEP_FILES), *out.glob("ber_vs_*.png")]:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
+
+def out_is_empty(out: Path) -> bool:
+    """``out`` holds nothing (but, perhaps, the lock file of an earlier sweep)."""
+    return not out.is_dir() or all(entry.name == LOCK_FILE for entry in out.iterdir())
+
+
+def _held_rows(
+    sweep: Sweep, out: Path, resume: bool, force: bool
+) -> tuple[list[dict[str, Any]], bool]:
+    """The rows ``out`` holds that ``sweep`` keeps (renumbered by their grid values when the
+    sweep grew; none when ``force`` starts it afresh), once ``out`` is checked, and whether
+    the sweep grew. Reads only.
+
+    Raises:
+        ConfigError: ``out`` is a file; not empty without ``resume`` or ``force``; with
+            ``resume``, holds no sweep, a damaged ``sweep.json``, another sweep (naming every
+            difference) or a damaged journal.
+    """
+    manifest_path = out / "sweep.json"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a directory")
+    if not resume:
+        if force or out_is_empty(out):
+            return [], False
+        if manifest_path.exists():
+            raise ConfigError(
+                f"--out: {out} already holds a sweep (add --resume to continue it, or --force "
+                "to start it afresh)"
+            )
+        raise ConfigError(f"--out: {out} is not empty (use --force to write a sweep there)")
+    if not manifest_path.exists():
         what = "does not exist" if not out.exists() else "holds no sweep (no sweep.json)"
         raise ConfigError(f"--resume: {out} {what}; drop --resume to start the sweep there")
-    elif out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a directory")
+    try:
+        held = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        reason = getattr(err, "strerror", None) or "not UTF-8"
+        raise ConfigError(f"{manifest_path}: cannot read: {reason}") from None
+    except ValueError:
+        held = None
+    if not isinstance(held, dict) or not isinstance(held.get("id"), str):
+        raise ConfigError(f"{manifest_path}: damaged (not a sweep.json written by testbed sweep)")
+    if held.get("format") != FORMAT:
+        raise ConfigError(
+            f"--resume: {manifest_path} was written by an older testbed without input hashes, "
+            "so its inputs cannot be checked; start the sweep in a new --out"
+        )
+    resumption = compare(held, manifest(sweep))
+    if resumption.differences:
+        raise ConfigError(
+            f"--resume: {out} holds a different sweep than {sweep.source}: "
+            + "; ".join(resumption.differences)
+        )
+    rows = read_journal(out / "runs.jsonl", sweep, renumber=resumption.grown)
+    return rows, resumption.grown
 
 
 def _record(
@@ -179,24 +270,28 @@ def _record(
                 flush()
             progress.update(outcome.metrics is None)
         flush()
-    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or broken: keep what finished
+    except BaseException as failure:  # interrupted (Ctrl-C, SIGTERM) or broken: keep what ran
         with _interrupts_ignored():
             close = getattr(stream_of, "close", None)
             if close is not None:
                 close()  # stops the workers (a generator's finally)
             progress.close()
-            # The journal on disk is the truth: an interrupt can land inside a flush, after
-            # its write and before its bookkeeping (a signal already taken by Python is not
-            # held back by the mask), so append only the finished rows it does not hold yet.
-            on_disk = read_journal(journal, repair=True)
-            written = {(r["point"], r["seed"]) for r in on_disk}
-            rest = [r for r in pending if (r["point"], r["seed"]) not in written]
-            if rest:
-                append_rows(journal, rest)
-            rows[:] = on_disk + rest
-            pending.clear()
-            flush()
-            write_aggregate()
+            try:
+                # The journal on disk is the truth: an interrupt can land inside a flush,
+                # after its write and before its bookkeeping (a signal already taken by Python
+                # is not held back by the mask), so append only the finished rows it lacks.
+                on_disk = read_journal(journal, repair=True)
+                written = {(r["point"], r["seed"]) for r in on_disk[len(rows) :]}
+                rest = [r for r in pending if (r["point"], r["seed"]) not in written]
+                if rest:
+                    append_rows(journal, rest)
+                rows[:] = on_disk + rest
+                pending.clear()
+                flush()
+                write_aggregate()
+            except OSError:
+                if not isinstance(failure, OSError):  # a full disk: its first error is raised
+                    raise
         raise
     finally:
         progress.close()

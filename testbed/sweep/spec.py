@@ -9,6 +9,7 @@ exactly; grid values travel to the runs that way.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -36,6 +37,7 @@ __all__ = [
     "describe_point",
     "expand",
     "load_sweep",
+    "sweep_description",
     "sweep_names",
     "toml_literal",
 ]
@@ -83,6 +85,7 @@ class RangeSpec:
     include: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        check(all(math.isfinite(v) for v in self.include), "include", "must be finite")
         check(math.isfinite(self.start), "start", f"must be finite, got {self.start}")
         check(math.isfinite(self.stop), "stop", f"must be finite, got {self.stop}")
         check(self.num >= 1, "num", f"must be ≥ 1, got {self.num}")
@@ -90,16 +93,38 @@ class RangeSpec:
         if self.scale == "log":
             check(self.start > 0.0, "start", f"must be > 0 on a log scale, got {self.start}")
             check(self.stop > 0.0, "stop", f"must be > 0 on a log scale, got {self.stop}")
+        spaced = self._spaced()
+        check(
+            len(set(spaced)) == self.num,
+            "num",
+            f"{self.num} values from {self.start!r} to {self.stop!r} are only "
+            f"{len(set(spaced))} distinct ones at {_SIGNIFICANT_DIGITS} significant digits",
+        )
+        extra = [_rounded(v) for v in self.include]
+        for value in extra:
+            check(
+                value not in spaced and extra.count(value) == 1,
+                "include",
+                f"{value!r} is already in the range or repeated",
+            )
+
+    def _spaced(self) -> list[float]:
+        """The ``num`` evenly spaced values (exponents on a log scale), rounded."""
+        if self.scale == "log":  # with num = 1 both give [start]
+            raw = np.geomspace(self.start, self.stop, self.num)
+        else:
+            raw = np.linspace(self.start, self.stop, self.num)
+        return [_rounded(float(v)) for v in raw]
 
     def values(self) -> tuple[float, ...]:
         """The axis values, ascending, rounded to 12 significant digits (``1e-05``, not
-        ``1.0000000000000001e-05``), duplicates removed."""
-        if self.scale == "log":  # with num = 1 both give [start]
-            raw = list(np.geomspace(self.start, self.stop, self.num))
-        else:
-            raw = list(np.linspace(self.start, self.stop, self.num))
-        rounded = {float(f"{v:.{_SIGNIFICANT_DIGITS}g}") for v in (*raw, *self.include)}
-        return tuple(sorted(rounded))
+        ``1.0000000000000001e-05``): ``num`` distinct ones and every ``include`` value."""
+        return tuple(sorted({*self._spaced(), *(_rounded(v) for v in self.include)}))
+
+
+def _rounded(value: float) -> float:
+    """``value`` to :data:`_SIGNIFICANT_DIGITS` significant digits."""
+    return float(f"{value:.{_SIGNIFICANT_DIGITS}g}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +174,9 @@ class Sweep:
         seeds: the seeds of every point.
         metrics: flattened metric names to aggregate (``command_lag_s.mean``).
         source: where it was loaded from, for messages.
+        inputs: ``(file, SHA-256 hex)`` of what the runs read: the scenario file
+            (``package:<id>`` for a packaged one) and every user file (model, layout, preset,
+            mission) that the base or any grid point names, sorted (:func:`load_sweep`).
     """
 
     id: str
@@ -159,6 +187,7 @@ class Sweep:
     seeds: tuple[int, ...]
     metrics: tuple[str, ...]
     source: str
+    inputs: tuple[tuple[str, str], ...] = ()
 
     @property
     def points(self) -> list[dict[str, Any]]:
@@ -168,16 +197,6 @@ class Sweep:
             dict(zip(keys, combo, strict=True))
             for combo in itertools.product(*(v for _, v in self.axes))
         ]
-
-    def identity(self) -> dict[str, Any]:
-        """What a results directory must match to be resumed (not the aggregated metrics)."""
-        return {
-            "id": self.id,
-            "scenario": self.scenario,
-            "overrides": list(self.overrides),
-            "axes": [[key, [toml_literal(v) for v in values]] for key, values in self.axes],
-            "seeds": list(self.seeds),
-        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,6 +215,13 @@ def sweep_names() -> list[str]:
     return sorted(
         e.name.removesuffix(".toml") for e in folder.iterdir() if e.name.endswith(".toml")
     )
+
+
+def sweep_description(name: str) -> str:
+    """The ``description`` of the packaged sweep ``name`` (as its file has it, unchecked)."""
+    entry = resources.files("testbed").joinpath(_SWEEP_DIR, f"{name}.toml")
+    with resources.as_file(entry) as path:
+        return str(load_toml(path).get("description", ""))
 
 
 def toml_literal(value: Any) -> str:
@@ -218,15 +244,26 @@ def _flatten_table(
     table: Mapping[str, Any], prefix: str = "", *, keep_empty: bool = False
 ) -> dict[str, Any]:
     """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level. An
-    empty table is dropped, or with ``keep_empty`` kept as a value (the grid refuses it)."""
+    empty table is dropped, or with ``keep_empty`` (the grid) kept as a value (the grid refuses
+    it), and so is a table :func:`_is_range` takes for a range without ``scale``."""
     flat: dict[str, Any] = {}
     for key, value in table.items():
         dotted = f"{prefix}{key}"
-        if isinstance(value, Mapping) and "scale" not in value and (value or not keep_empty):
+        level = isinstance(value, Mapping) and not (
+            _is_range(value) if keep_empty else "scale" in value
+        )
+        if level and (value or not keep_empty):
             flat.update(_flatten_table(value, f"{dotted}.", keep_empty=keep_empty))
         else:
             flat[dotted] = value
     return flat
+
+
+def _is_range(table: Mapping[str, Any]) -> bool:
+    """A grid table that is a range, not a level of nested keys: it has ``scale``, or a value
+    that is neither a table nor an array (a level holds only those: ``start = 1.0`` is a
+    range's, one whose ``scale`` is missing)."""
+    return "scale" in table or any(not isinstance(v, Mapping | list) for v in table.values())
 
 
 def _fixed_and_swept(fixed: Iterable[str], swept: Sequence[str]) -> tuple[str, str] | None:
@@ -280,7 +317,7 @@ def load_sweep(
             repeated grid value, more than :data:`MAX_RUNS` runs, or a grid point whose
             scenario does not load (named by its values).
     """
-    from testbed.run.scenario import load_scenario
+    from testbed.run.scenario import load_scenario, scenario_digest
 
     text = str(name_or_path)
     base_dir: Path | None = None
@@ -298,9 +335,7 @@ def load_sweep(
     top = build(_SweepFile, data, source=source)
     if source.startswith("package:") and top.id != text:
         raise ConfigError(f"{source}: id: must equal the file name, got {top.id!r}")
-    scenario = top.scenario
-    if base_dir is not None and (scenario.endswith(".toml") or "/" in scenario):
-        scenario = str((base_dir / scenario).resolve())
+    scenario = _scenario_of(top.scenario, base_dir, source)
     fixed_values = _flatten_table(top.set)
     fixed = [f"{k}={toml_literal(v)}" for k, v in fixed_values.items()]
     axes = []
@@ -345,12 +380,38 @@ def load_sweep(
         metrics=top.metrics,
         source=source,
     )
-    load_scenario(sweep.scenario, sweep.overrides)  # the base alone: its errors name --set
-    check_points(sweep, stream)
-    return sweep
+    # the base with the file's [set], then with --set too: each error names where it is
+    files = dict([scenario_digest(sweep.scenario)])
+    files.update(load_scenario(sweep.scenario, fixed, overrides_source=f"{source}: [set]").files)
+    files.update(load_scenario(sweep.scenario, sweep.overrides).files)
+    files.update(check_points(sweep, stream))
+    return dataclasses.replace(sweep, inputs=tuple(sorted(files.items())))
 
 
-def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
+def _scenario_of(scenario: str, base_dir: Path | None, source: str) -> str:
+    """The sweep file's ``scenario``: a packaged id, or a path (relative ones taken from the
+    sweep file's folder ``base_dir``) made absolute.
+
+    Raises:
+        ConfigError: an unknown id, or a path that names no file (naming the sweep file and
+            its ``scenario`` key).
+    """
+    from testbed.run.scenario import scenario_names
+
+    if scenario.endswith(".toml") or "/" in scenario or "\\" in scenario:
+        path = Path(scenario) if base_dir is None else (base_dir / scenario).resolve()
+        if not path.is_file():
+            raise ConfigError(f"{source}: scenario: {path}: file not found")
+        return str(path)
+    known = scenario_names()
+    if scenario not in known:
+        raise ConfigError(
+            f"{source}: scenario: unknown scenario id {scenario!r} (known: {', '.join(known)})"
+        )
+    return scenario
+
+
+def check_points(sweep: Sweep, stream: TextIO | None = None) -> dict[str, str]:
     """Load the scenario of every grid point through the scenario loader, before any run.
 
     First each axis value on its own (the other axes at their first value), so that a bad value
@@ -359,8 +420,11 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     times must be < ``duration_s``, images need the camera and token MAC...), so a point made of
     values that are fine one by one may still not load. Each point is loaded once.
 
+    Returns:
+        ``{file: SHA-256 hex}`` of the user files the points read (their scenario's ``files``).
+
     Raises:
-        ConfigError: ``<source>: grid point key=value, ...: <the loader's one line>``.
+        ConfigError: ``<source>: grid point key=value, ...: <key>: <what is wrong>``.
     """
     from testbed.run.scenario import load_scenario
     from testbed.sweep.progress import Progress
@@ -372,16 +436,21 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     if stream is not None:
         progress = Progress(total, 0, stream, f"{sweep.id}: checking", unit="grid points")
     checked: set[tuple[int, ...]] = set()
+    files: dict[str, str] = {}
 
     def check_one(index: tuple[int, ...]) -> None:
         point = tuple(f"{keys[a]}={literals[a][i]}" for a, i in enumerate(index))
+        where = f"{sweep.source}: grid point {', '.join(point)}"
         try:
-            load_scenario(sweep.scenario, (*sweep.overrides, *point))
-        except ConfigError as err:
+            scenario = load_scenario(
+                sweep.scenario, (*sweep.overrides, *point), overrides_source=where
+            )
+        except ConfigError:
             if progress is not None:
                 progress.close()
-            raise ConfigError(f"{sweep.source}: grid point {', '.join(point)}: {err}") from None
+            raise
         checked.add(index)
+        files.update(scenario.files)
         if progress is not None:
             progress.update(False)
 
@@ -397,6 +466,7 @@ def check_points(sweep: Sweep, stream: TextIO | None = None) -> None:
     finally:
         if progress is not None:
             progress.close()
+    return files
 
 
 def _point_overrides(point: Mapping[str, Any]) -> tuple[str, ...]:

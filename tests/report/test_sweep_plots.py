@@ -5,6 +5,7 @@ errors."""
 from __future__ import annotations
 
 import csv
+import functools
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -433,3 +434,82 @@ def test_a_supervised_sweep_also_gets_the_mission_plot(tmp_path: Path) -> None:
     paths = plot_ber_sweep(path, tmp_path / "plots")
     assert paths[-1].name == "ber_vs_mission.png"
     assert paths[-1].read_bytes()[:8] == PNG_MAGIC and paths[-1].stat().st_size > 20_000
+
+
+def test_error_bars_of_non_negative_metrics_stop_at_zero(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Seeds far apart at one BER (age 0.01 and 2.0 s): the free t interval of the mean
+    reaches below 0; every bar of every BER plot (lag, age, tracking RMSE) stops at 0."""
+    import testbed.report.sweep_plots as sweep_plots
+
+    text = _write_results(tmp_path / "results.csv").read_text(encoding="utf-8")
+    rows = text.splitlines()
+    wild = []
+    for row in rows[1:]:
+        cells = row.split(",")
+        if cells[4] == "ok":  # age and z RMSE: 0.01 for seed 0, 2.0 for the others
+            big = cells[1] != "0"
+            cells[12] = "2.0" if big else "0.01"  # command_age_s.mean
+            cells[15] = "2.0" if big else "0.001"  # velocity_tracking_rmse.z
+        wild.append(",".join(cells))
+    (tmp_path / "results.csv").write_text("\n".join([rows[0], *wild]) + "\n", encoding="utf-8")
+    assert line(np.array([0.0] * 3), np.array([0.01, 2.0, 2.0])).low[0] < 0.0
+    drawn: list[object] = []
+    real_draw = sweep_plots.draw
+
+    def spy(ax: object, *args: object, **kwargs: object) -> None:
+        drawn.append(ax)
+        real_draw(ax, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(sweep_plots, "draw", spy)
+    monkeypatch.setattr(
+        sweep_plots, "draw_non_negative", functools.partial(spy, bounds=(0.0, math.inf))
+    )
+    plot_ber_sweep(tmp_path / "results.csv", tmp_path / "plots")
+    ends = [
+        seg[:, 1]
+        for ax in drawn
+        for collection in ax.collections  # type: ignore[attr-defined]
+        for seg in collection.get_segments()
+    ]
+    assert ends and min(float(e.min()) for e in ends) == 0.0
+
+
+def test_titles_name_the_sweep_id_so_equal_results_give_equal_pngs(tmp_path: Path) -> None:
+    """The same results.csv in folders of different names, each beside a sweep.json of the
+    same id: byte-identical PNGs."""
+    outputs = []
+    for folder in ("first", "second-name"):
+        (tmp_path / folder).mkdir()
+        source = _write_results(tmp_path / folder / "results.csv")
+        (tmp_path / folder / "sweep.json").write_text('{"id": "ber-small-v1"}\n')
+        outputs.append([p.read_bytes() for p in plot_ber_sweep(source, tmp_path / folder)])
+    assert outputs[0] == outputs[1]
+
+
+def test_no_plot_and_no_warning_when_every_run_failed(tmp_path: Path) -> None:
+    import warnings
+
+    path = tmp_path / "results.csv"
+    path.write_text(
+        "point,seed,link.ber,status,error,link.uplink.per\n"
+        "0,0,0.0,failed,boom,\n1,0,0.001,failed,boom,\n",
+        encoding="utf-8",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert plot_ber_sweep(path, tmp_path / "plots") == []
+    assert not list((tmp_path / "plots").glob("*.png"))
+
+
+def test_a_sweep_without_tracking_gets_no_empty_tracking_plot(tmp_path: Path) -> None:
+    """Supervised control has no stick tracking (every cell empty): no ber_vs_tracking.png."""
+    path = tmp_path / "results.csv"
+    path.write_text(
+        "point,seed,link.ber,status,error,command_lag_s.mean,velocity_tracking_rmse.x\n"
+        "0,0,0.0,ok,,0.1,\n0,1,0.0,ok,,0.2,\n1,0,0.001,ok,,0.1,\n",
+        encoding="utf-8",
+    )
+    names = [p.name for p in plot_ber_sweep(path, tmp_path / "plots")]
+    assert names == ["ber_vs_lag.png"]

@@ -124,7 +124,7 @@ def test_toml_literal_round_trips_through_set_parsing(value: object) -> None:
             '"link.ber" = { scale = "cubic", start = 1.0, stop = 2.0, num = 3 }',
             "grid.link.ber.scale",
         ),
-        ('"link.ber" = [0.0, 2.0]', "grid point link.ber=2.0: --set: link.ber: must be in [0, 1]"),
+        ('"link.ber" = [0.0, 2.0]', "grid point link.ber=2.0: link.ber: must be in [0, 1]"),
         ('"link.wobble" = [1]', "link.wobble: unknown key"),
         ('"seed" = [1, 2]', "grid.seed: 'seed' cannot be swept"),
         ('"duration_s" = [5.0]', "grid.duration_s: also fixed in [set]"),
@@ -296,7 +296,8 @@ def test_existing_results_need_resume_and_the_same_sweep(
     assert "add --resume" in capsys.readouterr().err
     other = ["--set", "duration_s=9", "--set", "metrics.settle_s=1"]
     assert main(["sweep", str(path), *other, "--out", str(out), "--resume"]) == 2
-    assert "holds a different sweep" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "holds a different sweep" in err and "duration_s: 8.0 → 9.0" in err
     assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 0
     assert "0 run now" in capsys.readouterr().out  # everything was done already
 
@@ -441,11 +442,12 @@ def test_a_failing_point_is_recorded_and_the_sweep_completes(
     assert [(a["n_ok"], a["n_failed"]) for a in aggregate] == [("2", "0"), ("0", "2")]
 
 
-def test_seeds_option_runs_the_first_seeds_and_resumes_only_the_same(
+def test_seeds_option_runs_the_first_seeds_and_resume_adds_the_rest(
     pool_sweep: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """--seeds 1 runs seed 0 at every point: the very rows the full sweep holds for seed 0
-    (a second run of the same runs); --resume takes it with --seeds 1 only."""
+    (a second run of the same runs); --resume without --seeds adds seed 1 (3 runs), and the
+    tables then equal the full sweep's."""
     path, pool_out = pool_sweep
     out = tmp_path / "one"
     assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out)]) == 0
@@ -454,9 +456,14 @@ def test_seeds_option_runs_the_first_seeds_and_resumes_only_the_same(
     full = [r for r in _rows(pool_out / "results.csv") if r["seed"] == "0"]
     assert rows == full
     capsys.readouterr()
-    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 2
-    assert "holds a different sweep" in capsys.readouterr().err
     assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out), "--resume"]) == 0
+    assert "0 run now" in capsys.readouterr().out
+    assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 0
+    assert "3 run now" in capsys.readouterr().out
+    for table in ("results.csv", "aggregate.csv"):
+        assert (out / table).read_bytes() == (pool_out / table).read_bytes()
+    assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out), "--resume"]) == 2
+    assert "seeds: 1 removed" in capsys.readouterr().err  # shrinking is not resuming
     for bad in ("0", "3"):
         assert main(["sweep", str(path), *SHORT, "--seeds", bad, "--out", str(tmp_path / bad)]) == 2
         err = capsys.readouterr().err

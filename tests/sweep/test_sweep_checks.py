@@ -190,7 +190,8 @@ def test_a_bad_value_of_a_large_grid_is_named_at_once(tmp_path: Path) -> None:
     gaps = ", ".join(repr(0.5 + i * 0.001) for i in range(500))
     path = _sweep(tmp_path, f'"link.ber" = [{ber}]\n"link.ipg_s" = [{gaps}]')
     start = time.process_time()
-    with pytest.raises(Exception, match=r"grid point link.ber=2.0, link.ipg_s=0.5: --set"):
+    match = r"grid point link.ber=2.0, link.ipg_s=0.5: link.ber: must be in"
+    with pytest.raises(Exception, match=match):
         load_sweep(str(path), ['link.ipg="fixed"'])
     per_load = (time.process_time() - start) / 700
     assert per_load > 0.0
@@ -273,3 +274,68 @@ def test_plot_without_an_extension_prints_the_png_it_wrote(
     assert printed == str(tmp_path / "noext.png")
     assert Path(printed).read_bytes().startswith(b"\x89PNG")
     assert not (tmp_path / "noext").exists()
+
+
+@pytest.mark.parametrize(
+    ("scenario", "fixed", "grid", "message"),
+    [
+        (
+            "s100-teleop-v1",
+            '"link.bogus" = 1',
+            '"link.ber" = [0.0]',
+            "{path}: [set]: link.bogus: unknown key (known: ",
+        ),
+        (
+            "no-such-scenario-v1",
+            "",
+            '"link.ber" = [0.0]',
+            "{path}: scenario: unknown scenario id 'no-such-scenario-v1' (known: ",
+        ),
+        (
+            "missing.toml",
+            "",
+            '"link.ber" = [0.0]',
+            "{path}: scenario: {folder}/missing.toml: file not found",
+        ),
+        (
+            "s100-teleop-v1",
+            "",
+            '"link.bitrate_bps" = { start = 1000, stop = 2000, num = 3 }',
+            "{path}: grid.link.bitrate_bps.scale: required key missing",
+        ),
+        (
+            "s100-teleop-v1",
+            "",
+            '"link.bitrate_bps" = { scale = "linear", start = 1000, '
+            "stop = 1000.0000000001, num = 3 }",
+            "{path}: grid.link.bitrate_bps.num: 3 values from 1000.0 to 1000.0000000001 are only 1 "
+            "distinct ones at 12 significant digits",
+        ),
+        (
+            "s100-teleop-v1",
+            "",
+            '"link.ber" = { scale = "log", start = 1e-5, stop = 1e-3, num = 3, include = [1e-4] }',
+            "{path}: grid.link.ber.include: 0.0001 is already in the range or repeated",
+        ),
+    ],
+)
+def test_errors_of_the_sweep_file_name_it_and_the_key(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    scenario: str,
+    fixed: str,
+    grid: str,
+    message: str,
+) -> None:
+    """Not "--set" (none was given): the file, and the key in it."""
+    path = tmp_path / "s.toml"
+    path.write_text(
+        f'schema = 1\nid = "s-v1"\ndescription = "d"\nscenario = "{scenario}"\n'
+        f"[set]\nduration_s = 8.0\n{fixed}\n[grid]\n{grid}\n",
+        encoding="utf-8",
+    )
+    assert main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    expected = "testbed: error: " + message.format(path=path, folder=tmp_path)
+    assert err.startswith(expected) and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
