@@ -104,21 +104,28 @@ def check_distance(distance_m: float) -> None:
 
 
 def check_duration(
-    duration_s: float, *, low_s: float = 0.0, low_open: bool = True, note: str = ""
+    duration_s: float,
+    *,
+    low_s: float = 0.0,
+    low_open: bool = True,
+    note: str = "",
+    low_note: str = "",
 ) -> None:
     """``--duration``: a time in (``low_s``, one day] s, the longest a scenario may run
     (:data:`testbed.run.sections.MAX_DURATION_S`, ``testbed run``'s limit); ``low_open=False``
-    admits ``low_s`` itself. ``note`` (e.g. where the lower bound comes from) ends the message.
+    admits ``low_s`` itself. ``note`` ends every message; ``low_note`` (where the lower bound
+    comes from) only that of a duration too short.
 
     Raises:
-        ConfigError: ``--duration: must be in (0, 86400] s, got 1e+300`` and ``note``.
+        ConfigError: ``--duration: must be in (0, 86400] s, got 1e+300`` and the note.
     """
     from testbed.run.sections import MAX_DURATION_S
 
     try:
         check_range(duration_s, "--duration", low_s, MAX_DURATION_S, "s", low_open=low_open)
     except FieldError as err:
-        raise ConfigError(f"{err}{note}") from None
+        too_short = duration_s <= low_s  # NaN is neither: no bound to explain
+        raise ConfigError(f"{err}{low_note if too_short else ''}{note}") from None
 
 
 def link_config_option(preset: str, overrides: Sequence[str]) -> LinkConfig:

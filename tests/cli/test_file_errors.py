@@ -1,5 +1,6 @@
-"""Bad names and paths of data files: one line naming the option or the source (a scenario
-file or ``--set``) and the key, exit 2, before anything runs.
+"""Bad names and paths of data files, options misnamed in errors, waypoints beyond the world:
+one line naming the option or the source (a scenario file or ``--set``) and the key, exit 2,
+before anything runs.
 
 Every data file a user may name (a link preset, a vehicle model, a thruster layout, a mission, an
 arm model, a TPIK configuration) is resolved by :func:`testbed.config.user_file`: a packaged
@@ -9,6 +10,7 @@ one is "file not found" at the resolved path, never an unknown packaged name.
 
 from __future__ import annotations
 
+import json
 from importlib import resources
 from pathlib import Path
 
@@ -178,3 +180,64 @@ def test_an_unknown_preset_names_the_preset_option(
     # an override's error still names --set
     message = error_line(capsys, [command, "--set", "bogus=1"])
     assert message.startswith("--set: bogus: unknown key")
+
+
+def test_an_address_not_of_this_machine_names_host(
+    here: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a review: `--host notahost` named --port; 192.0.2.1 (TEST-NET-1) is nobody's address here
+    message = error_line(capsys, ["live", "--host", "192.0.2.1", "--port", "0", "--out", "o"])
+    assert message.startswith("--host: cannot serve on 192.0.2.1:0 (")
+
+
+def test_a_host_that_does_not_resolve_names_host() -> None:
+    import socket
+
+    from testbed.cli.live import _bind_option
+
+    assert _bind_option(socket.gaierror(-2, "Name or service not known")) == "--host"
+    assert _bind_option(OSError(98, "Address already in use")) == "--port"
+
+
+@pytest.mark.parametrize(
+    ("duration", "message"),
+    [  # the settle-time note explains only the lower bound (s100-teleop-v1: settle 10 s)
+        ("100000", "--duration: must be in (10, 86400] s, got 100000.0"),
+        (
+            "5",
+            "--duration: must be in (10, 86400] s, got 5.0 (above the scenario's metrics.settle_s)",
+        ),
+    ],
+)
+def test_hils_duration_note_is_for_a_duration_too_short(
+    duration: str, message: str, here: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["hil", "vehicle", "--port", str(here / "no-such-port"), "--duration", duration]
+    assert error_line(capsys, argv) == message
+
+
+# --- nits: mission waypoints are bounded -------------------------------------------------------
+
+
+def test_a_waypoint_beyond_the_world_names_the_mission_file_and_the_waypoint(
+    here: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a review: x = 1e9 m ran, and reported a mean position error of 3.06e8 m
+    points = [
+        {"time_from_start": t, "transform": {"x": x, "y": 0, "z": 1, "rx": 0, "ry": 0, "rz": 0}}
+        for t, x in ((0.0, 0.0), (30.0, 1e9))
+    ]
+    mission = {"name": "far", "parent": "map", "child": "base_link", "waypoints": points}
+    (here / "far.json").write_text(json.dumps(mission))
+    argv = [
+        "run",
+        "heavy-waypoint-v1",
+        "--out",
+        "out",
+        "--set",
+        "vehicle.autonomy.mission=far.json",
+    ]
+    assert error_line(capsys, argv) == (
+        "--set: vehicle.autonomy.mission: far.json: waypoints[1].transform.x: must be in "
+        "[-10000, 10000] m (the world's extent), got 1e+09"
+    )
