@@ -170,23 +170,38 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: malformed TOML: {err}") from None
 
 
-def user_file(name: str, known: Iterable[str], what: str) -> Path | None:
+def user_file(name: str, known: Iterable[str], what: str, suffix: str = ".toml") -> Path | None:
     """Where a named data file comes from: None for a packaged ``name`` (one of ``known``), else
-    the user's own TOML file at the path ``name``.
+    the user's own file at the path ``name``.
+
+    ``name`` is a path when it ends in ``suffix`` or holds a path separator; a path must name an
+    existing file ending in ``suffix``. Every data file a user may name (link presets, vehicle
+    models, thruster layouts, arm models, TPIK configurations, missions) is resolved here, so
+    their messages agree; callers prefix the file (or ``--set``) and the key.
 
     Raises:
-        ConfigError: neither a packaged name nor an existing ``.toml`` file (the message lists
-            the packaged ones); ``what`` says what the files hold (e.g. "vehicle model").
+        ConfigError: a path to no file (``thruster configuration file not found:
+            /abs/my-frame.toml``: the path made absolute, from the working directory), to a
+            directory or to a file not ending in ``suffix``; or neither a path nor a packaged
+            name (the message lists the packaged ones); ``what`` says what the files hold
+            (e.g. "vehicle model").
     """
     names = list(known)
     if name in names:
         return None
     path = Path(name)
-    if path.suffix == ".toml" and path.is_file():
+    if path.suffix != suffix and "/" not in name and "\\" not in name:
+        raise ConfigError(
+            f"unknown {what} {name!r} (packaged: {', '.join(names)}; or a path to a {suffix} file)"
+        )
+    if path.suffix == suffix and path.is_file():
         return path
-    raise ConfigError(
-        f"unknown {what} {name!r} (packaged: {', '.join(names)}; or a path to a .toml file)"
-    )
+    where = path.absolute()
+    if not path.exists():
+        raise ConfigError(f"{what} file not found: {where}")
+    if not path.is_file():
+        raise ConfigError(f"{what} file {where}: not a file")
+    raise ConfigError(f"{what} file {where}: must end in {suffix}")
 
 
 def named_table(tables: Mapping[str, Any], name: str, source: str, what: str) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from testbed.cli.options import (
     check_duration,
     check_seed,
     exit_code_of,
+    link_config_option,
 )
 from testbed.config import ConfigError
 
@@ -64,7 +65,6 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
     import math
     import threading
 
-    from testbed.channel.config import load_link_config
     from testbed.emulator.ptys import ModemEmulator
 
     if not (args.time_factor > 0.0 and math.isfinite(args.time_factor)):
@@ -73,7 +73,7 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
     if args.duration is not None:
         check_duration(args.duration, low_open=False, note=" (omit it to run until Ctrl-C)")
     check_seed(args.seed)
-    config = load_link_config(args.preset, args.overrides)
+    config = link_config_option(args.preset, args.overrides)
     with ModemEmulator(
         config,
         seed=args.seed,

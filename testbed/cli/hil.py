@@ -184,7 +184,7 @@ def run_hil_command(args: argparse.Namespace) -> int:
     scenario = load_scenario(scenario_name, args.overrides)
     duration = scenario.duration_s if args.duration is None else args.duration
     settle = scenario.metrics.settle_s
-    check_duration(duration, low_s=settle, note=" (above the scenario's metrics.settle_s)")
+    check_duration(duration, low_s=settle, low_note=" (above the scenario's metrics.settle_s)")
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"

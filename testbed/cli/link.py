@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from testbed.cli.options import EXIT_OK, Subparsers, add_set_option, check_distance, check_seed
+from testbed.cli.options import (
+    EXIT_OK,
+    Subparsers,
+    add_set_option,
+    check_distance,
+    check_seed,
+    link_config_option,
+)
 from testbed.config import ConfigError
 
 __all__ = ["add_link_parser"]
@@ -42,7 +49,6 @@ def _run_link(args: argparse.Namespace) -> int:
     import json
     import math
 
-    from testbed.channel.config import load_link_config
     from testbed.channel.probe import MAX_FRAMES, format_report, frame_size_limits, run_probe
 
     lo, hi = frame_size_limits()
@@ -54,7 +60,7 @@ def _run_link(args: argparse.Namespace) -> int:
         raise ConfigError(f"--interval: must be > 0 s, got {args.interval}")
     check_distance(args.distance)
     check_seed(args.seed)
-    config = load_link_config(args.preset, args.overrides)
+    config = link_config_option(args.preset, args.overrides)
     result = run_probe(
         config,
         frames=args.frames,

@@ -96,6 +96,17 @@ def add_live_parser(sub: Subparsers) -> None:
     live.set_defaults(handler=_run_live)
 
 
+def _bind_option(err: OSError) -> str:
+    """The option a failed bind is about: ``--host`` when the address is unknown or not this
+    machine's, ``--port`` otherwise (in use, privileged)."""
+    import errno
+    import socket
+
+    if isinstance(err, socket.gaierror) or err.errno == errno.EADDRNOTAVAIL:
+        return "--host"
+    return "--port"
+
+
 def _run_live(args: argparse.Namespace) -> int:
     """Handler of ``testbed live``."""
     from testbed.live.hub import Hub
@@ -117,7 +128,10 @@ def _run_live(args: argparse.Namespace) -> int:
         try:
             sock = bind(args.host, args.port)
         except OSError as err:
-            raise ConfigError(f"--port: cannot serve on {args.host}:{args.port} ({err})") from None
+            option = _bind_option(err)
+            raise ConfigError(
+                f"{option}: cannot serve on {args.host}:{args.port} ({err})"
+            ) from None
         try:
             endpoints = _open_ports(ports, modem)
             hub = Hub()

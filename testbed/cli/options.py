@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TypeAlias
 
 from testbed.config import ConfigError, FieldError, check_range
 
 if TYPE_CHECKING:
+    from testbed.channel import LinkConfig
     from testbed.hil import LinkEndpoint, PortSettings
     from testbed.run.scenario import Scenario
 
@@ -33,6 +34,7 @@ __all__ = [
     "check_seed",
     "exit_code_of",
     "format_value",
+    "link_config_option",
     "missing",
     "open_modem_ports",
     "warn_token_cycle",
@@ -102,21 +104,45 @@ def check_distance(distance_m: float) -> None:
 
 
 def check_duration(
-    duration_s: float, *, low_s: float = 0.0, low_open: bool = True, note: str = ""
+    duration_s: float,
+    *,
+    low_s: float = 0.0,
+    low_open: bool = True,
+    note: str = "",
+    low_note: str = "",
 ) -> None:
     """``--duration``: a time in (``low_s``, one day] s, the longest a scenario may run
     (:data:`testbed.run.sections.MAX_DURATION_S`, ``testbed run``'s limit); ``low_open=False``
-    admits ``low_s`` itself. ``note`` (e.g. where the lower bound comes from) ends the message.
+    admits ``low_s`` itself. ``note`` ends every message; ``low_note`` (where the lower bound
+    comes from) only that of a duration too short.
 
     Raises:
-        ConfigError: ``--duration: must be in (0, 86400] s, got 1e+300`` and ``note``.
+        ConfigError: ``--duration: must be in (0, 86400] s, got 1e+300`` and the note.
     """
     from testbed.run.sections import MAX_DURATION_S
 
     try:
         check_range(duration_s, "--duration", low_s, MAX_DURATION_S, "s", low_open=low_open)
     except FieldError as err:
-        raise ConfigError(f"{err}{note}") from None
+        too_short = duration_s <= low_s  # NaN is neither: no bound to explain
+        raise ConfigError(f"{err}{low_note if too_short else ''}{note}") from None
+
+
+def link_config_option(preset: str, overrides: Sequence[str]) -> LinkConfig:
+    """``--preset`` (a packaged preset or a ``.toml`` path) with the ``--set`` overrides: a bad
+    preset is a one-line error naming ``--preset``, a bad override one naming ``--set``.
+
+    Raises:
+        ConfigError: ``--preset: link preset file not found: /abs/modem.toml``, or the
+            override's message.
+    """
+    from testbed.channel import load_link_config
+
+    try:
+        load_link_config(preset)
+    except ConfigError as err:
+        raise ConfigError(f"--preset: {err}") from None
+    return load_link_config(preset, overrides)
 
 
 def check_baud(baud: int | None) -> None:

@@ -365,13 +365,16 @@ _FILE_KEYS = (
     ("vehicle", "model"),
     ("vehicle", "thrusters"),
     ("vehicle", "autonomy", "mission"),
+    ("vehicle", "arm", "model"),
+    ("vehicle", "arm", "tpik"),
 )
 """Keys that may name a user's file by path."""
 
 
 def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
     """A scenario file's data with the relative paths of its user files (a preset, model,
-    layout or mission ending in ``.toml``/``.json``) taken from the file's ``folder``, so a
+    layout, mission, arm model or TPIK configuration ending in ``.toml``/``.json``) taken from
+    the file's ``folder``, so a
     scenario kept beside its files runs from anywhere (``--set`` paths stay the working
     directory's, as on any command line)."""
     for key in _FILE_KEYS:
@@ -388,12 +391,14 @@ def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 
 def _user_files(scenario: Scenario) -> list[str]:
-    """The data files given by path (a link preset, a model, a thruster layout, a mission), not
-    packaged."""
+    """The data files given by path (a link preset, a model, a thruster layout, a mission, an
+    arm model, a TPIK configuration), not packaged."""
     vehicle = scenario.vehicle
     named = [scenario.link.preset, vehicle.model, vehicle.thrusters]
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
         named.append(vehicle.autonomy.mission)
+    if vehicle.arm is not None:
+        named += [vehicle.arm.model, vehicle.arm.tpik]
     return [name for name in named if Path(name).suffix in (".toml", ".json")]
 
 

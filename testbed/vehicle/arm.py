@@ -1,6 +1,6 @@
 """A Reach-Alpha-5-like manipulator on the vehicle: its model, loaded from package data.
 
-The model (:class:`ArmModel`, loaded from ``data/alpha5.toml`` by :func:`load_arm_model`) is a
+The model (:class:`ArmModel`, loaded from ``data/arms/alpha5.toml`` by :func:`load_arm_model`) is a
 serial chain written as a URDF is: every joint has an origin and fixed-axis roll-pitch-yaw in
 its parent link's frame and one axis in its own frame; link ``i`` moves with joint ``i``. All
 figures in the model are **FLU** (ROS: x forward, y left, z up), as published; the arm's base
@@ -29,12 +29,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from testbed.config import build, check, check_range, check_ranges, load_toml
+from testbed.config import build, check, check_range, check_ranges, load_toml, user_file
 
 __all__ = [
     "ArmJoint",
     "ArmLink",
     "ArmModel",
+    "arm_model_names",
     "load_arm_model",
 ]
 
@@ -273,28 +274,47 @@ def _derive_link(spec: _LinkSpec, end: Vec3) -> ArmLink:
     )
 
 
+def _arms_dir() -> resources.abc.Traversable:
+    return resources.files("testbed.vehicle").joinpath("data", "arms")
+
+
+def arm_model_names() -> list[str]:
+    """Names of the packaged arm models (``testbed/vehicle/data/arms/*.toml``), sorted."""
+    return sorted(
+        entry.name.removesuffix(".toml")
+        for entry in _arms_dir().iterdir()
+        if entry.name.endswith(".toml")
+    )
+
+
 @functools.cache
 def _packaged_arm_model(name: str) -> ArmModel:
     """The packaged model ``name``, read once per process (the package's files do not change
     while it runs; the model is immutable)."""
-    entry = resources.files("testbed.vehicle").joinpath("data", f"{name}.toml")
-    with resources.as_file(entry) as packaged:
-        return load_arm_model(name, path=packaged)
+    with resources.as_file(_arms_dir().joinpath(f"{name}.toml")) as packaged:
+        return load_arm_model(path=packaged)
 
 
 def load_arm_model(name: str = "alpha5", *, path: str | Path | None = None) -> ArmModel:
-    """Load an arm model from ``testbed/vehicle/data/{name}.toml`` (or from ``path``).
+    """Load an arm model: a packaged one by name, or the user's own TOML file (the packaged
+    files' layout) at the path ``name`` (:func:`~testbed.config.user_file`).
 
     Args:
-        name: the packaged model's name.
-        path: read this file instead of the packaged one (tests, experiments).
+        name: a packaged model (``testbed/vehicle/data/arms/NAME.toml``; see
+            :func:`arm_model_names`) or a ``.toml`` path.
+        path: read this file instead (``name`` is then ignored).
 
     Raises:
-        ConfigError: the file is missing or malformed, or a key is unknown, missing or out of
-            range; the message names the file and the dotted key (e.g. ``joints[1].axis``).
+        ConfigError: neither a packaged name nor an existing ``.toml`` file (the message lists
+            the packaged ones, or names the path), or the file is malformed, or a key is
+            unknown, missing or out of range; the message names the file and the dotted key
+            (e.g. ``joints[1].axis``).
     """
     if path is None:
-        return _packaged_arm_model(name)
+        own = user_file(name, arm_model_names(), "arm model")
+        if own is None:
+            return _packaged_arm_model(name)
+        path = own
     spec = build(_ArmSpec, load_toml(path), source=str(path))
     n = len(spec.joints)
     return ArmModel(

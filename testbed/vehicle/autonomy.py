@@ -39,11 +39,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Literal
 
 from testbed.common.geometry import euler_from_quat, quat_rotate_inverse
-from testbed.config import ConfigError, FieldError, check_range
+from testbed.config import ConfigError, FieldError, check_range, user_file
 from testbed.ecs import World
 from testbed.vehicle.behaviours import MissionRunner
 from testbed.vehicle.components import (
@@ -174,18 +173,16 @@ class AutonomyConfig:
 
 
 def resolve_mission(name: str) -> Mission:
-    """The mission ``name``: a packaged one, or a JSON file at that path.
+    """The mission ``name``: a packaged one, or a ``.json`` file at that path
+    (:func:`~testbed.config.user_file`).
 
     Raises:
-        ConfigError: neither a packaged mission nor a readable file (the message lists the
-            packaged ones), or a bad file (the message names the file and the field).
+        ConfigError: neither a packaged mission (the message lists them) nor an existing
+            ``.json`` file (the message names the path), or a bad file (the message names the
+            file and the field).
     """
-    if name in mission_names():
-        return load_packaged_mission(name)
-    if not Path(name).is_file():
-        known = ", ".join(mission_names())
-        raise ConfigError(f"mission {name!r}: no such packaged mission ({known}) or file")
-    return load_mission(name)
+    own = user_file(name, mission_names(), "mission", suffix=".json")
+    return load_packaged_mission(name) if own is None else load_mission(own)
 
 
 @dataclass(slots=True)

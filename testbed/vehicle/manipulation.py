@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from testbed.config import check, check_ranges
+from testbed.config import ConfigError, FieldError, check, check_ranges
 from testbed.ecs import World
 from testbed.vehicle.arm import ArmModel, load_arm_model
 from testbed.vehicle.arm_kinematics import end_effector_ned, uvms_kinematics
@@ -52,13 +52,15 @@ class ArmConfig:
     """The scenario's ``[vehicle.arm]`` table: a manipulator on the hull.
 
     Attributes:
-        model: the arm's data file (``testbed/vehicle/data/NAME.toml``; ``alpha5``).
+        model: the arm model: a packaged one (``testbed/vehicle/data/arms/NAME.toml``;
+            ``alpha5``) or the path of the user's own ``.toml`` file in that layout.
         coupling: the arm's reaction forces act on the hull (True); False cancels them, as if
             the arm were massless to the vehicle (what the coupling costs the controller).
         trim: a float on the hull cancels the arm's weight in water and its moment in the
             initial pose (the vehicle is ballasted for its arm, as Angler's was).
         initial_q_rad: the joints at start [rad]; None = the model's.
-        tpik: the TPIK's table in ``data/tpik.toml``.
+        tpik: the TPIK configuration: a table of ``data/tpik.toml`` (``alpha5-heavy``) or the
+            path of the user's own ``.toml`` file holding one such table's keys at its top level.
     """
 
     model: str = "alpha5"
@@ -70,8 +72,16 @@ class ArmConfig:
     def __post_init__(self) -> None:
         if self.initial_q_rad is not None:
             check_ranges(self.initial_q_rad, "initial_q_rad", -2 * math.pi, 2 * math.pi, "rad")
-        self.arm_model()  # a bad file or a start outside the limits fails here, naming it
-        load_tpik_config(self.tpik)
+        # a bad name or file fails here, naming the key (a start outside the limits is a
+        # FieldError of initial_q_rad already)
+        try:
+            self.arm_model()
+        except ConfigError as err:
+            raise FieldError("model", str(err)) from None
+        try:
+            load_tpik_config(self.tpik)
+        except ConfigError as err:
+            raise FieldError("tpik", str(err)) from None
 
     def arm_model(self) -> ArmModel:
         """The arm model, with ``initial_q_rad`` applied.

@@ -21,12 +21,12 @@ NED). ``child`` names the frame the waypoints are for: Angler's tool frame
 (a typo must not quietly fly the hull instead of the jaws).
 
 **Checks.** Missing or unknown keys, unknown frame names, non-numbers, non-finite numbers, a
-waypoint above the surface (``z < 0``), a non-zero ``rx`` or ``ry``, an ``|rz|`` beyond 2π (degrees
-given for radians, most likely), an empty waypoint list, a negative first time and
-repeated or decreasing times (Angler's library has repeated ones; they make a zero-length
-segment) are :class:`~testbed.config.ConfigError`\\ s whose one-line message names the file
-and the field path, e.g. ``missions/square.json: waypoints[2].time_from_start: must be > 3 s
-(the previous waypoint's), got 3``.
+waypoint above the surface (``z < 0``) or beyond ±10 km (:data:`MAX_POSITION_M`), a non-zero
+``rx`` or ``ry``, an ``|rz|`` beyond 2π (degrees given for radians, most likely), an empty
+waypoint list, a negative first time and repeated or decreasing times (Angler's library has
+repeated ones; they make a zero-length segment) are :class:`~testbed.config.ConfigError`\\ s
+whose one-line message names the file and the field path, e.g. ``missions/square.json:
+waypoints[2].time_from_start: must be > 3 s (the previous waypoint's), got 3``.
 
 **Trajectories.** :func:`plan` prepends the vehicle's pose at ``t = 0`` when the first waypoint
 is later than 0 (as Angler does), then interpolates linearly: position per axis, yaw along the
@@ -56,6 +56,7 @@ from testbed.config import ConfigError, read_text, to_float
 __all__ = [
     "BODY_FRAMES",
     "LEVEL_TOLERANCE_RAD",
+    "MAX_POSITION_M",
     "PARENT_FRAMES",
     "TOOL_FRAMES",
     "Mission",
@@ -81,6 +82,10 @@ PARENT_FRAMES = ("map",)
 _TOP_KEYS = ("name", "parent", "child", "waypoints")
 _WAYPOINT_KEYS = ("time_from_start", "transform", "velocity", "acceleration")
 _TRANSFORM_KEYS = ("x", "y", "z", "rx", "ry", "rz")
+
+MAX_POSITION_M = 10000.0
+"""Largest accepted ``|coordinate|`` [m] of a position in the world (a waypoint, a vehicle's start
+position): the ±10 km the simulation is meant to cover."""
 
 LEVEL_TOLERANCE_RAD = 1e-6
 """Largest ``|rx|``, ``|ry|`` [rad] a waypoint may have: roll and pitch are not flown (the pose
@@ -412,6 +417,12 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
                 f"{source}: {key}.transform.z: must be ≥ 0 m (z is down: {z:g} m is above the "
                 "surface)"
             )
+        for axis, value in (("x", x), ("y", y), ("z", z)):
+            if abs(value) > MAX_POSITION_M:
+                raise ConfigError(
+                    f"{source}: {key}.transform.{axis}: must be in [{-MAX_POSITION_M:g}, "
+                    f"{MAX_POSITION_M:g}] m (the world's extent), got {value:g}"
+                )
         for axis, angle in (("rx", rx), ("ry", ry)):
             if abs(angle) > LEVEL_TOLERANCE_RAD:
                 raise ConfigError(

@@ -61,7 +61,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common.geometry import Vec3, euler_from_quat, wrap_angle
-from testbed.config import build, check, check_range, check_ranges, load_toml, named_table
+from testbed.config import (
+    build,
+    check,
+    check_range,
+    check_ranges,
+    load_toml,
+    named_table,
+    user_file,
+)
 from testbed.vehicle.task_priority import (
     EqualityTask,
     Level,
@@ -80,6 +88,7 @@ __all__ = [
     "rotation_error",
     "saturate",
     "solve_uvms",
+    "tpik_config_names",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -210,36 +219,57 @@ class TpikConfig:
         return len(self.joint_velocity_limits)
 
 
-def _config_file() -> resources.abc.Traversable:
-    return resources.files("testbed.vehicle").joinpath("data", "tpik.toml")
+@functools.cache
+def _packaged_tables() -> tuple[str, dict[str, Any]]:
+    """The packaged ``data/tpik.toml``: its path (for messages) and its tables, read once per
+    process."""
+    entry = resources.files("testbed.vehicle").joinpath("data", "tpik.toml")
+    with resources.as_file(entry) as packaged:
+        return str(packaged), load_toml(packaged)
+
+
+def tpik_config_names() -> list[str]:
+    """Names of the packaged TPIK configurations (the tables of ``data/tpik.toml``), sorted."""
+    return sorted(_packaged_tables()[1])
 
 
 def load_tpik_config(name: str = "alpha5-heavy", path: str | Path | None = None) -> TpikConfig:
-    """The TPIK configuration table ``name`` of ``data/tpik.toml`` (or of the file ``path``).
+    """A TPIK configuration: the packaged table ``name`` of ``data/tpik.toml``, or the user's
+    own TOML file at the path ``name`` (:func:`~testbed.config.user_file`), which holds one
+    configuration: one table's keys at its top level (``rate_hz = 30.0``, ``[[limit_tasks]]``).
+
+    With ``path``, the table ``name`` of that file (``data/tpik.toml``'s layout) instead.
 
     TOML has no null: a table without ``level_gain`` / ``yaw_gain`` has that task off. Change
     single values with ``dataclasses.replace`` (which runs the same checks).
 
     Raises:
-        ConfigError: missing file or table, or a bad table (file and dotted key named).
+        ConfigError: neither a packaged name nor an existing ``.toml`` file (the message lists
+            the packaged ones, or names the path), a missing file or table, or a bad table
+            (file and dotted key named).
     """
-    if path is None:
+    if path is not None:
+        source = str(path)
+        table = named_table(load_toml(path), name, source, "TPIK table")
+        return _tpik_config(table, source, f"{name}.")
+    own = user_file(name, tpik_config_names(), "TPIK configuration")
+    if own is None:
         return _packaged_tpik_config(name)
-    return _tpik_config(name, str(path), load_toml(path))
+    return _tpik_config(load_toml(own), str(own), "")
 
 
 @functools.cache
 def _packaged_tpik_config(name: str) -> TpikConfig:
-    """Table ``name`` of the packaged ``data/tpik.toml``, read once per process."""
-    with resources.as_file(_config_file()) as packaged:
-        return _tpik_config(name, str(packaged), load_toml(packaged))
+    """Table ``name`` of the packaged ``data/tpik.toml``, built once per process."""
+    source, tables = _packaged_tables()
+    return _tpik_config(named_table(tables, name, source, "TPIK table"), source, f"{name}.")
 
 
-def _tpik_config(name: str, source: str, tables: dict[str, Any]) -> TpikConfig:
-    table = named_table(tables, name, source, "TPIK table")
+def _tpik_config(table: dict[str, Any], source: str, prefix: str) -> TpikConfig:
+    """Build one configuration's table; messages name ``source`` and ``prefix`` + the key."""
     data: dict[str, Any] = {"level_gain": None, "yaw_gain": None, **table}
     data.pop("source", None)  # free-text provenance
-    return build(TpikConfig, data, source=source, prefix=f"{name}.")
+    return build(TpikConfig, data, source=source, prefix=prefix)
 
 
 def rotation_error(target: FloatArray, current: FloatArray) -> FloatArray:

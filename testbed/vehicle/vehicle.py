@@ -86,6 +86,7 @@ from testbed.vehicle.localization import (
     estimate_navigation,
 )
 from testbed.vehicle.manipulation import ArmConfig, Manipulator, build_manipulator, plan_arm
+from testbed.vehicle.mission import MAX_POSITION_M
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.pilot import PilotGains
@@ -147,8 +148,6 @@ CONTROL_RATE_RANGE_HZ = (1.0, 1000.0)
 PHYSICS_DT_RANGE_S = (1e-4, 0.1)
 """Accepted physics steps [s] (default 1/240): below 0.1 ms a day-long run would take ≈ 10⁹
 steps; above 0.1 s the explicit integration of a 0.02 s thruster lag is meaningless."""
-MAX_POSITION_M = 10000.0
-"""Largest accepted ``|coordinate|`` [m] of a start position."""
 
 
 def _default_gains() -> ControlGains:

@@ -128,5 +128,7 @@ def test_a_users_preset_file(tmp_path: object, capsys: pytest.CaptureFixture[str
     scenario = load_scenario("s100-teleop-v1", [f"link.preset={path}"])
     assert scenario.link.channel.bitrate_bps == 4800
     assert str(path) in dict(scenario.files)
-    assert main(["link", "--preset", str(path.with_name("none.toml"))]) == 2
-    assert "unknown link preset" in capsys.readouterr().err
+    missing = path.with_name("none.toml")
+    assert main(["link", "--preset", str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"testbed: error: --preset: link preset file not found: {missing.absolute()}\n"

@@ -41,7 +41,9 @@ from testbed.vehicle.arm_kinematics import (
 )
 
 S = np.diag([1.0, -1.0, -1.0])
-PACKAGED = Path(__file__).resolve().parents[2] / "testbed" / "vehicle" / "data" / "alpha5.toml"
+PACKAGED = (
+    Path(__file__).resolve().parents[2] / "testbed" / "vehicle" / "data" / "arms" / "alpha5.toml"
+)
 
 # The published table: (name, origin in the parent link [m], rpy [rad], axis, limits [rad]).
 TABLE = [

@@ -1,6 +1,6 @@
 """The arm in the physics against closed forms and momentum: statics, trim, coupling, limits.
 
-The vehicle is the BlueROV2 Heavy with the Reach-Alpha-5-like arm (``data/alpha5.toml``), at
+The vehicle is the BlueROV2 Heavy with the Reach-Alpha-5-like arm (``data/arms/alpha5.toml``), at
 5 m depth in open water, no current, pybullet DIRECT at 240 Hz. The independent truths are the
 arm's own kinematics (:mod:`testbed.vehicle.arm`, numpy FK, a path separate from pybullet's
 multibody FK), its datasheet masses and volumes, Newton's and Archimedes' laws, the
@@ -205,7 +205,7 @@ _CASES = [
 def test_a_driven_joint_stops_at_its_limit_and_never_outruns_its_command(
     heavy: HydroModel, alpha5: ArmModel, joint_index: int, side: int
 ) -> None:
-    """Truth: the published joint limits (alpha5.toml) and finite differences of the measured
+    """Truth: the published joint limits (arms/alpha5.toml) and finite differences of the measured
     angles. One joint starts 0.2 rad inside a limit and is driven towards it at its velocity
     limit for 1 s (the others held at 0): it travels at the commanded rate (finite differences,
     1 %), stops within 0.01 rad of the limit and rests there (within 5 mrad at the end); no

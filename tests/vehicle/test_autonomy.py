@@ -174,7 +174,7 @@ def test_the_ismc_removes_a_buoyancy_error_the_nominal_law_leaves(
 
 
 def test_a_mission_needs_a_known_mission_file() -> None:
-    with pytest.raises(ConfigError, match="no such packaged mission"):
+    with pytest.raises(ConfigError, match="unknown mission 'no-such-mission'"):
         build(VehicleConfig, heavy(mission="no-such-mission"), source="test")
 
 

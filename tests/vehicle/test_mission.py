@@ -13,6 +13,7 @@ import pytest
 from testbed.config import ConfigError
 from testbed.vehicle.mission import (
     LEVEL_TOLERANCE_RAD,
+    MAX_POSITION_M,
     Trajectory,
     load_mission,
     load_packaged_mission,
@@ -145,6 +146,12 @@ def _mutate(data: dict[str, Any], edit: str) -> str:
         points[2]["transform"]["ry"] = -1e-5
     elif edit == "yaw in degrees":  # radians: 90.0 was accepted silently
         points[2]["transform"]["rz"] = 90.0
+    elif edit == "far north":  # a review: x = 1e9 m ran, mean position error 3e8 m
+        points[2]["transform"]["x"] = 1e9
+    elif edit == "far west":
+        points[1]["transform"]["y"] = -10000.5
+    elif edit == "too deep":
+        points[0]["transform"]["z"] = 20000.0
     text = json.dumps(data)
     if edit == "nan":
         text = text.replace('"y": 2.0', '"y": NaN')
@@ -185,6 +192,18 @@ BAD_INPUTS = [
     ("roll", "waypoints[2].transform.rx: must be 0 (roll and pitch are not flown: "),
     ("pitch", "waypoints[2].transform.ry: must be 0 (roll and pitch are not flown: "),
     ("yaw in degrees", "waypoints[2].transform.rz: must be in [-2π, 2π] (the yaw in radians"),
+    (
+        "far north",
+        "waypoints[2].transform.x: must be in [-10000, 10000] m (the world's extent), got 1e+09",
+    ),
+    (
+        "far west",
+        "waypoints[1].transform.y: must be in [-10000, 10000] m (the world's extent), got -10000.5",
+    ),
+    (
+        "too deep",
+        "waypoints[0].transform.z: must be in [-10000, 10000] m (the world's extent), got 20000",
+    ),
     ("nan", "waypoints[2].transform.y: must be finite"),
     ("infinity", "waypoints[2].transform.y: must be finite"),
     ("duplicate key", "name: key given twice"),
@@ -279,3 +298,11 @@ def test_rounding_in_roll_and_pitch_and_a_full_turn_of_yaw_are_accepted(tmp_path
     path.write_text(json.dumps(_doc(point)), encoding="utf-8")
     (waypoint,) = load_mission(path).waypoints
     assert waypoint.euler_xyz_rad == (LEVEL_TOLERANCE_RAD, -1e-17, -2.0 * math.pi)
+
+
+def test_waypoints_at_the_worlds_edge_are_accepted() -> None:
+    """±10 km (MAX_POSITION_M, the start position's domain too) is inside."""
+    assert MAX_POSITION_M == 10000.0
+    points = (_point(0.0, MAX_POSITION_M, -MAX_POSITION_M, MAX_POSITION_M),)
+    mission = parse_mission(_doc(*points), "edge.json")
+    assert mission.waypoints[0].position_ned == (10000.0, -10000.0, 10000.0)

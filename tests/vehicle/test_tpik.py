@@ -407,7 +407,7 @@ def test_packaged_config() -> None:
     assert config.level_gain == 0.5 and config.yaw_gain == 0.5 and not config.ee_orientation
     hardware = load_tpik_config("alpha5-heavy-hardware")
     assert hardware.yaw_gain == 0.65 and all(t.gain == 0.2 for t in hardware.limit_tasks)
-    with pytest.raises(ConfigError, match="no TPIK table"):
+    with pytest.raises(ConfigError, match="unknown TPIK configuration 'nope'"):
         load_tpik_config("nope")
 
 

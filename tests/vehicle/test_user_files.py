@@ -1,4 +1,5 @@
-"""A user's own vehicle model and thruster layout files, named by path in a scenario.
+"""A user's own vehicle model, thruster layout, arm model and TPIK files, named by path in a
+scenario.
 
 Checked against what the files say: a model whose buoyancy the user changed floats where
 B·fraction = W puts it (the hull's submerged fraction, linear across the surface), and a layout
@@ -7,6 +8,8 @@ with one thruster turned round allocates with that column of the packaged matrix
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 from importlib import resources
 from pathlib import Path
 
@@ -15,9 +18,11 @@ import pytest
 
 from testbed.config import ConfigError
 from testbed.run.scenario import load_scenario
+from testbed.vehicle.arm import load_arm_model
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.physics import Physics
 from testbed.vehicle.thruster_config import load_thruster_config
+from testbed.vehicle.tpik import load_tpik_config
 from testbed.vehicle.vehicle import Vehicle
 
 DATA = resources.files("testbed.vehicle").joinpath("data")
@@ -69,8 +74,12 @@ def test_bad_user_files_are_one_line_errors(tmp_path: Path) -> None:
     message = str(err.value)
     assert message.startswith("--set: vehicle.model: ") and str(bad) in message
     assert "mass_kg" in message and "\n" not in message
-    with pytest.raises(ConfigError, match=r"vehicle\.thrusters: unknown thruster configuration"):
-        load_scenario("s100-teleop-v1", [f"vehicle.thrusters={tmp_path / 'none.toml'}"])
+    missing = tmp_path / "none.toml"
+    with pytest.raises(ConfigError) as err:
+        load_scenario("s100-teleop-v1", [f"vehicle.thrusters={missing}"])
+    assert str(err.value) == (
+        f"--set: vehicle.thrusters: thruster configuration file not found: {missing.absolute()}"
+    )
 
 
 @pytest.mark.parametrize(
@@ -99,3 +108,67 @@ def test_a_models_weight_is_its_mass_times_g(
     message = str(info.value)
     assert message.startswith(f"--set: vehicle.model: {path}: weight_n: must be mass_kg·g ")
     assert f"got {weight.removesuffix('.0')}" in message and "\n" not in message
+
+
+def _tpik_file(to: Path, rate_hz: str) -> Path:
+    """The packaged alpha5-heavy TPIK table as a user's file: its keys at the top level."""
+    text = DATA.joinpath("tpik.toml").read_text(encoding="utf-8")
+    table = text[text.index("[alpha5-heavy]\n") : text.index("[alpha5-heavy-hardware]")]
+    table = table.removeprefix("[alpha5-heavy]\n").replace("[[alpha5-heavy.limit_tasks]]", "[[")
+    assert table.count("rate_hz = 30.0") == 1
+    to.write_text(table.replace("[[", "[[limit_tasks]]").replace("30.0", rate_hz, 1))
+    return to
+
+
+def test_a_users_arm_and_tpik_files_are_the_arm_flown(tmp_path: Path) -> None:
+    """vehicle.arm.model and vehicle.arm.tpik take a path like vehicle.model: the vehicle's
+    manipulator and its physics carry the file's arm (a heavier first link), the TPIK the file's
+    rate, and the run's inputs hold both files' SHA-256."""
+    arm = _copy("arms", "alpha5", tmp_path / "myarm.toml", ("mass_kg = 0.194", "mass_kg = 0.5"))
+    tpik = _tpik_file(tmp_path / "mytpik.toml", "20.0")
+    scenario = load_scenario(
+        "uvms-station-keeping-v1", [f"vehicle.arm.model={arm}", f"vehicle.arm.tpik={tpik}"]
+    )
+    packaged = load_arm_model()
+    with Vehicle(scenario.vehicle, np.random.default_rng(0)) as vehicle:
+        manipulator = vehicle.manipulator
+        assert manipulator is not None
+        assert manipulator.model.links[0].mass_kg == 0.5 != packaged.links[0].mass_kg
+        assert manipulator.model.links[1:] == packaged.links[1:]
+        assert vehicle.physics.arm_model is not None
+        assert vehicle.physics.arm_model.links[0].mass_kg == 0.5
+        assert manipulator.tpik == dataclasses.replace(load_tpik_config(), rate_hz=20.0)
+    files = dict(scenario.files)
+    for path in (arm, tpik):
+        assert files[str(path)] == hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_arm_and_tpik_paths_in_a_scenario_file_are_taken_beside_it(tmp_path: Path) -> None:
+    folder = tmp_path / "study"
+    folder.mkdir()
+    _copy("arms", "alpha5", folder / "myarm.toml", ("mass_kg = 0.194", "mass_kg = 0.5"))
+    _tpik_file(folder / "mytpik.toml", "20.0")
+    text = resources.files("testbed").joinpath("scenarios", "uvms-waypoint-v1.toml").read_text()
+    assert text.count('model = "alpha5"') == 1
+    mine = 'model = "myarm.toml"\ntpik = "mytpik.toml"'
+    path = folder / "uvms.toml"
+    path.write_text(text.replace('model = "alpha5"', mine))
+    scenario = load_scenario(str(path))
+    assert scenario.vehicle.arm is not None
+    assert scenario.vehicle.arm.model == str(folder / "myarm.toml")
+    assert scenario.vehicle.arm.arm_model().links[0].mass_kg == 0.5
+    assert load_tpik_config(scenario.vehicle.arm.tpik).rate_hz == 20.0
+    assert [name for name, _ in scenario.files] == [
+        str(path),
+        str(folder / "myarm.toml"),
+        str(folder / "mytpik.toml"),
+    ]
+
+
+def test_a_bad_user_tpik_file_names_the_key_the_file_and_its_key(tmp_path: Path) -> None:
+    tpik = _tpik_file(tmp_path / "fast.toml", "-1.0")
+    with pytest.raises(ConfigError) as err:
+        load_scenario("uvms-waypoint-v1", [f"vehicle.arm.tpik={tpik}"])
+    message = str(err.value)
+    assert message.startswith(f"--set: vehicle.arm.tpik: {tpik}: rate_hz: must be ")
+    assert "\n" not in message
