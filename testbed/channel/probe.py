@@ -258,7 +258,7 @@ def _percent(fraction: float) -> str:
 
 
 def _ms(value: float | None) -> str:
-    return "-" if value is None else f"{value * 1e3:.1f} ms"
+    return "n/a" if value is None else f"{value * 1e3:.1f} ms"  # n/a, as every summary says
 
 
 def format_report(result: ProbeResult) -> str:

@@ -262,7 +262,7 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             f"final {_num(error['final'])} m; settled "
             f"{_num(mission['time_to_converge_s'], digits=2)} s after the final target (at "
             f"{_num(mission.get('final_target_s'), digits=1)} s); goals reached "
-            f"{_count(mission['goals_reached'])}/{_count(mission['goals'])}; estimate error mean "
+            f"{_goals(mission['goals_reached'], mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
         if (heading := mission.get("yaw_error_deg")) is not None:
@@ -351,6 +351,14 @@ _LOSS_CAUSES = (
 
 def _count(value: int | None) -> str:
     return "n/a" if value is None else str(value)
+
+
+def _goals(reached: int | None, goals: int | None) -> str:
+    """``"reached/goals"``, or one ``"n/a"`` when both are null (the vehicle never published a
+    mission status, e.g. a mission that never started), not ``"n/a/n/a"``."""
+    if reached is None and goals is None:
+        return "n/a"
+    return f"{_count(reached)}/{_count(goals)}"
 
 
 def _list_scenarios(args: argparse.Namespace) -> int:

@@ -155,11 +155,16 @@ def test_a_mission_that_never_started_says_why(
     assert "mission never started: navigation not ready (position σ > ready_sigma_m = 0.5 m" in (
         summary
     )
+    # no mission status at all: one n/a for the goals (it printed "goals reached n/a/n/a")
+    assert mission["goals"] is None and mission["goals_reached"] is None
+    assert "; goals reached n/a; estimate error mean" in summary and "n/a/n/a" not in summary
     mocap = tmp_path / "mocap"
     assert main([*common, "--no-plots", "--out", str(mocap)]) == 0
     mission = json.loads((mocap / "metrics.json").read_text())["mission"]
     assert 0.0 <= mission["ready_s"] <= 0.1  # motion capture: ready at once
-    assert "never started" not in capsys.readouterr().out
+    summary = capsys.readouterr().out
+    assert "never started" not in summary
+    assert f"; goals reached {mission['goals_reached']}/{mission['goals']}; " in summary
 
 
 def test_a_gap_shorter_than_the_round_trip_is_warned_in_one_line(
