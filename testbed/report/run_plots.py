@@ -36,8 +36,9 @@ from testbed.report.figures import no_data, save
 from testbed.report.images import plot_image_strip
 from testbed.report.mission_plots import has_target, plot_mission
 from testbed.report.timeline import TIMELINE_WINDOW_S, plot_timeline
-from testbed.run.metrics import SIGNAL_LAG_WINDOW_S, signal_lag_s
+from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 from testbed.run.recorder import NodeEvent, Recorder
+from testbed.run.run_metrics import stick_lag_s
 from testbed.run.runner import RunResult
 from testbed.vehicle.autonomy import resolve_mission
 
@@ -89,11 +90,14 @@ def plot_speeds(
     *,
     title: str,
     max_lag_s: float = SIGNAL_LAG_WINDOW_S,
+    settle_s: float = 0.0,
 ) -> Path:
     """Draw the pilot's sticks (operator) against those the vehicle applies, one axis per row.
 
     Sticks are normalised to [−1, 1]. Each row's legend gives the delay that best aligns the
-    vehicle's stick with the pilot's (:func:`testbed.run.metrics.signal_lag_s`).
+    vehicle's stick with the pilot's (:func:`testbed.run.metrics.signal_lag_s`) as
+    ``metrics.json`` takes it: after ``settle_s`` [s], over the rows the link's sticks were
+    flown (:func:`~testbed.run.run_metrics.received_from_the_link`).
 
     Args:
         series: :meth:`Recorder.series` columns (``t_s``, ``cmd_*``, ``rx_*``).
@@ -106,6 +110,7 @@ def plot_speeds(
         ``path``.
     """
     t = np.asarray(series["t_s"], dtype=float)
+    after = t >= settle_s  # the lag as metrics.json's signal_lag_s takes it
     fig = Figure(figsize=(11.0, 8.5), layout="constrained")
     axes = fig.subplots(len(_STICKS), 1, sharex=True, squeeze=False)[:, 0]
     fig.suptitle(f"{title}\ncommanded (operator) vs received (vehicle) sticks")
@@ -116,7 +121,7 @@ def plot_speeds(
             continue
         cmd = np.asarray(series[f"cmd_{axis}"], dtype=float)
         rx = np.asarray(series[f"rx_{axis}"], dtype=float)
-        lag = signal_lag_s(t, cmd, rx, max_lag_s) if t.size >= 3 else math.nan
+        lag = stick_lag_s(series, axis, after, max_lag_s)
         lag_text = "lag n/a" if math.isnan(lag) else f"lag ≈ {lag:.2f} s"
         commanded, received = "commanded (operator)", f"received (vehicle), {lag_text}"
         ax.plot(t, cmd, drawstyle="steps-post", color="tab:blue", lw=1.6, label=commanded)
@@ -356,7 +361,9 @@ def write_plots(
         plot_timeline(
             recorder.trace, out_dir / "timeline.png", title=title, window_s=timeline_window_s
         ),
-        plot_speeds(series, out_dir / "speeds.png", title=title, max_lag_s=max_lag_s),
+        plot_speeds(
+            series, out_dir / "speeds.png", title=title, max_lag_s=max_lag_s, settle_s=settle_s
+        ),
         plot_state(series, recorder.events, out_dir / "state.png", title=title),
     ]
     if attitude_experiment:

@@ -55,7 +55,7 @@ from testbed.report.closed_forms import (
 from testbed.report.figures import footnote, note, save
 from testbed.report.sweep_axes import LogAxis, draw
 from testbed.report.sweep_results import Results, read_results, short_key, sweep_label
-from testbed.run.metrics import metric_bounds
+from testbed.run.metric_bounds import metric_bounds
 
 __all__ = [
     "ImageRateModel",
@@ -70,7 +70,7 @@ _TRACKING_AXES = (("x", "m/s"), ("y", "m/s"), ("z", "m/s"), ("yaw", "rad/s"))
 _BARS_NOTE = "lines: medians over seeds; bars: 95 % t-interval of the mean"
 NON_NEGATIVE = (0.0, math.inf)
 """Bounds of the plotted quantities that cannot be negative (lags, ages, counts, rates, RMS
-errors; :func:`~testbed.run.metrics.metric_bounds`): their error bars stop at 0."""
+errors; :func:`~testbed.run.metric_bounds.metric_bounds`): their error bars stop at 0."""
 draw_non_negative = functools.partial(draw, bounds=NON_NEGATIVE)
 """:func:`~testbed.report.sweep_axes.draw` of a quantity that cannot be negative (every
 quantity of the BER plots: lags, ages, rates, RMS errors, times)."""

@@ -36,22 +36,17 @@ from __future__ import annotations
 import math
 from array import array
 from collections.abc import Mapping, Sequence
-from fnmatch import fnmatchcase
 
 import numpy as np
 
 __all__ = [
-    "NON_NEGATIVE_METRICS",
-    "PROBABILITY_METRICS",
     "SIGNAL_LAG_WINDOW_S",
     "age_of_information",
     "distribution",
     "error_statistics",
     "final_target_s",
-    "is_probability",
     "mean_ci95",
     "mean_ci95_half_width",
-    "metric_bounds",
     "position_error",
     "settling_time_s",
     "signal_lag_s",
@@ -108,79 +103,6 @@ def mean_ci95_half_width(values: Sequence[float] | np.ndarray) -> float:
     if n < 2:
         return math.nan
     return float(stats.t.ppf(0.975, n - 1)) * float(array.std(ddof=1)) / math.sqrt(n)
-
-
-PROBABILITY_METRICS = ("*.per", "*.drop_rate")
-"""Flattened metrics (``fnmatch`` patterns) that are probabilities, within [0, 1]: a packet
-error rate, the share of frames a link dropped."""
-
-NON_NEGATIVE_METRICS = (
-    # counts: a number of things, never below 0
-    "*.n",
-    "link.*.frames_*",
-    "frames_rejected.*",
-    "events.*",
-    "images.captured",
-    "images.completed",
-    "images.undecodable",
-    "images.bytes_delivered",
-    "images.chunk_bytes",
-    "mission.goals",
-    "mission.goals_reached",
-    "mission.goals_refused",
-    "mission.orders_acknowledged",
-    "mission.samples",
-    "navigation.delivered.*",
-    "navigation.filter.*",
-    "navigation.by_source.*",
-    # rates and sizes [bit/s, B, 1/min]
-    "link.*.goodput_bps",
-    "link.*.mean_frame_bytes",
-    "link.*.mean_on_air_bytes",
-    "images.per_minute",
-    # durations, ages and lags of delivered things, times since the start [s]
-    "sim_s",
-    "ipg_s",
-    "command_lag_s.*",
-    "command_age_s.*",
-    "odometry_age_s.*",
-    "images.latency_s.*",
-    "images.completion_interval_s.*",
-    "mission.completion_s",
-    "mission.final_target_s",
-    "mission.time_to_converge_s",
-    "mission.ready_s",
-    # magnitudes: norms, RMS values, spreads, percentiles of absolute errors, energy used
-    "velocity_tracking_rmse.*",
-    "mission.position_error_m.*",
-    "mission.estimate_error_m.*",
-    "*.std",
-    "attitude_error_deg.*.p95",
-    "mission.yaw_error_deg.p95",
-    "energy_wh",
-)
-"""Flattened metrics (``fnmatch`` patterns) that cannot be negative by their meaning. Signed
-ones are left out on purpose: ``signal_lag_s.*`` (the received stick may lead by up to half a
-sample), the means of ``attitude_error_deg.*`` and ``mission.yaw_error_deg`` (signed errors),
-and anything not listed (no bound is assumed)."""
-
-
-def is_probability(name: str) -> bool:
-    """Whether a flattened metric (``link.uplink.per``) is a probability, within [0, 1]
-    (:data:`PROBABILITY_METRICS`)."""
-    return any(fnmatchcase(name, pattern) for pattern in PROBABILITY_METRICS)
-
-
-def metric_bounds(name: str) -> tuple[float, float] | None:
-    """The values a flattened metric can take: ``(0, 1)`` for a probability
-    (:data:`PROBABILITY_METRICS`), ``(0, inf)`` for a quantity that cannot be negative
-    (:data:`NON_NEGATIVE_METRICS`: counts, rates, sizes, durations, magnitudes), else None (a
-    signed or unknown quantity). :func:`mean_ci95` clips confidence intervals to them."""
-    if is_probability(name):
-        return 0.0, 1.0
-    if any(fnmatchcase(name, pattern) for pattern in NON_NEGATIVE_METRICS):
-        return 0.0, math.inf
-    return None
 
 
 def mean_ci95(
@@ -279,6 +201,7 @@ def signal_lag_s(
     commanded: Sequence[float] | np.ndarray,
     received: Sequence[float] | np.ndarray,
     max_lag_s: float = SIGNAL_LAG_WINDOW_S,
+    valid: Sequence[bool] | np.ndarray | None = None,
 ) -> float:
     """The delay that best aligns ``received`` with ``commanded`` (cross-correlation) [s].
 
@@ -292,11 +215,17 @@ def signal_lag_s(
     ``−dt``, the received signal leading, or at ``max_lag_s``, the true lag possibly beyond it)
     is no measurement: NaN.
 
+    ``valid`` marks the received samples that are the link's: where it is false (a failsafe
+    holding the sticks centred, the vehicle disarmed) the received value says nothing of the
+    delay, and those samples (and the grid points next to them) take no part in the means or
+    in any shift's correlation.
+
     Args:
         t_s: (n,) sample times [s], increasing.
         commanded: (n,) the pilot's signal.
         received: (n,) the signal the vehicle applied, same units.
         max_lag_s: upper end of the search [s] (capped at the series' length).
+        valid: (n,) which received samples count; None = all.
 
     Returns:
         The lag [s], within ``(−dt/2, max_lag_s)``; NaN when either signal is constant (nothing
@@ -311,13 +240,19 @@ def signal_lag_s(
     grid = t[0] + dt * np.arange(t.size)
     a = np.interp(grid, t, a)
     b = np.interp(grid, t, b)
-    a = a - a.mean()
-    b = b - b.mean()
+    if valid is None:
+        mask = np.ones(t.size, dtype=bool)
+    else:  # a grid point counts only between two valid samples
+        mask = np.interp(grid, t, np.asarray(valid, dtype=float)) >= 1.0
+    if mask.sum() < 3:
+        return math.nan
+    a = a - a[mask].mean()
+    b = np.where(mask, b - b[mask].mean(), 0.0)
     if not a.any() or not b.any():
         return math.nan
     max_shift = min(round(max_lag_s / dt), t.size - 2)
     shifts = range(-1, max_shift + 1)
-    scores = np.array([_correlation(a, b, shift) for shift in shifts])
+    scores = np.array([_correlation(a, b, mask, shift) for shift in shifts])
     k = int(np.argmax(scores))
     if not 0 < k < scores.size - 1:
         return math.nan  # the peak is at an end of the search window
@@ -327,12 +262,14 @@ def signal_lag_s(
     return (shifts[k] + offset) * dt
 
 
-def _correlation(a: np.ndarray, b: np.ndarray, shift: int) -> float:
-    """Normalised correlation of ``a`` with ``b`` delayed by ``shift`` samples (any sign)."""
+def _correlation(a: np.ndarray, b: np.ndarray, mask: np.ndarray, shift: int) -> float:
+    """Normalised correlation of ``a`` with ``b`` delayed by ``shift`` samples (any sign), over
+    the pairs whose ``b`` sample is in ``mask`` (``b`` is 0 elsewhere)."""
     if shift >= 0:
-        x, y = a[: a.size - shift], b[shift:]
+        x, y, m = a[: a.size - shift], b[shift:], mask[shift:]
     else:
-        x, y = a[-shift:], b[: b.size + shift]
+        x, y, m = a[-shift:], b[: b.size + shift], mask[: mask.size + shift]
+    x = np.where(m, x, 0.0)
     denom = math.sqrt(float(x @ x) * float(y @ y))
     return float(x @ y) / denom if denom > 0.0 else -math.inf
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +44,8 @@ __all__ = [
     "compute_metrics",
     "mission_metrics",
     "navigation_metrics",
+    "received_from_the_link",
+    "stick_lag_s",
     "stick_tracking",
     "token_cycle",
 ]
@@ -299,6 +301,26 @@ _STICK_AXES = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
 """The stick axes of the series (``cmd_*``, ``rx_*``) and the body velocity each asks for."""
 
 
+def received_from_the_link(series: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(n,) bool: the rows whose ``rx_*`` sticks are the last the link delivered, armed with
+    no failsafe engaged (otherwise the vehicle flies centred sticks whatever arrives)."""
+    return np.asarray((series["armed"] > 0.5) & (series["failsafe"] == 0.0), dtype=bool)
+
+
+def stick_lag_s(
+    series: Mapping[str, np.ndarray], axis: str, after: np.ndarray, max_lag_s: float
+) -> float:
+    """``signal_lag_s.<axis>`` [s]: :func:`~testbed.run.metrics.signal_lag_s` of the pilot's
+    ``cmd_<axis>`` against the vehicle's ``rx_<axis>`` over the rows ``after`` (the settle
+    time), counting the received samples that are the link's (:func:`received_from_the_link`);
+    NaN with ten or fewer of those."""
+    linked = received_from_the_link(series)[after]
+    if linked.sum() <= 10:
+        return math.nan
+    t, commanded, received = (series[c][after] for c in ("t_s", f"cmd_{axis}", f"rx_{axis}"))
+    return signal_lag_s(t, commanded, received, max_lag_s=max_lag_s, valid=linked)
+
+
 def stick_tracking(
     series: dict[str, np.ndarray],
     after: np.ndarray,
@@ -309,7 +331,9 @@ def stick_tracking(
     """``signal_lag_s`` and ``velocity_tracking_rmse`` of ``metrics.json``: how the sticks the
     vehicle applies follow the pilot's, and how its body velocity follows what they ask for.
 
-    Both are taken over the armed rows at or after the settle time (``after``). Under autonomy
+    Both are taken at or after the settle time (``after``): the RMS over the armed rows, the
+    lag over the rows whose received sticks are the link's (:func:`received_from_the_link`:
+    armed, no failsafe holding them centred). Under autonomy
     the vehicle flies its mission and never the sticks (it records them centred: ``rx_*`` = 0,
     ``ref_*`` = 0), so there is nothing to track: every axis is NaN (null in the file), not the
     vehicle's RMS speed against a zero demand.
@@ -328,19 +352,8 @@ def stick_tracking(
     if under_autonomy:
         nothing = {axis: math.nan for axis, _ in _STICK_AXES}
         return nothing, dict(nothing)
-    t = series["t_s"]
     flying = after & (series["armed"] > 0.5)
-    signal = {
-        axis: signal_lag_s(
-            t[flying],
-            series[f"cmd_{axis}"][flying],
-            series[f"rx_{axis}"][flying],
-            max_lag_s=max_lag_s,
-        )
-        if flying.sum() > 10
-        else math.nan
-        for axis, _ in _STICK_AXES
-    }
+    signal = {axis: stick_lag_s(series, axis, after, max_lag_s) for axis, _ in _STICK_AXES}
     rmse = {
         axis: float(np.sqrt(np.mean((series[f"ref_{v}"][flying] - series[v][flying]) ** 2)))
         if flying.any()

@@ -4,7 +4,7 @@
 :func:`aggregate_rows` gives, per grid point and aggregated metric, the count, median, 95th
 percentile, mean and 95 % Student-t confidence interval of the mean over its seeds
 (``aggregate.csv``), clipped to the values the metric can take
-(:func:`~testbed.run.metrics.metric_bounds`: [0, 1] for probabilities such as ``*.per``, ≥ 0
+(:func:`~testbed.run.metric_bounds.metric_bounds`: [0, 1] for probabilities such as ``*.per``, ≥ 0
 for counts, rates, sizes, durations and magnitudes; :func:`~testbed.run.metrics.mean_ci95`
 says why).
 """
@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from testbed.config import ConfigError
-from testbed.run.metrics import mean_ci95, metric_bounds
+from testbed.run.metric_bounds import metric_bounds
+from testbed.run.metrics import mean_ci95
 from testbed.sweep.journal import sorted_unique
 from testbed.sweep.spec import RESERVED_COLUMNS, Sweep
 
@@ -45,7 +46,7 @@ def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, A
 def aggregate_rows(sweep: Sweep, rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Per point: ``n_ok``, ``n_failed`` and, for each aggregated metric, ``n``, ``median``,
     ``p95``, ``mean``, ``ci_low``, ``ci_high`` (95 % Student-t interval of the mean, within
-    the metric's bounds, :func:`~testbed.run.metrics.metric_bounds`; None with fewer than two
+    the metric's bounds, :func:`~testbed.run.metric_bounds.metric_bounds`; None with fewer than two
     values). Missing values (None) are left
     out per metric.
 

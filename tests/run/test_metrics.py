@@ -60,6 +60,29 @@ def test_signal_lag_recovers_a_known_delay_between_grid_points() -> None:
     assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.004)
 
 
+def test_signal_lag_leaves_out_samples_a_failsafe_held_centred() -> None:
+    """Slow sticks (29-47 s periods, as the scenarios' pilots) delayed by 0.5 s, with forty
+    1.5-s stretches where the vehicle held its sticks centred (a failsafe): the centred
+    stretches pull the plain estimate off the delay; marked invalid they take no part, and
+    the delay is found again."""
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 120.0, 0.05)
+    commanded = 0.4 * np.sin(2 * np.pi * t / 29.0) + 0.15 * np.sin(2 * np.pi * t / 9.0 + 2.0)
+    commanded += 0.3 * np.sin(2 * np.pi * t / 47.0 + 1.0)
+    lag = 0.5
+    received = np.interp(t - lag, t, commanded, left=0.0)
+    valid = np.ones(t.size, dtype=bool)
+    for start in rng.uniform(0.0, 118.0, 40):
+        valid[(t >= start) & (t < start + 1.5)] = False
+    held = np.where(valid, received, 0.0)
+    assert abs(signal_lag_s(t, commanded, held, 2.0) - lag) > 0.3  # 0.85 s: the bias it had
+    # the slow sticks' flat correlation peak: within half a 50-ms sample
+    assert signal_lag_s(t, commanded, held, 2.0, valid=valid) == pytest.approx(lag, abs=0.025)
+    assert signal_lag_s(t, commanded, received, 2.0, valid=np.ones(t.size, dtype=bool)) == (
+        signal_lag_s(t, commanded, received, 2.0)
+    )
+
+
 def test_signal_lag_of_a_staircase_hold_is_about_half_the_hold_plus_delay() -> None:
     """A signal sampled every T and held, after a delay D, lags by D + T/2 on average."""
     t = np.arange(0.0, 200.0, 0.01)

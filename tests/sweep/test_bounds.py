@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from testbed.run.metrics import metric_bounds
+from testbed.run.metric_bounds import metric_bounds
 from testbed.sweep import RunSpec, Sweep, aggregate_rows, execute_run
 
 NON_NEGATIVE = [
@@ -85,7 +85,7 @@ def test_every_metric_of_a_real_run_is_classified_by_its_meaning() -> None:
             name.startswith("attitude_error") and last == "mean"
         ):
             assert bounds is None, name
-        elif last in ("per", "drop_rate"):
-            assert bounds == (0.0, 1.0), name
+        elif last in ("per", "drop_rate") or isinstance(outcome.metrics[name], bool):
+            assert bounds == (0.0, 1.0), name  # a yes/no: its mean over runs is a share
         else:
             assert bounds == (0.0, math.inf), name
