@@ -244,7 +244,8 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"{per(down['per'])}{_dropped(down)}, {down['goodput_bps']:.0f} bit/s",
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
-        f"  yaw error std {_num(yaw['std'], digits=2)} deg; energy {metrics['energy_wh']:.3f} Wh",
+        f"  yaw error std {_num(yaw['std'], digits=2, unit=' deg')}; "
+        f"energy {metrics['energy_wh']:.3f} Wh",
     ]
     images = metrics.get("images")
     if images is not None:

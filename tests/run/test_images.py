@@ -184,7 +184,7 @@ def test_run_summary_says_n_a_for_a_yaw_error_it_could_not_measure(clean_run: Ru
     yaw = attitude["yaw"]
     assert f"yaw error std {yaw['std']:.2f} deg" in format_summary(clean_run.metrics, Path("out"))
     unmeasured = {**clean_run.metrics, "attitude_error_deg": {**attitude, "yaw": {"std": math.nan}}}
-    assert "yaw error std n/a deg;" in format_summary(unmeasured, Path("out"))
+    assert "yaw error std n/a;" in format_summary(unmeasured, Path("out"))
 
 
 def test_an_image_that_decodes_to_no_picture_is_counted_not_scored_lossless() -> None:
