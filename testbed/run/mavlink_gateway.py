@@ -49,7 +49,7 @@ from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
 from testbed.run.images import image_source_factory
-from testbed.run.interrupts import interrupt_of
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -366,36 +366,37 @@ def run_gateway(
             endpoint.close()
     reached = min(float(env.now), duration)
     energy = math.nan if node is None else node.energy_wh
-    if hil is None:
-        metrics = compute_metrics(
-            scenario,
-            seed,
-            recorder,
-            sim_s=reached,
-            wall_s=wall_s,
-            energy_wh=energy,
-            payload_bytes={
-                "uplink": 0 if node is None else node.port.payload_bytes,
-                "downlink": 0 if operator is None else operator.port.payload_bytes,
-            },
-        )
-    else:
-        metrics = hil_metrics(
-            scenario,
-            seed,
-            recorder,
-            modems,
-            ledger,
-            duration_s=reached,
-            wall_s=wall_s,
-            vehicle_node=node,
-            operator_node=operator,
-            poll_s=0.001,
-            modem=modem,
-            lateness_ns=poll_lateness,
-        )
-    metrics["mavlink"] = gateway_metrics(gateway, probe, reached)
-    return RunResult(scenario, seed, metrics, recorder, stopped)
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+        if hil is None:
+            metrics = compute_metrics(
+                scenario,
+                seed,
+                recorder,
+                sim_s=reached,
+                wall_s=wall_s,
+                energy_wh=energy,
+                payload_bytes={
+                    "uplink": 0 if node is None else node.port.payload_bytes,
+                    "downlink": 0 if operator is None else operator.port.payload_bytes,
+                },
+            )
+        else:
+            metrics = hil_metrics(
+                scenario,
+                seed,
+                recorder,
+                modems,
+                ledger,
+                duration_s=reached,
+                wall_s=wall_s,
+                vehicle_node=node,
+                operator_node=operator,
+                poll_s=0.001,
+                modem=modem,
+                lateness_ns=poll_lateness,
+            )
+        metrics["mavlink"] = gateway_metrics(gateway, probe, reached)
+    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
 
 
 def gateway_metrics(
