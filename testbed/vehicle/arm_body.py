@@ -179,18 +179,25 @@ class ArmBody:
 
     def hold_limits(self, dt_s: float) -> None:
         """Before a step of ``dt_s`` [s]: each motor's target is the commanded rate, cut so the
-        joint ends the step at most at its limit (the arm's soft limits, as Reach's firmware
-        keeps its joints inside theirs); the motors are set again only when that changes.
-        pybullet's own limit constraints on these links are not relied on: on the lightest
-        links they let a driven joint through, or past by 0.025 rad pulling its neighbour."""
+        joint ends the step at most at its limit, and turned back towards the limit (at most at
+        the joint's velocity limit) when a load has pushed it past (the arm's soft limits, as
+        Reach's firmware keeps its joints inside theirs; a resting motor at its effort limit
+        otherwise creeps: axis c 0.014 rad past its upper limit in 30 s); the motors are set
+        again only when that changes. pybullet's own limit constraints on these links are not
+        relied on: on the lightest links they let a driven joint through, or past by 0.025 rad
+        pulling its neighbour."""
         states = self._pb.getJointStates(self._body, self.joint_indices, self._cid)
         targets = []
         for state, rate, joint in zip(states, self._rates, self.model.joints, strict=True):
-            angle = state[0]
-            if rate > 0.0:
-                rate = min(rate, max(0.0, (joint.upper_rad - angle) / dt_s))
+            angle, fastest = state[0], joint.velocity_rad_s
+            if angle > joint.upper_rad:  # pushed past: back towards the limit
+                rate = max(-fastest, min(rate, (joint.upper_rad - angle) / dt_s))
+            elif angle < joint.lower_rad:
+                rate = min(fastest, max(rate, (joint.lower_rad - angle) / dt_s))
+            elif rate > 0.0:
+                rate = min(rate, (joint.upper_rad - angle) / dt_s)
             elif rate < 0.0:
-                rate = max(rate, min(0.0, (joint.lower_rad - angle) / dt_s))
+                rate = max(rate, (joint.lower_rad - angle) / dt_s)
             targets.append(rate)
         applied = tuple(targets)
         if applied != self._applied:
