@@ -275,8 +275,22 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             lines.append(f"  {never}")
     if (gated := gate_rejections(metrics)) is not None:
         lines.append(f"  {gated}")
+    if (capsized := _capsized(metrics)) is not None:
+        lines.append(f"  {capsized}")
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def _capsized(metrics: dict[str, Any]) -> str | None:
+    """``"warning: the vehicle capsized …"`` when its roll or pitch passed 90°, else None
+    (keys only ever added: an older metrics.json has no ``max_tilt_deg``)."""
+    tilt = metrics.get("max_tilt_deg")
+    if tilt is None or missing(tilt.get("capsized_s")):
+        return None
+    return (
+        f"warning: the vehicle capsized at t = {tilt['capsized_s']:.1f} s (largest roll "
+        f"{tilt['roll']:.0f}°, pitch {tilt['pitch']:.0f}°)"
+    )
 
 
 def gate_rejections(metrics: dict[str, Any], *, brief: bool = False) -> str | None:

@@ -63,6 +63,7 @@ NON_NEGATIVE_METRICS = (
     "attitude_error_deg.*.p95",
     "mission.yaw_error_deg.p95",
     "energy_wh",
+    "max_tilt_deg.*",
 )
 """Flattened metrics (``fnmatch`` patterns) that cannot be negative by their meaning. Signed
 ones are left out on purpose: ``signal_lag_s.*`` (the received stick may lead by up to half a

@@ -40,8 +40,10 @@ from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import KalmanLocalizer, Navigation
 
 __all__ = [
+    "CAPSIZE_DEG",
     "TokenCycle",
     "compute_metrics",
+    "max_tilt",
     "mission_metrics",
     "navigation_metrics",
     "received_from_the_link",
@@ -240,6 +242,7 @@ def compute_metrics(
         "velocity_tracking_rmse": rmse,
         "attitude_error_deg": attitude,
         "energy_wh": energy_wh,
+        "max_tilt_deg": max_tilt(series),
         "frames_rejected": dict(recorder.frames_rejected),
         "events": {
             "failsafe": failsafe_engagements(recorder.events),
@@ -299,6 +302,22 @@ def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
 
 _STICK_AXES = (("x", "u"), ("y", "v"), ("z", "w"), ("yaw", "r"))
 """The stick axes of the series (``cmd_*``, ``rx_*``) and the body velocity each asks for."""
+
+
+CAPSIZE_DEG = 90.0
+"""Roll or pitch beyond which a vehicle counts as capsized [deg] (upside down or on its end)."""
+
+
+def max_tilt(series: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """``max_tilt_deg``: the largest |roll| and |pitch| over the whole run [deg] and when the
+    first of them passed :data:`CAPSIZE_DEG` (``capsized_s`` [s]; NaN: never)."""
+    roll, pitch = np.abs(series["roll_deg"]), np.abs(series["pitch_deg"])
+    over = np.flatnonzero((roll > CAPSIZE_DEG) | (pitch > CAPSIZE_DEG))
+    return {
+        "roll": float(roll.max()) if roll.size else math.nan,
+        "pitch": float(pitch.max()) if pitch.size else math.nan,
+        "capsized_s": float(series["t_s"][over[0]]) if over.size else math.nan,
+    }
 
 
 def received_from_the_link(series: Mapping[str, np.ndarray]) -> np.ndarray:

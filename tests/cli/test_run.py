@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from testbed.cli.main import main
@@ -194,3 +195,35 @@ def test_the_summary_says_how_many_frames_in_the_per_collided(
     assert down["frames_collided"] > 0
     line = next(li for li in capsys.readouterr().out.splitlines() if "downlink" in li)
     assert f"(collided {down['frames_collided']})" in line
+
+
+def test_a_capsized_vehicle_is_said_in_the_summary(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A BlueROV2 whose CoG is 2 cm above its CoB (its own model file) has a negative
+    metacentric height: flown without an attitude hold it turns over. The run says so in one
+    warning line, and ``max_tilt_deg`` holds the largest |roll| and |pitch| of series.csv and
+    the first time past 90°; the standard vehicle (CoG below the CoB) gets no such line."""
+    from importlib import resources
+
+    model = resources.files("testbed.vehicle").joinpath("data/models/bluerov2.toml").read_text()
+    top = model.replace("cog_m = [0.0, 0.0, 0.02]", "cog_m = [0.0, 0.0, -0.02]")
+    assert top != model
+    (tmp_path / "top.toml").write_text(top)
+    argv = ["run", "s100-teleop-v1", "--set", "duration_s=30", "--set", "operator.mode=manual"]
+    out = tmp_path / "top"
+    model_path = str(tmp_path / "top.toml")
+    assert (
+        main([*argv, "--set", f"vehicle.model={model_path}", "--no-plots", "--out", str(out)]) == 0
+    )
+    tilt = json.loads((out / "metrics.json").read_text())["max_tilt_deg"]
+    series = np.genfromtxt(out / "series.csv", delimiter=",", names=True)
+    over = series["t_s"][(np.abs(series["roll_deg"]) > 90) | (np.abs(series["pitch_deg"]) > 90)]
+    assert over.size and tilt["capsized_s"] == pytest.approx(over[0])
+    assert tilt["roll"] == pytest.approx(np.abs(series["roll_deg"]).max(), abs=1e-3)  # 3 places
+    lines = capsys.readouterr().out.splitlines()
+    assert f"  warning: the vehicle capsized at t = {over[0]:.1f} s" in "\n".join(lines)
+    assert main([*argv, "--no-plots", "--out", str(tmp_path / "std")]) == 0
+    standard = json.loads((tmp_path / "std" / "metrics.json").read_text())["max_tilt_deg"]
+    assert standard["capsized_s"] is None and standard["roll"] < 90.0
+    assert "warning" not in capsys.readouterr().out
