@@ -43,6 +43,7 @@ from testbed.config import build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.ecs.store import FrameStore
 from testbed.vehicle.allocation import Allocator
+from testbed.vehicle.arm_body import G_M_S2, RHO_KG_M3
 from testbed.vehicle.autonomy import (
     AutonomyConfig,
     build_autonomy,
@@ -286,6 +287,7 @@ class VehicleConfig:
         )
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
         self._check_arm_controller()
+        self._check_arm_load()
         pool = self.pool_in_use
         if pool is not None:
             x, y, z = self.start_position_ned_m
@@ -297,6 +299,23 @@ class VehicleConfig:
                 f"{0.5 * pool.width_m:g} m, depth ≤ {pool.depth_m:g} m), got "
                 f"{list(self.start_position_ned_m)}",
             )
+
+    def _check_arm_load(self) -> None:
+        """Refuse an arm that weighs more in water than the whole vehicle weighs in air: no
+        hull carries that (its trim float would outsize the vehicle; without one the thrusters
+        hold nothing). A 400-kg link made a 3.9-kN float, silently, and the run "worked"."""
+        if self.arm is None:
+            return
+        arm = self.arm.arm_model()
+        links = (arm.base, *arm.links)
+        wet_n = sum((link.mass_kg - RHO_KG_M3 * link.volume_m3) * G_M_S2 for link in links)
+        weight_n = load_model(self.model).weight_n
+        check(
+            abs(wet_n) <= weight_n,
+            "arm",
+            f"the arm ({self.arm.model}) weighs {wet_n:.0f} N in water, more than the "
+            f"vehicle ({self.model}, {weight_n:.1f} N) weighs in air: the hull cannot carry it",
+        )
 
     def _check_arm_controller(self) -> None:
         """Refuse an arm under the PID controller: TPIK's output is a body twist [m/s, rad/s]

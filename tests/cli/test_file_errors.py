@@ -241,3 +241,26 @@ def test_a_waypoint_beyond_the_world_names_the_mission_file_and_the_waypoint(
         "--set: vehicle.autonomy.mission: far.json: waypoints[1].transform.x: must be in "
         "[-10000, 10000] m (the world's extent), got 1e+09"
     )
+
+
+def test_an_arm_heavier_in_water_than_the_vehicle_is_refused(
+    here: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Alpha 5 with its first link at 400 kg: (m − ρV)·g summed over the links (closed form
+    from the file) is ≈ 3.9 kN, thirty times the Heavy's 132.6-N weight; the run used to
+    trim it with a 3.9-kN float, silently, and exit 0."""
+    import tomllib
+
+    text = ARM.read_text()
+    heavy = text.replace("mass_kg = 0.341", "mass_kg = 400.0", 1)
+    assert heavy != text
+    (here / "heavy-arm.toml").write_text(heavy)
+    data = tomllib.loads(heavy)
+    links = [data["base"], *data["links"]]
+    wet = sum((link["mass_kg"] - 1000.0 * link["volume_l"] / 1000.0) * 9.81 for link in links)
+    argv = ["run", "uvms-station-keeping-v1", "--set", "vehicle.arm.model=heavy-arm.toml"]
+    line = error_line(capsys, [*argv, "--out", str(here / "out")])
+    assert line.startswith("--set: vehicle.arm: the arm (heavy-arm.toml) weighs ")
+    stated = float(line.split(" weighs ", 1)[1].split(" N in water", 1)[0])
+    assert stated == pytest.approx(wet, rel=1e-3) and "(bluerov2-heavy, 132.6 N)" in line
+    assert not (here / "out").exists()
