@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +101,18 @@ def test_an_interrupt_while_plotting_a_finished_run_keeps_its_results(tmp_path: 
     assert set(metrics["files"]) == {"events.csv", "series.csv"}
 
 
+@pytest.fixture
+def ctrl_c_as_a_terminal() -> Iterator[None]:
+    """SIGINT handled as Python does by default (a KeyboardInterrupt), also where the tests run
+    with it ignored (a shell's background job), so the CLI installs its handlers as for a user."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("ctrl_c_as_a_terminal")
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_after_the_simulation_ended_keeps_the_whole_run(
     signum: signal.Signals, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any
