@@ -160,8 +160,12 @@ def compute_metrics(
     goals_acked: int | None = None,
     autonomy: Autonomy | None = None,
     navigation: Navigation | None = None,
+    ignored_setpoints: int | None = None,
 ) -> dict[str, Any]:
     """Reduce a recording to the ``metrics.json`` content (README: "metrics.json").
+
+    ``ignored_setpoints`` (the vehicle's count of operator setpoints it could not apply: not a
+    number, out of range) is ``events.ignored_setpoints``; None = not known here.
 
     ``mission_status`` (the vehicle's :class:`MissionStatus` at the end), ``goals_acked``
     (:func:`goals_acked`) and the vehicle's ``autonomy`` resource at the end feed, with the
@@ -247,6 +251,7 @@ def compute_metrics(
         "events": {
             "failsafe": failsafe_engagements(recorder.events),
             "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
+            "ignored_setpoints": ignored_setpoints,
         },
     }
     if scenario.images.enabled:

@@ -35,6 +35,7 @@ from testbed.run.run_metrics import compute_metrics
 from testbed.run.scenario import Scenario
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import Navigation
+from testbed.vehicle.systems import Controllers
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -313,6 +314,7 @@ def _run_metrics(
         navigation=(
             vehicle.world.resource(Navigation) if vehicle.world.has_resource(Navigation) else None
         ),
+        ignored_setpoints=vehicle.world.resource(Controllers).ignored_setpoints,
     )
 
 

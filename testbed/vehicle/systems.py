@@ -93,6 +93,7 @@ from testbed.vehicle.control_kernels import (
     put_targets,
 )
 from testbed.vehicle.guidance import PositionController
+from testbed.vehicle.mission import MAX_POSITION_M
 from testbed.vehicle.pilot import (
     SURFACE_HOLD_DEPTH_M,
     PilotGains,
@@ -104,7 +105,11 @@ from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
 from testbed.vehicle.thrust_kernels import interval_wrench, put_wrench
 from testbed.vehicle.thrusters import ThrusterDynamics
 
+MAX_SETPOINT_DEPTH_M = MAX_POSITION_M
+"""Deepest depth setpoint the vehicle takes [m] (the world's extent, as for positions)."""
+
 __all__ = [
+    "MAX_SETPOINT_DEPTH_M",
     "Actuation",
     "ControlFlags",
     "Controllers",
@@ -253,7 +258,8 @@ class Controllers:
         last_contact_s: vehicle time of the last accepted operator intent [s].
         flags: the modes in effect this frame.
         flags_tick: the world tick they were last worked out at (0: never).
-        ignored_setpoints: operator setpoints that could not be applied (an attitude of zero
+        ignored_setpoints: operator setpoints that could not be applied (a depth that is not a
+            number in [0, :data:`MAX_SETPOINT_DEPTH_M`] m, an attitude that is not finite or of zero
             norm), counted and otherwise ignored (the targets stay as they were).
         pilot_gains: ``pilot`` as the pilot interface's kernel reads it
             (:func:`~testbed.vehicle.pilot.pilot_gains_array`; fixed at construction, as
@@ -522,12 +528,17 @@ def ingest_commands(world: World) -> None:
             set_targets(world, ctl, targets.depth_m, targets.quaternion_wxyz)
     for _, depth_sp in world.query1(DepthSetpoint, changed=True):
         ctl.last_contact_s = now
+        if not 0.0 <= depth_sp.depth_m <= MAX_SETPOINT_DEPTH_M:  # NaN, inf, above the surface
+            ctl.ignored_setpoints += 1  # a value from the link, not an error
+            continue
         _set_depth_target(world, ctl, depth_sp.depth_m)
     for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
         ctl.last_contact_s = now
         try:
+            if not all(math.isfinite(c) for c in att_sp.quaternion_wxyz):
+                raise ValueError("not finite")
             attitude = quat_normalize(att_sp.quaternion_wxyz)
-        except ValueError:  # a zero quaternion from the link: a value, not an error
+        except ValueError:  # a zero or non-finite quaternion from the link: a value
             ctl.ignored_setpoints += 1
             continue
         _set_attitude_target(world, ctl, attitude)

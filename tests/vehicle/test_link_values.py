@@ -1,0 +1,92 @@
+"""Setpoints a change-set peer sends that no operator could mean (NaN, infinite, beyond the
+world) are values: the vehicle counts them in ``ignored_setpoints`` and keeps its targets.
+
+A bit flip that survives a frame's CRC-16 on a change-set link reaches the vehicle as a
+well-formed payload (the teleop, live and MAVLink paths range-check their own encodings); a
+security review's payloads dived without limit (``DepthSetpoint(inf)``), climbed the wrong way
+(``1e300``) and made the attitude target NaN.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from testbed.common.changeset import ApplyStatus, ChangeSetCodec, ChangeSetReceiver
+from testbed.common.components import (
+    ArmRequest,
+    AttitudeSetpoint,
+    ControlMode,
+    ControlTargets,
+    DepthSetpoint,
+    ModeRequest,
+    MovementCommand,
+)
+from testbed.ecs import Change, ChangeKind, Side
+from testbed.run.links import make_registry
+from testbed.vehicle.systems import MAX_SETPOINT_DEPTH_M, Controllers
+from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+
+REGISTRY = make_registry()
+CODEC = ChangeSetCodec(REGISTRY)
+TYPE_IDS = {entry.cls: entry.type_id for entry in REGISTRY}
+
+
+def payload(sequence: int, *values: object) -> bytes:
+    """An operator's change set writing ``values`` on its entity 7 (the codec's own encoding)."""
+    changes = [Change(7, ChangeKind.CHANGED, type(v), TYPE_IDS[type(v)], v, 0) for v in values]
+    (encoded,) = CODEC.encode(changes, Side.OPERATOR, sequence)
+    return encoded
+
+
+@pytest.mark.parametrize(
+    "setpoint",
+    [
+        DepthSetpoint(math.inf),
+        DepthSetpoint(math.nan),
+        DepthSetpoint(1e300),
+        DepthSetpoint(-1.0),
+        AttitudeSetpoint((math.nan, 0.0, 0.0, 0.0)),
+        AttitudeSetpoint((1.0, math.inf, 0.0, 0.0)),
+    ],
+    ids=["depth-inf", "depth-nan", "depth-1e300", "depth-above", "att-nan", "att-inf"],
+)
+def test_a_setpoint_no_operator_could_mean_is_counted_and_changes_nothing(
+    setpoint: object,
+) -> None:
+    vehicle = Vehicle(VehicleConfig(), np.random.default_rng(1))
+    try:
+        receiver = ChangeSetReceiver(vehicle.world, REGISTRY, Side.VEHICLE)
+        start = (ArmRequest(True, 1), ModeRequest(ControlMode.DEPTH_HOLD))
+        receiver.apply(payload(0, *start, MovementCommand(1, 0.0, (0.0,) * 6)))
+        vehicle.advance(1.0)
+        before = vehicle.world.get(vehicle.entity, ControlTargets)
+        result = receiver.apply(payload(1, setpoint))
+        assert result.status is ApplyStatus.APPLIED  # well-formed: the codec takes it
+        vehicle.advance(1.9)  # within the 1-s hold timeout: no failsafe re-measures the targets
+        after = vehicle.world.get(vehicle.entity, ControlTargets)
+        assert vehicle.world.resource(Controllers).ignored_setpoints == 1
+        assert before is not None and after == before
+        depth = vehicle.state().position_ned[2]
+        assert abs(depth - vehicle.config.start_position_ned_m[2]) < 0.1  # held where it was
+    finally:
+        vehicle.close()
+
+
+def test_the_deepest_setpoint_taken_is_the_worlds_extent() -> None:
+    """The bound itself is a depth the vehicle takes (its target moves there)."""
+    vehicle = Vehicle(VehicleConfig(), np.random.default_rng(1))
+    try:
+        receiver = ChangeSetReceiver(vehicle.world, REGISTRY, Side.VEHICLE)
+        start = (ArmRequest(True, 1), ModeRequest(ControlMode.DEPTH_HOLD))
+        receiver.apply(payload(0, *start, MovementCommand(1, 0.0, (0.0,) * 6)))
+        vehicle.advance(1.0)
+        receiver.apply(payload(1, DepthSetpoint(MAX_SETPOINT_DEPTH_M)))
+        vehicle.advance(1.1)
+        targets = vehicle.world.get(vehicle.entity, ControlTargets)
+        assert targets is not None and targets.depth_m == MAX_SETPOINT_DEPTH_M
+        assert vehicle.world.resource(Controllers).ignored_setpoints == 0
+    finally:
+        vehicle.close()
