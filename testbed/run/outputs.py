@@ -36,12 +36,15 @@ __all__ = [
     "json_ready",
     "prepare_out_dir",
     "remove_run_results",
+    "replace_atomically",
     "write_json_atomic",
     "write_run",
 ]
 
 METRICS_FILE = "metrics.json"
 _TMP_PREFIX = ".tmp-"
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)  # read once: the process's file-creation mask
 
 PlotWriter = Callable[[RunResult, Path], list[Path]]
 """Writes a run's plots into a directory, returns the files written."""
@@ -101,28 +104,36 @@ def json_ready(value: Any) -> Any:
     return value
 
 
-def _replace_from(write: Callable[[Path], object], path: Path) -> Path:
+def replace_atomically(write: Callable[[Path], object], path: Path) -> Path:
     """Write through ``write(tmp)`` to a temporary name beside ``path``, then rename.
+
+    The temporary file is made new, under a name no one chose beforehand (``mkstemp``): a
+    link planted at a fixed name would have had the results written through it.
 
     Raises:
         OSError: the write failed (a full disk): its ``filename`` is ``path``.
     """
-    tmp = path.with_name(f"{_TMP_PREFIX}{path.name}")
+    tmp = path
     try:
+        handle, name = tempfile.mkstemp(prefix=f"{_TMP_PREFIX}{path.name}.", dir=path.parent)
+        os.fchmod(handle, 0o666 & ~_UMASK)  # as open() would make it (mkstemp makes 0600)
+        os.close(handle)
+        tmp = Path(name)
         write(tmp)
         os.replace(tmp, path)
     except OSError as err:  # name the file the user knows, not the temporary one
         raise OSError(err.errno, err.strerror, str(path)) from err
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+        if tmp != path:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
     return path
 
 
 def write_json_atomic(path: Path, document: dict[str, Any]) -> Path:
     """``document`` as indented strict JSON at ``path``, by write-and-rename."""
     text = json.dumps(json_ready(document), indent=2, allow_nan=False) + "\n"
-    return _replace_from(lambda tmp: tmp.write_text(text, encoding="utf-8"), path)
+    return replace_atomically(lambda tmp: tmp.write_text(text, encoding="utf-8"), path)
 
 
 def _previous_files(out_dir: Path) -> list[str]:
@@ -168,14 +179,14 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
         (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
     recorder = result.recorder
     written = [
-        _replace_from(recorder.write_events_csv, out_dir / "events.csv"),
-        _replace_from(recorder.write_series_csv, out_dir / "series.csv"),
+        replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
+        replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
     ]
     images = result.scenario.images
     if images.enabled:
         log, chunk = recorder.images, images.chunk_bytes
         write = functools.partial(write_images_csv, log, chunk)
-        written.append(_replace_from(write, out_dir / "images.csv"))
+        written.append(replace_atomically(write, out_dir / "images.csv"))
     interrupted: KeyboardInterrupt | None = None
     if plots is not None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
+from testbed.run.outputs import replace_atomically
 from testbed.sweep.spec import Sweep, toml_literal
 
 __all__ = [
@@ -140,23 +141,21 @@ def append_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, fsync, and rename it over ``path``.
+    """Write ``text`` to a new temporary file beside ``path``, fsync, and rename it over
+    ``path`` (:func:`~testbed.run.outputs.replace_atomically`).
 
     Raises:
         OSError: the write failed (a full disk): ``filename`` is ``path``, and the temporary
             file is removed.
     """
-    tmp = path.with_name(path.name + ".tmp")
-    try:
+
+    def write(tmp: Path) -> None:
         with tmp.open("w", encoding="utf-8", newline="") as handle:
             handle.write(text)
             handle.flush()
             os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except OSError as err:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise OSError(err.errno, err.strerror, str(path)) from None
+
+    replace_atomically(write, path)
 
 
 def _cell(value: Any) -> str:

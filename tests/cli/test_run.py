@@ -227,3 +227,25 @@ def test_a_capsized_vehicle_is_said_in_the_summary(
     standard = json.loads((tmp_path / "std" / "metrics.json").read_text())["max_tilt_deg"]
     assert standard["capsized_s"] is None and standard["roll"] < 90.0
     assert "warning" not in capsys.readouterr().out
+
+
+def test_results_are_not_written_through_a_planted_link(tmp_path: Path) -> None:
+    """A link planted at the old fixed temporary name (``.tmp-events.csv``) in a results folder
+    another user can write: the run writes its own new temporary files, the link's target is
+    untouched, and the results are regular files with the usual mode (0666 less the umask)."""
+    import os
+    import stat
+
+    out, victim = tmp_path / "out", tmp_path / "victim.txt"
+    out.mkdir()
+    victim.write_text("keep me")
+    for name in ("events.csv", "series.csv", "metrics.json"):
+        (out / f".tmp-{name}").symlink_to(victim)
+    argv = ["run", "s100-teleop-v1", "--set", "duration_s=12", "--no-plots", "--force"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert victim.read_text() == "keep me"
+    mask = os.umask(0)
+    os.umask(mask)
+    for name in ("events.csv", "series.csv", "metrics.json"):
+        info = (out / name).lstat()
+        assert stat.S_ISREG(info.st_mode) and stat.S_IMODE(info.st_mode) == 0o666 & ~mask
