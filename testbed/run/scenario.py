@@ -155,7 +155,7 @@ class Scenario:
 
     def __post_init__(self) -> None:
         check(
-            ID_PATTERN.match(self.id) is not None,
+            ID_PATTERN.fullmatch(self.id) is not None,  # `$` alone lets a final newline in
             "id",
             f"must match {ID_PATTERN.pattern} (e.g. 's100-teleop-v1'), got {self.id!r}",
         )

@@ -143,7 +143,7 @@ class _SweepFile:
 
         check(self.schema == SCHEMA_VERSION, "schema", f"unsupported version {self.schema}")
         check(  # it names the default results folder, sweeps/<id>/
-            ID_PATTERN.match(self.id) is not None,
+            ID_PATTERN.fullmatch(self.id) is not None,  # `$` alone lets a final newline in
             "id",
             f"must match {ID_PATTERN.pattern} (e.g. 'ber-vs-lag-v1'), got {self.id!r}",
         )

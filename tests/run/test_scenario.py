@@ -435,6 +435,7 @@ def test_ipg_policies() -> None:
         ("metrics.sample_rate_hz=0", "--set: metrics.sample_rate_hz: must be in [0.001, 1000] Hz"),
         ("metrics.settle_s=200", "--set: metrics.settle_s: must be < duration_s"),
         ("id=Bad_Id", "--set: id: must match"),
+        ('id="evil-v1\\n"', "--set: id: must match"),  # a newline after the version
         (
             "faults.thrusters=[{t_s=200, thruster='VerticalLeft', mode='dead'}]",
             "--set: faults.thrusters[0].t_s: must be < duration_s",
