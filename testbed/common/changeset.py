@@ -412,6 +412,7 @@ class ChangeSetSender:
         "_side",
         "_side_code",
         "_since",
+        "_snapshot_tick",
         "_world",
     )
 
@@ -433,6 +434,7 @@ class ChangeSetSender:
             if entry.owner is side:
                 self._codec.check_fits(entry)
         self._since = 0
+        self._snapshot_tick = 0
         self._sequence = 0
         self._side_code = _SIDE_CODES[side]
         self._owned: list[Registration] = []
@@ -470,9 +472,16 @@ class ChangeSetSender:
         """Payloads carrying the full owned state, for a new peer or a periodic resync.
 
         Also repeats the despawns and removals still in the world's removal log, so a resync
-        clears mirrors whose despawn was lost. Does not move the poll mark.
+        clears mirrors whose despawn was lost. Does not move the poll mark. Then forgets the
+        removals made before the previous snapshot (and already polled): each has gone out in
+        a poll and in at least one snapshot since, so the log stays bounded by what two
+        snapshot periods remove (a peer churning mirrors grew it by two rows a cycle, forever).
         """
-        return self._emit(replicated_entries(self._world, 0, self._owned_types()))
+        world = self._world
+        payloads = self._emit(replicated_entries(world, 0, self._owned_types()))
+        world.trim_removals(min(self._snapshot_tick, self._since))
+        self._snapshot_tick = world.tick
+        return payloads
 
     def _owned_types(self) -> list[Registration]:
         """The registered types this side owns, in type-id order (remade if the registry grew:
