@@ -218,7 +218,13 @@ class VehicleEndpoint:
     # ------------------------------------------------------------------------ receive
 
     def receive(
-        self, channel: Channel, data: bytes, now_s: float, arrived_s: float | None = None
+        self,
+        channel: Channel,
+        data: bytes,
+        now_s: float,
+        arrived_s: float | None = None,
+        *,
+        end: bool = False,
     ) -> int:
         """Parse ``data`` from ``channel`` and act on every message in it.
 
@@ -228,11 +234,14 @@ class VehicleEndpoint:
             now_s: the world's time [s].
             arrived_s: when the bytes arrived, on the world's clock [s] (the sample time of the
                 pilot input they carry); default ``now_s``.
+            end: ``data`` ends a datagram or a client's stream
+                (:attr:`~testbed.hil.Received.end`): a packet still incomplete is dropped and
+                counted (``truncated``), not continued by the next call.
 
         Returns:
             Pilot-input packets accepted from ``data``.
         """
-        decoded = channel.wire.decode(data)
+        decoded = channel.wire.decode(data, end)
         self.rejected.update(decoded.bad)
         before = self.pilot_inputs
         arrived = now_s if arrived_s is None else arrived_s

@@ -3,6 +3,13 @@
 A link's reader thread queues every datagram or read as a :class:`~testbed.hil.Received`
 (bytes and :func:`time.perf_counter_ns` when the read returned) on :attr:`inbox`; the real-time
 run drains it from its own process (nothing calls into simpy from a reader thread).
+
+Packet boundaries (:attr:`~testbed.hil.Received.end`): each UDP datagram ends a packet, so the
+decoder never joins a stray or truncated datagram with the next one (a stray start byte would
+otherwise swallow the ≈ 265 B behind it); on ``tcpin`` the end of a client's stream (it hung up,
+or a new client replaced it) is an empty read with ``end``, so the next client starts with no
+piece of the old one's packet. A serial line ends a packet when it goes idle
+(:class:`~testbed.hil.RawAdapter`).
 :meth:`send` is called from the run's thread and never blocks for long (UDP ``sendto``; TCP with
 a short timeout; serial through :class:`~testbed.hil.SerialTransport`'s writer thread).
 
@@ -12,17 +19,20 @@ URLs (MAVProxy's and ArduPilot SITL's words):
   back from it only (SITL's ``--out``; the default, ``udpout:127.0.0.1:14550``, is where
   QGroundControl and MAVProxy listen);
 * ``udpin:HOST:PORT`` — listen on HOST:PORT, answer the last sender;
-* ``tcpin:HOST:PORT`` — listen for one TCP client at a time (a new one replaces the old);
+* ``tcpin:HOST:PORT`` — listen for one TCP client at a time (a new one replaces the old; one
+  thread accepts and reads);
 * ``serial:PORT[,BAUD]`` or a pyserial URL (``/dev/ttyUSB0``, ``socket://…``, ``loop://``) —
   115200 baud by default.
 
-Addresses bind to 127.0.0.1 unless the URL names another host. Bad URLs raise ``ValueError``;
+Addresses bind to 127.0.0.1 unless the URL names another host (an IPv6 one, e.g. ``::1``,
+opens an IPv6 socket). Bad URLs raise ``ValueError``;
 ports that cannot be opened raise ``OSError`` (the CLI turns both into one line).
 """
 
 from __future__ import annotations
 
 import queue
+import select
 import socket
 import threading
 import time
@@ -158,6 +168,7 @@ class _Counted:
         self.packets_in = 0
         self.packets_out = 0
         self.dropped = 0
+        self._end_pending = False
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
 
@@ -166,14 +177,28 @@ class _Counted:
         thread.start()
         self._threads.append(thread)
 
-    def _queue(self, data: bytes) -> None:
+    def _queue(self, data: bytes, end: bool = False) -> None:
+        if self._end_pending and not self._mark_end():
+            self.inbox_full += 1  # the end of the last stream first: this read cannot follow it
+            return
         try:
-            self.inbox.put_nowait(Received(data, time.perf_counter_ns()))
+            self.inbox.put_nowait(Received(data, time.perf_counter_ns(), end))
         except queue.Full:  # a flood: counted, not kept
             self.inbox_full += 1
             return
         self.bytes_in += len(data)
         self.packets_in += 1
+
+    def _mark_end(self) -> bool:
+        """Queue the end of a stream (an empty read with ``end``); if the inbox is full, it is
+        queued before the next read instead (False)."""
+        try:
+            self.inbox.put_nowait(Received(b"", time.perf_counter_ns(), True))
+        except queue.Full:
+            self._end_pending = True
+            return False
+        self._end_pending = False
+        return True
 
     def counters(self) -> dict[str, int]:
         return {
@@ -240,7 +265,7 @@ class UdpLink(_Counted):
             if len(data) > MAX_UDP_DATAGRAM:
                 self.oversize += 1
                 continue
-            self._queue(data)
+            self._queue(data, end=True)  # a datagram is a packet boundary
 
     def send(self, data: bytes) -> bool:
         peer = self._peer
@@ -266,49 +291,62 @@ class UdpLink(_Counted):
 
 
 class TcpServerLink(_Counted):
-    """``tcpin``: listen on HOST:PORT; one client at a time, the newest wins."""
+    """``tcpin``: listen on HOST:PORT; one client at a time, the newest wins. One thread
+    accepts and reads, so what the old client sent is queued before its stream's end and the
+    new client's bytes after it."""
 
     def __init__(self, url: str, host: str, port: int) -> None:
         super().__init__(url)
-        self._server = socket.create_server((host, port), reuse_port=False)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._server = socket.create_server((host, port), family=family, reuse_port=False)
         self._server.settimeout(_READ_TIMEOUT_S)
         self.local_address = self._server.getsockname()
         self._client: socket.socket | None = None
         self._lock = threading.Lock()
         self.clients = 0
-        self._start(self._accept_loop)
+        self._start(self._serve)
 
-    def _accept_loop(self) -> None:
+    def _serve(self) -> None:
+        server = self._server
         while not self._stop.is_set():
+            client = self._client  # only this thread replaces it
+            watched = [server] if client is None else [server, client]
             try:
-                client, _ = self._server.accept()
-            except TimeoutError:
-                continue
-            except OSError:
+                readable, _, _ = select.select(watched, [], [], _READ_TIMEOUT_S)
+            except (OSError, ValueError):  # closed under us
                 return
-            client.settimeout(_READ_TIMEOUT_S)
-            with self._lock:
-                old, self._client = self._client, client
+            if client is not None and client in readable:
+                try:
+                    data = client.recv(_MAX_DATAGRAM)
+                except TimeoutError:
+                    data = None
+                except OSError:
+                    data = b""
+                if data:
+                    self._queue(data)
+                elif data is not None:  # hung up
+                    self._end_stream(client, None)
+            if server in readable:
+                try:
+                    new, _ = server.accept()
+                except TimeoutError:
+                    continue
+                except OSError:
+                    if self._stop.is_set():
+                        return
+                    continue
+                new.settimeout(_READ_TIMEOUT_S)
                 self.clients += 1
-            if old is not None:
-                old.close()
-            self._start(lambda c=client: self._read_loop(c))
+                self._end_stream(self._client, new)
 
-    def _read_loop(self, client: socket.socket) -> None:
-        while not self._stop.is_set():
-            try:
-                data = client.recv(_MAX_DATAGRAM)
-            except TimeoutError:
-                continue
-            except OSError:
-                break
-            if not data:
-                break
-            self._queue(data)
+    def _end_stream(self, old: socket.socket | None, new: socket.socket | None) -> None:
+        """Replace the client (``old`` hung up or ``new`` takes its place) and end the old
+        stream: a packet it left incomplete is not continued by the next client's bytes."""
         with self._lock:
-            if self._client is client:
-                self._client = None
-        client.close()
+            self._client = new
+        if old is not None:
+            old.close()
+            self._mark_end()
 
     def send(self, data: bytes) -> bool:
         with self._lock:
@@ -326,13 +364,12 @@ class TcpServerLink(_Counted):
         return True
 
     def close(self) -> None:
-        self._stop.set()
+        self._join()
         self._server.close()
         with self._lock:
             client, self._client = self._client, None
         if client is not None:
             client.close()
-        self._join()
 
 
 class SerialLink:

@@ -176,7 +176,7 @@ class GatewayNode:
         for intake, channel in zip(self.intakes, self.channels, strict=True):
             for received in intake.take():
                 arrived_s = now_s - max(0.0, (start - received.read_ns) * 1e-9)
-                if endpoint.receive(channel, received.data, now_s, arrived_s):
+                if endpoint.receive(channel, received.data, now_s, arrived_s, end=received.end):
                     command = station.latest_command()
                     if command is not None:
                         self.read_ns[command.sampled_s] = received.read_ns

@@ -182,7 +182,7 @@ class MavlinkVehicleNode:
             for received in intake.take():
                 age_s = max(0.0, (start - received.read_ns) * 1e-9)
                 arrived_s = now - age_s
-                if self.endpoint.receive(channel, received.data, now, arrived_s):
+                if self.endpoint.receive(channel, received.data, now, arrived_s, end=received.end):
                     reads.append(received.read_ns)
                     self.recorder.command_updates.append((now, arrived_s))
 
