@@ -8,8 +8,8 @@ Packet boundaries (:attr:`~testbed.hil.Received.end`): each UDP datagram ends a 
 decoder never joins a stray or truncated datagram with the next one (a stray start byte would
 otherwise swallow the ≈ 265 B behind it); on ``tcpin`` the end of a client's stream (it hung up,
 or a new client replaced it) is an empty read with ``end``, so the next client starts with no
-piece of the old one's packet. A serial line ends a packet when it goes idle
-(:class:`~testbed.hil.RawAdapter`).
+piece of the old one's packet. A serial line is a plain stream with no boundaries (MAVLink
+frames itself, and a telemetry radio delivers a packet in bursts with gaps between them).
 :meth:`send` is called from the run's thread and never blocks for long (UDP ``sendto``; TCP with
 a short timeout; serial through :class:`~testbed.hil.SerialTransport`'s writer thread).
 
@@ -38,7 +38,7 @@ import threading
 import time
 from typing import Any, Protocol
 
-from testbed.hil import BAUD_RANGE, RawAdapter, Received, SerialTransport
+from testbed.hil import BAUD_RANGE, RawAdapter, Received, Segment, SerialTransport
 
 __all__ = [
     "DEFAULT_BAUD",
@@ -372,13 +372,21 @@ class TcpServerLink(_Counted):
             client.close()
 
 
+class _StreamAdapter(RawAdapter):
+    """:class:`~testbed.hil.RawAdapter` whose idle line ends nothing: a MAVLink stream."""
+
+    def idle(self) -> list[Segment]:
+        """Nothing: a pause on the line (a radio's burst gap) is no packet boundary."""
+        return []
+
+
 class SerialLink:
     """A serial port or pyserial URL through :class:`~testbed.hil.SerialTransport` (a
-    transparent adapter: MAVLink frames itself)."""
+    transparent adapter: MAVLink frames itself; no packet ends at a pause)."""
 
     def __init__(self, url: str, port: str, baudrate: int) -> None:
         self.url = url
-        self.transport = SerialTransport(port, RawAdapter(), baudrate=baudrate)
+        self.transport = SerialTransport(port, _StreamAdapter(), baudrate=baudrate)
         self.inbox = self.transport.inbox
 
     def send(self, data: bytes) -> bool:

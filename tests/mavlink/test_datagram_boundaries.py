@@ -173,3 +173,24 @@ def test_tcpin_on_an_ipv6_address() -> None:
             assert client.recv(16) == b"back"
     finally:
         link.close()
+
+
+def test_a_pause_on_a_serial_line_splits_no_packet() -> None:
+    """A telemetry radio delivers a packet in bursts: half a MANUAL_CONTROL, a pause well past
+    the serial transport's idle gap, then the rest (pyserial's loop:// port, a real serial
+    object we did not write). The packet arrives whole, nothing is counted truncated."""
+    from testbed.mavlink.links import open_link
+
+    link = open_link("loop://")
+    ep = endpoint()
+    channel = ep.open_channel(link.url)
+    try:
+        packet = sticks(300)
+        link.send(packet[:9])
+        time.sleep(0.2)  # the stimulus: a gap of 10 idle periods, not a bound on anything
+        link.send(packet[9:])
+        drain_until(link, ep, channel, lambda: sum(ep.received.values()) >= 1)
+        assert ep.received == {"MANUAL_CONTROL": 1}
+        assert "truncated" not in ep.rejected
+    finally:
+        link.close()
