@@ -200,8 +200,13 @@ def test_stopping_with_websockets_mid_close_is_quiet(
             assert sock.recv(12) == b"HTTP/1.1 101"  # then never read again
             socks.append(sock)
         _wait("5 clients", lambda: len(server.console.connections) == 5)
-        for i in range(20):  # states the clients never read: the server's buffers fill
-            server.hub.publish({"t": float(i), "pad": "x" * 65536})
+        protocols = list(server.server.server_state.connections)
+        assert len(protocols) == 5
+        deadline = time.monotonic() + _TIMEOUT_S
+        while not all(p.transport.get_write_buffer_size() for p in protocols):  # type: ignore[attr-defined]
+            assert time.monotonic() < deadline, "the server's send buffers never filled"
+            server.hub.publish({"t": time.monotonic(), "pad": "x" * 262144})  # never read
+            time.sleep(0.01)
         mask = os.urandom(4)
         payload = struct.pack(">H", 1000)
         frame = bytes([0x88, 0x80 | len(payload)]) + mask
