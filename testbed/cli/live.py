@@ -141,7 +141,7 @@ def _run_live(args: argparse.Namespace) -> int:
         except BaseException:
             sock.close()
             raise
-        server = ConsoleServer(hub, session.pilot, sock)
+        server = ConsoleServer(hub, session.pilot, sock, host=args.host)
         server.start()
         print(f"testbed live: console on {server.url}", flush=True)
         try:

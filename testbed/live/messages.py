@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "MAX_CONNECTIONS",
     "MAX_MESSAGE_BYTES",
     "MODES",
     "Arm",
@@ -49,10 +50,13 @@ __all__ = [
     "SetMode",
     "StickInput",
     "parse_message",
+    "too_long",
 ]
 
 MAX_MESSAGE_BYTES = 4096
-"""Largest message accepted [B]; longer ones are rejected unread."""
+"""Largest message accepted [B of UTF-8]; longer ones are rejected unread."""
+MAX_CONNECTIONS = 32
+"""WebSockets served at once (the pilot and viewers); more are refused 403, counted."""
 MODES = ("manual", "stabilize", "depth_hold")
 """Control modes the browser may ask for."""
 
@@ -281,9 +285,18 @@ def _typed(obj: dict[str, Any]) -> Message | Rejected:
     return Rejected("malformed", f"unknown message type {str(kind)[:32]!r}")
 
 
+def too_long(text: str | bytes) -> bool:
+    """Whether ``text`` is over :data:`MAX_MESSAGE_BYTES` in bytes (UTF-8), not characters."""
+    if len(text) > MAX_MESSAGE_BYTES:
+        return True
+    if isinstance(text, bytes) or 4 * len(text) <= MAX_MESSAGE_BYTES:
+        return False  # at most 4 UTF-8 bytes a character
+    return len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES
+
+
 def parse_message(text: str | bytes) -> Message | Rejected:
     """One browser message → its value, or :class:`Rejected` (never raises)."""
-    if len(text) > MAX_MESSAGE_BYTES:
+    if too_long(text):
         return Rejected("malformed", f"longer than {MAX_MESSAGE_BYTES} B")
     try:
         obj = json.loads(text)
@@ -306,6 +319,11 @@ class InputCounters:
         not_pilot: control messages from a read-only viewer, ignored.
         bad_requests: HTTP requests the server could not parse (garbled bytes on the socket,
             answered 400 Bad Request) or that asked for an upgrade other than WebSocket.
+        foreign_host: HTTP requests and WebSockets whose ``Host`` is not one of the console's
+            own names (DNS rebinding), answered 403.
+        foreign_origin: WebSockets opened by a page of another origin (cross-site WebSocket
+            hijacking), answered 403.
+        too_many: WebSockets beyond :data:`MAX_CONNECTIONS`, answered 403.
     """
 
     accepted: int = 0
@@ -314,6 +332,9 @@ class InputCounters:
     flooded: int = 0
     not_pilot: int = 0
     bad_requests: int = 0
+    foreign_host: int = 0
+    foreign_origin: int = 0
+    too_many: int = 0
 
     def count(self, parsed: Message | Rejected) -> None:
         """Count a parse result."""
@@ -334,6 +355,9 @@ class InputCounters:
             "flooded": self.flooded,
             "not_pilot": self.not_pilot,
             "bad_requests": self.bad_requests,
+            "foreign_host": self.foreign_host,
+            "foreign_origin": self.foreign_origin,
+            "too_many": self.too_many,
         }
 
 

@@ -16,6 +16,21 @@ Bytes that are not HTTP at all (a garbled request line, a malformed chunked body
 that arrives while the app answers) and counted ``bad_requests``; the warning uvicorn would log
 for each is not printed, so a flood of them cannot fill the pilot's terminal.
 
+Only the console's own pages may use it (:class:`_Guard`, in front of every route): a request
+or WebSocket whose ``Host`` is not one of the console's own names (loopback names, the
+``--host`` it was bound to; see :func:`own_names`) is answered 403 and counted
+``foreign_host`` — a DNS-rebinding page names its own domain there. A WebSocket whose
+``Origin`` is not the console's own (``http://`` + its ``Host``) is answered 403 and counted
+``foreign_origin`` — a page of another site (or another port) cannot take the pilot's seat.
+A WebSocket without ``Origin`` is served: browsers always send one, so it is a script or a
+tool (no cross-site risk: it could open the socket anyway). At most
+:data:`~testbed.live.messages.MAX_CONNECTIONS` WebSockets at once; more are answered 403,
+counted ``too_many``.
+
+Ending is quiet whatever the clients do: a WebSocket whose close is already under way, or whose
+peer stopped reading, is dropped (uvicorn's own shutdown raised ``InvalidState`` for the first
+and waited forever for the second), and uvicorn's error log is dropped once stopping.
+
 Browser input is data: each text frame is size-checked, rate-limited
 (:class:`~testbed.live.messages.RateLimit`), parsed (:func:`~testbed.live.messages.parse_message`)
 and counted; sticks go to the :class:`~testbed.operator.live_pilot.LivePilot`'s queue, other
@@ -26,11 +41,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import json
 import logging
 import socket
+import sys
 import threading
 import time
+from collections.abc import Iterable
 from importlib import resources
 from typing import Any
 
@@ -39,10 +57,13 @@ from starlette.applications import Starlette
 from starlette.requests import Request
 from starlette.responses import HTMLResponse, JSONResponse, Response
 from starlette.routing import Route, WebSocketRoute
+from starlette.types import ASGIApp, Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from testbed.live.hub import Hub
 from testbed.live.messages import (
+    MAX_CONNECTIONS,
     MAX_MESSAGE_BYTES,
     InputCounters,
     LatencyReport,
@@ -51,10 +72,11 @@ from testbed.live.messages import (
     Rejected,
     StickInput,
     parse_message,
+    too_long,
 )
 from testbed.operator.live_pilot import LivePilot
 
-__all__ = ["ConsoleServer", "bind", "build_app"]
+__all__ = ["ConsoleServer", "bind", "build_app", "own_names"]
 
 _CENTRE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 _UVICORN_LOG = "uvicorn.error"
@@ -65,18 +87,126 @@ _BAD_REQUEST_WARNINGS = frozenset(
 """What uvicorn's HTTP protocol logs for a request it answers 400 (or cannot upgrade)."""
 
 
-class _BadRequestCounter(logging.Filter):
-    """Counts uvicorn's bad-request warnings into ``counters.bad_requests`` and drops them."""
+_GRACE_S = 2
+"""How long the server waits for its connections to end when stopping [s]."""
+_LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "[::1]"})
+_ANY_ADDRESS = frozenset({"", "0.0.0.0", "::", "[::]"})
+
+
+class _UvicornLog(logging.Filter):
+    """Counts uvicorn's bad-request warnings into ``counters.bad_requests`` and drops them;
+    drops its errors once the server is stopping (a connection cut mid-close is not news)."""
 
     def __init__(self, counters: InputCounters) -> None:
         super().__init__()
         self._counters = counters
+        self.stopping = False
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.msg in _BAD_REQUEST_WARNINGS:
             self._counters.bad_requests += 1
             return False
-        return True
+        return not (self.stopping and record.levelno >= logging.ERROR)
+
+
+class _WebSocketProtocol(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol, ending quietly: at shutdown a connection whose close is
+    already under way (uvicorn raised ``InvalidState``) or whose peer stopped reading (uvicorn
+    waited for the flush forever) is dropped."""
+
+    def shutdown(self) -> None:
+        try:
+            super().shutdown()
+        except Exception:  # the peer's close is under way: nothing more to say
+            self.transport.abort()
+            return
+        if self.transport.get_write_buffer_size():
+            self.transport.abort()
+
+
+def _host_name(host: str) -> str:
+    """The name in a ``Host`` header (lower case, IPv6 in brackets), without the port."""
+    host = host.strip().lower()
+    if host.startswith("["):
+        return host[: host.find("]") + 1] if "]" in host else host
+    return host.rpartition(":")[0] if host.count(":") == 1 else host
+
+
+def _ip_literal(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name.strip("[]"))
+    except ValueError:
+        return False
+    return True
+
+
+def own_names(host: str) -> frozenset[str]:
+    """The names the console answers to when bound to ``host``: the loopback names and
+    ``host`` itself; for an any-address bind (``0.0.0.0``, ``::``) also this machine's host
+    name (any IP literal is accepted too: see :class:`_Guard`)."""
+    names = set(_LOOPBACK_NAMES)
+    name = host.strip().lower()
+    if name in _ANY_ADDRESS:
+        names.add("*ip")
+        names.update(n.lower() for n in (socket.gethostname(), socket.getfqdn()) if n)
+    elif ":" in name and not name.startswith("["):
+        names.add(f"[{name}]")
+    else:
+        names.add(name)
+    return frozenset(names)
+
+
+class _Guard:
+    """ASGI middleware: refuses (403, counted) a ``Host`` that is not one of ``names`` and a
+    WebSocket whose ``Origin`` is not ``http://`` + its ``Host``.
+
+    A ``Host`` naming an IP address is accepted when bound to any address (``"*ip"`` in
+    ``names``): a browser that sent it reached this socket at that address, so its page's
+    origin is the console's own — DNS rebinding needs a domain name. The port is not checked
+    (an SSH tunnel changes it); the origin check compares it.
+    """
+
+    def __init__(self, app: ASGIApp, names: Iterable[str], counters: InputCounters) -> None:
+        self.app = app
+        self.names = frozenset(names)
+        self.counters = counters
+
+    def _own(self, host: str) -> bool:
+        name = _host_name(host)
+        return name in self.names or ("*ip" in self.names and _ip_literal(name))
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        headers = {k: v for k, v in scope["headers"] if k in (b"host", b"origin")}
+        host = headers.get(b"host", b"").decode("latin-1")
+        if not self._own(host):
+            self.counters.foreign_host += 1
+            await self._refuse(scope, send, "not this console's host name")
+            return
+        origin = headers.get(b"origin")
+        own_origin = f"http://{host.strip().lower()}"
+        if (
+            scope["type"] == "websocket"
+            and origin is not None
+            and origin.decode("latin-1").strip().lower() != own_origin
+        ):
+            self.counters.foreign_origin += 1
+            await self._refuse(scope, send, "not this console's origin")
+            return
+        await self.app(scope, receive, send)
+
+    @staticmethod
+    async def _refuse(scope: Scope, send: Send, why: str) -> None:
+        if scope["type"] == "websocket":
+            await send({"type": "websocket.close", "code": 1008})  # before accept: HTTP 403
+            return
+        body = f"403 Forbidden: {why}\n".encode()
+        headers = [(b"content-type", b"text/plain; charset=utf-8")]
+        headers.append((b"content-length", str(len(body)).encode()))
+        await send({"type": "http.response.start", "status": 403, "headers": headers})
+        await send({"type": "http.response.body", "body": body})
 
 
 def _static(name: str) -> str:
@@ -126,7 +256,7 @@ class _Console:
         if not conn.limit.allow():
             counters.flooded += 1
             return None
-        if len(text) > MAX_MESSAGE_BYTES:
+        if too_long(text):
             counters.malformed += 1
             return None
         parsed = parse_message(text)
@@ -165,8 +295,11 @@ async def _sender(console: _Console, conn: _Connection) -> None:
         await conn.websocket.send_text(json.dumps(document))
 
 
-def build_app(hub: Hub, pilot: LivePilot) -> tuple[Starlette, _Console]:
-    """The Starlette app serving the console for ``hub`` and ``pilot``."""
+def build_app(
+    hub: Hub, pilot: LivePilot, names: Iterable[str] = _LOOPBACK_NAMES
+) -> tuple[ASGIApp, _Console]:
+    """The app serving the console for ``hub`` and ``pilot`` to the host ``names``
+    (:func:`own_names`)."""
     console = _Console(hub, pilot)
     page, script = _static("index.html"), _static("console.js")
 
@@ -184,14 +317,19 @@ def build_app(hub: Hub, pilot: LivePilot) -> tuple[Starlette, _Console]:
         return JSONResponse({"state": latest, "viewers": len(console.connections)})
 
     async def ws(websocket: WebSocket) -> None:
-        await websocket.accept()
+        if len(console.connections) >= MAX_CONNECTIONS:
+            hub.counters.too_many += 1
+            await websocket.close(code=1013)  # before accept: HTTP 403
+            return
         conn = _Connection(websocket)
         console.seat(conn)
-        console.connections.append(conn)
+        console.connections.append(conn)  # before accepting: the cap holds meanwhile
         hub.viewers = len(console.connections)
         conn.wake.set()
-        sender = asyncio.create_task(_sender(console, conn))
+        sender: asyncio.Task[None] | None = None
         try:
+            await websocket.accept()
+            sender = asyncio.create_task(_sender(console, conn))
             while True:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
@@ -203,12 +341,13 @@ def build_app(hub: Hub, pilot: LivePilot) -> tuple[Starlette, _Console]:
                 answer = console.receive(conn, text)
                 if answer is not None:
                     await websocket.send_text(json.dumps(answer))
-        except (WebSocketDisconnect, RuntimeError):
+        except (WebSocketDisconnect, RuntimeError, OSError):
             pass
         finally:
-            sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await sender
+            if sender is not None:
+                sender.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await sender
             console.leave(conn)
 
     routes = [
@@ -217,7 +356,7 @@ def build_app(hub: Hub, pilot: LivePilot) -> tuple[Starlette, _Console]:
         Route("/state", state),
         WebSocketRoute("/ws", ws),
     ]
-    return Starlette(routes=routes), console
+    return _Guard(Starlette(routes=routes), names, hub.counters), console
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -246,21 +385,29 @@ class ConsoleServer:
         hub: the bridge to the session.
         pilot: the live pilot.
         sock: the listening socket (:func:`bind`).
+        host: the address ``sock`` was bound to as the user gave it (``--host``), one of the
+            names the console answers to (:func:`own_names`); None: the socket's address.
     """
 
-    def __init__(self, hub: Hub, pilot: LivePilot, sock: socket.socket) -> None:
+    def __init__(
+        self, hub: Hub, pilot: LivePilot, sock: socket.socket, host: str | None = None
+    ) -> None:
         self.hub = hub
         self.sock = sock
-        self.app, self.console = build_app(hub, pilot)
+        bound = str(sock.getsockname()[0])
+        names = own_names(bound) | (own_names(host) if host is not None else frozenset())
+        self.app, self.console = build_app(hub, pilot, names)
         config = uvicorn.Config(
             self.app,
             http="httptools",
+            ws=_WebSocketProtocol,
             log_level="warning",
             lifespan="off",
             ws_max_size=16 * MAX_MESSAGE_BYTES,
+            timeout_graceful_shutdown=_GRACE_S,
         )
         self.server = uvicorn.Server(config)
-        self._bad_requests = _BadRequestCounter(hub.counters)
+        self._bad_requests = _UvicornLog(hub.counters)
         self._thread = threading.Thread(target=self._serve, name="live-console", daemon=True)
 
     @property
@@ -292,10 +439,15 @@ class ConsoleServer:
             finally:
                 task.cancel()
 
-        asyncio.run(main())
+        try:
+            asyncio.run(main())
+        except Exception as err:  # never a thread traceback; one line unless we were stopping
+            if not self.server.should_exit:
+                print(f"testbed live: the console's server stopped: {err!r}", file=sys.stderr)
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Stop serving and wait up to ``timeout_s`` [s] for the thread."""
+        self._bad_requests.stopping = True
         self.server.should_exit = True
         self._thread.join(timeout_s)
         self.sock.close()

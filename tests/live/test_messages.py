@@ -142,7 +142,19 @@ def test_counters_sort_rejections() -> None:
         "flooded": 0,
         "not_pilot": 0,
         "bad_requests": 0,
+        "foreign_host": 0,
+        "foreign_origin": 0,
+        "too_many": 0,
     }
+
+
+def test_the_size_limit_is_in_bytes_not_characters() -> None:
+    # 1,400 three-byte characters: 1,4xx characters but over 4,096 bytes of UTF-8
+    text = json.dumps({"t": "ping", "c": 1, "pad": "€" * 1400}, ensure_ascii=False)
+    assert len(text) < MAX_MESSAGE_BYTES < len(text.encode())
+    assert parse_message(text) == Rejected("malformed", f"longer than {MAX_MESSAGE_BYTES} B")
+    fits = json.dumps({"t": "ping", "c": 1, "pad": "€" * 1000}, ensure_ascii=False)
+    assert len(fits.encode()) <= MAX_MESSAGE_BYTES and not isinstance(parse_message(fits), Rejected)
 
 
 def test_rate_limit_sheds_a_flood_and_refills() -> None:
