@@ -9,7 +9,9 @@ security review's payloads dived without limit (``DepthSetpoint(inf)``), climbed
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -41,6 +43,20 @@ def payload(sequence: int, *values: object) -> bytes:
     return encoded
 
 
+@contextlib.contextmanager
+def holding_depth() -> Iterator[tuple[Vehicle, ChangeSetReceiver]]:
+    """A vehicle armed in depth hold through its change-set receiver, 1 s in."""
+    vehicle = Vehicle(VehicleConfig(), np.random.default_rng(1))
+    try:
+        receiver = ChangeSetReceiver(vehicle.world, REGISTRY, Side.VEHICLE)
+        start = (ArmRequest(True, 1), ModeRequest(ControlMode.DEPTH_HOLD))
+        receiver.apply(payload(0, *start, MovementCommand(1, 0.0, (0.0,) * 6)))
+        vehicle.advance(1.0)
+        yield vehicle, receiver
+    finally:
+        vehicle.close()
+
+
 @pytest.mark.parametrize(
     "setpoint",
     [
@@ -56,12 +72,7 @@ def payload(sequence: int, *values: object) -> bytes:
 def test_a_setpoint_no_operator_could_mean_is_counted_and_changes_nothing(
     setpoint: object,
 ) -> None:
-    vehicle = Vehicle(VehicleConfig(), np.random.default_rng(1))
-    try:
-        receiver = ChangeSetReceiver(vehicle.world, REGISTRY, Side.VEHICLE)
-        start = (ArmRequest(True, 1), ModeRequest(ControlMode.DEPTH_HOLD))
-        receiver.apply(payload(0, *start, MovementCommand(1, 0.0, (0.0,) * 6)))
-        vehicle.advance(1.0)
+    with holding_depth() as (vehicle, receiver):
         before = vehicle.world.get(vehicle.entity, ControlTargets)
         result = receiver.apply(payload(1, setpoint))
         assert result.status is ApplyStatus.APPLIED  # well-formed: the codec takes it
@@ -71,22 +82,13 @@ def test_a_setpoint_no_operator_could_mean_is_counted_and_changes_nothing(
         assert before is not None and after == before
         depth = vehicle.state().position_ned[2]
         assert abs(depth - vehicle.config.start_position_ned_m[2]) < 0.1  # held where it was
-    finally:
-        vehicle.close()
 
 
 def test_the_deepest_setpoint_taken_is_the_worlds_extent() -> None:
     """The bound itself is a depth the vehicle takes (its target moves there)."""
-    vehicle = Vehicle(VehicleConfig(), np.random.default_rng(1))
-    try:
-        receiver = ChangeSetReceiver(vehicle.world, REGISTRY, Side.VEHICLE)
-        start = (ArmRequest(True, 1), ModeRequest(ControlMode.DEPTH_HOLD))
-        receiver.apply(payload(0, *start, MovementCommand(1, 0.0, (0.0,) * 6)))
-        vehicle.advance(1.0)
+    with holding_depth() as (vehicle, receiver):
         receiver.apply(payload(1, DepthSetpoint(MAX_SETPOINT_DEPTH_M)))
         vehicle.advance(1.1)
         targets = vehicle.world.get(vehicle.entity, ControlTargets)
         assert targets is not None and targets.depth_m == MAX_SETPOINT_DEPTH_M
         assert vehicle.world.resource(Controllers).ignored_setpoints == 0
-    finally:
-        vehicle.close()
