@@ -497,7 +497,10 @@ def ingest_commands(world: World) -> None:
         ctl.last_contact_s = now  # a goal order (the loops and the tree read it themselves)
     for _, cmd in world.query1(MovementCommand, changed=True):
         status = world.get(vehicle, CommandStatus)
-        if status is None or cmd.seq > status.seq:
+        # newer, or the first after a silence past the hold timeout: a restarted sender, or a
+        # sequence number a corrupted payload pushed far ahead (2**63 − 1 locked the pilot out)
+        resync = status is not None and now - status.received_s > ctl.failsafe.hold_after_s
+        if status is None or cmd.seq > status.seq or resync:
             world.set(vehicle, CommandStatus(cmd.seq, now, now - cmd.sampled_s))
             ctl.sticks = cmd.sticks
             ctl.last_contact_s = now

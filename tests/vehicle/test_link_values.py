@@ -92,3 +92,28 @@ def test_the_deepest_setpoint_taken_is_the_worlds_extent() -> None:
         targets = vehicle.world.get(vehicle.entity, ControlTargets)
         assert targets is not None and targets.depth_m == MAX_SETPOINT_DEPTH_M
         assert vehicle.world.resource(Controllers).ignored_setpoints == 0
+
+
+def test_a_sequence_number_pushed_far_ahead_locks_the_pilot_out_for_one_hold_timeout() -> None:
+    """A command whose sequence number a corrupted payload set to 2**63 − 1: later commands
+    (seq 3, 4, …) are older by number, so the vehicle ignores them and holds; once no command
+    has been accepted for the hold timeout (1 s), the next one is taken whatever its number
+    (it used to lock the pilot out for good)."""
+    from testbed.common.components import CommandStatus
+
+    with holding_depth() as (vehicle, receiver):
+        receiver.apply(payload(1, MovementCommand(2**63 - 1, 1.0, (0.0,) * 6)))
+        vehicle.advance(1.1)
+        taken = []
+        for k in range(20):  # the operator's own commands at 10 Hz: surge stick 0.5
+            receiver.apply(
+                payload(2 + k, MovementCommand(3 + k, 1.1 + 0.1 * k, (0.5,) + (0.0,) * 5))
+            )
+            vehicle.advance(1.2 + 0.1 * k)
+            status = vehicle.world.get(vehicle.entity, CommandStatus)
+            assert status is not None
+            taken.append(status.seq)
+        assert taken[0] == 2**63 - 1  # at first ignored: older by number
+        first = next(k for k, seq in enumerate(taken) if seq != 2**63 - 1)
+        assert 0.9 <= 0.1 * first + 0.1 <= 1.2  # taken one hold timeout after the last accepted
+        assert taken[-1] == 3 + 19  # and every one after it
