@@ -215,6 +215,7 @@ def _tpik_input(
     ee_position, ee_rotation, jacobian = uvms_kinematics(arm.model, q, position, quaternion)
     ahead = now - target.time_s
     velocity = np.asarray(target.velocity_ned_m_s, dtype=float)
+    posture = np.asarray(arm.model.initial_q_rad, dtype=float)  # the start pose
     return TpikInput(
         q=q,
         position_ned_m=position,
@@ -226,4 +227,5 @@ def _tpik_input(
         target_rotation_ned=None,
         target_yaw_rad=target.yaw_rad,
         target_velocity_ned_m_s=velocity,
+        posture_q_rad=posture,
     )

@@ -24,7 +24,12 @@ Task order (highest first), as built by :func:`solve_uvms`:
 2. vehicle "level": roll, pitch → 0 (``level_gain``; ours, see below);
 3. end effector: position (3-D, NED) or, with ``ee_orientation`` and a target rotation, the
    6-D pose (Angler main priority 2, 6-D pose; Angler hardware adds a 3-D position task);
-4. vehicle yaw → target (``yaw_gain``; Angler priority 3), skipped if no target yaw.
+4. vehicle yaw → target (``yaw_gain``; Angler priority 3), skipped if no target yaw;
+5. arm posture: every joint → its start angle (``posture_gain``; off unless set, as in Angler's
+   configurations; Angler's task library has it as ``ManipulatorJointConfigurationTask``): the
+   lowest task, it only uses what the others leave free, so it does not change their outputs;
+   without it the minimum-norm solution lets the joints drift on long missions
+   (docs/manipulator.md).
 
 Our additions to Angler (also stated in ``data/tpik.toml``):
 
@@ -165,6 +170,8 @@ class TpikConfig:
             input has a target rotation.
         orientation_gain: gain of the orientation rows of the pose task [1/s].
         yaw_gain: gain of the vehicle yaw task [1/s], or None for no yaw task.
+        posture_gain: gain of the arm posture task (joints → their start angles) [1/s], or
+            None for none (the default, as Angler's configurations).
         max_linear_m_s: limit on each of u, v, w [m/s].
         max_angular_rad_s: limit on each of p, q, r [rad/s].
         joint_velocity_limits: limit per arm joint [rad/s]; its length is the joint count.
@@ -183,10 +190,11 @@ class TpikConfig:
     max_angular_rad_s: float
     joint_velocity_limits: tuple[float, ...]
     singular_threshold: float
+    posture_gain: float | None = None
 
     def __post_init__(self) -> None:
         check_range(self.rate_hz, "rate_hz", 0.0, 1000.0, "Hz", low_open=True)
-        for key in ("level_gain", "yaw_gain"):
+        for key in ("level_gain", "yaw_gain", "posture_gain"):
             value = getattr(self, key)
             if value is not None:
                 check_range(value, key, 0.0, _MAX_GAIN_1_S, "1/s", low_open=True)
@@ -267,7 +275,7 @@ def _packaged_tpik_config(name: str) -> TpikConfig:
 
 def _tpik_config(table: dict[str, Any], source: str, prefix: str) -> TpikConfig:
     """Build one configuration's table; messages name ``source`` and ``prefix`` + the key."""
-    data: dict[str, Any] = {"level_gain": None, "yaw_gain": None, **table}
+    data: dict[str, Any] = {"level_gain": None, "yaw_gain": None, "posture_gain": None, **table}
     data.pop("source", None)  # free-text provenance
     return build(TpikConfig, data, source=source, prefix=prefix)
 
@@ -306,6 +314,8 @@ class TpikInput:
         target_rotation_ned: (3, 3) end-effector target orientation, or None.
         target_yaw_rad: vehicle heading target [rad], or None (no yaw task).
         target_velocity_ned_m_s: (3,) end-effector feed-forward velocity [m/s] (zeros if none).
+        posture_q_rad: (n,) the joints' posture (their start angles) [rad], or None (no
+            posture task).
     """
 
     q: FloatArray
@@ -318,6 +328,7 @@ class TpikInput:
     target_rotation_ned: FloatArray | None
     target_yaw_rad: float | None
     target_velocity_ned_m_s: FloatArray
+    posture_q_rad: FloatArray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -431,6 +442,11 @@ def solve_uvms(config: TpikConfig, state: TpikInput) -> TpikOutput:
     if config.yaw_gain is not None and state.target_yaw_rad is not None:
         yaw_error = np.array([config.yaw_gain * wrap_angle(state.target_yaw_rad - yaw)])
         fixed.append(EqualityTask("yaw", euler_rows[2:], yaw_error))
+    if config.posture_gain is not None and state.posture_q_rad is not None:
+        rows = np.zeros((n_joints, n))
+        rows[:, VEHICLE_DOF:] = np.eye(n_joints)
+        posture = np.asarray(state.posture_q_rad, dtype=float) - q
+        fixed.append(EqualityTask("posture", rows, config.posture_gain * posture))
     candidates = [
         t
         for t in config.limit_tasks

@@ -86,7 +86,8 @@ def test_an_unknown_or_missing_tpik_configuration_names_set_and_the_key(
     argv = ["run", "uvms-waypoint-v1", "--out", "out", "--set"]
     assert error_line(capsys, [*argv, "vehicle.arm.tpik=nope"]) == (
         "--set: vehicle.arm.tpik: unknown TPIK configuration 'nope' "
-        "(packaged: alpha5-heavy, alpha5-heavy-hardware; or a path to a .toml file)"
+        "(packaged: alpha5-heavy, alpha5-heavy-hardware, alpha5-heavy-posture; or a path to a "
+        ".toml file)"
     )
     assert error_line(capsys, [*argv, "vehicle.arm.tpik=mine.toml"]) == (
         f"--set: vehicle.arm.tpik: TPIK configuration file not found: {here}/mine.toml"

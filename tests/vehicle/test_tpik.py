@@ -488,3 +488,42 @@ def test_solver_output_within_limits() -> None:
 def test_limit_task_checks() -> None:
     with pytest.raises(ValueError, match="overlap"):
         JointLimitTask(0, (0.0, 1.0), (0.1, 0.9), 0.5, 0.3)
+
+
+def test_posture_task_brings_the_joints_home_and_leaves_the_higher_tasks_alone() -> None:
+    """The optional lowest task (``posture_gain``): on the test UVMS flying its end effector
+    round a 2-m square once (20 s a leg), the joints end near their start angles with it, and far
+    from them without it (the minimum-norm solution lets the arm take part of every move, and
+    nothing brings it back); and at any instant it does not change what the higher tasks get
+    (J_ee ζ and J_yaw ζ the same with and without it, before saturation)."""
+    plain = load_tpik_config()
+    home = dataclasses.replace(plain, posture_gain=0.3)
+    corners = [np.array(c) for c in ([2.5, 0, 2], [2.5, 2, 2], [0.5, 2, 2], [0.5, 0, 2])]
+    ends = {}
+    for name, config in (("plain", plain), ("home", home)):
+        state = _start(1.0)
+        for corner in corners:
+            for _ in range(round(20.0 * config.rate_hz)):
+                inp = dataclasses.replace(
+                    state.tpik_input(corner, 0.0), posture_q_rad=_start(1.0).q
+                )
+                out = solve_uvms(config, inp)
+                state = state.step(
+                    np.array([*out.vehicle_twist, *out.joint_rates]), config.period_s
+                )
+        ends[name] = float(np.abs(state.q - _start(1.0).q).max())
+        assert np.linalg.norm(state.ee()[0] - corners[-1]) < 0.01  # the mission flown either way
+    assert ends["home"] < 0.01 and ends["plain"] > 0.1
+    # priority: the posture rows only use what the higher tasks leave free
+    state = _start(1.0)
+    state = dataclasses.replace(state, q=state.q + np.array([0.3, -0.2, 0.2, 0.1]))
+    inp = dataclasses.replace(state.tpik_input(corners[0], 0.2), posture_q_rad=_start(1.0).q)
+    unsaturated = dataclasses.replace(home, max_linear_m_s=10.0, max_angular_rad_s=10.0)
+    unsaturated = dataclasses.replace(unsaturated, joint_velocity_limits=(100.0,) * 4)
+    with_it = solve_uvms(unsaturated, inp)
+    without = solve_uvms(dataclasses.replace(unsaturated, posture_gain=None), inp)
+    zeta_with = np.array([*with_it.vehicle_twist, *with_it.joint_rates])
+    zeta_without = np.array([*without.vehicle_twist, *without.joint_rates])
+    jac = inp.uvms_jacobian
+    np.testing.assert_allclose(jac[:3] @ zeta_with, jac[:3] @ zeta_without, atol=1e-9)
+    assert not np.allclose(zeta_with[6:], zeta_without[6:])  # it does move the joints
