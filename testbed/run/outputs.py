@@ -130,6 +130,17 @@ def replace_atomically(write: Callable[[Path], object], path: Path) -> Path:
     return path
 
 
+def _remove_leftovers(out_dir: Path) -> None:
+    """Remove the temporary files and folders (``.tmp-*``) a run killed while writing left in
+    ``out_dir`` (a link among them is removed, never followed)."""
+    for path in out_dir.glob(f"{_TMP_PREFIX}*"):
+        with contextlib.suppress(OSError):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+
+
 def write_json_atomic(path: Path, document: dict[str, Any]) -> Path:
     """``document`` as indented strict JSON at ``path``, by write-and-rename."""
     text = json.dumps(json_ready(document), indent=2, allow_nan=False) + "\n"
@@ -174,6 +185,7 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
             files and ``metrics.json`` (listing the plots made before it) are written.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
+    _remove_leftovers(out_dir)
     previous = _previous_files(out_dir)
     with contextlib.suppress(FileNotFoundError):
         (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
