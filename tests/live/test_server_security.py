@@ -35,6 +35,7 @@ from testbed.live.hub import Hub
 from testbed.live.messages import MAX_CONNECTIONS
 from testbed.live.server import ConsoleServer, bind, own_names
 from testbed.operator.live_pilot import LivePilot
+from tests.live.test_server_http import _exchange as exchange
 
 _TIMEOUT_S = 30.0
 """Failure bound of each wait [s]: a loaded machine answers late, never wrong."""
@@ -74,14 +75,8 @@ def _role(ws: ClientConnection) -> str:
 
 
 def _exchange(server: ConsoleServer, data: bytes) -> bytes:
-    """Send ``data``, close our side, read the whole answer."""
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=_TIMEOUT_S) as conn:
-        conn.sendall(data)
-        conn.shutdown(socket.SHUT_WR)
-        answer = b""
-        while chunk := conn.recv(4096):
-            answer += chunk
-    return answer
+    """Send ``data`` to the console, close our side, read the whole answer."""
+    return exchange(("127.0.0.1", _port(server)), data)
 
 
 def _upgrade(host: str, origin: str | None = None) -> bytes:
