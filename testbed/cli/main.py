@@ -69,24 +69,52 @@ _SIGNALLED: list[int] = []
 _PUT_OFF_IN = ("numba.", "llvmlite.")
 """Modules whose Python code an interrupt must not be raised in (see :func:`_put_off`)."""
 
+_PUT_OFF_FILES = frozenset(
+    {"<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>"}
+)
+"""Code an interrupt must not be raised in either: an import under way (see :func:`_put_off`)."""
+
+_FROM_TEXT = "<string>"
+"""The file name of code ``exec`` or ``eval`` compiled from text. Only the text's own body
+(``<module>``) is put off, not the functions it defines, and not ``python -c``'s body, the
+bottom of its stack."""
+
 _PUT_OFF_S = 0.001
 """How long an interrupt is put off at a time [s]."""
 
 
 def _put_off(signum: int, frame: FrameType | None) -> bool:
-    """Send ``signum`` again, to be handled after the numba code running now, if any is.
+    """Send ``signum`` again, to be handled after the code running now, if it is code an
+    interrupt must not be raised in.
 
-    Python runs a handler wherever the program is, also in numba's own Python code: its
-    compiler, and the callbacks its compiled kernels make (``_numba_unpickle``, each time a
-    kernel hands a new array back, as the navigation filter's did every frame). An exception raised
-    in a kernel's first callback crashes the process (a segmentation fault, seen), in a later
-    one it comes out as ``SystemError``. So while any frame of the stack is numba's, the signal
-    is sent again a moment later, from a thread of its own (sent from the handler, it would be
-    handled inside it; a ``threading.Timer`` would wait here for its thread to start), until
-    the stack is the program's own.
+    Python runs a handler wherever the program is, and in three places an exception raised
+    there does harm:
+
+    - numba's own Python code: its compiler, and the callbacks its compiled kernels make
+      (``_numba_unpickle``, each time a kernel hands a new array back, as the navigation
+      filter's did every frame). An exception raised in a kernel's first callback crashes
+      the process (a segmentation fault, seen), in a later one it comes out as
+      ``SystemError``.
+    - an import: a compiled module's initialisation may swallow it (numpy's random
+      generator, registering its classes, did: Ctrl-C was lost and ``testbed link`` ran to
+      its end), and a module left half imported stays broken.
+    - code compiled from text by ``exec`` or ``eval`` (the methods ``dataclasses`` writes, at
+      every import that declares one): CPython notes an interrupt that leaves such code as
+      unhandled, and however the program handles it, the process ends killed by SIGINT
+      instead of with its own exit code (130 after the one line, seen as -2).
+
+    So while any frame of the stack is one of those, the signal is sent again a moment later,
+    from a thread of its own (sent from the handler, it would be handled inside it; a
+    ``threading.Timer`` would wait here for its thread to start), until the stack is the
+    program's own.
     """
     while frame is not None:
-        if frame.f_globals.get("__name__", "").startswith(_PUT_OFF_IN):
+        code = frame.f_code
+        if (
+            code.co_filename in _PUT_OFF_FILES
+            or (code.co_filename == _FROM_TEXT and code.co_name == "<module>" and frame.f_back)
+            or frame.f_globals.get("__name__", "").startswith(_PUT_OFF_IN)
+        ):
             _thread.start_new_thread(_send_again, (threading.get_ident(), signum))
             return True
         frame = frame.f_back

@@ -269,6 +269,56 @@ def test_an_interrupt_inside_numbas_own_code_is_raised_after_it() -> None:
     assert done.stdout.splitlines() == ["put off []", "Terminated True", "at once Terminated"]
 
 
+IN_IMPORT_OR_TEXT = """
+import os, signal, sys, time
+import testbed.cli.run as run
+
+def interrupted_inside(args):  # Ctrl-C arrives inside {where}, then the program's own code
+    {code}
+    print("whole" if getattr(sys.modules.get("signals_itself"), "done", False) else "half")
+    sys.stdout.flush()
+    time.sleep(30)
+    return 0
+
+run._list_scenarios = interrupted_inside
+from testbed.cli.main import main
+sys.exit(main(["scenarios"]))
+"""
+
+SIGNALS_ITSELF = "import os, signal\nos.kill(os.getpid(), signal.SIGINT)\ndone = True\n"
+
+
+@pytest.mark.parametrize(
+    ("where", "code"),
+    [
+        ("an import", "import signals_itself"),  # a module that takes Ctrl-C while imported
+        ("code exec compiled from text", f"exec({SIGNALS_ITSELF!r}, {{}})"),  # dataclasses do
+    ],
+)
+def test_ctrl_c_in_an_import_or_in_code_from_text_ends_with_130(
+    tmp_path: Path, where: str, code: str
+) -> None:
+    # Under load, `testbed link` took Ctrl-C while importing: inside numpy's random generator
+    # registering its classes the interrupt was swallowed (the probe ran to its end, exit 0),
+    # and inside a dataclass's methods, which `dataclasses` compiles from text with exec,
+    # CPython marked it unhandled: the one line, then the process killed by SIGINT (-2), not
+    # 130. The handler puts the signal off until the import or the text's code is done.
+    # Run with -m, as `python -m testbed` is: CPython acts on that mark only for -m.
+    (tmp_path / "signals_itself.py").write_text(SIGNALS_ITSELF)
+    (tmp_path / "interrupted_cli.py").write_text(IN_IMPORT_OR_TEXT.format(where=where, code=code))
+    done = subprocess.run(
+        [sys.executable, "-m", "interrupted_cli"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+        preexec_fn=default_sigint,
+    )
+    assert (done.returncode, done.stderr) == (130, "testbed: interrupted\n")
+    if code.startswith("import"):
+        assert done.stdout == "whole\n"  # imported whole, interrupted after
+
+
 IN_A_CALLBACK = """
 import importlib, signal, sys
 import simpy
