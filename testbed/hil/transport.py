@@ -266,15 +266,21 @@ class Transport:
         return counts
 
     def close(self, timeout_s: float = 2.0) -> None:
-        """Stop both threads, close the port and join the threads."""
+        """Stop both threads, close the port and join the threads.
+
+        Frames :meth:`send` accepted that were not written by then (still queued, or waiting
+        for the previous chunk's pacing) are counted dropped: every accepted frame ends as
+        sent or dropped.
+        """
         self._stop.set()
+        unwritten = 0
         while True:  # make room for the writer's stop sentinel
             try:
                 self._outbox.put_nowait(None)
                 break
             except queue.Full:
                 with contextlib.suppress(queue.Empty):
-                    self._outbox.get_nowait()
+                    unwritten += self._outbox.get_nowait() is not None
         with self._lock:
             port, self._port = self._port, None
         if port is not None:
@@ -282,6 +288,12 @@ class Transport:
         self.connected.clear()
         for thread in self._threads:
             thread.join(timeout_s)
+        while True:  # what the writer left queued
+            try:
+                unwritten += self._outbox.get_nowait() is not None
+            except queue.Empty:
+                break
+        self.frames_dropped += unwritten
 
     def __enter__(self) -> Transport:
         return self
@@ -390,13 +402,17 @@ class Transport:
         next_ok = 0.0
         while True:
             item = self._outbox.get()
-            if item is None or self._stop.is_set():
+            if item is None:
+                return
+            if self._stop.is_set():
+                self.frames_dropped += 1  # accepted, closed before it was written
                 return
             frame, ready_s = item
             for chunk in self.adapter.writes(frame):
                 ready_s = max(ready_s, next_ok)
                 delay = next_ok - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
+                    self.frames_dropped += 1  # closed while it waited for its turn
                     return
                 port = self._port
                 if port is None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import queue
 import socket
 import threading
+import time
 
 import pytest
 import serial
@@ -64,6 +65,25 @@ def test_send_never_blocks_and_drops_when_full() -> None:
         assert transport.frames_dropped == results.count(False)
     finally:
         transport.close()
+
+
+def test_every_accepted_frame_ends_sent_or_dropped_when_the_transport_closes() -> None:
+    # A loaded HIL run ended with orders its transport had accepted neither written nor
+    # counted dropped: close() discarded the queue (here: the first write holds 42 s, the
+    # rest wait behind it).
+    transport = SerialTransport(
+        "loop://", S100Adapter(pace_bps=8.0), baudrate=115200, max_pending_frames=4
+    )
+    try:
+        results = [transport.send(encode_frame(b"x" * 40)) for _ in range(6)]
+        deadline = time.monotonic() + 10.0
+        while transport.bytes_out == 0 and time.monotonic() < deadline:
+            time.sleep(0.005)  # the first frame is on the wire, the others wait their turn
+        assert transport.bytes_out > 0
+    finally:
+        transport.close()
+    assert results.count(True) >= 4
+    assert transport.frames_sent + transport.frames_dropped == len(results)
 
 
 def test_callback_errors_are_counted() -> None:
