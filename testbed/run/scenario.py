@@ -371,6 +371,21 @@ _FILE_KEYS = (
 """Keys that may name a user's file by path."""
 
 
+FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
+"""The dotted names of :data:`_FILE_KEYS` (``vehicle.thrusters``...)."""
+
+
+def path_beside(value: Any, folder: Path) -> Any:
+    """``value`` of a file key (:data:`FILE_KEY_NAMES`) as written in a file kept in
+    ``folder``: a relative path of a user file (ending in ``.toml``/``.json``) taken from
+    ``folder``; anything else (a packaged name, an absolute path) as it is."""
+    if isinstance(value, str):
+        path = Path(value)
+        if not path.is_absolute() and path.suffix in (".toml", ".json"):
+            return str(folder / path)
+    return value
+
+
 def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
     """A scenario file's data with the relative paths of its user files (a preset, model,
     layout, mission, arm model or TPIK configuration ending in ``.toml``/``.json``) taken from
@@ -381,12 +396,8 @@ def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
         table: Any = data
         for part in key[:-1]:
             table = table.get(part) if isinstance(table, dict) else None
-        value = table.get(key[-1]) if isinstance(table, dict) else None
-        if not isinstance(value, str):
-            continue
-        path = Path(value)
-        if not path.is_absolute() and path.suffix in (".toml", ".json"):
-            table[key[-1]] = str(folder / path)
+        if isinstance(table, dict) and key[-1] in table:
+            table[key[-1]] = path_beside(table[key[-1]], folder)
     return data
 
 

@@ -305,8 +305,10 @@ def load_sweep(
     """Load a packaged sweep by id, or a sweep file by path, and check every point loads.
 
     Args:
-        name_or_path: a packaged id (:func:`sweep_names`) or a ``.toml`` path. A relative
-            ``scenario`` path in the file is taken relative to the file.
+        name_or_path: a packaged id (:func:`sweep_names`) or a ``.toml`` path. Relative paths
+            in the file (its ``scenario``, and user files named in ``[set]`` or ``[grid]``:
+            a preset, model, layout, mission...) are taken from the file's folder and kept
+            absolute, as a scenario file's are.
         overrides: ``KEY=VALUE`` scenario overrides (the CLI's ``--set``) for every run.
         stream: where the progress of the grid check goes (a bar on a terminal, else a line
             every second once it takes longer than that); None: no progress.
@@ -317,7 +319,7 @@ def load_sweep(
             repeated grid value, more than :data:`MAX_RUNS` runs, or a grid point whose
             scenario does not load (named by its values).
     """
-    from testbed.run.scenario import load_scenario, scenario_digest
+    from testbed.run.scenario import FILE_KEY_NAMES, load_scenario, path_beside, scenario_digest
 
     text = str(name_or_path)
     base_dir: Path | None = None
@@ -336,7 +338,13 @@ def load_sweep(
     if source.startswith("package:") and top.id != text:
         raise ConfigError(f"{source}: id: must equal the file name, got {top.id!r}")
     scenario = _scenario_of(top.scenario, base_dir, source)
-    fixed_values = _flatten_table(top.set)
+
+    def beside(key: str, value: Any) -> Any:  # a user file named in the sweep file
+        if base_dir is None or key not in FILE_KEY_NAMES:
+            return value
+        return path_beside(value, base_dir)
+
+    fixed_values = {k: beside(k, v) for k, v in _flatten_table(top.set).items()}
     fixed = [f"{k}={toml_literal(v)}" for k, v in fixed_values.items()]
     axes = []
     for key, spec in _flatten_table(top.grid, keep_empty=True).items():
@@ -356,7 +364,7 @@ def load_sweep(
                 )
         else:
             raise ConfigError(f"{source}: {where}: expected a non-empty array or a range table")
-        axes.append((key, values))
+        axes.append((key, tuple(beside(key, value) for value in values)))
     if not axes:
         raise ConfigError(f"{source}: grid: must have at least one axis")
     clash = _fixed_and_swept(_override_keys(overrides), [key for key, _ in axes])

@@ -339,3 +339,33 @@ def test_errors_of_the_sweep_file_name_it_and_the_key(
     expected = "testbed: error: " + message.format(path=path, folder=tmp_path)
     assert err.startswith(expected) and err.count("\n") == 1, err
     assert not (tmp_path / "out").exists()
+
+
+def test_user_files_in_set_and_grid_are_taken_from_the_sweep_files_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A study kept in one folder (a sweep over layout files of its own, a model in [set]) ran
+    # only from that folder: [set] and [grid] paths were the working directory's, unlike the
+    # sweep's scenario and paths in scenario files.
+    study = tmp_path / "study"
+    study.mkdir()
+    data = Path(__file__).parents[2] / "testbed" / "vehicle" / "data"
+    (study / "my-layout.toml").write_text((data / "thrusters" / "bluerov2.toml").read_text())
+    (study / "my-model.toml").write_text((data / "models" / "bluerov2.toml").read_text())
+    (study / "s.toml").write_text(
+        'schema = 1\nid = "study-v1"\ndescription = "d"\nscenario = "s100-teleop-v1"\n'
+        '[set]\n"vehicle.model" = "my-model.toml"\n'
+        '[grid]\n"vehicle.thrusters" = ["my-layout.toml", "bluerov2"]\n'
+    )
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    sweep = load_sweep("../study/s.toml")
+    layout, model = str(study.resolve() / "my-layout.toml"), str(study.resolve() / "my-model.toml")
+    assert sweep.axes == (("vehicle.thrusters", (layout, "bluerov2")),)
+    assert f'vehicle.model="{model}"' in sweep.overrides
+    assert {name for name, _ in sweep.inputs} == {"package:s100-teleop-v1", layout, model}
+    assert [spec.overrides[-1] for spec in expand(sweep)] == [
+        f'vehicle.thrusters="{layout}"',
+        'vehicle.thrusters="bluerov2"',
+    ]
