@@ -61,7 +61,13 @@ from testbed.vehicle.components import (
 )
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.hydrodynamics import HydroModel
-from testbed.vehicle.ismc import IsmcController, IsmcGains, load_ismc_gains, mismatched_model
+from testbed.vehicle.ismc import (
+    IsmcController,
+    IsmcGains,
+    known_ismc_models,
+    load_ismc_gains,
+    mismatched_model,
+)
 from testbed.vehicle.kinematic import PoseGains, pose_twist
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.mission import Mission, load_mission, load_packaged_mission, mission_names
@@ -105,8 +111,11 @@ class ModelMismatch:
 
 @dataclass(frozen=True, slots=True)
 class IsmcSettings:
-    """Overrides of the vehicle model's packaged ISMC gains (``data/ismc.toml``); each None
-    keeps the packaged value. Domains: :class:`~testbed.vehicle.ismc.IsmcGains`'.
+    """Overrides of the vehicle model's packaged ISMC gains (``data/ismc.toml``, the table of
+    the model's ``name``); each None keeps the packaged value. A model with no packaged table
+    (a model file of the user's own) flies with all three set here. Domains:
+    :class:`~testbed.vehicle.ismc.IsmcGains`. (The controller runs every vehicle frame, at the
+    control rate; a table's ``rate_hz`` records its source's.)
 
     Attributes:
         kp: (6,) Kp per body axis (u v w p q r) [1/s].
@@ -121,6 +130,11 @@ class IsmcSettings:
     def __post_init__(self) -> None:
         self.applied_to(IsmcGains((1.0,) * 6, 1.0, 1.0, 100.0))  # checks each value set
 
+    @property
+    def complete(self) -> bool:
+        """Whether every gain is set (no packaged table needed)."""
+        return None not in (self.kp, self.rho, self.lambda_)
+
     def applied_to(self, gains: IsmcGains) -> IsmcGains:
         """``gains`` with the values set here (checked by :class:`IsmcGains`)."""
         return dataclasses.replace(
@@ -129,6 +143,28 @@ class IsmcSettings:
             rho=gains.rho if self.rho is None else self.rho,
             lambda_=gains.lambda_ if self.lambda_ is None else self.lambda_,
         )
+
+    def gains_for(self, model_name: str) -> IsmcGains:
+        """The gains the ISMC of the model named ``model_name`` flies with: all three set here,
+        or the model's packaged table with the ones set here.
+
+        Raises:
+            FieldError: not all set, and no packaged table of that name (naming ``ismc`` and
+                what to set).
+        """
+        if self.complete:
+            return self.applied_to(
+                IsmcGains((1.0,) * 6, 1.0, 1.0, 100.0, "[vehicle.autonomy.ismc]")
+            )
+        known = known_ismc_models()
+        if model_name not in known:
+            missing = [k for k in ("kp", "rho", "lambda_") if getattr(self, k) is None]
+            raise FieldError(
+                "ismc",
+                f"the vehicle model {model_name!r} has no packaged ISMC gains (known: "
+                f"{', '.join(known)}): set {', '.join(missing)} too",
+            )
+        return self.applied_to(load_ismc_gains(model_name))
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,7 +268,7 @@ def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
     mission = None if config.mission is None else resolve_mission(config.mission)
     ismc = None
     if config.controller == "ismc":
-        gains = config.ismc.applied_to(load_ismc_gains(model.name))
+        gains = config.ismc.gains_for(model.name)
         m = config.mismatch
         belief = mismatched_model(
             model,

@@ -39,7 +39,7 @@ from typing import Any, Literal
 import numpy as np
 
 from testbed.common.geometry import Quaternion, quat_rotate
-from testbed.config import build, check, check_range, check_ranges, load_toml
+from testbed.config import FieldError, build, check, check_range, check_ranges, load_toml
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.ecs.store import FrameStore
 from testbed.vehicle.allocation import Allocator
@@ -288,6 +288,7 @@ class VehicleConfig:
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
         self._check_arm_controller()
         self._check_arm_load()
+        self._check_ismc_gains()
         pool = self.pool_in_use
         if pool is not None:
             x, y, z = self.start_position_ned_m
@@ -316,6 +317,15 @@ class VehicleConfig:
             f"the arm ({self.arm.model}) weighs {wet_n:.0f} N in water, more than the "
             f"vehicle ({self.model}, {weight_n:.1f} N) weighs in air: the hull cannot carry it",
         )
+
+    def _check_ismc_gains(self) -> None:
+        """Refuse, at load, an ISMC with no gains: a model with no packaged table (a model
+        file of the user's own) needs all three in ``autonomy.ismc``."""
+        if self.autonomy is not None and self.autonomy.controller == "ismc":
+            try:
+                self.autonomy.ismc.gains_for(load_model(self.model).name)
+            except FieldError as err:
+                raise FieldError(f"autonomy.{err.key}", err.message) from None
 
     def _check_arm_controller(self) -> None:
         """Refuse an arm under the PID controller: TPIK's output is a body twist [m/s, rad/s]

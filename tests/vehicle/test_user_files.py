@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from testbed.config import ConfigError
+from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.arm import load_arm_model
 from testbed.vehicle.hydrodynamics import load_model
@@ -172,3 +173,31 @@ def test_a_bad_user_tpik_file_names_the_key_the_file_and_its_key(tmp_path: Path)
     message = str(err.value)
     assert message.startswith(f"--set: vehicle.arm.tpik: {tpik}: rate_hz: must be ")
     assert "\n" not in message
+
+
+def test_a_users_model_flies_the_ismc_with_the_gains_the_scenario_gives(tmp_path: Path) -> None:
+    """A model file of the user's own has no packaged ISMC gains: refused in one line naming
+    the key until kp, rho and lambda_ are all set; then the Heavy's figures under another name,
+    with the Heavy's gains given, fly exactly as the packaged Heavy (a review: no way to fly
+    the autonomy with a model of one's own, and the error named the packaged gains file)."""
+    path = _copy(
+        "models", "bluerov2-heavy", tmp_path / "my-heavy.toml", ('"bluerov2-heavy"', '"my-heavy"')
+    )
+    short = ["duration_s=12", "trials=1"]
+    with pytest.raises(ConfigError) as refused:
+        load_scenario("heavy-station-keeping-v1", [f"vehicle.model={path}", *short])
+    assert str(refused.value).startswith("--set: vehicle.autonomy.ismc: ")
+    assert "'my-heavy' has no packaged ISMC gains" in str(refused.value)
+    assert "set kp, rho too" in str(refused.value)  # the scenario sets lambda_ already
+    packaged = load_scenario("heavy-station-keeping-v1", short)
+    gains = (
+        "vehicle.autonomy.ismc.kp=[10.0, 10.0, 6.0, 3.0, 6.0, 10.0]",
+        "vehicle.autonomy.ismc.rho=20.0",
+    )
+    own = load_scenario("heavy-station-keeping-v1", [f"vehicle.model={path}", *short, *gains])
+    runs = [run_scenario(scenario) for scenario in (packaged, own)]
+    assert runs[0].metrics["mission"] == runs[1].metrics["mission"]
+    series = [run.recorder.series() for run in runs]
+    assert series[0].keys() == series[1].keys()
+    for column in series[0]:
+        np.testing.assert_array_equal(series[0][column], series[1][column], err_msg=column)
