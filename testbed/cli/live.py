@@ -31,7 +31,6 @@ A user's mistake (bad option, a port that cannot be bound) is one line and exit 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 from pathlib import Path
@@ -112,6 +111,7 @@ def _run_live(args: argparse.Namespace) -> int:
     from testbed.live.hub import Hub
     from testbed.live.server import ConsoleServer, bind
     from testbed.live.session import LiveSession
+    from testbed.run.interrupts import deferred_interrupts
     from testbed.run.outputs import claimed_out_dir, write_run
     from testbed.run.scenario import load_scenario
 
@@ -147,19 +147,25 @@ def _run_live(args: argparse.Namespace) -> int:
         try:
             result = session.run(args.duration)
         finally:
-            server.stop()
+            with deferred_interrupts() as late:  # a second Ctrl-C: the session is ending
+                server.stop()
         plots = None
         if not args.no_plots:
             from testbed.report.run_plots import write_run_plots
 
             plots = write_run_plots
-        with contextlib.suppress(KeyboardInterrupt):  # a second Ctrl-C while plotting
-            write_run(result, out, plots=plots)  # writes the data and metrics.json anyway
+        cut: list[KeyboardInterrupt] = []
+        try:
+            write_run(result, out, plots=plots)  # the data and metrics.json whole, whenever
+        except KeyboardInterrupt as interrupt:  # a Ctrl-C while writing: the plots cut short
+            cut.append(interrupt)
         reached = result.metrics["sim_s"]
+        kept = "results without plots" if cut and plots is not None else "results"
         print(
-            f"testbed live: session ended at t = {reached:.1f} s; results in {out}", file=sys.stderr
+            f"testbed live: session ended at t = {reached:.1f} s; {kept} in {out}", file=sys.stderr
         )
-        return EXIT_OK if result.stopped is None else exit_code_of(result.stopped)
+        stopped = result.stopped or (late[0] if late else None) or (cut[0] if cut else None)
+        return EXIT_OK if stopped is None else exit_code_of(stopped)
 
 
 def _port_options(args: argparse.Namespace) -> dict[str, str] | None:

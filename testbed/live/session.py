@@ -231,12 +231,12 @@ class LiveSession:
             env.run(until=duration_s)
         except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
             if (stopped := interrupt_of(error)) is None:
+                self.vehicle.close()
                 raise
-        finally:
+        with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
             wall_s = time.perf_counter() - start
             self.vehicle.close()
-        reached = duration_s if stopped is None else float(env.now)
-        with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+            reached = duration_s if stopped is None else float(env.now)
             metrics = self.metrics(reached, wall_s)
         return RunResult(
             self.scenario, self.seed, metrics, self.recorder, stopped or (late[0] if late else None)

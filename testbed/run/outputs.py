@@ -28,6 +28,7 @@ from typing import Any
 
 from testbed.config import ConfigError
 from testbed.run.images import write_images_csv
+from testbed.run.interrupts import deferred_interrupts
 from testbed.run.runner import RunResult
 
 __all__ = [
@@ -181,26 +182,29 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
         The files written, ``metrics.json`` last.
 
     Raises:
-        KeyboardInterrupt: an interrupt while the plots were drawn, raised again once the data
-            files and ``metrics.json`` (listing the plots made before it) are written.
+        KeyboardInterrupt: an interrupt while the files were written, raised again once the
+            data files and ``metrics.json`` (listing the plots made before it) are written: the
+            data and ``metrics.json`` are written whole whenever it comes, the plots are cut
+            short (or not begun).
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    _remove_leftovers(out_dir)
-    previous = _previous_files(out_dir)
-    with contextlib.suppress(FileNotFoundError):
-        (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
-    recorder = result.recorder
-    written = [
-        replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
-        replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
-    ]
-    images = result.scenario.images
-    if images.enabled:
-        log, chunk = recorder.images, images.chunk_bytes
-        write = functools.partial(write_images_csv, log, chunk)
-        written.append(replace_atomically(write, out_dir / "images.csv"))
-    interrupted: KeyboardInterrupt | None = None
-    if plots is not None:
+    with deferred_interrupts() as late:  # the data whole, even on a (second) Ctrl-C now
+        out_dir.mkdir(parents=True, exist_ok=True)
+        _remove_leftovers(out_dir)
+        previous = _previous_files(out_dir)
+        with contextlib.suppress(FileNotFoundError):
+            (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
+        recorder = result.recorder
+        written = [
+            replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
+            replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
+        ]
+        images = result.scenario.images
+        if images.enabled:
+            log, chunk = recorder.images, images.chunk_bytes
+            write = functools.partial(write_images_csv, log, chunk)
+            written.append(replace_atomically(write, out_dir / "images.csv"))
+    interrupted: KeyboardInterrupt | None = late[0] if late else None
+    if plots is not None and interrupted is None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
         try:
             for made in plots(result, staging):
@@ -211,15 +215,17 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
             interrupted = interrupt
         finally:
             shutil.rmtree(staging, ignore_errors=True)
-    names = {path.name for path in written}
-    for stale in previous:
-        if stale not in names and stale != METRICS_FILE:
-            with contextlib.suppress(OSError):
-                (out_dir / stale).unlink()
-    document = dict(result.metrics)
-    document["complete"] = result.stopped is None
-    document["files"] = {path.name: path.stat().st_size for path in written}
-    written.append(write_json_atomic(out_dir / METRICS_FILE, document))
+    with deferred_interrupts() as late:
+        names = {path.name for path in written}
+        for stale in previous:
+            if stale not in names and stale != METRICS_FILE:
+                with contextlib.suppress(OSError):
+                    (out_dir / stale).unlink()
+        document = dict(result.metrics)
+        document["complete"] = result.stopped is None
+        document["files"] = {path.name: path.stat().st_size for path in written}
+        written.append(write_json_atomic(out_dir / METRICS_FILE, document))
+    interrupted = interrupted or (late[0] if late else None)
     if interrupted is not None:
         raise interrupted
     return written

@@ -368,13 +368,12 @@ def run_hil(
         env.run(until=duration)
     except BaseException as error:  # Ctrl-C or SIGTERM: keep what ran, marked partial
         if (stopped := interrupt_of(error)) is None:
+            _close(vehicle_node, endpoints)
             raise
-    finally:
+    with deferred_interrupts() as closing:  # a second Ctrl-C: the run is ending anyway
         wall_s = 0.0 if start is None else time.perf_counter() - start
-        if vehicle_node is not None:
-            vehicle_node.vehicle.close()
-        for endpoint in endpoints.values():
-            endpoint.close()
+        _close(vehicle_node, endpoints)
+    stopped = stopped or (closing[0] if closing else None)
     reached = duration if stopped is None else float(env.now)
     with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
         tally_images(recorder, vehicle_node, operator_node)
@@ -393,6 +392,14 @@ def run_hil(
             lateness_ns=lateness_ns,
         )
     return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+
+
+def _close(vehicle_node: VehicleNode | None, endpoints: Mapping[str, LinkEndpoint]) -> None:
+    """Release the vehicle's physics and the endpoints' ports and threads."""
+    if vehicle_node is not None:
+        vehicle_node.vehicle.close()
+    for endpoint in endpoints.values():
+        endpoint.close()
 
 
 def _peer(role: str) -> str:

@@ -393,3 +393,25 @@ def test_sigterm_in_a_kernels_first_callback_ends_the_run_with_its_partial_resul
     assert line.startswith("testbed: interrupted at t = "), line
     metrics = check_set(out)
     assert metrics["complete"] is False and 0.0 <= metrics["sim_s"] < 20.0
+
+
+@pytest.mark.parametrize("gap_s", [0.05, 0.3])
+def test_a_double_ctrl_c_ends_a_live_session_with_its_results(tmp_path: Path, gap_s: float) -> None:
+    # A pilot's double Ctrl-C: the second came while the console server stopped (50 ms: only
+    # 'testbed: interrupted', the folder removed) or while the results were written (0.3 s:
+    # 'results in DIR' over an empty folder). Both end with the session's one line, its data.
+    out = tmp_path / "live"
+    proc = start(["live", "--port", "0", "--duration", "600", "--out", str(out)])
+    assert proc.stdout is not None and proc.stdout.readline().startswith("testbed live: console")
+    time.sleep(2.0)  # the session flies a while
+    proc.send_signal(signal.SIGINT)
+    time.sleep(gap_s)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=WAIT_S)
+    assert proc.returncode == 130, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed live: session ended at t = "), stderr
+    assert lines[0].endswith(f" in {out}")
+    metrics = check_set(out)
+    assert metrics["complete"] is False
+    assert {"events.csv", "series.csv"} <= set(metrics["files"])

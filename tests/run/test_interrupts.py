@@ -101,6 +101,30 @@ def test_an_interrupt_while_plotting_a_finished_run_keeps_its_results(tmp_path: 
     assert set(metrics["files"]) == {"events.csv", "series.csv"}
 
 
+@pytest.mark.usefixtures("ctrl_c_as_a_terminal")
+def test_ctrl_c_while_the_data_files_are_written_keeps_them_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A (second) Ctrl-C while the events file is written: the data files and metrics.json
+    are written whole, the plots are not begun, then the interrupt goes on up. A live
+    session's double Ctrl-C left an empty folder under 'results in DIR'."""
+    result = run_scenario(load_scenario("s100-teleop-v1", ["duration_s=12"]), seed=0)
+    write_events = type(result.recorder).write_events_csv
+
+    def interrupted_midway(recorder: object, path: Path) -> None:
+        os.kill(os.getpid(), signal.SIGINT)  # handled at once, inside the write, unless held
+        write_events(recorder, path)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(type(result.recorder), "write_events_csv", interrupted_midway)
+    plotted: list[Path] = []
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        write_run(result, out, plots=lambda _, staging: plotted)
+    metrics = check_set(out)
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}
+    assert (out / "events.csv").read_text().count("\n") > 100  # whole: every event row
+
+
 @pytest.fixture
 def ctrl_c_as_a_terminal() -> Iterator[None]:
     """SIGINT handled as Python does by default (a KeyboardInterrupt), also where the tests run
