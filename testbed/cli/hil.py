@@ -31,8 +31,10 @@ runs.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +47,7 @@ from testbed.cli.options import (
     format_value,
     open_modem_ports,
 )
+from testbed.cli.run import loss_note
 from testbed.config import ConfigError
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
@@ -153,8 +156,11 @@ def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
                 raise ConfigError(
                     f"{option}: required (or run one node: `testbed hil vehicle|operator --port P`)"
                 )
-        if args.operator_port == args.vehicle_port:
-            raise ConfigError("--vehicle-port: must differ from --operator-port")
+        if _same_device(args.operator_port, args.vehicle_port):
+            raise ConfigError(
+                f"--vehicle-port: must differ from --operator-port ({args.vehicle_port} and "
+                f"{args.operator_port} are the same device)"
+            )
         return pair
     for option, url in pair.values():
         if url is not None:
@@ -162,6 +168,17 @@ def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
     if not args.port:
         raise ConfigError(f"--port: required with `testbed hil {mode}`")
     return {mode: ("--port", args.port)}
+
+
+def _same_device(a: str, b: str) -> bool:
+    """Whether two port names are one port: the same text, or two paths to one device (a
+    ``/dev/serial/by-id/…`` link and the ``/dev/ttyUSB0`` it points to)."""
+    if a == b:
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # a URL (socket://, loop://) or a path to nothing yet
+        return False
 
 
 def run_hil_command(args: argparse.Namespace) -> int:
@@ -215,9 +232,20 @@ def run_hil_command(args: argparse.Namespace) -> int:
             modem=args.modem,
             on_start=announce,
         )
+        result.metrics["hil"]["ports"] = {  # what a rerun needs beside the scenario's inputs
+            "baud": baud,
+            "rtscts": rtscts,
+            "m64_channel": args.m64_channel,
+            "duration_s": duration,
+        }
         return finish_run(
             result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
         )
+
+
+def _last_errors(reports: Iterable[dict[str, Any]]) -> str:
+    """The endpoints' last port errors, ``; ``-joined."""
+    return "; ".join(r["last_error"] for r in reports if r["last_error"])
 
 
 def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:
@@ -232,22 +260,40 @@ def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:
     def percent(value: float | None) -> str:
         return format_value(value, 100.0, 2, " %")
 
+    def losses(direction: dict[str, Any]) -> str:  # the simulated run's words where known
+        known = {k: None if v != v else v for k, v in direction.items()}  # NaN: not known here
+        return "" if known["frames_dropped"] is None else loss_note(known)
+
     hil = metrics["hil"]
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
     added = hil["added_latency_ms"]
     lag, rtt = metrics["command_lag_s"], hil["round_trip_s"]
+    reports = hil["endpoints"].values()
+    errors = sum(r["port_errors"] for r in reports)
+    failures = sum(r["reopen_failures"] for r in reports)
     lines = [
         f"hil {metrics['scenario']} ({hil['mode']}, {hil['modem']}): "
         f"{metrics['sim_s']:.1f} s in real time",
         f"  uplink   sent {count(up['frames_sent'])}, delivered {count(up['frames_delivered'])}"
-        f", PER {percent(up['per'])}",
+        f", PER {percent(up['per'])}{losses(up)}",
         f"  downlink sent {count(down['frames_sent'])}, delivered "
-        f"{count(down['frames_delivered'])}, PER {percent(down['per'])}",
+        f"{count(down['frames_delivered'])}, PER {percent(down['per'])}{losses(down)}",
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; round trip mean "
         f"{ms(rtt['mean'])}",
         f"  added latency p50 {ms(added['p50'] / 1000, 2)} p95 {ms(added['p95'] / 1000, 2)} "
-        f"max {ms(added['max'] / 1000, 2)}; reopens {hil['reopens']}; garbage "
-        f"{hil['garbage_bytes']} B",
-        f"  wrote {out}/",
+        f"max {ms(added['max'] / 1000, 2)}; port errors {errors}, reopens {hil['reopens']}, "
+        f"failed reopens {failures}; garbage {hil['garbage_bytes']} B",
     ]
+    failsafe = metrics["events"].get("failsafe")
+    if failsafe and failsafe == failsafe:  # not NaN: the vehicle runs here
+        lines.append(f"  failsafe engaged {failsafe} time(s) (events.csv: when)")
+    for name, direction in (("uplink", up), ("downlink", down)):
+        if direction["frames_sent"] and direction["frames_delivered"] == 0:
+            lines.append(
+                f"  warning: no {name} frame arrived: check --modem, the ports (not one device) "
+                "and that a reply fits the gap (docs/hil.md)"
+            )
+    if errors:
+        lines.append(f"  warning: a port failed {errors} time(s): {_last_errors(reports)}")
+    lines.append(f"  wrote {out}/")
     return "\n".join(lines)

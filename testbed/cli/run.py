@@ -239,9 +239,9 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"{metrics['scenario']} seed {metrics['seed']}: {metrics['sim_s']:.0f} s simulated in "
         f"{metrics['wall_s']:.1f} s ({metrics['rtf']:.0f}x real time)",
         f"  uplink   {up['frames_delivered']}/{up['frames_sent']} frames, PER "
-        f"{per(up['per'])}{_losses(up)}, {up['goodput_bps']:.0f} bit/s",
+        f"{per(up['per'])}{loss_note(up)}, {up['goodput_bps']:.0f} bit/s",
         f"  downlink {down['frames_delivered']}/{down['frames_sent']} frames, PER "
-        f"{per(down['per'])}{_losses(down)}, {down['goodput_bps']:.0f} bit/s",
+        f"{per(down['per'])}{loss_note(down)}, {down['goodput_bps']:.0f} bit/s",
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
         f"  yaw error std {_num(yaw['std'], digits=2, unit=' deg')}; "
@@ -340,7 +340,7 @@ def never_ready(mission: dict[str, Any]) -> str | None:
     )
 
 
-def _losses(direction: dict[str, Any]) -> str:
+def loss_note(direction: dict[str, Any]) -> str:
     """``" (collided N, …)"``: how the frames in the PER were lost when not by bit errors
     alone (collisions, out of range, outages), then ``", dropped N (P %)"``: frames the sender's
     FIFO dropped (never on the air, so not in the PER); nothing for what did not happen."""

@@ -82,6 +82,9 @@ _MAX_READ = 4096
 _LATENESS_SAMPLES = 200_000
 """Thread-lateness samples kept per thread (the newest)."""
 
+_DROPPED_KEPT = 4096
+"""Dropped frames' bytes kept for a reader of :attr:`Transport.dropped_frames` (the newest)."""
+
 MIN_PACKET_GAP_S = 0.02
 """Shortest idle time that ends a packet on a byte-transparent modem's line [s]. A USB serial
 adapter hands bytes to the host in bursts (an FTDI chip's latency timer is 16 ms by default),
@@ -196,6 +199,7 @@ class Transport:
         self.last_error = ""
         self.frames_sent = 0
         self.frames_dropped = 0
+        self.dropped_frames: deque[bytes] = deque(maxlen=_DROPPED_KEPT)
         self.bytes_in = 0
         self.bytes_out = 0
         self.callback_errors = 0
@@ -231,7 +235,9 @@ class Transport:
 
     # -- caller side ----------------------------------------------------------------------
     def send(self, frame: bytes) -> bool:
-        """Queue one encoded frame for writing; never blocks.
+        """Queue one encoded frame for writing; never blocks. A frame it accepts is later
+        written whole (``frames_sent``) or dropped (``frames_dropped``, its bytes appended to
+        :attr:`dropped_frames`: the port failed or closed first).
 
         Returns:
             False if the queue was full or the transport closed (the frame is dropped and
@@ -273,14 +279,15 @@ class Transport:
         sent or dropped.
         """
         self._stop.set()
-        unwritten = 0
+        unwritten: list[bytes] = []
         while True:  # make room for the writer's stop sentinel
             try:
                 self._outbox.put_nowait(None)
                 break
             except queue.Full:
                 with contextlib.suppress(queue.Empty):
-                    unwritten += self._outbox.get_nowait() is not None
+                    if (item := self._outbox.get_nowait()) is not None:
+                        unwritten.append(item[0])
         with self._lock:
             port, self._port = self._port, None
         if port is not None:
@@ -290,10 +297,20 @@ class Transport:
             thread.join(timeout_s)
         while True:  # what the writer left queued
             try:
-                unwritten += self._outbox.get_nowait() is not None
+                item = self._outbox.get_nowait()
             except queue.Empty:
                 break
-        self.frames_dropped += unwritten
+            if item is not None:
+                unwritten.append(item[0])
+        for frame in unwritten:
+            self._drop(frame)
+
+    def _drop(self, frame: bytes) -> None:
+        """Count ``frame``, accepted by :meth:`send`, dropped unwritten (or part written) and
+        keep its bytes in :attr:`dropped_frames` for whoever accounts for frames by their bytes
+        (the real-time run's frame ledger)."""
+        self.frames_dropped += 1
+        self.dropped_frames.append(frame)
 
     def __enter__(self) -> Transport:
         return self
@@ -405,24 +422,24 @@ class Transport:
             if item is None:
                 return
             if self._stop.is_set():
-                self.frames_dropped += 1  # accepted, closed before it was written
+                self._drop(item[0])  # accepted, closed before it was written
                 return
             frame, ready_s = item
             for chunk in self.adapter.writes(frame):
                 ready_s = max(ready_s, next_ok)
                 delay = next_ok - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
-                    self.frames_dropped += 1  # closed while it waited for its turn
+                    self._drop(frame)  # closed while it waited for its turn
                     return
                 port = self._port
                 if port is None:
-                    self.frames_dropped += 1
+                    self._drop(frame)
                     break
                 try:
                     self._write(port, chunk.data)
                 except PORT_ERRORS as exc:
                     self._fail(port, exc)
-                    self.frames_dropped += 1
+                    self._drop(frame)
                     break
                 written_s = time.monotonic()
                 self.writer_lateness_ns.append(max(0, round((written_s - ready_s) * 1e9)))

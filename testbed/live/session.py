@@ -61,7 +61,7 @@ from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
-from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns
+from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, poll_modems, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
@@ -246,8 +246,7 @@ class LiveSession:
         env = self.env
         while True:
             self.lateness_ns.append(rt_lateness_ns(self.env))
-            for modem in self.hil_modems.values():
-                modem.poll()
+            poll_modems(self.hil_modems.values())
             self.pilot.drain()
             for message, _ in self.hub.take():
                 self.apply(message)

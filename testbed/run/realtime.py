@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -160,6 +160,18 @@ class FrameLedger:
                 return frame_id, t_s
         return None
 
+    def dropped(self, src: str, data: bytes) -> int:
+        """The id of the oldest outstanding frame from ``src`` with bytes ``data``, which its
+        port dropped before it reached the line: no longer outstanding, and neither delivered
+        nor lost on the air (not in :meth:`settled`); −1 if none is outstanding."""
+        queue = self._outstanding.get(src)
+        for k, (frame_id, sent, _) in enumerate(queue or ()):
+            if sent == data:
+                assert queue is not None
+                del queue[k]
+                return frame_id
+        return -1
+
     def settled(self, src: str) -> int:
         """Frames from ``src`` known to have arrived or been lost."""
         return self.matched.get(src, 0) + self.lost.get(src, 0)
@@ -232,14 +244,29 @@ class HilModem:
             self.outage_refused += 1
             trace.record(now, EventKind.OUTAGE, self.name, self.peer, frame_id, 0, len(data))
             return False
-        if not self.endpoint.send(data):
+        if not self.endpoint.send(data):  # the queue full or the port closed: not on the air
+            self._ledger.dropped(self.name, data)
             trace.record(now, EventKind.DROP, self.name, BROADCAST, frame_id, 0, len(data))
             return False
         trace.record(now, EventKind.TX_START, self.name, BROADCAST, frame_id, 0, len(data))
         return True
 
+    def note_drops(self) -> None:
+        """Record a drop for each frame the port dropped since the last call (accepted by
+        :meth:`send`, then the port failed or closed before writing it): out of the PER, as a
+        simulated sender's drops are. Call it for every modem before any :meth:`poll`
+        (:func:`poll_modems`), so no frame received after a drop counts it lost."""
+        dropped = self.endpoint.transport.dropped_frames
+        while dropped:
+            data = dropped.popleft()
+            frame_id = self._ledger.dropped(self.name, data)
+            self._trace.record(
+                self.env.now, EventKind.DROP, self.name, BROADCAST, frame_id, 0, len(data)
+            )
+
     def poll(self) -> int:
         """Hand every frame received so far to :attr:`on_receive`; returns how many."""
+        self.note_drops()
         return self.endpoint.deliver(self._hand_over)
 
     def _hand_over(self, frame: Frame) -> None:
@@ -259,6 +286,15 @@ class HilModem:
             self.on_receive(Delivery(data, t_sent, now, frame_id, self.peer))
 
 
+def poll_modems(modems: Iterable[HilModem]) -> None:
+    """Note every modem's port drops, then hand each one's received frames to its node."""
+    modems = list(modems)
+    for modem in modems:
+        modem.note_drops()
+    for modem in modems:
+        modem.poll()
+
+
 def run_poll(
     env: simpy.Environment,
     modems: Sequence[HilModem],
@@ -273,8 +309,7 @@ def run_poll(
     while True:
         if rt_env is not None and lateness_ns is not None:
             lateness_ns.append(rt_lateness_ns(rt_env))
-        for modem in modems:
-            modem.poll()
+        poll_modems(modems)
         yield env.timeout(period_s)
 
 
@@ -426,9 +461,10 @@ def hil_metrics(
 
     Link, per direction: ``frames_sent`` (handed to the sender's modem), ``frames_delivered``
     (decoded by the receiving node), ``frames_corrupted`` (candidates the receiver's decoder
-    rejected), ``frames_dropped`` (sender's queue full or port down), ``frames_outage``
-    (refused or discarded in a scenario outage window), ``per`` (1 − delivered / settled, where
-    settled counts the frames the ledger knows arrived or were lost), ``goodput_bps`` and
+    rejected), ``frames_dropped`` (sender's queue full, port down or closed: never on the line,
+    so not in the PER), ``drop_rate`` (dropped / sent), ``frames_outage`` (refused or discarded
+    in a scenario outage window), ``per`` (1 − delivered / settled, where settled counts the
+    frames the ledger knows arrived or were lost on the line), ``goodput_bps`` and
     ``mean_frame_bytes`` (the frames' own bytes). ``frames_collided``, ``frames_out_of_range``
     and ``mean_on_air_bytes`` are null: only the simulator's trace knows why a frame vanished on
     the air, and a real modem's packet padding is its own. A count that needs the end not
@@ -514,15 +550,18 @@ def _direction(
     delivered = recorder.frames_decoded[direction] if receiver is not None else nan
     settled = ledger.settled(src)
     both = sender is not None and receiver is not None
+    sent = sender.frames_offered if sender is not None else nan
+    dropped = sender.endpoint.transport.frames_dropped if sender is not None else nan
     return {
-        "frames_sent": sender.frames_offered if sender is not None else nan,
+        "frames_sent": sent,
         "frames_delivered": delivered,
         "frames_corrupted": receiver.endpoint.corrupt_frames if receiver is not None else nan,
         "frames_collided": nan,
-        "frames_dropped": (sender.endpoint.transport.frames_dropped if sender is not None else nan),
+        "frames_dropped": dropped,
         "frames_outage": outage if both else nan,
         "frames_out_of_range": nan,
         "per": 1.0 - delivered / settled if both and settled else nan,
+        "drop_rate": dropped / sent if sent else nan,
         "goodput_bps": (
             8.0 * payload_bytes / duration_s if receiver is not None and duration_s > 0 else nan
         ),

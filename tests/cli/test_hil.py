@@ -9,6 +9,7 @@ import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -128,14 +129,17 @@ def test_a_port_that_fails_to_open_closes_the_one_already_open(
     assert alive == []  # the operator's reader and writer were stopped and joined
 
 
-def test_summary_shows_what_is_unknown_as_n_a() -> None:
+def _summary_metrics(**link: float) -> dict[str, Any]:
+    """A HIL run's metrics as the summary reads them (one endpoint per node)."""
     nan = float("nan")
-    side = {"frames_sent": 20, "frames_delivered": nan, "per": nan}
-    metrics = {
+    side = {"frames_sent": 20, "frames_delivered": nan, "per": nan, "frames_dropped": nan}
+    endpoint = {"port_errors": 0, "reopen_failures": 0, "last_error": ""}
+    return {
         "scenario": "s100-teleop-v1",
         "sim_s": 12.0,
-        "link": {"uplink": side, "downlink": {**side, "frames_delivered": 19}},
+        "link": {"uplink": {**side, **link}, "downlink": {**side, "frames_delivered": 19}},
         "command_lag_s": {"mean": nan, "p95": nan},
+        "events": {"failsafe": nan},
         "hil": {
             "mode": "operator",
             "modem": "s100",
@@ -143,11 +147,49 @@ def test_summary_shows_what_is_unknown_as_n_a() -> None:
             "round_trip_s": {"mean": 0.3364},
             "reopens": 1,
             "garbage_bytes": 7,
+            "endpoints": {"operator": endpoint},
         },
     }
-    text = format_hil_summary(metrics, Path("out"))
+
+
+def test_summary_shows_what_is_unknown_as_n_a() -> None:
+    text = format_hil_summary(_summary_metrics(), Path("out"))
     assert "(operator, s100)" in text
-    assert "sent 20, delivered n/a, PER n/a" in text
+    assert "sent 20, delivered n/a, PER n/a\n" in text
     assert "delivered 19" in text
     assert "command lag mean n/a" in text and "round trip mean 336 ms" in text
-    assert "p50 0.50 ms p95 0.90 ms max 2.00 ms; reopens 1; garbage 7 B" in text
+    assert "p50 0.50 ms p95 0.90 ms max 2.00 ms; port errors 0, reopens 1, failed reopens 0" in text
+    assert "garbage 7 B" in text and "warning" not in text and "failsafe" not in text
+
+
+def test_summary_says_when_a_port_died_frames_were_dropped_or_none_arrived() -> None:
+    """A review killed the emulator mid-run: 26 of 43 orders dropped at the dead port, the
+    vehicle surfaced, and the summary said 'PER 0.00 %', 'reopens 0' and nothing more."""
+    metrics = _summary_metrics(
+        frames_sent=43, frames_delivered=17, per=0.0, frames_dropped=26, drop_rate=26 / 43
+    )
+    metrics["link"]["downlink"].update(frames_sent=17, frames_delivered=0)
+    metrics["events"]["failsafe"] = 1
+    metrics["hil"]["endpoints"]["operator"].update(
+        port_errors=1, reopen_failures=12, last_error="SerialException: could not open port"
+    )
+    text = format_hil_summary(metrics, Path("out"))
+    assert "sent 43, delivered 17, PER 0.00 %, dropped 26 (60.5 %) at the sender" in text
+    assert "port errors 1, reopens 1, failed reopens 12" in text
+    assert "failsafe engaged 1 time(s)" in text
+    assert "warning: no downlink frame arrived" in text
+    assert "warning: a port failed 1 time(s): SerialException: could not open port" in text
+
+
+def test_one_device_under_two_names_is_refused(tmp_path: Path) -> None:
+    """A /dev/serial/by-id/... link beside the device it names: one modem, not two."""
+    leader, follower = os.openpty()
+    try:
+        device = os.ttyname(follower)
+        alias = tmp_path / "by-id-modem"
+        alias.symlink_to(device)
+        argv = ["hil", "--operator-port", device, "--vehicle-port", str(alias)]
+        assert exit_code(argv) == 2
+    finally:
+        os.close(leader)
+        os.close(follower)

@@ -40,8 +40,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +56,7 @@ from testbed.channel import Delivery, EventKind, LinkConfig, Trace, load_link_co
 from testbed.hil import LinkEndpoint, PortSettings, open_endpoint
 from testbed.protocol import Frame, encode_frame
 from testbed.run.outputs import write_run
-from testbed.run.realtime import POLL_S, FrameLedger, HilModem, run_hil
+from testbed.run.realtime import POLL_S, FrameLedger, HilModem, poll_modems, run_hil
 from testbed.run.runner import RunResult
 from testbed.run.scenario import load_scenario
 
@@ -101,12 +102,20 @@ def test_ledger_forgets_beyond_its_horizon_as_lost() -> None:
 
 
 @dataclass
+class FakeTransport:
+    """Where a port's writer thread leaves the frames it dropped after accepting them."""
+
+    dropped_frames: deque[bytes]
+
+
+@dataclass
 class FakeEndpoint:
     """The part of a LinkEndpoint a HilModem uses: a wire to another fake, no threads."""
 
     sent: list[bytes]
     peer: FakeEndpoint | None = None
     accept: bool = True
+    transport: FakeTransport = field(default_factory=lambda: FakeTransport(deque()))
 
     def send(self, frame: bytes) -> bool:
         if not self.accept:
@@ -174,6 +183,40 @@ def test_modem_refuses_and_discards_in_an_outage_and_reports_drops() -> None:
     fake.accept = False
     assert operator.send(encode_frame(b"z")) is False
     assert len(trace.of_kind(EventKind.DROP)) == 1
+
+
+def test_ledger_leaves_a_dropped_frame_out_of_the_settled_ones() -> None:
+    ledger = FrameLedger()
+    for k in range(3):
+        ledger.record_sent("operator", bytes([k]), float(k))
+    assert ledger.dropped("operator", b"\x01") == 1
+    assert ledger.dropped("operator", b"\x01") == -1  # no longer outstanding
+    assert ledger.match("operator", b"\x02") == (2, 2.0)  # frame 0 lost, frame 1 not
+    assert (ledger.matched["operator"], ledger.lost["operator"]) == (1, 1)
+    assert ledger.settled("operator") == 2
+
+
+def test_frames_the_port_dropped_are_drops_not_losses_on_the_air() -> None:
+    """The port went down under frame 1 (its writer dropped it after accepting it) and frame
+    2's queue was full: a review's HIL run counted such frames lost on the air once the port
+    came back (PER 11.76 % on a link with no bit error), or not at all when it did not."""
+    trace = Trace()
+    operator, vehicle = _pair(trace, [])
+    got: list[Delivery] = []
+    vehicle.on_receive = got.append
+    frames = [encode_frame(b"order %d" % k) for k in range(4)]
+    fake: Any = operator.endpoint
+    assert operator.send(frames[0]) and operator.send(frames[1])
+    fake.transport.dropped_frames.append(fake.sent.pop())  # the writer's drop: never written
+    fake.accept = False
+    assert operator.send(frames[2]) is False  # refused at once: the queue is full
+    fake.accept = True
+    assert operator.send(frames[3])
+    poll_modems([vehicle, operator])  # the vehicle first, as the runs poll
+    assert [d.frame_id for d in got] == [0, 3]
+    ledger = operator._ledger
+    assert ledger.lost.get("operator", 0) == 0 and ledger.settled("operator") == 2
+    assert [e.frame_id for e in trace.of_kind(EventKind.DROP)] == [2, 1]
 
 
 def test_run_hil_rejects_bad_arguments_and_closes_what_it_was_given() -> None:
@@ -934,7 +977,15 @@ def test_port_vanishes_and_returns_while_the_run_goes_on(window: Window) -> None
     assert len(levels) >= 2  # held, and let go
     assert metrics["events"]["failsafe"] == levels.count("HOLD")  # engagements, not changes
     assert max(recorder.commands_applied.values()) > first_back_s  # orders flow again
-    assert metrics["link"]["uplink"]["per"] > 0.0  # the orders lost count
+    # The orders the dead port dropped are drops (a drop row each), not losses on the air:
+    # the PER counts only frames that reached the line and vanished there (the emulator's
+    # collisions; BER 0), as in simulation.
+    drops = [e for e in trace.events if e.kind is EventKind.DROP and e.src == "operator"]
+    assert 2 <= len(drops) <= operator["frames_dropped"]  # the last ones dropped at the close
+    up = metrics["link"]["uplink"]
+    assert up["drop_rate"] == operator["frames_dropped"] / up["frames_sent"]
+    if window.emulators[0]["modems"][1]["rx_collided"] == 0:  # no collision: none on a quiet host
+        assert up["per"] == 0.0  # it counted the dropped orders lost once the port was back
 
 
 def test_two_computers_each_write_what_they_observe(window: Window) -> None:
