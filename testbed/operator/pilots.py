@@ -43,6 +43,7 @@ __all__ = [
     "SineTerm",
     "Sticks",
     "SupervisorPilot",
+    "is_pure",
 ]
 
 Sticks = tuple[float, float, float, float, float, float]
@@ -100,11 +101,15 @@ class Pilot(Protocol):
 
     A run's operator station calls :meth:`sample` once per operator frame, at increasing
     times. It need not be a pure function of ``t_s``: a pilot may keep state or draw from a
-    random generator (seed it yourself for repeatable runs). Only the packaged pilots
-    (:data:`PURE_PILOTS`), pure by construction, are sampled again by the recorder at the
-    vehicle's instants (the ``cmd_*`` columns); for any other pilot the recorder holds the
-    operator's own samples (:class:`SampleHold`), so it never advances the pilot's state and
-    the run does not depend on the recording rate.
+    random generator (seed it yourself for repeatable runs). Only a pilot that is a pure
+    function of time (:func:`is_pure`: the packaged ones, :data:`PURE_PILOTS`, and any whose
+    class sets ``pure_function_of_time = True``) is sampled again by the recorder at the
+    vehicle's instants (the ``cmd_*`` columns: its continuous stick); for any other pilot the
+    recorder holds the operator's own samples (:class:`SampleHold`), so it never advances the
+    pilot's state and the run does not depend on the recording rate. ``signal_lag_s`` is
+    measured against the ``cmd_*`` columns, so it means the pilot-to-vehicle delay only for a
+    pure pilot; with held samples it leaves out the operator's sampling delay (up to one
+    operator frame: 0.3 s on s100). ``metrics.json``'s ``signal_lag_reference`` says which.
 
     The station refuses a sample whose sticks are not six finite positions in [−1, 1]
     (:func:`~testbed.operator.station.check_sticks`: a ValueError naming the pilot's type and
@@ -316,6 +321,15 @@ class SupervisorPilot:
 
 PURE_PILOTS = (ScriptedPilot, AttitudePilot, SupervisorPilot)
 """The pilots whose ``sample(t)`` is a pure function of ``t`` (observers may sample them again)."""
+
+
+def is_pure(pilot: object) -> bool:
+    """Whether ``pilot.sample(t)`` is a pure function of ``t``, so observers may sample it
+    again: a packaged pilot (:data:`PURE_PILOTS`), or a pilot whose class says so with
+    ``pure_function_of_time = True``."""
+    return (
+        isinstance(pilot, PURE_PILOTS) or getattr(type(pilot), "pure_function_of_time", 0) is True
+    )
 
 
 class SampleHold:

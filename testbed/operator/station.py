@@ -133,6 +133,12 @@ def sample_pilot(world: World) -> None:
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
     sample = session.pilot.sample(now)
+    if not isinstance(sample, PilotSample):
+        inner = session.pilot.pilot if isinstance(session.pilot, SampleHold) else session.pilot
+        raise TypeError(
+            f"pilot {type(inner).__name__}: sample() must return a PilotSample "
+            f"(testbed.operator.pilots), got {type(sample).__name__}"
+        )
     check_sticks(session.pilot, sample.sticks)
     goal = sample.goal
     if goal is not None:

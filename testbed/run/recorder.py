@@ -344,6 +344,9 @@ class Recorder:
         rows: series rows (see :data:`SERIES_COLUMNS`): a :class:`SeriesRows`, or any list of
             row tuples.
         images: images captured, sent and received (image feedback runs).
+        stick_source: what the ``cmd_*`` columns hold: ``"pilot"`` (the pilot sampled at each
+            row's instant, its continuous stick) or ``"operator samples"`` (a pilot that is not
+            a pure function of time: the operator's own samples, held between its frames).
     """
 
     trace: Trace = field(default_factory=Trace)
@@ -358,6 +361,7 @@ class Recorder:
     events: list[NodeEvent] = field(default_factory=list)
     rows: SeriesRows | list[tuple[float, ...]] = field(default_factory=SeriesRows)
     images: ImageLog = field(default_factory=ImageLog)
+    stick_source: str = "pilot"
 
     def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:
         """Record a node event."""

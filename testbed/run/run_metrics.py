@@ -242,6 +242,7 @@ def compute_metrics(
         "command_lag_s": summary(lags),
         "command_age_s": command_age,
         "signal_lag_s": signal,
+        "signal_lag_reference": recorder.stick_source,
         "odometry_age_s": odometry_age,
         "velocity_tracking_rmse": rmse,
         "attitude_error_deg": attitude,

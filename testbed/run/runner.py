@@ -25,7 +25,7 @@ import simpy
 from testbed.channel import Medium, Trace
 from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
-from testbed.operator.pilots import PURE_PILOTS, Pilot, SampleHold
+from testbed.operator.pilots import Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
@@ -176,13 +176,22 @@ def long_lived_frozen() -> Iterator[None]:
 
 
 def observed_pilot(pilot: Pilot) -> tuple[Pilot, Pilot]:
-    """``(the operator's pilot, the recorder's view of it)``: a packaged pilot
-    (:data:`~testbed.operator.pilots.PURE_PILOTS`, a pure function of time) both times, as the
-    recorder may sample it again; any other pilot through a
+    """``(the operator's pilot, the recorder's view of it)``: a pilot that is a pure function of
+    time (:func:`~testbed.operator.pilots.is_pure`: the packaged ones, or one that says so)
+    both times, as the recorder may sample it again; any other pilot through a
     :class:`~testbed.operator.pilots.SampleHold`, so that only the operator samples it (its
     state, if it keeps any, advances at the operator's frames alone) and the recorder sees the
-    operator's samples, held between frames."""
-    if isinstance(pilot, PURE_PILOTS):
+    operator's samples, held between frames.
+
+    Raises:
+        TypeError: ``pilot`` has no ``sample`` method (it is refused before anything runs).
+    """
+    if not callable(getattr(pilot, "sample", None)):
+        raise TypeError(
+            "pilot: expected an object with sample(t_s) -> PilotSample "
+            f"(testbed.operator.pilots.Pilot), got {type(pilot).__name__}"
+        )
+    if is_pure(pilot):
         return pilot, pilot
     hold = SampleHold(pilot)
     return hold, hold.held
@@ -233,6 +242,8 @@ def run_scenario(
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
     recorder = Recorder(trace=Trace())
+    if recorded_pilot is not operator_pilot:
+        recorder.stick_source = "operator samples"
     link = scenario.link
     medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
     for outage in scenario.faults.link_outages:

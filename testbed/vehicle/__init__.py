@@ -1,6 +1,6 @@
 """vehicle: physics, thrusters, allocation, control and sensors of the simulated ROV.
 
-See DESIGN.md.
+Its architecture is the ECS paper's (README, "Architecture"; docs/vehicle.md).
 
 Modules (import them directly; this package imports nothing, so ``import testbed.vehicle``
 stays cheap and never loads pybullet):

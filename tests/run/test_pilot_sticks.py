@@ -68,3 +68,26 @@ def test_full_sticks_and_the_wrong_count_of_sticks() -> None:
 
     with pytest.raises(ValueError, match=r"^pilot Five: 5 sticks sampled, expected 6$"):
         OperatorStation(Five(), SessionPlan(arm_at_s=100.0)).frame(0.0)
+
+
+def test_a_pilot_without_sample_or_returning_no_pilot_sample_is_named() -> None:
+    """A review's two broken pilots: one with no sample method failed only once the simulation
+    ran, deep inside simpy, and one returning a bare tuple raised AttributeError 'sticks'."""
+
+    class NoSample:
+        pass
+
+    class Bare:
+        def sample(self, t_s: float) -> tuple[float, ...]:
+            return (0.0,) * 6
+
+    scenario = load_scenario(
+        "s100-teleop-v1", ["duration_s=3.0", "pilot.start_s=0.5", "metrics.settle_s=0.5"]
+    )
+    with pytest.raises(
+        TypeError, match=r"^pilot: expected an object with sample\(t_s\) .* NoSample"
+    ):
+        run_scenario(scenario, pilot=NoSample())  # type: ignore[arg-type]
+    expected = r"^pilot Bare: sample\(\) must return a PilotSample .*, got tuple$"
+    with pytest.raises(TypeError, match=expected):
+        run_scenario(scenario, pilot=Bare())  # type: ignore[arg-type]
