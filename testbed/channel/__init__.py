@@ -9,6 +9,8 @@ The link is simpy's ``Cable`` shape: a :class:`Medium` apart from the nodes, eac
 - :mod:`~testbed.channel.medium` — :class:`Medium`, :class:`Modem`, :class:`Delivery`,
   :func:`decode_delivery` (every simulated receiver's decoding rule).
 - :mod:`~testbed.channel.errors` — independent and Gilbert–Elliott bit errors.
+- :mod:`~testbed.channel.model` — the seam for a link model of your own (:class:`LinkModel`:
+  air time and a receiver's bit errors; :class:`StandardLink`, the preset's).
 - :mod:`~testbed.channel.mac` — token passing (the paper's) and free access, as simpy processes.
 - :mod:`~testbed.channel.trace` — typed link events, and what became of each frame
   (:func:`frame_outcomes`, :func:`transmissions`, :func:`direction_counts`).
@@ -32,6 +34,7 @@ from .mac import (
     run_token_slave,
 )
 from .medium import Delivery, Medium, Modem, ModemCounters, Position, decode_delivery
+from .model import ErrorModel, LinkModel, StandardLink
 from .outcomes import (
     RECEPTION_OUTCOMES,
     DirectionCounts,
@@ -52,6 +55,7 @@ __all__ = [
     "TELEROBOTICS_2021",
     "Delivery",
     "DirectionCounts",
+    "ErrorModel",
     "EventKind",
     "Fixed",
     "FrameOutcome",
@@ -60,12 +64,14 @@ __all__ = [
     "IpgPolicy",
     "LinkConfig",
     "LinkEvent",
+    "LinkModel",
     "Medium",
     "Modem",
     "ModemCounters",
     "Position",
     "ProbeResult",
     "Propagation",
+    "StandardLink",
     "Trace",
     "Transmission",
     "decode_delivery",

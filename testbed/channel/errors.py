@@ -135,12 +135,13 @@ class BitErrors:
         self._gap = pos - n_bits
         return out
 
-    def corrupt(self, data: bytes, p_independent: float) -> tuple[bytes, int]:
+    def corrupt(self, data: bytes, p_independent: float, t_s: float = 0.0) -> tuple[bytes, int]:
         """Apply bit errors to one received copy.
 
         Args:
             data: the bytes as sent.
             p_independent: per-bit probability of independent errors for this copy.
+            t_s: when it is received [s]; unused (these errors do not change with time).
 
         Returns:
             The bytes as received and the number of flipped bits.

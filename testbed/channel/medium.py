@@ -7,9 +7,10 @@ with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
   ``tx_buffer_bytes``). With ``packet_bytes > 0`` the frame is cut into fixed-size packets, the
   last zero-padded, each queued and sent as its own transmission.
 - A transmission spends ``intrinsic_delay_s`` (the device counts as transmitting), then the
-  airtime ``8·len / bitrate_bps``. The next queued transmission starts ``queue_gap_s`` after
-  that. In half duplex a modem defers its queue while it is receiving (until ``queue_gap_s``
-  after the reception ends) and loses any reception that overlaps its own transmission.
+  airtime ``8·len / bitrate_bps`` (the link model's, :meth:`~.model.LinkModel.airtime_s`).
+  The next queued transmission starts ``queue_gap_s`` after that. In half duplex a modem
+  defers its queue while it is receiving (until ``queue_gap_s`` after the reception ends) and
+  loses any reception that overlaps its own transmission.
 - The medium is a broadcast channel: every other attached modem within ``max_range_m`` (distance
   between the position callables at transmit time) receives its own copy, which arrives after
   the propagation delay ``fixed_s + distance / speed_mps``: the copy is on the air at the
@@ -18,7 +19,8 @@ with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
   intrinsic + airtime + propagation.
 - Any overlap of two receptions at one modem destroys both (no capture); destroyed copies are
   counted and traced, never delivered. Other copies are delivered with bits flipped by the
-  receiver's :class:`~testbed.channel.errors.BitErrors` — the receiver's decoder must catch them.
+  receiver's error model (the link model's, :meth:`~.model.LinkModel.error_model`: by default
+  :class:`~testbed.channel.errors.BitErrors`) — the receiver's decoder must catch them.
   The per-bit probability of independent errors is 1 − (1 − ber)(1 − min(1, ber_per_m·d)), with
   d the distance at transmit time; the receiver's Gilbert–Elliott chain (if enabled) is ORed on
   top and advances over the bits of the copies it is handed (not over destroyed ones).
@@ -41,7 +43,7 @@ import numpy as np
 import simpy
 
 from testbed.channel.config import LinkConfig
-from testbed.channel.errors import BitErrors
+from testbed.channel.model import LinkModel, StandardLink
 from testbed.channel.trace import BROADCAST, EventKind, Trace
 from testbed.protocol import CorruptFrame, Frame, FrameDecoder
 
@@ -158,6 +160,8 @@ class Medium:
         rng: random generator; each attached modem gets an independent child stream from it
             (``rng.spawn``), so one receiver's errors do not depend on another's traffic.
         trace: event sink, or None for speed.
+        model: the link model (air time, bit errors; :mod:`~testbed.channel.model`); None:
+            the preset's own (:class:`~testbed.channel.model.StandardLink`).
     """
 
     def __init__(
@@ -166,10 +170,12 @@ class Medium:
         config: LinkConfig,
         rng: np.random.Generator,
         trace: Trace | None = None,
+        model: LinkModel | None = None,
     ) -> None:
         self.env = env
         self.config = config
         self.trace = trace
+        self.model: LinkModel = StandardLink(config) if model is None else model
         self._rng = rng
         self._modems: list[Modem] = []
         self._next_frame_id = 0
@@ -295,13 +301,11 @@ class Modem:
         self._env = medium.env
         self._half_duplex = config.duplex == "half"
         self._intrinsic_s = config.intrinsic_delay_s
-        self._s_per_byte = 8.0 / config.bitrate_bps
+        self._airtime_s = medium.model.airtime_s
         self._gap_s = config.queue_gap_s
         self._buffer_bytes = config.tx_buffer_bytes
         self._packet_bytes = config.packet_bytes
-        self._errors = BitErrors(config.burst, rng)
-        self._clean = not config.burst.enabled
-        """No burst chain: a copy with no independent error probability arrives clean."""
+        self._errors = medium.model.error_model(rng)
         self._fifo: deque[_Queued] = deque()
         self._fifo_bytes = 0
         self._tx_start_s = -math.inf
@@ -405,7 +409,7 @@ class Modem:
         frame_id, part, _, data = entry
         size = len(data)
         self._fifo_bytes -= size
-        busy_s = self._intrinsic_s + size * self._s_per_byte
+        busy_s = self._intrinsic_s + self._airtime_s(size, now)
         end_s = now + busy_s
         self._tx_start_s = now
         self._tx_end_s = end_s
@@ -457,10 +461,7 @@ class Modem:
                 kind = EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
             return
-        if self._clean and rec.p_independent <= 0.0:
-            n_errors = 0  # nothing can flip a bit (the error model draws nothing either)
-        else:
-            data, n_errors = self._errors.corrupt(data, rec.p_independent)
+        data, n_errors = self._errors.corrupt(data, rec.p_independent, now)
         if n_errors:
             counters.rx_corrupted += 1
             counters.rx_bit_errors += n_errors

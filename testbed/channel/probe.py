@@ -38,6 +38,7 @@ import simpy
 from testbed.channel.config import LinkConfig
 from testbed.channel.mac import run_periodic_sender
 from testbed.channel.medium import Delivery, Medium, decode_delivery
+from testbed.channel.model import LinkModel, model_name
 from testbed.channel.trace import EventKind, Trace
 from testbed.protocol import MAX_PAYLOAD, Frame, FrameDecoder, encode_frame, frame_overhead
 
@@ -112,6 +113,8 @@ class ProbeResult:
     sim_s: float
     wall_s: float
     rtf: float
+    link_model: str = ""
+    """The class of a link model of the user's own (``module.Name``), or "" for the preset's."""
 
     def to_json_dict(self) -> dict[str, Any]:
         """The ``--json`` object (the documented keys first; keys are only ever added)."""
@@ -139,6 +142,7 @@ class ProbeResult:
             "interval_s": self.interval_s,
             "distance_m": self.distance_m,
             "seed": self.seed,
+            "link_model": self.link_model or None,
         }
 
 
@@ -155,6 +159,7 @@ def run_probe(
     interval_s: float = 1.0,
     seed: int = 0,
     distance_m: float = 0.0,
+    link_model: LinkModel | None = None,
 ) -> ProbeResult:
     """Send ``frames`` frames one way over a two-node link and measure what arrives.
 
@@ -166,6 +171,8 @@ def run_probe(
         interval_s: time between frames handed to the sender [s], > 0.
         seed: seed of the run's random generator, ≥ 0 (same seed ⇒ same result).
         distance_m: sender–receiver distance [m], ≥ 0.
+        link_model: a link model of your own (:mod:`~testbed.channel.model`); None: the
+            preset's.
 
     Returns:
         The counts, PER, goodput, latency statistics and timing of the run.
@@ -187,7 +194,7 @@ def run_probe(
 
     env = simpy.Environment()
     losses = Trace(kinds=(EventKind.COLLIDE, EventKind.OUT_OF_RANGE))
-    medium = Medium(env, config, np.random.default_rng(seed), trace=losses)
+    medium = Medium(env, config, np.random.default_rng(seed), trace=losses, model=link_model)
     sender = medium.attach("sender")
     far = (float(distance_m), 0.0, 0.0)
     receiver = medium.attach("receiver", None if distance_m == 0.0 else lambda: far)
@@ -250,6 +257,7 @@ def run_probe(
         sim_s=sim_s,
         wall_s=wall_s,
         rtf=sim_s / wall_s,
+        link_model="" if link_model is None else model_name(link_model),
     )
 
 

@@ -23,6 +23,7 @@ import numpy as np
 import simpy
 
 from testbed.channel import Medium, Trace
+from testbed.channel.model import LinkModel, model_name
 from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.pilots import Pilot, SampleHold, is_pure
@@ -207,6 +208,7 @@ def run_scenario(
     seed: int | None = None,
     pilot: Pilot | None = None,
     vehicle_setup: VehicleSetup | None = None,
+    link_model: LinkModel | None = None,
 ) -> RunResult:
     """Simulate ``scenario`` once.
 
@@ -231,6 +233,10 @@ def run_scenario(
             replace its world or entity, or reach the link, the operator or the recorder. Keep
             runs repeatable: any randomness from generators you seed yourself (the run's own
             generators are not handed out), and no wall-clock time.
+        link_model: a link model of your own for the scenario's link
+            (:class:`~testbed.channel.model.LinkModel`: the air time of a transmission and a
+            receiver's bit errors; the scenario's ``[link]`` keeps the rest: MAC, delays,
+            range, buffers). Recorded as ``inputs.link_model`` in the metrics.
 
     Returns:
         The metrics and the recording.
@@ -245,7 +251,9 @@ def run_scenario(
     if recorded_pilot is not operator_pilot:
         recorder.stick_source = "operator samples"
     link = scenario.link
-    medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
+    medium = Medium(
+        env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=link_model
+    )
     for outage in scenario.faults.link_outages:
         medium.add_outage(outage.start_s, outage.end_s)
         recorder.event(outage.start_s, "scenario", "outage", f"until {outage.end_s:g} s")
@@ -292,6 +300,8 @@ def run_scenario(
         metrics = _run_metrics(
             scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, stopped
         )
+        if link_model is not None:
+            metrics["inputs"]["link_model"] = model_name(link_model)
     return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
 
 

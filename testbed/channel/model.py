@@ -1,0 +1,82 @@
+"""The seam for a link model of your own: how long a transmission is on the air, and what a
+receiver's bit errors are.
+
+A :class:`~testbed.channel.medium.Medium` asks its :class:`LinkModel` two things and does the
+rest itself (the MAC's queues and gaps, propagation, range, collisions, outages, the trace and
+the counters, which every link shares):
+
+- :meth:`LinkModel.airtime_s`: the time a transmission of ``size_bytes`` starting at ``t_s``
+  keeps the sender busy after the modem's intrinsic delay [s] — a bit rate that changes over
+  time, a rate adaptation, a per-packet overhead;
+- :meth:`LinkModel.error_model`: one receiver's :class:`ErrorModel`, made once per attached
+  modem with that receiver's own generator, which must be its only source of randomness (one
+  seed, one result).
+
+:class:`StandardLink` is the preset's own model (``bitrate_bps``; independent errors at the
+copy's BER plus the preset's Gilbert–Elliott chain), used when none is given. Give yours to
+:func:`~testbed.run.runner.run_scenario` (``link_model=``) or
+:func:`~testbed.channel.probe.run_probe` (``testbed link``'s probe); a run records its class
+in ``metrics.json`` (``inputs.link_model``). docs/channel.md, "A link model of your own".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from .config import LinkConfig
+from .errors import BitErrors
+
+__all__ = ["ErrorModel", "LinkModel", "StandardLink", "model_name"]
+
+
+class ErrorModel(Protocol):
+    """One receiver's bit errors."""
+
+    def corrupt(self, data: bytes, p_independent: float, t_s: float) -> tuple[bytes, int]:
+        """The bytes of one copy as received and how many bits were flipped.
+
+        Args:
+            data: the bytes as sent.
+            p_independent: the copy's independent bit error probability (the link's BER at
+                the distance it crossed; a model may use it or not).
+            t_s: the time the copy is received [s].
+        """
+        ...
+
+
+class LinkModel(Protocol):
+    """What a link model decides (module docstring)."""
+
+    def airtime_s(self, size_bytes: int, t_s: float) -> float:
+        """Time on the air of ``size_bytes`` bytes sent at ``t_s`` [s], > 0, the modem's
+        intrinsic delay not included."""
+        ...
+
+    def error_model(self, rng: np.random.Generator) -> ErrorModel:
+        """A new receiver's bit errors, drawing only from ``rng``."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class StandardLink:
+    """The preset's model: a constant bit rate, and independent errors plus the preset's
+    Gilbert–Elliott burst chain (:class:`~testbed.channel.errors.BitErrors`)."""
+
+    config: LinkConfig
+
+    def airtime_s(self, size_bytes: int, t_s: float) -> float:
+        """``size_bytes · (8 / bitrate_bps)`` [s], whatever the time."""
+        return size_bytes * (8.0 / self.config.bitrate_bps)
+
+    def error_model(self, rng: np.random.Generator) -> BitErrors:
+        """The preset's independent and burst errors."""
+        return BitErrors(self.config.burst, rng)
+
+
+def model_name(model: object) -> str:
+    """``module.QualifiedName`` of a model's class, for the record."""
+    cls = type(model)
+    return f"{cls.__module__}.{cls.__qualname__}"

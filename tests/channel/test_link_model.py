@@ -1,0 +1,102 @@
+"""A link model of the user's own (testbed.channel.model): the medium asks it for each
+transmission's air time and each receiver's bit errors, against closed forms and a second
+method (the preset's own keys)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from testbed.channel import EventKind, LinkModel, StandardLink
+from testbed.channel.config import load_link_config
+from testbed.channel.probe import run_probe
+from testbed.protocol import encode_frame
+from testbed.run import load_scenario, run_scenario
+
+S100 = load_link_config("s100", ["ber=0"])
+
+
+@dataclasses.dataclass(frozen=True)
+class StepRate:
+    """A bit rate that steps from ``before_bps`` to ``after_bps`` at ``at_s``; no errors."""
+
+    before_bps: float
+    after_bps: float
+    at_s: float
+
+    def airtime_s(self, size_bytes: int, t_s: float) -> float:
+        return size_bytes * (8.0 / (self.before_bps if t_s < self.at_s else self.after_bps))
+
+    def error_model(self, rng: np.random.Generator) -> EveryNth:
+        return EveryNth(0)
+
+
+class EveryNth:
+    """Flips one bit of every ``n``-th copy a receiver gets (0: none), drawing nothing."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.copies = n, 0
+
+    def corrupt(self, data: bytes, p_independent: float, t_s: float) -> tuple[bytes, int]:
+        self.copies += 1
+        if self.n and self.copies % self.n == 0:
+            return bytes([data[0] ^ 0x80]) + data[1:], 1
+        return data, 0
+
+
+@dataclasses.dataclass(frozen=True)
+class EveryThirdLost:
+    config: object
+
+    def airtime_s(self, size_bytes: int, t_s: float) -> float:
+        return StandardLink(S100).airtime_s(size_bytes, t_s)
+
+    def error_model(self, rng: np.random.Generator) -> EveryNth:
+        return EveryNth(3)
+
+
+def test_a_rate_that_changes_over_time_gives_each_frame_its_closed_form_latency() -> None:
+    n, size = 100, 60  # one frame a second; the rate halves from t = 49.5 s
+    model: LinkModel = StepRate(1900.0, 950.0, 49.5)
+    r = run_probe(S100, frames=n, frame_bytes=size, link_model=model)
+    fast, slow = (S100.intrinsic_delay_s + 8 * size / bps for bps in (1900.0, 950.0))
+    assert r.frames_delivered == n and r.per == 0.0
+    assert r.latency_s.mean == pytest.approx((50 * fast + 50 * slow) / n, abs=1e-9)
+    assert r.latency_s.max == pytest.approx(slow, abs=1e-9)
+    assert r.link_model.endswith("test_link_model.StepRate")
+    assert r.to_json_dict()["link_model"] == r.link_model
+    assert run_probe(S100, frames=3).to_json_dict()["link_model"] is None  # the preset's
+
+
+def test_a_receivers_error_model_decides_which_copies_arrive_corrupted() -> None:
+    r = run_probe(S100, frames=300, frame_bytes=40, link_model=EveryThirdLost(S100))
+    assert (r.frames_corrupted, r.frames_delivered) == (100, 200)  # the decoder caught each
+    assert r.per == pytest.approx(1 / 3)
+
+
+def test_a_users_constant_rate_model_flies_as_the_presets_key_bit_for_bit() -> None:
+    """The second method: a run whose model says 1400 bit/s is the run of the same scenario
+    with link.bitrate_bps = 1400, byte for byte; each 13-B order crosses in the intrinsic delay
+    plus 8·13/1400 s (19.55 ms more than at 1900 bit/s), and the model is recorded."""
+    short = ["duration_s=30", "trials=1"]
+    preset = run_scenario(load_scenario("s100-teleop-v1", short))
+    keyed = run_scenario(load_scenario("s100-teleop-v1", [*short, "link.bitrate_bps=1400"]))
+    modelled = run_scenario(
+        load_scenario("s100-teleop-v1", short), link_model=StepRate(1400.0, 1400.0, 0.0)
+    )
+    for column, values in keyed.recorder.series().items():
+        np.testing.assert_array_equal(values, modelled.recorder.series()[column], column)
+    sent, crossed = {}, []
+    for event in modelled.recorder.trace.events:
+        if event.kind is EventKind.TX_START and event.src == "operator":
+            sent[event.frame_id] = event.t_s
+        elif event.kind is EventKind.DELIVER and event.dst == "vehicle":
+            crossed.append(event.t_s - sent[event.frame_id])
+    assert len(encode_frame(b"\0" * 7)) == 13  # an order's size on the wire
+    expected = S100.intrinsic_delay_s + 8 * 13 / 1400
+    # plus the radio's propagation over the few metres between the nodes (≈ 3 ns a metre)
+    assert len(crossed) > 40 and crossed == pytest.approx([expected] * len(crossed), abs=1e-7)
+    assert modelled.metrics["inputs"]["link_model"].endswith("test_link_model.StepRate")
+    assert "link_model" not in preset.metrics["inputs"]
