@@ -14,11 +14,17 @@ function send(obj) { if (ws.readyState === 1) ws.send(JSON.stringify(obj)); }
 window.consoleSend = send; // for scripted checks
 
 // ---------------------------------------------------------------- input
+// The flying keys (and T) belong to the pilot wherever the focus is, except in a field one types
+// into: their default action is prevented, so a focused menu never takes them as type-ahead (S
+// would pick "stabilize" in the mode menu and send it). A focused menu takes no letters at all.
+const FLYING_KEYS = new Set(["KeyW", "KeyS", "KeyA", "KeyD", "KeyQ", "KeyE", "KeyR", "KeyF", "KeyT"]);
+const typesText = (el) => !!el && el.tagName === "INPUT" && el.type !== "checkbox";
 addEventListener("keydown", (e) => {
-  if (e.target.tagName === "INPUT") return;
-  if (e.key === "t" || e.key === "T") { $("truth").checked = !$("truth").checked; return; }
+  if (typesText(e.target)) return;
+  if (FLYING_KEYS.has(e.code) || (e.target.tagName === "SELECT" && e.key.length === 1)) e.preventDefault();
+  if (e.code === "KeyT") { if (!e.repeat) $("truth").checked = !$("truth").checked; return; }
   keys.add(e.code); if (e.shiftKey) keys.add("Shift");
-});
+}, true);
 addEventListener("keyup", (e) => { keys.delete(e.code); if (!e.shiftKey) keys.delete("Shift"); });
 addEventListener("blur", () => keys.clear());
 
@@ -78,7 +84,10 @@ setInterval(() => {
 
 $("arm").onclick = () => send({ t: "arm", armed: true });
 $("disarm").onclick = () => send({ t: "arm", armed: false });
-$("mode").onchange = () => send({ t: "mode", mode: $("mode").value });
+$("mode").onchange = () => {
+  send({ t: "mode", mode: $("mode").value });
+  $("mode").blur(); // the keys fly again at once, never pick another mode
+};
 $("set-ber").onclick = () => send({ t: "link", ber: Number($("ber").value) });
 $("set-gap").onclick = () => send({ t: "link", gap_s: Number($("gap").value) });
 $("reset-gap").onclick = () => send({ t: "link", gap_s: null });

@@ -1,0 +1,107 @@
+"""The console page's own behaviour in headless Chromium against one real ``testbed live``.
+
+One ``testbed live`` process and one browser serve the whole module (each costs seconds);
+each test opens its own tab (a fresh browser context) and closes it, so the tests do not
+depend on one another's order, and any tab may be the pilot once the previous test's tab has
+left (its wait for the seat is a condition, not a sleep). An init script records every message
+the page sends on its WebSocket (``window.__sent``), so a test sees what the page asked for.
+
+What the page shows is read from the page; what the session did, from ``/state``. Every wait
+is for a condition with a deadline only as the failure bound (``DEADLINE_S``, far beyond what
+the model needs on a loaded 2-core machine).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tests.live.livesession import DEADLINE_S, Live
+
+_WAIT_MS = DEADLINE_S * 1000.0
+"""Failure bound of a wait in the page [ms]."""
+
+_RECORD_SENT = """
+window.__sent = [];
+const __send = WebSocket.prototype.send;
+WebSocket.prototype.send = function (data) {
+  window.__sent.push(JSON.parse(String(data))); return __send.call(this, data); };
+"""
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory, browser_path: str) -> Iterator[Live]:
+    del browser_path
+    process = Live(tmp_path_factory.mktemp("console-page") / "out")
+    try:
+        yield process
+    finally:
+        if process.proc.poll() is None:
+            process.proc.kill()
+            process.proc.wait()
+
+
+@pytest.fixture(scope="module")
+def browser(browser_path: str) -> Iterator[Any]:
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=browser_path, args=["--no-sandbox"])
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+@pytest.fixture
+def tab(browser: Any, live: Live) -> Iterator[Any]:
+    """A fresh tab on the console that holds the pilot's seat and has drawn a state."""
+    context = browser.new_context(viewport={"width": 1500, "height": 900})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(_WAIT_MS)
+        page.add_init_script(_RECORD_SENT)
+        page.goto(live.url)
+        page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+        yield page
+    finally:
+        context.close()
+
+
+def _sent(page: Any, kind: str) -> list[dict[str, Any]]:
+    sent: list[dict[str, Any]] = page.evaluate("window.__sent")
+    return [m for m in sent if m.get("t") == kind]
+
+
+def _wait_sent_sticks(page: Any, axis: str, value: float) -> None:
+    """Until the page has sent a stick message with ``axis`` at ``value``."""
+    page.wait_for_function(
+        f"window.__sent.some((m) => m.t === 'sticks' && m.{axis} === {json.dumps(value)})"
+    )
+
+
+def test_flying_keys_never_change_the_mode(tab: Any) -> None:
+    page = tab
+    # a mode picked from the menu is sent once, and the menu lets go of the focus
+    page.focus("#mode")
+    page.select_option("#mode", "manual")
+    assert _sent(page, "mode") == [{"t": "mode", "mode": "manual"}]
+    assert page.evaluate("document.activeElement.id") != "mode"
+    page.select_option("#mode", "depth_hold")
+    assert [m["mode"] for m in _sent(page, "mode")] == ["manual", "depth_hold"]
+
+    # the menu focused again (a click, Tab): the flying keys fly, the menu ignores letters
+    page.focus("#mode")
+    for key, axis, value in (("KeyS", "x", -0.5), ("KeyD", "y", 0.5), ("KeyA", "y", -0.5)):
+        page.keyboard.down(key)
+        _wait_sent_sticks(page, axis, value)  # the key was taken, its default action ran
+        page.keyboard.up(key)
+    page.keyboard.press("KeyM")  # "manual" by type-ahead, were letters let through
+    page.keyboard.down("KeyW")
+    _wait_sent_sticks(page, "x", 0.5)  # taken after M: M's default action has run
+    page.keyboard.up("KeyW")
+    assert page.input_value("#mode") == "depth_hold"
+    assert [m["mode"] for m in _sent(page, "mode")] == ["manual", "depth_hold"]
