@@ -105,3 +105,36 @@ def test_flying_keys_never_change_the_mode(tab: Any) -> None:
     page.keyboard.up("KeyW")
     assert page.input_value("#mode") == "depth_hold"
     assert [m["mode"] for m in _sent(page, "mode")] == ["manual", "depth_hold"]
+
+
+_ROW = """(args) => { const [table, key] = args;
+  const row = [...document.getElementById(table).rows].find((r) => r.cells[0].textContent === key);
+  return row ? [...row.cells].slice(1).map((c) => c.textContent) : null; }"""
+"""A row of one of the page's tables by its first cell: the other cells' text, or null."""
+
+
+def test_link_panel_counts_frames_out_of_range(tab: Any, live: Live) -> None:
+    page = tab
+    legend = page.evaluate("document.getElementById('timeline').nextElementSibling.textContent")
+    assert "out of range" in legend, legend
+    colours = page.evaluate("KIND_COLOUR")
+    assert len(set(colours.values())) == len(colours)  # one colour per fate
+    legend_colours = page.evaluate(
+        "[...document.querySelectorAll('#legend span')].map((s) => s.style.color)"
+    )
+    assert len(legend_colours) == len(colours)
+
+    # 2 km away the modems are out of range: the uplink's frames are counted so, on the page too
+    page.fill("#distance", "2000")
+    page.click("#set-distance")
+    try:
+        live.wait("out of range", lambda s: s["link"]["uplink"]["out_of_range"] > 0)
+        page.wait_for_function(
+            f"""() => {{ const row = ({_ROW})(["link", "out of range"]);
+            return row !== null && drawn !== null && Number(row[0]) > 0
+              && Number(row[0]) === drawn.link.uplink.out_of_range
+              && Number(row[1]) === drawn.link.downlink.out_of_range; }}"""
+        )
+    finally:
+        page.click("#reset-distance")
+        live.wait("distance reset", lambda s: s["link"]["distance_m"] is None)

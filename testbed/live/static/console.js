@@ -226,8 +226,13 @@ function drawDepth(truth) {
   line(depthOp, "#4af"); if (truth) line(depthTruth, "#f90");
 }
 
+// the packet timeline's colours, and its legend drawn from them (one place for both)
 const KIND_COLOUR = { tx_start: "#888", deliver: "#3c3", corrupt: "#f93", collide: "#f33",
-  outage: "#b5f", drop: "#fff", out_of_range: "#a63" };
+  outage: "#b5f", drop: "#fff", out_of_range: "#0cc" };
+const KIND_LABEL = [["tx_start", "sent"], ["deliver", "delivered"], ["corrupt", "corrupted"],
+  ["collide", "collided"], ["outage", "outage"], ["drop", "dropped"], ["out_of_range", "out of range"]];
+$("legend").innerHTML = KIND_LABEL.map(([kind, label]) =>
+  `<span style="color:${KIND_COLOUR[kind]}">■</span> ${label}`).join(" · ");
 function drawTimeline(s) {
   const c = $("timeline"), g = c.getContext("2d");
   g.fillStyle = "#000"; g.fillRect(0, 0, c.width, c.height);
@@ -266,7 +271,8 @@ function draw() {
   const L = s.link, u = L.uplink, d = L.downlink, pct = (p) => (p === null ? "–" : `${(100 * p).toFixed(1)} %`);
   rows($("link"), [["", "uplink", "downlink"], ["sent", u.sent, d.sent], ["delivered", u.delivered, d.delivered],
     ["corrupted", u.corrupted, d.corrupted], ["collided", u.collided, d.collided],
-    ["outage", u.outage, d.outage], ["dropped", u.dropped, d.dropped], ["PER", pct(u.per), pct(d.per)]]);
+    ["outage", u.outage, d.outage], ["out of range", u.out_of_range, d.out_of_range],
+    ["dropped", u.dropped, d.dropped], ["PER", pct(u.per), pct(d.per)]]);
   rows($("ages"), [["command lag [s]", fmt(L.command_lag_s)], ["command age [s]", fmt(L.command_age_s)],
     ["odometry age [s]", fmt(L.odometry_age_s)], ["BER", L.ber], ["gap [s]", fmt(L.gap_s, 3)],
     ["distance [m]", L.distance_m === null ? "scenario" : L.distance_m],
