@@ -138,3 +138,46 @@ def test_link_panel_counts_frames_out_of_range(tab: Any, live: Live) -> None:
     finally:
         page.click("#reset-distance")
         live.wait("distance reset", lambda s: s["link"]["distance_m"] is None)
+
+
+def _field_matches(field: str, key: str) -> str:
+    """JS: the field shows the drawn state's link value (to its 6 significant digits)."""
+    return (
+        f"(() => {{ const v = drawn.link.{key}, f = document.getElementById('{field}').value;"
+        f" return v === null ? f === '' : f !== '' && Math.abs(Number(f) - v) <= 1e-6 * v; }})()"
+    )
+
+
+def test_link_fields_start_from_the_link_and_refusals_are_shown(tab: Any, live: Live) -> None:
+    page = tab
+    page.wait_for_function("drawn !== null")  # the first state is drawn: the fields are filled
+    ber = page.evaluate("drawn.link.ber")
+    assert ber > 0.0  # the scenario's BER: a field left at "0" would make the link error-free
+    for field, key in (("ber", "ber"), ("gap", "gap_s"), ("distance", "distance_m")):
+        assert page.evaluate(_field_matches(field, key)), (field, page.input_value(f"#{field}"))
+
+    # "set" unedited keeps the link as it is
+    page.click("#set-ber")
+    page.wait_for_function("window.__sent.some((m) => m.t === 'link')")
+    assert _sent(page, "link") == [{"t": "link", "ber": ber}]
+
+    # a BER the server refuses: said in the notes and beside the fields, the field put back
+    page.fill("#ber", "0.6")
+    page.click("#set-ber")
+    page.wait_for_function("document.getElementById('notes').textContent.includes('ber: must')")
+    assert "refused" in page.inner_text("#link-refused")
+    page.wait_for_function(_field_matches("ber", "ber"))
+    assert live.state()["link"]["ber"] == ber
+
+    # a gap of 0 likewise; a blank field is not sent at all
+    gap = page.evaluate("drawn.link.gap_s")
+    page.fill("#gap", "0")
+    page.click("#set-gap")
+    page.wait_for_function("document.getElementById('notes').textContent.includes('gap_s: must')")
+    page.wait_for_function(_field_matches("gap", "gap_s"))
+    page.fill("#gap", "")
+    page.click("#set-gap")
+    page.wait_for_function("document.getElementById('notes').textContent.includes('no value')")
+    page.wait_for_function(_field_matches("gap", "gap_s"))
+    assert [m for m in _sent(page, "link") if "gap_s" in m] == [{"t": "link", "gap_s": 0}]
+    assert live.state()["link"]["gap_s"] == gap

@@ -88,10 +88,36 @@ $("mode").onchange = () => {
   send({ t: "mode", mode: $("mode").value });
   $("mode").blur(); // the keys fly again at once, never pick another mode
 };
-$("set-ber").onclick = () => send({ t: "link", ber: Number($("ber").value) });
-$("set-gap").onclick = () => send({ t: "link", gap_s: Number($("gap").value) });
+// The link fields show the values in effect (from the state, 6 significant digits; distance
+// blank while it is the scenario's) until edited; a blank field is not sent, and a value the
+// server refuses is said in the notes and beside the fields, and its field put back.
+const LINK_FIELDS = { ber: "ber", gap: "gap_s", distance: "distance_m" };
+const filledWith = {}; // the link value each field was last filled with
+const fieldText = (v) => (v === null || v === undefined ? "" : String(Number(Number(v).toPrecision(6))));
+function fillLinkFields(L) {
+  for (const [id, key] of Object.entries(LINK_FIELDS)) {
+    // a new value in effect refills the field, unless the pilot is typing in it
+    if (filledWith[id] !== L[key] && document.activeElement !== $(id)) restoreField(id, L);
+  }
+}
+function restoreField(id, L) { $(id).value = fieldText(L[LINK_FIELDS[id]]); filledWith[id] = L[LINK_FIELDS[id]]; }
+const pageNotes = []; // the page's own notices (refusals), shown after the server's notes
+function showNotes() { $("notes").textContent = (state ? state.console.notes : []).concat(pageNotes).join("\n"); }
+function refused(text) {
+  const line = `t = ${state ? fmt(state.t, 1) : "–"} s: refused: ${text}`;
+  pageNotes.push(line); if (pageNotes.length > 5) pageNotes.shift();
+  $("link-refused").textContent = line; showNotes();
+}
+function setLink(id) {
+  const key = LINK_FIELDS[id], text = $(id).value.trim();
+  $("link-refused").textContent = "";
+  if (text !== "") { send({ t: "link", [key]: Number(text) }); return; }
+  refused(`${key}: no value given`); if (state) restoreField(id, state.link);
+}
+$("set-ber").onclick = () => setLink("ber");
+$("set-gap").onclick = () => setLink("gap");
 $("reset-gap").onclick = () => send({ t: "link", gap_s: null });
-$("set-distance").onclick = () => send({ t: "link", distance_m: Number($("distance").value) });
+$("set-distance").onclick = () => setLink("distance");
 $("reset-distance").onclick = () => send({ t: "link", distance_m: null });
 $("outage").onclick = () => send({ t: "outage", duration_s: 3 });
 for (let i = 0; i <= 15; i++) $("shift").add(new Option(String(i), String(i), i === 4, i === 4));
@@ -137,7 +163,12 @@ ws.onmessage = (ev) => {
     if (rtt <= bestRtt || offsetMs === null) { bestRtt = rtt; offsetMs = msg.s - (msg.c + now) / 2; }
     return;
   }
-  if (msg.t === "rejected") return;
+  if (msg.t === "rejected") { // e.g. "ber: must be in [0, 0.5], got 0.6"
+    refused(String(msg.reason));
+    const key = String(msg.reason).split(":")[0];
+    for (const id of Object.keys(LINK_FIELDS)) if (LINK_FIELDS[id] === key && state) restoreField(id, state.link);
+    return;
+  }
   state = msg; role = msg.role;
   const add = (list, p, max) => { list.push(p); if (list.length > max) list.shift(); };
   if (msg.operator) add(trackOp, msg.operator.pos, 3000);
@@ -268,6 +299,7 @@ function draw() {
   $("truth").disabled = false;
   for (const id of ["set-ber", "set-gap", "reset-gap", "set-distance", "reset-distance", "outage"])
     $(id).disabled = !pilot || !s.link.simulated; // HIL ports: the real link is not ours to change
+  fillLinkFields(s.link);
   const L = s.link, u = L.uplink, d = L.downlink, pct = (p) => (p === null ? "–" : `${(100 * p).toFixed(1)} %`);
   rows($("link"), [["", "uplink", "downlink"], ["sent", u.sent, d.sent], ["delivered", u.delivered, d.delivered],
     ["corrupted", u.corrupted, d.corrupted], ["collided", u.collided, d.collided],
@@ -283,7 +315,7 @@ function draw() {
     ["state → pixels [ms]", fmt(pixelLags.length ? pixelLags[pixelLags.length - 1] : null)],
     ["scheduler lateness p95 [ms]", fmt(C.lateness_ms.p95)],
     ["inputs ok / malformed / range / flood", `${C.inputs.accepted} / ${C.inputs.malformed} / ${C.inputs.out_of_range} / ${C.inputs.flooded}`]]);
-  $("notes").textContent = C.notes.join("\n");
+  showNotes();
   rows($("events"), s.events.slice().reverse().map((e) => [fmt(e[0], 1), `${e[1]} ${e[2]} ${e[3]}`]));
   if (offsetMs !== null) pixelLags.push(performance.now() + offsetMs - s.server_ns / 1e6);
 }
