@@ -181,3 +181,39 @@ def test_link_fields_start_from_the_link_and_refusals_are_shown(tab: Any, live: 
     page.wait_for_function(_field_matches("gap", "gap_s"))
     assert [m for m in _sent(page, "link") if "gap_s" in m] == [{"t": "link", "gap_s": 0}]
     assert live.state()["link"]["gap_s"] == gap
+
+
+_CELL_COLOUR = """(key) => { const row = [...document.getElementById('telemetry').rows]
+  .find((r) => r.cells[0].textContent === key);
+  return row ? getComputedStyle(row.cells[1]).color : null; }"""
+"""The computed colour of a telemetry value by its row's name, or null."""
+
+
+_FLAGGED = "document.getElementById('telemetry').classList.contains('stale')"
+
+
+def test_stale_telemetry_is_flagged_and_the_failsafe_is_truth_only(tab: Any) -> None:
+    page = tab
+    page.wait_for_function("drawn !== null && drawn.operator !== null && drawn.operator.age_s < 3")
+    fresh = page.evaluate(_CELL_COLOUR, "armed")
+    assert "stale" not in page.inner_text("#telemetry")
+    # the vehicle's failsafe is physics truth: shown only with the truth overlay, as truth
+    assert "failsafe" not in page.inner_text("#telemetry")
+    page.keyboard.press("KeyT")
+    page.wait_for_function(f"({_ROW})(['telemetry', 'failsafe (truth)']) !== null")
+    page.keyboard.press("KeyT")
+    page.wait_for_function(
+        "![...document.getElementById('telemetry').rows].some((r) =>"
+        " r.cells[0].textContent.includes('failsafe'))"
+    )
+
+    # a 5-s outage: no reply for over 3 s, so the operator's state is stale, flagged and greyed
+    page.evaluate("consoleSend({ t: 'outage', duration_s: 5 })")
+    page.wait_for_function(
+        f"drawn.operator.age_s > 3 && {_FLAGGED}"
+        " && document.getElementById('telemetry').textContent.includes('stale')"
+    )
+    assert page.evaluate(_CELL_COLOUR, "armed") != fresh
+    # replies resume after the outage: no longer stale
+    page.wait_for_function(f"drawn.operator.age_s < 3 && !{_FLAGGED}")
+    assert page.evaluate(_CELL_COLOUR, "armed") == fresh

@@ -4,6 +4,7 @@
 
 const $ = (id) => document.getElementById(id);
 const STICK_HZ = 20, DEADZONE = 0.05;
+const STALE_S = 3; // operator state older than this [s] is flagged stale (docs/live.md)
 const ws = new WebSocket(`ws://${location.host}/ws`);
 let role = "viewer", state = null, drawn = null, offsetMs = null, bestRtt = Infinity;
 const rtts = [], pixelLags = [], trackOp = [], trackTruth = [], depthOp = [], depthTruth = [];
@@ -284,14 +285,20 @@ function draw() {
   drawImage(s.image);
   const o = s.operator, tr = s.truth;
   const both = (a, b, d = 2) => (truth ? `${a} <span style="color:#f90">(${b})</span>` : a);
+  // stale: the operator's last state is older than STALE_S; its values are greyed and the age
+  // flagged (the truth beside them, when shown, is not stale)
+  const stale = !!o && o.age_s !== null && o.age_s > STALE_S;
+  $("telemetry").classList.toggle("stale", stale);
+  const ageText = !o ? "–" : stale ? `<span class="bad">${fmt(o.age_s)} stale (&gt; ${STALE_S} s)</span>` : fmt(o.age_s);
   rows($("telemetry"), o ? [
     ["depth [m]", both(fmt(o.pos[2]), fmt(tr.pos[2]))],
     ["north, east [m]", both(`${fmt(o.pos[0])}, ${fmt(o.pos[1])}`, `${fmt(tr.pos[0])}, ${fmt(tr.pos[1])}`)],
     ["heading [deg]", both(fmt(o.rpy[2], 1), fmt(tr.rpy[2], 1))],
     ["roll, pitch [deg]", both(`${fmt(o.rpy[0], 1)}, ${fmt(o.rpy[1], 1)}`, `${fmt(tr.rpy[0], 1)}, ${fmt(tr.rpy[1], 1)}`)],
     ["armed", both(String(o.armed), String(tr.armed))], ["mode", o.mode],
-    ["failsafe (vehicle)", `<span class="${tr.failsafe === "NOMINAL" ? "ok" : "bad"}">${tr.failsafe}</span>`],
-    ["state age [s]", fmt(o.age_s)],
+    ["state age [s]", ageText],
+    // the vehicle's failsafe is physics truth (the operator is not told it): truth overlay only
+    ...(truth ? [["failsafe (truth)", `<span style="color:#f90">(${tr.failsafe})</span>`]] : []),
   ] : [["telemetry", "waiting for the first reply"]]);
   drawTrack(s, truth); drawDepth(truth); drawTimeline(s);
   const pilot = s.role === "pilot"; // a viewer watches: its controls are greyed (and ignored)
