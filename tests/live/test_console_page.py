@@ -217,3 +217,24 @@ def test_stale_telemetry_is_flagged_and_the_failsafe_is_truth_only(tab: Any) -> 
     # replies resume after the outage: no longer stale
     page.wait_for_function(f"drawn.operator.age_s < 3 && !{_FLAGGED}")
     assert page.evaluate(_CELL_COLOUR, "armed") == fresh
+
+
+def test_a_viewers_controls_look_greyed_and_both_count_connected(tab: Any, browser: Any) -> None:
+    pilot = tab
+    context = browser.new_context()
+    try:
+        viewer = context.new_page()
+        viewer.set_default_timeout(_WAIT_MS)
+        viewer.goto(pilot.url)
+        viewer.wait_for_function("document.getElementById('role').textContent === 'viewer'")
+        header = "document.querySelector('header').innerText"
+        for page in (pilot, viewer):
+            page.wait_for_function(f"/connected 2\\b/.test({header})")
+            assert "viewers" not in page.evaluate(header)
+        opacity = "(id) => getComputedStyle(document.getElementById(id)).opacity"
+        for control in ("arm", "mode", "ber", "set-ber"):
+            assert viewer.is_disabled(f"#{control}") and pilot.is_enabled(f"#{control}")
+            assert float(viewer.evaluate(opacity, control)) < 0.6, control
+            assert float(pilot.evaluate(opacity, control)) == 1.0, control
+    finally:
+        context.close()
