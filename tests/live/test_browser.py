@@ -21,101 +21,20 @@ from __future__ import annotations
 import json
 import math
 import os
-import select
 import shutil
-import signal
-import subprocess
-import sys
-import time
-import urllib.request
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tests.processes import default_sigint
-
-_DEADLINE_S = 60.0
-_CAP_S = 600.0
-"""Failure bound of every wait [s of wall clock]: a loaded machine runs late, never wrong."""
+from tests.live.livesession import Live
 
 _FAKE_GAMEPAD = """
 window.__pad = { id: "fake pad", index: 0, connected: true, mapping: "standard", timestamp: 0,
   axes: [0, 0, 0, 0], buttons: Array.from({ length: 17 }, () => ({ pressed: false, value: 0 })) };
 navigator.getGamepads = () => [window.__pad];
 """
-
-
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        found = shutil.which(name)
-        if found:
-            return found
-    return None
-
-
-@pytest.fixture(scope="module")
-def browser_path() -> str:
-    pytest.importorskip("playwright.sync_api", reason="Playwright is not installed")
-    path = _chromium()
-    if path is None:
-        pytest.skip("no Chromium executable (apt-get install chromium)")
-    return path
-
-
-class Live:
-    """A running ``testbed live`` process."""
-
-    def __init__(self, out: Path) -> None:
-        self.out = out
-        command = [sys.executable, "-m", "testbed", "live", "--port", "0", "--no-plots"]
-        command += ["--out", str(out), "--duration", "3600"]  # the test ends it (SIGINT)
-        self.proc = subprocess.Popen(
-            command,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            preexec_fn=default_sigint,  # it must take the test's Ctrl-C however pytest started
-        )
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], 4 * _DEADLINE_S)
-        line = self.proc.stdout.readline() if ready else ""  # once the console is up
-        assert line.startswith("testbed live: console on "), line + self.proc.stderr.read()
-        self.url = line.split()[-1]
-
-    def state(self) -> dict[str, Any]:
-        with urllib.request.urlopen(self.url + "state", timeout=10) as response:
-            document: dict[str, Any] = json.loads(response.read())
-        return document["state"] or {}
-
-    def wait(self, what: str, ok: Callable[[dict[str, Any]], bool]) -> dict[str, Any]:
-        """The first state that satisfies ``ok``. A progress timeout: the deadline
-        (``_DEADLINE_S``) restarts whenever the link's counters move (a loaded host runs the
-        session slowly, not wrongly), up to ``_CAP_S`` in all."""
-        start = time.monotonic()
-        deadline = start + _DEADLINE_S
-        progress = None
-        state: dict[str, Any] = {}
-        while time.monotonic() < min(deadline, start + _CAP_S):
-            ended = self.proc.poll() is not None
-            assert not ended, f"testbed live ended waiting for {what}: " + self.proc.stderr.read()
-            state = self.state()
-            if state and ok(state):
-                return state
-            link = (state or {}).get("link") or {}
-            now = json.dumps([link.get("uplink"), link.get("downlink")], sort_keys=True)
-            if now != progress:
-                progress, deadline = now, time.monotonic() + _DEADLINE_S
-            time.sleep(0.05)
-        waited = time.monotonic() - start
-        last = json.dumps(state)[:2000]
-        raise AssertionError(f"never in {waited:.0f} s: {what}; last state {last}")
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-        return self.proc.wait(timeout=300)  # progress timeout: a loaded host writes slowly
 
 
 @pytest.fixture

@@ -4,6 +4,7 @@
 
 const $ = (id) => document.getElementById(id);
 const STICK_HZ = 20, DEADZONE = 0.05;
+const STALE_S = 3; // operator state older than this [s] is flagged stale (docs/live.md)
 const ws = new WebSocket(`ws://${location.host}/ws`);
 let role = "viewer", state = null, drawn = null, offsetMs = null, bestRtt = Infinity;
 const rtts = [], pixelLags = [], trackOp = [], trackTruth = [], depthOp = [], depthTruth = [];
@@ -14,11 +15,17 @@ function send(obj) { if (ws.readyState === 1) ws.send(JSON.stringify(obj)); }
 window.consoleSend = send; // for scripted checks
 
 // ---------------------------------------------------------------- input
+// The flying keys (and T) belong to the pilot wherever the focus is, except in a field one types
+// into: their default action is prevented, so a focused menu never takes them as type-ahead (S
+// would pick "stabilize" in the mode menu and send it). A focused menu takes no letters at all.
+const FLYING_KEYS = new Set(["KeyW", "KeyS", "KeyA", "KeyD", "KeyQ", "KeyE", "KeyR", "KeyF", "KeyT"]);
+const typesText = (el) => !!el && el.tagName === "INPUT" && el.type !== "checkbox";
 addEventListener("keydown", (e) => {
-  if (e.target.tagName === "INPUT") return;
-  if (e.key === "t" || e.key === "T") { $("truth").checked = !$("truth").checked; return; }
+  if (typesText(e.target)) return;
+  if (FLYING_KEYS.has(e.code) || (e.target.tagName === "SELECT" && e.key.length === 1)) e.preventDefault();
+  if (e.code === "KeyT") { if (!e.repeat) $("truth").checked = !$("truth").checked; return; }
   keys.add(e.code); if (e.shiftKey) keys.add("Shift");
-});
+}, true);
 addEventListener("keyup", (e) => { keys.delete(e.code); if (!e.shiftKey) keys.delete("Shift"); });
 addEventListener("blur", () => keys.clear());
 
@@ -78,11 +85,40 @@ setInterval(() => {
 
 $("arm").onclick = () => send({ t: "arm", armed: true });
 $("disarm").onclick = () => send({ t: "arm", armed: false });
-$("mode").onchange = () => send({ t: "mode", mode: $("mode").value });
-$("set-ber").onclick = () => send({ t: "link", ber: Number($("ber").value) });
-$("set-gap").onclick = () => send({ t: "link", gap_s: Number($("gap").value) });
+$("mode").onchange = () => {
+  send({ t: "mode", mode: $("mode").value });
+  $("mode").blur(); // the keys fly again at once, never pick another mode
+};
+// The link fields show the values in effect (from the state, 6 significant digits; distance
+// blank while it is the scenario's) until edited; a blank field is not sent, and a value the
+// server refuses is said in the notes and beside the fields, and its field put back.
+const LINK_FIELDS = { ber: "ber", gap: "gap_s", distance: "distance_m" };
+const filledWith = {}; // the link value each field was last filled with
+const fieldText = (v) => (v === null || v === undefined ? "" : String(Number(Number(v).toPrecision(6))));
+function fillLinkFields(L) {
+  for (const [id, key] of Object.entries(LINK_FIELDS)) {
+    // a new value in effect refills the field, unless the pilot is typing in it
+    if (filledWith[id] !== L[key] && document.activeElement !== $(id)) restoreField(id, L);
+  }
+}
+function restoreField(id, L) { $(id).value = fieldText(L[LINK_FIELDS[id]]); filledWith[id] = L[LINK_FIELDS[id]]; }
+const pageNotes = []; // the page's own notices (refusals), shown after the server's notes
+function showNotes() { $("notes").textContent = (state ? state.console.notes : []).concat(pageNotes).join("\n"); }
+function refused(text) {
+  const line = `t = ${state ? fmt(state.t, 1) : "–"} s: refused: ${text}`;
+  pageNotes.push(line); if (pageNotes.length > 5) pageNotes.shift();
+  $("link-refused").textContent = line; showNotes();
+}
+function setLink(id) {
+  const key = LINK_FIELDS[id], text = $(id).value.trim();
+  $("link-refused").textContent = "";
+  if (text !== "") { send({ t: "link", [key]: Number(text) }); return; }
+  refused(`${key}: no value given`); if (state) restoreField(id, state.link);
+}
+$("set-ber").onclick = () => setLink("ber");
+$("set-gap").onclick = () => setLink("gap");
 $("reset-gap").onclick = () => send({ t: "link", gap_s: null });
-$("set-distance").onclick = () => send({ t: "link", distance_m: Number($("distance").value) });
+$("set-distance").onclick = () => setLink("distance");
 $("reset-distance").onclick = () => send({ t: "link", distance_m: null });
 $("outage").onclick = () => send({ t: "outage", duration_s: 3 });
 for (let i = 0; i <= 15; i++) $("shift").add(new Option(String(i), String(i), i === 4, i === 4));
@@ -128,7 +164,12 @@ ws.onmessage = (ev) => {
     if (rtt <= bestRtt || offsetMs === null) { bestRtt = rtt; offsetMs = msg.s - (msg.c + now) / 2; }
     return;
   }
-  if (msg.t === "rejected") return;
+  if (msg.t === "rejected") { // e.g. "ber: must be in [0, 0.5], got 0.6"
+    refused(String(msg.reason));
+    const key = String(msg.reason).split(":")[0];
+    for (const id of Object.keys(LINK_FIELDS)) if (LINK_FIELDS[id] === key && state) restoreField(id, state.link);
+    return;
+  }
   state = msg; role = msg.role;
   const add = (list, p, max) => { list.push(p); if (list.length > max) list.shift(); };
   if (msg.operator) add(trackOp, msg.operator.pos, 3000);
@@ -217,8 +258,13 @@ function drawDepth(truth) {
   line(depthOp, "#4af"); if (truth) line(depthTruth, "#f90");
 }
 
+// the packet timeline's colours, and its legend drawn from them (one place for both)
 const KIND_COLOUR = { tx_start: "#888", deliver: "#3c3", corrupt: "#f93", collide: "#f33",
-  outage: "#b5f", drop: "#fff", out_of_range: "#a63" };
+  outage: "#b5f", drop: "#fff", out_of_range: "#0cc" };
+const KIND_LABEL = [["tx_start", "sent"], ["deliver", "delivered"], ["corrupt", "corrupted"],
+  ["collide", "collided"], ["outage", "outage"], ["drop", "dropped"], ["out_of_range", "out of range"]];
+$("legend").innerHTML = KIND_LABEL.map(([kind, label]) =>
+  `<span style="color:${KIND_COLOUR[kind]}">■</span> ${label}`).join(" · ");
 function drawTimeline(s) {
   const c = $("timeline"), g = c.getContext("2d");
   g.fillStyle = "#000"; g.fillRect(0, 0, c.width, c.height);
@@ -239,14 +285,20 @@ function draw() {
   drawImage(s.image);
   const o = s.operator, tr = s.truth;
   const both = (a, b, d = 2) => (truth ? `${a} <span style="color:#f90">(${b})</span>` : a);
+  // stale: the operator's last state is older than STALE_S; its values are greyed and the age
+  // flagged (the truth beside them, when shown, is not stale)
+  const stale = !!o && o.age_s !== null && o.age_s > STALE_S;
+  $("telemetry").classList.toggle("stale", stale);
+  const ageText = !o ? "–" : stale ? `<span class="bad">${fmt(o.age_s)} stale (&gt; ${STALE_S} s)</span>` : fmt(o.age_s);
   rows($("telemetry"), o ? [
     ["depth [m]", both(fmt(o.pos[2]), fmt(tr.pos[2]))],
     ["north, east [m]", both(`${fmt(o.pos[0])}, ${fmt(o.pos[1])}`, `${fmt(tr.pos[0])}, ${fmt(tr.pos[1])}`)],
     ["heading [deg]", both(fmt(o.rpy[2], 1), fmt(tr.rpy[2], 1))],
     ["roll, pitch [deg]", both(`${fmt(o.rpy[0], 1)}, ${fmt(o.rpy[1], 1)}`, `${fmt(tr.rpy[0], 1)}, ${fmt(tr.rpy[1], 1)}`)],
     ["armed", both(String(o.armed), String(tr.armed))], ["mode", o.mode],
-    ["failsafe (vehicle)", `<span class="${tr.failsafe === "NOMINAL" ? "ok" : "bad"}">${tr.failsafe}</span>`],
-    ["state age [s]", fmt(o.age_s)],
+    ["state age [s]", ageText],
+    // the vehicle's failsafe is physics truth (the operator is not told it): truth overlay only
+    ...(truth ? [["failsafe (truth)", `<span style="color:#f90">(${tr.failsafe})</span>`]] : []),
   ] : [["telemetry", "waiting for the first reply"]]);
   drawTrack(s, truth); drawDepth(truth); drawTimeline(s);
   const pilot = s.role === "pilot"; // a viewer watches: its controls are greyed (and ignored)
@@ -254,10 +306,12 @@ function draw() {
   $("truth").disabled = false;
   for (const id of ["set-ber", "set-gap", "reset-gap", "set-distance", "reset-distance", "outage"])
     $(id).disabled = !pilot || !s.link.simulated; // HIL ports: the real link is not ours to change
+  fillLinkFields(s.link);
   const L = s.link, u = L.uplink, d = L.downlink, pct = (p) => (p === null ? "–" : `${(100 * p).toFixed(1)} %`);
   rows($("link"), [["", "uplink", "downlink"], ["sent", u.sent, d.sent], ["delivered", u.delivered, d.delivered],
     ["corrupted", u.corrupted, d.corrupted], ["collided", u.collided, d.collided],
-    ["outage", u.outage, d.outage], ["dropped", u.dropped, d.dropped], ["PER", pct(u.per), pct(d.per)]]);
+    ["outage", u.outage, d.outage], ["out of range", u.out_of_range, d.out_of_range],
+    ["dropped", u.dropped, d.dropped], ["PER", pct(u.per), pct(d.per)]]);
   rows($("ages"), [["command lag [s]", fmt(L.command_lag_s)], ["command age [s]", fmt(L.command_age_s)],
     ["odometry age [s]", fmt(L.odometry_age_s)], ["BER", L.ber], ["gap [s]", fmt(L.gap_s, 3)],
     ["distance [m]", L.distance_m === null ? "scenario" : L.distance_m],
@@ -268,7 +322,7 @@ function draw() {
     ["state → pixels [ms]", fmt(pixelLags.length ? pixelLags[pixelLags.length - 1] : null)],
     ["scheduler lateness p95 [ms]", fmt(C.lateness_ms.p95)],
     ["inputs ok / malformed / range / flood", `${C.inputs.accepted} / ${C.inputs.malformed} / ${C.inputs.out_of_range} / ${C.inputs.flooded}`]]);
-  $("notes").textContent = C.notes.join("\n");
+  showNotes();
   rows($("events"), s.events.slice().reverse().map((e) => [fmt(e[0], 1), `${e[1]} ${e[2]} ${e[3]}`]));
   if (offsetMs !== null) pixelLags.push(performance.now() + offsetMs - s.server_ns / 1e6);
 }
