@@ -76,6 +76,7 @@ from testbed.run.runner import (
     tally_images,
 )
 from testbed.run.scenario import Scenario
+from testbed.vehicle.systems import Controllers
 
 __all__ = [
     "DIRECTIONS",
@@ -479,6 +480,11 @@ def hil_metrics(
     ``command_lag_s``, ``command_age_s``, ``odometry_age_s`` and ``signal_lag_s``; and at the
     operator everything drawn from the vehicle's truth (tracking, attitude errors, energy).
 
+    ``token_round_trip_s`` and ``reply_fits_gap`` are the scenario link's closed form only when
+    its preset models the modem in use (``s100``, ``s2c`` for EvoLogics, ``m64``), else null;
+    the vehicle's event counts (failsafe, thruster faults) are null at a lone operator, and
+    ``events.ignored_setpoints`` is the vehicle's count where it runs here.
+
     ``hil``: ``mode``, ``modem``, ``poll_s``; ``added_latency_ms`` (port read returned → frame
     handed to the node, both endpoints pooled: ``p50``, ``p95``, ``max``, ``mean``, ``n``);
     ``round_trip_s`` (operator, token passing: order handed to the modem → the reply that
@@ -502,7 +508,14 @@ def hil_metrics(
         wall_s=wall_s,
         energy_wh=nan if vehicle_node is None else vehicle_node.energy_wh,
         payload_bytes=payload,
+        ignored_setpoints=None
+        if vehicle_node is None
+        else vehicle_node.vehicle.world.resource(Controllers).ignored_setpoints,
     )
+    if vehicle_node is None:  # the vehicle's own counts are kept on the other computer
+        metrics["events"].update(failsafe=nan, thruster_fault=nan)
+    if _PRESET_OF_MODEM.get(modem) != scenario.link.preset:  # the closed form is another link's
+        metrics["token_round_trip_s"], metrics["reply_fits_gap"] = nan, None
     metrics["link"] = {
         direction: _direction(direction, modems, ledger, recorder, payload[direction], duration_s)
         for direction in DIRECTIONS
@@ -528,6 +541,11 @@ def hil_metrics(
         "endpoints": reports,
     }
     return metrics
+
+
+_PRESET_OF_MODEM = {"s100": "s100", "evologics": "s2c", "m64": "m64"}
+"""The link preset that models each modem kind: a scenario on another preset describes another
+link, and its token cycle's closed form is not this run's."""
 
 
 def _direction(

@@ -1003,6 +1003,13 @@ def test_two_computers_each_write_what_they_observe(window: Window) -> None:
     assert received >= 1
     assert vehicle["link"]["downlink"]["frames_sent"] == received  # one reply per order
     assert vehicle["link"]["uplink"]["frames_sent"] is None  # sent on the other computer
+    # the vehicle's own counts where it runs, null at the lone operator (they were 0 there)
+    assert operator["events"] == {
+        "failsafe": None,
+        "thruster_fault": None,
+        "ignored_setpoints": None,
+    }
+    assert vehicle["events"]["ignored_setpoints"] == 0 and vehicle["events"]["failsafe"] >= 0
     assert operator["link"]["uplink"]["frames_sent"] >= received
     vehicle_in = vehicle["hil"]["endpoints"]["vehicle"]
     _unhanded(window, vehicle_in["bytes_in"], vehicle_in["garbage_bytes"], received, 13 + CRLF)
