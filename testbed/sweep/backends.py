@@ -51,9 +51,10 @@ __all__ = [
     "sigint_blocked",
 ]
 
-EXCLUDED_METRICS = ("scenario", "inputs", "seed", "wall_s", "rtf")
-"""``metrics.json`` keys left out of result rows: already in the row or the sweep's files, or
-wall-clock dependent."""
+EXCLUDED_METRICS = ("scenario", "inputs", "seed", "wall_s", "rtf", "signal_lag_reference")
+"""``metrics.json`` keys left out of result rows: already in the row or the sweep's files,
+wall-clock dependent, or a label the same for every run of a sweep (a sweep runs the
+scenario's own pilot: ``signal_lag_reference`` is ``"pilot"``)."""
 SCENARIO_KEYS = ("images.chunk_bytes", "images.selective_repeat")
 """Scenario values added to the rows of runs with images (after the metrics), so that plots of
 the rows need not know the sweep file: the chunk size and transfer mode of the closed forms."""
