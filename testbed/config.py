@@ -12,6 +12,7 @@ This module is a leaf: standard library only, importable from every layer.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import tomllib
@@ -156,18 +157,34 @@ def read_text(path: str | Path) -> str:
         raise ConfigError(f"{path}: cannot read: {err}") from None
 
 
+_PARSED: dict[str, dict[str, Any]] = {}
+"""TOML texts parsed in this process, by text (:func:`load_toml`)."""
+
+_PARSED_KEPT = 256
+"""Texts :data:`_PARSED` keeps (the oldest go first)."""
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file into a dict.
+    """Read a TOML file into a dict (a new one each call, the caller's to change).
+
+    The file is read every time; a text parsed before in this process is not parsed again
+    (a sweep's check loads a scenario, its model, layout and preset once per grid point).
 
     Raises:
         ConfigError: the file is missing, unreadable or not valid TOML (message names the file).
     """
     path = Path(path)
     text = read_text(path)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: malformed TOML: {err}") from None
+    parsed = _PARSED.get(text)
+    if parsed is None:
+        try:
+            parsed = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"{path}: malformed TOML: {err}") from None
+        if len(_PARSED) >= _PARSED_KEPT:
+            del _PARSED[next(iter(_PARSED))]
+        _PARSED[text] = parsed
+    return copy.deepcopy(parsed)
 
 
 def user_file(name: str, known: Iterable[str], what: str, suffix: str = ".toml") -> Path | None:

@@ -92,3 +92,16 @@ def test_load_toml_errors_name_the_file(tmp_path: Path) -> None:
 def test_field_error_carries_key() -> None:
     err = FieldError("x", "bad")
     assert err.key == "x" and str(err) == "x: bad"
+
+
+def test_load_toml_reads_the_file_each_time_and_hands_out_a_new_dict(tmp_path: Path) -> None:
+    """Parsed texts are kept (a sweep's check loads the same files once per grid point), but a
+    file edited between two loads is read as it is now, and a caller's changes to what it got
+    reach no other caller."""
+    path = tmp_path / "m.toml"
+    path.write_text('name = "a"\\n[t]\\nx = [1.0, 2.0]\\n')
+    first = load_toml(path)
+    first["t"]["x"].append(3.0)
+    assert load_toml(path) == {"name": "a", "t": {"x": [1.0, 2.0]}}
+    path.write_text('name = "b"\\n[t]\\nx = [1.0, 2.0]\\n')
+    assert load_toml(path)["name"] == "b"
