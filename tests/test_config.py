@@ -99,9 +99,9 @@ def test_load_toml_reads_the_file_each_time_and_hands_out_a_new_dict(tmp_path: P
     file edited between two loads is read as it is now, and a caller's changes to what it got
     reach no other caller."""
     path = tmp_path / "m.toml"
-    path.write_text('name = "a"\\n[t]\\nx = [1.0, 2.0]\\n')
+    path.write_text('name = "a"\n[t]\nx = [1.0, 2.0]\n')
     first = load_toml(path)
     first["t"]["x"].append(3.0)
     assert load_toml(path) == {"name": "a", "t": {"x": [1.0, 2.0]}}
-    path.write_text('name = "b"\\n[t]\\nx = [1.0, 2.0]\\n')
+    path.write_text('name = "b"\n[t]\nx = [1.0, 2.0]\n')
     assert load_toml(path)["name"] == "b"
