@@ -31,7 +31,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from testbed.config import build, check, load_toml, user_file
+from testbed.config import ConfigError, FieldError, build, check, load_toml, user_file
 from testbed.vehicle.plant_kernels import N_COEFFICIENTS, fossen_acceleration
 from testbed.vehicle.water_current import WaterCurrent
 
@@ -52,6 +52,10 @@ FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
 
+
+MAX_WATER_DENSITY_KG_M3 = 1030.0
+"""The densest sea water a vehicle is modelled in [kg/m³] (a bound on buoyancy, not the plant's
+density)."""
 
 GRAVITY_RANGE_M_S2 = (9.78, 9.83)
 """Standard gravity at sea level from the equator to the poles [m/s²]: a model's ``weight_n``
@@ -125,6 +129,44 @@ class HydroModel:
         eigenvalues = np.linalg.eigvalsh(self.mass_matrix)
         check(bool(eigenvalues.min() > 0.0), "inertia_kg_m2", "mass matrix is not positive")
 
+    def check_body(self) -> None:
+        """Refuse figures no rigid body has (they ran quietly: 1e9 N of buoyancy on 14 kg
+        flew the vehicle 33 m above the surface): a body's principal moments obey the triangle
+        inequality; its centres of gravity and buoyancy lie within its hull box; it displaces
+        at most its hull box's volume of the densest water, at the strongest gravity.
+        :func:`load_model` checks every model file so; a controller's deliberately wrong belief
+        (:func:`~testbed.vehicle.ismc.mismatched_model`) is not a body and is not checked.
+
+        Raises:
+            FieldError: naming the key.
+        """
+        inertia = self.inertia_kg_m2
+        for i, axis in enumerate("xyz"):
+            others = inertia[(i + 1) % 3] + inertia[(i + 2) % 3]
+            check(
+                inertia[i] <= others * (1.0 + 1e-9),
+                f"inertia_kg_m2[{i}]",
+                f"I{axis}{axis} = {inertia[i]:g} exceeds the other two together ({others:g}): "
+                "no rigid body has such principal moments",
+            )
+        for key in ("cog_m", "cob_m"):
+            point = getattr(self, key)
+            for i, (value, size) in enumerate(zip(point, self.hull_size_m, strict=True)):
+                check(
+                    abs(value) <= size / 2.0,
+                    f"{key}[{i}]",
+                    f"must lie within the hull box (|{value:g}| ≤ hull_size_m[{i}]/2 = "
+                    f"{size / 2.0:g} m)",
+                )
+        volume_m3 = float(np.prod(self.hull_size_m))
+        most_n = MAX_WATER_DENSITY_KG_M3 * GRAVITY_RANGE_M_S2[1] * volume_m3
+        check(
+            self.buoyancy_n <= most_n,
+            "buoyancy_n",
+            f"must be ≤ {most_n:.4g} N, the weight of the water the hull box holds "
+            f"({volume_m3:.4g} m³ of {MAX_WATER_DENSITY_KG_M3:g} kg/m³), got {self.buoyancy_n:g}",
+        )
+
     @property
     def net_buoyancy_n(self) -> float:
         """B − W [N]: positive means the vehicle floats up."""
@@ -184,10 +226,16 @@ def load_model(
     """
     own = user_file(name, known_models(), "vehicle model")
     if own is not None:
-        model = build(HydroModel, load_toml(own), source=str(own))
+        source = str(own)
+        model = build(HydroModel, load_toml(own), source=source)
     else:
         with resources.as_file(_models_dir().joinpath(f"{name}.toml")) as path:
-            model = build(HydroModel, load_toml(path), source=str(path))
+            source = str(path)
+            model = build(HydroModel, load_toml(path), source=source)
+    try:
+        model.check_body()
+    except FieldError as err:
+        raise ConfigError(f"{source}: {err.key}: {err.message}") from None
     if added_mass_coriolis is not None:
         model = dataclasses.replace(model, added_mass_coriolis=added_mass_coriolis)
     return model

@@ -39,7 +39,15 @@ from typing import Any, Literal
 import numpy as np
 
 from testbed.common.geometry import Quaternion, quat_rotate
-from testbed.config import FieldError, build, check, check_range, check_ranges, load_toml
+from testbed.config import (
+    ConfigError,
+    FieldError,
+    build,
+    check,
+    check_range,
+    check_ranges,
+    load_toml,
+)
 from testbed.ecs import Entity, Origin, Replicate, System, World
 from testbed.ecs.store import FrameStore
 from testbed.vehicle.allocation import Allocator
@@ -289,6 +297,7 @@ class VehicleConfig:
         self._check_arm_controller()
         self._check_arm_load()
         self._check_ismc_gains()
+        self._check_layout_fits_hull()
         pool = self.pool_in_use
         if pool is not None:
             x, y, z = self.start_position_ned_m
@@ -317,6 +326,25 @@ class VehicleConfig:
             f"the arm ({self.arm.model}) weighs {wet_n:.0f} N in water, more than the "
             f"vehicle ({self.model}, {weight_n:.1f} N) weighs in air: the hull cannot carry it",
         )
+
+    def _check_layout_fits_hull(self) -> None:
+        """Refuse a thruster farther from the body origin than the hull's size along an axis
+        (twice the hull box's half-extent: room for ducts outside it); a layout's thruster at
+        1e9 m ran quietly, its energy 0 Wh."""
+        try:
+            hull = load_model(self.model).hull_size_m
+            layout = load_thruster_config(self.thrusters)
+        except ConfigError:  # a file that does not load: the scenario loader names its key
+            return
+        for thruster in layout.thrusters:
+            for i, (value, size) in enumerate(zip(thruster.position_m, hull, strict=True)):
+                check(
+                    abs(value) <= size,
+                    "thrusters",
+                    f"thruster {thruster.name!r} of {self.thrusters} is outside the hull of "
+                    f"{self.model}: |position_m[{i}]| = {abs(value):g} m, at most hull_size_m"
+                    f"[{i}] = {size:g} m",
+                )
 
     def _check_ismc_gains(self) -> None:
         """Refuse, at load, an ISMC with no gains: a model with no packaged table (a model

@@ -201,3 +201,27 @@ def test_a_users_model_flies_the_ismc_with_the_gains_the_scenario_gives(tmp_path
     assert series[0].keys() == series[1].keys()
     for column in series[0]:
         np.testing.assert_array_equal(series[0][column], series[1][column], err_msg=column)
+
+
+@pytest.mark.parametrize(
+    ("kind", "replace", "named"),
+    [  # an extensibility review's files, all of which ran quietly with exit 0
+        ("models", ("buoyancy_n = 114.8", "buoyancy_n = 1e9"), "buoyancy_n: must be ≤ 397.2 N"),
+        ("models", ("[0.16, 0.16, 0.16]", "[0.16, 0.16, 0.4]"), "inertia_kg_m2[2]: Izz = 0.4 "),
+        ("models", ("cog_m = [0.0, 0.0, 0.02]", "cog_m = [0.0, 0.0, 5.0]"), "cog_m[2]: must lie"),
+        ("thrusters", ("[0.11, 0.01, 0.0]", "[1e9, 0.01, 0.0]"), "vehicle.thrusters: thruster"),
+    ],
+)
+def test_figures_no_rigid_body_has_are_refused_naming_the_key(
+    tmp_path: Path, kind: str, replace: tuple[str, str], named: str
+) -> None:
+    """B at most the water the hull box holds (1030 kg/m³, 9.83 m/s²: 397.2 N for the
+    BlueROV2's 0.457 × 0.338 × 0.254 m), principal moments within the triangle inequality,
+    the centres within the hull box, thrusters within the hull's size of the origin (a rod's
+    near-zero moment about its axis is a body: the review's 1e-9 kg·m² stays legal)."""
+    path = _copy(kind, "bluerov2", tmp_path / "odd.toml", replace)
+    key = "vehicle.model" if kind == "models" else "vehicle.thrusters"
+    with pytest.raises(ConfigError) as err:
+        load_scenario("s100-teleop-v1", [f"{key}={path}"])
+    message = str(err.value)
+    assert named in message and "\n" not in message, message
