@@ -76,6 +76,10 @@ POLL_S = 0.001
 PUBLISH_HZ = 10.0
 """Rate of the console's state [Hz]."""
 GOTO_REFUSED = "go-to refused: no vehicle state received yet (the depth to hold is unknown)"
+GOTO_NO_FIX = (
+    "go-to refused: this vehicle knows no position (no vehicle.sensors.position fix, no "
+    "navigation), so it cannot fly to a point; run a scenario with one (e.g. s100-video-v1)"
+)
 SIMULATED_ONLY = "link controls act on the simulated link only (this session runs on HIL ports)"
 
 _STICK_TOLERANCE = 0.01
@@ -310,11 +314,15 @@ class LiveSession:
             self._go_to(message)
 
     def _go_to(self, message: GoToPoint) -> None:
-        """Supervised control: fly to the clicked point at the depth the operator knows."""
+        """Supervised control: fly to the clicked point at the depth the operator knows
+        (refused, with a note, by a vehicle without a position fix: GUIDED would hold it in
+        place with no target, silently)."""
         odometry = self.station.vehicle_odometry()
-        if odometry is None:
+        vehicle = self.scenario.vehicle
+        no_fix = vehicle.sensors.position is None and vehicle.navigation_in_use is None
+        if odometry is None or no_fix:
             self._event("goto_refused", f"x={message.x:.2f} y={message.y:.2f} m")
-            self.hub.note(GOTO_REFUSED)
+            self.hub.note(GOTO_NO_FIX if no_fix else GOTO_REFUSED)
             return
         depth = odometry.position_ned_m[2]
         self.requests.goto((message.x, message.y, depth))

@@ -18,7 +18,7 @@ from testbed.live.messages import (
     Outage,
     SetMode,
 )
-from testbed.live.session import GOTO_REFUSED, LiveSession
+from testbed.live.session import GOTO_NO_FIX, GOTO_REFUSED, LiveSession
 from testbed.run.scenario import load_scenario
 
 
@@ -78,3 +78,28 @@ def test_the_state_is_plain_json(session: LiveSession) -> None:
     text = json.dumps(state, allow_nan=False)
     assert json.loads(text)["link"]["simulated"] is True
     assert state["truth"]["failsafe"] == "NOMINAL"
+
+
+@pytest.mark.parametrize(
+    ("name", "refused"), [("s100-thruster-failure-v1", True), ("s100-supervised-v1", False)]
+)
+def test_a_goto_to_a_vehicle_that_knows_no_position_is_refused_with_a_note(
+    name: str, refused: bool
+) -> None:
+    """A review's click went out as a GoTo and left the vehicle in GUIDED holding still, with
+    nothing said: a vehicle with no position fix and no navigation cannot fly to a point (its
+    position loop has nothing to close on). One with navigation (the supervised mission's)
+    takes the order."""
+    session = LiveSession(load_scenario(name), Hub(), pilot=None)
+    try:
+        env = session.env
+        env.process(session.vehicle_node.run())
+        env.process(session.operator_node.run())
+        env.run(until=3.0)  # a reply has come: the depth to hold is known
+        assert session.station.vehicle_odometry() is not None
+        session.apply(GoToPoint(1.0, 0.5))
+        kinds = [e.kind for e in session.recorder.events if e.node == "live"]
+        assert kinds[-1] == ("goto_refused" if refused else "goto_sent")
+        assert (GOTO_NO_FIX in session.hub.notes) is refused
+    finally:
+        session.vehicle.close()
