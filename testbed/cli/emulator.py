@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 from testbed.cli.options import (
@@ -95,12 +96,18 @@ def _run_modem_emulator(args: argparse.Namespace) -> int:
         except KeyboardInterrupt as interrupt:
             stopped = interrupt
         for name, counters in zip("AB", emulator.counters, strict=True):
-            print(f"testbed: port {name}: {counters}", file=sys.stderr)
+            print(f"testbed: port {name}: {_counts(dataclasses.asdict(counters))}", file=sys.stderr)
         modem_counters = emulator.personality_counters
         if modem_counters is not None:
             for name, counts in zip("AB", modem_counters, strict=True):
-                print(f"testbed: {args.modem} modem {name}: {counts}", file=sys.stderr)
+                print(f"testbed: {args.modem} modem {name}: {_counts(counts)}", file=sys.stderr)
     if stopped is not None:
         print("testbed: interrupted; the emulator closed its ports", file=sys.stderr)
         return exit_code_of(stopped)
     return EXIT_OK
+
+
+def _counts(counts: dict[str, int]) -> str:
+    """``key value, …`` of a counter set, as a person reads it."""
+    text = ", ".join(f"{key.replace('_', ' ')} {value}" for key, value in counts.items())
+    return text or "nothing counted"

@@ -193,3 +193,14 @@ def test_one_device_under_two_names_is_refused(tmp_path: Path) -> None:
     finally:
         os.close(leader)
         os.close(follower)
+
+
+def test_the_emulator_reports_its_counters_as_words(capsys: pytest.CaptureFixture[str]) -> None:
+    """Its closing lines were Python reprs (``PortCounters(bytes_in=2685, …)``)."""
+    assert main(["modem-emulator", "--duration", "0.2", "--preset", "m64", "--modem", "m64"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert "testbed: port A: bytes in 0, bursts 0, bursts dropped 0, deliveries 0, " in lines[-4]
+    assert lines[-2:] == [
+        "testbed: m64 modem A: nothing counted",
+        "testbed: m64 modem B: nothing counted",
+    ]
