@@ -194,6 +194,7 @@ def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str,
     endpoints: dict[str, LinkEndpoint] = {}
     try:
         for role, (option, settings) in ports.items():
+            _check_socket_url(option, settings.url)
             try:
                 endpoints[role] = open_endpoint(settings)
             except errors as err:
@@ -204,6 +205,36 @@ def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str,
             endpoint.close()
         raise
     return endpoints
+
+
+_SOCKET_OPTIONS = frozenset({"logging"})
+"""The URL options pyserial's ``socket://`` handler knows."""
+
+
+def _check_socket_url(option: str, url: str) -> None:
+    """A ``socket://`` URL names its host and port and only options pyserial knows (its own
+    messages for these were ``'<=' not supported between instances of 'int' and 'NoneType'``
+    and ``'debug|info|warning|error'``).
+
+    Raises:
+        ConfigError: naming the option and what is missing or unknown.
+    """
+    from urllib.parse import parse_qs, urlsplit
+
+    if not url.startswith("socket://"):
+        return
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if not parts.hostname or port is None:
+        raise ConfigError(f"{option}: {url}: a socket:// URL needs a host and a port (host:port)")
+    unknown = sorted(set(parse_qs(parts.query, keep_blank_values=True)) - _SOCKET_OPTIONS)
+    if unknown:
+        raise ConfigError(
+            f"{option}: {url}: unknown URL option {unknown[0]!r} (socket:// takes: logging)"
+        )
 
 
 def warn_token_cycle(scenario: Scenario) -> None:

@@ -204,3 +204,20 @@ def test_the_emulator_reports_its_counters_as_words(capsys: pytest.CaptureFixtur
         "testbed: m64 modem A: nothing counted",
         "testbed: m64 modem B: nothing counted",
     ]
+
+
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [
+        ("socket://host", "a socket:// URL needs a host and a port (host:port)"),
+        ("socket://127.0.0.1:x", "a socket:// URL needs a host and a port (host:port)"),
+        ("socket://127.0.0.1:1?badopt=1", "unknown URL option 'badopt' (socket:// takes: logging)"),
+    ],
+)
+def test_a_socket_url_without_its_port_or_with_an_unknown_option_is_named(
+    url: str, says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """pyserial's own words for these were "'<=' not supported between instances of 'int' and
+    'NoneType'" and "'debug|info|warning|error'" (a HIL review)."""
+    assert exit_code(["hil", "--operator-port", url, "--vehicle-port", "loop://"]) == 2
+    assert capsys.readouterr().err == f"testbed: error: --operator-port: {url}: {says}\n"
