@@ -31,12 +31,13 @@ runs.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from testbed.cli.options import (
     Subparsers,
@@ -49,6 +50,9 @@ from testbed.cli.options import (
 )
 from testbed.cli.run import loss_note
 from testbed.config import ConfigError
+
+if TYPE_CHECKING:
+    from testbed.hil import LinkEndpoint
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
 
@@ -98,6 +102,11 @@ def add_hil_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--rtscts", action="store_true", help="RTS/CTS hardware flow control (S100: unpaced)"
+    )
+    parser.add_argument(
+        "--log-bytes",
+        action="store_true",
+        help="record every byte each port read and wrote, with its time, in ports.csv",
     )
     parser.add_argument(
         "--m64-channel",
@@ -212,11 +221,14 @@ def run_hil_command(args: argparse.Namespace) -> int:
             {
                 role: (option, PortSettings(url, modem, role, baud, rtscts, **channel))
                 for role, (option, url) in ports.items()
-            }
+            },
+            log_bytes=args.log_bytes,
         )
         where = ", ".join(f"{role} on {url}" for role, (_, url) in ports.items())
+        clock_start_ns: list[int] = []
 
         def announce() -> None:  # once the nodes are built and the real-time clock starts
+            clock_start_ns.append(time.perf_counter_ns())
             print(
                 f"testbed: hil {mode}: {where} ({args.modem}); running {duration:g} s, "
                 "Ctrl-C ends early",
@@ -238,9 +250,36 @@ def run_hil_command(args: argparse.Namespace) -> int:
             "m64_channel": args.m64_channel,
             "duration_s": duration,
         }
+        extras = None
+        if args.log_bytes:
+            start_ns = clock_start_ns[0] if clock_start_ns else 0
+            extras = {"ports.csv": functools.partial(write_port_log, endpoints, start_ns)}
         return finish_run(
-            result, out, plots=not args.no_plots, planned_s=duration, summary=format_hil_summary
+            result,
+            out,
+            plots=not args.no_plots,
+            planned_s=duration,
+            summary=format_hil_summary,
+            extras=extras,
         )
+
+
+def write_port_log(endpoints: Mapping[str, LinkEndpoint], start_ns: int, path: Path) -> None:
+    """``ports.csv``: every byte each port read and wrote (``--log-bytes``), one row per read
+    or write in time order: ``t_s`` (from the run's clock start; setup writes before it are
+    negative), ``port`` (the node), ``dir`` (``in`` read, ``out`` written), ``bytes`` (count),
+    ``hex`` (the bytes)."""
+    rows = sorted(
+        (t_ns, role, direction, data)
+        for role, endpoint in endpoints.items()
+        for t_ns, direction, data in endpoint.transport.byte_log or ()
+    )
+    with path.open("w", encoding="utf-8", newline="") as out:
+        out.write("t_s,port,dir,bytes,hex\n")
+        for t_ns, role, direction, data in rows:
+            out.write(
+                f"{(t_ns - start_ns) / 1e9:.6f},{role},{direction},{len(data)},{data.hex()}\n"
+            )
 
 
 def _last_errors(reports: Iterable[dict[str, Any]]) -> str:

@@ -179,8 +179,11 @@ def check_out_dir(out: Path) -> None:
         raise ConfigError(f"--out: {out}: {err.strerror or err}") from None
 
 
-def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str, LinkEndpoint]:
-    """Each role's modem endpoint on its port (``role → (option, settings)``), in order.
+def open_modem_ports(
+    ports: Mapping[str, tuple[str, PortSettings]], *, log_bytes: bool = False
+) -> dict[str, LinkEndpoint]:
+    """Each role's modem endpoint on its port (``role → (option, settings)``), in order; with
+    ``log_bytes``, each transport keeps every byte it reads and writes (its ``byte_log``).
 
     Raises:
         ConfigError: a port cannot be opened (no such device, a bad pyserial URL or option):
@@ -196,7 +199,7 @@ def open_modem_ports(ports: Mapping[str, tuple[str, PortSettings]]) -> dict[str,
         for role, (option, settings) in ports.items():
             _check_socket_url(option, settings.url)
             try:
-                endpoints[role] = open_endpoint(settings)
+                endpoints[role] = open_endpoint(settings, log_bytes=log_bytes)
             except errors as err:
                 reason = " ".join(str(err).split()) or type(err).__name__
                 raise ConfigError(f"{option}: cannot open {settings.url}: {reason}") from None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -184,6 +184,7 @@ def finish_run(
     plots: bool,
     planned_s: float,
     summary: Callable[[dict[str, Any], Path], str] | None = None,
+    extras: Mapping[str, Callable[[Path], None]] | None = None,
 ) -> int:
     """Write a finished or interrupted run (``testbed run`` and ``testbed hil``) and say so:
     the summary on stdout, or for an interrupted run one line on stderr and 130/143.
@@ -194,6 +195,7 @@ def finish_run(
         plots: write the plots (never for an interrupted run: what ran is kept, fast).
         planned_s: the run's planned duration [s], for the interrupted line.
         summary: formats the summary (default :func:`format_summary`).
+        extras: more data files to write (:func:`~testbed.run.outputs.write_run`).
     """
     from testbed.run.outputs import write_run
     from testbed.run.trials import remove_trials
@@ -204,7 +206,7 @@ def finish_run(
 
         writer = write_run_plots
     try:
-        write_run(result, out, plots=writer)
+        write_run(result, out, plots=writer, extras=extras)
         remove_trials(out)  # an earlier trials run's results (--force)
     except KeyboardInterrupt as interrupt:  # the run finished; its results are written
         print(

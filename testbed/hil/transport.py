@@ -142,6 +142,9 @@ class Transport:
         backoff_initial_s: first wait before reopening a failed port [s].
         backoff_max_s: longest wait between reopen attempts [s].
         max_pending_frames: frames :meth:`send` may queue; more are dropped and counted.
+        log_bytes: keep every byte read and written, setup included, in :attr:`byte_log`
+            (``(perf_counter_ns, "in" | "out", bytes)``, in each thread's order) — a HIL
+            session's raw record (``testbed hil --log-bytes``).
         packet_gap_s: idle time after the last bytes read that ends a packet on a transparent
             line [s] (module docstring); a subclass's reads must return empty within about
             this long when nothing arrives.
@@ -168,6 +171,7 @@ class Transport:
         backoff_max_s: float = 2.0,
         max_pending_frames: int = 64,
         packet_gap_s: float = MIN_PACKET_GAP_S,
+        log_bytes: bool = False,
     ) -> None:
         if not packet_gap_s > 0:
             raise ValueError(f"packet_gap_s must be > 0, got {packet_gap_s!r}")
@@ -200,6 +204,7 @@ class Transport:
         self.frames_sent = 0
         self.frames_dropped = 0
         self.dropped_frames: deque[bytes] = deque(maxlen=_DROPPED_KEPT)
+        self.byte_log: deque[tuple[int, str, bytes]] | None = deque() if log_bytes else None
         self.bytes_in = 0
         self.bytes_out = 0
         self.callback_errors = 0
@@ -305,6 +310,14 @@ class Transport:
         for frame in unwritten:
             self._drop(frame)
 
+    def _log(self, direction: str, data: bytes, t_ns: int | None = None) -> None:
+        """Keep ``data`` read (``"in"``) or written (``"out"``) at ``t_ns`` (``perf_counter_ns``,
+        now if None) in :attr:`byte_log`, when the transport logs bytes."""
+        if self.byte_log is not None:
+            self.byte_log.append(
+                (time.perf_counter_ns() if t_ns is None else t_ns, direction, data)
+            )
+
     def _drop(self, frame: bytes) -> None:
         """Count ``frame``, accepted by :meth:`send`, dropped unwritten (or part written) and
         keep its bytes in :attr:`dropped_frames` for whoever accounts for frames by their bytes
@@ -330,6 +343,7 @@ class Transport:
         constructor, before the writer can see the port)."""
         for chunk in self.adapter.setup():
             self._write(port, chunk.data)
+            self._log("out", chunk.data)
             self.bytes_out += len(chunk.data)
             self.setup_writes += 1
             if chunk.hold_s > 0:
@@ -413,6 +427,7 @@ class Transport:
             last_data_s = time.monotonic()
             in_packet = True
             self.bytes_in += len(data)
+            self._log("in", data, read_ns)
             self._queue(self.adapter.receive(data), read_ns)
 
     def _write_loop(self) -> None:
@@ -442,6 +457,7 @@ class Transport:
                     self._drop(frame)
                     break
                 written_s = time.monotonic()
+                self._log("out", chunk.data)
                 self.writer_lateness_ns.append(max(0, round((written_s - ready_s) * 1e9)))
                 self.bytes_out += len(chunk.data)
                 next_ok = written_s + chunk.hold_s

@@ -22,7 +22,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -169,7 +169,13 @@ def remove_run_results(out_dir: Path) -> None:
             (out_dir / name).unlink()
 
 
-def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = None) -> list[Path]:
+def write_run(
+    result: RunResult,
+    out_dir: Path,
+    *,
+    plots: PlotWriter | None = None,
+    extras: Mapping[str, Callable[[Path], None]] | None = None,
+) -> list[Path]:
     """Write one run's results into ``out_dir`` (see the module docstring).
 
     Args:
@@ -177,6 +183,8 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
         out_dir: the results directory (checked by :func:`prepare_out_dir` beforehand).
         plots: writes the plots into a directory (e.g.
             :func:`testbed.report.run_plots.write_run_plots`); None for no plots.
+        extras: more data files, ``name → writer(path)`` (e.g. a HIL session's ``ports.csv``),
+            written with the data files and listed in ``metrics.json``.
 
     Returns:
         The files written, ``metrics.json`` last.
@@ -203,6 +211,8 @@ def write_run(result: RunResult, out_dir: Path, *, plots: PlotWriter | None = No
             log, chunk = recorder.images, images.chunk_bytes
             write = functools.partial(write_images_csv, log, chunk)
             written.append(replace_atomically(write, out_dir / "images.csv"))
+        for name, writer in (extras or {}).items():
+            written.append(replace_atomically(writer, out_dir / name))
     interrupted: KeyboardInterrupt | None = late[0] if late else None
     if plots is not None and interrupted is None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))

@@ -9,10 +9,12 @@ import queue
 import socket
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import serial
 
+from testbed.cli.hil import write_port_log
 from testbed.hil import (
     LinkEndpoint,
     M64Adapter,
@@ -328,3 +330,34 @@ def test_one_write_timeout_after_the_bytes_went_out_is_counted_not_a_port_error(
         assert transport.frames_dropped == 1  # the second, whose write failed the port
     finally:
         transport.close()
+
+
+def test_the_byte_log_holds_every_byte_written_and_read_in_time_order(tmp_path: Path) -> None:
+    """``testbed hil --log-bytes``: through loop:// each frame (S100: frame + CR LF) is written,
+    then read back, byte for byte; ports.csv lists both, in time order, from the clock start."""
+    transport = SerialTransport(
+        "loop://", S100Adapter(pace_bps=1e7), baudrate=115200, log_bytes=True
+    )
+    endpoint = LinkEndpoint(transport)
+    start_ns = time.perf_counter_ns()
+    try:
+        for p in PAYLOADS:
+            assert endpoint.send(encode_frame(p))
+        assert collect(endpoint, len(PAYLOADS)) == PAYLOADS
+    finally:
+        endpoint.close()
+    log = list(transport.byte_log or ())
+    written = b"".join(data for _, direction, data in log if direction == "out")
+    read = b"".join(data for _, direction, data in log if direction == "in")
+    wire = b"".join(encode_frame(p) + b"\r\n" for p in PAYLOADS)
+    assert written == read == wire
+    assert sum(len(d) for _, k, d in log if k == "out") == transport.bytes_out
+    write_port_log({"operator": endpoint}, start_ns, tmp_path / "ports.csv")
+    lines = (tmp_path / "ports.csv").read_text().splitlines()
+    assert lines[0] == "t_s,port,dir,bytes,hex"
+    rows = [line.split(",") for line in lines[1:]]
+    assert len(rows) == len(log) and [float(r[0]) for r in rows] == sorted(
+        float(r[0]) for r in rows
+    )
+    assert all(float(r[0]) >= 0.0 and r[1] == "operator" for r in rows)
+    assert bytes.fromhex("".join(r[4] for r in rows if r[2] == "out")) == wire
