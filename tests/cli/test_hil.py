@@ -108,7 +108,7 @@ def test_an_overflow_or_value_error_from_pyserial_names_the_port_option(
     from testbed import hil
     from testbed.hil import PortSettings
 
-    def refuse(settings: PortSettings) -> None:
+    def refuse(settings: PortSettings, **options: object) -> None:
         raise OverflowError("signed integer is greater than maximum")
 
     monkeypatch.setattr(hil, "open_endpoint", refuse)
