@@ -16,7 +16,8 @@ with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
   the propagation delay ``fixed_s + distance / speed_mps``: the copy is on the air at the
   receiver from ``t0 + intrinsic + propagation`` to ``t0 + intrinsic + airtime + propagation``
   and is handed over at the end. Unloaded latency is therefore exactly
-  intrinsic + airtime + propagation.
+  intrinsic + airtime + propagation; with packets, N·(intrinsic + packet airtime) +
+  (N − 1)·``queue_gap_s`` + propagation for the last of a frame's N packets.
 - Any overlap of two receptions at one modem destroys both (no capture); destroyed copies are
   counted and traced, never delivered. Other copies are delivered with bits flipped by the
   receiver's error model (the link model's, :meth:`~.model.LinkModel.error_model`: by default
