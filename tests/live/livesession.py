@@ -6,6 +6,7 @@ other under ``--import-mode=importlib``); the ``browser_path`` fixture is in ``c
 
 from __future__ import annotations
 
+import contextlib
 import json
 import select
 import shutil
@@ -14,7 +15,7 @@ import subprocess
 import sys
 import time
 import urllib.request
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -82,6 +83,18 @@ class Live:
         waited = time.monotonic() - start
         last = json.dumps(state)[:2000]
         raise AssertionError(f"never in {waited:.0f} s: {what}; last state {last}")
+
+    @classmethod
+    @contextlib.contextmanager
+    def running(cls, out: Path, *args: str) -> Iterator[Live]:
+        """A session for a fixture: killed at the end if the test left it running."""
+        process = cls(out, *args)
+        try:
+            yield process
+        finally:
+            if process.proc.poll() is None:
+                process.proc.kill()
+                process.proc.wait()
 
     def stop(self) -> int:
         if self.proc.poll() is None:

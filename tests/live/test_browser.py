@@ -40,13 +40,8 @@ navigator.getGamepads = () => [window.__pad];
 @pytest.fixture
 def live(tmp_path: Path, browser_path: str) -> Iterator[Live]:
     del browser_path
-    process = Live(tmp_path / "out")
-    try:
+    with Live.running(tmp_path / "out") as process:
         yield process
-    finally:
-        if process.proc.poll() is None:
-            process.proc.kill()
-            process.proc.wait()
 
 
 def test_console_flies_the_vehicle_and_shows_the_link(

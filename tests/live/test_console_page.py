@@ -35,13 +35,8 @@ WebSocket.prototype.send = function (data) {
 @pytest.fixture(scope="module")
 def live(tmp_path_factory: pytest.TempPathFactory, browser_path: str) -> Iterator[Live]:
     del browser_path
-    process = Live(tmp_path_factory.mktemp("console-page") / "out")
-    try:
+    with Live.running(tmp_path_factory.mktemp("console-page") / "out") as process:
         yield process
-    finally:
-        if process.proc.poll() is None:
-            process.proc.kill()
-            process.proc.wait()
 
 
 @pytest.fixture(scope="module")
