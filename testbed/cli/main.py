@@ -103,12 +103,13 @@ def _put_off(signum: int, frame: FrameType | None) -> bool:
       unhandled, and however the program handles it, the process ends killed by SIGINT
       instead of with its own exit code (130 after the one line, seen as -2).
 
-    So while any frame of the stack is one of those, the signal is sent again a moment later,
-    from a thread of its own (sent from the handler, it would be handled inside it; a
-    ``threading.Timer`` would wait here for its thread to start), until the stack is the
-    program's own.
+    So while any frame the command runs (newer than :func:`main`'s: a program that calls
+    ``main`` from inside an import of its own still takes Ctrl-C) is one of those, the signal is
+    sent again a moment later, from a thread of its own (sent from the handler, it would be
+    handled inside it; a ``threading.Timer`` would wait here for its thread to start), until
+    the stack is the program's own.
     """
-    while frame is not None:
+    while frame is not None and frame.f_code is not main.__code__:  # the command's own frames
         code = frame.f_code
         if (
             code.co_filename in _PUT_OFF_FILES

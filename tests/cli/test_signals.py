@@ -319,6 +319,36 @@ def test_ctrl_c_in_an_import_or_in_code_from_text_ends_with_130(
         assert done.stdout == "whole\n"  # imported whole, interrupted after
 
 
+MAIN_IN_AN_IMPORT = """
+import os, signal, time
+import testbed.cli.run as run
+
+def interrupted(args):
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(30)
+    return 0
+
+run._list_scenarios = interrupted
+from testbed.cli.main import main
+print("code", main(["scenarios"]), flush=True)
+"""
+
+
+def test_a_program_calling_main_inside_its_own_import_still_takes_ctrl_c(tmp_path: Path) -> None:
+    # Interrupts are put off while an import runs; only the imports the command itself makes
+    # count, not one the whole program runs inside (it would never take Ctrl-C).
+    (tmp_path / "study_import.py").write_text(MAIN_IN_AN_IMPORT)
+    done = subprocess.run(
+        [sys.executable, "-c", "import study_import"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+        preexec_fn=default_sigint,
+    )
+    assert (done.stdout, done.stderr) == ("code 130\n", "testbed: interrupted\n")
+
+
 IN_A_CALLBACK = """
 import importlib, signal, sys
 import simpy
