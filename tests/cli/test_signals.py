@@ -34,6 +34,21 @@ def start(args: list[str]) -> subprocess.Popen[str]:
     )
 
 
+def python_taking_ctrl_c(
+    args: list[str], cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Python with ``args`` to its end (output captured), SIGINT handled as a terminal's Ctrl-C
+    is however pytest was started."""
+    return subprocess.run(
+        [sys.executable, *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=WAIT_S,
+        preexec_fn=default_sigint,
+    )
+
+
 def wait_for(condition: object, what: str, proc: subprocess.Popen[str] | None = None) -> None:
     deadline = time.monotonic() + WAIT_S
     while not condition():  # type: ignore[operator]
@@ -202,13 +217,7 @@ def test_an_interrupt_a_library_turned_into_its_own_error_still_ends_as_one(
 ) -> None:
     # The handler raises wherever the program is; code that catches the interrupt and raises
     # something else must not turn Ctrl-C or SIGTERM into a traceback and exit code 1.
-    done = subprocess.run(
-        [sys.executable, "-c", SWALLOWED.format(name=name)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-        preexec_fn=default_sigint,
-    )
+    done = python_taking_ctrl_c(["-c", SWALLOWED.format(name=name)])
     assert (done.returncode, done.stderr) == (code, "testbed: interrupted\n")
 
 
@@ -306,14 +315,7 @@ def test_ctrl_c_in_an_import_or_in_code_from_text_ends_with_130(
     # Run with -m, as `python -m testbed` is: CPython acts on that mark only for -m.
     (tmp_path / "signals_itself.py").write_text(SIGNALS_ITSELF)
     (tmp_path / "interrupted_cli.py").write_text(IN_IMPORT_OR_TEXT.format(where=where, code=code))
-    done = subprocess.run(
-        [sys.executable, "-m", "interrupted_cli"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-        preexec_fn=default_sigint,
-    )
+    done = python_taking_ctrl_c(["-m", "interrupted_cli"], cwd=tmp_path)
     assert (done.returncode, done.stderr) == (130, "testbed: interrupted\n")
     if code.startswith("import"):
         assert done.stdout == "whole\n"  # imported whole, interrupted after
@@ -338,14 +340,7 @@ def test_a_program_calling_main_inside_its_own_import_still_takes_ctrl_c(tmp_pat
     # Interrupts are put off while an import runs; only the imports the command itself makes
     # count, not one the whole program runs inside (it would never take Ctrl-C).
     (tmp_path / "study_import.py").write_text(MAIN_IN_AN_IMPORT)
-    done = subprocess.run(
-        [sys.executable, "-c", "import study_import"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-        preexec_fn=default_sigint,
-    )
+    done = python_taking_ctrl_c(["-c", "import study_import"], cwd=tmp_path)
     assert (done.stdout, done.stderr) == ("code 130\n", "testbed: interrupted\n")
 
 
