@@ -300,8 +300,10 @@ def format_hil_summary(metrics: dict[str, Any], out: Path) -> str:
         return format_value(value, 100.0, 2, " %")
 
     def losses(direction: dict[str, Any]) -> str:  # the simulated run's words where known
-        known = {k: None if v != v else v for k, v in direction.items()}  # NaN: not known here
+        known = json_ready(direction)  # NaN, not known here: None, as in metrics.json
         return "" if known["frames_dropped"] is None else loss_note(known)
+
+    from testbed.run.outputs import json_ready
 
     hil = metrics["hil"]
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
