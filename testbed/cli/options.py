@@ -226,10 +226,13 @@ def _check_socket_url(option: str, url: str) -> None:
 
     if not url.startswith("socket://"):
         return
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except ValueError as err:  # an unclosed [IPv6 bracket
+        raise ConfigError(f"{option}: {url}: not a socket:// URL ({err})") from None
     try:
         port = parts.port
-    except ValueError:
+    except ValueError:  # not a number, or out of range
         port = None
     if not parts.hostname or port is None:
         raise ConfigError(f"{option}: {url}: a socket:// URL needs a host and a port (host:port)")

@@ -211,6 +211,8 @@ def test_the_emulator_reports_its_counters_as_words(capsys: pytest.CaptureFixtur
     [
         ("socket://host", "a socket:// URL needs a host and a port (host:port)"),
         ("socket://127.0.0.1:x", "a socket:// URL needs a host and a port (host:port)"),
+        ("socket://127.0.0.1:99999", "a socket:// URL needs a host and a port (host:port)"),
+        ("socket://[::1", "not a socket:// URL (Invalid IPv6 URL)"),  # raised a traceback
         ("socket://127.0.0.1:1?badopt=1", "unknown URL option 'badopt' (socket:// takes: logging)"),
     ],
 )
