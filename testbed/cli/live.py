@@ -149,18 +149,21 @@ def _run_live(args: argparse.Namespace) -> int:
         finally:
             with deferred_interrupts() as late:  # a second Ctrl-C: the session is ending
                 server.stop()
-        plots = None
-        if not args.no_plots:
-            from testbed.report.run_plots import write_run_plots
-
-            plots = write_run_plots
         cut: list[KeyboardInterrupt] = []
+        plots = None
         try:
-            write_run(result, out, plots=plots)  # the data and metrics.json whole, whenever
+            if not args.no_plots and not late:
+                from testbed.report.run_plots import write_run_plots  # matplotlib: seconds
+
+                plots = write_run_plots
+        except KeyboardInterrupt as interrupt:  # a Ctrl-C while it loads: no plots
+            cut.append(interrupt)
+        try:
+            write_run(result, out, plots=None if cut else plots)  # data and metrics.json whole
         except KeyboardInterrupt as interrupt:  # a Ctrl-C while writing: the plots cut short
             cut.append(interrupt)
         reached = result.metrics["sim_s"]
-        kept = "results without plots" if cut and plots is not None else "results"
+        kept = "results without plots" if (cut or late) and not args.no_plots else "results"
         print(
             f"testbed live: session ended at t = {reached:.1f} s; {kept} in {out}", file=sys.stderr
         )
