@@ -61,6 +61,7 @@ from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
+from testbed.run.plugins import scenario_link_model
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, poll_modems, rt_lateness_ns
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
@@ -126,7 +127,8 @@ class LiveSession:
         self.modem_kind = modem
         if endpoints is None:
             rng = np.random.default_rng(link_seed)
-            self.medium = Medium(env, link.channel, rng, self.recorder.trace)
+            model = scenario_link_model(scenario)
+            self.medium = Medium(env, link.channel, rng, self.recorder.trace, model=model)
         else:
             for role, peer in (("vehicle", "operator"), ("operator", "vehicle")):
                 self.hil_modems[role] = HilModem(

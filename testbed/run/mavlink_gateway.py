@@ -53,6 +53,7 @@ from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
+from testbed.run.plugins import scenario_link_model
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns, run_poll
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
@@ -310,7 +311,13 @@ def run_gateway(
     ledger = FrameLedger()
     poll_lateness: deque[int] = deque(maxlen=_SAMPLES)
     if hil is None:
-        medium = Medium(env, link.channel, np.random.default_rng(link_seed), recorder.trace)
+        medium = Medium(
+            env,
+            link.channel,
+            np.random.default_rng(link_seed),
+            recorder.trace,
+            model=scenario_link_model(scenario),
+        )
         for outage in scenario.faults.link_outages:
             medium.add_outage(outage.start_s, outage.end_s)
             recorder.event(outage.start_s, "scenario", "outage", f"until {outage.end_s:g} s")

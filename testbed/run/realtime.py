@@ -67,12 +67,14 @@ from testbed.protocol import Frame, encode_frame
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
+from testbed.run.plugins import scenario_pilot
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import (
     RunResult,
     make_operator_node,
     make_vehicle_node,
+    observed_pilot,
     tally_images,
 )
 from testbed.run.scenario import Scenario
@@ -364,8 +366,16 @@ def run_hil(
         raise ValueError(problem)
     seed = scenario.seed if seed is None else seed
     _, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
+    try:  # a pilot of the user's own is made here: its failure closes the ports too
+        operator_pilot, recorded_pilot = observed_pilot(scenario_pilot(scenario, seed))
+    except BaseException:
+        for endpoint in endpoints.values():
+            endpoint.close()
+        raise
     env = simpy.rt.RealtimeEnvironment(factor=1.0, strict=False)
     recorder = Recorder(trace=Trace())
+    if recorded_pilot is not operator_pilot:
+        recorder.stick_source = "operator samples"
     ledger = FrameLedger()
     outages = [(o.start_s, o.end_s) for o in scenario.faults.link_outages]
     for start_s, end_s in outages:
@@ -390,11 +400,15 @@ def run_hil(
     try:
         if "vehicle" in modems:
             rng = np.random.default_rng(vehicle_seed)
-            vehicle_node = make_vehicle_node(env, scenario, rng, modems["vehicle"], recorder)
+            vehicle_node = make_vehicle_node(
+                env, scenario, rng, modems["vehicle"], recorder, pilot=recorded_pilot
+            )
             env.process(vehicle_node.run())
         if "operator" in modems:
             replies = {} if vehicle_node is None else vehicle_node.reply_odometry_s
-            operator_node = make_operator_node(env, scenario, modems["operator"], recorder, replies)
+            operator_node = make_operator_node(
+                env, scenario, modems["operator"], recorder, replies, pilot=operator_pilot
+            )
             env.process(operator_node.run())
         env.process(run_poll(env, list(modems.values()), poll_s, lateness_ns))
         env.sync()  # start the clock now, after the vehicle's physics has loaded

@@ -31,6 +31,7 @@ from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
+from testbed.run.plugins import scenario_link_model, scenario_pilot
 from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.scenario import Scenario
@@ -85,11 +86,11 @@ def make_vehicle_node(
     modem: LinkModem,
     recorder: Recorder,
     *,
-    pilot: Pilot | None = None,
+    pilot: Pilot,
 ) -> VehicleNode:
     """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
     scheduled. ``rng`` feeds the vehicle's sensors and current; ``pilot`` is what the recorder
-    samples for the ``cmd_*`` columns (default: the scenario's, a pure function of time)."""
+    samples for the ``cmd_*`` columns (:func:`observed_pilot`'s second)."""
     link = scenario.link
     factory = partial(Vehicle, scenario.vehicle, rng)
     node = VehicleNode(
@@ -106,7 +107,7 @@ def make_vehicle_node(
     vehicle = node.vehicle
     observer = VehicleObserver(
         recorder,
-        scenario.pilot.pilot() if pilot is None else pilot,
+        pilot,
         vehicle.reference_velocity,
         scenario.metrics.sample_rate_hz,
     )
@@ -128,11 +129,12 @@ def make_operator_node(
     recorder: Recorder,
     reply_odometry_s: dict[int, float],
     *,
-    pilot: Pilot | None = None,
+    pilot: Pilot,
 ) -> OperatorNode:
     """The scenario's operator node on ``modem`` (simulated or HIL). ``reply_odometry_s`` is
     the vehicle node's map of reply frame → odometry sample time (recording only; empty when
-    the vehicle runs elsewhere); ``pilot`` replaces the scenario's."""
+    the vehicle runs elsewhere); ``pilot`` is the station's (:func:`observed_pilot`'s
+    first)."""
     link = scenario.link
     token = link.mac == "token"
     plan = SessionPlan(
@@ -143,7 +145,7 @@ def make_operator_node(
     )
     return OperatorNode(
         env,
-        OperatorStation(scenario.pilot.pilot() if pilot is None else pilot, plan),
+        OperatorStation(pilot, plan),
         modem,
         codec=link.codec,
         ipg=link.ipg_policy if token else None,
@@ -236,15 +238,17 @@ def run_scenario(
         link_model: a link model of your own for the scenario's link
             (:class:`~testbed.channel.model.LinkModel`: the air time of a transmission and a
             receiver's bit errors; the scenario's ``[link]`` keeps the rest: MAC, delays,
-            range, buffers). Recorded as ``inputs.link_model`` in the metrics.
+            range, buffers); replaces the scenario's ``link.model``. Recorded as
+            ``inputs.link_model`` in the metrics (its class, or the scenario's target).
 
     Returns:
         The metrics and the recording.
     """
     seed = scenario.seed if seed is None else seed
     operator_pilot, recorded_pilot = observed_pilot(
-        scenario.pilot.pilot() if pilot is None else pilot
+        scenario_pilot(scenario, seed) if pilot is None else pilot
     )
+    model = scenario_link_model(scenario) if link_model is None else link_model
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
     recorder = Recorder(trace=Trace())
@@ -252,7 +256,7 @@ def run_scenario(
         recorder.stick_source = "operator samples"
     link = scenario.link
     medium = Medium(
-        env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=link_model
+        env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=model
     )
     for outage in scenario.faults.link_outages:
         medium.add_outage(outage.start_s, outage.end_s)
@@ -302,6 +306,8 @@ def run_scenario(
         )
         if link_model is not None:
             metrics["inputs"]["link_model"] = model_name(link_model)
+        elif model is not None:
+            metrics["inputs"]["link_model"] = scenario.link.model
     return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
 
 

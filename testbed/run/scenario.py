@@ -49,6 +49,7 @@ from testbed.config import (
     parse_override,
 )
 from testbed.run.images import ImagesSection
+from testbed.run.plugins import check_arguments, load_factory, takes_rng, target_file
 from testbed.run.sections import (
     MAX_DURATION_S,
     FaultsSection,
@@ -367,8 +368,10 @@ _FILE_KEYS = (
     ("vehicle", "autonomy", "mission"),
     ("vehicle", "arm", "model"),
     ("vehicle", "arm", "tpik"),
+    ("pilot", "factory"),
+    ("link", "model"),
 )
-"""Keys that may name a user's file by path."""
+"""Keys that may name a user's file by path (the last two a Python file, ``FILE.py:NAME``)."""
 
 
 FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
@@ -377,9 +380,13 @@ FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
 
 def path_beside(value: Any, folder: Path) -> Any:
     """``value`` of a file key (:data:`FILE_KEY_NAMES`) as written in a file kept in
-    ``folder``: a relative path of a user file (ending in ``.toml``/``.json``) taken from
-    ``folder``; anything else (a packaged name, an absolute path) as it is."""
+    ``folder``: a relative path of a user file (ending in ``.toml``/``.json``, or a
+    ``FILE.py:NAME`` target) taken from ``folder``; anything else (a packaged name, a module,
+    an absolute path) as it is."""
     if isinstance(value, str):
+        python = target_file(value)
+        if python is not None and not Path(python).is_absolute():
+            return f"{folder / python}:{value.rpartition(':')[2]}"
         path = Path(value)
         if not path.is_absolute() and path.suffix in (".toml", ".json"):
             return str(folder / path)
@@ -410,7 +417,9 @@ def _user_files(scenario: Scenario) -> list[str]:
         named.append(vehicle.autonomy.mission)
     if vehicle.arm is not None:
         named += [vehicle.arm.model, vehicle.arm.tpik]
-    return [name for name in named if Path(name).suffix in (".toml", ".json")]
+    files = [name for name in named if Path(name).suffix in (".toml", ".json")]
+    targets = (scenario.pilot.factory, scenario.link.model)
+    return files + [path for path in map(target_file, targets) if path is not None]
 
 
 def scenario_digest(name_or_path: str) -> tuple[str, str]:
@@ -464,6 +473,11 @@ def _from_data(
             "and MAVLink orders carry no depth setpoint: depth hold keeps the depth at arming)"
         )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
+    if pilot.kind == "python":
+        factory = load_factory(pilot.factory, where, "pilot.factory")
+        given = {**pilot.args, "rng": None} if takes_rng(factory) else pilot.args
+        keys = ("pilot.factory", "pilot.args", "(**args)")
+        check_arguments(factory, pilot.factory, (), given, where, keys)
     faults = build(FaultsSection, top.faults, source=where, prefix="faults.")
     metrics = build(MetricsSection, top.metrics, source=where, prefix="metrics.")
     images = build(ImagesSection, top.images, source=where, prefix="images.")
@@ -519,6 +533,10 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
             f"{where}: link.mac: 'free' does not work with link.codec = 'teleop' (its vehicle only "
             "answers orders, on a token-passing link: use link.mac = 'token' or another codec)"
         )
+    if section.model:
+        factory = load_factory(section.model, where, "link.model")
+        keys = ("link.model", "link.model_args", "(config, **model_args)")
+        check_arguments(factory, section.model, (section.channel,), section.model_args, where, keys)
     if "ipg_s" in given and section.ipg != "fixed":
         raise ConfigError(f"{where}: link.ipg_s: only used when link.ipg = 'fixed'")
     if "snapshot_period_s" in given and section.codec != "changeset":

@@ -10,8 +10,8 @@ A failed check raises :class:`~testbed.config.FieldError` naming the field; the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
 from testbed.channel import (
     TELEROBOTICS_2018,
@@ -33,6 +33,7 @@ from testbed.operator.pilots import (
 )
 from testbed.protocol import OPERATOR_HEADER_SIZE, ORDER_TYPES, Move, frame_overhead
 from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
+from testbed.run.plugins import check_target
 
 ORDER_FRAME_BYTES = frame_overhead() + OPERATOR_HEADER_SIZE + Move.BODY_SIZE
 """A move order's frame [B] (13 with the default framing): the token gap rules size on it."""
@@ -134,6 +135,10 @@ class LinkSection:
             [s], in [0, 86400]; 0 = never.
         operator_position_ned_m: (3,) the operator's modem [m], world NED, each in
             [−1e4, 1e4]; the vehicle's modem moves with the vehicle.
+        model: a link model of the user's own, ``"FILE.py:NAME"`` or ``"MODULE:NAME"``: the
+            callable called as ``NAME(channel, **model_args)`` for each run
+            (:mod:`testbed.run.plugins`); "" = the preset's own model.
+        model_args: the model factory's keyword arguments (only with ``model``).
     """
 
     preset: str = "s100"
@@ -148,9 +153,15 @@ class LinkSection:
     downlink_rate_hz: float = 100.0
     snapshot_period_s: float = 5.0
     operator_position_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    model: str = ""
+    model_args: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_range(self.ipg_s, "ipg_s", 0.0, MAX_GAP_S, "s", low_open=True)
+        if self.model:
+            problem = check_target(self.model)
+            check(problem is None, "model", problem or "")
+        check(not self.model_args or bool(self.model), "model_args", "only used with link.model")
         check_time(self.snapshot_period_s, "snapshot_period_s")
         check_rate(self.uplink_rate_hz, "uplink_rate_hz")
         check_rate(self.downlink_rate_hz, "downlink_rate_hz")
@@ -257,11 +268,12 @@ class PilotSection:
     in between (the operator sends the held value as AttitudeSetpoint at its own rate).
     ``kind = "supervisor"``: supervised control of a vehicle with ``[vehicle.autonomy]``, no
     sticks; ``goals`` is a timed list of GoTo goals and cancels
-    (:class:`~testbed.operator.pilots.SupervisorPilot`). Each kind rejects the others'
-    non-zero settings.
+    (:class:`~testbed.operator.pilots.SupervisorPilot`). ``kind = "python"``: a pilot of the
+    user's own, made for each run by the callable ``factory`` names with ``args``
+    (:mod:`testbed.run.plugins`). Each kind rejects the others' non-zero settings.
 
     Attributes:
-        kind: ``"scripted"``, ``"attitude"`` or ``"supervisor"``.
+        kind: ``"scripted"``, ``"attitude"``, ``"supervisor"`` or ``"python"``.
         start_s: when the pilot starts [s], in [0, duration_s).
         x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms (amplitude in [−1, 1],
             period in [0.01, 1e6] s, phase in [−2π, 2π] rad).
@@ -272,9 +284,13 @@ class PilotSection:
             [1e-3, 1000] (``kind = "attitude"``).
         goals: the supervisor's orders (``kind = "supervisor"``): ``{t_s, position_ned_m,
             yaw_deg}`` goals and ``{t_s, cancel = true}`` cancels, taken in time order.
+        factory: ``"FILE.py:NAME"`` or ``"MODULE:NAME"``, the callable that makes the pilot
+            (``kind = "python"``; a relative file is the scenario file's folder's).
+        args: the factory's keyword arguments (``kind = "python"``), any TOML values; ``rng``
+            is the run's to give.
     """
 
-    kind: Literal["scripted", "attitude", "supervisor"] = "scripted"
+    kind: Literal["scripted", "attitude", "supervisor", "python"] = "scripted"
     start_s: float = 5.0
     x: tuple[SineTerm, ...] = ()
     y: tuple[SineTerm, ...] = ()
@@ -288,6 +304,8 @@ class PilotSection:
     yaw_period_s: float = 25.0
     setpoint_rate_hz: float = 10.0
     goals: tuple[GoalStep, ...] = ()
+    factory: str = ""
+    args: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_time(self.start_s, "start_s")
@@ -300,14 +318,23 @@ class PilotSection:
             "scripted": _STICK_AXES,
             "attitude": _ATTITUDE_AMPLITUDES,
             "supervisor": ("goals",),
+            "python": ("factory", "args"),
         }
         for kind, names in owners.items():
             if kind != self.kind:
                 for name in names:
                     check(not getattr(self, name), name, f"only used when kind = {kind!r}")
+        if self.kind == "python":
+            check(bool(self.factory), "factory", "required when kind = 'python'")
+            problem = check_target(self.factory)
+            check(problem is None, "factory", problem or "")
+            check("rng" not in self.args, "args.rng", "the run gives rng (its seed's generator)")
 
     def pilot(self) -> Pilot:
-        """The pilot this section configures (:mod:`testbed.operator.pilots`)."""
+        """The packaged pilot this section configures (:mod:`testbed.operator.pilots`); a
+        ``kind = "python"`` pilot is made by :func:`testbed.run.plugins.scenario_pilot`."""
+        if self.kind == "python":
+            raise ValueError("a pilot of kind 'python' is made by plugins.scenario_pilot")
         if self.kind == "supervisor":
             return SupervisorPilot(self.goals)
         if self.kind == "attitude":

@@ -1,0 +1,268 @@
+"""Pilots and link models of the user's own, named in a scenario file.
+
+A scenario names a callable of the user's as ``"FILE.py:NAME"`` (a Python file: relative to the
+scenario file's folder, or to the working directory in ``--set``, or absolute) or
+``"MODULE:NAME"`` (a module Python can import: installed, or on ``PYTHONPATH``)::
+
+    [pilot]
+    kind = "python"
+    factory = "my_pilots.py:StepPilot"
+    args = { at_s = 15.0, surge = 0.5 }
+
+    [link]
+    preset = "s100"
+    model = "my_links.py:halved_after"
+    model_args = { at_s = 50.0 }
+
+Each run calls its factories afresh, so a pilot or model that keeps state starts clean in every
+run, trial and sweep point: a pilot factory as ``factory(**args)``, given ``rng=`` (a
+``numpy.random.Generator`` of the run's seed, :func:`pilot_generator`) when it has a parameter
+named ``rng``; a link model factory as ``factory(config, **model_args)``, ``config`` the run's
+:class:`~testbed.channel.config.LinkConfig` (the preset with the ``[link]`` keys applied). The
+pilot must have ``sample(t_s) -> PilotSample`` (:class:`~testbed.operator.pilots.Pilot`), the
+model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkModel`).
+
+Loading a scenario imports the target and binds the arguments to its signature, so a missing
+file, a name the module lacks or an argument the factory does not take is a one-line error
+naming the key before anything runs. A file is imported once per process, as a module named
+``testbed_user_<stem>_<8 hex digits of its path>`` (its own imports must be importable: a
+sibling module of the file is not, unless its folder is on ``PYTHONPATH``). Sweep workers
+import it themselves, so it must be readable where they run.
+
+This runs the user's own code from a file the user named, as ``python my_pilots.py`` would;
+nothing received from a link, a socket or a browser is ever imported or evaluated.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import inspect
+import re
+import sys
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from testbed.config import ConfigError
+
+if TYPE_CHECKING:
+    from testbed.channel.model import LinkModel
+    from testbed.operator.pilots import Pilot
+    from testbed.run.scenario import Scenario
+
+__all__ = [
+    "PYTHON_SUFFIX",
+    "call_factory",
+    "check_arguments",
+    "check_target",
+    "load_factory",
+    "pilot_generator",
+    "scenario_link_model",
+    "scenario_pilot",
+    "takes_rng",
+    "target_file",
+]
+
+PYTHON_SUFFIX = ".py"
+"""The suffix that makes a target's module part a file path rather than a module name."""
+
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*")
+_MODULES: dict[Path, ModuleType] = {}
+
+
+def target_file(target: str) -> str | None:
+    """The file path of a ``"FILE.py:NAME"`` target, None for ``"MODULE:NAME"`` or a malformed
+    one."""
+    module, colon, _ = target.rpartition(":")
+    return module if colon and module.endswith(PYTHON_SUFFIX) else None
+
+
+def check_target(target: str) -> str | None:
+    """What is wrong with the form of ``target`` (``"FILE.py:NAME"`` or ``"MODULE:NAME"``), or
+    None."""
+    module, colon, name = target.rpartition(":")
+    if not colon or not module or not _NAME.fullmatch(name):
+        return f"expected 'FILE.py:NAME' or 'MODULE:NAME', got {target!r}"
+    if not module.endswith(PYTHON_SUFFIX) and not _NAME.fullmatch(module):
+        return f"{module!r} is neither a .py file nor a module name"
+    return None
+
+
+def load_factory(target: str, where: str, key: str) -> Callable[..., Any]:
+    """The callable ``target`` names, imported (once per process for a file).
+
+    Raises:
+        ConfigError: ``"<where>: <key>: ..."`` for a malformed target, a missing or unreadable
+            file, a module that fails to import (its exception's type and message), a missing
+            name, or a name that is not callable.
+    """
+    problem = check_target(target)
+    if problem is not None:
+        raise ConfigError(f"{where}: {key}: {problem}")
+    module_part, _, name = target.rpartition(":")
+    try:
+        module = _import_file(Path(module_part)) if target_file(target) else None
+        if module is None:
+            module = importlib.import_module(module_part)
+    except FileNotFoundError:
+        raise ConfigError(f"{where}: {key}: no such file: {module_part}") from None
+    except Exception as error:  # the user's module failed: its own error, in one line
+        message = f"{type(error).__name__}: {error}"
+        raise ConfigError(f"{where}: {key}: importing {module_part} failed: {message}") from None
+    found: Any = module
+    for part in name.split("."):
+        if not hasattr(found, part):
+            raise ConfigError(f"{where}: {key}: {module_part} has no {name!r}")
+        found = getattr(found, part)
+    if not callable(found):
+        raise ConfigError(f"{where}: {key}: {name!r} in {module_part} is not callable")
+    return cast(Callable[..., Any], found)
+
+
+def _import_file(path: Path) -> ModuleType:
+    """The module of the Python file at ``path``, executed the first time it is asked for."""
+    resolved = path.resolve()
+    module = _MODULES.get(resolved)
+    if module is not None:
+        return module
+    if not resolved.is_file():
+        raise FileNotFoundError(resolved)
+    digest = hashlib.sha256(str(resolved).encode()).hexdigest()[:8]
+    stem = re.sub(r"\W", "_", resolved.stem)
+    name = f"testbed_user_{stem}_{digest}"
+    spec = importlib.util.spec_from_file_location(name, resolved)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"not a Python module: {resolved}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # before it runs: a dataclass looks its module up
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+    _MODULES[resolved] = module
+    return module
+
+
+def takes_rng(factory: Callable[..., Any]) -> bool:
+    """Whether ``factory`` has a parameter named ``rng`` (it is then given the run's
+    generator)."""
+    try:
+        return "rng" in inspect.signature(factory).parameters
+    except (TypeError, ValueError):  # no signature to read (some builtins)
+        return False
+
+
+def check_arguments(
+    factory: Callable[..., Any],
+    target: str,
+    positional: tuple[Any, ...],
+    kwargs: Mapping[str, Any],
+    where: str,
+    keys: tuple[str, str, str],
+) -> None:
+    """Bind ``positional`` and ``kwargs`` to ``factory``'s signature without calling it.
+
+    Args:
+        factory: the callable ``target`` names.
+        target: as the scenario gives it, for messages.
+        positional: what the run passes first (a link model's config).
+        kwargs: the keyword arguments.
+        where: the file (or ``--set``), for messages.
+        keys: the target's key, the arguments' key and the call's shape for messages
+            (``("link.model", "link.model_args", "(config, **model_args)")``).
+
+    Raises:
+        ConfigError: ``"<where>: <key>: ..."`` naming what does not bind (the target's key when
+            it cannot take the positional arguments; the arguments' key for a keyword it does
+            not take, or one it needs that is missing).
+    """
+    target_key, key, shape = keys
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):
+        return  # nothing to check against: the call will tell
+    try:
+        signature.bind_partial(*positional)
+    except TypeError as error:
+        raise ConfigError(f"{where}: {target_key}: {target} cannot take {shape}: {error}") from None
+    try:
+        signature.bind(*positional, **kwargs)
+    except TypeError as error:
+        raise ConfigError(f"{where}: {key}: {target}: {error}") from None
+
+
+def call_factory(
+    factory: Callable[..., Any],
+    positional: tuple[Any, ...],
+    kwargs: Mapping[str, Any],
+    where: str,
+    key: str,
+) -> Any:
+    """``factory(*positional, **kwargs)``; an exception it raises becomes a one-line
+    :class:`ConfigError` naming ``key`` (the arguments were the scenario's)."""
+    try:
+        return factory(*positional, **kwargs)
+    except Exception as error:
+        raise ConfigError(f"{where}: {key}: {type(error).__name__}: {error}") from None
+
+
+def pilot_generator(seed: int) -> np.random.Generator:
+    """The generator a run of seed ``seed`` gives a pilot factory that takes ``rng``: the third
+    child of ``SeedSequence(seed)`` (the link's and the vehicle's are the first two, so adding it
+    changed no other draw)."""
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[2])
+
+
+def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
+    """The pilot ``scenario`` configures, made afresh for a run of seed ``seed``: a packaged one
+    (:meth:`~testbed.run.sections.PilotSection.pilot`), or the user's (module docstring).
+
+    Raises:
+        ConfigError: the factory failed, or made something without ``sample`` (naming
+            ``pilot.factory``).
+    """
+    section = scenario.pilot
+    if section.kind != "python":
+        return section.pilot()
+    key = "pilot.factory"
+    factory = load_factory(section.factory, scenario.source, key)
+    kwargs = dict(section.args)
+    if takes_rng(factory):
+        kwargs["rng"] = pilot_generator(seed)
+    pilot = call_factory(factory, (), kwargs, scenario.source, key)
+    if not callable(getattr(pilot, "sample", None)):
+        raise ConfigError(
+            f"{scenario.source}: {key}: {section.factory} made a {type(pilot).__name__}, not a "
+            "pilot (expected an object with sample(t_s) -> PilotSample)"
+        )
+    return cast("Pilot", pilot)
+
+
+def scenario_link_model(scenario: Scenario) -> LinkModel | None:
+    """The link model ``scenario`` names in ``link.model``, made afresh for a run (module
+    docstring), or None for the preset's own.
+
+    Raises:
+        ConfigError: the factory failed, or made something that is not a link model (naming
+            ``link.model``).
+    """
+    link = scenario.link
+    if not link.model:
+        return None
+    key = "link.model"
+    factory = load_factory(link.model, scenario.source, key)
+    model = call_factory(factory, (link.channel,), link.model_args, scenario.source, key)
+    laws = ("airtime_s", "error_model")
+    missing = [name for name in laws if not callable(getattr(model, name, None))]
+    if missing:
+        raise ConfigError(
+            f"{scenario.source}: {key}: {link.model} made a {type(model).__name__} without "
+            f"{' and '.join(missing)} (expected a testbed.channel.model.LinkModel)"
+        )
+    return cast("LinkModel", model)
