@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import textwrap
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 
 from testbed.channel import EventKind
 from testbed.cli.main import main
+from testbed.config import ConfigError
 from testbed.live.hub import Hub
 from testbed.live.session import LiveSession
 from testbed.run.runner import run_scenario
@@ -359,3 +361,43 @@ def test_the_readmes_scenario_tables_run_with_the_docs_link_model(tmp_path: Path
         abs=1e-7,
     )
     assert set(np.unique(result.recorder.series()["cmd_x"])) == {0.0, 0.5}
+
+
+def test_a_hil_run_flies_the_scenarios_pilot_and_a_failing_factory_closes_the_ports(
+    study: Path,
+) -> None:
+    """``testbed hil`` (run_hil) over emulated EvoLogics modems, both nodes here: the file's
+    pilot steers (every order the vehicle took holds the step's stick, 0.5 as the order's
+    signed byte carries it: round(0.5 · 127) / 127); a factory that raises is one line naming
+    the key, and both ports are closed."""
+    from testbed.channel import load_link_config
+    from testbed.emulator.ptys import ModemEmulator
+    from testbed.hil import PortSettings, open_endpoint
+    from testbed.run.realtime import run_hil
+
+    config = load_link_config("s2c", ["intrinsic_delay_s=0.05"])
+    short = ["metrics.settle_s=1", "link.ipg=fixed", "link.ipg_s=0.3", "pilot.args={at_s=1.0}"]
+    with ModemEmulator(config, seed=0, modem="evologics") as emulator:
+        path_a, path_b = emulator.paths
+        endpoints = {
+            "operator": open_endpoint(PortSettings(path_a, "evologics", "operator")),
+            "vehicle": open_endpoint(PortSettings(path_b, "evologics", "vehicle")),
+        }
+        scenario = load_scenario(str(study / "step.toml"), short)
+        result = run_hil(scenario, endpoints, duration_s=4.0, modem="evologics")
+        series = result.recorder.series()
+        taken = series["rx_x"][series["rx_x"] != 0.0]
+        assert len(taken) > 0 and set(np.unique(taken)) == {64 / 127}  # 0.5 on the wire's int8
+        assert set(np.unique(series["cmd_x"])) == {0.0, 0.5}
+        assert result.metrics["signal_lag_reference"] == "operator samples"
+
+        endpoints = {
+            "operator": open_endpoint(PortSettings(path_a, "evologics", "operator")),
+            "vehicle": open_endpoint(PortSettings(path_b, "evologics", "vehicle")),
+        }
+        factory = f"pilot.factory={study / 'my_pilots.py'}:failing"
+        failing = load_scenario(str(study / "step.toml"), [*short, factory])
+        with pytest.raises(ConfigError, match=r"step\.toml: pilot\.factory: RuntimeError"):
+            run_hil(failing, endpoints, duration_s=4.0, modem="evologics")
+        alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:")]
+        assert alive == []  # each port's reader and writer threads stopped: the ports closed
