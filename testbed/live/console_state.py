@@ -15,7 +15,13 @@ from collections import deque
 from itertools import islice
 from typing import TYPE_CHECKING, Any
 
-from testbed.common.components import ActiveMode, Armed, FailsafeStatus, PositionSetpoint
+from testbed.common.components import (
+    ActiveMode,
+    Armed,
+    FailsafeStatus,
+    ModeRequest,
+    PositionSetpoint,
+)
 from testbed.common.geometry import euler_from_quat
 from testbed.live.monitor import finite_or_none, image_view, latency_ms
 from testbed.vehicle.systems import Controllers
@@ -37,6 +43,10 @@ def console_state(session: LiveSession) -> dict[str, Any]:
     world = station.world
     armed = next((a.armed for _, a in world.query1(Armed)), None)
     mode = next((m.mode.name.lower() for _, m in world.query1(ActiveMode)), None)
+    asked_mode = session.requests.asked  # asked on the console, or else the session plan's
+    if asked_mode is None:
+        asked_mode = next((r.mode for _, r in world.query1(ModeRequest)), None)
+    asked = None if asked_mode is None else asked_mode.name.lower()
     truth = vehicle.truth
     ctl = vehicle.world.resource(Controllers)
     status = vehicle.world.get(ctl.vehicle, FailsafeStatus)
@@ -69,6 +79,7 @@ def console_state(session: LiveSession) -> dict[str, Any]:
             "target": _target(session),
         },
         "pilot": {
+            "mode": asked,
             "sticks": [round(s, 3) for s in session.pilot.sticks],
             "taken": session.pilot.taken,
         },

@@ -42,6 +42,10 @@ class LiveRequests:
 
     Args:
         entity: the operator's intent entity (:attr:`OperatorStation.entity`).
+
+    Attributes:
+        asked: the mode last asked for here (a mode request, or GUIDED by a go-to), from the
+            moment it was asked, before the operator frame that sends it; None before any.
     """
 
     def __init__(self, entity: Entity) -> None:
@@ -50,6 +54,7 @@ class LiveRequests:
         self._mode: ControlMode | None = None
         self._goto: tuple[float, float, float] | None = None
         self._seq = _FIRST_ARM_SEQ
+        self.asked: ControlMode | None = None
 
     def arm(self, armed: bool) -> None:
         """Ask to arm (True) or disarm (False) at the next operator frame."""
@@ -57,12 +62,13 @@ class LiveRequests:
 
     def mode(self, mode: ControlMode) -> None:
         """Ask for ``mode`` at the next operator frame."""
-        self._mode = mode
+        self._mode = self.asked = mode
 
     def goto(self, position_ned_m: tuple[float, float, float]) -> None:
         """Ask the vehicle to fly to ``position_ned_m`` [m, NED; z = depth] in GUIDED (keeping
         its heading) at the next operator frame; another mode request ends it."""
         self._goto = position_ned_m
+        self._mode, self.asked = None, ControlMode.GUIDED
 
     def __call__(self, world: World) -> None:
         if self._goto is not None:

@@ -102,6 +102,57 @@ def test_flying_keys_never_change_the_mode(tab: Any) -> None:
     assert [m["mode"] for m in _sent(page, "mode")] == ["manual", "depth_hold"]
 
 
+def test_the_mode_menu_shows_the_mode_asked_and_the_telemetry_flags_a_vehicle_elsewhere(
+    tab: Any, browser: Any, live: Live
+) -> None:
+    """A page opened (or reloaded) after another asked for a mode shows that mode in its menu,
+    not the page's default; a mode asked without the menu (a gamepad button's message) moves the
+    menu once the server has it; the telemetry's mode row says the vehicle's mode and, while it
+    is not the one asked, both in red."""
+    first = tab
+    first.evaluate("consoleSend({t: 'mode', mode: 'manual'})")  # as a gamepad's A button does
+    try:
+        first.wait_for_function("document.getElementById('mode').value === 'manual'")
+        live.wait("manual asked", lambda s: s["pilot"]["mode"] == "manual")
+        live.wait("manual reported", lambda s: (s["operator"] or {}).get("mode") == "manual")
+        first.wait_for_function(f"(({_ROW})(['telemetry', 'mode']) || [''])[0] === 'manual'")
+        first.context.close()  # the pilot leaves; a new page takes the seat
+
+        context = browser.new_context(viewport={"width": 1500, "height": 900})
+        try:
+            page = context.new_page()
+            page.set_default_timeout(_WAIT_MS)
+            page.add_init_script(_RECORD_SENT)
+            page.goto(live.url)
+            page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+            page.wait_for_function("drawn !== null")
+            assert page.input_value("#mode") == "manual"  # the page's own default: depth_hold
+
+            # asked, not yet taken: the row holds the vehicle's mode and the one asked, in red
+            page.select_option("#mode", "stabilize")
+            page.wait_for_function(
+                """() => { const cell = [...document.getElementById('telemetry').rows]
+                  .find((r) => r.cells[0].textContent === 'mode');
+                  return cell && cell.cells[1].innerHTML.includes('class="bad"')
+                    && cell.cells[1].textContent === 'manual (asked stabilize)'; }"""
+            )
+            assert page.input_value("#mode") == "stabilize"
+            live.wait("stabilize reported", lambda s: s["operator"]["mode"] == "stabilize")
+            page.wait_for_function(f"({_ROW})(['telemetry', 'mode'])[0] === 'stabilize'")
+        finally:
+            context.close()
+    finally:
+        restore = browser.new_context()
+        try:
+            page = restore.new_page()
+            page.goto(live.url)
+            page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+            page.evaluate("consoleSend({t: 'mode', mode: 'depth_hold'})")
+            live.wait("depth_hold back", lambda s: s["operator"]["mode"] == "depth_hold")
+        finally:
+            restore.close()
+
+
 _ROW = """(args) => { const [table, key] = args;
   const row = [...document.getElementById(table).rows].find((r) => r.cells[0].textContent === key);
   return row ? [...row.cells].slice(1).map((c) => c.textContent) : null; }"""

@@ -9,6 +9,8 @@ from collections.abc import Iterator
 
 import pytest
 
+from testbed.common.components import ControlMode, ModeRequest
+from testbed.live.console_state import console_state
 from testbed.live.hub import Hub
 from testbed.live.messages import (
     Arm,
@@ -101,5 +103,33 @@ def test_a_goto_to_a_vehicle_that_knows_no_position_is_refused_with_a_note(
         kinds = [e.kind for e in session.recorder.events if e.node == "live"]
         assert kinds[-1] == ("goto_refused" if refused else "goto_sent")
         assert (GOTO_NO_FIX in session.hub.notes) is refused
+    finally:
+        session.vehicle.close()
+
+
+def test_the_console_says_the_mode_asked_at_once_and_the_last_asked_is_the_one_sent() -> None:
+    """The state's ``pilot.mode`` is the session plan's mode until the pilot asks, then the
+    mode asked, from the moment the message is taken (the menu shows it, not a stale one until
+    the next operator frame); a go-to asks GUIDED; asked in one frame, the later ask wins: a
+    go-to after a mode request flies the go-to, a mode request after a go-to ends it."""
+    session = LiveSession(load_scenario("s100-supervised-v1"), Hub(), pilot=None)
+    try:
+        env = session.env
+        env.process(session.vehicle_node.run())
+        env.process(session.operator_node.run())
+        env.run(until=3.0)  # a reply has come: a go-to's depth is known
+        planned = session.scenario.operator.mode  # "depth_hold" here, as the menu's names
+        assert console_state(session)["pilot"]["mode"] == planned
+        world, entity = session.station.world, session.station.entity
+        for messages, expected in (
+            ([SetMode("stabilize")], ControlMode.STABILIZE),
+            ([SetMode("manual"), GoToPoint(1.0, 0.5)], ControlMode.GUIDED),
+            ([GoToPoint(1.0, 0.5), SetMode("depth_hold")], ControlMode.DEPTH_HOLD),
+        ):
+            for message in messages:
+                session.apply(message)
+            assert console_state(session)["pilot"]["mode"] == expected.name.lower()
+            env.run(until=env.now + 0.7)  # an operator frame (≈ 0.3 s apart) writes it
+            assert world.get(entity, ModeRequest).mode is expected
     finally:
         session.vehicle.close()

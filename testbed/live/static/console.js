@@ -11,7 +11,16 @@ const rtts = [], pixelLags = [], trackOp = [], trackTruth = [], depthOp = [], de
 const keys = new Set();
 const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : Number(v).toFixed(d));
 
-function send(obj) { if (ws.readyState === 1) ws.send(JSON.stringify(obj)); }
+// a mode this page asked for, shown by the menu until a drawn state says the server took it
+// (states in flight would put the old one back for a moment), for at most MODE_PICK_MS
+let modePicked = null, modePickedAt = 0;
+const MODE_PICK_MS = 3000;
+function send(obj) {
+  if (ws.readyState !== 1) return;
+  if (obj.t === "mode") { modePicked = obj.mode; modePickedAt = performance.now(); }
+  if (obj.t === "goto") modePicked = null; // GUIDED, if the server takes it
+  ws.send(JSON.stringify(obj));
+}
 window.consoleSend = send; // for scripted checks
 
 // ---------------------------------------------------------------- input
@@ -295,7 +304,10 @@ function draw() {
     ["north, east [m]", both(`${fmt(o.pos[0])}, ${fmt(o.pos[1])}`, `${fmt(tr.pos[0])}, ${fmt(tr.pos[1])}`)],
     ["heading [deg]", both(fmt(o.rpy[2], 1), fmt(tr.rpy[2], 1))],
     ["roll, pitch [deg]", both(`${fmt(o.rpy[0], 1)}, ${fmt(o.rpy[1], 1)}`, `${fmt(tr.rpy[0], 1)}, ${fmt(tr.rpy[1], 1)}`)],
-    ["armed", both(String(o.armed), String(tr.armed))], ["mode", o.mode],
+    ["armed", both(String(o.armed), String(tr.armed))],
+    // the mode the vehicle last reported; while it is not the one asked for, both, in red
+    ["mode", !o.mode || o.mode === s.pilot.mode ? o.mode
+      : `<span class="bad">${o.mode} (asked ${s.pilot.mode})</span>`],
     ["state age [s]", ageText],
     // the vehicle's failsafe is physics truth (the operator is not told it): truth overlay only
     ...(truth ? [["failsafe (truth)", `<span style="color:#f90">(${tr.failsafe})</span>`]] : []),
@@ -307,6 +319,12 @@ function draw() {
   for (const id of ["set-ber", "set-gap", "reset-gap", "set-distance", "reset-distance", "outage"])
     $(id).disabled = !pilot || !s.link.simulated; // HIL ports: the real link is not ours to change
   fillLinkFields(s.link);
+  // the menu shows the mode the operator asks for, whoever asked (the menu, a gamepad button,
+  // a go-to, the scenario's start), except while the pilot has it open
+  if (modePicked !== null && (s.pilot.mode === modePicked
+      || performance.now() - modePickedAt > MODE_PICK_MS)) modePicked = null;
+  if (s.pilot.mode && modePicked === null && document.activeElement !== $("mode"))
+    $("mode").value = s.pilot.mode;
   const L = s.link, u = L.uplink, d = L.downlink, pct = (p) => (p === null ? "–" : `${(100 * p).toFixed(1)} %`);
   rows($("link"), [["", "uplink", "downlink"], ["sent", u.sent, d.sent], ["delivered", u.delivered, d.delivered],
     ["corrupted", u.corrupted, d.corrupted], ["collided", u.collided, d.collided],
