@@ -44,13 +44,8 @@ from testbed.ecs import Phase, World
 from testbed.vehicle.allocation import CURRENT_TOLERANCE_A
 from testbed.vehicle.components import ControlTargets, DepthReading, ForceIntent, ImuReading
 from testbed.vehicle.control_kernels import attitude_update, depth_update
-from testbed.vehicle.systems import (
-    Actuation,
-    Controllers,
-    PowerMeter,
-    SimClock,
-    mean_force_weight,
-)
+from testbed.vehicle.resources import Actuation, Controllers, PowerMeter, SimClock
+from testbed.vehicle.systems import mean_force_weight
 from testbed.vehicle.thrust_kernels import (
     allocate_pinv,
     interval_wrench,

@@ -24,7 +24,7 @@ from testbed.common.components import (
 )
 from testbed.common.geometry import euler_from_quat
 from testbed.live.monitor import finite_or_none, image_view, latency_ms
-from testbed.vehicle.systems import Controllers
+from testbed.vehicle.resources import Controllers
 
 if TYPE_CHECKING:
     from testbed.live.session import LiveSession

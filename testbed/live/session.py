@@ -67,7 +67,7 @@ from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
 from testbed.run.scenario import Scenario
-from testbed.vehicle.systems import Controllers
+from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = ["GOTO_REFUSED", "POLL_S", "PUBLISH_HZ", "LiveSession", "run_live"]

@@ -54,7 +54,7 @@ from testbed.run.recorder import Recorder, VehicleObserver
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario
-from testbed.vehicle.systems import SimClock
+from testbed.vehicle.resources import SimClock
 from testbed.vehicle.vehicle import Vehicle, VehicleConfig
 
 __all__ = [

@@ -37,7 +37,7 @@ from testbed.protocol import Frame, FrameDecoder, encode_frame, frame_overhead
 from testbed.run.images import CapturedImage, ReceivedImage
 from testbed.run.links import OPERATOR_LINKS, VEHICLE_LINKS, Ingested, Outgoing
 from testbed.run.recorder import Recorder
-from testbed.vehicle.systems import SimClock
+from testbed.vehicle.resources import SimClock
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import CodedImage, ImageSource
 

@@ -78,7 +78,7 @@ from testbed.run.runner import (
     tally_images,
 )
 from testbed.run.scenario import Scenario
-from testbed.vehicle.systems import Controllers
+from testbed.vehicle.resources import Controllers
 
 __all__ = [
     "DIRECTIONS",

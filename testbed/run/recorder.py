@@ -37,13 +37,8 @@ from testbed.run.images import ImageLog
 from testbed.vehicle.components import ControlTargets, FailsafeStatus, MissionStatus, PoseTarget
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
-from testbed.vehicle.systems import (
-    Controllers,
-    PlantTruth,
-    PowerMeter,
-    SimClock,
-    applied_sticks,
-)
+from testbed.vehicle.resources import Controllers, PlantTruth, PowerMeter, SimClock
+from testbed.vehicle.systems import applied_sticks
 
 __all__ = [
     "SERIES_COLUMNS",

@@ -37,7 +37,7 @@ from testbed.run.run_metrics import compute_metrics
 from testbed.run.scenario import Scenario
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import Navigation
-from testbed.vehicle.systems import Controllers
+from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [

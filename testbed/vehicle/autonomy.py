@@ -26,9 +26,9 @@ the present pose; armed before any order, the vehicle holds station where it is.
 is counted (:attr:`Autonomy.refused`, ``mission.goals_refused``) and the vehicle flies on. The
 tree's disarm fallback (``disarm_requested``) is a level: the operator's last arm request was a
 disarm, or the link failsafe disarmed the vehicle (latched until the operator asks to arm
-again). A vehicle under autonomy owns its mode: the operator's mode requests
-and sticks are not applied (:func:`~testbed.vehicle.systems.ingest_commands`), and a link HOLD
-keeps the mission flying. The link's SURFACE level takes the vehicle from the mission as it does
+again). A vehicle under autonomy owns its mode: the operator's mode requests and sticks are
+not applied (:func:`~testbed.vehicle.command_systems.ingest_commands`), and a link HOLD keeps
+the mission flying. The link's SURFACE level takes the vehicle from the mission as it does
 without autonomy: the depth and attitude loops climb at the failsafe's ascent rate from where
 the vehicle is, level at its heading, and the failsafe disarms it at the surface (a vehicle
 disarmed at depth would sink if it is heavy in water, as the von Benzon Heavy is by 1 N).
@@ -72,7 +72,7 @@ from testbed.vehicle.kinematic import PoseGains, pose_twist
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.mission import Mission, load_mission, load_packaged_mission, mission_names
 from testbed.vehicle.mission_context import GoalRequest, MissionConfig, MissionContext
-from testbed.vehicle.systems import ZERO6, Controllers, SimClock, set_intent
+from testbed.vehicle.resources import ZERO6, Controllers, SimClock, set_intent
 
 __all__ = [
     "Autonomy",

@@ -42,9 +42,9 @@ from testbed.vehicle.nav_sensors import (
     MotionCaptureConfig,
     NavSource,
 )
+from testbed.vehicle.resources import Controllers, PlantTruth, SimClock, vehicle_row
 from testbed.vehicle.sensor_kernels import put_position
 from testbed.vehicle.sensors import PositionFix
-from testbed.vehicle.systems import Controllers, PlantTruth, SimClock, vehicle_row
 
 MIN_FIX_SIGMA_M = 1e-4
 """Smallest 1σ [m] a position fix is given in the filter (a noiseless fix is 0.1 mm)."""

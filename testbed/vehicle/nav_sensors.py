@@ -1,6 +1,6 @@
 """Navigation sensor models for localization: motion capture, a DVL, an acoustic (USBL) fix.
 
-Each model turns the physics truth (:class:`~testbed.vehicle.systems.PlantTruth`, read only
+Each model turns the physics truth (:class:`~testbed.vehicle.resources.PlantTruth`, read only
 here and in :mod:`testbed.vehicle.sensors`) into the :class:`Measurement` a localizer consumes:
 sampled at its own rate, with noise from the ``numpy.random.Generator`` it was given (give each
 model its own, e.g. from ``Generator.spawn``), and, where the real device is late, delivered
@@ -34,7 +34,7 @@ from testbed.config import check_range
 from testbed.vehicle.sensors import NormalDraws, SampleClock
 
 if TYPE_CHECKING:
-    from testbed.vehicle.systems import PlantTruth
+    from testbed.vehicle.resources import PlantTruth
 
 __all__ = [
     "Accelerometer",
@@ -347,7 +347,7 @@ class AccelerometerConfig:
 
 class Accelerometer:
     """The accelerometer: the true mean NED acceleration over the last frame
-    (:attr:`~testbed.vehicle.systems.PlantTruth.acceleration_ned_m_s2`) plus bias and white
+    (:attr:`~testbed.vehicle.resources.PlantTruth.acceleration_ned_m_s2`) plus bias and white
     noise, as an ``acceleration_ned`` measurement (the filter's prediction input)."""
 
     __slots__ = ("_clock", "_normals", "config", "name")

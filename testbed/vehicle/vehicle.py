@@ -99,6 +99,14 @@ from testbed.vehicle.mission import MAX_POSITION_M
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import BodyState, Physics, PoolScene
 from testbed.vehicle.pilot import PilotGains
+from testbed.vehicle.resources import (
+    Actuation,
+    Controllers,
+    PlantTruth,
+    PowerMeter,
+    SensorSuite,
+    SimClock,
+)
 from testbed.vehicle.scenery import pool_scenery
 from testbed.vehicle.sensors import (
     DepthSensor,
@@ -108,17 +116,7 @@ from testbed.vehicle.sensors import (
     PositionFix,
     PositionFixConfig,
 )
-from testbed.vehicle.systems import (
-    Actuation,
-    Controllers,
-    PlantTruth,
-    PowerMeter,
-    SensorSuite,
-    SimClock,
-    build_schedule,
-    shaped_sticks,
-    wrench_of,
-)
+from testbed.vehicle.systems import build_schedule, shaped_sticks, wrench_of
 from testbed.vehicle.t200 import SUPPLY_VOLTAGE_RANGE_V
 from testbed.vehicle.thrusters import (
     SPIN_UP_TIME_CONSTANT_S,

@@ -19,7 +19,7 @@ from testbed.vehicle.components import ImuReading
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.localization import Localizer, Navigation
 from testbed.vehicle.nav_sensors import Measurement
-from testbed.vehicle.systems import SimClock
+from testbed.vehicle.resources import SimClock
 from testbed.vehicle.vehicle import Vehicle
 
 TELEOP = ("duration_s=12", "metrics.settle_s=2")

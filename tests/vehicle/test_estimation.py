@@ -49,8 +49,8 @@ from testbed.vehicle.nav_sensors import (
     NavSource,
 )
 from testbed.vehicle.pilot import PilotGains
+from testbed.vehicle.resources import Controllers, PlantTruth, SimClock
 from testbed.vehicle.sensors import DepthSensor, DepthSensorConfig
-from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
 
 # --- truth: p(t) = d0 + A sin(ωt + φ) per NED axis; yaw sweeps at a constant rate ----------
 AMP_M = np.array([1.0, 0.8, 0.3])

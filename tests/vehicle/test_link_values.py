@@ -28,7 +28,8 @@ from testbed.common.components import (
 )
 from testbed.ecs import Change, ChangeKind, Side
 from testbed.run.links import make_registry
-from testbed.vehicle.systems import MAX_SETPOINT_DEPTH_M, Controllers
+from testbed.vehicle.command_systems import MAX_SETPOINT_DEPTH_M
+from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle, VehicleConfig
 
 REGISTRY = make_registry()

@@ -31,7 +31,7 @@ from testbed.vehicle.nav_sensors import (
     NavSource,
 )
 from testbed.vehicle.pilot import PilotGains
-from testbed.vehicle.systems import Controllers, PlantTruth, SimClock
+from testbed.vehicle.resources import Controllers, PlantTruth, SimClock
 
 TRUTH = PlantTruth(
     quat_from_euler(0.1, -0.2, 1.0), (0.0, 0.0, 0.0), (3.0, -4.0, 5.0), (0.5, -0.1, 0.05)

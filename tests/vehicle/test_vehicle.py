@@ -28,8 +28,8 @@ from testbed.vehicle.components import (
 from testbed.vehicle.control import FailsafeConfig
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M
+from testbed.vehicle.resources import SimClock
 from testbed.vehicle.sensors import DepthSensorConfig, ImuConfig
-from testbed.vehicle.systems import SimClock
 from testbed.vehicle.vehicle import SensorsConfig, Vehicle, VehicleConfig, load_vehicle_config
 
 QUIET = SensorsConfig(
