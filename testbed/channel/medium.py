@@ -44,7 +44,7 @@ import numpy as np
 import simpy
 
 from testbed.channel.config import LinkConfig
-from testbed.channel.model import LinkModel, StandardLink
+from testbed.channel.model import LinkModel, LinkModelError, StandardLink
 from testbed.channel.trace import BROADCAST, EventKind, Trace
 from testbed.protocol import CorruptFrame, Frame, FrameDecoder
 
@@ -303,6 +303,7 @@ class Modem:
         self._half_duplex = config.duplex == "half"
         self._intrinsic_s = config.intrinsic_delay_s
         self._airtime_s = medium.model.airtime_s
+        self._medium_model = medium.model
         self._gap_s = config.queue_gap_s
         self._buffer_bytes = config.tx_buffer_bytes
         self._packet_bytes = config.packet_bytes
@@ -410,7 +411,10 @@ class Modem:
         frame_id, part, _, data = entry
         size = len(data)
         self._fifo_bytes -= size
-        busy_s = self._intrinsic_s + self._airtime_s(size, now)
+        airtime_s = self._airtime_s(size, now)
+        if not 0.0 < airtime_s < math.inf:  # NaN too: a link model of the user's broke its law
+            raise LinkModelError.airtime(self._medium_model, size, now, airtime_s)
+        busy_s = self._intrinsic_s + airtime_s
         end_s = now + busy_s
         self._tx_start_s = now
         self._tx_end_s = end_s

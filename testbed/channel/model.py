@@ -21,15 +21,42 @@ in ``metrics.json`` (``inputs.link_model``). docs/channel.md, "A link model of y
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from testbed.config import ConfigError
+
 from .config import LinkConfig
 from .errors import BitErrors
 
-__all__ = ["ErrorModel", "LinkModel", "StandardLink", "model_name"]
+__all__ = ["ErrorModel", "LinkModel", "LinkModelError", "StandardLink", "model_name"]
+
+
+class LinkModelError(ConfigError):
+    """A link model broke its contract (an air time that is not a finite number > 0): the
+    model's class and file named in one line (the command line's ``testbed: error: ...``,
+    exit 2)."""
+
+    @classmethod
+    def airtime(cls, model: object, size_bytes: int, t_s: float, value: object) -> LinkModelError:
+        """The error for ``model.airtime_s(size_bytes, t_s)`` having returned ``value``."""
+        return cls(
+            f"link model {_described(model)}: airtime_s({size_bytes}, {t_s!r}) returned "
+            f"{value!r}: expected a finite time > 0 [s]"
+        )
+
+
+def _described(model: object) -> str:
+    """``QualifiedName (its source file)`` of a model's class, or the name alone."""
+    cls = type(model)
+    try:
+        where = inspect.getsourcefile(cls)
+    except TypeError:  # a built-in class
+        where = None
+    return cls.__qualname__ if where is None else f"{cls.__qualname__} ({where})"
 
 
 class ErrorModel(Protocol):

@@ -26,7 +26,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
-from testbed.config import check, check_range
+from testbed.config import ConfigError, check, check_range
 
 __all__ = [
     "GOAL_FRAMES",
@@ -37,6 +37,7 @@ __all__ = [
     "GoalOrder",
     "GoalStep",
     "Pilot",
+    "PilotError",
     "PilotSample",
     "SampleHold",
     "ScriptedPilot",
@@ -59,6 +60,12 @@ GoalFrame = Literal["vehicle", "end_effector"]
 or the manipulator arm's tool point (an EndEffectorSetpoint, an EndEffectorGoTo order)."""
 GOAL_FRAMES: tuple[GoalFrame, ...] = ("vehicle", "end_effector")
 """The accepted :data:`GoalFrame` values; ``"vehicle"`` is the default."""
+
+
+class PilotError(ConfigError, TypeError):
+    """A pilot sampled what a pilot cannot give (not a :class:`PilotSample`, or sticks that are
+    not six finite positions in [−1, 1]): its bug, named with its type, in one line on the
+    command line (``testbed: error: ...``, exit 2). A ValueError and a TypeError."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -37,7 +37,7 @@ from testbed.common.components import (
 )
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Entity, Phase, Replicate, Schedule, World
-from testbed.operator.pilots import Pilot, PilotSample, SampleHold
+from testbed.operator.pilots import Pilot, PilotError, PilotSample, SampleHold
 
 __all__ = [
     "STICK_AXES",
@@ -104,19 +104,19 @@ def check_sticks(pilot: Pilot, sticks: tuple[float, ...]) -> None:
     otherwise refuse it while encoding and the change-set codec carry a NaN to the vehicle).
 
     Raises:
-        ValueError: naming the pilot's type and the axis.
+        PilotError: naming the pilot's type and the axis (a ValueError).
     """
     inner = pilot.pilot if isinstance(pilot, SampleHold) else pilot  # the user's, not the hold
     name = type(inner).__name__
     if len(sticks) != len(STICK_AXES):
-        raise ValueError(f"pilot {name}: {len(sticks)} sticks sampled, expected 6")
+        raise PilotError(f"pilot {name}: {len(sticks)} sticks sampled, expected 6")
     for axis, value in zip(STICK_AXES, sticks, strict=True):
         try:
             ok = -1.0 <= float(value) <= 1.0  # a NaN fails the comparison
         except (TypeError, ValueError):
             ok = False
         if not ok:
-            raise ValueError(
+            raise PilotError(
                 f"pilot {name}: {axis} stick must be a finite number in [-1, 1], got {value!r}"
             )
 
@@ -127,15 +127,15 @@ def sample_pilot(world: World) -> None:
     ``"end_effector"`` frame, or a cancel) when a new one is in force.
 
     Raises:
-        ValueError: the pilot's sticks are not six finite positions in [−1, 1]
-            (:func:`check_sticks`).
+        PilotError: the pilot's sample is not a :class:`PilotSample` (a TypeError too), or its
+            sticks are not six finite positions in [−1, 1] (:func:`check_sticks`).
     """
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
-    sample = session.pilot.sample(now)
+    sample = session.pilot.sample(float(now))  # a float, as the protocol says, from t = 0 on
     if not isinstance(sample, PilotSample):
         inner = session.pilot.pilot if isinstance(session.pilot, SampleHold) else session.pilot
-        raise TypeError(
+        raise PilotError(
             f"pilot {type(inner).__name__}: sample() must return a PilotSample "
             f"(testbed.operator.pilots), got {type(sample).__name__}"
         )

@@ -57,6 +57,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "PYTHON_SUFFIX",
+    "TABLE_VALUE_KEYS",
     "call_factory",
     "check_arguments",
     "check_target",
@@ -66,13 +67,22 @@ __all__ = [
     "scenario_pilot",
     "takes_rng",
     "target_file",
+    "target_files",
 ]
 
 PYTHON_SUFFIX = ".py"
 """The suffix that makes a target's module part a file path rather than a module name."""
 
+TABLE_VALUE_KEYS = frozenset({"pilot.args", "link.model_args"})
+"""Scenario keys whose value is one table, a factory's keyword arguments: a sweep's ``[set]``
+sets such a table whole (``"link.model_args" = {}`` clears the scenario's), never merged key by
+key."""
+
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*")
 _MODULES: dict[Path, ModuleType] = {}
+_FILES: dict[str, list[str]] = {}
+"""The files behind each imported target's module (:func:`target_files`), by resolved path (a
+file) or module name."""
 
 
 def target_file(target: str) -> str | None:
@@ -108,11 +118,13 @@ def load_factory(target: str, where: str, key: str) -> Callable[..., Any]:
     try:
         module = _import_file(Path(module_part)) if target_file(target) else None
         if module is None:
-            module = importlib.import_module(module_part)
+            module = _import_module(module_part)
     except FileNotFoundError:
         raise ConfigError(f"{where}: {key}: no such file: {module_part}") from None
     except Exception as error:  # the user's module failed: its own error, in one line
         message = f"{type(error).__name__}: {error}"
+        if isinstance(error, ModuleNotFoundError) and error.name == module_part:
+            message += f" (a file is named as '{module_part}{PYTHON_SUFFIX}:{name}')"
         raise ConfigError(f"{where}: {key}: importing {module_part} failed: {message}") from None
     found: Any = module
     for part in name.split("."):
@@ -125,7 +137,11 @@ def load_factory(target: str, where: str, key: str) -> Callable[..., Any]:
 
 
 def _import_file(path: Path) -> ModuleType:
-    """The module of the Python file at ``path``, executed the first time it is asked for."""
+    """The module of the Python file at ``path``, executed the first time it is asked for, with
+    its folder first on the import path while it runs (as ``python FILE.py`` has it), so that
+    its imports find the modules beside it; the files of those are kept for
+    :func:`target_files`. A module of that name imported before (from elsewhere) is Python's
+    as ever: the one already loaded."""
     resolved = path.resolve()
     module = _MODULES.get(resolved)
     if module is not None:
@@ -139,14 +155,54 @@ def _import_file(path: Path) -> ModuleType:
     if spec is None or spec.loader is None:
         raise ImportError(f"not a Python module: {resolved}")
     module = importlib.util.module_from_spec(spec)
+    before = set(sys.modules)
     sys.modules[name] = module  # before it runs: a dataclass looks its module up
+    sys.path.insert(0, str(resolved.parent))
     try:
         spec.loader.exec_module(module)
     except BaseException:
         del sys.modules[name]
         raise
+    finally:
+        sys.path.remove(str(resolved.parent))
     _MODULES[resolved] = module
+    _FILES[str(resolved)] = [str(resolved), *_files_beside(resolved.parent, before)]
     return module
+
+
+def _import_module(name: str) -> ModuleType:
+    """``importlib.import_module(name)``, keeping its file and those of the modules beside it
+    that it imported for :func:`target_files` (the first time)."""
+    before = set(sys.modules)
+    module = importlib.import_module(name)
+    origin = getattr(module, "__file__", None)
+    if origin is not None and name not in _FILES:
+        folder = Path(origin).resolve().parent
+        _FILES[name] = [str(Path(origin).resolve()), *_files_beside(folder, before)]
+    return module
+
+
+def _files_beside(folder: Path, before: set[str]) -> list[str]:
+    """The files in ``folder`` of the modules imported since ``before`` (a set of
+    ``sys.modules``' names), sorted."""
+    files = set()
+    for name in set(sys.modules) - before:
+        origin = getattr(sys.modules[name], "__file__", None)
+        if origin is not None and Path(origin).resolve().parent == folder:
+            files.add(str(Path(origin).resolve()))
+    return sorted(files)
+
+
+def target_files(target: str) -> list[str]:
+    """The files behind ``target`` whose content a run depends on: the named file (or the
+    module's), and the modules beside it that its import loaded (a helper it imports later, in
+    a function, is not seen), once :func:`load_factory` imported it in this process; else the
+    named file alone (a module: none)."""
+    module_part = target.rpartition(":")[0]
+    if target_file(target) is not None:
+        path = str(Path(module_part).resolve())
+        return list(_FILES.get(path, [path]))
+    return list(_FILES.get(module_part, []))
 
 
 def takes_rng(factory: Callable[..., Any]) -> bool:

@@ -9,6 +9,7 @@ call at the end of a run; the statistics themselves (ages of information, lags, 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+import testbed
 from testbed.channel import Trace, direction_counts
 from testbed.common.components import MissionStatus
 from testbed.protocol import VEHICLE_HEADER_SIZE
@@ -91,9 +93,10 @@ class TokenCycle:
 def token_cycle(scenario: Scenario) -> TokenCycle | None:
     """The scenario's tightest :class:`TokenCycle` (a move order's or the longest order's,
     whichever leaves the least time to spare), or None for a link without token-passing
-    teleop."""
+    teleop, or one whose air time is a model of the user's (``link.model``: the closed form
+    knows only the preset's bit rate)."""
     link = scenario.link
-    if link.mac != "token" or link.codec != "teleop":
+    if link.mac != "token" or link.codec != "teleop" or link.model:
         return None
     chunk = scenario.images.chunk_bytes if scenario.images.enabled else 0
     reply_bytes = FRAME_OVERHEAD + VEHICLE_HEADER_SIZE + chunk
@@ -108,6 +111,15 @@ def token_cycle(scenario: Scenario) -> TokenCycle | None:
         for order_bytes in (ORDER_FRAME_BYTES, LONGEST_ORDER_FRAME_BYTES)
     ]
     return min(cycles, key=lambda cycle: cycle.gap_s - cycle.round_trip_s)
+
+
+def _own_pilot(scenario: Scenario) -> dict[str, Any]:
+    """``{"pilot": {"factory", "args"}}`` for a pilot of the user's own, else nothing."""
+    pilot = scenario.pilot
+    if pilot.kind != "python":
+        return {}
+    args = json.loads(json.dumps(pilot.args, default=str))  # a TOML date as its text
+    return {"pilot": {"factory": pilot.factory, "args": args}}
 
 
 def _link_direction(
@@ -208,9 +220,11 @@ def compute_metrics(
     metrics: dict[str, Any] = {
         "scenario": scenario.id,
         "inputs": {  # what ran: enough to run it again
+            "testbed": testbed.__version__,
             "source": scenario.source,
             "overrides": list(scenario.overrides),
             "files": dict(scenario.files),
+            **_own_pilot(scenario),
         },
         "seed": seed,
         "sim_s": sim_s,

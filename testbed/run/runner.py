@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -306,6 +307,8 @@ def run_scenario(
         )
         if link_model is not None:
             metrics["inputs"]["link_model"] = model_name(link_model)
+            # the closed form knows the preset's bit rate only, not the model's air time
+            metrics["token_round_trip_s"], metrics["reply_fits_gap"] = math.nan, None
         elif model is not None:
             metrics["inputs"]["link_model"] = scenario.link.model
     return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))

@@ -49,7 +49,13 @@ from testbed.config import (
     parse_override,
 )
 from testbed.run.images import ImagesSection
-from testbed.run.plugins import check_arguments, load_factory, takes_rng, target_file
+from testbed.run.plugins import (
+    check_arguments,
+    load_factory,
+    takes_rng,
+    target_file,
+    target_files,
+)
 from testbed.run.sections import (
     MAX_DURATION_S,
     FaultsSection,
@@ -418,8 +424,10 @@ def _user_files(scenario: Scenario) -> list[str]:
     if vehicle.arm is not None:
         named += [vehicle.arm.model, vehicle.arm.tpik]
     files = [name for name in named if Path(name).suffix in (".toml", ".json")]
-    targets = (scenario.pilot.factory, scenario.link.model)
-    return files + [path for path in map(target_file, targets) if path is not None]
+    for target in (scenario.pilot.factory, scenario.link.model):
+        if target:
+            files += target_files(target)
+    return files
 
 
 def scenario_digest(name_or_path: str) -> tuple[str, str]:
@@ -474,6 +482,8 @@ def _from_data(
         )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
     if pilot.kind == "python":
+        if "start_s" in top.pilot:  # a pilot of one's own starts when it says (its args)
+            raise ConfigError(f"{where}: pilot.start_s: not used when kind = 'python'")
         factory = load_factory(pilot.factory, where, "pilot.factory")
         given = {**pilot.args, "rng": None} if takes_rng(factory) else pilot.args
         keys = ("pilot.factory", "pilot.args", "(**args)")

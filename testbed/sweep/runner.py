@@ -21,6 +21,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -389,6 +390,12 @@ def format_summary(sweep: Sweep, summary: SweepSummary) -> str:
     ]
     for point, seed, values, error in summary.failed:
         lines.append(f"  FAILED point {point} seed {seed} ({values}): {error}")
+    if summary.failed:
+        point, seed = summary.failed[0][:2]
+        spec = next(s for s in expand(sweep) if (s.point, s.seed) == (point, seed))
+        sets = " ".join(f"--set {shlex.quote(override)}" for override in spec.overrides)
+        command = f"testbed run {shlex.quote(spec.scenario)} --seed {seed} {sets}".rstrip()
+        lines.append(f"  the first failed run alone: {command}")
     out = summary.out
     lines.append(f"  wrote {out / 'results.csv'} and {out / 'aggregate.csv'}")
     return "\n".join(lines)

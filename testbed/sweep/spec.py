@@ -22,6 +22,7 @@ from typing import Any, Literal, TextIO
 import numpy as np
 
 from testbed.config import ConfigError, build, check, load_toml, parse_override
+from testbed.run.plugins import TABLE_VALUE_KEYS
 
 __all__ = [
     "DEFAULT_METRICS",
@@ -245,12 +246,17 @@ def _flatten_table(
 ) -> dict[str, Any]:
     """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level. An
     empty table is dropped, or with ``keep_empty`` (the grid) kept as a value (the grid refuses
-    it), and so is a table :func:`_is_range` takes for a range without ``scale``."""
+    it), and so is a table :func:`_is_range` takes for a range without ``scale``. Outside the
+    grid a table at a :data:`~testbed.run.plugins.TABLE_VALUE_KEYS` key is one value (a
+    factory's arguments, set whole)."""
     flat: dict[str, Any] = {}
     for key, value in table.items():
         dotted = f"{prefix}{key}"
-        level = isinstance(value, Mapping) and not (
-            _is_range(value) if keep_empty else "scale" in value
+        whole = not keep_empty and dotted in TABLE_VALUE_KEYS
+        level = (
+            isinstance(value, Mapping)
+            and not whole
+            and not (_is_range(value) if keep_empty else "scale" in value)
         )
         if level and (value or not keep_empty):
             flat.update(_flatten_table(value, f"{dotted}.", keep_empty=keep_empty))

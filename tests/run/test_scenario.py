@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.metadata
 import math
 import tomllib
 from importlib import resources
@@ -123,8 +124,8 @@ def test_load_by_path_equals_packaged(tmp_path: Path) -> None:
 
 
 def test_a_run_records_what_ran(tmp_path: Path) -> None:
-    """metrics.json's inputs: the source, the --set overrides in order, and the digest of each
-    user file (here a thruster layout given by path)."""
+    """metrics.json's inputs: the testbed's version, the source, the --set overrides in order,
+    and the digest of each user file (here a thruster layout given by path)."""
     layout = resources.files("testbed.vehicle").joinpath("data", "thrusters", "bluerov2.toml")
     mine = write(tmp_path, layout.read_text(encoding="utf-8"), "mine.toml")
     overrides = ["duration_s=12", "metrics.settle_s=1", f"vehicle.thrusters={mine}"]
@@ -132,6 +133,7 @@ def test_a_run_records_what_ran(tmp_path: Path) -> None:
     inputs = run_scenario(scenario).metrics["inputs"]
     digest = hashlib.sha256(mine.read_bytes()).hexdigest()
     assert inputs == {
+        "testbed": importlib.metadata.version("testbed"),
         "source": "package:s100-teleop-v1",
         "overrides": overrides,
         "files": {str(mine): digest},

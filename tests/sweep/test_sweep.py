@@ -433,7 +433,9 @@ def test_a_failing_point_is_recorded_and_the_sweep_completes(
     rows = _rows(out / "results.csv")
     assert [r["status"] for r in rows] == ["ok", "ok", "failed", "failed"]
     failed = rows[2]
-    assert failed["error"] == "ValueError: stuck force must be within [-1, 1] N"  # one line
+    # one line, naming where the failure was raised in code not the testbed's (this test's)
+    where = f"(at {Path(__file__).resolve()}:{flaky.__code__.co_firstlineno + 2})"
+    assert failed["error"] == f"ValueError: stuck force must be within [-1, 1] N {where}"
     assert failed["link.uplink.per"] == ""  # no metrics for a failed run, and no partial row
     stdout = capsys.readouterr().out
     assert "4 runs, 2 failed" in stdout
