@@ -38,7 +38,8 @@ from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle import systems
 from testbed.vehicle.components import ControlMode
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 from testbed.vehicle.water_current import WaterCurrent
 
 pytestmark = pytest.mark.benchmark

@@ -49,7 +49,8 @@ def pytest_sessionstart(session: object) -> None:
     import numpy as np
 
     from testbed.vehicle.components import ControlMode
-    from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+    from testbed.vehicle.vehicle import Vehicle
+    from testbed.vehicle.vehicle_config import VehicleConfig
 
     with Vehicle(VehicleConfig(), np.random.default_rng(0)) as vehicle:  # builds the loops'
         vehicle.arm()

@@ -55,7 +55,8 @@ from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario
 from testbed.vehicle.resources import SimClock
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 __all__ = [
     "FRAME_CONFIGS",

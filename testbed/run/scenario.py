@@ -1,11 +1,12 @@
 """Scenarios: versioned TOML files loaded into frozen dataclasses, with ``--set`` overrides.
 
 A scenario is everything one run needs apart from the seed: the link (a channel preset plus
-overrides, the codec, the medium access and the operator's modem position), the vehicle (a
-:class:`~testbed.vehicle.vehicle.VehicleConfig`), the operator's start-up requests, the pilot,
-the faults and the metric settings. The packaged scenarios live in ``testbed/scenarios/*.toml``
-(package data, each with a header saying what it reproduces and where its figures come from)
-and are named by versioned ids (``s100-teleop-v1``): a changed meaning gets a new version.
+overrides, the codec, the medium access and the operator's modem position), the vehicle
+(a :class:`~testbed.vehicle.vehicle_config.VehicleConfig`), the operator's start-up requests,
+the pilot, the faults and the metric settings. The packaged scenarios live in
+``testbed/scenarios/*.toml`` (package data, each with a header saying what it reproduces and
+where its figures come from) and are named by versioned ids (``s100-teleop-v1``): a changed
+meaning gets a new version.
 
 Loading is strict (:mod:`testbed.config`): an unknown key at any level, a wrong type, a value
 out of range, an unknown preset, model, layout or thruster name, or a schema version other than
@@ -70,7 +71,7 @@ from testbed.run.sections import (
 from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config
-from testbed.vehicle.vehicle import VehicleConfig
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 __all__ = [
     "ID_PATTERN",

@@ -3,7 +3,7 @@
 the pilots themselves live in :mod:`testbed.operator.pilots`), ``[faults]`` and ``[metrics]``.
 A failed check raises :class:`~testbed.config.FieldError` naming the field; the loader
 (:mod:`testbed.run.scenario`) turns it into the one-line error naming the file and dotted key.
-``[vehicle]`` is :class:`~testbed.vehicle.vehicle.VehicleConfig`, ``[images]``
+``[vehicle]`` is :class:`~testbed.vehicle.vehicle_config.VehicleConfig`, ``[images]``
 :class:`~testbed.run.images.ImagesSection`.
 """
 

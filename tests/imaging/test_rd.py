@@ -17,7 +17,8 @@ from PIL import Image
 
 from testbed.imaging import decode, encode, pool_scene
 from testbed.vehicle.camera import CameraConfig
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 BUDGETS = (300, 600, 1200, 2400)
 

@@ -36,7 +36,8 @@ from testbed.run.links import (
     TeleopVehicleLink,
 )
 from testbed.run.sections import LinkSection
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 
 @pytest.fixture

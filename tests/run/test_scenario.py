@@ -27,7 +27,7 @@ from testbed.run.scenario import (
     scenario_names,
 )
 from testbed.vehicle.thruster_config import load_thruster_config
-from testbed.vehicle.vehicle import VehicleConfig
+from testbed.vehicle.vehicle_config import VehicleConfig
 from testbed.vehicle.water_current import WaterCurrent
 
 PACKAGED = [

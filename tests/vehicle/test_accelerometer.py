@@ -14,7 +14,8 @@ import pytest
 
 from testbed.config import build
 from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 AMP_M = np.array([1.0, 0.8, 0.3])
 OMEGA_RAD_S = 2.0 * np.pi / np.array([20.0, 15.0, 25.0])

@@ -30,7 +30,8 @@ from testbed.vehicle.components import (
     PositionSetpoint,
 )
 from testbed.vehicle.estimation import NavigationEstimate
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 TICK_S = 0.05  # the tree's default tick (Angler: 20 Hz)
 FRAME_S = 0.01

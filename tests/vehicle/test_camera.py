@@ -23,7 +23,8 @@ from testbed.vehicle.camera import CameraConfig, camera_pose, linear_depth_m, un
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.physics import Physics
 from testbed.vehicle.scenery import Quad, Scenery, Solid, png_bytes
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig, load_vehicle_config
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig, load_vehicle_config
 
 # black water and no haze: only lit geometry is non-zero
 CLEAR = CameraConfig(

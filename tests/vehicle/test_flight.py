@@ -39,7 +39,7 @@ from testbed.vehicle.physics import Physics, simulate_open_loop
 from testbed.vehicle.pilot import PilotGains
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config
-from testbed.vehicle.vehicle import YAW_GAINS
+from testbed.vehicle.vehicle_config import YAW_GAINS
 
 Model = Literal["bluerov2", "bluerov2-heavy"]
 Axis = Literal["x", "y", "yaw"]

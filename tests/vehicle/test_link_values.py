@@ -30,7 +30,8 @@ from testbed.ecs import Change, ChangeKind, Side
 from testbed.run.links import make_registry
 from testbed.vehicle.command_systems import MAX_SETPOINT_DEPTH_M
 from testbed.vehicle.resources import Controllers
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 REGISTRY = make_registry()
 CODEC = ChangeSetCodec(REGISTRY)

@@ -12,7 +12,8 @@ from testbed.ecs import Phase, Schedule, World
 from testbed.ecs.store import FrameStore
 from testbed.vehicle.components import AppliedWrench, ControlMode, ForceIntent
 from testbed.vehicle.thrust_kernels import put_wrench
-from testbed.vehicle.vehicle import Vehicle, VehicleConfig
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 

@@ -30,7 +30,8 @@ from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M
 from testbed.vehicle.resources import SimClock
 from testbed.vehicle.sensors import DepthSensorConfig, ImuConfig
-from testbed.vehicle.vehicle import SensorsConfig, Vehicle, VehicleConfig, load_vehicle_config
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import SensorsConfig, VehicleConfig, load_vehicle_config
 
 QUIET = SensorsConfig(
     imu=ImuConfig(attitude_noise_rad=0.0, heading_noise_rad=0.0, gyro_noise_rad_s=0.0),
