@@ -18,7 +18,7 @@ import math
 import tomllib
 import types
 import typing
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Hashable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -185,6 +185,29 @@ def load_toml(path: str | Path) -> dict[str, Any]:
             del _PARSED[next(iter(_PARSED))]
         _PARSED[text] = parsed
     return copy.deepcopy(parsed)
+
+
+_BUILT: dict[tuple[Hashable, ...], Any] = {}
+"""Immutable values built from files' texts in this process (:func:`built_from_text`)."""
+
+
+def built_from_text(kind: str, path: str | Path, make: Callable[[], T], *extra: Hashable) -> T:
+    """``make()``, the immutable ``kind`` value built from the file at ``path`` (with ``extra``
+    options), built once per text of the file in this process: the file is read every time, so
+    an edit is seen; the same text is not built and checked again (a sweep's check loads a
+    scenario's model and layout once per grid point, a scenario with overrides twice).
+
+    ``make`` must be a pure function of the file's text and ``extra``, returning a value
+    nothing changes (frozen dataclasses of tuples). An error it raises is raised each time.
+    """
+    key = (kind, str(path), read_text(path), *extra)
+    if key in _BUILT:
+        return typing.cast(T, _BUILT[key])
+    value = make()
+    if len(_BUILT) >= _PARSED_KEPT:
+        del _BUILT[next(iter(_BUILT))]
+    _BUILT[key] = value
+    return value
 
 
 def user_file(name: str, known: Iterable[str], what: str, suffix: str = ".toml") -> Path | None:

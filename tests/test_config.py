@@ -8,7 +8,15 @@ from typing import Literal
 
 import pytest
 
-from testbed.config import ConfigError, FieldError, apply_overrides, build, check, load_toml
+from testbed.config import (
+    ConfigError,
+    FieldError,
+    apply_overrides,
+    build,
+    built_from_text,
+    check,
+    load_toml,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,3 +113,31 @@ def test_load_toml_reads_the_file_each_time_and_hands_out_a_new_dict(tmp_path: P
     assert load_toml(path) == {"name": "a", "t": {"x": [1.0, 2.0]}}
     path.write_text('name = "b"\n[t]\nx = [1.0, 2.0]\n')
     assert load_toml(path)["name"] == "b"
+
+
+def test_a_value_built_from_a_file_is_built_once_per_text_and_again_after_an_edit(
+    tmp_path: Path,
+) -> None:
+    """built_from_text: the same text (and options) is not built again; an edit of the file,
+    other options, or an error (raised each time, never kept) are."""
+    path = tmp_path / "f.toml"
+    path.write_text("x = 1\n", encoding="utf-8")
+    built: list[int] = []
+
+    def make() -> int:
+        value = int(load_toml(path)["x"])
+        built.append(value)
+        if value < 0:
+            raise ConfigError(f"{path}: x: must be >= 0")
+        return value
+
+    assert [built_from_text("t", path, make) for _ in range(3)] == [1, 1, 1]
+    assert built == [1]
+    assert built_from_text("t", path, make, "other option") == 1 and built == [1, 1]
+    path.write_text("x = 2\n", encoding="utf-8")
+    assert built_from_text("t", path, make) == 2 and built == [1, 1, 2]
+    path.write_text("x = -1\n", encoding="utf-8")
+    for _ in range(2):
+        with pytest.raises(ConfigError, match="must be >= 0"):
+            built_from_text("t", path, make)
+    assert built == [1, 1, 2, -1, -1]

@@ -29,7 +29,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -44,6 +44,7 @@ from testbed.config import (
     FieldError,
     apply_overrides,
     build,
+    built_from_text,
     check,
     check_range,
     load_toml,
@@ -341,18 +342,16 @@ def load_scenario(
     if text.endswith(".toml") or "/" in text or "\\" in text or Path(text).is_file():
         source = text
         data = _paths_beside(load_toml(text), Path(text).parent)
+        scenario = _file_scenario(Path(text), data, source)
     else:
         known = scenario_names()
         if text not in known:
             raise ConfigError(f"scenario {text!r}: unknown scenario id (known: {', '.join(known)})")
         packaged_id = text
         source = f"package:{text}"
-        with resources.as_file(_scenario_dir().joinpath(f"{text}.toml")) as path:
-            data = load_toml(path)
-    link_keys = data.get("link")
-    scenario = _from_data(
-        data, source, source, set(link_keys) if isinstance(link_keys, Mapping) else set()
-    )
+        with resources.as_file(_scenario_dir().joinpath(f"{text}.toml")) as file:
+            data = load_toml(file)
+            scenario = _file_scenario(file, data, source)
     if packaged_id is not None and scenario.id != packaged_id:
         raise ConfigError(f"{source}: id: must equal the file name, got {scenario.id!r}")
     if overrides:
@@ -398,6 +397,36 @@ def path_beside(value: Any, folder: Path) -> Any:
         if not path.is_absolute() and path.suffix in (".toml", ".json"):
             return str(folder / path)
     return value
+
+
+def _file_scenario(file: Path, data: dict[str, Any], source: str) -> Scenario:
+    """The scenario of a file's own ``data`` (read from ``file``, the one ``source`` names),
+    without overrides, so that its errors name the file, not ``--set``; built once per text of
+    the file and of the user files it names in this process (a sweep loads it once per grid
+    point)."""
+    link_keys = data.get("link")
+    given = set(link_keys) if isinstance(link_keys, Mapping) else set()
+    named = tuple(_named_file_texts(data))
+    return built_from_text(
+        "scenario", file, lambda: _from_data(data, source, source, given), *named
+    )
+
+
+def _named_file_texts(data: Mapping[str, Any]) -> Iterator[str]:
+    """The text of each user file a scenario's ``data`` names by path (:data:`_FILE_KEYS`;
+    "" for one that cannot be read, which the build then names)."""
+    for key in _FILE_KEYS:
+        value: Any = data
+        for part in key:
+            value = value.get(part) if isinstance(value, Mapping) else None
+        if not isinstance(value, str):
+            continue
+        path = target_file(value) or (value if Path(value).suffix in (".toml", ".json") else None)
+        if path is not None:
+            try:
+                yield Path(path).read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError):
+                yield ""
 
 
 def _paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:

@@ -26,12 +26,21 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from testbed.config import ConfigError, FieldError, build, check, load_toml, user_file
+from testbed.config import (
+    ConfigError,
+    FieldError,
+    build,
+    built_from_text,
+    check,
+    load_toml,
+    user_file,
+)
 from testbed.vehicle.plant_kernels import N_COEFFICIENTS, fossen_acceleration
 from testbed.vehicle.water_current import WaterCurrent
 
@@ -225,13 +234,19 @@ def load_model(
             or a bad file (the message names the file and the key).
     """
     own = user_file(name, known_models(), "vehicle model")
+    option = added_mass_coriolis
     if own is not None:
-        source = str(own)
-        model = build(HydroModel, load_toml(own), source=source)
-    else:
-        with resources.as_file(_models_dir().joinpath(f"{name}.toml")) as path:
-            source = str(path)
-            model = build(HydroModel, load_toml(path), source=source)
+        return built_from_text("model", own, lambda: _read_model(own, option), option)
+    with resources.as_file(_models_dir().joinpath(f"{name}.toml")) as path:
+        return built_from_text("model", path, lambda: _read_model(path, option), option)
+
+
+def _read_model(
+    path: Path, added_mass_coriolis: Literal["full", "isotropic", "off"] | None
+) -> HydroModel:
+    """The model in the file at ``path``, checked (:meth:`HydroModel.check_body`)."""
+    source = str(path)
+    model = build(HydroModel, load_toml(path), source=source)
     try:
         model.check_body()
     except FieldError as err:

@@ -26,7 +26,15 @@ from typing import Literal
 
 import numpy as np
 
-from testbed.config import ConfigError, FieldError, build, check, load_toml, user_file
+from testbed.config import (
+    ConfigError,
+    FieldError,
+    build,
+    built_from_text,
+    check,
+    load_toml,
+    user_file,
+)
 
 __all__ = [
     "Handedness",
@@ -226,6 +234,11 @@ def read_thruster_config(path: str | Path) -> ThrusterConfig:
     Raises:
         ConfigError: unreadable file, unknown or missing key, bad value (names file and key).
     """
+    return built_from_text("thrusters", path, lambda: _read_layout(path))
+
+
+def _read_layout(path: str | Path) -> ThrusterConfig:
+    """:func:`read_thruster_config` of the file at ``path``, read and checked now."""
     source = str(path)
     raw = build(_ThrusterFile, load_toml(path), source=source)
     convert = mate_rov_to_frd if raw.frame == "mate-rov" else _as_vector

@@ -613,3 +613,25 @@ def test_depth_hold_needs_a_layout_that_can_heave(tmp_path: Path) -> None:
     assert "\n" not in message
     manual = load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", "operator.mode=manual"])
     assert manual.operator.mode == "manual"
+
+
+def test_a_scenario_loaded_again_sees_an_edit_of_a_file_it_names(tmp_path: Path) -> None:
+    """A scenario's own checks are kept per text of the scenario file and of the user files
+    it names: renaming the layout's thruster that a fault names makes the same scenario file
+    refused at its next load (one line naming the fault's key), though its own text is the
+    same."""
+    layout = resources.files("testbed.vehicle").joinpath("data", "thrusters", "ecs-4h.toml")
+    text = layout.read_text(encoding="utf-8")
+    mine = write(tmp_path, text, "mine.toml")
+    scenario_text = (
+        resources.files("testbed.scenarios")
+        .joinpath("s100-thruster-failure-v1.toml")
+        .read_text(encoding="utf-8")
+    )
+    assert 'thruster = "LateralFrontLeft"' in scenario_text
+    body = scenario_text.replace('thrusters = "ecs-4h"', 'thrusters = "mine.toml"')
+    path = write(tmp_path, body, "failure.toml")
+    assert load_scenario(str(path)).vehicle.thrusters == str(mine)
+    mine.write_text(text.replace("LateralFrontLeft", "PortBow"), encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"failure\.toml: faults\.thrusters\[0\]\.thruster: "):
+        load_scenario(str(path))
