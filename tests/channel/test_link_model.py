@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from testbed.channel import EventKind, LinkModel, StandardLink
+from testbed.channel import EventKind, LinkModel, StandardLink, Trace
 from testbed.channel.config import load_link_config
 from testbed.channel.probe import run_probe
 from testbed.protocol import encode_frame
@@ -76,6 +76,20 @@ def test_a_receivers_error_model_decides_which_copies_arrive_corrupted() -> None
     assert r.per == pytest.approx(1 / 3)
 
 
+def order_crossings(trace: Trace) -> list[tuple[float, float, int]]:
+    """``(sent at, time to cross, frame bytes)`` of each operator frame the vehicle received
+    [s, s, B], from a run's link trace."""
+    sent: dict[int, tuple[float, int]] = {}
+    crossed = []
+    for event in trace.events:
+        if event.kind is EventKind.TX_START and event.src == "operator":
+            sent[event.frame_id] = (event.t_s, event.size_bytes)
+        elif event.kind is EventKind.DELIVER and event.dst == "vehicle":
+            t_s, size = sent[event.frame_id]
+            crossed.append((t_s, event.t_s - t_s, size))
+    return crossed
+
+
 def test_a_users_constant_rate_model_flies_as_the_presets_key_bit_for_bit() -> None:
     """The second method: a run whose model says 1400 bit/s is the run of the same scenario
     with link.bitrate_bps = 1400, byte for byte; each 13-B order crosses in the intrinsic delay
@@ -88,12 +102,7 @@ def test_a_users_constant_rate_model_flies_as_the_presets_key_bit_for_bit() -> N
     )
     for column, values in keyed.recorder.series().items():
         np.testing.assert_array_equal(values, modelled.recorder.series()[column], column)
-    sent, crossed = {}, []
-    for event in modelled.recorder.trace.events:
-        if event.kind is EventKind.TX_START and event.src == "operator":
-            sent[event.frame_id] = event.t_s
-        elif event.kind is EventKind.DELIVER and event.dst == "vehicle":
-            crossed.append(event.t_s - sent[event.frame_id])
+    crossed = [took for _, took, _ in order_crossings(modelled.recorder.trace)]
     assert len(encode_frame(b"\0" * 7)) == 13  # an order's size on the wire
     expected = S100.intrinsic_delay_s + 8 * 13 / 1400
     # plus the radio's propagation over the few metres between the nodes (≈ 3 ns a metre)

@@ -13,6 +13,7 @@ the model needs on a loaded 2-core machine).
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Iterator
 from typing import Any
@@ -51,9 +52,9 @@ def browser(browser_path: str) -> Iterator[Any]:
             chromium.close()
 
 
-@pytest.fixture
-def tab(browser: Any, live: Live) -> Iterator[Any]:
-    """A fresh tab on the console that holds the pilot's seat and has drawn a state."""
+@contextlib.contextmanager
+def pilot_tab(browser: Any, live: Live) -> Iterator[Any]:
+    """A fresh tab on the console (its own browser context) that holds the pilot's seat."""
     context = browser.new_context(viewport={"width": 1500, "height": 900})
     try:
         page = context.new_page()
@@ -64,6 +65,13 @@ def tab(browser: Any, live: Live) -> Iterator[Any]:
         yield page
     finally:
         context.close()
+
+
+@pytest.fixture
+def tab(browser: Any, live: Live) -> Iterator[Any]:
+    """A fresh tab on the console that holds the pilot's seat."""
+    with pilot_tab(browser, live) as page:
+        yield page
 
 
 def _sent(page: Any, kind: str) -> list[dict[str, Any]]:
@@ -118,13 +126,7 @@ def test_the_mode_menu_shows_the_mode_asked_and_the_telemetry_flags_a_vehicle_el
         first.wait_for_function(f"(({_ROW})(['telemetry', 'mode']) || [''])[0] === 'manual'")
         first.context.close()  # the pilot leaves; a new page takes the seat
 
-        context = browser.new_context(viewport={"width": 1500, "height": 900})
-        try:
-            page = context.new_page()
-            page.set_default_timeout(_WAIT_MS)
-            page.add_init_script(_RECORD_SENT)
-            page.goto(live.url)
-            page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+        with pilot_tab(browser, live) as page:
             page.wait_for_function("drawn !== null")
             assert page.input_value("#mode") == "manual"  # the page's own default: depth_hold
 
@@ -139,18 +141,11 @@ def test_the_mode_menu_shows_the_mode_asked_and_the_telemetry_flags_a_vehicle_el
             assert page.input_value("#mode") == "stabilize"
             live.wait("stabilize reported", lambda s: s["operator"]["mode"] == "stabilize")
             page.wait_for_function(f"({_ROW})(['telemetry', 'mode'])[0] === 'stabilize'")
-        finally:
-            context.close()
     finally:
-        restore = browser.new_context()
-        try:
-            page = restore.new_page()
-            page.goto(live.url)
-            page.wait_for_function("document.getElementById('role').textContent === 'pilot'")
+        first.context.close()  # (again, if it failed before): the seat is the restorer's
+        with pilot_tab(browser, live) as page:
             page.evaluate("consoleSend({t: 'mode', mode: 'depth_hold'})")
             live.wait("depth_hold back", lambda s: s["operator"]["mode"] == "depth_hold")
-        finally:
-            restore.close()
 
 
 _ROW = """(args) => { const [table, key] = args;

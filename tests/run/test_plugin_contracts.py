@@ -20,7 +20,7 @@ from testbed.channel.model import LinkModelError
 from testbed.cli.main import main
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
-from tests.run.test_plugins import LINKS, PILOTS, _scenario_text
+from tests.run.test_plugins import _scenario_text, write_study
 
 BROKEN_LINKS = """
 from testbed.channel import StandardLink
@@ -75,17 +75,37 @@ class Helped:
 
 @pytest.fixture
 def study(tmp_path: Path) -> Path:
-    folder = tmp_path / "study"
-    folder.mkdir()
-    (folder / "my_pilots.py").write_text(PILOTS)
-    (folder / "my_links.py").write_text(LINKS)
+    """test_plugins's study folder, with the broken models and odd pilots beside."""
+    folder = write_study(tmp_path / "study")
     (folder / "broken_links.py").write_text(BROKEN_LINKS)
     (folder / "odd_pilots.py").write_text(ODD_PILOTS)
     (folder / "helped.py").write_text(HELPED)
     (folder / "contracts_helper.py").write_text("SURGE = 0.25\n")
-    pilot = 'kind = "python"\nfactory = "my_pilots.py:StepPilot"\nargs = { at_s = 15.0 }'
-    (folder / "step.toml").write_text(_scenario_text(pilot))
     return folder
+
+
+def _write_sweep(study: Path, sweep_id: str, factory: str, duration_s: float) -> Path:
+    """A one-run sweep file in ``study`` flying ``factory``'s pilot (no args) on step.toml."""
+    path = study / f"{sweep_id}.toml"
+    path.write_text(
+        textwrap.dedent(
+            f"""\
+            schema = 1
+            id = "{sweep_id}-v1"
+            description = "a pilot of one's own"
+            scenario = "step.toml"
+            seeds = 1
+            metrics = ["energy_wh"]
+            [set]
+            "pilot.factory" = "{factory}"
+            "pilot.args" = {{}}
+            "duration_s" = {duration_s}
+            [grid]
+            "link.ber" = [0.0]
+            """
+        )
+    )
+    return path
 
 
 @pytest.mark.parametrize("airtime", ["nan", "-0.5", "0.0", "inf"])
@@ -192,25 +212,7 @@ def test_a_pilot_imports_a_module_beside_it_and_both_files_are_recorded_and_held
         path = study / name
         assert files[str(path)] == hashlib.sha256(path.read_bytes()).hexdigest()
 
-    sweep_file = study / "helped.toml"
-    sweep_file.write_text(
-        textwrap.dedent(
-            """\
-            schema = 1
-            id = "helped-v1"
-            description = "a helped pilot"
-            scenario = "step.toml"
-            seeds = 1
-            metrics = ["energy_wh"]
-            [set]
-            "pilot.factory" = "helped.py:Helped"
-            "pilot.args" = {}
-            "duration_s" = 12.0
-            [grid]
-            "link.ber" = [0.0]
-            """
-        )
-    )
+    sweep_file = _write_sweep(study, "helped", "helped.py:Helped", 12.0)
     out = tmp_path / "sweep"
     assert main(["sweep", str(sweep_file), "--workers", "1", "--out", str(out)]) == 0
     (study / "contracts_helper.py").write_text("SURGE = 0.5\n")
@@ -258,25 +260,7 @@ def test_metrics_name_the_version_and_the_pilot_and_a_failed_sweep_run_says_wher
         "factory": f"{study / 'my_pilots.py'}:StepPilot",
         "args": {"at_s": 15.0},
     }
-    sweep_file = study / "sleepy.toml"
-    sweep_file.write_text(
-        textwrap.dedent(
-            """\
-            schema = 1
-            id = "sleepy-v1"
-            description = "a pilot that falls asleep"
-            scenario = "step.toml"
-            seeds = 1
-            metrics = ["energy_wh"]
-            [set]
-            "pilot.factory" = "odd_pilots.py:Sleepy"
-            "pilot.args" = {}
-            "duration_s" = 15.0
-            [grid]
-            "link.ber" = [0.0]
-            """
-        )
-    )
+    sweep_file = _write_sweep(study, "sleepy", "odd_pilots.py:Sleepy", 15.0)
     out = tmp_path / "sweep"
     assert main(["sweep", str(sweep_file), "--workers", "1", "--out", str(out)]) == 1
     summary = capsys.readouterr().out

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from testbed.channel import EventKind
 from testbed.cli.main import main
 from testbed.config import ConfigError
 from testbed.live.hub import Hub
@@ -22,6 +21,7 @@ from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.run.trials import run_trials
 from testbed.sweep import load_sweep, run_sweep
+from tests.channel.test_link_model import order_crossings
 
 PILOTS = '''
 import numpy as np
@@ -98,16 +98,20 @@ def _scenario_text(pilot: str, link: str = "", extra: str = "") -> str:
     )
 
 
-@pytest.fixture
-def study(tmp_path: Path) -> Path:
-    """A folder with the user's pilots, link models and a step scenario naming them."""
-    folder = tmp_path / "study"
+def write_study(folder: Path) -> Path:
+    """``folder`` made, with the user's pilots, link models and a step scenario naming them."""
     folder.mkdir()
     (folder / "my_pilots.py").write_text(PILOTS)
     (folder / "my_links.py").write_text(LINKS)
     pilot = 'kind = "python"\nfactory = "my_pilots.py:StepPilot"\nargs = { at_s = 15.0 }'
     (folder / "step.toml").write_text(_scenario_text(pilot))
     return folder
+
+
+@pytest.fixture
+def study(tmp_path: Path) -> Path:
+    """A folder with the user's pilots, link models and a step scenario naming them."""
+    return write_study(tmp_path / "study")
 
 
 def test_a_pilot_named_in_the_scenario_flies_its_sticks_from_its_arguments(
@@ -173,12 +177,7 @@ def test_a_link_model_named_in_the_scenario_flies_as_the_presets_key_bit_for_bit
     keyed = run_scenario(load_scenario(str(study / "step.toml"), ["link.bitrate_bps=1400"]))
     for column, values in keyed.recorder.series().items():
         np.testing.assert_array_equal(values, modelled.recorder.series()[column], column)
-    sent, crossed = {}, []
-    for event in modelled.recorder.trace.events:
-        if event.kind is EventKind.TX_START and event.src == "operator":
-            sent[event.frame_id] = event.t_s
-        elif event.kind is EventKind.DELIVER and event.dst == "vehicle":
-            crossed.append(event.t_s - sent[event.frame_id])
+    crossed = [took for _, took, _ in order_crossings(modelled.recorder.trace)]
     expected = load_scenario("s100-teleop-v1").link.channel.intrinsic_delay_s + 8 * 13 / 1400
     assert len(crossed) > 40 and crossed == pytest.approx([expected] * len(crossed), abs=1e-7)
     assert modelled.metrics["inputs"]["link_model"] == f"{study / 'my_links.py'}:constant"
@@ -342,24 +341,14 @@ def test_the_readmes_scenario_tables_run_with_the_docs_link_model(tmp_path: Path
     (tmp_path / "readme.toml").write_text(header + "duration_s = 80.0\n" + tables)
     # its pilot flies 0.5 stick ahead from 15 s: past the S100's range by 50 s, so no limit here
     result = run_scenario(load_scenario(str(tmp_path / "readme.toml"), ["link.max_range_m=inf"]))
-    sent: dict[int, tuple[float, int]] = {}
-    crossed: list[tuple[float, float]] = []
-    for event in result.recorder.trace.events:
-        if event.kind is EventKind.TX_START and event.src == "operator":
-            sent[event.frame_id] = (event.t_s, event.size_bytes)
-        elif event.kind is EventKind.DELIVER and event.dst == "vehicle":
-            t_s, size = sent[event.frame_id]
-            crossed.append((t_s, (event.t_s - t_s) - 8 * size / 1900))
+    crossings = order_crossings(result.recorder.trace)
     delay = result.scenario.link.channel.intrinsic_delay_s
-    before = [extra for t_s, extra in crossed if t_s < 50.0]
-    after = [extra for t_s, extra in crossed if t_s >= 50.0]
+    air_s = [8 * size / 1900 for _, _, size in crossings]  # the preset's rate
+    before = [took - air for (t_s, took, _), air in zip(crossings, air_s, strict=True) if t_s < 50]
+    after = [took - air for (t_s, took, _), air in zip(crossings, air_s, strict=True) if t_s >= 50]
     assert before == pytest.approx([delay] * len(before), abs=1e-7)
-    sizes_after = [size for t_s, size in sent.values() if t_s >= 50.0]
-    assert len(after) > 20 and sizes_after
-    assert after == pytest.approx(
-        [delay + 8 * size / 1900 for (t_s, size) in sent.values() if t_s >= 50.0][: len(after)],
-        abs=1e-7,
-    )
+    halved = [delay + air for (t_s, _, _), air in zip(crossings, air_s, strict=True) if t_s >= 50]
+    assert len(after) > 20 and after == pytest.approx(halved, abs=1e-7)
     assert set(np.unique(result.recorder.series()["cmd_x"])) == {0.0, 0.5}
 
 
