@@ -180,6 +180,8 @@ class TeleopOperatorEnd:
         self._sent_heading: KeepHeading | None = None
         self._sent_goals: dict[type[_GoalSetpoint], _GoalSetpoint] = {}
         self._settled_arm: ArmRequest | None = None
+        self._orders_encoded = 0
+        self._arm_request: tuple[ArmRequest, int] | None = None  # the request, its first order
         self._pending_goal: tuple[_GoalOrder, bool] | None = None  # the order and its seq bit
         self._sent_cancel: GoalCancel | None = None
         self._pending_cancel = False
@@ -204,6 +206,9 @@ class TeleopOperatorEnd:
             self._sent_cancel, self._pending_cancel = cancel, True
             self._pending_goal = None  # the cancel supersedes a goal not yet acknowledged
         request = world.get(intents, ArmRequest)
+        self._orders_encoded += 1  # this order's number
+        if request is not None and (self._arm_request is None or self._arm_request[0] != request):
+            self._arm_request = (request, self._orders_encoded)
         reported = world.get(self.vehicle, Armed)
         vehicle_armed = reported is not None and reported.armed
         arm = disarm = False
@@ -297,10 +302,17 @@ class TeleopOperatorEnd:
         )
         world.set(vehicle, odometry, origin=Origin.REMOTE)
         world.set(vehicle, Armed(state.armed), origin=Origin.REMOTE)
+        # A request is settled once a reply shows it done: done once, a later change on the
+        # vehicle's side (a failsafe disarm) is not undone; only a new request (new seq) asks
+        # again. The reply answers the last order and shows the state from before the vehicle
+        # applied it, so only a reply to an order after the request's first shows the request
+        # applied (one to that order may show the state an earlier order is about to change:
+        # arm, then disarm before the arm's reply came, settled the disarm on the stale
+        # 'disarmed' and the vehicle stayed armed).
         request = world.get(self._intents, ArmRequest)
-        if request is not None and request.armed == state.armed:
-            # done once: a later change on the vehicle's side (a failsafe disarm) is not
-            # undone; only a new request (new seq) asks again
+        carried = self._arm_request
+        shown = carried is not None and carried[0] == request and self._orders_encoded > carried[1]
+        if request is not None and shown and request.armed == state.armed:
             self._settled_arm = request
         mode = mode_from_wire(state.mode)
         if mode is not None:

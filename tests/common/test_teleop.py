@@ -189,11 +189,44 @@ def test_a_vehicle_side_disarm_is_not_overridden_by_an_old_arm_request() -> None
     """A request counts once per seq: after a failsafe disarm only a new request re-arms."""
     world, intents, end = operator_end()
     world.set(intents, ArmRequest(True, 1))
+    assert order_flags(end.encode_order()) == (True, False)
+    end.apply_reply(reply(armed=False), 0.5)  # the state before the arm was applied
+    assert order_flags(end.encode_order()) == (True, False)  # (ignored by an armed vehicle)
     end.apply_reply(reply(armed=True), 1.0)
     end.apply_reply(reply(armed=False), 9.0)  # e.g. surfaced and disarmed by the failsafe
     assert order_flags(end.encode_order()) == (False, False)
     world.set(intents, ArmRequest(True, 2))
     assert order_flags(end.encode_order()) == (True, False)
+
+
+@pytest.mark.parametrize("first", [True, False])
+def test_a_second_request_made_before_the_firsts_reply_is_not_lost(first: bool) -> None:
+    """Arm, then disarm before the arm's reply came (and the reverse): the vehicle ends in the
+    second request's state. The vehicle answers each order with the state from before it
+    applies it (its reply goes out as the order arrives), so the first order's reply shows the
+    old state, which the second request asked for: taken as done, the second was never sent
+    and the vehicle stayed as the first left it (a user review through the S100 gateway)."""
+    world, intents, end = operator_end()
+    vehicle_armed = not first
+
+    def exchange() -> bool:
+        """One token cycle's order; the vehicle's state before it applied the order."""
+        nonlocal vehicle_armed
+        arm, disarm = order_flags(end.encode_order())
+        before = vehicle_armed
+        vehicle_armed = (vehicle_armed or arm) and not disarm
+        return before
+
+    end.apply_reply(reply(armed=vehicle_armed), 0.0)
+    world.set(intents, ArmRequest(first, 1))
+    in_flight = exchange()  # the first request's order is out and applied...
+    assert vehicle_armed is first
+    world.set(intents, ArmRequest(not first, 2))  # ...and the second is asked before its reply
+    end.apply_reply(reply(armed=in_flight), 1.0)
+    for k in range(4):
+        end.apply_reply(reply(armed=exchange()), 2.0 + k)
+    assert vehicle_armed is (not first)
+    assert order_flags(end.encode_order()) == (False, False)  # settled: nothing more asked
 
 
 def test_changed_attitude_setpoint_becomes_keep_heading_in_whole_degrees() -> None:
