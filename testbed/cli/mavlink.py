@@ -113,6 +113,14 @@ def add_mavlink_parser(sub: Subparsers) -> None:
         "--rtscts", action="store_true", help="RTS/CTS flow control, with the modem ports only"
     )
     add_set_option(parser, "override a scenario key, e.g. --set vehicle.thrusters=bluerov2-heavy")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="an ArduSub parameter's value at boot (repeatable), e.g. SYSID_THISMAV=2 or "
+        "JS_GAIN_DEFAULT=0.8: those ArduSub reads only at boot take a PARAM_SET at the next boot",
+    )
     parser.add_argument("--seed", type=int, default=None, help="random seed (vehicle sensors)")
     parser.add_argument(
         "--out", type=Path, default=None, help="output directory (default: runs/mavlink-…)"
@@ -165,6 +173,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
         except ValueError as err:
             raise ConfigError(f"--gcs: {err}") from None
     check_seed(args.seed)
+    boot_params = _boot_params(args.param)
     scenario = load_scenario(args.scenario, overrides)
     warn_token_cycle(scenario)
     duration = scenario.duration_s if args.duration is None else args.duration
@@ -209,12 +218,34 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
                 duration_s=duration,
                 hil=endpoints or None,
                 modem=modem if hil else "",
+                boot_params=boot_params,
             )
         else:
-            result = run_mavlink(scenario, links, seed=args.seed, duration_s=duration)
+            result = run_mavlink(
+                scenario, links, seed=args.seed, duration_s=duration, boot_params=boot_params
+            )
         return finish_run(
             result, out, plots=not args.no_plots, planned_s=duration, summary=format_mavlink_summary
         )
+
+
+def _boot_params(given: list[str]) -> dict[str, float]:
+    """``--param NAME=VALUE`` values, checked against ArduSub's table (one line naming the
+    option and the parameter for an unknown name or a value it refuses)."""
+    from testbed.mavlink.params import ParamTable
+
+    table = ParamTable()
+    values: dict[str, float] = {}
+    for text in given:
+        name, sep, raw = text.partition("=")
+        name = name.strip().upper()
+        if not sep or not name:
+            raise ConfigError(f"--param {text!r}: expected NAME=VALUE")
+        try:
+            values[name] = table.boot_value(name, float(raw))
+        except ValueError as err:  # not a number, an unknown name, a refused value
+            raise ConfigError(f"--param {text!r}: {err}") from None
+    return values
 
 
 def _open_modems(

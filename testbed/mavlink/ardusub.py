@@ -117,6 +117,19 @@ def _clamp(value: float, low: float, high: float) -> float:
     return low if value < low else high if value > high else value
 
 
+def boot_gain(default: float, low: float, high: float, steps: int) -> float:
+    """The joystick gain ArduSub starts with (``Sub::init_joystick``, at boot only; a
+    JS_GAIN_* set later takes effect at the next boot, or through the gain buttons): the
+    default within [low, high] when it is within them (±0.01) or with one step, else the step
+    nearest the middle; then within [0.1, 1]."""
+    steps = max(1, steps)
+    if steps == 1 or low - 0.01 < default < high + 0.01:
+        gain = min(max(default, low), high)
+    else:
+        gain = low + (steps // 2 - 1) * (high - low) / (steps - 1)
+    return min(max(gain, 0.1), 1.0)
+
+
 def manual_control_pwm(
     x: int, y: int, z: int, r: int, *, gain: float, throttle_gain: float = 1.0
 ) -> dict[int, int]:

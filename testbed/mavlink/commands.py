@@ -254,16 +254,18 @@ def on_set_mode(
     now_s: float,
     arrived_s: float,
 ) -> None:
-    """SET_MODE (custom mode flag required) → COMMAND_ACK for DO_SET_MODE, as ArduPilot."""
+    """SET_MODE → a COMMAND_ACK whose command is SET_MODE's message id, 11, as ArduPilot's
+    ``GCS_MAVLINK::handle_set_mode`` sends (not DO_SET_MODE's 176); DENIED without the custom
+    mode flag (``_set_mode_common``'s "supported but invalid parameters")."""
     del now_s, arrived_s
     if not endpoint.for_us(message.target_system):
         return
     endpoint.accepted += 1
     if not int(message.base_mode) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        result = _FAILED
+        result = _DENIED
     else:
         result = set_mode(endpoint, int(message.custom_mode))
-    _ack(endpoint, channel, message, mav.MAV_CMD_DO_SET_MODE, result)
+    _ack(endpoint, channel, message, mav.MAVLINK_MSG_ID_SET_MODE, result)
 
 
 # --------------------------------------------------------------------------- parameters
@@ -368,10 +370,7 @@ def on_param_set(
         if reply is not None:
             endpoint.queue(channel, reply)
         return
-    endpoint.accepted += 1
-    if name in ("JS_GAIN_DEFAULT", "JS_GAIN_MIN", "JS_GAIN_MAX"):
-        p = endpoint.params
-        endpoint.gain = min(max(p["JS_GAIN_DEFAULT"], p["JS_GAIN_MIN"]), p["JS_GAIN_MAX"])
+    endpoint.accepted += 1  # (SYSID_THISMAV and JS_GAIN_DEFAULT take effect at the next boot)
     reply = _param_value(endpoint, index)
     if reply is not None:
         endpoint.broadcast(reply)

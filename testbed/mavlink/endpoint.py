@@ -49,7 +49,7 @@ from testbed.common.components import (
 )
 from testbed.ecs import Entity, Origin, World
 from testbed.mavlink import commands, guided
-from testbed.mavlink.ardusub import RcInput, manual_control_pwm, sticks_from_rc
+from testbed.mavlink.ardusub import RcInput, boot_gain, manual_control_pwm, sticks_from_rc
 from testbed.mavlink.failsafe import FailsafeMonitor
 from testbed.mavlink.params import ParamTable
 from testbed.mavlink.streams import StreamSchedule
@@ -150,7 +150,11 @@ class VehicleEndpoint:
         self.sent: Counter[str] = Counter()
         self.pilot_inputs = 0
         self.rc = RcInput()
-        self.gain = self.params["JS_GAIN_DEFAULT"]
+        p = self.params
+        self.gain = boot_gain(
+            p["JS_GAIN_DEFAULT"], p["JS_GAIN_MIN"], p["JS_GAIN_MAX"], int(p["JS_GAIN_STEPS"])
+        )
+        self._system_id = int(p["SYSID_THISMAV"])  # ArduPilot's GCS::init, at boot only
         self.failsafe = FailsafeMonitor()
         self._velocity = VelocityEstimator()
         self._seq = 0
@@ -182,8 +186,9 @@ class VehicleEndpoint:
 
     @property
     def system_id(self) -> int:
-        """SYSID_THISMAV."""
-        return int(self.params["SYSID_THISMAV"])
+        """SYSID_THISMAV at boot (a value set later takes effect at the next boot, as in
+        ArduPilot, whose ``GCS::init`` reads it once)."""
+        return self._system_id
 
     @property
     def gcs_system_id(self) -> int:

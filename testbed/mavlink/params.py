@@ -125,6 +125,23 @@ class ParamTable:
             return None
         return self.params[index], self._values[index]
 
+    def boot_value(self, name: str, value: float) -> float:
+        """``value`` as ``name``'s value at boot, as PARAM_SET would take it (an integer's
+        rounded).
+
+        Raises:
+            ValueError: an unknown name, or a value PARAM_SET refuses (non-finite, outside the
+                row's range or the type's), the message saying which.
+        """
+        index = self.index_of(name)
+        if index is None:
+            raise ValueError(f"unknown ArduSub parameter {name!r}")
+        probe = ParamTable(self.params)
+        if probe.set(name, value) is None:
+            param = self.params[index]
+            raise ValueError(f"{name} = {value!r} refused (range [{param.low:g}, {param.high:g}])")
+        return probe[name]
+
     def set(self, name: str, value: float) -> int | None:
         """Set ``name`` to ``value`` (rounded for integer types).
 

@@ -132,6 +132,7 @@ class GatewayNode:
         links: the ground-station links (one endpoint channel each).
         facts: the link facts the endpoint reports.
         stop: ends the process at its next wake-up once set (from any thread).
+        boot_params: ArduSub parameters' values at boot (``--param``).
     """
 
     def __init__(
@@ -141,11 +142,15 @@ class GatewayNode:
         links: Sequence[Link],
         facts: LinkFacts,
         stop: threading.Event | None = None,
+        boot_params: Mapping[str, float] | None = None,
     ) -> None:
         self.env = env
         self.station = station
         self.endpoint = ShoreEndpoint(
-            station.world, station.entity, facts, EndpointOptions(origin=Origin.LOCAL)
+            station.world,
+            station.entity,
+            facts,
+            EndpointOptions(param_overrides=dict(boot_params or {}), origin=Origin.LOCAL),
         )
         self.links = list(links)
         self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
@@ -265,6 +270,7 @@ def run_gateway(
     stop: threading.Event | None = None,
     hil: Mapping[str, LinkEndpoint] | None = None,
     modem: str = "",
+    boot_params: Mapping[str, float] | None = None,
 ) -> RunResult:
     """Run both nodes in real time for ``duration_s`` [s], the ground stations on ``links``
     driving the vehicle through the shore endpoint and the scenario's link.
@@ -279,6 +285,7 @@ def run_gateway(
             channel (closed when the run ends); the channel preset then only informs
             :class:`~testbed.mavlink.shore.LinkFacts`.
         modem: the HIL modem kind, for the record.
+        boot_params: the shore endpoint's ArduSub parameters at boot (``--param``).
 
     Returns:
         The metrics (those of ``testbed run`` or ``testbed hil``, plus ``mavlink``) and the
@@ -305,7 +312,8 @@ def run_gateway(
     recorder = Recorder(trace=Trace())
     link = scenario.link
     station = GatewayStation()
-    gateway = GatewayNode(env, station, links, gateway_link_facts(scenario, modem or None), stop)
+    facts = gateway_link_facts(scenario, modem or None)
+    gateway = GatewayNode(env, station, links, facts, stop, boot_params)
     holder: dict[str, VehicleNode] = {}
     modems: dict[str, Any] = {}
     ledger = FrameLedger()

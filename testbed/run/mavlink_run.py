@@ -34,7 +34,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Generator, Sequence
+from collections.abc import Generator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -104,6 +104,7 @@ class MavlinkVehicleNode:
         links: the ground-station links (one endpoint channel each).
         recorder: ground-truth sink.
         stop: ends the node's process at the next frame once set (from any thread).
+        boot_params: ArduSub parameters' values at boot (``--param``), over the layout's.
     """
 
     def __init__(
@@ -114,6 +115,7 @@ class MavlinkVehicleNode:
         links: Sequence[Link],
         recorder: Recorder,
         stop: threading.Event | None = None,
+        boot_params: Mapping[str, float] | None = None,
     ) -> None:
         self.env = env
         self._stop = stop
@@ -124,6 +126,7 @@ class MavlinkVehicleNode:
         overrides = {
             "FRAME_CONFIG": float(FRAME_CONFIGS.get(config.thrusters, 7)),
             "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
+            **(boot_params or {}),
         }
         options = EndpointOptions(config.supply_voltage_v, overrides)
         self.endpoint = VehicleEndpoint(
@@ -205,10 +208,13 @@ def run_mavlink(
     seed: int | None = None,
     duration_s: float | None = None,
     stop: threading.Event | None = None,
+    boot_params: Mapping[str, float] | None = None,
 ) -> RunResult:
     """Run the scenario's vehicle in real time for ``duration_s`` [s] with the ground stations
     on ``links`` as its pilot; the links are closed when the run ends. ``stop``, once set from
     any thread, ends the run at the next frame (a complete run of the time reached).
+    ``boot_params`` are ArduSub parameters' values at boot (``testbed mavlink --param``: what
+    the vehicle reads once, at boot, such as SYSID_THISMAV and JS_GAIN_DEFAULT, too).
 
     Ctrl-C or SIGTERM (a ``KeyboardInterrupt``) ends it early: ``stopped`` is set and the
     metrics cover the ``sim_s`` reached.
@@ -230,7 +236,7 @@ def run_mavlink(
     start: float | None = None
     try:
         rng = np.random.default_rng(vehicle_seed)
-        node = MavlinkVehicleNode(env, scenario, rng, links, recorder, stop)
+        node = MavlinkVehicleNode(env, scenario, rng, links, recorder, stop, boot_params)
         process = env.process(node.run(duration))
         env.sync()  # start the clock now, after pybullet has loaded
         start = time.perf_counter()

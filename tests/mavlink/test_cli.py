@@ -57,6 +57,10 @@ def free_udp_port() -> int:
             "baud must be an integer in [50, 12000000], got '1000000000000'",
         ),
         (["--gcs", "bogus://x"], "--gcs: cannot open bogus://x: invalid URL"),  # a ValueError
+        ([*NO_GCS, "--param", "NO_SUCH=1"], "--param 'NO_SUCH=1': unknown ArduSub parameter"),
+        ([*NO_GCS, "--param", "SYSID_THISMAV=0"], "SYSID_THISMAV = 0.0 refused (range [1, 255])"),
+        ([*NO_GCS, "--param", "JS_GAIN_DEFAULT=nan"], "JS_GAIN_DEFAULT = nan refused"),
+        ([*NO_GCS, "--param", "SYSID_THISMAV"], "--param 'SYSID_THISMAV': expected NAME=VALUE"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(
@@ -84,3 +88,30 @@ def test_a_short_session_writes_the_run_outputs_and_the_mavlink_section(
     assert section["links"][url]["packets_out"] >= 10
     assert section["gcs_to_thruster_ms"]["n"] == 0  # no pilot
     assert metrics["sim_s"] == pytest.approx(1.5)
+
+
+def test_boot_parameters_set_what_ardusub_reads_only_at_boot(tmp_path: Path) -> None:
+    """``--param SYSID_THISMAV=2 --param JS_GAIN_DEFAULT=0.8``: the vehicle is system 2 from its
+    first heartbeat and flies at gain 0.8 (the PilotGain it reports), which a PARAM_SET during
+    a session does not change (ArduSub reads both once, at boot)."""
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs:
+        gcs.bind(("127.0.0.1", 0))
+        url = f"udpout:127.0.0.1:{gcs.getsockname()[1]}"
+        argv = ["mavlink", "--gcs", url, "--duration", "1.5", "--no-plots"]
+        boot = ["--param", "SYSID_THISMAV=2", "--param", "js_gain_default=0.8"]
+        assert main([*argv, *boot, "--out", str(tmp_path / "out")]) == 0
+        gcs.setblocking(False)
+        parser = mav.MAVLink(None)
+        messages = []
+        while True:
+            try:
+                datagram = gcs.recv(65535)
+            except BlockingIOError:
+                break
+            messages += parser.parse_buffer(datagram) or []
+    heartbeats = [m for m in messages if m.get_type() == "HEARTBEAT"]
+    assert heartbeats and {m.get_srcSystem() for m in heartbeats} == {2}
+    gains = [m.value for m in messages if m.get_type() == "NAMED_VALUE_FLOAT"]
+    assert gains and all(gain == pytest.approx(0.8) for gain in gains)

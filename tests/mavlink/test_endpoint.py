@@ -90,10 +90,12 @@ def test_modes_are_acknowledged_reflected_in_the_heartbeat_and_unsimulated_ones_
 ) -> None:
     gcs.send(gcs.set_mode(0))
     gcs.run(1.01)
-    assert acks(gcs, mav.MAV_CMD_DO_SET_MODE) == [ACCEPTED]
+    # SET_MODE is acknowledged with its message id (11), as ArduPilot's handle_set_mode does
+    assert acks(gcs, mav.MAVLINK_MSG_ID_SET_MODE) == [ACCEPTED]
     assert gcs.last("HEARTBEAT").custom_mode == 0
     gcs.send(gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 2))  # ALT_HOLD by COMMAND_LONG
     gcs.run(1.01)
+    assert acks(gcs, mav.MAV_CMD_DO_SET_MODE) == [ACCEPTED]
     assert gcs.last("HEARTBEAT").custom_mode == 2
     active = gcs.vehicle.world.get(gcs.vehicle.entity, ActiveMode)
     assert active is not None and active.mode is ControlMode.DEPTH_HOLD
@@ -102,7 +104,8 @@ def test_modes_are_acknowledged_reflected_in_the_heartbeat_and_unsimulated_ones_
         gcs.send(gcs.set_mode(refused))
     gcs.send(gcs.mav.set_mode_encode(1, 0, 19))  # no custom-mode flag
     gcs.run(1.01)
-    assert acks(gcs, mav.MAV_CMD_DO_SET_MODE) == [FAILED] * 5
+    denied = mav.MAV_RESULT_DENIED  # no custom-mode flag: "supported, invalid parameters"
+    assert acks(gcs, mav.MAVLINK_MSG_ID_SET_MODE) == [FAILED] * 4 + [denied]
     assert gcs.last("HEARTBEAT").custom_mode == 2
     assert any(m.text == "Flight mode change failed" for m in gcs.of("STATUSTEXT"))
 
@@ -139,10 +142,11 @@ def test_forward_stick_drives_the_thrusters_and_the_vehicle(gcs: SimGcs) -> None
     assert max(abs(p - 1500) for p in pulses) > 25
     assert gcs.truth_surge_m_s() > 0.2
     assert gcs.last("VFR_HUD").groundspeed >= 0.0
-    gain = gcs.endpoint.gain
-    gcs.send(gcs.param_set("JS_GAIN_DEFAULT", 1.0))  # the joystick gain takes effect
+    # ArduSub reads JS_GAIN_DEFAULT at boot only (Sub::init_joystick): set now, the gain stays
+    gcs.send(gcs.param_set("JS_GAIN_DEFAULT", 1.0))
     gcs.run(0.1, gcs.flying(x=1000))
-    assert gain == 0.5 and gcs.endpoint.rc.channels[4] == 1900
+    assert gcs.endpoint.gain == 0.5 and gcs.endpoint.rc.channels[4] == 1700  # 1500 + 0.4·0.5·1000
+    assert gcs.last("PARAM_VALUE").param_value == 1.0  # stored and echoed for the next boot
 
 
 def test_alt_hold_holds_depth_where_manual_drifts(gcs: SimGcs) -> None:
@@ -274,15 +278,19 @@ def test_rc_channels_override_is_pilot_input_too(gcs: SimGcs) -> None:
     assert gains and gains[-1] == 0.5
 
 
-def test_system_ids_are_parameters_that_take_effect(gcs: SimGcs) -> None:
-    gcs.send(gcs.param_set("MAV_GCS_SYSID", 200), gcs.param_set("SYSID_THISMAV", 7))  # this order:
-    # once SYSID_THISMAV is 7, requests to system 1 are no longer ours
+def test_the_gcs_id_takes_effect_at_once_this_vehicles_at_the_next_boot(gcs: SimGcs) -> None:
+    """MAV_GCS_SYSID is read live (ArduPilot's sysid_my_gcs()); SYSID_THISMAV once, at boot
+    (GCS::init): set during a session it is stored and echoed, and the vehicle stays system 1,
+    so the ground station that set it does not lose the vehicle (a user review: it vanished)."""
+    gcs.send(gcs.param_set("MAV_GCS_SYSID", 200), gcs.param_set("SYSID_THISMAV", 7))
     gcs.run(1.01)
-    assert gcs.last("HEARTBEAT").get_srcSystem() == 7
-    gcs.send(gcs.mav.manual_control_encode(7, 500, 0, 500, 0, 0))  # from 255: no longer the GCS
+    assert gcs.last("HEARTBEAT").get_srcSystem() == 1
+    echoed = {m.param_id: m.param_value for m in gcs.of("PARAM_VALUE")}
+    assert echoed["SYSID_THISMAV"] == 7 and echoed["MAV_GCS_SYSID"] == 200
+    gcs.send(gcs.mav.manual_control_encode(1, 500, 0, 500, 0, 0))  # from 255: no longer the GCS
     other = SimGcs.make_sender(200)
-    gcs.send(other.manual_control_encode(1, 500, 0, 500, 0, 0), sender=other)  # wrong target
-    gcs.send(other.manual_control_encode(7, 500, 0, 500, 0, 0), sender=other)  # accepted
+    gcs.send(other.manual_control_encode(7, 500, 0, 500, 0, 0), sender=other)  # wrong target
+    gcs.send(other.manual_control_encode(1, 500, 0, 500, 0, 0), sender=other)  # accepted
     gcs.step()
     endpoint = gcs.endpoint
     assert dict(endpoint.rejected) == {"wrong_sysid": 1, "wrong_target": 1}

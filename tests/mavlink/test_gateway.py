@@ -104,10 +104,10 @@ def test_a_ground_station_flies_the_vehicle_through_the_s100_link(
     assert time.monotonic() - sent >= D_UP_S + D_DOWN_S
 
     gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)  # ALT_HOLD
-    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_ACCEPTED
+    assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == mav.MAV_RESULT_ACCEPTED
     session.heartbeat(lambda hb: hb.custom_mode == 2)
     gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 16)  # POSHOLD: refused
-    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_FAILED
+    assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == mav.MAV_RESULT_FAILED
 
     session.sticks = (1000, 0, 500, 0)  # forward
     session.pump(6.0)

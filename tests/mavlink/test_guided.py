@@ -48,7 +48,10 @@ def gcs() -> Iterator[SimGcs]:
 
 
 def mode_acks(gcs: SimGcs) -> list[int]:
-    return [m.result for m in gcs.of("COMMAND_ACK") if m.command == mav.MAV_CMD_DO_SET_MODE]
+    """The mode change acknowledgements, in order: SET_MODE's (ArduPilot acknowledges it with
+    its message id, 11) and COMMAND_LONG DO_SET_MODE's."""
+    commands = (mav.MAVLINK_MSG_ID_SET_MODE, mav.MAV_CMD_DO_SET_MODE)
+    return [m.result for m in gcs.of("COMMAND_ACK") if m.command in commands]
 
 
 def target(
@@ -306,9 +309,9 @@ def test_guided_through_the_real_time_s100_gateway() -> None:
         assert session.ack(400) == ACCEPTED
         session.heartbeat(lambda hb: hb.base_mode & 128)
         gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)
-        assert session.ack(mav.MAV_CMD_DO_SET_MODE) == ACCEPTED
+        assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == ACCEPTED
         gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
-        assert session.ack(mav.MAV_CMD_DO_SET_MODE) == ACCEPTED
+        assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == ACCEPTED
         session.heartbeat(lambda hb: hb.custom_mode == 4)  # the vehicle's own state
         session.pump(1.0)
         mask = POSITION_ONLY | YAW_IGNORE

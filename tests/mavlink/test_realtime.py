@@ -70,7 +70,7 @@ def test_a_ground_station_connects_configures_flies_and_loses_contact(
 
     session.sticks = (0, 0, 500, 0)
     gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)  # ALT_HOLD
-    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_ACCEPTED
+    assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == mav.MAV_RESULT_ACCEPTED
     session.heartbeat(lambda hb: hb.custom_mode == 2)
     session.pump(1.0)
     start = session.latest["VFR_HUD"].alt
@@ -78,7 +78,7 @@ def test_a_ground_station_connects_configures_flies_and_loses_contact(
     assert abs(session.latest["VFR_HUD"].alt - start) < 0.1  # depth held (alt < 0 below)
 
     gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 16)  # POSHOLD: refused
-    assert session.ack(mav.MAV_CMD_DO_SET_MODE) == mav.MAV_RESULT_FAILED
+    assert session.ack(mav.MAVLINK_MSG_ID_SET_MODE) == mav.MAV_RESULT_FAILED
 
     gcs.param_set_send("FS_GCS_TIMEOUT", 2.0)  # lose the GCS sooner than ArduSub's 5 s
     session.until(
