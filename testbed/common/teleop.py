@@ -15,7 +15,8 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
     heading), which the vehicle flies as that setpoint in GUIDED — refused (counted
     unsupported) by a vehicle without a position fix, as is a ``Move`` asking for GUIDED, and a
-    goal above the surface (a negative depth, either goal order); a
+    goal above the surface (a negative depth, either goal order; the operator's end sends a
+    goal above the surface at 0 m, and coordinates beyond ±327.67 m at that bound); a
     changed :class:`EndEffectorSetpoint` becomes an ``EndEffectorGoTo`` (the extension's code
     8: 1 cm, the tool yaw in 0.01° or none), which the vehicle writes back as that setpoint
     (its mode untouched; refused without a position fix too, the target being in the fix's
@@ -265,10 +266,13 @@ class TeleopOperatorEnd:
         return None
 
     def _goal_order(self, target: _GoalSetpoint) -> _GoalOrder:
-        """The order of a goal intent: int16 cm, clamped, for both; a GoTo's heading in whole
-        degrees (the setpoint's, or the vehicle's last reported one), an EndEffectorGoTo's tool
-        yaw in 0.01° (or none)."""
+        """The order of a goal intent: int16 cm, clamped (±327.67 m, the wire's range), for
+        both, a depth above the surface clamped to it (0 m: the vehicle refuses a negative one,
+        and a vehicle flown directly takes such a goal at the surface too); a GoTo's heading in
+        whole degrees (the setpoint's, or the vehicle's last reported one), an
+        EndEffectorGoTo's tool yaw in 0.01° (or none)."""
         x, y, z = (max(-32768, min(32767, round(100.0 * v))) for v in target.position_ned_m)
+        z = max(0, z)
         if isinstance(target, EndEffectorSetpoint):
             yaw = round(100.0 * math.degrees(target.yaw_rad)) % _YAW_CDEG
             return EndEffectorGoTo(x, y, z, yaw if target.use_yaw else None)

@@ -763,3 +763,23 @@ def test_reply_flags_follow_the_vehicles_mission_status() -> None:
     op_world, _, op_end = operator_end()
     assert op_end.apply_reply(end.encode_reply(), 3.0)
     assert op_world.get(op_end.vehicle, MissionStatus) == MissionStatus(True, True)
+
+
+def test_a_goal_above_the_surface_travels_at_the_surface_and_the_vehicle_takes_it() -> None:
+    """A ground station's GUIDED target 3 m above the surface: flown directly, the vehicle's
+    position loop holds it at the surface hold depth; through the narrow link it went as a
+    negative GoTo depth, which the vehicle refuses (a goal above the surface), so it flew the
+    previous target on (a user review). It travels at 0 m now, as a goal the vehicle takes;
+    beyond the wire's ±327.67 m a coordinate is clamped to it."""
+    world, intents, end = operator_end()
+    assert end.apply_reply(reply(armed=True, mode=4, heading=0), 1.0)
+    world.set(intents, PositionSetpoint((2.0, 500.0, -3.0)))
+    payload = end.encode_order()
+    message = decode_operator_message(payload)
+    assert isinstance(message, OperatorMessage)
+    assert message.order == GoTo(200, 32767, 0, 0)
+    v_world, vehicle, v_intents, v_end = vehicle_end()
+    v_world.set(vehicle, PositionReading(0.9, (0.0, 0.0, 1.0)))
+    assert v_end.apply_order(payload, 1.0) is True
+    setpoint = v_world.get(v_intents, PositionSetpoint)
+    assert setpoint is not None and setpoint.position_ned_m == (2.0, 327.67, 0.0)
