@@ -33,7 +33,7 @@ import dataclasses
 import math
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Generator, Mapping, Sequence
 from typing import Any
 
@@ -120,6 +120,7 @@ class MavlinkVehicleNode:
         self.env = env
         self._stop = stop
         self.recorder = recorder
+        self._failsafes_noted: Counter[str] = Counter()
         config = mavlink_vehicle_config(scenario.vehicle)
         self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
         vehicle = self.vehicle
@@ -195,7 +196,13 @@ class MavlinkVehicleNode:
         done = time.perf_counter_ns()
         self.gcs_to_thruster_ns.extend(done - read for read in self._frame_reads)
         self.compute_ns.append(done - self._ingest_ns)
-        self.endpoint.update(world.resource(SimClock).time_s)
+        now = world.resource(SimClock).time_s
+        self.endpoint.update(now)
+        triggered = self.endpoint.failsafe.triggered
+        if triggered != self._failsafes_noted:  # ArduSub's pilot-input or GCS failsafe acted
+            for kind in sorted(triggered - self._failsafes_noted):
+                self.recorder.event(now, "vehicle", "ardusub_failsafe", kind)
+            self._failsafes_noted = triggered.copy()
         for link, channel in zip(self.links, self.channels, strict=True):
             for packet in channel.take():
                 link.send(packet)

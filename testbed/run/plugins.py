@@ -25,9 +25,10 @@ model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkMode
 Loading a scenario imports the target and binds the arguments to its signature, so a missing
 file, a name the module lacks or an argument the factory does not take is a one-line error
 naming the key before anything runs. A file is imported once per process, as a module named
-``testbed_user_<stem>_<8 hex digits of its path>`` (its own imports must be importable: a
-sibling module of the file is not, unless its folder is on ``PYTHONPATH``). Sweep workers
-import it themselves, so it must be readable where they run.
+``testbed_user_<stem>_<8 hex digits of its path>``, with its folder first on the import path
+while it runs (as ``python FILE.py`` has it), so its module-level imports find the modules
+beside it; their files are hashed with it (:func:`target_files`). Sweep workers import it
+themselves, so it must be readable where they run.
 
 This runs the user's own code from a file the user named, as ``python my_pilots.py`` would;
 nothing received from a link, a socket or a browser is ever imported or evaluated.

@@ -34,7 +34,15 @@ from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
 from testbed.run.images import ImageLog
-from testbed.vehicle.components import ControlTargets, FailsafeStatus, MissionStatus, PoseTarget
+from testbed.vehicle.components import (
+    ActiveMode,
+    Armed,
+    ControlMode,
+    ControlTargets,
+    FailsafeStatus,
+    MissionStatus,
+    PoseTarget,
+)
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.resources import Controllers, PlantTruth, PowerMeter, SimClock
@@ -108,10 +116,12 @@ class VehicleObserver:
         self._next_sample_s = 0.0
         self._last_failsafe = 0
         self._last_mission: tuple[int, int] = (0, 0)
+        self._last_armed = False
+        self._last_mode: ControlMode | None = None
 
     def __call__(self, world: World) -> None:
         now = world.resource(SimClock).time_s
-        if world.changed_any(FailsafeStatus, MissionStatus):  # since this system's last run
+        if world.changed_any(FailsafeStatus, MissionStatus, Armed, ActiveMode):  # since last run
             self._note_changes(world, now)
         if now < self._next_sample_s - 1e-9:
             return
@@ -119,8 +129,17 @@ class VehicleObserver:
         self._recorder.rows.append(self.row(world, now, float(self._last_failsafe)))
 
     def _note_changes(self, world: World, now: float) -> None:
-        """Events for a new failsafe level and for mission goals given or reached."""
+        """Events for the vehicle arming or disarming, a new mode in effect, a new failsafe
+        level, and mission goals given or reached."""
         vehicle = world.resource(Controllers).vehicle
+        armed = world.get(vehicle, Armed)
+        if armed is not None and armed.armed != self._last_armed:
+            self._recorder.event(now, "vehicle", "arm" if armed.armed else "disarm")
+            self._last_armed = armed.armed
+        mode = world.get(vehicle, ActiveMode)
+        if mode is not None and mode.mode is not self._last_mode:
+            self._recorder.event(now, "vehicle", "mode", mode.mode.name)
+            self._last_mode = mode.mode
         status = world.get(vehicle, FailsafeStatus)
         level = 0 if status is None else int(status.level)
         if level != self._last_failsafe:

@@ -95,6 +95,11 @@ def test_a_ground_station_connects_configures_flies_and_loses_contact(
     result = session.finish()
     section = result.metrics["mavlink"]
     assert section["failsafes"]["gcs"] == 1
+    # events.csv tells the session's story: arming, ALT_HOLD, the GCS failsafe, its disarm
+    story = [(e.kind, e.detail) for e in result.recorder.events if e.node == "vehicle"]
+    arm, alt_hold = story.index(("arm", "")), story.index(("mode", "DEPTH_HOLD"))
+    lost = story.index(("ardusub_failsafe", "gcs"))
+    assert arm < alt_hold < lost and ("disarm", "") in story[lost:]
     assert section["rejected"]["wrong_sysid"] == 5
     assert section["rejected"]["crc"] == 1 and section["rejected"]["garbage"] >= 1
     assert section["received"]["PARAM_REQUEST_LIST"] >= 1

@@ -13,6 +13,8 @@ import pytest
 
 from testbed.channel import EventKind, LinkEvent, Trace
 from testbed.run.recorder import SERIES_COLUMNS, FloatPairs, Recorder, SeriesRows
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
 from tests.interrupts import interrupt_at_line
 
 K = EventKind
@@ -220,3 +222,25 @@ def test_an_interrupt_anywhere_in_appending_a_pair_keeps_the_pairs_whole() -> No
             break
         k += 1
     assert k > 1
+
+
+def test_the_event_file_tells_when_the_vehicle_armed_and_changed_mode() -> None:
+    """The vehicle's arming and modes in effect are events, at the frame they took effect: on
+    s100-teleop-v1 the session plan's arm and DEPTH_HOLD requests (sent at operator.arm_at_s)
+    take effect when the order carrying them arrives, after the link's intrinsic delay and the
+    order's air time (13 B at 1900 bit/s), in the next vehicle frame."""
+    scenario = load_scenario("s100-teleop-v1", ["duration_s=10", "metrics.settle_s=1"])
+    result = run_scenario(scenario)
+    story = [(e.t_s, e.kind, e.detail) for e in result.recorder.events if e.node == "vehicle"]
+    assert [kind for _, kind, _ in story] == ["mode", "arm", "mode"]
+    assert story[0][2] == "MANUAL" and story[2][2] == "DEPTH_HOLD"
+    channel = scenario.link.channel
+    crossing = channel.intrinsic_delay_s + 8 * 13 / channel.bitrate_bps
+    arm_at = scenario.operator.arm_at_s
+    sent = min(
+        e.t_s
+        for e in result.recorder.trace.events
+        if e.kind is EventKind.TX_START and e.src == "operator" and e.t_s >= arm_at
+    )
+    assert story[1][0] == story[2][0]
+    assert sent + crossing <= story[1][0] <= sent + crossing + 0.01 + 1e-9
