@@ -143,7 +143,8 @@ class ParamTable:
         return probe[name]
 
     def set(self, name: str, value: float) -> int | None:
-        """Set ``name`` to ``value`` (rounded for integer types).
+        """Set ``name`` to ``value`` (an integer type's as ArduPilot's PARAM_SET takes it: 0.01
+        added away from zero, then truncated, so 1.7 is 1 and 1.999 is 2).
 
         Returns:
             The parameter's index if accepted; None if refused (unknown name, non-finite
@@ -156,7 +157,7 @@ class ParamTable:
         param = self.params[index]
         if param.kind in _INT_LIMITS:
             low, high = _INT_LIMITS[param.kind]
-            value = float(round(value))
+            value = float(math.trunc(value + math.copysign(0.01, value)))
             if not low <= value <= high:
                 self.sets_refused += 1
                 return None

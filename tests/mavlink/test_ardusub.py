@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from testbed.mavlink.ardusub import boot_gain
+from testbed.mavlink.params import Param, ParamTable
 
 
 @pytest.mark.parametrize(
@@ -22,3 +23,15 @@ def test_the_boot_gain_is_init_joysticks(
 ) -> None:
     """ArduSub's Sub::init_joystick (ArduSub/joystick.cpp), worked by hand."""
     assert boot_gain(default, low, high, steps) == pytest.approx(gain)
+
+
+@pytest.mark.parametrize(
+    ("sent", "stored"), [(1.7, 1.0), (1.999, 2.0), (2.0, 2.0), (-1.7, -1.0), (-0.995, -1.0)]
+)
+def test_an_integer_parameter_takes_a_float_as_ardupilots_param_set(
+    sent: float, stored: float
+) -> None:
+    """GCS_MAVLINK::handle_param_set: 0.01 added away from zero, then the cast truncates (a
+    float just under an integer, as a float32 may carry it, is that integer; 1.7 is 1)."""
+    table = ParamTable((Param("SOME_INT", "INT16", 0.0),))
+    assert table.set("SOME_INT", sent) == 0 and table["SOME_INT"] == stored
