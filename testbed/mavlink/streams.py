@@ -62,17 +62,21 @@ class StreamSchedule:
 
     def set_group(self, stream_id: int, rate_hz: float) -> bool:
         """REQUEST_DATA_STREAM: every message of group ``stream_id`` (0 = all) at ``rate_hz``
-        (≤ 0: off). Returns False for an unknown group."""
+        (≤ 0: off), which is then its messages' default too (ArduPilot sets the group's stream
+        rate, from which SET_MESSAGE_INTERVAL 0 takes a message's default). Returns False for
+        an unknown group."""
         if stream_id != 0 and stream_id not in STREAM_GROUPS:
             return False
         groups = STREAM_GROUPS if stream_id == 0 else {stream_id: STREAM_GROUPS[stream_id]}
         for names in groups.values():
             for name in names:
-                self._set(name, _interval(rate_hz))
+                self._defaults[name] = _interval(rate_hz)
+                self._set(name, self._defaults[name])
         return True
 
     def set_interval(self, name: str, interval_us: float) -> bool:
-        """SET_MESSAGE_INTERVAL: −1 off, 0 the group's default, else every ``interval_us``
+        """SET_MESSAGE_INTERVAL: −1 off, 0 the group's rate (its boot rate, or the one
+        REQUEST_DATA_STREAM set since), else every ``interval_us``
         [µs] (capped at :data:`MAX_RATE_HZ`). Returns False for a message not streamed or a
         non-finite interval."""
         if name not in self._defaults or not math.isfinite(interval_us):
