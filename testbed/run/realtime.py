@@ -67,14 +67,13 @@ from testbed.protocol import Frame, encode_frame
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
-from testbed.run.plugins import scenario_pilot
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import (
     RunResult,
     make_operator_node,
     make_vehicle_node,
-    observed_pilot,
+    run_pilots,
     tally_images,
 )
 from testbed.run.scenario import Scenario
@@ -360,22 +359,18 @@ def run_hil(
         problem = f"poll_s must be > 0, got {poll_s}"
     elif not duration > settle_s:
         problem = f"duration_s must exceed metrics.settle_s ({settle_s:g} s), got {duration:g}"
-    if problem:
-        for endpoint in endpoints.values():
-            endpoint.close()
-        raise ValueError(problem)
     seed = scenario.seed if seed is None else seed
-    _, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
-    try:  # a pilot of the user's own is made here: its failure closes the ports too
-        operator_pilot, recorded_pilot = observed_pilot(scenario_pilot(scenario, seed))
+    recorder = Recorder(trace=Trace())
+    try:  # a bad argument, or a pilot of the user's own failing, closes the ports
+        if problem:
+            raise ValueError(problem)
+        operator_pilot, recorded_pilot = run_pilots(scenario, seed, recorder)
     except BaseException:
         for endpoint in endpoints.values():
             endpoint.close()
         raise
+    _, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.rt.RealtimeEnvironment(factor=1.0, strict=False)
-    recorder = Recorder(trace=Trace())
-    if recorded_pilot is not operator_pilot:
-        recorder.stick_source = "operator samples"
     ledger = FrameLedger()
     outages = [(o.start_s, o.end_s) for o in scenario.faults.link_outages]
     for start_s, end_s in outages:

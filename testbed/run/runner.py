@@ -47,6 +47,7 @@ __all__ = [
     "make_operator_node",
     "make_vehicle_node",
     "observed_pilot",
+    "run_pilots",
     "run_scenario",
     "tally_images",
 ]
@@ -201,6 +202,18 @@ def observed_pilot(pilot: Pilot) -> tuple[Pilot, Pilot]:
     return hold, hold.held
 
 
+def run_pilots(
+    scenario: Scenario, seed: int, recorder: Recorder, pilot: Pilot | None = None
+) -> tuple[Pilot, Pilot]:
+    """``(the operator's pilot, the recorder's view of it)`` for a run of seed ``seed``
+    (:func:`observed_pilot` of ``pilot``, or of the scenario's own made afresh), the recorder
+    told when it sees the operator's samples rather than the pilot itself."""
+    operator, recorded = observed_pilot(scenario_pilot(scenario, seed) if pilot is None else pilot)
+    if recorded is not operator:
+        recorder.stick_source = "operator samples"
+    return operator, recorded
+
+
 VehicleSetup = Callable[[Vehicle], None]
 """A user's hook on the built vehicle (:func:`run_scenario`'s ``vehicle_setup``)."""
 
@@ -246,15 +259,11 @@ def run_scenario(
         The metrics and the recording.
     """
     seed = scenario.seed if seed is None else seed
-    operator_pilot, recorded_pilot = observed_pilot(
-        scenario_pilot(scenario, seed) if pilot is None else pilot
-    )
+    recorder = Recorder(trace=Trace())
+    operator_pilot, recorded_pilot = run_pilots(scenario, seed, recorder, pilot)
     model = scenario_link_model(scenario) if link_model is None else link_model
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
-    recorder = Recorder(trace=Trace())
-    if recorded_pilot is not operator_pilot:
-        recorder.stick_source = "operator samples"
     link = scenario.link
     medium = Medium(
         env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=model
