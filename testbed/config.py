@@ -59,6 +59,12 @@ class FieldError(ValueError):
         self.message = message
 
 
+USER_MODULE_PREFIX = "testbed_user_"
+"""The name prefix of the modules the testbed imports from a user's Python file (a pilot or link
+model named in a scenario, :mod:`testbed.run.plugins`): the command line lets Ctrl-C land in
+their code, as in its own."""
+
+
 def check(condition: bool, key: str, message: str) -> None:
     """Raise :class:`FieldError` for ``key`` with ``message`` unless ``condition`` holds."""
     if not condition:

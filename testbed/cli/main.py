@@ -38,7 +38,7 @@ from testbed.cli.options import (
 )
 from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
 from testbed.cli.sweep import add_plot_parser, add_sweep_parser
-from testbed.config import ConfigError
+from testbed.config import USER_MODULE_PREFIX, ConfigError
 
 __all__ = ["EXIT_OK", "EXIT_USAGE", "build_parser", "format_summary", "main"]
 
@@ -107,10 +107,15 @@ def _put_off(signum: int, frame: FrameType | None) -> bool:
     ``main`` from inside an import of its own still takes Ctrl-C) is one of those, the signal is
     sent again a moment later, from a thread of its own (sent from the handler, it would be
     handled inside it; a ``threading.Timer`` would wait here for its thread to start), until
-    the stack is the program's own.
+    the stack is the program's own. A user's module the testbed imports by path (a scenario's
+    pilot or link model, :data:`~testbed.config.USER_MODULE_PREFIX`) is the program's own: the
+    import under way below it does not put the signal off (a pilot file that slept or looped
+    at import kept Ctrl-C waiting until it was done), one above it (an import it makes) does.
     """
     while frame is not None and frame.f_code is not main.__code__:  # the command's own frames
         code = frame.f_code
+        if frame.f_globals.get("__name__", "").startswith(USER_MODULE_PREFIX):
+            return False  # the user's own code, running (its module is dropped when raised in)
         if (
             code.co_filename in _PUT_OFF_FILES
             or (code.co_filename == _FROM_TEXT and code.co_name == "<module>" and frame.f_back)

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from testbed.config import ConfigError
+from testbed.config import USER_MODULE_PREFIX, ConfigError
 
 if TYPE_CHECKING:
     from testbed.channel.model import LinkModel
@@ -151,7 +151,7 @@ def _import_file(path: Path) -> ModuleType:
         raise FileNotFoundError(resolved)
     digest = hashlib.sha256(str(resolved).encode()).hexdigest()[:8]
     stem = re.sub(r"\W", "_", resolved.stem)
-    name = f"testbed_user_{stem}_{digest}"
+    name = f"{USER_MODULE_PREFIX}{stem}_{digest}"
     spec = importlib.util.spec_from_file_location(name, resolved)
     if spec is None or spec.loader is None:
         raise ImportError(f"not a Python module: {resolved}")

@@ -440,3 +440,32 @@ def test_a_double_ctrl_c_ends_a_live_session_with_its_results(tmp_path: Path, ga
     metrics = check_set(out)
     assert metrics["complete"] is False
     assert {"events.csv", "series.csv"} <= set(metrics["files"])
+
+
+def test_ctrl_c_while_a_scenarios_pilot_file_runs_at_import_ends_the_command_at_once(
+    tmp_path: Path,
+) -> None:
+    """A pilot file named in a scenario is the user's own code: Ctrl-C lands in it as in the
+    command's. Its import used to put the signal off (an import under way is code an interrupt
+    must not be raised in), so a file that slept 60 s at import kept Ctrl-C waiting 60 s, and
+    one that looped, for ever. Now: one line, exit 130, long before the sleep ends."""
+    marker = tmp_path / "importing"
+    (tmp_path / "sleepy.py").write_text(
+        f"import time\nopen({str(marker)!r}, 'w').close()\ntime.sleep(60)\n"
+        "def pilot():\n    raise AssertionError('never made')\n"
+    )
+    (tmp_path / "s.toml").write_text(
+        'schema = 1\nid = "sleepy-v1"\ndescription = "d"\nduration_s = 20.0\n'
+        '[pilot]\nkind = "python"\nfactory = "sleepy.py:pilot"\n'
+    )
+    proc = start(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out")])
+    try:
+        wait_for(marker.exists, "the pilot file's import", proc)
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=WAIT_S)
+        took_s = time.monotonic() - sent
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err == "testbed: interrupted\n", err
+    assert took_s < 50.0  # the import's own end is 60 s after the marker, later than this
