@@ -192,9 +192,10 @@ def _same_device(a: str, b: str) -> bool:
 
 def run_hil_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed hil``: check, open the ports, run in real time, write, summarise."""
-    from testbed.cli.run import finish_run
+    from testbed.cli.run import finish_run, report_failed_run
     from testbed.hil import PortSettings
-    from testbed.run.outputs import claimed_out_dir
+    from testbed.run.failures import partial_run
+    from testbed.run.outputs import claimed_out_dir, write_run
     from testbed.run.realtime import run_hil
     from testbed.run.scenario import load_scenario
 
@@ -236,15 +237,7 @@ def run_hil_command(args: argparse.Namespace) -> int:
                 flush=True,
             )
 
-        result = run_hil(
-            scenario,
-            endpoints,
-            seed=args.seed,
-            duration_s=duration,
-            modem=args.modem,
-            on_start=announce,
-        )
-        result.metrics["hil"]["ports"] = {  # what a rerun needs beside the scenario's inputs
+        ports_used = {  # what a rerun needs beside the scenario's inputs
             "baud": baud,
             "rtscts": rtscts,
             "m64_channel": args.m64_channel,
@@ -254,6 +247,22 @@ def run_hil_command(args: argparse.Namespace) -> int:
         if args.log_bytes:
             start_ns = clock_start_ns[0] if clock_start_ns else 0
             extras = {"ports.csv": functools.partial(write_port_log, endpoints, start_ns)}
+        try:
+            result = run_hil(
+                scenario,
+                endpoints,
+                seed=args.seed,
+                duration_s=duration,
+                modem=args.modem,
+                on_start=announce,
+            )
+        except Exception as error:  # part way (a pilot of the user's): keep what ran
+            if (partial := partial_run(error)) is None:
+                raise
+            partial.metrics["hil"]["ports"] = ports_used
+            write_run(partial, out, extras=extras)
+            return report_failed_run(error, out, duration)
+        result.metrics["hil"]["ports"] = ports_used
         return finish_run(
             result,
             out,

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from testbed.cli.options import (
+    EXIT_FAILED,
     EXIT_OK,
     Subparsers,
     add_set_option,
@@ -18,6 +20,8 @@ from testbed.cli.options import (
     warn_token_cycle,
 )
 from testbed.cli.options import format_value as _num
+from testbed.config import ConfigError
+from testbed.run.failures import partial_run
 
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
@@ -79,11 +83,58 @@ def _run_scenario(args: argparse.Namespace) -> int:
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
+    first_seed = scenario.seed if args.seed is None else args.seed
     with claimed_out_dir(out, force=args.force):
-        if scenario.trials > 1:
-            return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
-        result = run_scenario(scenario, seed=args.seed)
+        try:
+            if scenario.trials > 1:
+                return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
+            try:
+                result = run_scenario(scenario, seed=args.seed)
+            except Exception as error:
+                if (partial := partial_run(error)) is not None:
+                    from testbed.run.outputs import write_run
+                    from testbed.run.trials import remove_trials
+
+                    write_run(partial, out)
+                    remove_trials(out)
+                raise
+        except Exception as error:
+            return report_failed_run(
+                error, out, scenario.duration_s, trials=scenario.trials, first_seed=first_seed
+            )
         return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
+
+
+def report_failed_run(
+    error: Exception, out: Path, planned_s: float, *, trials: int = 1, first_seed: int = 0
+) -> int:
+    """Report a run (or trial) that ``error`` ended part way, its partial outputs written
+    (:mod:`testbed.run.failures`): for bad input (a ``ConfigError``, e.g. a pilot's sample that
+    is no ``PilotSample``) one line, exit 2, naming where what ran is; for any other error its
+    traceback, then that line, exit 1. An error without partial outputs is raised again.
+
+    Args:
+        error: what ended the run.
+        out: the results directory (trials: their parent).
+        planned_s: the run's planned duration [s].
+        trials: the scenario's trials; with more than one, the partial run is the trial of
+            seed ``first_seed + k - 1``, written in ``out/trial-k``.
+        first_seed: the seed of trial 1.
+    """
+    partial = partial_run(error)
+    if partial is None:
+        raise error
+    reached = f"to t = {partial.metrics['sim_s']:.1f} s of {planned_s:g} s"
+    if trials > 1:
+        k = partial.seed - first_seed + 1
+        reached = f"in trial {k} of {trials}, {reached}"
+        out = out / f"trial-{k}"
+    kept = f"what ran {reached}, is in {out}"
+    if isinstance(error, ConfigError):
+        raise ConfigError(f"{error} ({kept})") from None
+    traceback.print_exception(error)
+    print(f"testbed: the run failed; {kept}", file=sys.stderr)
+    return EXIT_FAILED
 
 
 def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool) -> int:

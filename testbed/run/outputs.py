@@ -4,8 +4,9 @@
 not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
 ``events.csv``, ``series.csv``, ``images.csv`` (image scenarios) and the plots, each under a
 temporary name renamed into place, and ``metrics.json`` **last**, carrying ``"complete"`` (true for
-a run that reached its end, false for one ended early by Ctrl-C or SIGTERM, whose ``sim_s`` says
-how far it got) and ``"files"``, the sibling files of this run with their sizes. A directory
+a run that reached its end, false for one ended early by Ctrl-C or SIGTERM, or by an error,
+whose ``sim_s`` says how far it got; then ``"failure"`` is the error in one line) and
+``"files"``, the sibling files of this run with their sizes. A directory
 without ``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json``
 names exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
 anything else is written, and the previous run's files that this run does not write again
@@ -239,7 +240,9 @@ def write_run(
                 with contextlib.suppress(OSError):
                     (out_dir / stale).unlink()
         document = dict(result.metrics)
-        document["complete"] = result.stopped is None
+        document["complete"] = result.stopped is None and result.failure is None
+        if result.failure is not None:
+            document["failure"] = result.failure
         document["files"] = {path.name: path.stat().st_size for path in written}
         written.append(write_json_atomic(out_dir / METRICS_FILE, document))
     interrupted = interrupted or (late[0] if late else None)

@@ -54,6 +54,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -64,6 +65,7 @@ from testbed.channel import Delivery, EventKind, Trace
 from testbed.channel.trace import BROADCAST
 from testbed.hil import LinkEndpoint, endpoint_report, latency_summary_ms
 from testbed.protocol import Frame, encode_frame
+from testbed.run.failures import keep_partial
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -391,6 +393,7 @@ def run_hil(
     operator_node: OperatorNode | None = None
     lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
     stopped: KeyboardInterrupt | None = None
+    failed: Exception | None = None
     start: float | None = None
     try:
         if "vehicle" in modems:
@@ -413,14 +416,20 @@ def run_hil(
         env.run(until=duration)
     except BaseException as error:  # Ctrl-C or SIGTERM: keep what ran, marked partial
         if (stopped := interrupt_of(error)) is None:
-            _close(vehicle_node, endpoints)
-            raise
+            if start is None or not isinstance(error, Exception):  # nothing ran yet
+                _close(vehicle_node, endpoints)
+                raise
+            failed = error  # an error part way (a pilot of the user's): keep what ran too
     with deferred_interrupts() as closing:  # a second Ctrl-C: the run is ending anyway
         wall_s = 0.0 if start is None else time.perf_counter() - start
         _close(vehicle_node, endpoints)
     stopped = stopped or (closing[0] if closing else None)
-    reached = duration if stopped is None else float(env.now)
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+
+    def reduce(failure: str | None) -> RunResult:
+        """What ran, reduced; ``failure`` is the error's line when one ended it."""
+        early = stopped is not None or failure is not None
+        if failure is not None:
+            recorder.event(float(env.now), "testbed", "failed", failure)
         tally_images(recorder, vehicle_node, operator_node)
         metrics = hil_metrics(
             scenario,
@@ -428,7 +437,7 @@ def run_hil(
             recorder,
             modems,
             ledger,
-            duration_s=reached,
+            duration_s=float(env.now) if early else duration,
             wall_s=wall_s,
             vehicle_node=vehicle_node,
             operator_node=operator_node,
@@ -436,7 +445,17 @@ def run_hil(
             modem=modem,
             lateness_ns=lateness_ns,
         )
-    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+        return RunResult(scenario, seed, metrics, recorder, stopped, failure)
+
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+        if failed is not None:
+            if env.now > 0:  # an error at the first instant leaves nothing to keep
+                keep_partial(failed, reduce)
+        else:
+            result = reduce(None)
+    if failed is not None:
+        raise failed
+    return replace(result, stopped=stopped or (late[0] if late else None))
 
 
 def _close(vehicle_node: VehicleNode | None, endpoints: Mapping[str, LinkEndpoint]) -> None:

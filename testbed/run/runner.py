@@ -16,7 +16,7 @@ import gc
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -29,6 +29,7 @@ from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.pilots import Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
+from testbed.run.failures import keep_partial
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
@@ -72,6 +73,8 @@ class RunResult:
         stopped: the interrupt (Ctrl-C, or SIGTERM raised as a ``KeyboardInterrupt``
             subclass) that ended the run before its end, or None; the metrics then cover
             the ``sim_s`` reached.
+        failure: for what ran before an error ended the run (:mod:`testbed.run.failures`),
+            that error in one line; None otherwise. The metrics cover the ``sim_s`` reached.
     """
 
     scenario: Scenario
@@ -79,6 +82,7 @@ class RunResult:
     metrics: dict[str, Any]
     recorder: Recorder
     stopped: KeyboardInterrupt | None = None
+    failure: str | None = None
 
 
 def make_vehicle_node(
@@ -300,19 +304,25 @@ def run_scenario(
     env.process(operator_node.run())
     start = time.perf_counter()
     stopped: KeyboardInterrupt | None = None
+    failed: Exception | None = None
     try:
         with long_lived_frozen():
             env.run(until=scenario.duration_s)
-    except BaseException as error:  # an interrupt: keep what ran (the caller writes it, marked)
+    except BaseException as error:  # keep what ran (the caller writes it, marked)
         if (stopped := interrupt_of(error)) is None:
-            vehicle.close()
-            raise
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
-        vehicle.close()
-        wall_s = time.perf_counter() - start
-        tally_images(recorder, vehicle_node, operator_node)
+            if not isinstance(error, Exception):  # SystemExit, GeneratorExit: not a run's
+                vehicle.close()
+                raise
+            failed = error
+    wall_s = time.perf_counter() - start
+
+    def reduce(failure: str | None) -> RunResult:
+        """What ran, reduced; ``failure`` is the error's line when one ended it."""
+        if failure is not None:
+            recorder.event(float(env.now), "testbed", "failed", failure)
+        early = stopped is not None or failure is not None
         metrics = _run_metrics(
-            scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, stopped
+            scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, early
         )
         if link_model is not None:
             metrics["inputs"]["link_model"] = model_name(link_model)
@@ -320,7 +330,19 @@ def run_scenario(
             metrics["token_round_trip_s"], metrics["reply_fits_gap"] = math.nan, None
         elif model is not None:
             metrics["inputs"]["link_model"] = scenario.link.model
-    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+        return RunResult(scenario, seed, metrics, recorder, stopped, failure)
+
+    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+        vehicle.close()
+        tally_images(recorder, vehicle_node, operator_node)
+        if failed is not None:
+            if env.now > 0:  # an error at the first instant leaves nothing to keep
+                keep_partial(failed, reduce)
+        else:
+            result = reduce(None)
+    if failed is not None:
+        raise failed
+    return replace(result, stopped=stopped or (late[0] if late else None))
 
 
 def _run_metrics(
@@ -331,16 +353,16 @@ def _run_metrics(
     operator_node: OperatorNode,
     wall_s: float,
     now_s: float,
-    stopped: KeyboardInterrupt | None,
+    early: bool,
 ) -> dict[str, Any]:
     """:func:`compute_metrics` of a simulated run that reached ``now_s`` [s] (its end unless
-    ``stopped``)."""
+    it ended ``early``: an interrupt or an error)."""
     vehicle = vehicle_node.vehicle
     return compute_metrics(
         scenario,
         seed,
         recorder,
-        sim_s=scenario.duration_s if stopped is None else float(now_s),
+        sim_s=float(now_s) if early else scenario.duration_s,
         wall_s=wall_s,
         energy_wh=vehicle_node.energy_wh,
         payload_bytes={

@@ -9,6 +9,9 @@ the trials the mean and the sample standard deviation (``ddof = 1``) of each, ov
 where the value is finite (``n`` says how many). An interrupt (Ctrl-C, SIGTERM) during trial
 ``K`` keeps trials ``1 … K−1`` and ``K``'s partial outputs (no plots), and ``trials.json`` then
 covers the finished trials only, with ``"complete": false`` and the interrupted trial named.
+An error that ends trial ``K`` (a pilot of the user's that raises, say) keeps the same, with
+``K``'s partial outputs carrying the error (``"failure"``) and ``"failed_trial": K``, and is
+then raised.
 
 Only the few series columns the trials figure draws are kept from each run (:class:`TrialTrack`),
 not its recording. Nothing here parses arguments or prints: :mod:`testbed.cli.run` does.
@@ -25,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from testbed.run.failures import partial_run
 from testbed.run.interrupts import interrupt_of
 from testbed.run.outputs import PlotWriter, remove_run_results, write_json_atomic, write_run
 from testbed.run.runner import RunResult, run_scenario
@@ -148,7 +152,11 @@ def headline(metrics: dict[str, Any]) -> dict[str, float]:
 
 
 def trials_document(
-    scenario: Scenario, first_seed: int, finished: Sequence[RunResult], interrupted: int | None
+    scenario: Scenario,
+    first_seed: int,
+    finished: Sequence[RunResult],
+    interrupted: int | None,
+    failed: int | None = None,
 ) -> dict[str, Any]:
     """The ``trials.json`` content of the finished trials (module docstring).
 
@@ -157,6 +165,7 @@ def trials_document(
         first_seed: the seed of trial 1.
         finished: the finished trials' results, in order.
         interrupted: the number of the trial an interrupt ended, or None.
+        failed: the number of the trial an error ended, or None.
     """
     rows = [
         {"trial": k, "seed": result.seed, "dir": trial_dir(Path(), k).as_posix()}
@@ -177,8 +186,9 @@ def trials_document(
         "first_seed": first_seed,
         "trials_planned": scenario.trials,
         "trials_finished": len(finished),
-        "complete": interrupted is None and len(finished) == scenario.trials,
+        "complete": interrupted is None and failed is None and len(finished) == scenario.trials,
         "interrupted_trial": interrupted,
+        "failed_trial": failed,
         "std_ddof": 1,
         "wall_clock_keys": list(WALL_CLOCK_KEYS),
         "mission": scenario.vehicle.autonomy is not None,
@@ -237,6 +247,8 @@ def run_trials(
             files += write_run(result, trial_dir(out, k), plots=plots)
         except BaseException as error:  # an interrupt between runs or while writing one
             if (stopped := interrupt_of(error)) is None:
+                if (partial := partial_run(error)) is not None:  # an error ended trial k
+                    _keep_failed(scenario, first, finished, out, k, partial)
                 raise
             interrupted = k
             break
@@ -256,6 +268,24 @@ def run_trials(
     else:
         (out / TRIALS_PLOT).unlink(missing_ok=True)  # an earlier run's figure of other trials
     return TrialsResult(scenario, document, tracks, stopped, reached_s, files)
+
+
+def _keep_failed(
+    scenario: Scenario,
+    first: int,
+    finished: Sequence[RunResult],
+    out: Path,
+    k: int,
+    partial: RunResult,
+) -> None:
+    """Trial ``k`` failed part way: its partial outputs (no plots) and ``trials.json`` over the
+    finished trials with ``k`` named as the failed one; the error is raised by the caller."""
+    write_run(partial, trial_dir(out, k))
+    document = trials_document(scenario, first, finished, None, failed=k)
+    write_json_atomic(out / TRIALS_FILE, document)
+    remove_trials(out, keep=k, keep_summary=True)
+    remove_run_results(out)
+    (out / TRIALS_PLOT).unlink(missing_ok=True)
 
 
 def remove_trials(out: Path, *, keep: int = 0, keep_summary: bool = False) -> None:

@@ -26,15 +26,13 @@ import os
 import re
 import signal
 import sys
-import sysconfig
 import threading
-import traceback
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from testbed.config import ConfigError
+from testbed.run.failures import describe
 from testbed.sweep.aggregate import flatten_metrics
 from testbed.sweep.spec import RunSpec
 
@@ -109,24 +107,7 @@ def execute_run(spec: RunSpec) -> RunOutcome:
             flat.setdefault(key, value)
         return RunOutcome(spec.point, spec.seed, flat, "")
     except Exception as err:  # a failed run is a result to record, not a reason to stop
-        message = " ".join(f"{type(err).__name__}: {err}".split())  # one line
-        return RunOutcome(spec.point, spec.seed, None, message + _raised_in_user_code(err))
-
-
-def _raised_in_user_code(error: BaseException) -> str:
-    """`` (at FILE:LINE)``: the innermost frame of ``error``'s traceback in code of the user's
-    own (a pilot or link model named in the scenario), not in the testbed, the standard library
-    or an installed package; "" when it never passed through such code."""
-    paths = sysconfig.get_paths()
-    roots = [Path(paths[key]).resolve() for key in ("stdlib", "platstdlib", "purelib", "platlib")]
-    roots.append(Path(__file__).resolve().parents[1])  # the testbed package
-    for frame in reversed(traceback.extract_tb(error.__traceback__)):
-        if frame.filename.startswith("<"):
-            continue
-        path = Path(frame.filename).resolve()
-        if not any(path.is_relative_to(root) for root in roots):
-            return f" (at {frame.filename}:{frame.lineno})"
-    return ""
+        return RunOutcome(spec.point, spec.seed, None, describe(err))
 
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h

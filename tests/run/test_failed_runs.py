@@ -1,0 +1,185 @@
+"""A run that an error ends part way keeps what ran (testbed.run.failures): a pilot of the
+user's that raises 12 s into a run used to lose the whole recording. The partial series is held
+to a run of a pilot that commands the same and never raises (a second run, not the code's own
+bookkeeping), and each entry point says where what ran went."""
+
+from __future__ import annotations
+
+import csv
+import json
+import threading
+from pathlib import Path
+
+import pytest
+
+from testbed.cli.main import main
+from testbed.run.failures import partial_run
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
+from tests.run.test_plugins import write_study
+
+PILOTS = """
+from testbed.operator.pilots import PilotSample
+
+STILL = PilotSample((0.0,) * 6)
+trials_made = [0]
+
+
+class Idle:
+    def sample(self, t_s):
+        return STILL
+
+
+class Sleepy:
+    def __init__(self, at_s=12.0):
+        self.at_s = at_s
+
+    def sample(self, t_s):
+        if t_s > self.at_s:
+            raise ValueError(f"pilot fell asleep at {t_s:.1f}")
+        return STILL
+
+
+class Overdriven:
+    def sample(self, t_s):
+        return PilotSample((2.0 if t_s > 12.0 else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+
+
+def second_trial_sleeps():
+    trials_made[0] += 1
+    return Sleepy() if trials_made[0] == 2 else Idle()
+"""
+
+RAISE_LINE = PILOTS.split("\n").index(
+    '            raise ValueError(f"pilot fell asleep at {t_s:.1f}")'
+)
+
+
+@pytest.fixture
+def study(tmp_path: Path) -> Path:
+    """test_plugins's study (a 30-s S100 scenario, step.toml), with these pilots beside."""
+    folder = write_study(tmp_path / "study")
+    (folder / "sleepy.py").write_text(PILOTS)
+    return folder
+
+
+def _pilot(study: Path, name: str) -> list[str]:
+    return ["--set", f"pilot.factory={study / 'sleepy.py'}:{name}", "--set", "pilot.args={}"]
+
+
+def _rows(path: Path) -> list[list[str]]:
+    with path.open(newline="") as handle:
+        return list(csv.reader(handle))
+
+
+def test_a_pilot_that_raises_part_way_keeps_what_ran_and_shows_its_traceback(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Exit 1, the traceback, then one line naming the time reached and the folder; the
+    series up to there is, row for row, the start of a run whose pilot commands the same and
+    never raises; metrics.json is marked incomplete with the error and the user's line."""
+    run = ["run", str(study / "step.toml"), "--no-plots"]
+    assert main([*run, "--out", str(study / "idle"), *_pilot(study, "Idle")]) == 0
+    capsys.readouterr()
+    out = study / "sleepy"
+    assert main([*run, "--out", str(out), *_pilot(study, "Sleepy")]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "ValueError: pilot fell asleep at 12.2" in err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert err.endswith(
+        f"testbed: the run failed; what ran to t = {metrics['sim_s']:.1f} s of 30 s, is in {out}\n"
+    )
+    assert metrics["complete"] is False
+    where = f"(at {study / 'sleepy.py'}:{RAISE_LINE + 1})"
+    assert metrics["failure"] == f"ValueError: pilot fell asleep at 12.2 {where}"
+    assert 12.0 < metrics["sim_s"] < 12.6  # the operator's sample after 12 s (0.3-s frames)
+    partial, whole = _rows(out / "series.csv"), _rows(study / "idle" / "series.csv")
+    assert len(partial) > 200 and partial == whole[: len(partial)]
+    assert float(partial[-1][0]) <= metrics["sim_s"] < float(whole[len(partial)][0])
+    last_event = _rows(out / "events.csv")[-1]
+    assert last_event[1:3] == ["testbed", "failed"] and last_event[-1] == metrics["failure"]
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}
+
+
+def test_the_python_api_raises_the_pilots_own_error_carrying_what_ran(study: Path) -> None:
+    """run_scenario raises the same exception as before; partial_run gives what ran."""
+    scenario = load_scenario(str(study / "step.toml"), _pilot(study, "Idle")[1::2])
+    sleepy = load_scenario(str(study / "step.toml"), _pilot(study, "Sleepy")[1::2])
+    with pytest.raises(ValueError, match=r"pilot fell asleep at 12\.2") as caught:
+        run_scenario(sleepy)
+    partial = partial_run(caught.value)
+    assert partial is not None and partial.stopped is None
+    assert partial.failure is not None and partial.failure.startswith("ValueError: pilot fell")
+    assert 12.0 < partial.metrics["sim_s"] < 12.6
+    assert partial_run(ValueError("not from a run")) is None
+    assert run_scenario(scenario).failure is None
+
+
+def test_a_bad_sample_part_way_is_one_line_exit_2_and_keeps_what_ran(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A sample out of [-1, 1] is bad input (one line, exit 2), and what ran is kept."""
+    out = study / "overdriven"
+    argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out)]
+    assert main([*argv, *_pilot(study, "Overdriven")]) == 2
+    err = capsys.readouterr().err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert err == (
+        "testbed: error: pilot Overdriven: surge stick must be a finite number in [-1, 1], "
+        f"got 2.0 (what ran to t = {metrics['sim_s']:.1f} s of 30 s, is in {out})\n"
+    )
+    assert metrics["complete"] is False and metrics["failure"].startswith("PilotError: ")
+
+
+def test_a_trial_that_fails_keeps_the_trials_before_it_and_its_own_start(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Trial 2 of 3 fails at 12.2 s: trial 1 whole, trial 2 partial, no trial 3, and
+    trials.json names the failed trial."""
+    out = study / "trials"
+    argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out), "--set", "trials=3"]
+    assert main([*argv, *_pilot(study, "second_trial_sleeps")]) == 1
+    err = capsys.readouterr().err
+    document = json.loads((out / "trials.json").read_text())
+    assert (document["complete"], document["failed_trial"], document["trials_finished"]) == (
+        False,
+        2,
+        1,
+    )
+    first = json.loads((out / "trial-1" / "metrics.json").read_text())
+    second = json.loads((out / "trial-2" / "metrics.json").read_text())
+    assert first["complete"] is True and first["sim_s"] == 30.0
+    assert second["complete"] is False and "pilot fell asleep" in second["failure"]
+    assert not (out / "trial-3").exists()
+    assert err.endswith(
+        f"what ran in trial 2 of 3, to t = {second['sim_s']:.1f} s of 30 s, "
+        f"is in {out / 'trial-2'}\n"
+    )
+
+
+def test_a_hil_run_whose_pilot_raises_keeps_what_ran_and_closes_the_ports(study: Path) -> None:
+    """run_hil over emulated EvoLogics modems: the pilot raising 2 s in ends the session with
+    its own error, what ran (to ≈ 2 s of real time) kept on it, both ports closed."""
+    from testbed.channel import load_link_config
+    from testbed.emulator.ptys import ModemEmulator
+    from testbed.hil import PortSettings, open_endpoint
+    from testbed.run.realtime import run_hil
+
+    config = load_link_config("s2c", ["intrinsic_delay_s=0.05"])
+    short = ["metrics.settle_s=1", "link.ipg=fixed", "link.ipg_s=0.3"]
+    sleepy = [f"pilot.factory={study / 'sleepy.py'}:Sleepy", "pilot.args={at_s=2.0}"]
+    with ModemEmulator(config, seed=0, modem="evologics") as emulator:
+        path_a, path_b = emulator.paths
+        endpoints = {
+            "operator": open_endpoint(PortSettings(path_a, "evologics", "operator")),
+            "vehicle": open_endpoint(PortSettings(path_b, "evologics", "vehicle")),
+        }
+        scenario = load_scenario(str(study / "step.toml"), [*short, *sleepy])
+        with pytest.raises(ValueError, match="pilot fell asleep") as caught:
+            run_hil(scenario, endpoints, duration_s=4.0, modem="evologics")
+        partial = partial_run(caught.value)
+        assert partial is not None and partial.failure is not None
+        assert 2.0 < partial.metrics["sim_s"] < 4.0
+        assert len(partial.recorder.series()["t_s"]) > 10
+    alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:")]
+    assert alive == []
