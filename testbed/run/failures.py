@@ -12,16 +12,19 @@ the exception (:func:`keep_partial`), which is raised unchanged: callers that kn
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import sysconfig
 import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from testbed.run.interrupts import deferred_interrupts
+
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
 
-__all__ = ["describe", "keep_partial", "partial_run", "raised_in_user_code"]
+__all__ = ["describe", "keep_partial", "partial_run", "raised_in_user_code", "reduce_run"]
 
 _PARTIAL = "testbed_partial_run"
 
@@ -73,3 +76,36 @@ def keep_partial(error: BaseException, reduce: Callable[[str], RunResult]) -> No
 def partial_run(error: BaseException) -> RunResult | None:
     """The partial result :func:`keep_partial` kept on ``error``, or None."""
     return getattr(error, _PARTIAL, None)
+
+
+def reduce_run(
+    reduce: Callable[[str | None], RunResult],
+    failed: Exception | None,
+    reached_s: float,
+    stopped: KeyboardInterrupt | None,
+) -> RunResult:
+    """The end of a run's simulation: its result, or ``failed`` raised with what ran kept.
+
+    Args:
+        reduce: makes the result from the recording (given the error's line, or None).
+        failed: the error that ended the simulation part way, or None.
+        reached_s: the simulated time reached [s]; an error at 0 leaves nothing to keep.
+        stopped: the interrupt that ended it early, or None.
+
+    Returns:
+        The result, its ``stopped`` set by ``stopped`` or a Ctrl-C while reducing (which is
+        reduced whole, then honoured by the caller).
+
+    Raises:
+        Exception: ``failed``, carrying the partial result (:func:`partial_run`).
+    """
+    result = None
+    with deferred_interrupts() as late:
+        if failed is None:
+            result = reduce(None)
+        elif reached_s > 0:
+            keep_partial(failed, reduce)
+    if failed is not None:
+        raise failed
+    assert result is not None
+    return dataclasses.replace(result, stopped=stopped or (late[0] if late else None))

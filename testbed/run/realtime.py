@@ -54,7 +54,6 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -65,7 +64,7 @@ from testbed.channel import Delivery, EventKind, Trace
 from testbed.channel.trace import BROADCAST
 from testbed.hil import LinkEndpoint, endpoint_report, latency_summary_ms
 from testbed.protocol import Frame, encode_frame
-from testbed.run.failures import keep_partial
+from testbed.run.failures import reduce_run
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -447,15 +446,7 @@ def run_hil(
         )
         return RunResult(scenario, seed, metrics, recorder, stopped, failure)
 
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
-        if failed is not None:
-            if env.now > 0:  # an error at the first instant leaves nothing to keep
-                keep_partial(failed, reduce)
-        else:
-            result = reduce(None)
-    if failed is not None:
-        raise failed
-    return replace(result, stopped=stopped or (late[0] if late else None))
+    return reduce_run(reduce, failed, float(env.now), stopped)  # reduced whole, even on Ctrl-C
 
 
 def _close(vehicle_node: VehicleNode | None, endpoints: Mapping[str, LinkEndpoint]) -> None:

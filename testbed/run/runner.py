@@ -16,7 +16,7 @@ import gc
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -29,7 +29,7 @@ from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.pilots import Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
-from testbed.run.failures import keep_partial
+from testbed.run.failures import reduce_run
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
@@ -332,17 +332,11 @@ def run_scenario(
             metrics["inputs"]["link_model"] = scenario.link.model
         return RunResult(scenario, seed, metrics, recorder, stopped, failure)
 
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+    with deferred_interrupts() as closing:  # what ran is reduced whole, even on Ctrl-C now
         vehicle.close()
         tally_images(recorder, vehicle_node, operator_node)
-        if failed is not None:
-            if env.now > 0:  # an error at the first instant leaves nothing to keep
-                keep_partial(failed, reduce)
-        else:
-            result = reduce(None)
-    if failed is not None:
-        raise failed
-    return replace(result, stopped=stopped or (late[0] if late else None))
+    stopped = stopped or (closing[0] if closing else None)
+    return reduce_run(reduce, failed, float(env.now), stopped)
 
 
 def _run_metrics(
