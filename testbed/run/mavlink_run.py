@@ -141,6 +141,7 @@ class MavlinkVehicleNode:
             EndpointPilot(self.endpoint),
             vehicle.reference_velocity,
             scenario.metrics.sample_rate_hz,
+            other_failsafe=lambda: self.endpoint.failsafe.active,  # the vehicle's own is off
         )
         vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
         for fault in scenario.faults.thrusters:

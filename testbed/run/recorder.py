@@ -39,6 +39,7 @@ from testbed.vehicle.components import (
     Armed,
     ControlMode,
     ControlTargets,
+    FailsafeLevel,
     FailsafeStatus,
     MissionStatus,
     PoseTarget,
@@ -78,6 +79,7 @@ SERIES_COLUMNS = (
     "est_n", "est_e", "est_d",                       # navigation estimate, NED (NaN: none)
     "ee_n", "ee_e", "ee_d",                          # end effector, truth, NED (NaN: no arm)
     "ee_target_n", "ee_target_e", "ee_target_d",     # autonomy's end-effector target (NaN: none)
+    "mode",                                          # mode in effect, ArduSub's number (NaN: none)
 )  # fmt: skip
 """Columns of :attr:`Recorder.series`, in order (filled by :meth:`VehicleObserver.row`)."""
 
@@ -100,6 +102,10 @@ class VehicleObserver:
             (:meth:`~testbed.vehicle.vehicle.Vehicle.reference_velocity`).
         sample_rate_hz: rate of the series rows [Hz]; a row is taken at the first frame at
             or after each sample instant.
+        other_failsafe: another failsafe that acts on this vehicle, asked at each row (in a
+            ``testbed mavlink`` run, ArduSub's pilot-input or GCS failsafe, the vehicle's own
+            being off there): while it says True, the ``failsafe`` column reads at least
+            HOLD (1). None: the vehicle's own level alone.
     """
 
     def __init__(
@@ -108,8 +114,10 @@ class VehicleObserver:
         pilot: Pilot,
         reference_velocity: Callable[[Sequence[float]], tuple[float, float, float, float]],
         sample_rate_hz: float,
+        other_failsafe: Callable[[], bool] | None = None,
     ) -> None:
         self._recorder = recorder
+        self._other_failsafe = other_failsafe
         self._pilot = pilot
         self._reference_velocity = reference_velocity
         self._sample_period_s = 1.0 / sample_rate_hz
@@ -126,7 +134,10 @@ class VehicleObserver:
         if now < self._next_sample_s - 1e-9:
             return
         self._next_sample_s += self._sample_period_s
-        self._recorder.rows.append(self.row(world, now, float(self._last_failsafe)))
+        failsafe = self._last_failsafe
+        if self._other_failsafe is not None and self._other_failsafe():
+            failsafe = max(failsafe, int(FailsafeLevel.HOLD))
+        self._recorder.rows.append(self.row(world, now, float(failsafe)))
 
     def _note_changes(self, world: World, now: float) -> None:
         """Events for the vehicle arming or disarming, a new mode in effect, a new failsafe
@@ -182,11 +193,14 @@ class VehicleObserver:
         estimate = world.get(ctl.vehicle, NavigationEstimate)
         row += _NO_ESTIMATE if estimate is None else estimate.position_ned_m
         if not world.has_resource(Manipulator):
-            return row + _NO_ESTIMATE + _NO_ESTIMATE
-        arm = world.resource(Manipulator)
-        row += arm.end_effector_ned(truth.position_ned_m, truth.quaternion_wxyz)
-        reach = world.get(ctl.vehicle, EndEffectorTarget)
-        return row + (_NO_ESTIMATE if reach is None else reach.position_ned_m)
+            row += _NO_ESTIMATE + _NO_ESTIMATE
+        else:
+            arm = world.resource(Manipulator)
+            row += arm.end_effector_ned(truth.position_ned_m, truth.quaternion_wxyz)
+            reach = world.get(ctl.vehicle, EndEffectorTarget)
+            row += _NO_ESTIMATE if reach is None else reach.position_ned_m
+        mode = world.get(ctl.vehicle, ActiveMode)
+        return (*row, math.nan if mode is None else float(mode.mode))
 
 
 class SeriesRows(Sequence[tuple[float, ...]]):

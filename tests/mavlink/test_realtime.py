@@ -118,3 +118,10 @@ def test_a_ground_station_connects_configures_flies_and_loses_contact(
     series = result.recorder.series()
     forward = series["rx_x"] > 0.4
     assert forward.any() and series["u"][forward].max() > 0.2  # the vehicle moved ahead
+    # series.csv as the ground station saw it: ALT_HOLD (custom_mode 2) from the ACK on; the
+    # GCS failsafe (system_status CRITICAL, never cleared: no heartbeat came back) in the
+    # failsafe column — ArduSub's failsafe, the vehicle's own being off in a MAVLink run
+    assert series["mode"][0] == 19.0 and series["mode"][-1] == 2.0
+    assert series["failsafe"][0] == 0.0 and series["failsafe"][-1] == 1.0
+    t_lost = next(e.t_s for e in result.recorder.events if e.kind == "ardusub_failsafe")
+    assert not series["failsafe"][series["t_s"] < t_lost].any()

@@ -220,7 +220,7 @@ def test_mission_metrics_without_any_target_are_nan_and_unknown_status_null() ->
 
 def test_new_series_columns_are_appended_at_the_end() -> None:
     assert SERIES_COLUMNS[:3] == ("t_s", "cmd_x", "cmd_y")
-    assert SERIES_COLUMNS[-13:] == (
+    assert SERIES_COLUMNS[-14:] == (
         "target_n",
         "target_e",
         "target_d",
@@ -234,5 +234,6 @@ def test_new_series_columns_are_appended_at_the_end() -> None:
         "ee_target_n",
         "ee_target_e",
         "ee_target_d",
+        "mode",
     )
     assert SERIES_COLUMNS.index("failsafe") == 31  # existing indices unchanged

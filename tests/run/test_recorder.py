@@ -244,3 +244,29 @@ def test_the_event_file_tells_when_the_vehicle_armed_and_changed_mode() -> None:
     )
     assert story[1][0] == story[2][0]
     assert sent + crossing <= story[1][0] <= sent + crossing + 0.01 + 1e-9
+
+
+def test_the_mode_column_is_manual_until_the_operators_mode_arrives_then_depth_hold() -> None:
+    """s100-teleop-v1's operator arms in depth hold at 1 s: the vehicle boots in MANUAL (19,
+    ArduSub's number) and the column turns to DEPTH_HOLD (2) once, when the first order has
+    crossed the link (its frame takes > 0.3 s at 1900 bit/s), and stays there; in
+    s100-outage-v1 the failsafe column is HOLD (1) from the first row 1 s (the failsafe's
+    staleness timeout) after the last order the vehicle took before the outage, until the
+    first order after it."""
+    result = run_scenario(load_scenario("s100-teleop-v1", ["duration_s=20", "metrics.settle_s=5"]))
+    series = result.recorder.series()
+    t, mode = series["t_s"], series["mode"]
+    (changes,) = np.nonzero(np.diff(mode))
+    assert len(changes) == 1 and mode[0] == 19.0 and mode[-1] == 2.0
+    assert 1.3 < t[changes[0] + 1] < 2.0
+    outage = run_scenario(load_scenario("s100-outage-v1", ["duration_s=70", "metrics.settle_s=5"]))
+    series = outage.recorder.series()
+    held = series["t_s"][series["failsafe"] == 1.0]
+    assert set(np.unique(series["failsafe"])) == {0.0, 1.0}
+    taken = [frame_s for frame_s, _ in outage.recorder.command_updates]
+    before = max(t_s for t_s in taken if t_s < 60.0)  # the outage: 60–62 s
+    after = min(t_s for t_s in taken if t_s > 60.0)
+    row_s = 1.0 / outage.scenario.metrics.sample_rate_hz
+    assert before + 1.0 <= held[0] < before + 1.0 + row_s + 0.011  # + a 100-Hz frame
+    assert held[-1] < after <= held[-1] + row_s
+    assert len(held) == round((after - held[0]) / row_s)  # no gap inside
