@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import reprlib
 import tomllib
 import types
 import typing
@@ -36,9 +37,22 @@ __all__ = [
     "named_table",
     "parse_override",
     "read_text",
+    "shown",
     "to_float",
     "user_file",
 ]
+
+
+_BRIEF = reprlib.Repr()  # Python 3.11's takes no arguments
+_BRIEF.maxlevel, _BRIEF.maxdict, _BRIEF.maxlist, _BRIEF.maxtuple = 2, 4, 6, 6
+_BRIEF.maxstring = _BRIEF.maxother = 60
+
+
+def shown(value: Any) -> str:
+    """``repr(value)`` cut short for a one-line message (a 200 000-point array pasted where a
+    table belongs made a 21-MB "line"): at most six items of a list, four of a dict, two levels,
+    60 characters of a string, with ``...`` where something was left out."""
+    return _BRIEF.repr(value)
 
 
 class ConfigError(ValueError):
@@ -138,7 +152,7 @@ def to_float(value: Any, source: str, key: str) -> float:
             formats' integers have no bound): ``"<source>: <key>: ..."``.
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{source}: {key}: expected a number, got {value!r}")
+        raise ConfigError(f"{source}: {key}: expected a number, got {shown(value)}")
     try:
         return float(value)
     except OverflowError:  # only an int overflows
@@ -372,7 +386,7 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
     if origin is typing.Literal:
         if value not in args:
             choices = ", ".join(repr(a) for a in args)
-            raise ConfigError(f"{source}: {key}: expected one of {choices}, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected one of {choices}, got {shown(value)}")
         return value
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
@@ -388,7 +402,7 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
         raise errors[0]
     if origin is tuple:
         if not isinstance(value, list | tuple):
-            raise ConfigError(f"{source}: {key}: expected an array, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected an array, got {shown(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_convert(args[0], v, source, f"{key}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
@@ -399,15 +413,15 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
         )
     if origin is dict:
         if not isinstance(value, Mapping):
-            raise ConfigError(f"{source}: {key}: expected a table, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected a table, got {shown(value)}")
         return {str(k): _convert(args[1], v, source, f"{key}.{k}") for k, v in value.items()}
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{source}: {key}: expected true or false, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected true or false, got {shown(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{source}: {key}: expected an integer, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected an integer, got {shown(value)}")
         return value
     if tp is float:
         number = to_float(value, source, key)
@@ -416,7 +430,7 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
         return number
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{source}: {key}: expected a string, got {value!r}")
+            raise ConfigError(f"{source}: {key}: expected a string, got {shown(value)}")
         return value
     if tp is Any:
         return value

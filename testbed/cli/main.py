@@ -145,6 +145,22 @@ def _signalled(signum: int, frame: FrameType | None) -> None:
     raise _interrupt_for(signum)
 
 
+def _swallowed(unraisable: sys.UnraisableHookArgs) -> None:
+    """``sys.unraisablehook`` while a command runs: an interrupt the handler raised where
+    Python cannot raise (a weakref callback, a ``__del__``, the garbage collector's callbacks:
+    "Exception ignored in …", and the command went on to exit 0, seen while plotting) is sent
+    again a moment later, to be raised in the command's own code; anything else goes to the
+    hook that was there before."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _SIGNALLED:
+        signum = _SIGNALLED.pop()  # appended again when it is handled
+        _thread.start_new_thread(_send_again, (threading.get_ident(), signum))  # the main one
+        return
+    _PREVIOUS_UNRAISABLE_HOOK[0](unraisable)
+
+
+_PREVIOUS_UNRAISABLE_HOOK = [sys.unraisablehook]
+
+
 _STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
 """What a disk says when results cannot be written: one line, not a traceback (exit 1)."""
 
@@ -181,6 +197,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _signalled)))
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
             previous.append((signal.SIGINT, signal.signal(signal.SIGINT, _signalled)))
+        _PREVIOUS_UNRAISABLE_HOOK[0] = sys.unraisablehook
+        sys.unraisablehook = _swallowed
     try:
         code: int = args.handler(args)
     except ConfigError as err:
@@ -212,4 +230,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         for signum, handler in previous:
             signal.signal(signum, handler)  # type: ignore[arg-type]
+        if sys.unraisablehook is _swallowed:
+            sys.unraisablehook = _PREVIOUS_UNRAISABLE_HOOK[0]
     return code

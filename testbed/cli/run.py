@@ -17,7 +17,7 @@ from testbed.cli.options import (
     check_seed,
     exit_code_of,
     missing,
-    warn_token_cycle,
+    warn_scenario,
 )
 from testbed.cli.options import format_value as _num
 from testbed.config import ConfigError
@@ -78,7 +78,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
     check_seed(args.seed)
     scenario = load_scenario(args.scenario, args.overrides)
-    warn_token_cycle(scenario)
+    warn_scenario(scenario)
     out = args.out
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -300,6 +300,8 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"  yaw error std {_num(yaw['std'], digits=2, unit=' deg')}; "
         f"energy {metrics['energy_wh']:.3f} Wh",
     ]
+    if (failsafe := failsafe_note(metrics)) is not None:
+        lines.append(f"  {failsafe}")
     images = metrics.get("images")
     if images is not None:
         latency, psnr = images["latency_s"]["mean"], images["psnr_db"]["mean"]
@@ -311,11 +313,16 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
     mission = metrics.get("mission")
     if mission is not None:
         error = mission["position_error_m"]
+        arrival = mission.get("final_target_s")
+        settled = (
+            f"settled {_num(mission['time_to_converge_s'], digits=2)} s after the final target "
+            f"(at {_num(arrival, digits=1)} s)"
+        )
+        if missing(arrival) and mission.get("samples"):
+            settled = "no final target: it still moved at the last armed row"
         lines.append(
             f"  mission position error mean {_num(error['mean'])} m, std {_num(error['std'])} m, "
-            f"final {_num(error['final'])} m; settled "
-            f"{_num(mission['time_to_converge_s'], digits=2)} s after the final target (at "
-            f"{_num(mission.get('final_target_s'), digits=1)} s); goals reached "
+            f"final {_num(error['final'])} m; {settled}; goals reached "
             f"{_goals(mission['goals_reached'], mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
@@ -328,6 +335,7 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             lines.append(f"  {never}")
     if (gated := gate_rejections(metrics)) is not None:
         lines.append(f"  {gated}")
+    lines += [f"  {line}" for line in silent_sources(metrics)]
     if (capsized := _capsized(metrics)) is not None:
         lines.append(f"  {capsized}")
     lines.append(f"  wrote {out}/")
@@ -378,6 +386,38 @@ def gate_rejections(metrics: dict[str, Any], *, brief: bool = False) -> str | No
             "vehicle.navigation.filter.accel_noise_m2_s3 (docs/autonomy.md)"
         )
     return line
+
+
+def failsafe_note(metrics: dict[str, Any]) -> str | None:
+    """The line saying the vehicle's link failsafe engaged (and surfaced it, which disarms
+    it), or None when it never did (keys only ever added: older files have no
+    ``failsafe_surfaced``)."""
+    events = metrics.get("events", {})
+    engaged, surfaced = events.get("failsafe"), events.get("failsafe_surfaced")
+    if missing(engaged) or not engaged:  # none, or counted on another computer (HIL)
+        return None
+    note = f"link failsafe engaged {engaged} time{'s' if engaged != 1 else ''}"
+    if not missing(surfaced) and surfaced:
+        note += f", surfaced {surfaced} (then disarmed; events.csv has when)"
+    return note
+
+
+def silent_sources(metrics: dict[str, Any]) -> list[str]:
+    """A warning line for each fitted navigation source that delivered nothing (a DVL out of
+    bottom lock the whole run, say), with what it lost when it counts that."""
+    navigation = metrics.get("navigation") or {}
+    lost = navigation.get("lost") or {}
+    lines = []
+    for name, count in (navigation.get("delivered") or {}).items():
+        if count:
+            continue
+        why = ""
+        if (losses := lost.get(name)) is not None:
+            why = (
+                f": {losses['unlocked']} samples without bottom lock, {losses['dropouts']} dropped"
+            )
+        lines.append(f"warning: navigation source {name} delivered nothing{why}")
+    return lines
 
 
 def never_ready(mission: dict[str, Any]) -> str | None:

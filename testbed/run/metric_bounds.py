@@ -35,6 +35,7 @@ NON_NEGATIVE_METRICS = (
     "mission.orders_acknowledged",
     "mission.samples",
     "navigation.delivered.*",
+    "navigation.lost.*",
     "navigation.filter.*",
     "navigation.by_source.*",
     # rates and sizes [bit/s, B, 1/min]

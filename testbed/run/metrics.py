@@ -383,20 +383,26 @@ def final_target_s(
 
     Args:
         t_s: (n,) sample times [s], increasing.
-        target: (n, 3) target positions [m], NED; a row with a NaN counts as different.
-        atol_m: how far a coordinate may differ and still be the final value [m].
+        target: (n, 3) target positions [m], NED, or (n, 4) with the target yaw [deg] last (a
+            waypoint that only turns the vehicle moves the target too); a row with a NaN
+            counts as different.
+        atol_m: how far a coordinate may differ and still be the final value [m, or deg].
 
     Returns:
-        That time [s]; NaN without samples or when the last one has no target.
+        That time [s]; NaN without samples, when the last one has no target, or when the
+        target still moved between the last two (a run that ended mid-trajectory).
     """
     t = np.asarray(t_s, dtype=float)
-    p = np.asarray(target, dtype=float).reshape(-1, 3)
+    p = np.asarray(target, dtype=float)
+    p = p.reshape(-1, p.shape[-1] if p.ndim > 1 else 3)
     if t.size != len(p):
         raise ValueError(f"{t.size} times for {len(p)} target samples")
     if t.size == 0 or not np.isfinite(p[-1]).all():
         return math.nan
     same = (np.abs(p - p[-1]) <= atol_m).all(axis=1)  # NaN compares False
     moved = np.flatnonzero(~same)
+    if moved.size and moved[-1] == t.size - 2:  # still moving at the end: it never arrived
+        return math.nan
     return float(t[int(moved[-1]) + 1 if moved.size else 0])
 
 
@@ -405,10 +411,13 @@ def settling_time_s(
     truth: Sequence[Sequence[float]] | np.ndarray,
     target: Sequence[Sequence[float]] | np.ndarray,
     tolerance_m: float,
+    target_yaw_deg: Sequence[float] | np.ndarray | None = None,
 ) -> tuple[float, float]:
     """How long after the target arrived at its final value the position error settled.
 
-    ``arrival`` = :func:`final_target_s` of ``target``; on the samples from then on, the
+    ``arrival`` = :func:`final_target_s` of ``target`` (with ``target_yaw_deg`` when it is
+    given and its last value is finite: a last waypoint that only turns the vehicle arrives
+    when the turn ends); on the samples from then on, the
     error to that (final) target is :func:`position_error`, and the settling time is
     :func:`time_to_converge_s` of it minus ``arrival``: 0 when the vehicle arrived with its
     target and stayed within tolerance, NaN when it ended outside.
@@ -418,12 +427,18 @@ def settling_time_s(
         truth: (n, 3) positions flown [m], NED.
         target: (n, 3) their targets [m], NED.
         tolerance_m: the goal tolerance [m].
+        target_yaw_deg: (n,) the target yaw [deg], or None.
 
     Returns:
         ``(settling [s], arrival [s])``; both NaN when there is no final target.
     """
     t = np.asarray(t_s, dtype=float)
-    arrival = final_target_s(t, target)
+    track = np.asarray(target, dtype=float).reshape(-1, 3)
+    if target_yaw_deg is not None:
+        yaw = np.asarray(target_yaw_deg, dtype=float)
+        if yaw.size and math.isfinite(yaw[-1]):
+            track = np.column_stack([track, yaw])
+    arrival = final_target_s(t, track)
     if math.isnan(arrival):
         return math.nan, math.nan
     rows = t >= arrival

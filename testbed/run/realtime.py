@@ -532,7 +532,7 @@ def hil_metrics(
         else vehicle_node.vehicle.world.resource(Controllers).ignored_setpoints,
     )
     if vehicle_node is None:  # the vehicle's own counts are kept on the other computer
-        metrics["events"].update(failsafe=nan, thruster_fault=nan)
+        metrics["events"].update(failsafe=nan, failsafe_surfaced=nan, thruster_fault=nan)
     if _PRESET_OF_MODEM.get(modem) != scenario.link.preset:  # the closed form is another link's
         metrics["token_round_trip_s"], metrics["reply_fits_gap"] = nan, None
     metrics["link"] = {

@@ -34,6 +34,7 @@ from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
 from testbed.run.images import ImageLog
+from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.components import (
     ActiveMode,
     Armed,
@@ -90,8 +91,10 @@ _NO_ESTIMATE = (math.nan,) * 3
 
 class VehicleObserver:
     """POST_UPDATE system appended to the vehicle's schedule: records what the vehicle
-    publishes — failsafe changes and the mission's goals given and reached (``mission_goal``,
-    ``mission_reached``) as node events and, at ``sample_rate_hz``, one series row —
+    publishes — failsafe changes, the mission's goals given and reached (``mission_goal``,
+    ``mission_reached``: the goal's number, counting from 1) and the mission tree's status line
+    whenever it changes (``mission``: "executing square", "…: goal not reached within 10 s",
+    "cancelled: …") as node events and, at ``sample_rate_hz``, one series row —
     reading its resources and components only (never the controllers' or the plant's insides).
 
     Args:
@@ -126,11 +129,21 @@ class VehicleObserver:
         self._last_mission: tuple[int, int] = (0, 0)
         self._last_armed = False
         self._last_mode: ControlMode | None = None
+        self._autonomy: Autonomy | bool | None = False  # False: not looked up yet
+        self._last_status = ""
 
     def __call__(self, world: World) -> None:
         now = world.resource(SimClock).time_s
         if world.changed_any(FailsafeStatus, MissionStatus, Armed, ActiveMode):  # since last run
             self._note_changes(world, now)
+        auto = self._autonomy
+        if auto is False:
+            auto = self._autonomy = (
+                world.resource(Autonomy) if world.has_resource(Autonomy) else None
+            )
+        if isinstance(auto, Autonomy) and auto.status != self._last_status:
+            self._last_status = auto.status
+            self._recorder.event(now, "vehicle", "mission", auto.status)
         if now < self._next_sample_s - 1e-9:
             return
         self._next_sample_s += self._sample_period_s
@@ -161,8 +174,8 @@ class VehicleObserver:
             goals, reached = self._last_mission
             if mission.goals != goals:
                 self._recorder.event(now, "vehicle", "mission_goal", str(mission.goals))
-            if mission.reached != reached:
-                self._recorder.event(now, "vehicle", "mission_reached", str(mission.reached))
+            if mission.reached != reached:  # the goal in force was reached: its number
+                self._recorder.event(now, "vehicle", "mission_reached", str(mission.goals))
             self._last_mission = (mission.goals, mission.reached)
 
     def row(self, world: World, now: float, failsafe: float) -> tuple[float, ...]:

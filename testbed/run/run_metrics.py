@@ -265,6 +265,9 @@ def compute_metrics(
         "frames_rejected": dict(recorder.frames_rejected),
         "events": {
             "failsafe": failsafe_engagements(recorder.events),
+            "failsafe_surfaced": sum(
+                1 for e in recorder.events if e.kind == "failsafe" and e.detail == "SURFACE"
+            ),
             "thruster_fault": sum(1 for e in recorder.events if e.kind == "thruster_fault"),
             "ignored_setpoints": ignored_setpoints,
         },
@@ -289,12 +292,18 @@ def compute_metrics(
     return metrics
 
 
+_LOSS_COUNTERS = ("unlocked", "dropouts")
+"""What a source that can miss samples counts (the DVL: no bottom lock, random dropout)."""
+
+
 def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
     """The ``"navigation"`` key of ``metrics.json`` (a vehicle with ``[vehicle.navigation]``):
     what the sources delivered and what the filter did with it.
 
     ``delivered``: measurements handed to the localizer, by source (``"depth"`` for the depth
-    sensor). ``filter``: the default localizer's counters
+    sensor), every fitted source named (0: it never delivered). ``lost``: for a source that
+    can miss samples (the DVL), its samples without bottom lock (``unlocked``) and those lost
+    to random dropout (``dropouts``). ``filter``: the default localizer's counters
     (:class:`~testbed.vehicle.estimation.FilterCounters`: ``accepted``, ``rejected`` by the χ²
     gate, ``invalid``, ``stale``, ``rollbacks``, ``reacquired``), ``by_source``: its
     ``accepted`` and ``rejected`` split by source, and ``gate_probability``: the gate's (the
@@ -312,8 +321,18 @@ def navigation_metrics(navigation: Navigation) -> dict[str, Any]:
             name: {"accepted": accepted, "rejected": rejected}
             for name, (accepted, rejected) in localizer.navigator.source_counters.items()
         }
+    delivered = {source.name: 0 for source in navigation.sources}  # a silent one shows 0
+    if navigation.depth_sigma_m > 0.0:
+        delivered["depth"] = 0
+    delivered.update(navigation.delivered)
+    lost = {
+        source.name: {key: int(getattr(source, key)) for key in _LOSS_COUNTERS}
+        for source in navigation.sources
+        if all(hasattr(source, key) for key in _LOSS_COUNTERS)
+    }
     return {
-        "delivered": dict(sorted(navigation.delivered.items())),
+        "delivered": dict(sorted(delivered.items())),
+        "lost": lost,
         "filter": filter_counts,
         "by_source": by_source,
         "gate_probability": gate,
@@ -453,7 +472,10 @@ def mission_metrics(
     nav_error = position_error(estimate[rows], body[rows])
     nav_error = nav_error[np.isfinite(nav_error)]
     heading = yaw_error_deg(series["yaw_deg"][rows], series["target_yaw_deg"][rows])
-    settling, arrival = settling_time_s(t[flying], truth[flying], target[flying], tolerance_m)
+    yaw_target = None if reaching else series["target_yaw_deg"][flying]
+    settling, arrival = settling_time_s(
+        t[flying], truth[flying], target[flying], tolerance_m, yaw_target
+    )
     return {
         "frame": "end_effector" if reaching else "body",
         "goal_tolerance_m": tolerance_m,

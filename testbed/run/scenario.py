@@ -190,10 +190,12 @@ class Scenario:
                 f"faults.link_outages[{i}].end_s",
                 f"must be ≤ duration_s ({end}), got {outage.end_s}",
             )
+        autonomy = self.vehicle.autonomy
         for key, value in (
             ("operator.arm_at_s", self.operator.arm_at_s),
             ("pilot.start_s", self.pilot.start_s),
             ("metrics.settle_s", self.metrics.settle_s),
+            ("vehicle.autonomy.start_s", 0.0 if autonomy is None else autonomy.start_s),
         ):
             check(value < end, key, f"must be < duration_s ({end}), got {value}")
         self._check_images()

@@ -262,6 +262,13 @@ class Autonomy:
     cancels: int = 0
     cancelled: bool = False
 
+    @property
+    def status(self) -> str:
+        """One line on what the mission tree is doing, as of its last tick ("executing
+        square", "square: goal reached", "…: goal not reached within 10 s", "cancelled:
+        holding the current pose", "setup failed: …"); "" before its first tick."""
+        return self.context.status
+
 
 def build_autonomy(config: AutonomyConfig, model: HydroModel) -> Autonomy:
     """The :class:`Autonomy` resource of ``config`` for a vehicle whose plant is ``model``."""

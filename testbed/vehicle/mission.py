@@ -31,8 +31,9 @@ waypoints[2].time_from_start: must be > 3 s (the previous waypoint's), got 3``.
 **Trajectories.** :func:`plan` prepends the vehicle's pose at ``t = 0`` when the first waypoint
 is later than 0 (as Angler does), then interpolates linearly: position per axis, yaw along the
 shorter way round; the feed-forward velocity is the segment's slope. The optional ``velocity``
-and ``acceleration`` of a waypoint are checked and kept, not used (Angler's Hermite variant is
-not implemented). After the last waypoint the trajectory holds the last pose, velocity zero.
+and ``acceleration`` of a waypoint must be zeros (Angler's files carry them so; a non-zero one
+is refused, since Angler's Hermite variant is not implemented and it would not be flown).
+After the last waypoint the trajectory holds the last pose, velocity zero.
 
 Pure: standard library and ``testbed.config`` / ``testbed.common.geometry`` only; no py_trees, no
 ECS (the behaviour tree that runs missions is :mod:`testbed.vehicle.behaviours`).
@@ -51,7 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.common.geometry import Vec3, wrap_angle
-from testbed.config import ConfigError, read_text, to_float
+from testbed.config import ConfigError, read_text, shown, to_float
 
 __all__ = [
     "BODY_FRAMES",
@@ -393,7 +394,9 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
     child = _frame(data["child"], "child", BODY_FRAMES + TOOL_FRAMES, source)
     raw_points = data["waypoints"]
     if not isinstance(raw_points, list) or not raw_points:
-        raise ConfigError(f"{source}: waypoints: expected a non-empty array, got {raw_points!r}")
+        raise ConfigError(
+            f"{source}: waypoints: expected a non-empty array, got {shown(raw_points)}"
+        )
     points: list[Waypoint] = []
     for i, raw in enumerate(raw_points):
         key = f"waypoints[{i}]"
@@ -450,7 +453,7 @@ def parse_mission(data: Any, source: str = "<mission>") -> Mission:
 def _keys(data: Any, key: str, known: Sequence[str], required: Sequence[str], source: str) -> None:
     where = key or "<root>"
     if not isinstance(data, Mapping):
-        raise ConfigError(f"{source}: {where}: expected an object, got {data!r}")
+        raise ConfigError(f"{source}: {where}: expected an object, got {shown(data)}")
     prefix = f"{key}." if key else ""
     unknown = sorted(set(data) - set(known))
     if unknown:
@@ -471,7 +474,7 @@ def _number(value: Any, key: str, source: str) -> float:
 
 def _string(value: Any, key: str, source: str) -> str:
     if not isinstance(value, str):
-        raise ConfigError(f"{source}: {key}: expected a string, got {value!r}")
+        raise ConfigError(f"{source}: {key}: expected a string, got {shown(value)}")
     return value
 
 
@@ -489,9 +492,18 @@ def _frame(value: Any, key: str, known: Sequence[str], source: str) -> str:
 
 
 def _six(value: Any, key: str, source: str) -> Vec6 | None:
+    """A waypoint's optional ``velocity`` or ``acceleration``: six numbers, all zero (the
+    trajectory is linear between waypoints, its velocity the segment's slope; a non-zero
+    one would be ignored, which flies another experiment than the file describes)."""
     if value is None:
         return None
     if not isinstance(value, list) or len(value) != 6:
-        raise ConfigError(f"{source}: {key}: expected an array of 6 numbers, got {value!r}")
+        raise ConfigError(f"{source}: {key}: expected an array of 6 numbers, got {shown(value)}")
     a, b, c, d, e, f = (_number(v, f"{key}[{i}]", source) for i, v in enumerate(value))
+    if any((a, b, c, d, e, f)):
+        raise ConfigError(
+            f"{source}: {key}: must be zeros or left out (not flown: the trajectory runs "
+            "straight between waypoints at the segment's slope; Angler's Hermite variant is "
+            f"not implemented), got {[a, b, c, d, e, f]}"
+        )
     return (a, b, c, d, e, f)

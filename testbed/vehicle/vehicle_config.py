@@ -23,9 +23,7 @@ from testbed.config import (
     load_toml,
 )
 from testbed.vehicle.arm_body import G_M_S2, RHO_KG_M3
-from testbed.vehicle.autonomy import (
-    AutonomyConfig,
-)
+from testbed.vehicle.autonomy import AutonomyConfig, resolve_mission
 from testbed.vehicle.camera import CameraConfig
 from testbed.vehicle.control import (
     FailsafeConfig,
@@ -36,7 +34,7 @@ from testbed.vehicle.localization import (
     NavigationConfig,
 )
 from testbed.vehicle.manipulation import ArmConfig
-from testbed.vehicle.mission import MAX_POSITION_M
+from testbed.vehicle.mission import BODY_FRAMES, MAX_POSITION_M
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
 from testbed.vehicle.physics import PoolScene
 from testbed.vehicle.pilot import PilotGains
@@ -230,6 +228,8 @@ class VehicleConfig:
         )
         check_ranges(self.start_euler_rad, "start_euler_rad", -2 * math.pi, 2 * math.pi, "rad")
         self._check_arm_controller()
+        self._check_arm_mission()
+        self._check_dvl_bottom()
         self._check_arm_load()
         self._check_ismc_gains()
         self._check_layout_fits_hull()
@@ -244,6 +244,36 @@ class VehicleConfig:
                 f"{0.5 * pool.width_m:g} m, depth ≤ {pool.depth_m:g} m), got "
                 f"{list(self.start_position_ned_m)}",
             )
+
+    def _check_arm_mission(self) -> None:
+        """Refuse an end-effector mission (``child`` a tool frame) without an arm: its points
+        are the tool's, and flying the hull to them is another experiment (it was flown so,
+        without a word, as an operator's end-effector goal never was)."""
+        autonomy = self.autonomy
+        if self.arm is not None or autonomy is None or autonomy.mission is None:
+            return
+        mission = resolve_mission(autonomy.mission)
+        check(
+            not mission.end_effector,
+            "autonomy.mission",
+            f"{mission.source}: child {mission.child!r} is the arm's end effector, and the "
+            "vehicle has no arm (vehicle.arm); for the hull's own waypoints use child "
+            f"{BODY_FRAMES[0]!r}",
+        )
+
+    def _check_dvl_bottom(self) -> None:
+        """Refuse a DVL's flat bottom at or above the vehicle's start: the vehicle would start
+        in the seabed (the DVL then never locks, and the run said nothing)."""
+        navigation = self.navigation
+        if navigation is None or navigation.dvl is None:
+            return
+        bottom, depth = navigation.dvl.bottom_depth_m, self.start_position_ned_m[2]
+        check(
+            bottom > depth,
+            "navigation.dvl.bottom_depth_m",
+            f"the bottom ({bottom:g} m) must lie below the vehicle's start depth "
+            f"(start_position_ned_m: {depth:g} m)",
+        )
 
     def _check_arm_load(self) -> None:
         """Refuse an arm that weighs more in water than the whole vehicle weighs in air: no

@@ -249,3 +249,59 @@ def test_results_are_not_written_through_a_planted_link(tmp_path: Path) -> None:
     for name in ("events.csv", "series.csv", "metrics.json"):
         info = (out / name).lstat()
         assert stat.S_ISREG(info.st_mode) and stat.S_IMODE(info.st_mode) == 0o666 & ~mask
+
+
+def test_an_end_effector_mission_on_a_vehicle_without_an_arm_is_refused(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """ee_waypoint's points are the jaws'; heavy-waypoint-v1 has no arm. It flew the hull to
+    them, exit 0, "goals reached 1/1" (an operator's end-effector goal was refused already)."""
+    argv = ["run", "heavy-waypoint-v1", "--set", "trials=1", "--out", str(tmp_path / "r")]
+    assert main([*argv, "--set", "vehicle.autonomy.mission=ee_waypoint"]) == 2
+    assert capsys.readouterr().err == (
+        "testbed: error: --set: vehicle.autonomy.mission: missions/ee_waypoint.json: child "
+        "'alpha_standard_jaws_tool' is the arm's end effector, and the vehicle has no arm "
+        "(vehicle.arm); for the hull's own waypoints use child 'base_link'\n"
+    )
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_mission_after_or_beyond_the_run_is_said_not_settled(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A start after the run's end is refused; goals after it are warned of (a shortened
+    run may mean it); a run that ends mid-trajectory has no final target, where the summary
+    said "settled 0.00 s after the final target (at 14.9 s)" while the target still moved."""
+    common = ["run", "heavy-station-keeping-v1", "--set", "trials=1", "--no-plots"]
+    late = ["--set", "duration_s=20", "--set", "vehicle.autonomy.start_s=1000"]
+    assert main([*common, *late, "--out", str(tmp_path / "late")]) == 2
+    assert "vehicle.autonomy.start_s: must be < duration_s (20.0), got 1000.0" in (
+        capsys.readouterr().err
+    )
+    short = ["--set", "duration_s=15", "--set", "vehicle.autonomy.mission=square"]
+    assert main([*common, *short, "--out", str(tmp_path / "short")]) == 0
+    mission = json.loads((tmp_path / "short" / "metrics.json").read_text())["mission"]
+    assert mission["final_target_s"] is None and mission["time_to_converge_s"] is None
+    assert "no final target: it still moved at the last armed row" in capsys.readouterr().out
+    supervised = ["run", "s100-supervised-v1", "--set", "duration_s=30", "--no-plots"]
+    assert main([*supervised, "--out", str(tmp_path / "goals")]) == 0
+    err = capsys.readouterr().err
+    assert err == (
+        "testbed: warning: pilot.goals[2]…[5] at t ≥ 45 s come after the run's end (30 s): "
+        "not sent\n"
+    )
+
+
+def test_a_link_failsafe_that_surfaced_and_disarmed_the_vehicle_is_said(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """At BER 0.1 no S100 frame gets through: the failsafe holds after 1 s and surfaces after
+    5 s, which disarms the vehicle; the summary said nothing of it."""
+    out = tmp_path / "r"
+    argv = ["run", "s100-supervised-v1", "--set", "duration_s=40", "--set", "link.ber=0.1"]
+    assert main([*argv, "--no-plots", "--out", str(out)]) == 0
+    events = json.loads((out / "metrics.json").read_text())["events"]
+    assert (events["failsafe"], events["failsafe_surfaced"]) == (1, 1)
+    assert "  link failsafe engaged 1 time, surfaced 1 (then disarmed; events.csv has when)\n" in (
+        capsys.readouterr().out
+    )

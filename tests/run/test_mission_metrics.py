@@ -117,6 +117,9 @@ def test_final_target_and_settling_by_hand() -> None:
     ends_outside = [*truth[:4], (1.7, 0, 0)]
     settling, arrival = settling_time_s(t, ends_outside, target, 0.2)
     assert math.isnan(settling) and arrival == 2.0
+    turning = [0.0, 0.0, 0.0, 45.0, 45.0]  # the last waypoint only turns: it arrives at 3 s
+    assert settling_time_s(t, truth, target, 0.2, turning) == (0.0, 3.0)
+    assert settling_time_s(t, truth, target, 0.2, [math.nan] * 5) == (1.0, 2.0)  # no yaw target
 
 
 def test_yaw_error_is_wrapped_and_absolute() -> None:

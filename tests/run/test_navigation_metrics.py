@@ -78,3 +78,35 @@ def test_rejections_by_chance_are_counted_without_advice() -> None:
     expected = "navigation filter's χ² gate rejected 1 of 13998 measurements (mocap 1/6998)"
     assert line == f"{expected}, re-acquired 0"
     assert "accel_noise_m2_s3" in (gate_rejections(metrics(15)) or "")
+
+
+def test_a_dvl_that_never_delivers_is_named_with_what_it_lost() -> None:
+    """A DVL fitted beside motion capture that lost every sample (dropouts certain; or the
+    bottom out of its lock window) used to leave no trace: no ``dvl`` key at all, no line.
+    At 5 Hz over 20 s it samples 100 times (closed form), all lost either way."""
+    rate_hz, duration_s = 5.0, 20.0
+    common = ["trials=1", f"duration_s={duration_s}"]
+    for dvl, lost in (
+        ("dropout_probability=1.0", {"unlocked": 0, "dropouts": 100}),
+        ("bottom_depth_m=3.0, max_altitude_m=1.0", {"unlocked": 100, "dropouts": 0}),
+    ):
+        navigation = f"vehicle.navigation={{dvl={{rate_hz={rate_hz}, {dvl}}}, motion_capture={{}}}}"
+        metrics = run_scenario(
+            load_scenario("heavy-station-keeping-v1", [*common, navigation])
+        ).metrics
+        reported = metrics["navigation"]
+        assert reported["delivered"]["dvl"] == 0 and reported["lost"] == {"dvl": lost}
+        assert sum(lost.values()) == round(rate_hz * duration_s)
+        line = (
+            f"  warning: navigation source dvl delivered nothing: {lost['unlocked']} samples "
+            f"without bottom lock, {lost['dropouts']} dropped\n"
+        )
+        assert line in format_summary(metrics, Path("out"))
+
+
+def test_a_dvl_bottom_above_the_vehicles_start_is_refused() -> None:
+    from testbed.config import ConfigError
+
+    navigation = "vehicle.navigation={dvl={bottom_depth_m=0.5}, motion_capture={}}"
+    with pytest.raises(ConfigError, match=r"dvl\.bottom_depth_m: the bottom \(0\.5 m\) must lie"):
+        load_scenario("heavy-station-keeping-v1", [navigation])

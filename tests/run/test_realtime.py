@@ -1006,6 +1006,7 @@ def test_two_computers_each_write_what_they_observe(window: Window) -> None:
     # the vehicle's own counts where it runs, null at the lone operator (they were 0 there)
     assert operator["events"] == {
         "failsafe": None,
+        "failsafe_surfaced": None,
         "thruster_fault": None,
         "ignored_setpoints": None,
     }

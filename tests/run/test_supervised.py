@@ -120,3 +120,27 @@ def test_over_the_change_set_codec_goals_and_cancels_replicate() -> None:
     held = target[(t > 6.3) & (t < 8.9)]
     assert np.all(np.diff(moving) > 0)  # the leg's target walks north at 0.2 m/s
     assert np.ptp(held) == 0.0 and 0.3 < held[0] < 1.0  # after the cancel: held where it was
+
+
+def test_events_tell_each_goals_story_by_its_number_and_the_cancel() -> None:
+    """s100-supervised-v1 whole: five GoTo orders, a cancel at 70 s while goal 4 flies. The
+    vehicle's events name each goal by its number (reached: 1, 2, 3 and 5; goal 4 was
+    reached as a count of 4, which read as goal 4 until now) and the mission tree's status
+    lines say when the cancel was honoured: after the cancel order crossed the link, before
+    goal 5 was given."""
+    result = run("link.ber=0")
+    goals = result.scenario.pilot.goals
+    cancel_s = next(goal.t_s for goal in goals if goal.cancel)
+    given = [goal for goal in goals if not goal.cancel]
+    overtaken = max(k for k, goal in enumerate(given, start=1) if goal.t_s < cancel_s)
+    events = [e for e in result.recorder.events if e.node == "vehicle"]
+    numbers = [int(e.detail) for e in events if e.kind == "mission_goal"]
+    reached = [int(e.detail) for e in events if e.kind == "mission_reached"]
+    assert numbers == list(range(1, len(given) + 1))
+    assert reached == [k for k in numbers if k != overtaken]
+    story = [(e.t_s, e.detail) for e in events if e.kind == "mission"]
+    (cancelled_s,) = [t_s for t_s, line in story if line.startswith("cancelled")]
+    next_goal_s = [e.t_s for e in events if e.kind == "mission_goal"][overtaken]
+    assert cancel_s < cancelled_s < next_goal_s
+    executing = [line for _, line in story if line.startswith("executing")]
+    assert len(executing) == len(given)

@@ -23,8 +23,8 @@ from testbed.run.trials import HEADLINE, TRIALS_FILE, WALL_CLOCK_KEYS, run_trial
 SCENARIO = """\
 schema = 1
 id = "station-trials-v1"
-description = "station keeping on motion capture, a few seconds"
-duration_s = 4.0
+description = "station keeping on motion capture, past the mission's 10-s leg"
+duration_s = 11.0
 seed = 7
 trials = {trials}
 

@@ -234,16 +234,36 @@ def test_a_missing_file_is_named(tmp_path: Path) -> None:
         load_mission(tmp_path / "nowhere.json")
 
 
-def test_optional_velocity_and_acceleration_are_kept(tmp_path: Path) -> None:
+def test_zero_velocity_and_acceleration_are_kept_and_a_non_zero_one_is_refused(
+    tmp_path: Path,
+) -> None:
+    """Angler's files carry zero velocities and accelerations: kept. A non-zero one would not
+    be flown (the trajectory is linear between waypoints): refused, naming the field, where it
+    used to be accepted and silently ignored."""
     point = _point(1.0, 0.0, 0.0, 1.0)
-    point["velocity"] = [0.1, 0, 0, 0, 0, 0]
-    point["acceleration"] = [0, 0, 0, 0, 0, 0.5]
+    point["velocity"] = [0, 0, 0, 0, 0, 0]
+    point["acceleration"] = [0.0] * 6
     path = tmp_path / "m.json"
     path.write_text(json.dumps(_doc(point)), encoding="utf-8")
     mission = load_mission(path)
-    assert mission.waypoints[0].velocity == (0.1, 0.0, 0.0, 0.0, 0.0, 0.0)
-    assert mission.waypoints[0].acceleration == (0.0, 0.0, 0.0, 0.0, 0.0, 0.5)
+    assert mission.waypoints[0].velocity == (0.0,) * 6
+    assert mission.waypoints[0].acceleration == (0.0,) * 6
     assert mission.source == str(path)
+    point["velocity"] = [0.5, 0, 0, 0, 0, 0]
+    path.write_text(json.dumps(_doc(point)), encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"m\.json: waypoints\[0\]\.velocity: must be zeros"):
+        load_mission(path)
+
+
+def test_a_huge_value_in_the_wrong_place_is_one_short_line(tmp_path: Path) -> None:
+    """A 200 000-point array saved without its wrapper object made a 21-MB error message."""
+    path = tmp_path / "bare.json"
+    path.write_text(json.dumps([_point(float(k + 1), 0.0, 0.0, 1.0) for k in range(200_000)]))
+    with pytest.raises(ConfigError) as caught:
+        load_mission(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: <root>: expected an object, got [{{")
+    assert len(message) < 400 and "\n" not in message and message.endswith("...]")
 
 
 def test_all_packaged_missions_load() -> None:
