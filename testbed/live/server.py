@@ -91,6 +91,9 @@ _GRACE_S = 2
 """How long the server waits for its connections to end when stopping [s]."""
 _LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "[::1]"})
 _ANY_ADDRESS = frozenset({"", "0.0.0.0", "::", "[::]"})
+_TOO_BIG = 1009
+"""WebSocket close code "message too big": the protocol closed a socket whose message passed
+``ws_max_size`` before the console saw it (counted as malformed)."""
 
 
 class _UvicornLog(logging.Filter):
@@ -179,18 +182,17 @@ class _Guard:
         if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        headers = {k: v for k, v in scope["headers"] if k in (b"host", b"origin")}
-        host = headers.get(b"host", b"").decode("latin-1")
+        hosts = [v for k, v in scope["headers"] if k == b"host"]
+        origins = [v for k, v in scope["headers"] if k == b"origin"]
+        host = hosts[0].decode("latin-1") if len(hosts) == 1 else ""  # two: whose is it?
         if not self._own(host):
             self.counters.foreign_host += 1
             await self._refuse(scope, send, "not this console's host name")
             return
-        origin = headers.get(b"origin")
         own_origin = f"http://{host.strip().lower()}"
-        if (
-            scope["type"] == "websocket"
-            and origin is not None
-            and origin.decode("latin-1").strip().lower() != own_origin
+        if scope["type"] == "websocket" and (
+            len(origins) > 1
+            or (origins and origins[0].decode("latin-1").strip().lower() != own_origin)
         ):
             self.counters.foreign_origin += 1
             await self._refuse(scope, send, "not this console's origin")
@@ -333,6 +335,8 @@ def build_app(
             while True:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
+                    if message.get("code") == _TOO_BIG:  # closed by the protocol: over ws_max_size
+                        hub.counters.malformed += 1
                     break
                 text = message.get("text")
                 if text is None:  # binary frames are not part of the protocol

@@ -219,3 +219,38 @@ def test_stopping_with_websockets_mid_close_is_quiet(
     assert capfd.readouterr().err == ""
     uvicorn_records = [r for r in caplog.records if r.name.startswith("uvicorn")]
     assert not any(r.levelno >= logging.ERROR or r.exc_info for r in uvicorn_records)
+
+
+def test_two_host_or_origin_headers_are_refused_whichever_comes_first(
+    server: ConsoleServer,
+) -> None:
+    """``Host: evil`` then ``Host: 127.0.0.1`` was served (the last one was checked); two Host
+    headers name no one host (RFC 9112: refuse), and two Origins on a WebSocket no one page
+    (refused by the guard or, first, by the WebSocket layer)."""
+    own = f"127.0.0.1:{_port(server)}".encode()
+    for first, second in ((b"evil.example", own), (own, b"evil.example"), (own, own)):
+        request = b"GET /state HTTP/1.1\r\nHost: " + first + b"\r\nHost: " + second + b"\r\n\r\n"
+        assert _exchange(server, request).startswith(b"HTTP/1.1 403 "), (first, second)
+    assert server.hub.counters.foreign_host == 3
+    origin = f"http://127.0.0.1:{_port(server)}"
+    upgrade = _upgrade(own.decode(), origin).replace(
+        b"\r\n\r\n", f"\r\nOrigin: {origin}\r\n\r\n".encode()
+    )
+    answer = _exchange(server, upgrade)  # the WebSocket layer refuses these itself (400)
+    assert answer.startswith((b"HTTP/1.1 400 ", b"HTTP/1.1 403 ")), answer[:80]
+    assert server.console.connections == [] and server.hub.counters.accepted == 0
+
+
+def test_a_message_past_the_protocols_size_limit_is_counted_as_malformed(
+    server: ConsoleServer,
+) -> None:
+    """A frame over ws_max_size is refused by the WebSocket layer (close 1009) before the
+    console reads it: it was counted nowhere; frames the console reads and refuses (over
+    MAX_MESSAGE_BYTES, under the layer's limit) were already counted."""
+    with _ws(server, None) as ws:
+        _role(ws)
+        ws.send("x" * (70 * 1024))
+        with contextlib.suppress(Exception):
+            ws.recv(timeout=_TIMEOUT_S)  # the close
+    _wait("the oversized frame counted", lambda: server.hub.counters.malformed == 1)
+    _wait("the socket gone", lambda: server.console.connections == [])
