@@ -61,9 +61,10 @@ from testbed.protocol import ImageSettings
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
+from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, poll_modems, rt_lateness_ns
-from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
 from testbed.run.scenario import Scenario

@@ -53,9 +53,10 @@ from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
+from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model
 from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns, run_poll
-from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario

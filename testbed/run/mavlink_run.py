@@ -49,8 +49,9 @@ from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.observer import VehicleObserver
 from testbed.run.realtime import rt_lateness_ns
-from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario

@@ -16,7 +16,7 @@ once through a :class:`~testbed.channel.mac.TokenSlave`.
 The :class:`~testbed.run.recorder.Recorder` is told the ground truth the wire does not carry
 (when the sticks in a frame were sampled, which reply carried which state); the nodes never
 read it. The vehicle's series are recorded by an observer system the runner adds
-(:class:`~testbed.run.recorder.VehicleObserver`), not by the node.
+(:class:`~testbed.run.observer.VehicleObserver`), not by the node.
 """
 
 from __future__ import annotations

@@ -33,8 +33,9 @@ from testbed.run.failures import reduce_run
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
+from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model, scenario_pilot
-from testbed.run.recorder import Recorder, VehicleObserver
+from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.scenario import Scenario
 from testbed.vehicle.autonomy import Autonomy
