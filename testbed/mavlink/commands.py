@@ -64,7 +64,9 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
-"""AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do)."""
+"""AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do;
+PARAM_ENCODE_C_CAST is REFERENCE §4.4's, which marks it unverified: parameters are sent as
+floats cast, as ArduPilot's GCS code does)."""
 _NAMES_BY_ID = {msg_id: name for name, msg_id in MESSAGE_IDS.items()}
 _ACCEPTED: int = mav.MAV_RESULT_ACCEPTED
 _FAILED: int = mav.MAV_RESULT_FAILED

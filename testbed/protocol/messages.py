@@ -98,7 +98,9 @@ MAX_CHUNK_INDEX = 63
 
 _CM_PER_M = 100
 _POSITION_CODES = (-32768, 32767)
-_ANGLE_CODES_PER_DEG = 20  # 0.05° per LSB
+_ANGLE_CODES_PER_DEG = (
+    20  # 0.05° per LSB: inferred from the 13-bit field (REFERENCE §1.4: unverified)
+)
 _ANGLE_CODE_MAX = 180 * _ANGLE_CODES_PER_DEG  # ±180° = ±3600, inside the 13-bit ±4096
 _ORDER_CLASSES = tuple(ORDER_TYPES.values())
 

@@ -72,9 +72,14 @@ With mate-rov's gains the Wu model's weak righting moment (W·z_g = 2.26 N·m/ra
 ≈4° proportional error to hold 15° of roll; kp 0.5 N·m/deg puts the roll mode near
 10 rad/s with kd 0.1 (ζ ≈ 1 on 0.28 kg·m² incl. added inertia) and ki 0.25 removes the
 remaining offset within ~2 s. Doubling kp (1.0/0.5/0.15) oscillates: a gain margin of ≈2.
+The integral clamp is 10 deg·s (mate-rov: 40 for roll, 60 for pitch, with ki 0.01 / 0.015:
+integral torques of at most 0.4 / 0.9 N·m): with ki 0.25 it bounds the integral's torque at
+2.5 N·m, near the hull's largest righting moment (W·z_g = 2.26 N·m, at 90°); mate-rov's clamps
+with this ki would allow 10 / 15 N·m, past the 5-N·m output limit.
 """
 PITCH_GAINS = PidGains(kp=0.5, ki=0.25, kd=0.1, max_integral=10.0, max_output=5.0, i_zone=5.0)
-"""Pitch loop (deg → N·m), tuned as the roll loop (mate-rov-2025: 0.25/0.015/0.07)."""
+"""Pitch loop (deg → N·m), tuned as the roll loop (mate-rov-2025: 0.25/0.015/0.07; its
+integral clamp 60, ours 10 as for roll)."""
 YAW_GAINS = PidGains(kp=0.3, ki=0.01, kd=0.05, max_integral=10.0, max_output=5.0, i_zone=5.0)
 """mate-rov-2025 yaw loop (deg → N·m)."""
 DEPTH_GAINS = PidGains(
