@@ -142,6 +142,7 @@ def _signalled(signum: int, frame: FrameType | None) -> None:
     if _put_off(signum, frame):
         return
     _SIGNALLED.append(signum)
+    _RESENT.clear()
     raise _interrupt_for(signum)
 
 
@@ -153,12 +154,17 @@ def _swallowed(unraisable: sys.UnraisableHookArgs) -> None:
     hook that was there before."""
     if isinstance(unraisable.exc_value, KeyboardInterrupt) and _SIGNALLED:
         signum = _SIGNALLED.pop()  # appended again when it is handled
+        _RESENT.append(signum)
         _thread.start_new_thread(_send_again, (threading.get_ident(), signum))  # the main one
         return
     _PREVIOUS_UNRAISABLE_HOOK[0](unraisable)
 
 
 _PREVIOUS_UNRAISABLE_HOOK = [sys.unraisablehook]
+_RESENT: list[int] = []
+"""Signals :func:`_swallowed` sent again that have not been handled yet."""
+_RESENT_WAIT_S = 0.5
+"""How long a command that ended meanwhile waits for one to land [s] (it lands in ≈ 1 ms)."""
 
 
 _STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
@@ -194,6 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous: list[tuple[int, object]] = []
     if threading.current_thread() is threading.main_thread():
         del _SIGNALLED[:]
+        del _RESENT[:]
         previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _signalled)))
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
             previous.append((signal.SIGINT, signal.signal(signal.SIGINT, _signalled)))
@@ -201,6 +208,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.unraisablehook = _swallowed
     try:
         code: int = args.handler(args)
+        deadline = time.monotonic() + _RESENT_WAIT_S
+        while _RESENT and time.monotonic() < deadline:  # one sent again lands here, handled
+            time.sleep(_PUT_OFF_S)
     except ConfigError as err:
         print(f"testbed: error: {err}", file=sys.stderr)
         return EXIT_USAGE

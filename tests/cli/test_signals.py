@@ -244,7 +244,7 @@ def plots(args):  # the signal lands in a weakref callback, as it did once while
     figure = Figure()
     keep = weakref.ref(figure, lambda _: os.kill(os.getpid(), signal.SIG{name}))
     del figure  # the callback runs here: the interrupt raised in it is "ignored" by Python
-    deadline = time.monotonic() + 30.0
+    deadline = time.monotonic() + {spin_s}
     while time.monotonic() < deadline:  # the command's own code, where it must end
         pass
     return 0
@@ -262,7 +262,10 @@ def test_an_interrupt_python_ignored_in_a_callback_still_ends_the_command(
     """An interrupt raised in a weakref callback is printed as "Exception ignored in …" and
     dropped by Python: the command went on and exited 0 after a traceback (a review's Ctrl-C
     during plotting). It is sent again and ends the command in its own code, one line."""
-    done = python_taking_ctrl_c(["-c", IN_A_WEAKREF_CALLBACK.format(name=name)])
+    done = python_taking_ctrl_c(["-c", IN_A_WEAKREF_CALLBACK.format(name=name, spin_s=30.0)])
+    assert (done.returncode, done.stderr) == (code, "testbed: interrupted\n")
+    # the command ends at once after the callback: the interrupt sent again still lands in it
+    done = python_taking_ctrl_c(["-c", IN_A_WEAKREF_CALLBACK.format(name=name, spin_s=0.0)])
     assert (done.returncode, done.stderr) == (code, "testbed: interrupted\n")
 
 
