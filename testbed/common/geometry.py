@@ -163,6 +163,13 @@ def euler_from_quat(q: Sequence[float]) -> Vec3:
 
 
 @register_jitable
+def heading_of(q: Quaternion) -> float:
+    """The Z-Y-X yaw of an attitude quaternion [rad], in (−π, π] (:func:`euler_from_quat`'s)."""
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+@register_jitable
 def yaw_only(q: Quaternion) -> Quaternion:
     """The heading part of an attitude: rotation about world down by the Z-Y-X yaw."""
     w, x, y, z = q

@@ -69,7 +69,6 @@ from testbed.run.sections import (
     SineTerm,
     ThrusterFault,
 )
-from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config
 from testbed.vehicle.vehicle_config import VehicleConfig
@@ -498,7 +497,7 @@ def _from_data(
     top = build(_ScenarioFile, data, source=where)
     link = _build_link(top.link, where, given_link_keys)
     vehicle = build(VehicleConfig, top.vehicle, source=where, prefix="vehicle.")
-    _check_file(load_model, vehicle.model, where, "vehicle.model")
+    _check_file(lambda _: vehicle.hydro_model(), vehicle.model, where, "vehicle.model")
     layout = _loaded(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
     if operator.mode == "depth_hold" and not layout.matrix[2].any():
@@ -506,6 +505,13 @@ def _from_data(
             f"{where}: operator.mode: 'depth_hold' needs thrust along the body's z axis, and the "
             f"layout {vehicle.thrusters!r} has none (no vertical thruster): use 'manual' or "
             "'stabilize'"
+        )
+    holds_heading = operator.mode in ("stabilize", "depth_hold")
+    if holds_heading and not layout.matrix[5].any():
+        raise ConfigError(
+            f"{where}: operator.mode: {operator.mode!r} holds the heading, which needs a yaw "
+            f"moment, and the layout {vehicle.thrusters!r} can make none (every thruster's "
+            "line of force passes through the centre of mass): use 'manual'"
         )
     if operator.depth_m is not None and link.codec != "changeset":
         raise ConfigError(

@@ -342,7 +342,8 @@ def pilot_rows(
     if not (depth_hold or attitude_hold):
         return
     target = (targets[1], targets[2], targets[3], targets[4])
-    depth, q = trim_targets(targets[0], target, trims, dt_s, depth_hold, attitude_hold)
+    measured = (imu[1], imu[2], imu[3], imu[4])
+    depth, q = trim_targets(targets[0], target, trims, dt_s, depth_hold, attitude_hold, measured)
     put_row(targets, targets_mark, tick, (depth, q[0], q[1], q[2], q[3]))
 
 

@@ -24,6 +24,7 @@ numpy and math: this module must never import pybullet.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -65,6 +66,24 @@ Vec6 = tuple[float, float, float, float, float, float]
 MAX_WATER_DENSITY_KG_M3 = 1030.0
 """The densest sea water a vehicle is modelled in [kg/m³] (a bound on buoyancy, not the plant's
 density)."""
+
+MAX_SOLID_DENSITY_KG_M3 = 22590.0
+"""Osmium, the densest element [kg/m³]: a vehicle's mass over its hull box's volume is below it
+(a mass given in grams, 11 500 "kg", sank the vehicle 450 m in 12 s, quietly)."""
+
+_NUMBER_KEYS = (
+    "mass_kg",
+    "weight_n",
+    "buoyancy_n",
+    "cog_m",
+    "cob_m",
+    "inertia_kg_m2",
+    "added_mass",
+    "linear_damping",
+    "quadratic_damping",
+    "hull_size_m",
+)
+"""The fields that hold numbers, each checked finite first."""
 
 GRAVITY_RANGE_M_S2 = (9.78, 9.83)
 """Standard gravity at sea level from the equator to the poles [m/s²]: a model's ``weight_n``
@@ -116,6 +135,11 @@ class HydroModel:
     added_mass_coriolis: Literal["full", "isotropic", "off"] = "full"
 
     def __post_init__(self) -> None:
+        for key in _NUMBER_KEYS:  # inf passed the sign checks (a traceback, or NaN results)
+            value = getattr(self, key)
+            for i, number in enumerate(value if isinstance(value, tuple) else (value,)):
+                where = f"{key}[{i}]" if isinstance(value, tuple) else key
+                check(math.isfinite(number), where, f"must be finite, got {number}")
         check(self.mass_kg > 0.0, "mass_kg", f"must be > 0, got {self.mass_kg}")
         check(self.weight_n > 0.0, "weight_n", f"must be > 0, got {self.weight_n}")
         g_low, g_high = GRAVITY_RANGE_M_S2
@@ -149,8 +173,24 @@ class HydroModel:
         Raises:
             FieldError: naming the key.
         """
-        inertia = self.inertia_kg_m2
+        inertia, size = self.inertia_kg_m2, self.hull_size_m
+        volume_m3 = float(np.prod(size))
+        density = self.mass_kg / volume_m3
+        check(
+            density <= MAX_SOLID_DENSITY_KG_M3,
+            "mass_kg",
+            f"{self.mass_kg:g} kg in a hull box of {volume_m3:.4g} m³ is {density:.4g} kg/m³, "
+            f"denser than any solid ({MAX_SOLID_DENSITY_KG_M3:g} kg/m³, osmium): grams for kg?",
+        )
         for i, axis in enumerate("xyz"):
+            b, c = size[(i + 1) % 3], size[(i + 2) % 3]
+            most = self.mass_kg * (b * b + c * c) / 4.0  # all the mass at the box's corners
+            check(
+                inertia[i] <= most * (1.0 + 1e-9),
+                f"inertia_kg_m2[{i}]",
+                f"I{axis}{axis} = {inertia[i]:g} kg·m² exceeds {most:.4g}, the most "
+                f"{self.mass_kg:g} kg inside the {b:g} × {c:g} m hull section can have",
+            )
             others = inertia[(i + 1) % 3] + inertia[(i + 2) % 3]
             check(
                 inertia[i] <= others * (1.0 + 1e-9),
@@ -160,14 +200,13 @@ class HydroModel:
             )
         for key in ("cog_m", "cob_m"):
             point = getattr(self, key)
-            for i, (value, size) in enumerate(zip(point, self.hull_size_m, strict=True)):
+            for i, (value, extent) in enumerate(zip(point, size, strict=True)):
                 check(
-                    abs(value) <= size / 2.0,
+                    abs(value) <= extent / 2.0,
                     f"{key}[{i}]",
                     f"must lie within the hull box (|{value:g}| ≤ hull_size_m[{i}]/2 = "
-                    f"{size / 2.0:g} m)",
+                    f"{extent / 2.0:g} m)",
                 )
-        volume_m3 = float(np.prod(self.hull_size_m))
         most_n = MAX_WATER_DENSITY_KG_M3 * GRAVITY_RANGE_M_S2[1] * volume_m3
         check(
             self.buoyancy_n <= most_n,
@@ -246,7 +285,13 @@ def _read_model(
 ) -> HydroModel:
     """The model in the file at ``path``, checked (:meth:`HydroModel.check_body`)."""
     source = str(path)
-    model = build(HydroModel, load_toml(path), source=source)
+    data = load_toml(path)
+    if added_mass_coriolis is None and "added_mass_coriolis" not in data:
+        raise ConfigError(  # its default is Wu's full C_A, which tumbles the vehicle at speed
+            f"{source}: added_mass_coriolis: required key missing ('isotropic' as the packaged "
+            "models, 'full' or 'off': docs/vehicle.md), or set vehicle.added_mass_coriolis"
+        )
+    model = build(HydroModel, data, source=source)
     try:
         model.check_body()
     except FieldError as err:

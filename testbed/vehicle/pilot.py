@@ -21,11 +21,13 @@ from testbed.common.geometry import (
     Quaternion,
     Vec3,
     Wrench,
+    heading_of,
     quat_conjugate,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
     quat_rotate,
+    wrap_angle,
     yaw_only,
 )
 from testbed.config import check_range, check_ranges
@@ -289,6 +291,14 @@ def stick_trims(
     )
 
 
+MAX_HEADING_LEAD_RAD = math.radians(60.0)
+"""How far the yaw stick may turn the heading target ahead of the measured heading [rad]. A
+vehicle that turns slower than the stick's 100°/s (a hull with more rotational drag: −4 N·m·s²
+caps it near 64°/s) let the target run away from it; near 180° of error the attitude error's
+roll and pitch parts grew and the vehicle rolled ≈ 50°. At 60° the yaw loop (kp 0.3 N·m/deg)
+is saturated many times over, so a vehicle that can follow never meets the limit (the
+packaged models lead by at most 18° (BlueROV2) and 22° (Heavy) at full stick)."""
+
 SURFACE_HOLD_DEPTH_M = 0.15
 """The shallowest depth target a hold keeps [m, + down]: ArduSub's at the surface (5 cm below
 its SURFACE_DEPTH of −10 cm). A target above it would ask a floating hull to climb out of the
@@ -304,13 +314,16 @@ def trim_targets(
     dt_s: float,
     depth_hold: bool,
     attitude_hold: bool,
+    measured_wxyz: Quaternion,
 ) -> tuple[float, Quaternion]:
     """The hold targets after the sticks' trims (:func:`pilot_trims`) acted for ``dt_s`` [s].
 
     In depth hold the depth target [m, + down] moves at the heave trim (never shallower than
     :data:`SURFACE_HOLD_DEPTH_M`); in attitude hold the attitude target (body → NED) turns
-    about its own body axes by the roll and pitch trims and about world down by the yaw trim,
-    and is normalised.
+    about its own body axes by the roll and pitch trims and about world down by the yaw trim
+    (unless that would take the target's heading more than :data:`MAX_HEADING_LEAD_RAD` ahead
+    of the measured one, ``measured_wxyz``: a vehicle that turns slower than the stick asks
+    is waited for), and is normalised.
 
     Returns:
         (depth [m], attitude (4,)).
@@ -326,7 +339,9 @@ def trim_targets(
         if roll != 0.0 or pitch != 0.0:  # about the target's own body axes
             angle = math.hypot(roll, pitch)
             q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
-        if yaw != 0.0:  # about world down
-            q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
+        if yaw != 0.0:
+            lead = wrap_angle(heading_of(q) + yaw - heading_of(measured_wxyz))
+            if abs(lead) <= MAX_HEADING_LEAD_RAD or lead * yaw < 0.0:  # about world down
+                q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
         q = quat_normalize(q)
     return depth_m, q

@@ -122,6 +122,11 @@ class ThrusterConfig:
 
     def __post_init__(self) -> None:
         check(len(self.thrusters) > 0, "thrusters", "needs at least one thruster")
+        check(
+            all(math.isfinite(v) for v in self.center_of_mass_m),
+            "center_of_mass_m",
+            f"must be finite, got {list(self.center_of_mass_m)} (body FRD)",
+        )
         names = [t.name for t in self.thrusters]
         duplicate = sorted({n for n in names if names.count(n) > 1})
         check(not duplicate, "thrusters", f"duplicate thruster names {duplicate}")

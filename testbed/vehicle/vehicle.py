@@ -69,7 +69,6 @@ from testbed.vehicle.control import (
     AttitudeGains,
     DepthController,
 )
-from testbed.vehicle.hydrodynamics import load_model
 from testbed.vehicle.localization import (
     FixSource,
     build_navigation,
@@ -141,7 +140,7 @@ class Vehicle:
         self._matrix = np.array(thruster_config.matrix, dtype=float)
         n = self._matrix.shape[1]
         self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
-        self.model = load_model(config.model, added_mass_coriolis=config.added_mass_coriolis)
+        self.model = config.hydro_model()
         arm_model = None if config.arm is None else config.arm.arm_model()
         pool = config.pool_in_use
         self.physics = Physics(

@@ -29,7 +29,7 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
 )
-from testbed.vehicle.hydrodynamics import load_model
+from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.localization import (
     NavigationConfig,
 )
@@ -289,7 +289,7 @@ class VehicleConfig:
         arm = self.arm.arm_model()
         links = (arm.base, *arm.links)
         wet_n = sum((link.mass_kg - RHO_KG_M3 * link.volume_m3) * G_M_S2 for link in links)
-        weight_n = load_model(self.model).weight_n
+        weight_n = self.hydro_model().weight_n
         check(
             abs(wet_n) <= weight_n,
             "arm",
@@ -298,14 +298,22 @@ class VehicleConfig:
         )
 
     def _check_layout_fits_hull(self) -> None:
-        """Refuse a thruster farther from the body origin than the hull's size along an axis
-        (twice the hull box's half-extent: room for ducts outside it); a layout's thruster at
-        1e9 m ran quietly, its energy 0 Wh."""
+        """Refuse a layout's centre of mass outside the hull box, and a thruster farther from
+        the body origin than the hull's size along an axis (twice the hull box's half-extent:
+        room for ducts outside it); a layout's thruster at 1e9 m ran quietly, its energy 0 Wh."""
         try:
-            hull = load_model(self.model).hull_size_m
+            hull = self.hydro_model().hull_size_m
             layout = load_thruster_config(self.thrusters)
         except ConfigError:  # a file that does not load: the scenario loader names its key
             return
+        com = layout.center_of_mass_m
+        check(  # moments are taken about it: 2 m off, every thruster pushed from afar
+            all(abs(c) <= size / 2.0 for c, size in zip(com, hull, strict=True)),
+            "thrusters",
+            f"the centre of mass of {self.thrusters}, {[round(c, 6) for c in com]} m in body FRD, "
+            f"lies outside the hull of {self.model} (half-sizes "
+            f"{[round(size / 2.0, 6) for size in hull]} m)",
+        )
         for thruster in layout.thrusters:
             for i, (value, size) in enumerate(zip(thruster.position_m, hull, strict=True)):
                 check(
@@ -321,7 +329,7 @@ class VehicleConfig:
         file of the user's own) needs all three in ``autonomy.ismc``."""
         if self.autonomy is not None and self.autonomy.controller == "ismc":
             try:
-                self.autonomy.ismc.gains_for(load_model(self.model).name)
+                self.autonomy.ismc.gains_for(self.hydro_model().name)
             except FieldError as err:
                 raise FieldError(f"autonomy.{err.key}", err.message) from None
 
@@ -337,6 +345,10 @@ class VehicleConfig:
             f"{self.autonomy.controller!r} cannot fly vehicle.arm's end-effector missions "
             '(TPIK\'s body twist needs "ismc"); use controller = "ismc" or drop vehicle.arm',
         )
+
+    def hydro_model(self) -> HydroModel:
+        """The vehicle's model file, loaded with :attr:`added_mass_coriolis` when set."""
+        return load_model(self.model, added_mass_coriolis=self.added_mass_coriolis)
 
     @property
     def pool_in_use(self) -> PoolScene | None:

@@ -26,6 +26,8 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -36,7 +38,7 @@ from testbed.run.scenario import load_scenario
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
 from testbed.vehicle.physics import Physics, simulate_open_loop
-from testbed.vehicle.pilot import PilotGains
+from testbed.vehicle.pilot import MAX_HEADING_LEAD_RAD, PilotGains
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config
 from testbed.vehicle.vehicle_config import YAW_GAINS
@@ -182,6 +184,45 @@ def test_the_yaw_loop_can_hold_the_trim_rate() -> None:
         model = load_model(name)
         torque = -model.linear_damping[5] * rate - model.quadratic_damping[5] * rate * rate
         assert torque < YAW_GAINS.max_output
+
+
+def test_a_hull_that_turns_slower_than_the_stick_is_waited_for_and_stays_level(
+    tmp_path: Path,
+) -> None:
+    """The BlueROV2 with the peers' rotational drag (−4 N·m·s², bluerov2_gz and Blue) turns at
+    most where that drag meets the yaw loop's output limit (closed form: ≈ 64°/s, not the
+    stick's 100°/s). The heading target used to run away from it; near 180° of error the roll
+    and pitch parts of the attitude error grew and the vehicle rolled ≈ 50°. Now the target
+    leads by at most MAX_HEADING_LEAD_RAD (plus a frame's step), the rate is the closed form's
+    and the vehicle stays level."""
+    packaged = resources.files("testbed.vehicle").joinpath("data", "models", "bluerov2.toml")
+    text = packaged.read_text(encoding="utf-8")
+    line = next(li for li in text.splitlines() if li.startswith("quadratic_damping"))
+    drag = "quadratic_damping = [-33.8, -54.269, -36.99, -4.0, -4.0, -4.0]"
+    path = tmp_path / "bluerov2-gz-rotation.toml"
+    path.write_text(text.replace(line, drag), encoding="utf-8")
+    model = load_model(str(path))
+    overrides = [
+        f"duration_s={DURATION_S}",
+        f"vehicle.model={path}",
+        "vehicle.thrusters=bluerov2",
+        f"vehicle.supply_voltage_v={SUPPLY_V}",
+        *(f"pilot.{a}=[]" for a in ("x", "y", "z")),
+        f"pilot.yaw=[{FULL}, {FULL}]",
+        "metrics.settle_s=0",
+    ]
+    series = run_scenario(load_scenario("tether-teleop-v1", overrides), seed=0).recorder.series()
+    t = series["t_s"]
+    steady, flying = t >= STEADY_FROM_S, t >= 5.0
+    cap_deg_s = math.degrees(damping_speed(model, 5, YAW_GAINS.max_output))
+    assert cap_deg_s < math.degrees(PilotGains().attitude_trim_rad_s[2]) - 20.0
+    r_deg_s = math.degrees(float(series["r"][steady].mean()))
+    assert r_deg_s == pytest.approx(cap_deg_s, rel=0.02)
+    step_deg = math.degrees(PilotGains().attitude_trim_rad_s[2]) * 0.01  # one 100-Hz frame
+    lead = np.abs(series["err_yaw_deg"][flying])
+    assert lead.max() <= math.degrees(MAX_HEADING_LEAD_RAD) + step_deg + 1.0  # + noise
+    assert np.abs(series["roll_deg"][flying]).max() < 5.0
+    assert np.abs(series["pitch_deg"][flying]).max() < 5.0
 
 
 # ------------------------------------------------------------------------- open loop

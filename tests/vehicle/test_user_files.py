@@ -225,3 +225,88 @@ def test_figures_no_rigid_body_has_are_refused_naming_the_key(
         load_scenario("s100-teleop-v1", [f"{key}={path}"])
     message = str(err.value)
     assert named in message and "\n" not in message, message
+
+
+def _edited(kind: str, to: Path, *edits: tuple[str, str]) -> Path:
+    """The packaged bluerov2 file of ``kind`` with each (old, new) edit made once."""
+    text = DATA.joinpath(kind, "bluerov2.toml").read_text(encoding="utf-8")
+    for old, new in edits:
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    to.write_text(text, encoding="utf-8")
+    return to
+
+
+@pytest.mark.parametrize(
+    ("kind", "edits", "named"),
+    [  # a vehicle modeller's review: each ran quietly (exit 0, NaN results) or as a traceback
+        ("models", [("mass_kg = 11.5", "mass_kg = inf")], "mass_kg: must be finite, got inf"),
+        ("models", [("[0.16, 0.16, 0.16]", "[inf, 0.16, 0.16]")], "inertia_kg_m2[0]: must be fi"),
+        ("models", [("[-4.03,", "[-inf,")], "linear_damping[0]: must be finite, got -inf"),
+        ("models", [("[-33.8,", "[-inf,")], "quadratic_damping[0]: must be finite, got -inf"),
+        ("models", [("[0.0, 0.0, 0.02]", "[0.0, 0.0, inf]")], "cog_m[2]: must be finite"),
+        (
+            "models",  # grams for kilograms, the weight made to match: it sank 450 m in 12 s
+            [("mass_kg = 11.5", "mass_kg = 11500"), ("weight_n = 112.8", "weight_n = 112815")],
+            "mass_kg: 11500 kg in a hull box of 0.03923 m³ is 2.931e+05 kg/m³, denser than any",
+        ),
+        (
+            "models",  # g·m² for kg·m²
+            [("[0.16, 0.16, 0.16]", "[160.0, 160.0, 160.0]")],
+            "inertia_kg_m2[0]: Ixx = 160 kg·m² exceeds 0.5139, the most 11.5 kg inside the",
+        ),
+        (
+            "models",  # its default was Wu's full C_A, the variant that tumbles at speed
+            [('\nadded_mass_coriolis = "isotropic"\n', "\n")],
+            "added_mass_coriolis: required key missing ('isotropic' as the packaged models",
+        ),
+        (
+            "thrusters",
+            [("center_of_mass_m = [0.0, 0.0, -0.09]", "center_of_mass_m = [inf, 0.0, -0.09]")],
+            "center_of_mass_m: must be finite, got [0.0, inf, 0.09] (body FRD)",  # mate-rov x
+        ),
+        (
+            "thrusters",  # moments about a point 2 m away: the axis maxima collapsed
+            [("center_of_mass_m = [0.0, 0.0, -0.09]", "center_of_mass_m = [2.0, 0.0, -0.09]")],
+            "[0.0, 2.0, 0.09] m in body FRD, lies outside the hull of bluerov2 (half-sizes [",
+        ),
+    ],
+)
+def test_a_modellers_slips_are_one_line_naming_the_key(
+    tmp_path: Path, kind: str, edits: list[tuple[str, str]], named: str
+) -> None:
+    path = _edited(kind, tmp_path / "mine.toml", *edits)
+    key = "vehicle.model" if kind == "models" else "vehicle.thrusters"
+    with pytest.raises(ConfigError) as err:
+        load_scenario("s100-teleop-v1", [f"{key}={path}"])
+    message = str(err.value)
+    assert named in message and "\n" not in message, message
+
+
+def test_a_model_without_its_coriolis_option_flies_with_the_scenarios(tmp_path: Path) -> None:
+    """The option missing from the file is refused alone, not when the scenario sets it."""
+    edit = ('\nadded_mass_coriolis = "isotropic"\n', "\n")
+    path = _edited("models", tmp_path / "mine.toml", edit)
+    scenario = load_scenario(
+        "s100-teleop-v1", [f"vehicle.model={path}", "vehicle.added_mass_coriolis=isotropic"]
+    )
+    assert scenario.vehicle.hydro_model().added_mass_coriolis == "isotropic"
+
+
+def test_a_layout_that_makes_no_yaw_is_refused_where_the_heading_is_held(tmp_path: Path) -> None:
+    """Only the vertical thrusters, all on the centreline: no yaw moment. Depth hold and
+    stabilize hold the heading, so they are refused (it ran, the heading drifting 10°);
+    manual flies it."""
+    text = DATA.joinpath("thrusters", "bluerov2.toml").read_text(encoding="utf-8")
+    head, *blocks = text.split("[[thrusters]]")
+    kept = [b for b in blocks if "direction = [0.0, 0.0," in b]
+    kept = [b.replace("0.11, ", "0.0, ").replace("-0.11, ", "0.0, ") for b in kept]
+    assert kept
+    path = tmp_path / "verticals.toml"
+    path.write_text("[[thrusters]]".join([head, *kept]), encoding="utf-8")
+    layout = load_thruster_config(str(path))
+    assert not layout.matrix[5].any()  # the file's own geometry: no yaw moment
+    for mode in ("depth_hold", "stabilize"):
+        with pytest.raises(ConfigError, match=f"operator.mode: '{mode}' holds the heading"):
+            load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", f"operator.mode={mode}"])
+    load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", "operator.mode=manual"])
