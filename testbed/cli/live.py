@@ -45,7 +45,7 @@ from testbed.cli.options import (
     check_seed,
     exit_code_of,
     open_modem_ports,
-    warn_scenario,
+    warn_token_cycle,
 )
 from testbed.config import ConfigError
 
@@ -122,7 +122,7 @@ def _run_live(args: argparse.Namespace) -> int:
     ports = _port_options(args)
     modem = args.modem or "s100"
     scenario = load_scenario(args.scenario, args.overrides)
-    warn_scenario(scenario)
+    warn_token_cycle(scenario)
     out = args.out or Path("runs") / f"{scenario.id}-live-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):
         try:

@@ -44,7 +44,7 @@ from testbed.cli.options import (
     check_seed,
     format_value,
     open_modem_ports,
-    warn_scenario,
+    warn_token_cycle,
 )
 from testbed.config import ConfigError
 
@@ -175,7 +175,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     boot_params = _boot_params(args.param)
     scenario = load_scenario(args.scenario, overrides)
-    warn_scenario(scenario)
+    warn_token_cycle(scenario)
     duration = scenario.duration_s if args.duration is None else args.duration
     check_duration(duration)
     out = args.out

@@ -37,7 +37,8 @@ __all__ = [
     "link_config_option",
     "missing",
     "open_modem_ports",
-    "warn_scenario",
+    "warn_late_goals",
+    "warn_token_cycle",
 ]
 
 EXIT_OK = 0
@@ -243,20 +244,24 @@ def _check_socket_url(option: str, url: str) -> None:
         )
 
 
-def warn_scenario(scenario: Scenario) -> None:
-    """Warnings about a scenario that runs, on stderr: one ``testbed: warning:`` line when the
-    scenario's token gap is shorter than a move order's round trip
-    (:class:`~testbed.run.run_metrics.TokenCycle`; the run goes on, since that may be what is
-    studied, and ``metrics.json`` says ``reply_fits_gap: false``), another when supervised
-    goals come at or after the run's end (they are never sent)."""
+def warn_token_cycle(scenario: Scenario) -> None:
+    """One ``testbed: warning:`` line on stderr when the scenario's token gap is shorter than
+    a move order's round trip (:class:`~testbed.run.run_metrics.TokenCycle`); the run goes on,
+    since that may be what is studied, and ``metrics.json`` says ``reply_fits_gap: false``."""
     from testbed.run.run_metrics import token_cycle
 
     cycle = token_cycle(scenario)
     if cycle is not None and not cycle.fits:
         print(f"testbed: warning: {cycle.warning(scenario.link.ipg)}", file=sys.stderr)
+
+
+def warn_late_goals(scenario: Scenario) -> None:
+    """One ``testbed: warning:`` line on stderr when the scripted supervisor's goals come at or
+    after the run's end (``testbed run``, which runs ``duration_s`` with that pilot): they are
+    never sent. A shortened run (``--set duration_s=30``) may mean it: a line, not a refusal."""
     end = scenario.duration_s
     late = [i for i, goal in enumerate(scenario.pilot.goals) if goal.t_s >= end]
-    if late:  # a shortened run (--set duration_s=30) may mean it: a line, not a refusal
+    if late:
         which = f"pilot.goals[{late[0]}]" + (f"…[{late[-1]}]" if len(late) > 1 else "")
         print(
             f"testbed: warning: {which} at t ≥ {scenario.pilot.goals[late[0]].t_s:g} s come "

@@ -17,11 +17,12 @@ from testbed.cli.options import (
     check_seed,
     exit_code_of,
     missing,
-    warn_scenario,
+    warn_late_goals,
+    warn_token_cycle,
 )
 from testbed.cli.options import format_value as _num
 from testbed.config import ConfigError
-from testbed.run.failures import partial_run
+from testbed.run.failures import failed_trial, partial_run
 
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
@@ -78,12 +79,12 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
     check_seed(args.seed)
     scenario = load_scenario(args.scenario, args.overrides)
-    warn_scenario(scenario)
+    warn_token_cycle(scenario)
+    warn_late_goals(scenario)
     out = args.out
     if out is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{scenario.id}-{stamp}"
-    first_seed = scenario.seed if args.seed is None else args.seed
     with claimed_out_dir(out, force=args.force):
         try:
             if scenario.trials > 1:
@@ -99,37 +100,37 @@ def _run_scenario(args: argparse.Namespace) -> int:
                     remove_trials(out)
                 raise
         except Exception as error:
-            return report_failed_run(
-                error, out, scenario.duration_s, trials=scenario.trials, first_seed=first_seed
-            )
+            return report_failed_run(error, out, scenario.duration_s, trials=scenario.trials)
         return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
 
 
-def report_failed_run(
-    error: Exception, out: Path, planned_s: float, *, trials: int = 1, first_seed: int = 0
-) -> int:
-    """Report a run (or trial) that ``error`` ended part way, its partial outputs written
-    (:mod:`testbed.run.failures`): for bad input (a ``ConfigError``, e.g. a pilot's sample that
-    is no ``PilotSample``) one line, exit 2, naming where what ran is; for any other error its
-    traceback, then that line, exit 1. An error without partial outputs is raised again.
+def report_failed_run(error: Exception, out: Path, planned_s: float, *, trials: int = 1) -> int:
+    """Report a run (or trial) that ``error`` ended, what ran written (:mod:`testbed.run.failures`):
+    for bad input (a ``ConfigError``, e.g. a pilot's sample that is no ``PilotSample``) one
+    line, exit 2, naming where what ran is; for any other error its traceback, then that line,
+    exit 1. An error that left nothing (not a run's, or a single run's at its first instant)
+    is raised again.
 
     Args:
         error: what ended the run.
         out: the results directory (trials: their parent).
         planned_s: the run's planned duration [s].
-        trials: the scenario's trials; with more than one, the partial run is the trial of
-            seed ``first_seed + k - 1``, written in ``out/trial-k``.
-        first_seed: the seed of trial 1.
+        trials: the scenario's trials; with more than one, the failed trial's number is the
+            one :func:`~testbed.run.failures.failed_trial` noted, its outputs in ``out/trial-k``.
     """
-    partial = partial_run(error)
-    if partial is None:
+    partial, k = partial_run(error), failed_trial(error)
+    if partial is None and (k is None or trials == 1):
         raise error
-    reached = f"to t = {partial.metrics['sim_s']:.1f} s of {planned_s:g} s"
-    if trials > 1:
-        k = partial.seed - first_seed + 1
-        reached = f"in trial {k} of {trials}, {reached}"
-        out = out / f"trial-{k}"
-    kept = f"what ran {reached}, is in {out}"
+    reached = (
+        "" if partial is None else f"to t = {partial.metrics['sim_s']:.1f} s of {planned_s:g} s"
+    )
+    if k is not None and trials > 1:
+        if partial is None:
+            kept = f"trial {k} of {trials} failed as it began; the trials before it are in {out}"
+        else:
+            kept = f"what ran in trial {k} of {trials}, {reached}, is in {out / f'trial-{k}'}"
+    else:
+        kept = f"what ran {reached}, is in {out}"
     if isinstance(error, ConfigError):
         raise ConfigError(f"{error} ({kept})") from None
     traceback.print_exception(error)

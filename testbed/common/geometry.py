@@ -163,10 +163,15 @@ def euler_from_quat(q: Sequence[float]) -> Vec3:
 
 
 @register_jitable
-def heading_of(q: Quaternion) -> float:
-    """The Z-Y-X yaw of an attitude quaternion [rad], in (−π, π] (:func:`euler_from_quat`'s)."""
-    w, x, y, z = q
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+def heading_difference(a: Quaternion, b: Quaternion) -> float:
+    """How far attitude ``a`` is turned from ``b`` about world down [rad], in (−π, π]: the
+    twist about z of the world-frame rotation a·b⁻¹ (defined at any pitch, where the Euler
+    yaw is not; for level attitudes the difference of their yaws)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b  # a · conj(b): only its w and z parts are needed
+    w = aw * bw + ax * bx + ay * by + az * bz
+    z = -aw * bz - ax * by + ay * bx + az * bw
+    return wrap_angle(2.0 * math.atan2(z, w))
 
 
 @register_jitable

@@ -189,10 +189,11 @@ class _Guard:
             self.counters.foreign_host += 1
             await self._refuse(scope, send, "not this console's host name")
             return
-        own_origin = f"http://{host.strip().lower()}"
-        if scope["type"] == "websocket" and (
-            len(origins) > 1
-            or (origins and origins[0].decode("latin-1").strip().lower() != own_origin)
+        own_origin = f"http://{host.strip().lower()}"  # two Origins: the WebSocket layer's 400
+        if (
+            scope["type"] == "websocket"
+            and origins
+            and origins[0].decode("latin-1").strip().lower() != own_origin
         ):
             self.counters.foreign_origin += 1
             await self._refuse(scope, send, "not this console's origin")

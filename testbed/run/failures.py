@@ -24,9 +24,18 @@ from testbed.run.interrupts import deferred_interrupts
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
 
-__all__ = ["describe", "keep_partial", "partial_run", "raised_in_user_code", "reduce_run"]
+__all__ = [
+    "describe",
+    "failed_trial",
+    "keep_partial",
+    "keep_trial",
+    "partial_run",
+    "raised_in_user_code",
+    "reduce_run",
+]
 
 _PARTIAL = "testbed_partial_run"
+_TRIAL = "testbed_failed_trial"
 
 
 def describe(error: BaseException) -> str:
@@ -62,12 +71,13 @@ def keep_partial(error: BaseException, reduce: Callable[[str], RunResult]) -> No
     Args:
         error: the exception that ended the run's simulation (raised again by the caller).
         reduce: makes the partial result, given :func:`describe`'s line for its ``failure``.
-            If it raises too (a recording too short to reduce), nothing is kept: the original
-            error is what the user needs, not a second one.
+            If it raises too, nothing is kept and the original error is raised with a note
+            saying why (the user needs that error, not a second one).
     """
     try:
         result = reduce(describe(error))
-    except Exception:
+    except Exception as failure:  # the run's own error is the one to report
+        error.add_note(f"testbed: what ran could not be kept ({describe(failure)})")
         return
     with contextlib.suppress(AttributeError, TypeError):  # an exception type without a __dict__
         setattr(error, _PARTIAL, result)
@@ -76,6 +86,17 @@ def keep_partial(error: BaseException, reduce: Callable[[str], RunResult]) -> No
 def partial_run(error: BaseException) -> RunResult | None:
     """The partial result :func:`keep_partial` kept on ``error``, or None."""
     return getattr(error, _PARTIAL, None)
+
+
+def keep_trial(error: BaseException, trial: int) -> None:
+    """Note on ``error`` the number of the trial it ended (1-based; :func:`failed_trial`)."""
+    with contextlib.suppress(AttributeError, TypeError):
+        setattr(error, _TRIAL, trial)
+
+
+def failed_trial(error: BaseException) -> int | None:
+    """The trial :func:`keep_trial` noted on ``error``, or None (not a trial's)."""
+    return getattr(error, _TRIAL, None)
 
 
 def reduce_run(

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from testbed.run.failures import partial_run
+from testbed.run.failures import keep_trial, partial_run
 from testbed.run.interrupts import interrupt_of
 from testbed.run.outputs import PlotWriter, remove_run_results, write_json_atomic, write_run
 from testbed.run.runner import RunResult, run_scenario
@@ -246,9 +246,9 @@ def run_trials(
                 break
             files += write_run(result, trial_dir(out, k), plots=plots)
         except BaseException as error:  # an interrupt between runs or while writing one
-            if (stopped := interrupt_of(error)) is None:
-                if (partial := partial_run(error)) is not None:  # an error ended trial k
-                    _keep_failed(scenario, first, finished, out, k, partial)
+            if (stopped := interrupt_of(error)) is None:  # an error ended trial k
+                _keep_failed(scenario, first, finished, out, k, partial_run(error))
+                keep_trial(error, k)
                 raise
             interrupted = k
             break
@@ -276,14 +276,16 @@ def _keep_failed(
     finished: Sequence[RunResult],
     out: Path,
     k: int,
-    partial: RunResult,
+    partial: RunResult | None,
 ) -> None:
-    """Trial ``k`` failed part way: its partial outputs (no plots) and ``trials.json`` over the
-    finished trials with ``k`` named as the failed one; the error is raised by the caller."""
-    write_run(partial, trial_dir(out, k))
+    """Trial ``k`` failed: its partial outputs (no plots; none when it failed as it began) and
+    ``trials.json`` over the finished trials with ``k`` named as the failed one; the error is
+    raised by the caller."""
+    if partial is not None:
+        write_run(partial, trial_dir(out, k))
     document = trials_document(scenario, first, finished, None, failed=k)
     write_json_atomic(out / TRIALS_FILE, document)
-    remove_trials(out, keep=k, keep_summary=True)
+    remove_trials(out, keep=k if partial is not None else k - 1, keep_summary=True)
     remove_run_results(out)
     (out / TRIALS_PLOT).unlink(missing_ok=True)
 

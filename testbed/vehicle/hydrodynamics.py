@@ -71,20 +71,6 @@ MAX_SOLID_DENSITY_KG_M3 = 22590.0
 """Osmium, the densest element [kg/m³]: a vehicle's mass over its hull box's volume is below it
 (a mass given in grams, 11 500 "kg", sank the vehicle 450 m in 12 s, quietly)."""
 
-_NUMBER_KEYS = (
-    "mass_kg",
-    "weight_n",
-    "buoyancy_n",
-    "cog_m",
-    "cob_m",
-    "inertia_kg_m2",
-    "added_mass",
-    "linear_damping",
-    "quadratic_damping",
-    "hull_size_m",
-)
-"""The fields that hold numbers, each checked finite first."""
-
 GRAVITY_RANGE_M_S2 = (9.78, 9.83)
 """Standard gravity at sea level from the equator to the poles [m/s²]: a model's ``weight_n``
 must be ``mass_kg`` times some g in this range (the packaged models use 9.81 and 9.82)."""
@@ -117,7 +103,8 @@ class HydroModel:
             the mean of X_u̇, Y_v̇, Z_ẇ (and the rotational terms as given), so the Munk moments
             vanish, as with Stonefish's isotropic added mass; ``"off"``, C_A = 0, as bluerov2_gz,
             Blue and Gazebo's ``disable_coriolis``. M_A stays in the mass matrix in all three,
-            and each C_A is skew-symmetric (it does no work).
+            and each C_A is skew-symmetric (it does no work). The default is the packaged
+            models' ``"isotropic"``; a model file must name it (:func:`load_model`).
     """
 
     name: str
@@ -132,7 +119,7 @@ class HydroModel:
     linear_damping: Vec6
     quadratic_damping: Vec6
     hull_size_m: Vec3
-    added_mass_coriolis: Literal["full", "isotropic", "off"] = "full"
+    added_mass_coriolis: Literal["full", "isotropic", "off"] = "isotropic"
 
     def __post_init__(self) -> None:
         for key in _NUMBER_KEYS:  # inf passed the sign checks (a traceback, or NaN results)
@@ -241,6 +228,13 @@ class HydroModel:
     def mass_matrix(self) -> FloatArray:
         """(6, 6) M = M_RB + M_A."""
         return self.rigid_body_mass_matrix + self.added_mass_matrix
+
+
+_NUMBER_KEYS = tuple(
+    f.name for f in dataclasses.fields(HydroModel) if f.type in ("float", "Vec3", "Vec6")
+)
+"""The fields that hold numbers (from the class: a new one is checked too), each checked
+finite first in :meth:`HydroModel.__post_init__`."""
 
 
 def _models_dir() -> resources.abc.Traversable:

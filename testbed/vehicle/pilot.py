@@ -21,13 +21,12 @@ from testbed.common.geometry import (
     Quaternion,
     Vec3,
     Wrench,
-    heading_of,
+    heading_difference,
     quat_conjugate,
     quat_from_axis_angle,
     quat_multiply,
     quat_normalize,
     quat_rotate,
-    wrap_angle,
     yaw_only,
 )
 from testbed.config import check_range, check_ranges
@@ -339,9 +338,10 @@ def trim_targets(
         if roll != 0.0 or pitch != 0.0:  # about the target's own body axes
             angle = math.hypot(roll, pitch)
             q = quat_multiply(q, quat_from_axis_angle((roll / angle, pitch / angle, 0.0), angle))
-        if yaw != 0.0:
-            lead = wrap_angle(heading_of(q) + yaw - heading_of(measured_wxyz))
-            if abs(lead) <= MAX_HEADING_LEAD_RAD or lead * yaw < 0.0:  # about world down
-                q = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
+        if yaw != 0.0:  # about world down
+            turned = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), yaw), q)
+            lead = heading_difference(turned, measured_wxyz)
+            if abs(lead) <= MAX_HEADING_LEAD_RAD or lead * yaw < 0.0:
+                q = turned
         q = quat_normalize(q)
     return depth_m, q

@@ -196,6 +196,13 @@ class _ThrusterFile:
     thrusters: tuple[ThrusterSpec, ...]
     center_of_mass_m: Vector3 = (0.0, 0.0, 0.0)
 
+    def __post_init__(self) -> None:
+        check(  # in the file's own frame, as the user wrote it
+            all(math.isfinite(v) for v in self.center_of_mass_m),
+            "center_of_mass_m",
+            f"must be finite, got {list(self.center_of_mass_m)}",
+        )
+
 
 def _data_dir() -> Traversable:
     return resources.files("testbed.vehicle").joinpath("data", "thrusters")

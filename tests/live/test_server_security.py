@@ -226,7 +226,8 @@ def test_two_host_or_origin_headers_are_refused_whichever_comes_first(
 ) -> None:
     """``Host: evil`` then ``Host: 127.0.0.1`` was served (the last one was checked); two Host
     headers name no one host (RFC 9112: refuse), and two Origins on a WebSocket no one page
-    (refused by the guard or, first, by the WebSocket layer)."""
+    (the WebSocket layer answers those 400 itself, before the guard: held here, so a library
+    that stopped doing so would be seen)."""
     own = f"127.0.0.1:{_port(server)}".encode()
     for first, second in ((b"evil.example", own), (own, b"evil.example"), (own, own)):
         request = b"GET /state HTTP/1.1\r\nHost: " + first + b"\r\nHost: " + second + b"\r\n\r\n"
@@ -236,8 +237,8 @@ def test_two_host_or_origin_headers_are_refused_whichever_comes_first(
     upgrade = _upgrade(own.decode(), origin).replace(
         b"\r\n\r\n", f"\r\nOrigin: {origin}\r\n\r\n".encode()
     )
-    answer = _exchange(server, upgrade)  # the WebSocket layer refuses these itself (400)
-    assert answer.startswith((b"HTTP/1.1 400 ", b"HTTP/1.1 403 ")), answer[:80]
+    answer = _exchange(server, upgrade)  # the WebSocket layer refuses these before the guard
+    assert answer.startswith(b"HTTP/1.1 400 ") and b"Origin" in answer, answer[:200]
     assert server.console.connections == [] and server.hub.counters.accepted == 0
 
 

@@ -48,6 +48,13 @@ class Overdriven:
 def second_trial_sleeps():
     trials_made[0] += 1
     return Sleepy() if trials_made[0] == 2 else Idle()
+
+
+def second_trial_never_starts():
+    trials_made[0] += 1
+    if trials_made[0] == 2:
+        raise RuntimeError("no pilot for trial 2")
+    return Idle()
 """
 
 RAISE_LINE = PILOTS.split("\n").index(
@@ -183,3 +190,44 @@ def test_a_hil_run_whose_pilot_raises_keeps_what_ran_and_closes_the_ports(study:
         assert len(partial.recorder.series()["t_s"]) > 10
     alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:")]
     assert alive == []
+
+
+def test_a_trial_that_fails_as_it_begins_keeps_the_trials_before_it(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pilot factory that raises for trial 2 (bad input: one line, exit 2): nothing of trial
+    2 ran, but trial 1 and a trials.json naming the failed trial are kept, and the line says
+    which trial (it was the error alone, no trials.json)."""
+    out = study / "trials"
+    argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out), "--set", "trials=3"]
+    assert main([*argv, *_pilot(study, "second_trial_never_starts")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "RuntimeError: no pilot for trial 2" in err
+    assert err.endswith(f"(trial 2 of 3 failed as it began; the trials before it are in {out})\n")
+    document = json.loads((out / "trials.json").read_text())
+    assert (document["failed_trial"], document["trials_finished"]) == (2, 1)
+    assert (out / "trial-1" / "metrics.json").exists() and not (out / "trial-2").exists()
+
+
+def test_testbed_hil_writes_what_ran_when_the_pilot_raises(study: Path) -> None:
+    """The CLI over emulated EvoLogics modems (a code review drove it by hand): exit 1, the
+    partial session with its ports.csv and the ports it used, the failure naming the line."""
+    from testbed.channel import load_link_config
+    from testbed.emulator.ptys import ModemEmulator
+
+    config = load_link_config("s2c", ["intrinsic_delay_s=0.05"])
+    out = study / "hil"
+    with ModemEmulator(config, seed=0, modem="evologics") as emulator:
+        a, b = emulator.paths
+        ports = ["--operator-port", a, "--vehicle-port", b, "--modem", "evologics"]
+        short = ["--set", "metrics.settle_s=1", "--set", "link.ipg=fixed"]
+        short += ["--set", "link.ipg_s=0.3", "--set", f"pilot.factory={study / 'sleepy.py'}:Sleepy"]
+        argv = ["hil", str(study / "step.toml"), *ports, "--duration", "4", "--log-bytes"]
+        argv += ["--out", str(out), "--no-plots", *short, "--set", "pilot.args={at_s=2.0}"]
+        assert main(argv) == 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["complete"] is False and 2.0 < metrics["sim_s"] < 4.0
+    assert metrics["failure"].startswith("ValueError: pilot fell asleep at 2.")
+    assert f"(at {study / 'sleepy.py'}:{RAISE_LINE + 1})" in metrics["failure"]
+    assert {"ports.csv", "series.csv", "events.csv"} <= set(metrics["files"])
+    assert metrics["hil"]["ports"]["duration_s"] == 4.0

@@ -294,3 +294,34 @@ def test_failsafe_levels_and_config_checks() -> None:
     ]
     with pytest.raises(ConfigError, match="surface_after_s"):
         build(FailsafeConfig, {"hold_after_s": 2.0, "surface_after_s": 1.0})
+
+
+def test_the_yaw_trim_never_takes_the_heading_target_past_its_lead_limit() -> None:
+    """trim_targets turns the heading target by the yaw trim unless that takes it more than
+    MAX_HEADING_LEAD_RAD ahead of the measured heading; turning back is always allowed; the
+    lead is the rotation about world down, so near ±90° of pitch (where the Euler yaw is
+    undefined) a small real lead is a small lead. Truth: Euler yaws of level attitudes, and
+    attitudes built by a rotation about world down."""
+    from testbed.common.geometry import euler_from_quat, quat_from_axis_angle, quat_multiply
+    from testbed.vehicle.pilot import MAX_HEADING_LEAD_RAD, trim_targets
+
+    step = math.radians(1.0)
+    limit = MAX_HEADING_LEAD_RAD
+    measured = quat_from_euler(0.0, 0.0, 0.3)
+
+    def turned(lead_rad: float, rate: float, now: tuple[float, ...] = measured) -> float:
+        """How far one 1-s trim at ``rate`` [rad/s] turned a target ``lead_rad`` ahead."""
+        target = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), lead_rad), now)
+        _, q = trim_targets(1.0, target, (0.0, 0.0, 0.0, rate), 1.0, False, True, now)
+        before, after = euler_from_quat(target)[2], euler_from_quat(q)[2]
+        return math.remainder(after - before, math.tau)
+
+    assert turned(limit - 2 * step, step) == pytest.approx(step)  # within the limit: turns
+    assert turned(limit - 0.5 * step, step) == pytest.approx(0.0, abs=1e-12)  # waits
+    assert turned(limit + 10 * step, -step) == pytest.approx(-step)  # back towards it: turns
+    assert turned(-(limit - 0.5 * step), -step) == pytest.approx(0.0, abs=1e-12)  # left too
+    nose_up = quat_from_euler(0.0, math.radians(89.5), 0.3)  # the Euler yaw is ill-defined
+    target = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), math.radians(2.0)), nose_up)
+    _, q = trim_targets(1.0, target, (0.0, 0.0, 0.0, step), 1.0, False, True, nose_up)
+    expected = quat_multiply(quat_from_axis_angle((0.0, 0.0, 1.0), step), target)
+    assert np.allclose(q, expected, atol=1e-12) or np.allclose(q, [-c for c in expected])

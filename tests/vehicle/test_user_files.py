@@ -263,7 +263,7 @@ def _edited(kind: str, to: Path, *edits: tuple[str, str]) -> Path:
         (
             "thrusters",
             [("center_of_mass_m = [0.0, 0.0, -0.09]", "center_of_mass_m = [inf, 0.0, -0.09]")],
-            "center_of_mass_m: must be finite, got [0.0, inf, 0.09] (body FRD)",  # mate-rov x
+            "center_of_mass_m: must be finite, got [inf, 0.0, -0.09]",  # as written (mate-rov)
         ),
         (
             "thrusters",  # moments about a point 2 m away: the axis maxima collapsed
