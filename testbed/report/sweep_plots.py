@@ -188,7 +188,7 @@ def _closed_form_at_zero(ax: Axes, axis: LogAxis | None, value: float, colour: s
 
 
 def _title(fig: Figure, results: Results, what: str) -> None:
-    fig.suptitle(f"{what} — {sweep_label(results)} ({len(results.rows)} runs ok)")
+    fig.suptitle(f"{what} — {sweep_label(results)} ({results.runs_label()})")
 
 
 def _plot_lag(
@@ -492,7 +492,7 @@ def plot_pair(
     ax.grid(True, alpha=0.3)
     if hue:
         ax.legend(fontsize="small")
-    ax.set_title(f"{y} vs {x} — {sweep_label(results)} ({len(results.rows)} runs ok)")
+    ax.set_title(f"{y} vs {x} — {sweep_label(results)} ({results.runs_label()})")
     footnote(fig, "dots: runs; " + _BARS_NOTE)
     out = Path(out_path)
     if out.suffix == "":  # what matplotlib would write: the returned path is the real one

@@ -31,6 +31,7 @@ class Results:
         grid: the grid keys (the columns between ``seed`` and ``status``).
         rows: the rows with ``status = ok``, cells as the file's strings.
         row_numbers: each of ``rows``' place in the file, for messages (the head is row 1).
+        failed: the other rows (runs that failed: no metrics to plot, but not to be hidden).
     """
 
     path: Path
@@ -38,6 +39,21 @@ class Results:
     grid: tuple[str, ...]
     rows: tuple[dict[str, str], ...]
     row_numbers: tuple[int, ...]
+    failed: tuple[dict[str, str], ...] = ()
+
+    def runs_label(self) -> str:
+        """``"4 runs ok"``, or with failed runs ``"4 runs ok, 2 failed at link.ber 0.001"``
+        (the grid values where they failed): a title says what the curves leave out."""
+        label = f"{len(self.rows)} runs ok"
+        if not self.failed:
+            return label
+        swept = [  # the grid keys with more than one value: where the failures lie
+            key for key in self.grid if len({row[key] for row in self.rows + self.failed}) > 1
+        ]
+        where = "; ".join(
+            f"{key} {', '.join(dict.fromkeys(row[key] for row in self.failed))}" for key in swept
+        )
+        return f"{label}, {len(self.failed)} failed" + (f" at {where}" if where else "")
 
     def require(self, column: str, option: str) -> None:
         """Raise a one-line :class:`ConfigError` unless ``column`` exists.
@@ -163,7 +179,8 @@ def read_results(results_csv: Path | str) -> Results:
     ok = [(number, row) for number, row in enumerate(all_rows, start=2) if row["status"] == "ok"]
     grid = columns[2 : columns.index("status")]
     rows = tuple(row for _, row in ok)
-    return Results(path, columns, grid, rows, tuple(number for number, _ in ok))
+    failed = tuple(row for row in all_rows if row["status"] != "ok")
+    return Results(path, columns, grid, rows, tuple(number for number, _ in ok), failed)
 
 
 def sweep_label(results: Results) -> str:

@@ -74,8 +74,9 @@ class Resumption:
     Attributes:
         differences: why it may not (``"seeds: 3 removed"``, ``"input /a.toml changed"``…);
             empty when it may.
-        grown: the new sweep adds grid values or seeds to the held one (its finished runs are
-            kept; their point numbers are renumbered by their grid values).
+        grown: the new sweep adds grid values or seeds to the held one, or lists a grid's
+            values in another order (its finished runs are kept; their point numbers are
+            renumbered by their grid values).
     """
 
     differences: tuple[str, ...]
@@ -109,7 +110,7 @@ def compare(held: Mapping[str, Any], new: Mapping[str, Any]) -> Resumption:
 
     Refused: another id, base scenario, override value, grid axis, a removed grid value or seed,
     a changed or missing input (by SHA-256) or another testbed version. Added grid values and
-    seeds are growth, not a difference.
+    seeds, and a grid's values listed in another order, are growth, not a difference.
     """
     out: list[str] = []
     for name in ("id", "scenario", "testbed"):
@@ -131,7 +132,8 @@ def compare(held: Mapping[str, Any], new: Mapping[str, Any]) -> Resumption:
             removed = [v for v in old_axes[key] if key_of(v) not in kept]
             if removed:
                 out.append(f"grid.{key}: {', '.join(_shown(v) for v in removed)} removed")
-            grown |= len(values) > len(old_axes[key]) - len(removed)
+            # values added, or the same ones in another order: point numbers move either way
+            grown |= [key_of(v) for v in values] != [key_of(v) for v in old_axes[key]]
     old_seeds, new_seeds = held.get("seeds") or [], new["seeds"]
     removed_seeds = [s for s in old_seeds if s not in set(new_seeds)]
     if removed_seeds:

@@ -258,11 +258,38 @@ def _flatten_table(
             and not whole
             and not (_is_range(value) if keep_empty else "scale" in value)
         )
-        if level and (value or not keep_empty):
-            flat.update(_flatten_table(value, f"{dotted}.", keep_empty=keep_empty))
-        else:
-            flat[dotted] = value
+        inner = (
+            _flatten_table(value, f"{dotted}.", keep_empty=keep_empty)
+            if level and (value or not keep_empty)
+            else {dotted: value}
+        )
+        for name, leaf in inner.items():
+            if name in flat:  # "link.ber" = … and link.ber = …: two TOML keys, one sweep key
+                raise DuplicateKeyError(name)
+            flat[name] = leaf
     return flat
+
+
+def _flat(
+    table: Mapping[str, Any], name: str, source: str, *, keep_empty: bool = False
+) -> dict[str, Any]:
+    """:func:`_flatten_table` of the sweep file's ``[name]``, a key given twice one line."""
+    try:
+        return _flatten_table(table, keep_empty=keep_empty)
+    except DuplicateKeyError as err:
+        raise ConfigError(
+            f"{source}: {name}.{err.key}: given twice (a quoted dotted key and a nested one "
+            "name the same setting)"
+        ) from None
+
+
+class DuplicateKeyError(ValueError):
+    """A sweep key given twice in one table (a quoted dotted key and a nested one): the
+    caller names the file and the table."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
 
 
 def _is_range(table: Mapping[str, Any]) -> bool:
@@ -350,10 +377,10 @@ def load_sweep(
             return value
         return path_beside(value, base_dir)
 
-    fixed_values = {k: beside(k, v) for k, v in _flatten_table(top.set).items()}
+    fixed_values = {k: beside(k, v) for k, v in _flat(top.set, "set", source).items()}
     fixed = [f"{k}={toml_literal(v)}" for k, v in fixed_values.items()]
     axes = []
-    for key, spec in _flatten_table(top.grid, keep_empty=True).items():
+    for key, spec in _flat(top.grid, "grid", source, keep_empty=True).items():
         where = f"grid.{key}"
         if key in RESERVED_COLUMNS:
             raise ConfigError(f"{source}: {where}: {key!r} cannot be swept (use seeds)")

@@ -513,3 +513,25 @@ def test_a_sweep_without_tracking_gets_no_empty_tracking_plot(tmp_path: Path) ->
     )
     names = [p.name for p in plot_ber_sweep(path, tmp_path / "plots")]
     assert names == ["ber_vs_lag.png"]
+
+
+def test_a_title_names_the_failed_runs_and_where_they_failed(tmp_path: Path) -> None:
+    """Failed runs have no metrics to draw; the curves ended at the last good BER while the
+    title said only "(4 runs ok)". It now says how many failed, and at which grid values."""
+    from testbed.report.sweep_results import read_results
+
+    path = tmp_path / "results.csv"
+    rows = [
+        ["point", "seed", "link.ber", "link.ipg_s", "status", "error", "energy_wh"],
+        *[
+            [p, s, ber, "0.6", "ok", "", "0.1"]
+            for p, ber in ((0, "0.0"), (1, "0.0001"))
+            for s in (0, 1)
+        ],
+        *[[2, s, "0.001", "0.6", "failed", "ValueError: x", ""] for s in (0, 1)],
+    ]
+    with path.open("w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+    results = read_results(path)
+    assert len(results.rows) == 4 and len(results.failed) == 2
+    assert results.runs_label() == "4 runs ok, 2 failed at link.ber 0.001"

@@ -113,6 +113,37 @@ def test_resume_grows_the_grid_running_only_the_new_points(
     _one_line(capsys, "grid.link.ber: 0.0001 removed")
 
 
+def test_resume_takes_the_grid_in_another_order_as_the_same_runs(
+    done: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """[1e-3, 0.0] after [0.0, 1e-3]: it called the journal "damaged" (the points' numbers
+    moved); now nothing runs and the tables equal a fresh sweep's of that order."""
+    out = _copy(done, tmp_path)
+    swapped = _sweep(tmp_path, "[1e-3, 0.0]")
+    assert main(["sweep", str(swapped), *SHORT, "--out", str(out), "--resume"]) == 0
+    assert "0 run now" in capsys.readouterr().out
+    fresh = tmp_path / "fresh"
+    assert main(["sweep", str(swapped), *SHORT, "--out", str(fresh)]) == 0
+    for table in ("results.csv", "aggregate.csv"):
+        assert (out / table).read_bytes() == (fresh / table).read_bytes()
+
+
+def test_a_key_given_twice_in_grid_or_set_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A quoted dotted key and a nested one name one setting: TOML takes both and the last
+    won, silently (a figure of the wrong BER values)."""
+    for table, lines in (
+        ("grid", '[grid]\n"link.ber" = [0.0, 1e-4]\nlink.ber = [1e-3, 1e-2]\n'),
+        ("set", '[set]\n"link.ber" = 1e-3\nlink.ber = 0.0\n[grid]\n"link.ipg_s" = [0.6]\n'),
+    ):
+        path = tmp_path / f"{table}.toml"
+        head = 'schema = 1\nid = "twice-v1"\ndescription = "d"\nscenario = "s100-teleop-v1"\n'
+        path.write_text(head + "seeds = 1\n" + lines, encoding="utf-8")
+        assert main(["sweep", str(path), "--out", str(tmp_path / table)]) == 2
+        _one_line(capsys, f"{path}: {table}.link.ber: given twice")
+
+
 def test_failed_runs_are_run_again_on_resume(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
