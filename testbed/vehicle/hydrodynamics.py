@@ -281,7 +281,7 @@ def _read_model(
     source = str(path)
     data = load_toml(path)
     if added_mass_coriolis is None and "added_mass_coriolis" not in data:
-        raise ConfigError(  # its default is Wu's full C_A, which tumbles the vehicle at speed
+        raise ConfigError(  # left out, it silently meant Wu's full C_A once, which tumbles
             f"{source}: added_mass_coriolis: required key missing ('isotropic' as the packaged "
             "models, 'full' or 'off': docs/vehicle.md), or set vehicle.added_mass_coriolis"
         )
