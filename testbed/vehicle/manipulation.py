@@ -75,13 +75,14 @@ class ArmConfig:
         # a bad name or file fails here, naming the key (a start outside the limits is a
         # FieldError of initial_q_rad already)
         try:
-            self.arm_model()
+            arm = self.arm_model()
         except ConfigError as err:
             raise FieldError("model", str(err)) from None
         try:
-            load_tpik_config(self.tpik)
+            tpik = load_tpik_config(self.tpik)
         except ConfigError as err:
             raise FieldError("tpik", str(err)) from None
+        _check_tpik_fits_arm(tpik, arm, self.tpik)
 
     def arm_model(self) -> ArmModel:
         """The arm model, with ``initial_q_rad`` applied.
@@ -101,6 +102,35 @@ class ArmConfig:
             limits = f"[{joint.lower_rad:g}, {joint.upper_rad:g}]"
             check(inside, "initial_q_rad", f"{joint.name} = {angle:g} rad is outside {limits}")
         return dataclasses.replace(model, initial_q_rad=tuple(float(a) for a in q))
+
+
+def _check_tpik_fits_arm(tpik: TpikConfig, arm: ArmModel, name: str) -> None:
+    """Refuse, at load, a TPIK table for another arm: a joint count of its own (it crashed
+    the run at its first solve), or a joint-limit task whose physical range is not inside the
+    arm's joint limits (degrees for radians flew the mission 1.4 m off, saying nothing)."""
+    n = arm.n_joints
+    check(
+        len(tpik.joint_velocity_limits) == n,
+        "tpik",
+        f"{name}: joint_velocity_limits: {len(tpik.joint_velocity_limits)} values for the "
+        f"arm's {n} joints ({arm.name})",
+    )
+    for i, task in enumerate(tpik.limit_tasks):
+        check(
+            task.joint < n,
+            "tpik",
+            f"{name}: limit_tasks[{i}].joint: {task.joint}, the arm ({arm.name}) has joints "
+            f"0…{n - 1}",
+        )
+        joint = arm.joints[task.joint]
+        low, high = task.physical
+        check(
+            joint.lower_rad - 1e-9 <= low and high <= joint.upper_rad + 1e-9,
+            "tpik",
+            f"{name}: limit_tasks[{i}].physical: [{low:g}, {high:g}] rad is not inside "
+            f"{joint.name}'s limits [{joint.lower_rad:g}, {joint.upper_rad:g}] rad ({arm.name}; "
+            "degrees for radians?)",
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -310,3 +310,36 @@ def test_a_layout_that_makes_no_yaw_is_refused_where_the_heading_is_held(tmp_pat
         with pytest.raises(ConfigError, match=f"operator.mode: '{mode}' holds the heading"):
             load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", f"operator.mode={mode}"])
     load_scenario("s100-teleop-v1", [f"vehicle.thrusters={path}", "operator.mode=manual"])
+
+
+@pytest.mark.parametrize(
+    ("edit", "named"),
+    [  # a UVMS review: the first crashed the run at its first solve, the second flew 1.4 m off
+        (
+            (
+                "joint_velocity_limits = [0.5, 1.0, 1.0, 1.0]",
+                "joint_velocity_limits = [0.5, 1.0, 1.0]",
+            ),
+            "joint_velocity_limits: 3 values for the arm's 4 joints (alpha5)",
+        ),
+        (
+            ("physical = [0.0, 1.571]", "physical = [0.0, 90.0]"),
+            "limit_tasks[0].physical: [0, 90] rad is not inside axis_d's limits [0, 3.49] rad",
+        ),
+    ],
+)
+def test_a_tpik_table_for_another_arm_is_refused_at_load(
+    tmp_path: Path, edit: tuple[str, str], named: str
+) -> None:
+    """The TPIK table's joints are held to the arm's: the count, and each limit task's
+    physical range inside that joint's limits (the arm model file's own figures)."""
+    path = _tpik_file(tmp_path / "mytpik.toml", "30.0")
+    text = path.read_text(encoding="utf-8")
+    assert text.count(edit[0]) == 1
+    path.write_text(text.replace(*edit), encoding="utf-8")
+    if "safety" in named or "physical" in named:  # keep the task itself consistent
+        path.write_text(path.read_text().replace("safety = [0.087, 1.475]", "safety = [5.0, 84.5]"))
+    with pytest.raises(ConfigError) as err:
+        load_scenario("uvms-station-keeping-v1", [f"vehicle.arm.tpik={path}"])
+    message = str(err.value)
+    assert named in message and "\n" not in message, message
