@@ -264,15 +264,19 @@ class LiveSession:
     def _watch_sticks(self) -> None:
         """End-to-end lag: a change of the pilot's sticks → the vehicle applies them (within
         the teleop codec's 1/127 quantisation); a change superseded before it lands is not
-        counted."""
+        counted, nor one a vehicle under autonomy takes (it flies its mission, not sticks)."""
         held = self.pilot.sticks
         if held != self._held:
             self._held = held
             self._change = (self.env.now, held)
         if self._change is None:
             return
+        controllers = self.vehicle.world.resource(Controllers)
+        if controllers.autonomous:
+            self._change = None
+            return
         since, wanted = self._change
-        applied = self.vehicle.world.resource(Controllers).sticks
+        applied = controllers.sticks
         if all(abs(a - w) <= _STICK_TOLERANCE for a, w in zip(applied, wanted, strict=True)):
             self.stick_lags_s.append(self.env.now - since)
             self._change = None

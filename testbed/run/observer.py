@@ -22,6 +22,7 @@ from testbed.vehicle.components import (
     FailsafeStatus,
     MissionStatus,
     PoseTarget,
+    PositionSetpoint,
 )
 from testbed.vehicle.estimation import NavigationEstimate
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
@@ -146,7 +147,7 @@ class VehicleObserver:
         row += (world.resource(PowerMeter).current_a, float(ctl.flags.armed), failsafe)
         target = world.get(ctl.vehicle, PoseTarget)
         if target is None:
-            row += _NO_TARGET
+            row += _guided_target(world, ctl)
         else:
             row += (*target.position_ned_m, target.yaw_rad * _DEG)
         estimate = world.get(ctl.vehicle, NavigationEstimate)
@@ -160,3 +161,16 @@ class VehicleObserver:
             row += _NO_ESTIMATE if reach is None else reach.position_ned_m
         mode = world.get(ctl.vehicle, ActiveMode)
         return (*row, math.nan if mode is None else float(mode.mode))
+
+
+def _guided_target(world: World, ctl: Controllers) -> tuple[float, ...]:
+    """The ``target_*`` columns without an autonomy's pose target: in GUIDED, armed, the
+    operator's go-to (:class:`PositionSetpoint`, its heading NaN when it sets none), the one
+    the position loop flies; else NaN."""
+    if not (ctl.flags.guided and ctl.flags.armed):
+        return _NO_TARGET
+    setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
+    if not setpoints:
+        return _NO_TARGET
+    goal = setpoints[-1]  # as control_position takes it
+    return (*goal.position_ned_m, goal.yaw_rad * _DEG if goal.use_yaw else math.nan)

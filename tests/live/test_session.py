@@ -133,3 +133,23 @@ def test_the_console_says_the_mode_asked_at_once_and_the_last_asked_is_the_one_s
             assert world.get(entity, ModeRequest).mode is expected
     finally:
         session.vehicle.close()
+
+
+def test_a_vehicle_under_autonomy_gives_no_stick_to_vehicle_latency() -> None:
+    """s100-supervised-v1's vehicle flies its mission: a stick change it receives is not one
+    it applies, so it is not a latency sample (a review saw p50 378 ms while rx_x stayed 0);
+    the same change on s100-teleop-v1's vehicle is one."""
+    from testbed.vehicle.resources import Controllers
+
+    pushed = (0.5, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for name, samples in (("s100-supervised-v1", 0), ("s100-teleop-v1", 1)):
+        session = LiveSession(load_scenario(name), Hub(), pilot=None)
+        try:
+            session.pilot.submit(pushed)
+            session.pilot.drain()
+            session._watch_sticks()  # the change is seen
+            session.vehicle.world.resource(Controllers).sticks = pushed  # … and received
+            session._watch_sticks()
+            assert len(session.stick_lags_s) == samples, name
+        finally:
+            session.vehicle.close()

@@ -270,3 +270,48 @@ def test_the_mode_column_is_manual_until_the_operators_mode_arrives_then_depth_h
     assert before + 1.0 <= held[0] < before + 1.0 + row_s + 0.011  # + a 100-Hz frame
     assert held[-1] < after <= held[-1] + row_s
     assert len(held) == round((after - held[0]) / row_s)  # no gap inside
+
+
+def test_a_go_to_in_guided_is_the_series_target_as_the_position_loop_flies_it() -> None:
+    """Without an autonomy's pose target the target_* columns were NaN even while the vehicle
+    flew an operator's go-to in GUIDED (the live console's click): they now hold the
+    PositionSetpoint the position loop takes, its heading in degrees (NaN when it sets none),
+    and stay NaN outside GUIDED."""
+    from testbed.common.components import ArmRequest, ControlMode, ModeRequest
+    from testbed.common.components import PositionSetpoint as GoTo
+    from testbed.ecs import Phase
+    from testbed.operator.pilots import PilotSample
+    from testbed.run.observer import VehicleObserver
+    from testbed.vehicle.vehicle import Vehicle
+
+    class Centred:
+        def sample(self, t_s: float) -> PilotSample:
+            return PilotSample((0.0,) * 6)
+
+    scenario = load_scenario("s100-teleop-v1", ["vehicle.sensors.position.noise_m=0"])
+    with Vehicle(scenario.vehicle, np.random.default_rng(0)) as vehicle:
+        recorder = Recorder(trace=Trace())
+        observer = VehicleObserver(recorder, Centred(), vehicle.reference_velocity, 20.0)
+        vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
+        world, intents = vehicle.world, vehicle.operator_entity
+        world.set(intents, ArmRequest(True, 1))
+        world.set(intents, ModeRequest(ControlMode.DEPTH_HOLD))
+        world.set(intents, GoTo((2.0, 1.0, 1.2), 0.5, True))
+        vehicle.advance(1.0)  # not GUIDED: no target
+        world.set(intents, ModeRequest(ControlMode.GUIDED))
+        vehicle.advance(2.0)
+        world.set(intents, GoTo((-1.0, 0.5, 1.0)))  # no heading of its own
+        vehicle.advance(3.0)
+    series = recorder.series()
+    t = series["t_s"]
+    columns = [series[c] for c in ("target_n", "target_e", "target_d", "target_yaw_deg")]
+    first, second = (t > 1.05) & (t < 2.0), t > 2.05
+    assert all(np.isnan(c[t < 0.95]).all() for c in columns)
+    assert [np.unique(c[first]).tolist() for c in columns] == [
+        [2.0],
+        [1.0],
+        [1.2],
+        [pytest.approx(math.degrees(0.5))],
+    ]
+    assert [np.unique(c[second]).tolist() for c in columns[:3]] == [[-1.0], [0.5], [1.0]]
+    assert np.isnan(columns[3][second]).all()
