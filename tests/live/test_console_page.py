@@ -279,3 +279,22 @@ def test_a_viewers_controls_look_greyed_and_both_count_connected(tab: Any, brows
             assert float(pilot.evaluate(opacity, control)) == 1.0, control
     finally:
         context.close()
+
+
+def test_a_new_pilot_page_keeps_the_coders_roi_when_it_changes_only_the_budget(
+    browser: Any, live: Live
+) -> None:
+    """A pilot sets an ROI and leaves; the next page (a new seat, a reload) starts from the
+    coder's settings in effect, so sending a new budget keeps the ROI and its shift. It sent
+    roi null, shift 0 (the page's own empty ROI), erasing the first pilot's region."""
+    coder = "document.getElementById('img-coder').textContent"
+    with pilot_tab(browser, live) as first:
+        first.evaluate("send({t: 'image', roi: [10, 10, 67, 50], shift: 5, budget: 1200})")
+        first.wait_for_function(f"{coder}.startsWith('roi 10,10,67,50 shift 5 budget 1200')")
+    with pilot_tab(browser, live) as second:
+        second.wait_for_function(f"{coder}.startsWith('roi 10,10,67,50 shift 5')")
+        second.fill("#budget", "800")
+        second.click("#send-image")
+        (sent,) = _sent(second, "image")
+        assert (sent["roi"], sent["shift"], sent["budget"]) == ([10, 10, 67, 50], 5, 800)
+        second.wait_for_function(f"{coder}.startsWith('roi 10,10,67,50 shift 5 budget 800')")

@@ -153,6 +153,16 @@ $("image").onmouseup = (e) => {
   drag = null;
   if (x1 - x0 >= 2 && y1 - y0 >= 2) { roi = [x0, y0, x1, y1]; sendImage(); }
 };
+// A page that opens (or reloads, or takes over the seat) starts from the coder's settings in
+// effect: changing only the budget must not clear another pilot's ROI.
+let imageSynced = false;
+function adoptCoder(cd) {
+  const [x0, y0, x1, y1] = cd.roi;
+  roi = x1 > x0 && y1 > y0 ? [x0, y0, x1, y1] : null;
+  if (cd.shift > 0) $("shift").value = String(cd.shift);
+  $("budget").value = String(cd.budget);
+  imageSynced = true;
+}
 $("send-image").onclick = sendImage;
 $("clear-roi").onclick = () => { roi = null; sendImage(); };
 
@@ -215,6 +225,7 @@ function drawImage(img) {
     $("img-done").textContent = img.completed;
     const cd = img.coder;
     $("img-coder").textContent = `roi ${cd.roi.join(",")} shift ${cd.shift} budget ${cd.budget}`;
+    if (!imageSynced) adoptCoder(cd);
   }
 }
 
