@@ -53,6 +53,7 @@ class Hub:
         self.round_trips_ms: deque[float] = deque(maxlen=100_000)
         self.notes: deque[str] = deque(maxlen=_NOTES)
         self.viewers = 0
+        self._seats: queue.SimpleQueue[tuple[str, str]] = queue.SimpleQueue()
 
     def submit(self, message: Message, received_ns: int | None = None) -> None:
         """Queue a control message for the session (any thread)."""
@@ -64,6 +65,20 @@ class Hub:
         while True:
             try:
                 out.append(self._inbox.get_nowait())
+            except queue.Empty:
+                return out
+
+    def seat_event(self, kind: str, detail: str) -> None:
+        """Queue a change of who is connected or holds the pilot's seat (any thread): the
+        session records it in ``events.csv`` (``live,KIND,DETAIL``) at its next poll."""
+        self._seats.put((kind, detail))
+
+    def take_seat_events(self) -> list[tuple[str, str]]:
+        """Every queued seat event, oldest first (the session's thread)."""
+        out: list[tuple[str, str]] = []
+        while True:
+            try:
+                out.append(self._seats.get_nowait())
             except queue.Empty:
                 return out
 

@@ -219,8 +219,9 @@ def _static(name: str) -> str:
 class _Connection:
     """One browser: its socket, its role and a wake-up for its sender."""
 
-    def __init__(self, websocket: WebSocket) -> None:
+    def __init__(self, websocket: WebSocket, number: int) -> None:
         self.websocket = websocket
+        self.number = number  # 1, 2, … in the order the browsers connected: events.csv's name
         self.pilot = False
         self.wake = asyncio.Event()
         self.limit = RateLimit()
@@ -233,19 +234,33 @@ class _Console:
         self.hub = hub
         self.pilot = pilot
         self.connections: list[_Connection] = []
+        self.connected = 0
+
+    def connect(self, websocket: WebSocket) -> _Connection:
+        """A new browser, numbered in connection order, given the seat if it is free."""
+        self.connected += 1
+        conn = _Connection(websocket, self.connected)
+        self.seat(conn)
+        return conn
 
     def seat(self, conn: _Connection) -> None:
-        """Give ``conn`` the pilot's seat if it is free."""
+        """Give ``conn`` the pilot's seat if it is free (recorded: who flies from now on)."""
+        role = "viewer"
         if not any(c.pilot for c in self.connections):
-            conn.pilot = True
+            conn.pilot, role = True, "pilot"
+        self.hub.seat_event("connect", f"browser {conn.number} as {role}")
 
     def leave(self, conn: _Connection) -> None:
         self.connections.remove(conn)
+        role = "pilot" if conn.pilot else "viewer"
+        self.hub.seat_event("disconnect", f"browser {conn.number} ({role}) left")
         if conn.pilot:
             self.pilot.submit(_CENTRE)  # sticks to centre at once, not after the dead man
             if self.connections:
-                self.connections[0].pilot = True
-                self.connections[0].wake.set()
+                heir = self.connections[0]
+                heir.pilot = True
+                heir.wake.set()
+                self.hub.seat_event("seat", f"browser {heir.number} took the pilot's seat")
         self.hub.viewers = len(self.connections)
 
     def broadcast(self) -> None:
@@ -324,8 +339,7 @@ def build_app(
             hub.counters.too_many += 1
             await websocket.close(code=1013)  # before accept: HTTP 403
             return
-        conn = _Connection(websocket)
-        console.seat(conn)
+        conn = console.connect(websocket)
         console.connections.append(conn)  # before accepting: the cap holds meanwhile
         hub.viewers = len(console.connections)
         conn.wake.set()

@@ -255,6 +255,8 @@ class LiveSession:
             self.lateness_ns.append(rt_lateness_ns(self.env))
             poll_modems(self.hil_modems.values())
             self.pilot.drain()
+            for kind, detail in self.hub.take_seat_events():  # who flies from now on
+                self._event(kind, detail)
             for message, _ in self.hub.take():
                 self.apply(message)
             self._watch_coder()

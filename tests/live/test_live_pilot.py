@@ -12,7 +12,7 @@ from testbed.ecs import World
 from testbed.live.hub import Hub
 from testbed.live.intents import LiveImageConsole, LiveIpg, LiveRequests
 from testbed.live.messages import Arm, StickInput
-from testbed.live.server import _Connection, _Console
+from testbed.live.server import _Console
 from testbed.operator.live_pilot import LivePilot
 from testbed.protocol import ImageSettings
 
@@ -83,10 +83,9 @@ class _Socket:
 
 def test_the_first_browser_pilots_and_the_next_one_only_watches() -> None:
     console, pilot, hub = _console()
-    first, second = _Connection(_Socket()), _Connection(_Socket())  # type: ignore[arg-type]
-    for conn in (first, second):
-        console.seat(conn)
-        console.connections.append(conn)
+    for _ in range(2):  # as the server does: seated, then listed
+        console.connections.append(console.connect(_Socket()))  # type: ignore[arg-type]
+    first, second = console.connections
     assert first.pilot and not second.pilot
     console.receive(second, '{"t": "arm", "armed": false}')
     assert hub.counters.not_pilot == 1 and hub.take() == []
@@ -98,12 +97,18 @@ def test_the_first_browser_pilots_and_the_next_one_only_watches() -> None:
     console.leave(first)  # the pilot's tab closes: sticks centre, the viewer takes the seat
     pilot.drain()
     assert pilot.sticks == CENTRE and second.pilot
+    # who flew when, for events.csv (a study with a seat handover could not tell)
+    assert hub.take_seat_events() == [
+        ("connect", "browser 1 as pilot"),
+        ("connect", "browser 2 as viewer"),
+        ("disconnect", "browser 1 (pilot) left"),
+        ("seat", "browser 2 took the pilot's seat"),
+    ]
 
 
 def test_garbage_and_floods_are_counted_and_answered_never_raised() -> None:
     console, _, hub = _console()
-    conn = _Connection(_Socket())  # type: ignore[arg-type]
-    console.seat(conn)
+    conn = console.connect(_Socket())  # type: ignore[arg-type]
     console.connections.append(conn)
     answer = console.receive(conn, "{oops")
     assert answer is not None and answer["t"] == "rejected"
