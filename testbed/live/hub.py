@@ -19,7 +19,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from testbed.live.messages import InputCounters, Message
 
@@ -61,12 +61,7 @@ class Hub:
 
     def take(self) -> list[tuple[Message, int]]:
         """Every queued control message, oldest first (the session's thread)."""
-        out: list[tuple[Message, int]] = []
-        while True:
-            try:
-                out.append(self._inbox.get_nowait())
-            except queue.Empty:
-                return out
+        return _drained(self._inbox)
 
     def seat_event(self, kind: str, detail: str) -> None:
         """Queue a change of who is connected or holds the pilot's seat (any thread): the
@@ -75,12 +70,7 @@ class Hub:
 
     def take_seat_events(self) -> list[tuple[str, str]]:
         """Every queued seat event, oldest first (the session's thread)."""
-        out: list[tuple[str, str]] = []
-        while True:
-            try:
-                out.append(self._seats.get_nowait())
-            except queue.Empty:
-                return out
+        return _drained(self._seats)
 
     def set_waker(self, loop: asyncio.AbstractEventLoop, event: asyncio.Event) -> None:
         """The server's loop and the event it awaits for new state."""
@@ -105,3 +95,16 @@ class Hub:
         """A notice for the console (any thread)."""
         with self._lock:
             self.notes.append(text)
+
+
+T = TypeVar("T")
+
+
+def _drained(inbox: queue.SimpleQueue[T]) -> list[T]:
+    """Everything ``inbox`` holds now, oldest first, without waiting."""
+    out: list[T] = []
+    while True:
+        try:
+            out.append(inbox.get_nowait())
+        except queue.Empty:
+            return out
