@@ -89,17 +89,14 @@ def _run_scenario(args: argparse.Namespace) -> int:
         try:
             if scenario.trials > 1:
                 return _run_trials(scenario, out, seed=args.seed, plots=not args.no_plots)
-            try:
-                result = run_scenario(scenario, seed=args.seed)
-            except Exception as error:
-                if (partial := partial_run(error)) is not None:
-                    from testbed.run.outputs import write_run
-                    from testbed.run.trials import remove_trials
+            result = run_scenario(scenario, seed=args.seed)
+        except Exception as error:  # trials wrote a failed trial's part themselves
+            if scenario.trials == 1 and (partial := partial_run(error)) is not None:
+                from testbed.run.outputs import write_run
+                from testbed.run.trials import remove_trials
 
-                    write_run(partial, out)
-                    remove_trials(out)
-                raise
-        except Exception as error:
+                write_run(partial, out)
+                remove_trials(out)
             return report_failed_run(error, out, scenario.duration_s, trials=scenario.trials)
         return finish_run(result, out, plots=not args.no_plots, planned_s=scenario.duration_s)
 
