@@ -198,30 +198,33 @@ def write_run(
     """
     written: list[Path] = []
     interrupted: KeyboardInterrupt | None = None
-    try:
-        with deferred_interrupts() as late:  # the data whole, even on a (second) Ctrl-C now
-            out_dir.mkdir(parents=True, exist_ok=True)
-            _remove_leftovers(out_dir)
-            previous = _previous_files(out_dir)
-            with contextlib.suppress(FileNotFoundError):
-                (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
-            recorder = result.recorder
-            written += [
-                replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
-                replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
-            ]
-            images = result.scenario.images
-            if images.enabled:
-                log, chunk = recorder.images, images.chunk_bytes
-                write = functools.partial(write_images_csv, log, chunk)
-                written.append(replace_atomically(write, out_dir / "images.csv"))
-            for name, writer in (extras or {}).items():
-                written.append(replace_atomically(writer, out_dir / name))
-        interrupted = late[0] if late else None
-    except KeyboardInterrupt as interrupt:  # one that came as the held stretch ended
-        if len(written) < 2:  # before the data files were written: nothing to list
-            raise
-        interrupted = interrupt
+    while True:  # again if an interrupt came as the held stretch began: nothing written yet
+        try:
+            with deferred_interrupts() as late:  # the data whole, even on a (second) Ctrl-C now
+                out_dir.mkdir(parents=True, exist_ok=True)
+                _remove_leftovers(out_dir)
+                previous = _previous_files(out_dir)
+                with contextlib.suppress(FileNotFoundError):
+                    (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
+                recorder = result.recorder
+                written += [
+                    replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
+                    replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
+                ]
+                images = result.scenario.images
+                if images.enabled:
+                    log, chunk = recorder.images, images.chunk_bytes
+                    write = functools.partial(write_images_csv, log, chunk)
+                    written.append(replace_atomically(write, out_dir / "images.csv"))
+                for name, writer in (extras or {}).items():
+                    written.append(replace_atomically(writer, out_dir / name))
+            interrupted = interrupted or (late[0] if late else None)
+            break
+        except KeyboardInterrupt as interrupt:  # one that came as the held stretch began or ended
+            interrupted = interrupted or interrupt
+            if len(written) >= 2:  # the data files are written: on to metrics.json
+                break
+            written.clear()  # before them: write them now (nothing accepted is lost), then go on
     if plots is not None and interrupted is None:
         staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
         try:

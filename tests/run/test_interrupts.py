@@ -125,6 +125,34 @@ def test_ctrl_c_while_the_data_files_are_written_keeps_them_whole(
     assert (out / "events.csv").read_text().count("\n") > 100  # whole: every event row
 
 
+def test_an_interrupt_as_the_data_files_writing_begins_still_writes_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A (second) Ctrl-C that lands as write_run enters its held stretch, before it holds
+    signals: it went on up with nothing written, and a live session's double Ctrl-C printed
+    'results in DIR' over a folder without metrics.json. The data and metrics.json are now
+    written whole first, then the interrupt goes on up."""
+    from testbed.run import outputs
+
+    result = run_scenario(load_scenario("s100-teleop-v1", ["duration_s=12"]), seed=0)
+    held = outputs.deferred_interrupts
+    entered: list[int] = []
+
+    def interrupted_as_it_begins() -> Any:
+        entered.append(1)
+        if len(entered) == 1:  # the first stretch: the signal lands before it is held
+            raise KeyboardInterrupt
+        return held()
+
+    monkeypatch.setattr(outputs, "deferred_interrupts", interrupted_as_it_begins)
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        write_run(result, out, plots=lambda _, staging: [])
+    metrics = check_set(out)
+    assert set(metrics["files"]) == {"events.csv", "series.csv"}  # no plots begun
+    assert (out / "series.csv").read_text().count("\n") > 100
+
+
 @pytest.fixture
 def ctrl_c_as_a_terminal() -> Iterator[None]:
     """SIGINT handled as Python does by default (a KeyboardInterrupt), also where the tests run
