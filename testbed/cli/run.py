@@ -331,6 +331,8 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             )
         if (never := never_ready(mission)) is not None:
             lines.append(f"  {never}")
+    if (arm := arm_note(metrics)) is not None:
+        lines.append(f"  {arm}")
     if (gated := gate_rejections(metrics)) is not None:
         lines.append(f"  {gated}")
     lines += [f"  {line}" for line in silent_sources(metrics)]
@@ -338,6 +340,27 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         lines.append(f"  {capsized}")
     lines.append(f"  wrote {out}/")
     return "\n".join(lines)
+
+
+def arm_note(metrics: dict[str, Any]) -> str | None:
+    """``"arm: 870 TPIK solves, 12 with a joint-limit task; closest to a limit: axis_e
+    5.1°"`` for a vehicle with an arm (``margin_deg`` below 0: "past its safety limit by"),
+    else None."""
+    arm = metrics.get("arm")
+    if arm is None:
+        return None
+    line = f"arm: {arm['solves']} TPIK solves, {arm['limit_activations']} with a joint-limit task"
+    margins = {
+        name: joint["margin_deg"]
+        for name, joint in arm["joints"].items()
+        if not missing(joint["margin_deg"])
+    }
+    if margins:
+        joint = min(margins, key=margins.__getitem__)
+        margin = margins[joint]
+        closest = f"{margin:.1f}°" if margin >= 0 else f"past its limit by {-margin:.1f}°"
+        line += f"; closest to a limit: {joint} {closest}"
+    return line
 
 
 def _capsized(metrics: dict[str, Any]) -> str | None:

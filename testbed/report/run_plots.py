@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from testbed.report.arm_plots import plot_arm
 from testbed.report.figures import no_data, save
 from testbed.report.images import plot_image_strip
 from testbed.report.mission_plots import has_target, plot_mission
@@ -394,6 +395,8 @@ def write_run_plots(result: RunResult, out_dir: Path) -> list[Path]:
                 count=scenario.images.strip_images,
             )
         )
+    if result.recorder.arm is not None:
+        written.append(plot_arm(result.recorder.arm, out_dir / "arm.png", title=title))
     autonomy = scenario.vehicle.autonomy
     series = result.recorder.series()
     if autonomy is not None and has_target(series):

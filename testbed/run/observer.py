@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 from testbed.common.geometry import attitude_error, euler_from_quat
 from testbed.ecs import World
 from testbed.operator.pilots import Pilot
+from testbed.run.arm_log import ArmLog
 from testbed.run.recorder import Recorder
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.components import (
@@ -41,7 +42,9 @@ class VehicleObserver:
     publishes — failsafe changes, the mission's goals given and reached (``mission_goal``,
     ``mission_reached``: the goal's number, counting from 1) and the mission tree's status line
     whenever it changes (``mission``: "executing square", "…: goal not reached within 10 s",
-    "cancelled: …") as node events and, at ``sample_rate_hz``, one series row —
+    "cancelled: …") and, with an arm, the joints whose TPIK limit task is in force whenever
+    they change (``limit_tasks``: their names, or "none") as node events and, at
+    ``sample_rate_hz``, one series row (and one :class:`~testbed.run.arm_log.ArmLog` row) —
     reading its resources and components only (never the controllers' or the plant's insides).
 
     Args:
@@ -77,6 +80,7 @@ class VehicleObserver:
         self._last_armed = False
         self._last_mode: ControlMode | None = None
         self._autonomy: Autonomy | bool | None = False  # False: not looked up yet
+        self._arm: Manipulator | bool | None = False
         self._last_status = ""
 
     def __call__(self, world: World) -> None:
@@ -91,13 +95,32 @@ class VehicleObserver:
         if isinstance(auto, Autonomy) and auto.status != self._last_status:
             self._last_status = auto.status
             self._recorder.event(now, "vehicle", "mission", auto.status)
+        arm = self._arm
+        if arm is False:
+            arm = self._arm = self._start_arm_log(world)
+        if isinstance(arm, Manipulator):
+            log = self._recorder.arm
+            assert log is not None
+            if log.note(arm):
+                self._recorder.event(now, "vehicle", "limit_tasks", " ".join(log.active) or "none")
         if now < self._next_sample_s - 1e-9:
             return
+        if isinstance(arm, Manipulator):
+            assert self._recorder.arm is not None
+            self._recorder.arm.record(now, arm)
         self._next_sample_s += self._sample_period_s
         failsafe = self._last_failsafe
         if self._other_failsafe is not None and self._other_failsafe():
             failsafe = max(failsafe, int(FailsafeLevel.HOLD))
         self._recorder.rows.append(self.row(world, now, float(failsafe)))
+
+    def _start_arm_log(self, world: World) -> Manipulator | None:
+        """The vehicle's arm, its log started in the recorder; None without one."""
+        if not world.has_resource(Manipulator):
+            return None
+        arm = world.resource(Manipulator)
+        self._recorder.arm = ArmLog.of(arm)
+        return arm
 
     def _note_changes(self, world: World, now: float) -> None:
         """Events for the vehicle arming or disarming, a new mode in effect, a new failsafe

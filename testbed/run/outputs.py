@@ -2,7 +2,8 @@
 
 :func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and writable,
 not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
-``events.csv``, ``series.csv``, ``images.csv`` (image scenarios) and the plots, each under a
+``events.csv``, ``series.csv``, ``images.csv`` (image scenarios), ``arm.csv`` (a vehicle with
+an arm) and the plots, each under a
 temporary name renamed into place, and ``metrics.json`` **last**, carrying ``"complete"`` (true for
 a run that reached its end, false for one ended early by Ctrl-C or SIGTERM, or by an error,
 whose ``sim_s`` says how far it got; then ``"failure"`` is the error in one line) and
@@ -216,6 +217,9 @@ def write_run(
                     log, chunk = recorder.images, images.chunk_bytes
                     write = functools.partial(write_images_csv, log, chunk)
                     written.append(replace_atomically(write, out_dir / "images.csv"))
+                if recorder.arm is not None:
+                    arm_csv = out_dir / "arm.csv"
+                    written.append(replace_atomically(recorder.arm.write_csv, arm_csv))
                 for name, writer in (extras or {}).items():
                     written.append(replace_atomically(writer, out_dir / name))
             interrupted = interrupted or (late[0] if late else None)

@@ -22,7 +22,7 @@ from array import array
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import overload
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -30,6 +30,9 @@ import numpy.typing as npt
 from testbed.channel import Trace
 from testbed.channel.trace import ListEquality
 from testbed.run.images import ImageLog
+
+if TYPE_CHECKING:
+    from testbed.run.arm_log import ArmLog
 
 __all__ = [
     "SERIES_COLUMNS",
@@ -235,6 +238,7 @@ class Recorder:
         rows: series rows (see :data:`SERIES_COLUMNS`): a :class:`SeriesRows`, or any list of
             row tuples.
         images: images captured, sent and received (image feedback runs).
+        arm: the arm's joints and set tasks (a vehicle with an arm), else None.
         stick_source: what the ``cmd_*`` columns hold: ``"pilot"`` (the pilot sampled at each
             row's instant, its continuous stick) or ``"operator samples"`` (a pilot that is not
             a pure function of time: the operator's own samples, held between its frames).
@@ -252,6 +256,7 @@ class Recorder:
     events: list[NodeEvent] = field(default_factory=list)
     rows: SeriesRows | list[tuple[float, ...]] = field(default_factory=SeriesRows)
     images: ImageLog = field(default_factory=ImageLog)
+    arm: ArmLog | None = None
     stick_source: str = "pilot"
 
     def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:

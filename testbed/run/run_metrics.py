@@ -274,6 +274,8 @@ def compute_metrics(
     }
     if scenario.images.enabled:
         metrics["images"] = image_metrics(recorder.images, sim_s)
+    if recorder.arm is not None:
+        metrics["arm"] = recorder.arm.metrics()
     autonomy_config = scenario.vehicle.autonomy
     if autonomy_config is not None:
         metrics["mission"] = mission_metrics(
