@@ -118,8 +118,13 @@ def _own_pilot(scenario: Scenario) -> dict[str, Any]:
     pilot = scenario.pilot
     if pilot.kind != "python":
         return {}
-    args = json.loads(json.dumps(pilot.args, default=str))  # a TOML date as its text
-    return {"pilot": {"factory": pilot.factory, "args": args}}
+    return {"pilot": {"factory": pilot.factory, "args": plain_args(pilot.args)}}
+
+
+def plain_args(args: dict[str, Any]) -> dict[str, Any]:
+    """A factory's keyword arguments as JSON holds them (a TOML date as its text)."""
+    plain: dict[str, Any] = json.loads(json.dumps(args, default=str))
+    return plain
 
 
 def _link_direction(

@@ -36,7 +36,7 @@ from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model, scenario_pilot
 from testbed.run.recorder import Recorder
-from testbed.run.run_metrics import compute_metrics
+from testbed.run.run_metrics import compute_metrics, plain_args
 from testbed.run.scenario import Scenario
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import Navigation
@@ -325,12 +325,16 @@ def run_scenario(
         metrics = _run_metrics(
             scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, early
         )
+        inputs = metrics["inputs"]
+        if pilot is not None:  # the scenario's [pilot] did not fly: name what did
+            inputs["pilot"] = {"object": model_name(pilot)}
         if link_model is not None:
-            metrics["inputs"]["link_model"] = model_name(link_model)
+            inputs["link_model"] = model_name(link_model)
             # the closed form knows the preset's bit rate only, not the model's air time
             metrics["token_round_trip_s"], metrics["reply_fits_gap"] = math.nan, None
         elif model is not None:
-            metrics["inputs"]["link_model"] = scenario.link.model
+            inputs["link_model"] = scenario.link.model
+            inputs["link_model_args"] = plain_args(scenario.link.model_args)
         return RunResult(scenario, seed, metrics, recorder, stopped, failure)
 
     with deferred_interrupts() as closing:  # what ran is reduced whole, even on Ctrl-C now

@@ -18,6 +18,7 @@ import pytest
 import testbed
 from testbed.channel.model import LinkModelError
 from testbed.cli.main import main
+from testbed.operator.pilots import PilotSample
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from tests.run.test_plugins import _scenario_text, write_study
@@ -247,6 +248,13 @@ def test_start_s_is_refused_for_a_python_pilot_and_a_forgotten_suffix_is_hinted(
     assert "(a file is named as 'my_pilots_typo.py:StepPilot')" in capsys.readouterr().err
 
 
+class HeldSticks:
+    """A pilot object of the API's caller: surge held at 0.25."""
+
+    def sample(self, t_s: float) -> PilotSample:
+        return PilotSample((0.25, 0.0, 0.0, 0.0, 0.0, 0.0))
+
+
 def test_metrics_name_the_version_and_the_pilot_and_a_failed_sweep_run_says_where_and_how(
     study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -260,6 +268,11 @@ def test_metrics_name_the_version_and_the_pilot_and_a_failed_sweep_run_says_wher
         "factory": f"{study / 'my_pilots.py'}:StepPilot",
         "args": {"at_s": 15.0},
     }
+    # a pilot object handed to the API flies instead of the scenario's: the record names it
+    handed = run_scenario(load_scenario(str(study / "step.toml")), pilot=HeldSticks())
+    assert handed.metrics["inputs"]["pilot"] == {"object": f"{__name__}.HeldSticks"}
+    flown = handed.recorder.series()["cmd_x"]  # 0 before the operator's first sample
+    assert set(flown) == {0.0, 0.25} and flown[-1] == 0.25
     sweep_file = _write_sweep(study, "sleepy", "odd_pilots.py:Sleepy", 15.0)
     out = tmp_path / "sweep"
     assert main(["sweep", str(sweep_file), "--workers", "1", "--out", str(out)]) == 1

@@ -181,6 +181,7 @@ def test_a_link_model_named_in_the_scenario_flies_as_the_presets_key_bit_for_bit
     expected = load_scenario("s100-teleop-v1").link.channel.intrinsic_delay_s + 8 * 13 / 1400
     assert len(crossed) > 40 and crossed == pytest.approx([expected] * len(crossed), abs=1e-7)
     assert modelled.metrics["inputs"]["link_model"] == f"{study / 'my_links.py'}:constant"
+    assert modelled.metrics["inputs"]["link_model_args"] == {"bitrate_bps": 1400.0}
     assert "link_model" not in keyed.metrics["inputs"]
 
 
