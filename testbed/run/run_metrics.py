@@ -142,16 +142,22 @@ def _link_direction(
     ``mean_frame_bytes`` is the frames' own mean length (``frame_bytes`` over the frames sent),
     the length bit errors act on; ``mean_on_air_bytes`` adds the modem's packet padding.
 
+    ``frames_corrupted`` = settled − delivered − collided − outage − out of range: the frames
+    lost to bit errors (the receiver's decoder refused them), as ``testbed link`` counts them; a
+    frame whose bit errors all fell in its last packet's padding decodes and is delivered (the
+    trace marks that packet ``corrupt``), so delivered + corrupted + the other losses = settled.
+
     ``per`` = 1 − delivered / settled, over the frames whose every packet had reached the
     receiver (or been lost) when the run ended: a frame still queued or on the air at the end
     is neither delivered nor lost, and a frame the sender's FIFO dropped was never on the air
     (``drop_rate`` = dropped / sent counts those).
     """
     counts = direction_counts(trace.events, src, dst)
+    lost_otherwise = counts.frames_collided + counts.frames_outage + counts.frames_out_of_range
     return {
         "frames_sent": counts.frames_sent,
         "frames_delivered": decoded,
-        "frames_corrupted": counts.frames_corrupted,
+        "frames_corrupted": max(0, counts.frames_settled - decoded - lost_otherwise),
         "frames_collided": counts.frames_collided,
         "frames_dropped": counts.frames_dropped,
         "frames_outage": counts.frames_outage,

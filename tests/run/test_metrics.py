@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from testbed.channel import direction_counts
 from testbed.report.closed_forms import aoi_periodic_closed_form
 from testbed.run.metrics import (
     age_of_information,
@@ -14,6 +15,8 @@ from testbed.run.metrics import (
     signal_lag_s,
     summary,
 )
+from testbed.run.runner import run_scenario
+from testbed.run.scenario import load_scenario
 
 
 def test_age_of_periodic_lossless_updates_is_delay_plus_half_period() -> None:
@@ -146,3 +149,22 @@ def test_signal_lag_on_an_uneven_grid_uses_real_time() -> None:
     lag = 0.4
     received = np.sin(2 * np.pi * (t - lag) / 19.0) + 0.4 * np.sin(2 * np.pi * (t - lag) / 6.1)
     assert signal_lag_s(t, commanded, received) == pytest.approx(lag, abs=0.005)
+
+
+def test_frame_outcomes_add_up_when_bit_errors_fall_in_packet_padding() -> None:
+    """m64 cuts frames into 8-B packets, the last zero-padded: bit errors that fall only in
+    the padding leave the frame whole (the decoder takes it) though the trace marks the
+    packet corrupt. A frame is then delivered, not corrupted: delivered + corrupted +
+    collided + outage + out of range = the settled frames (the trace's second count), never
+    more than were sent."""
+    scenario = load_scenario("m64-teleop-v1", ["duration_s=300", "link.ber=3e-3"])
+    result = run_scenario(scenario, seed=1)
+    trace = result.recorder.trace
+    for src, dst, key in (("operator", "vehicle", "uplink"), ("vehicle", "operator", "downlink")):
+        link = result.metrics["link"][key]
+        counts = direction_counts(trace.events, src, dst)
+        outcomes = link["frames_delivered"] + link["frames_corrupted"] + link["frames_collided"]
+        outcomes += link["frames_outage"] + link["frames_out_of_range"]
+        assert outcomes == counts.frames_settled <= link["frames_sent"] - link["frames_dropped"]
+        # the case happened: more frames had a corrupt packet than were lost to bit errors
+        assert counts.frames_corrupted > link["frames_corrupted"] > 0
