@@ -9,7 +9,8 @@ with the semantics of the dccomms_ros custom link (REFERENCE §2.1):
 - A transmission spends ``intrinsic_delay_s`` (the device counts as transmitting), then the
   airtime ``8·len / bitrate_bps`` (the link model's, :meth:`~.model.LinkModel.airtime_s`).
   The next queued transmission starts ``queue_gap_s`` after that. In half duplex a modem
-  defers its queue while it is receiving (until ``queue_gap_s`` after the reception ends) and
+  defers its queue while it is receiving and until ``queue_gap_s`` after the reception ends
+  (also for a frame queued as the reception ends: a reply to the frame just received), and
   loses any reception that overlaps its own transmission.
 - The medium is a broadcast channel: every other attached modem within ``max_range_m`` (distance
   between the position callables at transmit time) receives its own copy, which arrives after
@@ -44,7 +45,7 @@ import numpy as np
 import simpy
 
 from testbed.channel.config import LinkConfig
-from testbed.channel.model import LinkModel, LinkModelError, StandardLink
+from testbed.channel.model import LinkModel, StandardLink, checked_airtime_s, checked_corrupt
 from testbed.channel.trace import BROADCAST, EventKind, Trace
 from testbed.protocol import CorruptFrame, Frame, FrameDecoder
 
@@ -302,7 +303,6 @@ class Modem:
         self._env = medium.env
         self._half_duplex = config.duplex == "half"
         self._intrinsic_s = config.intrinsic_delay_s
-        self._airtime_s = medium.model.airtime_s
         self._medium_model = medium.model
         self._gap_s = config.queue_gap_s
         self._buffer_bytes = config.tx_buffer_bytes
@@ -313,6 +313,7 @@ class Modem:
         self._tx_start_s = -math.inf
         self._tx_end_s = -math.inf
         self._free_at_s = -math.inf
+        self._rx_end_s = -math.inf  # the end of the last reception this modem finished
         self._wakeup_pending = False
         self._receptions: list[_Reception] = []
         self._inbox: list[Delivery] = []
@@ -397,6 +398,8 @@ class Modem:
             for r in self._receptions:  # defer while receiving (carrier sense, as dccomms)
                 if r.start_s <= now < r.end_s and r.end_s + self._gap_s > ready_s:
                     ready_s = r.end_s + self._gap_s
+            # and for the gap after one that just ended (a reply sent as its order arrives)
+            ready_s = max(ready_s, self._rx_end_s + self._gap_s)
         if ready_s - now > _TIME_EPS_S:
             self._wakeup_pending = True
             simpy.Timeout(self._env, ready_s - now).callbacks.append(self._wake)
@@ -411,9 +414,7 @@ class Modem:
         frame_id, part, _, data = entry
         size = len(data)
         self._fifo_bytes -= size
-        airtime_s = self._airtime_s(size, now)
-        if not 0.0 < airtime_s < math.inf:  # NaN too: a link model of the user's broke its law
-            raise LinkModelError.airtime(self._medium_model, size, now, airtime_s)
+        airtime_s = checked_airtime_s(self._medium_model, size, now)
         busy_s = self._intrinsic_s + airtime_s
         end_s = now + busy_s
         self._tx_start_s = now
@@ -450,6 +451,7 @@ class Modem:
     def _finish_reception(self, event: simpy.Event) -> None:
         rec: _Reception = event.value  # type: ignore[assignment]  # the Timeout carries it
         self._receptions.remove(rec)
+        self._rx_end_s = max(self._rx_end_s, rec.end_s)
         frame_id, part, parts, data = rec.entry
         trace = self._medium.trace
         counters = self.counters
@@ -466,7 +468,7 @@ class Modem:
                 kind = EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
             return
-        data, n_errors = self._errors.corrupt(data, rec.p_independent, now)
+        data, n_errors = checked_corrupt(self._errors, data, rec.p_independent, now)
         if n_errors:
             counters.rx_corrupted += 1
             counters.rx_bit_errors += n_errors

@@ -1,9 +1,10 @@
 """testbed.channel.mac: token passing and free access against the link's timing model.
 
 Timing on a half-duplex link with intrinsic delay i, propagation p and queue gap g: an order of
-airtime a_o sent at s reaches the slave at s + i + a_o + p; the slave answers at once, and its
-reply (airtime a_r) is on the air at the master from s + 2i + a_o + 2p until
-s + RTT, RTT = 2i + a_o + a_r + 2p.
+airtime a_o sent at s reaches the slave at s + i + a_o + p; the slave answers at once, its
+reply leaving once its half-duplex modem has turned round (the queue gap g after the order's
+reception), so the reply (airtime a_r) is on the air at the master from s + 2i + a_o + g + 2p
+until s + RTT, RTT = 2i + a_o + a_r + g + 2p.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ ORDER = encode_frame(bytes(7))  # 13 B: a move order (REFERENCE §1.6)
 REPLY = encode_frame(bytes(54))  # 60 B: state + 40-B image chunk
 A_O = 8 * len(ORDER) / S100.bitrate_bps
 A_R = 8 * len(REPLY) / S100.bitrate_bps
-RTT = 2 * I_S + A_O + A_R  # positions coincide: no propagation
+# positions coincide: no propagation
+RTT = 2 * I_S + A_O + A_R + GAP_S
 
 
 def test_ipg_policies_match_the_telerobotics_versions() -> None:

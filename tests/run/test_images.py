@@ -9,6 +9,7 @@ form (one chunk per inter-packet gap, the last reply's airtime and delay), the c
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from testbed.channel import load_link_config
+from testbed.channel import EventKind, load_link_config
 from testbed.config import ConfigError
 from testbed.imaging import decode, encode
 from testbed.report.run_plots import write_run_plots
@@ -61,7 +62,8 @@ def _clean_latency_s(encoded_bytes: int, number: int) -> float:
     framed = encoded_bytes + 2  # image CRC
     chunks = math.ceil(framed / CHUNK)
     last_frame = REPLY_HEADER_FRAME_BYTES + framed - (chunks - 1) * CHUNK
-    delivery_s = link.intrinsic_delay_s + last_frame * 8.0 / link.bitrate_bps
+    # the reply leaves once the vehicle's half-duplex modem has turned round after the order
+    delivery_s = link.queue_gap_s + link.intrinsic_delay_s + last_frame * 8.0 / link.bitrate_bps
     # the capture happens when the order asking for chunk 0 lands; the first image's is the
     # 16-B ImageSettings order, later chunk requests are 13-B moves that land sooner
     early_s = (16 - 13) * 8.0 / link.bitrate_bps if number == 0 else 0.0
@@ -308,3 +310,35 @@ def test_replies_overlap_orders_exactly_when_the_closed_form_round_trip_exceeds_
     assert result.metrics["token_round_trip_s"] == cycle.round_trip_s
     duplicates = result.metrics["images"]["duplicates"]
     assert (duplicates == 0) if fits else (duplicates >= 10)
+
+
+@pytest.mark.parametrize("preset", ["s100-teleop-v1", "m64-teleop-v1"])
+def test_the_closed_form_round_trip_is_the_simulated_one(preset: str) -> None:
+    """From an order's first transmission to the end of its reply's arrival, in the trace,
+    equals ``token_round_trip_s``: both deliveries and the vehicle modem's turn-round (its queue
+    gap after the order's reception: 0.1 s on m64, 100 µs on S100; m64 cuts each frame into
+    8-B packets, a queue gap apart). Within a tenth of the gap: the acoustic propagation
+    changes as the vehicle moves (the closed form takes the start's distance)."""
+    from testbed.run.run_metrics import token_cycle
+
+    scenario = load_scenario(preset, ["duration_s=40", "link.ber=0"])
+    trace = run_scenario(scenario).recorder.trace
+    starts: dict[int, tuple[float, str]] = {}
+    packets: dict[int, int] = {}
+    for e in trace.of_kind(EventKind.TX_START):
+        starts.setdefault(e.frame_id, (e.t_s, e.src))
+        packets[e.frame_id] = packets.get(e.frame_id, 0) + 1
+    ends: dict[int, list[float]] = {}
+    for e in trace.of_kind(EventKind.DELIVER):
+        ends.setdefault(e.frame_id, []).append(e.t_s)
+    frames = sorted(starts.items(), key=lambda item: item[1][0])
+    trips = [
+        ends[reply][-1] - start_s
+        for (_, (start_s, src)), (reply, (_, reply_src)) in itertools.pairwise(frames)
+        if src == "operator" and reply_src == "vehicle"
+        and len(ends.get(reply, ())) == packets[reply]  # every packet in by the end
+    ]  # fmt: skip
+    cycle = token_cycle(scenario)  # a move order's cycle: 13 B, the reply 20 B
+    assert cycle is not None and len(trips) >= 5
+    gap_s = scenario.link.channel.queue_gap_s
+    assert trips == pytest.approx([cycle.round_trip_s] * len(trips), abs=0.1 * gap_s)
