@@ -22,6 +22,7 @@ in ``metrics.json`` (``inputs.link_model``). docs/channel.md, "A link model of y
 from __future__ import annotations
 
 import inspect
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -32,11 +33,20 @@ from testbed.config import ConfigError
 from .config import LinkConfig
 from .errors import BitErrors
 
-__all__ = ["ErrorModel", "LinkModel", "LinkModelError", "StandardLink", "model_name"]
+__all__ = [
+    "ErrorModel",
+    "LinkModel",
+    "LinkModelError",
+    "StandardLink",
+    "checked_airtime_s",
+    "checked_corrupt",
+    "model_name",
+]
 
 
 class LinkModelError(ConfigError):
-    """A link model broke its contract (an air time that is not a finite number > 0): the
+    """A link model broke its contract (an air time that is not a finite number > 0, or
+    received bytes that are not the sent ones' length with the flipped bits counted): the
     model's class and file named in one line (the command line's ``testbed: error: ...``,
     exit 2)."""
 
@@ -47,6 +57,57 @@ class LinkModelError(ConfigError):
             f"link model {_described(model)}: airtime_s({size_bytes}, {t_s!r}) returned "
             f"{value!r}: expected a finite time > 0 [s]"
         )
+
+    @classmethod
+    def received(cls, errors: object, size_bytes: int, t_s: float, value: object) -> LinkModelError:
+        """The error for ``errors.corrupt(data, p, t_s)`` of ``size_bytes`` bytes having
+        returned ``value``."""
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        return cls(
+            f"link model's error model {_described(errors)}: corrupt(<{size_bytes} B>, p, "
+            f"{t_s!r}) returned {shown}: expected (bytes of the same length, the number of "
+            "bits that differ from the sent ones)"
+        )
+
+
+def checked_airtime_s(model: LinkModel, size_bytes: int, t_s: float) -> float:
+    """``model.airtime_s(size_bytes, t_s)`` [s], checked: a finite number > 0.
+
+    Raises:
+        LinkModelError: anything else (NaN, a string, None, ≤ 0, infinite).
+    """
+    value = model.airtime_s(size_bytes, t_s)
+    try:
+        fits = 0.0 < value < math.inf  # NaN too
+    except TypeError:  # not a number at all
+        fits = False
+    if not fits or isinstance(value, bool):
+        raise LinkModelError.airtime(model, size_bytes, t_s, value)
+    return float(value)
+
+
+def checked_corrupt(
+    errors: ErrorModel, data: bytes, p_independent: float, t_s: float
+) -> tuple[bytes, int]:
+    """``errors.corrupt(data, p_independent, t_s)``, checked: bytes of ``data``'s length and
+    the count of the bits in which they differ from ``data`` (counted here, and held to the
+    model's own count).
+
+    Raises:
+        LinkModelError: anything else.
+    """
+    value = errors.corrupt(data, p_independent, t_s)
+    if type(value) is tuple and len(value) == 2:
+        received, count = value
+        if type(received) is bytes and len(received) == len(data):
+            flipped = 0
+            if received is not data:
+                difference = int.from_bytes(received, "big") ^ int.from_bytes(data, "big")
+                flipped = difference.bit_count()
+            if isinstance(count, int | np.integer) and int(count) == flipped:
+                return received, flipped
+    raise LinkModelError.received(errors, len(data), t_s, value)
 
 
 def _described(model: object) -> str:

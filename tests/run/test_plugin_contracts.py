@@ -36,6 +36,31 @@ class Fixed:
 
     def error_model(self, rng):
         return self.base.error_model(rng)
+
+
+class Returns:
+    # errors that return what the scenario says (returns) instead of the received copy
+
+    def __init__(self, config, returns):
+        self.base, self.returns = StandardLink(config), returns
+
+    def airtime_s(self, size_bytes, t_s):
+        return self.base.airtime_s(size_bytes, t_s)
+
+    def error_model(self, rng):
+        return self
+
+    def corrupt(self, data, p_independent, t_s):
+        flipped = bytes([data[0] ^ 3]) + data[1:]
+        return {
+            "none": None,
+            "text": ("abc", 0),
+            "negative": (data, -5),
+            "short": (data[:-1], 0),
+            "uncounted": (flipped, 0),
+            "overcounted": (flipped, 3),
+            "counted": (flipped, 2),
+        }[self.returns]
 """
 
 ODD_PILOTS = '''
@@ -109,7 +134,7 @@ def _write_sweep(study: Path, sweep_id: str, factory: str, duration_s: float) ->
     return path
 
 
-@pytest.mark.parametrize("airtime", ["nan", "-0.5", "0.0", "inf"])
+@pytest.mark.parametrize("airtime", ["nan", "-0.5", "0.0", "inf", '"0.1"', "false"])
 def test_an_air_time_that_is_not_a_finite_number_above_zero_is_one_line_naming_the_model(
     study: Path, airtime: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -125,6 +150,33 @@ def test_an_air_time_that_is_not_a_finite_number_above_zero_is_one_line_naming_t
     assert "expected a finite time > 0 [s]" in err
     with pytest.raises(LinkModelError):
         run_scenario(load_scenario(str(study / "broken.toml")))
+
+
+@pytest.mark.parametrize(
+    "returns", ["none", "text", "negative", "short", "uncounted", "overcounted", "counted"]
+)
+def test_received_bytes_that_break_the_error_models_contract_are_one_line_naming_the_model(
+    study: Path, returns: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """corrupt() must give bytes of the sent length and the count of the bits that differ
+    (counted again by the medium, by XOR): anything else used to give a traceback naming no
+    model, or a trace whose deliveries and counts disagreed (a negative count, flips counted
+    as none). The copy flipped in two bits and counted 2 is a good one: its frames fail the
+    CRC and the run counts them corrupted."""
+    link = f'model = "broken_links.py:Returns"\nmodel_args = {{ returns = "{returns}" }}'
+    (study / "returns.toml").write_text(_scenario_text('kind = "scripted"', link))
+    argv = ["run", str(study / "returns.toml"), "--out", str(study / "out"), "--no-plots"]
+    if returns == "counted":
+        assert main(argv) == 0
+        uplink = json.loads((study / "out" / "metrics.json").read_text())["link"]["uplink"]
+        assert uplink["frames_delivered"] == 0
+        assert uplink["frames_corrupted"] == uplink["frames_sent"] - uplink["frames_dropped"] > 0
+        return
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"link model's error model Returns ({study / 'broken_links.py'}): corrupt(<" in err
+    assert "expected (bytes of the same length, the number of bits that differ" in err
 
 
 def test_the_token_cycles_closed_form_is_not_claimed_for_a_model_it_does_not_know(
