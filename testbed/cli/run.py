@@ -106,7 +106,8 @@ def report_failed_run(error: Exception, out: Path, planned_s: float, *, trials: 
     for bad input (a ``ConfigError``, e.g. a pilot's sample that is no ``PilotSample``) one
     line, exit 2, naming where what ran is; for any other error its traceback, then that line,
     exit 1. An error that left nothing (not a run's, or a single run's at its first instant)
-    is raised again.
+    is raised again, its traceback ending in "testbed: the run failed as it began; nothing was
+    written" (a note on the error).
 
     Args:
         error: what ended the run.
@@ -117,6 +118,8 @@ def report_failed_run(error: Exception, out: Path, planned_s: float, *, trials: 
     """
     partial, k = partial_run(error), failed_trial(error)
     if partial is None and (k is None or trials == 1):
+        if not isinstance(error, ConfigError):  # its traceback ends in the closing line
+            error.add_note("testbed: the run failed as it began; nothing was written")
         raise error
     reached = (
         "" if partial is None else f"to t = {partial.metrics['sim_s']:.1f} s of {planned_s:g} s"

@@ -231,3 +231,19 @@ def test_testbed_hil_writes_what_ran_when_the_pilot_raises(study: Path) -> None:
     assert f"(at {study / 'sleepy.py'}:{RAISE_LINE + 1})" in metrics["failure"]
     assert {"ports.csv", "series.csv", "events.csv"} <= set(metrics["files"])
     assert metrics["hil"]["ports"]["duration_s"] == 4.0
+
+
+def test_a_run_that_fails_as_it_begins_ends_its_traceback_with_the_closing_line(
+    study: Path,
+) -> None:
+    """A pilot that raises at its first sample (t = 0): nothing ran, so nothing is written
+    and --out is removed again; the traceback (Python prints an error's notes after it) ends
+    in the line every failed run ends in, saying so (a link-model researcher's review: it
+    ended in the bare traceback)."""
+    out = study / "first"
+    argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out)]
+    argv += [*_pilot(study, "Sleepy"), "--set", "pilot.args={at_s=-1.0}"]
+    with pytest.raises(ValueError, match=r"pilot fell asleep at 0\.0") as caught:
+        main(argv)
+    assert caught.value.__notes__ == ["testbed: the run failed as it began; nothing was written"]
+    assert not out.exists()
