@@ -226,6 +226,8 @@ def _sweep(args: argparse.Namespace) -> int:
         sweep, out, workers=args.workers, dask=args.dask, resume=args.resume, force=args.force
     )
     print(format_summary(sweep, summary))
+    if (late := late_replies(out / "results.csv")) is not None:
+        print(f"  {late}")
     if any(key.rsplit(".", 1)[-1] == "ber" for key, _ in sweep.axes):
         from testbed.report.sweep_plots import plot_ber_sweep
 
@@ -233,6 +235,29 @@ def _sweep(args: argparse.Namespace) -> int:
         if paths:
             print(f"  plots: {', '.join(path.name for path in paths)}")
     return EXIT_OK if not summary.failed else 1
+
+
+def late_replies(results_csv: Path) -> str | None:
+    """``"warning: …"`` when runs of the sweep had a token gap shorter than a move order's
+    round trip (``reply_fits_gap`` false: the line ``testbed run`` warns with for one run),
+    naming the grid values where it happens; else None."""
+    from testbed.report.sweep_results import read_results
+
+    results = read_results(results_csv)
+    late = [row for row in results.rows if row.get("reply_fits_gap") == "false"]
+    if not late:
+        return None
+    values = {  # the grid keys that tell them apart: not every value of theirs is late
+        key: ", ".join(dict.fromkeys(row[key] for row in late))
+        for key in results.grid
+        if {row[key] for row in late} != {row[key] for row in results.rows}
+    }
+    where = "; ".join(f"{key} {shown}" for key, shown in values.items())
+    return (
+        f"warning: in {len(late)} of {len(results.rows)} runs a reply does not fit the token "
+        f"gap (reply_fits_gap false{': ' + where if where else ''}): the next order leaves "
+        "before the reply is in"
+    )
 
 
 def first_seeds(sweep: Sweep, count: int | None) -> Sweep:

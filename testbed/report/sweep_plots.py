@@ -293,8 +293,12 @@ def image_rate_model(results: Results, mask: np.ndarray) -> ImageRateModel | Non
         mask: which rows make the line.
 
     Returns:
-        The model, or None when no row in ``mask`` completed an image or has a gap.
+        The model, or None when no row in ``mask`` completed an image or has a gap, or a row's
+        reply does not fit its gap (``reply_fits_gap`` false: the closed form assumes each
+        reply is in before the next order leaves).
     """
+    if any(results.rows[i].get("reply_fits_gap") == "false" for i in np.flatnonzero(mask)):
+        return None
     delivered = results.numbers("images.bytes_delivered")
     completed = results.numbers("images.completed")
     gap = results.numbers("ipg_s")
@@ -350,7 +354,7 @@ def _plot_images(
     footnote(
         fig,
         _BARS_NOTE + "; dashed: 60·q/(nT) with selective repeat, 60·q_o·q_r^n/(nT) without "
-        "(n chunks, gap T)",
+        "(n chunks, gap T); none where a reply does not fit the gap (reply_fits_gap false)",
     )
     _title(fig, results, "BER vs image feedback")
     return save(fig, path)
