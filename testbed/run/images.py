@@ -90,12 +90,21 @@ class ImageSettingsChange:
     roi_shift: int | None = None
 
     def __post_init__(self) -> None:
-        check(self.t_s >= 0.0 and math.isfinite(self.t_s), "t_s", f"must be ≥ 0, got {self.t_s}")
+        check(
+            self.t_s >= 0.0 and math.isfinite(self.t_s),
+            "t_s",
+            f"must be a finite time ≥ 0 [s], got {self.t_s}",
+        )
         if self.budget_bytes is not None:
             check(self.budget_bytes >= 1, "budget_bytes", f"must be ≥ 1, got {self.budget_bytes}")
         _check_roi(self.roi)
         if self.roi_shift is not None:
             check(0 <= self.roi_shift <= 15, "roi_shift", f"must be 0..15, got {self.roi_shift}")
+        check(
+            not (self.roi == () and self.roi_shift),
+            "roi_shift",
+            f"{self.roi_shift} raises no region: this change clears it (roi = [])",
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,8 +166,19 @@ class ImagesSection:
                     f"changes[{i}].t_s",
                     f"must be ≥ the previous change's t_s ({self.changes[i - 1].t_s})",
                 )
-        keys = ["budget_bytes", *(f"changes[{i}].budget_bytes" for i in range(len(self.changes)))]
-        for key, (_, settings) in zip(keys, settings_schedule(self), strict=True):
+        where = ["", *(f"changes[{i}]." for i in range(len(self.changes)))]
+        shift_set = (False, *(c.roi_shift is not None for c in self.changes))
+        for at, set_here, (_, _, roi, shift) in zip(
+            where, shift_set, _settings_in_force(self), strict=True
+        ):
+            check(
+                not roi or shift > 0,
+                f"{at}roi_shift" if set_here else f"{at}roi",
+                f"the region {list(roi)} needs roi_shift ≥ 1 to be coded (roi_shift is 0: the "
+                "coder would ignore it)",
+            )
+        for at, (_, settings) in zip(where, settings_schedule(self), strict=True):
+            key = f"{at}budget_bytes"
             least = _least_budget(settings)
             check(
                 settings.budget_bytes >= least,
@@ -197,15 +217,25 @@ def image_source_factory(images: ImagesSection) -> Callable[..., ImageSource]:
     return build
 
 
+def _settings_in_force(
+    images: ImagesSection,
+) -> list[tuple[float, int, tuple[int, ...], int]]:
+    """``(t_s, budget_bytes, roi, roi_shift)`` in force from the start and from each change
+    (a change's keys left out keep their previous value)."""
+    budget, roi, shift = images.budget_bytes, images.roi, images.roi_shift
+    steps = [(0.0, budget, roi, shift)]
+    for change in images.changes:
+        budget = budget if change.budget_bytes is None else change.budget_bytes
+        roi = roi if change.roi is None else change.roi
+        shift = shift if change.roi_shift is None else change.roi_shift
+        steps.append((change.t_s, budget, roi, shift))
+    return steps
+
+
 def settings_schedule(images: ImagesSection) -> list[tuple[float, ImageSettings]]:
     """The operator's ``ImageSettings`` orders: the section's at 0 s, then each change."""
-    budget, roi, shift = images.budget_bytes, images.roi, images.roi_shift
     schedule: list[tuple[float, ImageSettings]] = []
-    for t_s, change in [(0.0, None), *((c.t_s, c) for c in images.changes)]:
-        if change is not None:
-            budget = budget if change.budget_bytes is None else change.budget_bytes
-            roi = roi if change.roi is None else change.roi
-            shift = shift if change.roi_shift is None else change.roi_shift
+    for t_s, budget, roi, shift in _settings_in_force(images):
         x0, y0, x1, y1 = roi if roi else (0, 0, 0, 0)
         schedule.append((t_s, ImageSettings(x0, y0, x1, y1, shift if roi else 0, True, budget)))
     return schedule

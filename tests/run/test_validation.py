@@ -417,3 +417,26 @@ def test_a_supervisor_goal_above_the_surface_is_refused() -> None:
         load_scenario("s100-supervised-v1", [goal])
     surface = "pilot.goals=[{t_s = 2.0, position_ned_m = [1.0, 0.0, 0.0]}]"
     assert load_scenario("s100-supervised-v1", [surface]).pilot is not None
+
+
+@pytest.mark.parametrize(
+    ("override", "key", "says"),
+    [
+        ("images.roi=[40, 30, 119, 89]", "images.roi", "needs roi_shift ≥ 1"),
+        ("images.changes=[{t_s=20, roi=[1, 2, 3, 4]}]", "images.changes[0].roi", "needs roi_sh"),
+        ("images.changes=[{t_s=20, roi=[], roi_shift=3}]", "images.changes[0].roi_shift", "clears"),
+        ("images.changes=[{t_s=inf}]", "images.changes[0].t_s", "must be a finite time ≥ 0"),
+    ],
+)
+def test_a_region_of_interest_the_coder_would_ignore_is_refused(
+    override: str, key: str, says: str
+) -> None:
+    """A region with roi_shift 0 (the coder's "no region"), or a change that clears the region
+    and sets a shift, was accepted and silently coded no region (an images researcher's
+    review: the ROI baseline was unmeasurable from the outputs); a region with a shift runs."""
+    with pytest.raises(ConfigError) as info:
+        load_scenario("s100-video-v1", [override])
+    message = str(info.value)
+    assert message.startswith(f"--set: {key}: ") and says in message and "\n" not in message
+    shifted = load_scenario("s100-video-v1", ["images.roi=[40, 30, 119, 89]", "images.roi_shift=4"])
+    assert shifted.images.roi == (40, 30, 119, 89) and shifted.images.roi_shift == 4
