@@ -208,8 +208,10 @@ def write_run(
                 with contextlib.suppress(FileNotFoundError):
                     (out_dir / METRICS_FILE).unlink()  # first: no stale marker over new files
                 recorder = result.recorder
+                until_s = float(result.metrics.get("sim_s", math.inf))
+                write_events = functools.partial(recorder.write_events_csv, until_s=until_s)
                 written += [
-                    replace_atomically(recorder.write_events_csv, out_dir / "events.csv"),
+                    replace_atomically(write_events, out_dir / "events.csv"),
                     replace_atomically(recorder.write_series_csv, out_dir / "series.csv"),
                 ]
                 images = result.scenario.images

@@ -18,6 +18,7 @@ are ``"operator"`` and ``"vehicle"``; the uplink is operator → vehicle.
 from __future__ import annotations
 
 import csv
+import math
 from array import array
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -280,22 +281,24 @@ class Recorder:
             for row in self.rows:
                 handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
 
-    def write_events_csv(self, path: Path) -> None:
+    def write_events_csv(self, path: Path, until_s: float = math.inf) -> None:
         """Write every link and node event, in time order, as CSV.
 
         Columns: ``t_s, source, kind, src, dst, frame_id, part, size_bytes, bit_errors, detail``;
         ``source`` is ``link`` or the node's name. Equal times keep recording order, link events
         before node events. Written row by row from the trace's columns (the memory it takes
-        is one index per link event).
+        is one index per link event). Link events after ``until_s`` [s] (the run's end) are
+        left out: a transmission's end is traced as it starts, and one still on the air when
+        the run ended had not ended.
         """
         header = ["t_s", "source", "kind", "src", "dst", "frame_id", "part", "size_bytes"]
         header += ["bit_errors", "detail"]
         with path.open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(header)
-            writer.writerows(self._event_rows())
+            writer.writerows(self._event_rows(until_s))
 
-    def _event_rows(self) -> Iterator[list[object]]:
+    def _event_rows(self, until_s: float = math.inf) -> Iterator[list[object]]:
         """The rows of :meth:`write_events_csv`, in time order."""
         nodes = sorted(self.events, key=lambda n: n.t_s)  # stable: recording order on ties
         node_rows = iter(nodes)
@@ -318,6 +321,8 @@ class Recorder:
                     strict=True,
                 )
                 for t_s, kind, src, dst, frame_id, part, size_bytes, bit_errors in chunk:
+                    if t_s > until_s:
+                        continue
                     while node is not None and node.t_s < t_s:  # equal times: link first
                         yield _node_row(node)
                         node = next(node_rows, None)

@@ -111,9 +111,9 @@ def test_ctrl_c_while_the_data_files_are_written_keeps_them_whole(
     result = run_scenario(load_scenario("s100-teleop-v1", ["duration_s=12"]), seed=0)
     write_events = type(result.recorder).write_events_csv
 
-    def interrupted_midway(recorder: object, path: Path) -> None:
+    def interrupted_midway(recorder: object, path: Path, until_s: float) -> None:
         os.kill(os.getpid(), signal.SIGINT)  # handled at once, inside the write, unless held
-        write_events(recorder, path)  # type: ignore[arg-type]
+        write_events(recorder, path, until_s)  # type: ignore[arg-type]
 
     monkeypatch.setattr(type(result.recorder), "write_events_csv", interrupted_midway)
     plotted: list[Path] = []

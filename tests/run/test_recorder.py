@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from testbed.channel import EventKind, LinkEvent, Trace
+from testbed.run.outputs import write_run
 from testbed.run.recorder import SERIES_COLUMNS, FloatPairs, Recorder, SeriesRows
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
@@ -315,3 +316,21 @@ def test_a_go_to_in_guided_is_the_series_target_as_the_position_loop_flies_it() 
     ]
     assert [np.unique(c[second]).tolist() for c in columns[:3]] == [[-1.0], [0.5], [1.0]]
     assert np.isnan(columns[3][second]).all()
+
+
+def test_events_csv_ends_at_the_run_end_with_a_transmission_still_on_the_air(
+    tmp_path: Path,
+) -> None:
+    """m64's 8-B packets take 1 s each: a 40-s run ends with the reply's packet of 39.2–40.2 s
+    on the air. Its end is traced as it starts (t = 40.2 s), but the run never got there: the
+    file stops at the run's end (a link-model researcher's review found rows after it)."""
+    scenario = load_scenario("m64-teleop-v1", ["duration_s=40", "link.ber=0"])
+    result = run_scenario(scenario)
+    ends = [e.t_s for e in result.recorder.trace.of_kind(EventKind.TX_END)]
+    assert max(ends) > 40.0  # the case: traced, beyond the end
+    write_run(result, tmp_path)
+    with (tmp_path / "events.csv").open(newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    assert max(float(row["t_s"]) for row in rows) <= 40.0
+    written = sum(1 for row in rows if row["kind"] == "tx_end")
+    assert written == sum(1 for t in ends if t <= 40.0)
