@@ -118,6 +118,13 @@ class Pilot(Protocol):
     pure pilot; with held samples it leaves out the operator's sampling delay (up to one
     operator frame: 0.3 s on s100). ``metrics.json``'s ``signal_lag_reference`` says which.
 
+    A pilot that flies by what it sees (a person at the console, a model of one) also defines
+    ``see(odometry)``: before each sample, the station hands it the vehicle's
+    :class:`~testbed.common.components.Odometry` the operator received since the last sample
+    (once per arrival; ``sampled_s`` is the vehicle's time of the state, or over the teleop
+    codec, whose wire carries no time, its arrival), never the vehicle's truth. Such a pilot
+    depends on the run, so it is not pure.
+
     The station refuses a sample whose sticks are not six finite positions in [−1, 1]
     (:func:`~testbed.operator.station.check_sticks`: a ValueError naming the pilot's type and
     the axis), whatever codec carries them.
@@ -333,7 +340,9 @@ PURE_PILOTS = (ScriptedPilot, AttitudePilot, SupervisorPilot)
 def is_pure(pilot: object) -> bool:
     """Whether ``pilot.sample(t)`` is a pure function of ``t``, so observers may sample it
     again: a packaged pilot (:data:`PURE_PILOTS`), or a pilot whose class says so with
-    ``pure_function_of_time = True``."""
+    ``pure_function_of_time = True`` — unless it watches the vehicle (has ``see``)."""
+    if callable(getattr(pilot, "see", None)):  # it flies by what the run shows it
+        return False
     return (
         isinstance(pilot, PURE_PILOTS) or getattr(type(pilot), "pure_function_of_time", 0) is True
     )

@@ -4,7 +4,8 @@ The operator node owns a :class:`~testbed.ecs.World` ticked like the vehicle's, 
 
 - PRE_UPDATE — the link adapter has already written what arrived (the vehicle's replicated
   state, origin REMOTE) before :meth:`OperatorStation.frame` runs;
-- UPDATE — :func:`sample_pilot` writes this frame's :class:`MovementCommand` (a fresh sequence
+- UPDATE — :func:`sample_pilot` shows a pilot that watches the vehicle what arrived
+  (:func:`show_pilot`), then writes this frame's :class:`MovementCommand` (a fresh sequence
   number and the time the sticks were sampled) or, for the attitude experiment, the
   :class:`AttitudeSetpoint`; :func:`request_session` asks for the mode, depth and arming the
   scenario wants, once each;
@@ -80,9 +81,11 @@ class OperatorClock:
 
 
 class _Session:
-    """Resource: the pilot, the plan and what has been requested so far (mutable)."""
+    """Resource: the pilot, the plan and what has been requested so far (mutable); ``see``
+    is the pilot's own ``see`` method (a pilot that watches the vehicle, :func:`show_pilot`),
+    or None."""
 
-    __slots__ = ("entity", "pilot", "plan", "requested", "seq")
+    __slots__ = ("entity", "pilot", "plan", "requested", "see", "seen", "seq")
 
     def __init__(self, entity: Entity, pilot: Pilot, plan: SessionPlan) -> None:
         self.entity = entity
@@ -90,6 +93,10 @@ class _Session:
         self.plan = plan
         self.requested = False
         self.seq = 0
+        inner = pilot.pilot if isinstance(pilot, SampleHold) else pilot
+        see = getattr(inner, "see", None)
+        self.see: Callable[[Odometry], object] | None = see if callable(see) else None
+        self.seen: Odometry | None = None
 
 
 STICK_AXES = ("surge", "sway", "heave", "roll", "pitch", "yaw")
@@ -132,6 +139,8 @@ def sample_pilot(world: World) -> None:
     """
     now = world.resource(OperatorClock).time_s
     session = world.resource(_Session)
+    if session.see is not None:
+        show_pilot(world, session)
     sample = session.pilot.sample(float(now))  # a float, as the protocol says, from t = 0 on
     if not isinstance(sample, PilotSample):
         inner = session.pilot.pilot if isinstance(session.pilot, SampleHold) else session.pilot
@@ -155,6 +164,19 @@ def sample_pilot(world: World) -> None:
         return
     session.seq += 1
     world.set(session.entity, MovementCommand(session.seq, now, sample.sticks))
+
+
+def show_pilot(world: World, session: _Session) -> None:
+    """Hand a pilot that watches the vehicle (one with a ``see(odometry)`` method) the
+    vehicle's :class:`Odometry` the operator received since its last sample, once, before the
+    sample: what a person at the console sees, as late as the link made it (never the
+    vehicle's truth)."""
+    assert session.see is not None
+    for _, odometry in world.query1(Odometry):
+        if odometry is not session.seen:  # each reply's state arrives as a new object
+            session.seen = odometry
+            session.see(odometry)
+        return
 
 
 def request_session(world: World) -> None:
