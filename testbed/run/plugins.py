@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from testbed.config import USER_MODULE_PREFIX, ConfigError
+from testbed.config import USER_MODULE_PREFIX, ConfigError, shown
 
 if TYPE_CHECKING:
     from testbed.channel.model import LinkModel
@@ -260,13 +260,17 @@ def call_factory(
     kwargs: Mapping[str, Any],
     where: str,
     key: str,
+    args_key: str,
 ) -> Any:
     """``factory(*positional, **kwargs)``; an exception it raises becomes a one-line
-    :class:`ConfigError` naming ``key`` (the arguments were the scenario's)."""
+    :class:`ConfigError` naming ``key`` and, when it was given any, the key of its keyword
+    arguments ``args_key`` with them (the scenario's, or a ``--set``'s)."""
     try:
         return factory(*positional, **kwargs)
     except Exception as error:
-        raise ConfigError(f"{where}: {key}: {type(error).__name__}: {error}") from None
+        given = {k: v for k, v in kwargs.items() if k != "rng"}
+        called = f" (called with {args_key} = {shown(given)})" if given else ""
+        raise ConfigError(f"{where}: {key}{called}: {type(error).__name__}: {error}") from None
 
 
 def pilot_generator(seed: int) -> np.random.Generator:
@@ -292,7 +296,7 @@ def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
     kwargs = dict(section.args)
     if takes_rng(factory):
         kwargs["rng"] = pilot_generator(seed)
-    pilot = call_factory(factory, (), kwargs, scenario.source, key)
+    pilot = call_factory(factory, (), kwargs, scenario.source, key, "pilot.args")
     if not callable(getattr(pilot, "sample", None)):
         raise ConfigError(
             f"{scenario.source}: {key}: {section.factory} made a {type(pilot).__name__}, not a "
@@ -314,7 +318,8 @@ def scenario_link_model(scenario: Scenario) -> LinkModel | None:
         return None
     key = "link.model"
     factory = load_factory(link.model, scenario.source, key)
-    model = call_factory(factory, (link.channel,), link.model_args, scenario.source, key)
+    args = link.model_args
+    model = call_factory(factory, (link.channel,), args, scenario.source, key, "link.model_args")
     laws = ("airtime_s", "error_model")
     missing = [name for name in laws if not callable(getattr(model, name, None))]
     if missing:

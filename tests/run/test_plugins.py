@@ -305,7 +305,11 @@ def test_what_the_factory_makes_is_checked_before_the_run_one_line_exit_2(
     first frame with one line naming the scenario file and the key."""
     monkeypatch.chdir(study)
     cases = [
-        (["pilot.factory=my_pilots.py:failing"], "pilot.factory: RuntimeError: no pilot at 15.0"),
+        (
+            ["pilot.factory=my_pilots.py:failing"],  # the scenario's pilot.args, named
+            "pilot.factory (called with pilot.args = {'at_s': 15.0}): RuntimeError: no pilot at "
+            "15.0",
+        ),
         (
             ["pilot.factory=my_pilots.py:not_a_pilot", "pilot.args={}"],
             "pilot.factory: my_pilots.py:not_a_pilot made a int, not a pilot",
@@ -387,7 +391,10 @@ def test_a_hil_run_flies_the_scenarios_pilot_and_a_failing_factory_closes_the_po
         }
         factory = f"pilot.factory={study / 'my_pilots.py'}:failing"
         failing = load_scenario(str(study / "step.toml"), [*short, factory])
-        with pytest.raises(ConfigError, match=r"step\.toml: pilot\.factory: RuntimeError"):
+        with pytest.raises(
+            ConfigError,
+            match=r"step\.toml: pilot\.factory \(called with pilot\.args = .*\): RuntimeError",
+        ):
             run_hil(failing, endpoints, duration_s=4.0, modem="evologics")
         alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:")]
         assert alive == []  # each port's reader and writer threads stopped: the ports closed
