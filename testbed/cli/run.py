@@ -182,11 +182,17 @@ def format_trial(trial: int, metrics: dict[str, Any]) -> str:
     line = f"trial {trial} seed {metrics['seed']}: {_num(h['rtf'], digits=0)}x real time; "
     mission = metrics.get("mission")
     if mission is None:
-        return line + (
+        line += (
             f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0, ' ms')}, age mean "
             f"{_num(h['command_age_mean_s'], 1000.0, 0, ' ms')}; yaw error std "
             f"{_num(h['yaw_error_std_deg'], digits=2, unit=' deg')}; energy "
             f"{_num(h['energy_wh'], unit=' Wh')}"
+        )
+        if "images" not in metrics:
+            return line
+        return line + (
+            f"; images {_num(h['images_per_minute'], digits=1)}/min, latency mean "
+            f"{_num(h['image_latency_mean_s'], digits=1, unit=' s')}"
         )
     line += (
         f"position error mean {_num(h['position_error_mean_m'])} m, "
@@ -215,11 +221,17 @@ def format_trials_summary(document: dict[str, Any], out: Path) -> str:
 
     head = f"{document['trials_finished']} trials (mean ± std over trials): "
     if not document.get("mission", True):
+        images = ""
+        if document["across_trials"].get("images_per_minute", {}).get("n"):
+            images = (
+                f"; images {pm('images_per_minute', digits=1)} /min, latency mean "
+                f"{pm_unit('image_latency_mean_s', 's', digits=1)}"
+            )
         return (
             f"{head}command lag mean {pm_unit('command_lag_mean_s', 'ms', 1000.0, 0)}, age "
             f"mean {pm_unit('command_age_mean_s', 'ms', 1000.0, 0)}; yaw error std "
             f"{pm_unit('yaw_error_std_deg', 'deg', digits=2)}; energy "
-            f"{pm_unit('energy_wh', 'Wh')}\n  wrote {out}/"
+            f"{pm_unit('energy_wh', 'Wh')}{images}\n  wrote {out}/"
         )
     return (
         f"{head}position error mean "

@@ -60,11 +60,14 @@ HEADLINE: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("command_age_mean_s", ("command_age_s", "mean")),
     ("yaw_error_std_deg", ("attitude_error_deg", "yaw", "std")),
     ("energy_wh", ("energy_wh",)),
+    ("images_per_minute", ("images", "per_minute")),
+    ("image_latency_mean_s", ("images", "latency_s", "mean")),
+    ("image_psnr_mean_db", ("images", "psnr_db", "mean")),
 )
 """The per-trial figures of ``trials.json``: name → path of keys into ``metrics.json`` (NaN
 where the path is missing, e.g. the mission keys of a run without autonomy). The mission
 figures summarise trials under autonomy (Angler's protocol), the command and yaw figures
-teleoperated ones."""
+teleoperated ones, the image figures those with image feedback."""
 
 WALL_CLOCK_KEYS = ("rtf",)
 """Headline figures that depend on the machine's speed (not reproducible from the seed)."""

@@ -90,7 +90,7 @@ def test_trials_write_each_run_and_the_mean_over_them(scenario: Scenario, tmp_pa
     assert [row["dir"] for row in doc["trials"]] == ["trial-1", "trial-2", "trial-3"]
     for name, _ in HEADLINE:
         values = [row[name] for row in doc["trials"]]
-        if name == "yaw_error_std_deg":  # stick tracking: null under autonomy
+        if name == "yaw_error_std_deg" or name.startswith("image"):  # none under autonomy
             assert values == [None] * 3 and doc["across_trials"][name]["n"] == 0
             continue
         assert all(v is not None for v in values), name
@@ -278,3 +278,21 @@ def test_trials_of_a_teleoperated_scenario_summarise_its_command_figures(
     assert (
         f"command lag mean {1000 * lags.mean():.0f} ± {1000 * lags.std(ddof=1):.0f} ms" in summary
     )
+
+
+def test_image_trials_carry_the_image_figures(tmp_path: Path) -> None:
+    """Trials of an image scenario: each trial's images per minute, latency and PSNR in
+    trials.json, as its metrics.json has them (an images researcher's review: trials dropped
+    every image figure)."""
+    overrides = ["duration_s=40", "images.changes=[]", "trials=2"]
+    scenario = load_scenario("s100-video-v1", overrides)
+    out = tmp_path / "images"
+    prepare_out_dir(out)
+    run_trials(scenario, out)
+    doc = json.loads((out / TRIALS_FILE).read_text())
+    for k, row in enumerate(doc["trials"], start=1):
+        images = json.loads((out / f"trial-{k}" / "metrics.json").read_text())["images"]
+        assert row["images_per_minute"] == images["per_minute"] > 0
+        assert row["image_latency_mean_s"] == images["latency_s"]["mean"]
+        assert row["image_psnr_mean_db"] == images["psnr_db"]["mean"]
+    assert doc["across_trials"]["images_per_minute"]["n"] == 2
