@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import itertools
 import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -349,6 +350,7 @@ IMAGE_COLUMNS = (
     "roi_shift",
     "psnr_db",
     "roi_psnr_db",
+    "replies",
 )
 """The columns of ``images.csv`` (:func:`image_rows`)."""
 
@@ -360,9 +362,13 @@ def image_rows(log: ImageLog, chunk_bytes: int) -> list[list[object]]:
     operator did not complete; ``chunks`` is the replies it takes, ⌈(coded + 2-B CRC) /
     chunk⌉; ``roi`` is ``x0 y0 x1 y1`` (empty without one); ``psnr_db`` is empty for an image
     not completed, ``undecodable`` for one whose bits decode to no picture, 99 for a lossless
-    one (as in ``metrics.json``); ``roi_psnr_db`` the same inside the region of interest.
+    one (as in ``metrics.json``); ``roi_psnr_db`` the same inside the region of interest;
+    ``replies`` the vehicle's replies that carried a chunk of it (``chunks`` plus the chunks
+    sent again: selective repeat on a lossy link needs ≈ chunks / q, q a cycle's delivery
+    probability).
     """
     completed = {image.number: image for image in log.received if image.number >= 0}
+    replies = Counter(log.reply_images.values())
     rows: list[list[object]] = []
     for number in sorted(log.captured):
         source = log.captured[number]
@@ -382,6 +388,7 @@ def image_rows(log: ImageLog, chunk_bytes: int) -> list[list[object]]:
             "" if settings is None else (settings.roi_shift if roi else 0),
             "",
             "",
+            replies.get(number, 0),
         ]
         image = completed.get(number)
         if image is not None:

@@ -218,6 +218,7 @@ class VehicleNode:
             image.number, self.env.now, image.pixels, len(image.encoded), image.settings
         )
         self.recorder.images.captured[image.number] = record
+        self.recorder.event(self.env.now, "vehicle", "image_captured", str(image.number))
 
     @property
     def energy_wh(self) -> float:
@@ -315,6 +316,7 @@ class OperatorNode:
         for image in result.images:
             number = log.reply_images.get(image.frame_id, -1)
             log.received.append(ReceivedImage(number, now, image.pixels, image.size_bytes))
+            self.recorder.event(now, "operator", "image_completed", str(number))
 
     def _held(self, now: float, sampled_s: float) -> None:
         if sampled_s > self._held_sampled:

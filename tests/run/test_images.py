@@ -21,6 +21,7 @@ from testbed.channel import EventKind, load_link_config
 from testbed.config import ConfigError
 from testbed.imaging import decode, encode
 from testbed.report.run_plots import write_run_plots
+from testbed.run.images import image_rows
 from testbed.run.outputs import write_run
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import load_scenario
@@ -248,6 +249,7 @@ def test_images_csv_lists_each_image_against_the_closed_form(
         number, size = int(row["number"]), int(row["encoded_bytes"])
         assert float(row["latency_s"]) == pytest.approx(_clean_latency_s(size, number), abs=1e-5)
         assert int(row["chunks"]) == math.ceil((size + 2) / CHUNK) == 16
+        assert int(row["replies"]) == 16  # no reply lost: no chunk sent twice
         assert row["budget_bytes"] == "600" and row["roi"] == "" and row["roi_psnr_db"] == ""
         pixels = log.captured[number].pixels
         error = pixels.astype(float) - decode(encode(pixels, 600)).astype(float)
@@ -255,6 +257,36 @@ def test_images_csv_lists_each_image_against_the_closed_form(
         assert float(row["psnr_db"]) == pytest.approx(expected, abs=1e-3)
     interval = clean_run.metrics["images"]["completion_interval_s"]["mean"]
     assert interval == pytest.approx(16 * GAP_S, abs=1e-6)
+    # events.csv: a capture and a completion line per image, at the times the rows give
+    with (tmp_path / "events.csv").open(newline="") as handle:
+        events = [r for r in csv.DictReader(handle) if r["kind"].startswith("image_")]
+    captured = [
+        (int(e["detail"]), float(e["t_s"])) for e in events if e["kind"] == "image_captured"
+    ]
+    assert captured == [
+        (int(r["number"]), pytest.approx(float(r["captured_s"]), abs=1e-6)) for r in rows
+    ]
+    done = [(int(e["detail"]), float(e["t_s"])) for e in events if e["kind"] == "image_completed"]
+    assert done == [
+        (int(r["number"]), pytest.approx(float(r["completed_s"]), abs=1e-6)) for r in completed
+    ]
+
+
+def test_selective_repeat_sends_each_chunk_until_a_reply_gets_through() -> None:
+    """At BER 1e-3 a 60-B reply arrives with q = (1 − 1e-3)^480 ≈ 0.62; a reply is sent only
+    for an order that arrived, and a chunk is sent again until one gets through, so an image of
+    n chunks takes ≈ n / q replies (geometric repeats): ``images.csv``'s ``replies`` over the
+    completed images against that closed form, within four standard errors."""
+    ber = 1e-3
+    result = run("duration_s=600", f"link.ber={ber}", "images.changes=[]", seed=4)
+    rows = image_rows(result.recorder.images, CHUNK)
+    done = [row for row in rows if row[2] != ""]
+    chunks = sum(int(row[5]) for row in done)
+    replies = sum(int(row[-1]) for row in done)
+    q = (1.0 - ber) ** (8 * (CHUNK + 20))
+    # replies − chunks: a sum of `chunks` geometric failure counts, mean (1−q)/q, var (1−q)/q²
+    repeats, mean, var = replies - chunks, chunks * (1 - q) / q, chunks * (1 - q) / q**2
+    assert len(done) >= 10 and abs(repeats - mean) < 4.0 * math.sqrt(var)
 
 
 def test_roi_psnr_is_the_psnr_inside_the_region() -> None:
