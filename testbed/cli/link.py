@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from testbed.cli.options import (
     EXIT_OK,
@@ -39,6 +40,18 @@ def add_link_parser(sub: Subparsers) -> None:
     link.add_argument(
         "--distance", type=float, default=0.0, help="sender-receiver distance in m (default: 0)"
     )
+    link.add_argument(
+        "--model",
+        metavar="FILE.py:NAME",
+        help="a link model of your own (or MODULE:NAME), made as NAME(link config, **args) "
+        "(docs/channel.md, 'A link model of your own')",
+    )
+    link.add_argument(
+        "--model-args",
+        metavar="TOML",
+        default="{}",
+        help="its keyword arguments as a TOML inline table, e.g. '{bitrate_bps = 1400.0}'",
+    )
     link.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     link.add_argument("--json", action="store_true", help="print one JSON object")
     link.set_defaults(handler=_run_link)
@@ -46,6 +59,7 @@ def add_link_parser(sub: Subparsers) -> None:
 
 def _run_link(args: argparse.Namespace) -> int:
     """Handler of ``testbed link``: check the arguments, run the probe, print the result."""
+    import dataclasses
     import json
     import math
 
@@ -61,6 +75,15 @@ def _run_link(args: argparse.Namespace) -> int:
     check_distance(args.distance)
     check_seed(args.seed)
     config = link_config_option(args.preset, args.overrides)
+    model = None
+    if args.model is not None:
+        from testbed.run.plugins import make_link_model
+
+        model_args = _inline_table(args.model_args)
+        keys = ("--model", "--model-args")
+        model = make_link_model(args.model, model_args, config, "testbed link", keys)
+    elif args.model_args != "{}":
+        raise ConfigError("--model-args: only used with --model")
     result = run_probe(
         config,
         frames=args.frames,
@@ -68,9 +91,29 @@ def _run_link(args: argparse.Namespace) -> int:
         interval_s=args.interval,
         seed=args.seed,
         distance_m=args.distance,
+        link_model=model,
     )
+    if args.model is not None:  # named as the user named it, not by its imported module
+        result = dataclasses.replace(result, link_model=args.model)
     if args.json:
         print(json.dumps(result.to_json_dict()))
     else:
         print(format_report(result))
     return EXIT_OK
+
+
+def _inline_table(text: str) -> dict[str, Any]:
+    """``--model-args``: a TOML inline table as a dict.
+
+    Raises:
+        ConfigError: not TOML, or not a table.
+    """
+    import tomllib
+
+    try:
+        value = tomllib.loads(f"args = {text}")["args"]
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"--model-args: not a TOML inline table ({error}): {text}") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"--model-args: expected a TOML inline table {{...}}, got {text}")
+    return value

@@ -52,6 +52,7 @@ import numpy as np
 from testbed.config import USER_MODULE_PREFIX, ConfigError, shown
 
 if TYPE_CHECKING:
+    from testbed.channel.config import LinkConfig
     from testbed.channel.model import LinkModel
     from testbed.operator.pilots import Pilot
     from testbed.run.scenario import Scenario
@@ -63,6 +64,7 @@ __all__ = [
     "check_arguments",
     "check_target",
     "load_factory",
+    "make_link_model",
     "pilot_generator",
     "scenario_link_model",
     "scenario_pilot",
@@ -316,15 +318,33 @@ def scenario_link_model(scenario: Scenario) -> LinkModel | None:
     link = scenario.link
     if not link.model:
         return None
-    key = "link.model"
-    factory = load_factory(link.model, scenario.source, key)
-    args = link.model_args
-    model = call_factory(factory, (link.channel,), args, scenario.source, key, "link.model_args")
+    keys = ("link.model", "link.model_args")
+    return make_link_model(link.model, link.model_args, link.channel, scenario.source, keys)
+
+
+def make_link_model(
+    target: str,
+    args: Mapping[str, Any],
+    channel: LinkConfig,
+    where: str,
+    keys: tuple[str, str],
+) -> LinkModel:
+    """``NAME(channel, **args)`` of the callable ``target`` names (``"FILE.py:NAME"`` or
+    ``"MODULE:NAME"``), checked to be a link model; messages name ``where`` and ``keys`` (the
+    target's key and its arguments').
+
+    Raises:
+        ConfigError: the target does not load, the factory failed, or it made something without
+            ``airtime_s`` and ``error_model``.
+    """
+    key, args_key = keys
+    factory = load_factory(target, where, key)
+    model = call_factory(factory, (channel,), args, where, key, args_key)
     laws = ("airtime_s", "error_model")
     missing = [name for name in laws if not callable(getattr(model, name, None))]
     if missing:
         raise ConfigError(
-            f"{scenario.source}: {key}: {link.model} made a {type(model).__name__} without "
+            f"{where}: {key}: {target} made a {type(model).__name__} without "
             f"{' and '.join(missing)} (expected a testbed.channel.model.LinkModel)"
         )
     return cast("LinkModel", model)

@@ -5,6 +5,8 @@ method (the preset's own keys)."""
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ import pytest
 from testbed.channel import EventKind, LinkModel, StandardLink, Trace
 from testbed.channel.config import load_link_config
 from testbed.channel.probe import run_probe
+from testbed.cli.main import main
 from testbed.protocol import encode_frame
 from testbed.run import load_scenario, run_scenario
 
@@ -109,3 +112,38 @@ def test_a_users_constant_rate_model_flies_as_the_presets_key_bit_for_bit() -> N
     assert len(crossed) > 40 and crossed == pytest.approx([expected] * len(crossed), abs=1e-7)
     assert modelled.metrics["inputs"]["link_model"].endswith("test_link_model.StepRate")
     assert "link_model" not in preset.metrics["inputs"]
+
+
+def test_testbed_link_probes_a_link_model_of_ones_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``testbed link --model FILE.py:NAME --model-args TOML``: a constant 950 bit/s model gives
+    what ``--set bitrate_bps=950`` gives (the second method), the JSON names the model as the
+    user did; bad arguments are one line, exit 2 (a link researcher's review: the probe took no
+    model)."""
+    (tmp_path / "rates.py").write_text(
+        "from testbed.channel import StandardLink\n"
+        "import dataclasses\n\n"
+        "def constant(config, bitrate_bps):\n"
+        "    return StandardLink(dataclasses.replace(config, bitrate_bps=bitrate_bps))\n",
+        encoding="utf-8",
+    )
+    target = f"{tmp_path / 'rates.py'}:constant"
+    common = ["link", "--frames", "50", "--seed", "3", "--set", "ber=1e-3", "--json"]
+    assert main([*common, "--model", target, "--model-args", "{bitrate_bps = 950.0}"]) == 0
+    modelled = json.loads(capsys.readouterr().out)
+    assert main([*common, "--set", "bitrate_bps=950"]) == 0
+    keyed = json.loads(capsys.readouterr().out)
+    assert modelled.pop("link_model") == target and keyed.pop("link_model") is None
+    for timing in ("wall_s", "rtf"):
+        modelled.pop(timing), keyed.pop(timing)
+    assert modelled == keyed
+    assert modelled["latency_s"]["p50"] == pytest.approx(S100.intrinsic_delay_s + 8 * 60 / 950)
+    for bad, says in (
+        (["--model-args", "{bitrate_bps = 950.0}"], "--model-args: only used with --model"),
+        (["--model", target, "--model-args", "[1]"], "--model-args: expected a TOML inline"),
+        (["--model", target, "--model-args", "{bitrate_bps = -1.0}"], "(called with --model-args"),
+    ):
+        assert main([*common, *bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err, err
