@@ -82,24 +82,33 @@ class Propagation:
 
 @dataclass(frozen=True, slots=True)
 class GilbertElliott:
-    """Two-state (good/bad) Markov bit-error model, advanced once per received bit.
+    """Two-state (good/bad) Markov bit-error model, per receiver, on one of two clocks.
 
-    After each bit the chain leaves the good state with probability ``p_good_to_bad`` and the
-    bad state with ``p_bad_to_good``; a bit is flipped with probability ``ber_good`` or
-    ``ber_bad`` of the state it was received in. The state persists across frames, per receiver.
-    Off by default (never leaves the good state, which is error-free).
+    **Per bit** (the default, dccomms' model): after each bit the receiver is handed, the
+    chain leaves the good state with probability ``p_good_to_bad`` and the bad state with
+    ``p_bad_to_good``. It stands still while the link is idle, and a spell's length in seconds
+    depends on the traffic. **In time** (``mean_good_s`` and ``mean_bad_s`` given, a fading
+    channel): the state holds for exponentially distributed sojourns of those means, whatever
+    the traffic, and a copy takes the state at its arrival for all its bits. Either way a bit is
+    flipped with probability ``ber_good`` or ``ber_bad`` of its state, and the state persists
+    across frames. Off by default (never leaves the good state, which is error-free).
 
     Attributes:
         p_good_to_bad: per-bit transition probability good → bad, in [0, 1].
         p_bad_to_good: per-bit transition probability bad → good, in (0, 1].
         ber_good: bit error probability in the good state, in [0, 1].
         ber_bad: bit error probability in the bad state, in [0, 1].
+        mean_good_s: mean sojourn in the good state [s], > 0 for the chain in time; 0: per
+            bit (then ``mean_bad_s`` must be 0 too). Not with ``p_good_to_bad``.
+        mean_bad_s: mean sojourn in the bad state [s], > 0 with ``mean_good_s``.
     """
 
     p_good_to_bad: float = 0.0
     p_bad_to_good: float = 1.0
     ber_good: float = 0.0
     ber_bad: float = 0.5
+    mean_good_s: float = 0.0
+    mean_bad_s: float = 0.0
 
     def __post_init__(self) -> None:
         _probability(self.p_good_to_bad, "p_good_to_bad")
@@ -107,15 +116,37 @@ class GilbertElliott:
         check(self.p_bad_to_good > 0.0, "p_bad_to_good", "must be > 0 (bad state would absorb)")
         _probability(self.ber_good, "ber_good")
         _probability(self.ber_bad, "ber_bad")
+        for key in ("mean_good_s", "mean_bad_s"):
+            check_range(getattr(self, key), key, 0.0, MAX_DELAY_S * 1e3, "s")
+        if self.mean_good_s or self.mean_bad_s:
+            check(
+                self.mean_good_s > 0.0 and self.mean_bad_s > 0.0,
+                "mean_bad_s" if self.mean_good_s else "mean_good_s",
+                "the chain in time needs both mean_good_s and mean_bad_s > 0",
+            )
+            check(
+                self.p_good_to_bad == 0.0,
+                "p_good_to_bad",
+                "give per-bit probabilities or mean sojourns in seconds, not both",
+            )
+
+    @property
+    def timed(self) -> bool:
+        """Whether the chain runs in time (mean sojourns in seconds) rather than per bit."""
+        return self.mean_good_s > 0.0
 
     @property
     def enabled(self) -> bool:
         """Whether the model can flip any bit at all."""
-        return self.ber_good > 0.0 or (self.p_good_to_bad > 0.0 and self.ber_bad > 0.0)
+        leaves_good = self.timed or self.p_good_to_bad > 0.0
+        return self.ber_good > 0.0 or (leaves_good and self.ber_bad > 0.0)
 
     @property
     def stationary_bad(self) -> float:
-        """Long-run fraction of bits received in the bad state, p_gb / (p_gb + p_bg)."""
+        """Long-run fraction in the bad state: of bits, p_gb / (p_gb + p_bg); of time (the
+        chain in time), mean_bad_s / (mean_good_s + mean_bad_s)."""
+        if self.timed:
+            return self.mean_bad_s / (self.mean_good_s + self.mean_bad_s)
         return self.p_good_to_bad / (self.p_good_to_bad + self.p_bad_to_good)
 
     @property

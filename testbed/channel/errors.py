@@ -15,7 +15,9 @@ Two sources, combined by OR of their error masks (a bit flips once if any source
 - the **Gilbert–Elliott** chain (:class:`~testbed.channel.config.GilbertElliott`), simulated by
   state sojourns: a sojourn in a state left with probability q per bit lasts Geometric(q) bits;
   within each sojourn the number of errors is Binomial(k, ber_state) and their positions uniform.
-  The state and the rest of the current sojourn carry over to the receiver's next copy.
+  The state and the rest of the current sojourn carry over to the receiver's next copy. A chain
+  in time (``mean_good_s``, ``mean_bad_s``: :class:`TimedGilbertElliottChain`) holds its state
+  for exponential sojourns in seconds instead, and a copy takes the state at its arrival.
 
 Randomness only through the ``numpy.random.Generator`` passed in.
 """
@@ -26,7 +28,7 @@ import numpy as np
 
 from testbed.channel.config import GilbertElliott
 
-__all__ = ["BitErrors", "GilbertElliottChain", "flip_bits"]
+__all__ = ["BitErrors", "GilbertElliottChain", "TimedGilbertElliottChain", "flip_bits"]
 
 _BINOMIAL_ABOVE = 2.0
 """Expected errors per copy above which independent errors are drawn as Binomial + positions."""
@@ -94,6 +96,44 @@ class GilbertElliottChain:
         return out
 
 
+class TimedGilbertElliottChain:
+    """One receiver's Gilbert–Elliott chain in time (``mean_good_s``, ``mean_bad_s``): the
+    state holds for exponential sojourns of those means (a continuous-time Markov chain), and
+    a copy received at ``t_s`` takes the state at ``t_s`` for all its bits.
+
+    Args:
+        model: the chain's parameters (:attr:`GilbertElliott.timed`).
+        rng: random generator (owned by the receiver).
+    """
+
+    __slots__ = ("_ber", "_means", "_rng", "_switch_s", "bad")
+
+    def __init__(self, model: GilbertElliott, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._means = (model.mean_good_s, model.mean_bad_s)
+        self._ber = (model.ber_good, model.ber_bad)
+        # the stationary state at t = 0, and a fresh sojourn from it (memoryless: exact)
+        self.bad = bool(rng.random() < model.stationary_bad)
+        self._switch_s = float(rng.exponential(self._means[self.bad]))
+
+    def state_at(self, t_s: float) -> bool:
+        """Advance the chain to ``t_s`` [s] (never back); True when it is bad then."""
+        while self._switch_s <= t_s:
+            self.bad = not self.bad
+            self._switch_s += float(self._rng.exponential(self._means[self.bad]))
+        return self.bad
+
+    def error_positions(self, n_bits: int, t_s: float) -> list[int]:
+        """The positions that flip in a copy of ``n_bits`` bits received at ``t_s`` [s]."""
+        ber = self._ber[self.state_at(t_s)]
+        if ber <= 0.0:
+            return []
+        if ber >= 1.0:
+            return list(range(n_bits))
+        m = int(self._rng.binomial(n_bits, ber))
+        return self._rng.choice(n_bits, m, replace=False).tolist() if m else []
+
+
 class BitErrors:
     """One receiver's bit-error state: independent errors plus an optional burst chain.
 
@@ -102,11 +142,16 @@ class BitErrors:
         rng: random generator owned by this receiver.
     """
 
-    __slots__ = ("_chain", "_gap", "_p", "_rng")
+    __slots__ = ("_chain", "_gap", "_p", "_rng", "_timed")
 
     def __init__(self, burst: GilbertElliott, rng: np.random.Generator) -> None:
         self._rng = rng
-        self._chain = GilbertElliottChain(burst, rng) if burst.enabled else None
+        self._chain: GilbertElliottChain | None = None
+        self._timed: TimedGilbertElliottChain | None = None
+        if burst.enabled and burst.timed:
+            self._timed = TimedGilbertElliottChain(burst, rng)
+        elif burst.enabled:
+            self._chain = GilbertElliottChain(burst, rng)
         self._p = -1.0  # probability the countdown was drawn for; -1 = none
         self._gap = 0  # clean bits left before the next independent error
 
@@ -141,17 +186,20 @@ class BitErrors:
         Args:
             data: the bytes as sent.
             p_independent: per-bit probability of independent errors for this copy.
-            t_s: when it is received [s]; unused (these errors do not change with time).
+            t_s: when it is received [s]: the time of a chain in time (else unused).
 
         Returns:
             The bytes as received and the number of flipped bits.
         """
         n_bits = len(data) * 8
         positions = self._independent(n_bits, p_independent)
+        burst: list[int] = []
         if self._chain is not None:
             burst = self._chain.error_positions(n_bits)
-            if burst:
-                positions = sorted(set(positions).union(burst)) if positions else burst
+        elif self._timed is not None:
+            burst = self._timed.error_positions(n_bits, t_s)
+        if burst:
+            positions = sorted(set(positions).union(burst)) if positions else burst
         if not positions:
             return data, 0
         return flip_bits(data, positions), len(positions)

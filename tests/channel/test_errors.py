@@ -8,16 +8,26 @@ ber_bad = 1 a frame of n bits is clean iff all its bits are good: (b / (a + b))�
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import simpy
 from scipy import stats
 
-from testbed.channel.config import GilbertElliott, LinkConfig
-from testbed.channel.errors import BitErrors, GilbertElliottChain, flip_bits
+from testbed.channel.config import GilbertElliott, LinkConfig, load_link_config
+from testbed.channel.errors import (
+    BitErrors,
+    GilbertElliottChain,
+    TimedGilbertElliottChain,
+    flip_bits,
+)
 from testbed.channel.medium import Medium
+from testbed.channel.probe import run_probe
+from testbed.config import FieldError
 
 OFF = GilbertElliott()
+S100_CLEAN = load_link_config("s100", ["ber=0"])
 
 
 def per_interval(p_bit: float, n_bytes: int, frames: int) -> tuple[float, float]:
@@ -160,3 +170,58 @@ def test_burst_model_ors_with_independent_errors() -> None:
     config = LinkConfig(bitrate_bps=1e4, ber=2e-4, burst=GilbertElliott(ber_good=3e-4))
     lo, hi = per_interval(1.0 - (1.0 - 2e-4) * (1.0 - 3e-4), 50, 8000)
     assert lo <= _medium_per(config, 0.0, 50, 8000) <= hi
+
+
+# --- the chain in time (mean sojourns in seconds) ------------------------------------------
+
+TIMED = GilbertElliott(ber_good=0.0, ber_bad=1.0, mean_good_s=20.0, mean_bad_s=5.0)
+
+
+@pytest.mark.parametrize("interval_s", [0.1, 1.0, 7.0])
+def test_a_chain_in_time_is_the_two_state_markov_process_whatever_the_traffic(
+    interval_s: float,
+) -> None:
+    """Copies received every ``interval_s``: the fraction in the bad state is π_b =
+    mean_bad / (mean_good + mean_bad) = 0.2, and a copy after a bad one is bad with
+    π_b + (1 − π_b)·exp(−(1/mean_good + 1/mean_bad)·Δt) (the continuous-time chain's
+    transition law) — at every rate of traffic, unlike the per-bit chain."""
+    chain = TimedGilbertElliottChain(TIMED, np.random.default_rng(11))
+    n = 100_000
+    bad = np.array([chain.state_at(k * interval_s) for k in range(n)])
+    pi_bad = TIMED.stationary_bad
+    assert pi_bad == 0.2
+    # successive samples are correlated: the standard error grows by √((1+ρ)/(1−ρ))
+    rho = np.exp(-(1 / 20.0 + 1 / 5.0) * interval_s)
+    se = np.sqrt(pi_bad * (1 - pi_bad) / n * (1 + rho) / (1 - rho))
+    assert abs(bad.mean() - pi_bad) < 4 * se
+    after_bad = bad[1:][bad[:-1]]
+    stay = pi_bad + (1 - pi_bad) * rho
+    assert abs(after_bad.mean() - stay) < 4 * np.sqrt(stay * (1 - stay) / after_bad.size) + 0.01
+
+
+def test_a_probe_of_a_chain_in_time_loses_frames_at_its_bad_fraction_at_any_rate() -> None:
+    """ber_bad 1: a frame is lost exactly when it arrives in the bad state, so the PER is π_b
+    = 0.2 one frame a second or ten (the per-bit chain's PER would change with the rate)."""
+    config = dataclasses.replace(S100_CLEAN, burst=TIMED)
+    for interval_s, frames in ((1.0, 40_000), (0.1, 40_000)):
+        result = run_probe(config, frames=frames, frame_bytes=20, interval_s=interval_s, seed=5)
+        rho = np.exp(-(1 / 20.0 + 1 / 5.0) * interval_s)
+        se = np.sqrt(0.2 * 0.8 / frames * (1 + rho) / (1 - rho))
+        assert abs(result.per - 0.2) < 4 * se, (interval_s, result.per)
+
+
+@pytest.mark.parametrize(
+    ("burst", "key"),
+    [
+        ({"mean_good_s": 10.0}, "mean_bad_s"),
+        ({"mean_bad_s": 10.0}, "mean_good_s"),
+        ({"mean_good_s": 10.0, "mean_bad_s": 1.0, "p_good_to_bad": 1e-4}, "p_good_to_bad"),
+        ({"mean_good_s": -1.0, "mean_bad_s": 1.0}, "mean_good_s"),
+    ],
+)
+def test_a_chain_in_time_needs_both_means_and_no_per_bit_probabilities(
+    burst: dict[str, float], key: str
+) -> None:
+    with pytest.raises(FieldError) as info:
+        GilbertElliott(**burst)
+    assert info.value.key == key
