@@ -56,6 +56,7 @@ __all__ = [
     "roi_psnr_db",
     "settings_schedule",
     "write_images_csv",
+    "write_images_npz",
 ]
 
 
@@ -411,6 +412,39 @@ def write_images_csv(log: ImageLog, chunk_bytes: int, path: Path) -> None:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(IMAGE_COLUMNS)
         writer.writerows(image_rows(log, chunk_bytes))
+
+
+def write_images_npz(log: ImageLog, path: Path) -> None:
+    """Write ``images.npz`` (``numpy.load``): every captured picture and every picture the
+    operator completed, for measures of one's own (SSIM, a detector's score, a video).
+
+    Arrays: ``captured`` (k, h, w) uint8 grey as rendered, ``captured_number`` (k,) and
+    ``captured_s`` (k,) [s]; ``received`` (m, h, w) uint8 as the operator decoded them (zeros
+    where the bits decode to no picture), ``received_number`` (m,) (the captured number; −1
+    unknown), ``completed_s`` (m,) [s] and ``received_decodable`` (m,) bool. Compressed, and
+    the same bytes for the same run.
+    """
+    numbers = sorted(log.captured)
+    shape = next((log.captured[n].pixels.shape for n in numbers), (0, 0))
+    captured = np.zeros((len(numbers), *shape), dtype=np.uint8)
+    for row, number in enumerate(numbers):
+        captured[row] = log.captured[number].pixels
+    received = np.zeros((len(log.received), *shape), dtype=np.uint8)
+    decodable = np.zeros(len(log.received), dtype=np.bool_)
+    for row, image in enumerate(log.received):
+        if image.pixels.shape == shape:
+            received[row], decodable[row] = image.pixels, True
+    with path.open("wb") as handle:
+        np.savez_compressed(
+            handle,
+            captured=captured,
+            captured_number=np.array(numbers, dtype=np.int64),
+            captured_s=np.array([log.captured[n].t_s for n in numbers], dtype=np.float64),
+            received=received,
+            received_number=np.array([r.number for r in log.received], dtype=np.int64),
+            completed_s=np.array([r.t_s for r in log.received], dtype=np.float64),
+            received_decodable=decodable,
+        )
 
 
 def _summary(values: list[float], *keys: str) -> dict[str, float]:

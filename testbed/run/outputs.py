@@ -2,17 +2,16 @@
 
 :func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and writable,
 not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
-``events.csv``, ``series.csv``, ``images.csv`` (image scenarios), ``arm.csv`` (a vehicle with
-an arm) and the plots, each under a
-temporary name renamed into place, and ``metrics.json`` **last**, carrying ``"complete"`` (true for
-a run that reached its end, false for one ended early by Ctrl-C or SIGTERM, or by an error,
-whose ``sim_s`` says how far it got; then ``"failure"`` is the error in one line) and
-``"files"``, the sibling files of this run with their sizes. A directory
-without ``metrics.json`` holds no finished result (a run killed while writing); a ``metrics.json``
-names exactly the files that belong to it. ``--force`` removes the previous ``metrics.json`` before
-anything else is written, and the previous run's files that this run does not write again
-(:mod:`testbed.run.trials` also removes earlier trials' results, and a single run's when trials
-replace it: :func:`remove_run_results`).
+``events.csv``, ``series.csv``, ``images.csv`` and ``images.npz`` (image scenarios), ``arm.csv`` (a
+vehicle with an arm) and the plots, each under a temporary name renamed into place, and
+``metrics.json`` **last**, carrying ``"complete"`` (true for a run that reached its end, false for
+one ended early by Ctrl-C or SIGTERM, or by an error, whose ``sim_s`` says how far it got; then
+``"failure"`` is the error in one line) and ``"files"``, the sibling files of this run with their
+sizes. A directory without ``metrics.json`` holds no finished result (a run killed while writing);
+a ``metrics.json`` names exactly the files that belong to it. ``--force`` removes the previous
+``metrics.json`` before anything else is written, and the previous run's files that this run does
+not write again (:mod:`testbed.run.trials` also removes earlier trials' results, and a single run's
+when trials replace it: :func:`remove_run_results`).
 """
 
 from __future__ import annotations
@@ -29,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
-from testbed.run.images import write_images_csv
+from testbed.run.images import write_images_csv, write_images_npz
 from testbed.run.interrupts import deferred_interrupts
 from testbed.run.runner import RunResult
 
@@ -219,6 +218,8 @@ def write_run(
                     log, chunk = recorder.images, images.chunk_bytes
                     write = functools.partial(write_images_csv, log, chunk)
                     written.append(replace_atomically(write, out_dir / "images.csv"))
+                    write = functools.partial(write_images_npz, log)
+                    written.append(replace_atomically(write, out_dir / "images.npz"))
                 if recorder.arm is not None:
                     arm_csv = out_dir / "arm.csv"
                     written.append(replace_atomically(recorder.arm.write_csv, arm_csv))

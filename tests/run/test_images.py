@@ -257,6 +257,18 @@ def test_images_csv_lists_each_image_against_the_closed_form(
         assert float(row["psnr_db"]) == pytest.approx(expected, abs=1e-3)
     interval = clean_run.metrics["images"]["completion_interval_s"]["mean"]
     assert interval == pytest.approx(16 * GAP_S, abs=1e-6)
+    # images.npz: the captured pictures, and the received ones as the coder alone decodes them
+    with np.load(tmp_path / "images.npz") as npz:
+        assert npz["captured_number"].tolist() == sorted(log.captured)
+        for number, pixels in zip(npz["captured_number"], npz["captured"], strict=True):
+            np.testing.assert_array_equal(pixels, log.captured[int(number)].pixels)
+        assert npz["received_number"].tolist() == [int(r["number"]) for r in completed]
+        assert npz["received_decodable"].all()
+        for number, pixels in zip(npz["received_number"], npz["received"], strict=True):
+            source = log.captured[int(number)].pixels
+            np.testing.assert_array_equal(pixels, decode(encode(source, 600)))
+        times = [float(r["completed_s"]) for r in completed]
+        np.testing.assert_allclose(npz["completed_s"], times, atol=1e-6)
     # events.csv: a capture and a completion line per image, at the times the rows give
     with (tmp_path / "events.csv").open(newline="") as handle:
         events = [r for r in csv.DictReader(handle) if r["kind"].startswith("image_")]
