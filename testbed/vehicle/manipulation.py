@@ -106,8 +106,9 @@ class ArmConfig:
 
 def _check_tpik_fits_arm(tpik: TpikConfig, arm: ArmModel, name: str) -> None:
     """Refuse, at load, a TPIK table for another arm: a joint count of its own (it crashed
-    the run at its first solve), or a joint-limit task whose physical range is not inside the
-    arm's joint limits (degrees for radians flew the mission 1.4 m off, saying nothing)."""
+    the run at its first solve), a joint-limit task whose physical range is not inside the
+    arm's joint limits (degrees for radians flew the mission 1.4 m off, saying nothing), or
+    whose safety range does not hold the arm's start angle."""
     n = arm.n_joints
     check(
         len(tpik.joint_velocity_limits) == n,
@@ -130,6 +131,15 @@ def _check_tpik_fits_arm(tpik: TpikConfig, arm: ArmModel, name: str) -> None:
             f"{name}: limit_tasks[{i}].physical: [{low:g}, {high:g}] rad is not inside "
             f"{joint.name}'s limits [{joint.lower_rad:g}, {joint.upper_rad:g}] rad ({arm.name}; "
             "degrees for radians?)",
+        )
+        start = arm.initial_q_rad[task.joint]
+        low, high = task.safety
+        check(
+            low <= start <= high,
+            "tpik",
+            f"{name}: limit_tasks[{i}].safety: [{low:g}, {high:g}] rad does not hold "
+            f"{joint.name}'s start angle {start:g} rad (the arm's initial_q_rad): the task "
+            "would be broken from the first instant",
         )
 
 

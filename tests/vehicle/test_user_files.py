@@ -326,13 +326,18 @@ def test_a_layout_that_makes_no_yaw_is_refused_where_the_heading_is_held(tmp_pat
             ("physical = [0.0, 1.571]", "physical = [0.0, 90.0]"),
             "limit_tasks[0].physical: [0, 90] rad is not inside axis_d's limits [0, 3.49] rad",
         ),
+        (  # the start pose outside the safety range: broken from the first instant, accepted
+            ("safety = [0.087, 1.475]", "safety = [0.087, 1.1]"),
+            "limit_tasks[0].safety: [0.087, 1.1] rad does not hold axis_d's start angle 1.2 rad",
+        ),
     ],
 )
 def test_a_tpik_table_for_another_arm_is_refused_at_load(
     tmp_path: Path, edit: tuple[str, str], named: str
 ) -> None:
-    """The TPIK table's joints are held to the arm's: the count, and each limit task's
-    physical range inside that joint's limits (the arm model file's own figures)."""
+    """The TPIK table's joints are held to the arm's: the count, each limit task's physical
+    range inside that joint's limits and its safety range around the start angle (the arm
+    model file's own figures)."""
     path = _tpik_file(tmp_path / "mytpik.toml", "30.0")
     text = path.read_text(encoding="utf-8")
     assert text.count(edit[0]) == 1
