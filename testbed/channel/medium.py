@@ -45,7 +45,13 @@ import numpy as np
 import simpy
 
 from testbed.channel.config import LinkConfig
-from testbed.channel.model import LinkModel, StandardLink, checked_airtime_s, checked_corrupt
+from testbed.channel.model import (
+    LinkModel,
+    StandardLink,
+    checked_airtime_s,
+    checked_corrupt,
+    wanted_keywords,
+)
 from testbed.channel.trace import BROADCAST, EventKind, Trace
 from testbed.protocol import CorruptFrame, Frame, FrameDecoder
 
@@ -129,7 +135,16 @@ class ModemCounters:
 class _Reception:
     """One copy on the air at one receiver (internal, mutable)."""
 
-    __slots__ = ("collided", "end_s", "entry", "p_independent", "src", "start_s", "t_tx_start_s")
+    __slots__ = (
+        "collided",
+        "distance_m",
+        "end_s",
+        "entry",
+        "p_independent",
+        "src",
+        "start_s",
+        "t_tx_start_s",
+    )
 
     def __init__(
         self,
@@ -139,8 +154,10 @@ class _Reception:
         start_s: float,
         end_s: float,
         p_independent: float,
+        distance_m: float,
     ) -> None:
         self.src = src
+        self.distance_m = distance_m
         self.entry = entry
         self.t_tx_start_s = t_tx_start_s
         self.start_s = start_s
@@ -267,9 +284,8 @@ class Medium:
             if self._ber_per_m > 0.0:
                 p = 1.0 - (1.0 - p) * (1.0 - min(1.0, self._ber_per_m * distance_m))
             delay_s = busy_s + prop_s
-            rec = _Reception(
-                sender.name, entry, t0, t0 + (self._intrinsic_s + prop_s), t0 + delay_s, p
-            )
+            start_s = t0 + (self._intrinsic_s + prop_s)
+            rec = _Reception(sender.name, entry, t0, start_s, t0 + delay_s, p, distance_m)
             receiver._start_reception(rec)
             simpy.Timeout(env, delay_s, rec).callbacks.append(receiver._finish_reception)
 
@@ -307,7 +323,14 @@ class Modem:
         self._gap_s = config.queue_gap_s
         self._buffer_bytes = config.tx_buffer_bytes
         self._packet_bytes = config.packet_bytes
-        self._errors = medium.model.error_model(rng)
+        model = medium.model
+        if wanted_keywords(model.error_model, ("receiver",)):
+            self._errors = model.error_model(rng, receiver=name)  # type: ignore[call-arg]
+        else:
+            self._errors = model.error_model(rng)
+        # the context a user's laws ask for (none for the preset's: its calls stay as they were)
+        self._airtime_context = {key: name for key in wanted_keywords(model.airtime_s, ("sender",))}
+        self._corrupt_keys = wanted_keywords(self._errors.corrupt, ("sender", "distance_m"))
         self._fifo: deque[_Queued] = deque()
         self._fifo_bytes = 0
         self._tx_start_s = -math.inf
@@ -414,7 +437,7 @@ class Modem:
         frame_id, part, _, data = entry
         size = len(data)
         self._fifo_bytes -= size
-        airtime_s = checked_airtime_s(self._medium_model, size, now)
+        airtime_s = checked_airtime_s(self._medium_model, size, now, **self._airtime_context)
         busy_s = self._intrinsic_s + airtime_s
         end_s = now + busy_s
         self._tx_start_s = now
@@ -468,7 +491,12 @@ class Modem:
                 kind = EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
             return
-        data, n_errors = checked_corrupt(self._errors, data, rec.p_independent, now)
+        if self._corrupt_keys:
+            context = {"sender": rec.src, "distance_m": rec.distance_m}
+            wanted = {key: context[key] for key in self._corrupt_keys}
+            data, n_errors = checked_corrupt(self._errors, data, rec.p_independent, now, **wanted)
+        else:
+            data, n_errors = checked_corrupt(self._errors, data, rec.p_independent, now)
         if n_errors:
             counters.rx_corrupted += 1
             counters.rx_bit_errors += n_errors

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import inspect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -41,6 +42,7 @@ __all__ = [
     "checked_airtime_s",
     "checked_corrupt",
     "model_name",
+    "wanted_keywords",
 ]
 
 
@@ -71,13 +73,26 @@ class LinkModelError(ConfigError):
         )
 
 
-def checked_airtime_s(model: LinkModel, size_bytes: int, t_s: float) -> float:
-    """``model.airtime_s(size_bytes, t_s)`` [s], checked: a finite number > 0.
+def wanted_keywords(function: Callable[..., object], offered: tuple[str, ...]) -> tuple[str, ...]:
+    """Which of the ``offered`` keyword arguments ``function`` takes (by name, or all of them
+    through ``**kwargs``): a model's law is called with the context it asks for only
+    (:class:`LinkModel`), so a law written without it keeps working."""
+    try:
+        parameters = inspect.signature(function).parameters
+    except (TypeError, ValueError):  # a built-in without a signature: nothing extra
+        return ()
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return offered
+    return tuple(name for name in offered if name in parameters)
+
+
+def checked_airtime_s(model: LinkModel, size_bytes: int, t_s: float, **context: object) -> float:
+    """``model.airtime_s(size_bytes, t_s, **context)`` [s], checked: a finite number > 0.
 
     Raises:
         LinkModelError: anything else (NaN, a string, None, ≤ 0, infinite).
     """
-    value = model.airtime_s(size_bytes, t_s)
+    value = model.airtime_s(size_bytes, t_s, **context)
     try:
         fits = 0.0 < value < math.inf  # NaN too
     except TypeError:  # not a number at all
@@ -88,16 +103,16 @@ def checked_airtime_s(model: LinkModel, size_bytes: int, t_s: float) -> float:
 
 
 def checked_corrupt(
-    errors: ErrorModel, data: bytes, p_independent: float, t_s: float
+    errors: ErrorModel, data: bytes, p_independent: float, t_s: float, **context: object
 ) -> tuple[bytes, int]:
-    """``errors.corrupt(data, p_independent, t_s)``, checked: bytes of ``data``'s length and
-    the count of the bits in which they differ from ``data`` (counted here, and held to the
-    model's own count).
+    """``errors.corrupt(data, p_independent, t_s, **context)``, checked: bytes of ``data``'s
+    length and the count of the bits in which they differ from ``data`` (counted here, and
+    held to the model's own count).
 
     Raises:
         LinkModelError: anything else.
     """
-    value = errors.corrupt(data, p_independent, t_s)
+    value = errors.corrupt(data, p_independent, t_s, **context)
     if type(value) is tuple and len(value) == 2:
         received, count = value
         if type(received) is bytes and len(received) == len(data):
@@ -121,7 +136,12 @@ def _described(model: object) -> str:
 
 
 class ErrorModel(Protocol):
-    """One receiver's bit errors."""
+    """One receiver's bit errors.
+
+    ``corrupt`` may also take, by name, keyword arguments of the copy's context (it is given
+    those it names, or all through ``**kwargs``): ``sender`` (the sending node's name, e.g.
+    ``"operator"``) and ``distance_m`` (sender to receiver at the transmission's start [m]).
+    """
 
     def corrupt(self, data: bytes, p_independent: float, t_s: float) -> tuple[bytes, int]:
         """The bytes of one copy as received and how many bits were flipped.
@@ -136,7 +156,12 @@ class ErrorModel(Protocol):
 
 
 class LinkModel(Protocol):
-    """What a link model decides (module docstring)."""
+    """What a link model decides (module docstring).
+
+    Context it may ask for by naming it (see :func:`wanted_keywords`): ``airtime_s`` a
+    ``sender`` (the sending node's name: an uplink and a downlink of their own rates), and
+    ``error_model`` a ``receiver`` (the receiving node's name).
+    """
 
     def airtime_s(self, size_bytes: int, t_s: float) -> float:
         """Time on the air of ``size_bytes`` bytes sent at ``t_s`` [s], > 0, the modem's

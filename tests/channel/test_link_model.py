@@ -147,3 +147,57 @@ def test_testbed_link_probes_a_link_model_of_ones_own(
         assert main([*common, *bad]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and says in err, err
+
+
+class Asymmetric:
+    """An uplink (the operator's) at 1900 bit/s and a downlink at 950; errors only on copies
+    that crossed more than ``cut_m`` (every bit flipped there), and a record of the context."""
+
+    def __init__(self, cut_m: float) -> None:
+        self.cut_m = cut_m
+        self.receivers: list[str] = []
+        self.copies: list[tuple[str, float]] = []
+
+    def airtime_s(self, size_bytes: int, t_s: float, sender: str) -> float:
+        return 8.0 * size_bytes / (1900.0 if sender == "operator" else 950.0)
+
+    def error_model(self, rng: np.random.Generator, receiver: str) -> Asymmetric:
+        self.receivers.append(receiver)
+        return self
+
+    def corrupt(
+        self, data: bytes, p_independent: float, t_s: float, **context: float | str
+    ) -> tuple[bytes, int]:
+        sender, distance_m = str(context["sender"]), float(context["distance_m"])
+        self.copies.append((sender, distance_m))
+        if distance_m <= self.cut_m:
+            return data, 0
+        return bytes(b ^ 0xFF for b in data), 8 * len(data)
+
+
+def test_a_link_model_may_ask_for_the_sender_the_receiver_and_the_distance() -> None:
+    """Laws that name ``sender``, ``receiver`` and ``distance_m`` are given them (a link
+    researcher's review: an asymmetric link and BER(d) could not be written): each order
+    crosses in the intrinsic delay + 8·13/1900 s and each reply in + 8·20/950 s; every copy's
+    distance is the nodes' (the vehicle starts 0.5 m from the operator and the scripted pilot
+    moves it); beyond the cut every copy is lost."""
+    short = ["duration_s=30", "link.ber=0"]
+    model = Asymmetric(cut_m=1e9)
+    result = run_scenario(load_scenario("s100-teleop-v1", short), link_model=model)
+    assert sorted(model.receivers) == ["operator", "vehicle"]
+    trace = result.recorder.trace
+    start = {e.frame_id: (e.t_s, e.src) for e in trace.of_kind(EventKind.TX_START)}
+    crossed = [
+        (start[e.frame_id][1], e.t_s - start[e.frame_id][0])
+        for e in trace.of_kind(EventKind.DELIVER)
+    ]
+    intrinsic = S100.intrinsic_delay_s
+    for sender, took in crossed:
+        size, bps = (13, 1900.0) if sender == "operator" else (20, 950.0)
+        assert took == pytest.approx(intrinsic + 8.0 * size / bps, abs=1e-6), sender
+    assert {s for s, _ in crossed} == {"operator", "vehicle"}
+    distances = [d for _, d in model.copies]
+    assert min(distances) == pytest.approx(0.5, abs=0.05) and max(distances) < 20.0
+    lost = Asymmetric(cut_m=0.0)
+    cut = run_scenario(load_scenario("s100-teleop-v1", short), link_model=lost)
+    assert cut.metrics["link"]["uplink"]["frames_delivered"] == 0
