@@ -15,18 +15,12 @@ M = M_RB + M_A about CO is then general (r_g ≠ 0 couples surge–pitch and swa
 is computed once (:func:`testbed.vehicle.hydrodynamics.coefficients`); each step's arithmetic
 is one compiled function, :func:`~.plant_kernels.pybullet_wrench`.
 
-Frames: this module (with its compiled arithmetic, :mod:`.plant_kernels`) is the only place that
-knows pybullet is z-up. pybullet's world is NED
-rotated by π about north, (x, y, z)_pb = (N, −E, −D), and its body frame is FLU, the same
-rotation of FRD: vectors map by (x, −y, −z) both ways and a quaternion (w, x, y, z) maps to
-(w, x, −y, −z). Nothing outside this module imports pybullet.
-
-Rendering: :meth:`Physics.add_scenery` (visual-only static bodies, :mod:`.scenery`) and
-:meth:`Physics.render` (pybullet's CPU renderer from a camera pose in NED, :mod:`.camera`).
-
-Size: this module stays whole, over the 500-line guideline, because it is the one module allowed
-to import pybullet and the one that knows pybullet's z-up frames; the scene, the stepper and the
-frame conversions cannot move out without spreading that knowledge.
+Frames: pybullet's world is NED rotated by π about north, its body frame FLU
+(:mod:`.pybullet_frames`). This is the one module that imports pybullet; it hands the module and
+its client to those that build and draw the scene: :mod:`.hull_body`, :mod:`.arm_body` with
+:mod:`.arm_coupling` (the arm's reaction on the hull), :mod:`.pool_scene` and
+:mod:`.scenery_render` (:meth:`Physics.add_scenery`, :meth:`Physics.render`).
+:mod:`.open_loop` runs the plant with a constant wrench.
 """
 
 from __future__ import annotations
@@ -35,22 +29,29 @@ import ctypes
 import math
 import os
 import sys
-import tempfile
 import weakref
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 
 from testbed.common import jit
-from testbed.common.geometry import euler_from_quat, quat_from_euler, rotate, rotation_matrix
-from testbed.config import check
+from testbed.common.geometry import euler_from_quat
 from testbed.vehicle.arm import ArmModel
-from testbed.vehicle.arm_body import G_M_S2, RHO_KG_M3, ArmBody, arm_links
+from testbed.vehicle.arm_body import ArmBody
+from testbed.vehicle.arm_coupling import (
+    Coupling,
+    arm_static_reaction,
+    measured_reaction,
+    rotated,
+    trim_float,
+    trim_wrench,
+)
+from testbed.vehicle.body_state import BodyState, frozen
 from testbed.vehicle.camera import CameraConfig, CameraPose
-from testbed.vehicle.hydrodynamics import HydroModel, coefficients, load_model
+from testbed.vehicle.hull_body import hull_body, place_hull
+from testbed.vehicle.hydrodynamics import HydroModel, coefficients
 from testbed.vehicle.plant_kernels import (
     LOAD_CURRENT,
     LOAD_NU_DOT,
@@ -59,7 +60,9 @@ from testbed.vehicle.plant_kernels import (
     pybullet_state,
     pybullet_wrench,
 )
-from testbed.vehicle.scenery import LIGHT_TOWARDS_NED, Scenery
+from testbed.vehicle.pool_scene import PoolScene, build_pool
+from testbed.vehicle.scenery import Scenery
+from testbed.vehicle.scenery_render import add_scenery_bodies, render_scenery
 from testbed.vehicle.water_current import CurrentProcess, WaterCurrent
 
 
@@ -88,18 +91,7 @@ def _import_pybullet_quietly() -> ModuleType:
 
 pybullet = _import_pybullet_quietly()
 
-__all__ = [
-    "POOL_LIMITS_M",
-    "BodyState",
-    "OpenLoopResult",
-    "Physics",
-    "PoolScene",
-    "ned_to_pybullet",
-    "pybullet_to_ned",
-    "quaternion_ned_to_pybullet",
-    "quaternion_pybullet_to_ned",
-    "simulate_open_loop",
-]
+__all__ = ["Physics"]
 
 FloatArray = NDArray[np.float64]
 Vec3 = tuple[float, float, float]
@@ -109,105 +101,6 @@ _Raw = tuple[Vec3, tuple[float, float, float, float], tuple[Vec3, Vec3]]
 """pybullet's (position, orientation xyzw, (linear velocity, angular velocity)), world z-up."""
 _ZERO3 = (0.0, 0.0, 0.0)
 _VEC3 = jit.floats(3)
-_Coupling = tuple[Sequence[float], Sequence[float], Sequence[float], Vec3, Vec3]
-"""The last step's hull velocity, angular velocity, rotation, force and torque (world)."""
-
-
-def ned_to_pybullet(vector: Sequence[float]) -> Vec3:
-    """A vector in NED (or body FRD) → pybullet's world (or body FLU): (x, −y, −z)."""
-    return (float(vector[0]), -float(vector[1]), -float(vector[2]))
-
-
-def pybullet_to_ned(vector: Sequence[float]) -> Vec3:
-    """A vector in pybullet's world (or body FLU) → NED (or body FRD): (x, −y, −z)."""
-    return (float(vector[0]), -float(vector[1]), -float(vector[2]))
-
-
-def quaternion_ned_to_pybullet(q_wxyz: Sequence[float]) -> tuple[float, float, float, float]:
-    """Attitude quaternion (w, x, y, z), FRD → NED, as pybullet's (x, y, z, w), FLU → world."""
-    w, x, y, z = (float(c) for c in q_wxyz)
-    return (x, -y, -z, w)
-
-
-def quaternion_pybullet_to_ned(q_xyzw: Sequence[float]) -> tuple[float, float, float, float]:
-    """pybullet's (x, y, z, w), FLU → world, as the attitude quaternion (w, x, y, z), FRD → NED."""
-    x, y, z, w = (float(c) for c in q_xyzw)
-    return (w, x, -y, -z)
-
-
-POOL_LIMITS_M = {"length_m": 50.0, "width_m": 50.0, "depth_m": 20.0, "wall_thickness_m": 5.0}
-"""Largest pool dimensions [m]: an Olympic pool or a large test tank (the camera's textures grow
-with the area, at 2 cm a texel)."""
-
-
-@dataclass(frozen=True, slots=True)
-class PoolScene:
-    """A rectangular pool: floor and four walls as static bodies, contact on.
-
-    The origin is the centre of the water surface; the floor's top is at NED z = ``depth_m``,
-    the walls' inner faces at x = ±length/2 and y = ±width/2.
-
-    Attributes:
-        length_m: extent along north [m].
-        width_m: extent along east [m].
-        depth_m: water depth [m].
-        wall_thickness_m: thickness of the floor and walls [m].
-    """
-
-    length_m: float = 10.0
-    width_m: float = 6.0
-    depth_m: float = 3.0
-    wall_thickness_m: float = 0.5
-
-    def __post_init__(self) -> None:
-        for key, high in POOL_LIMITS_M.items():
-            value = getattr(self, key)
-            check(0.0 < value <= high, key, f"must be in (0, {high:g}] m, got {value}")
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class BodyState:
-    """The vehicle's state at one instant (arrays are read-only).
-
-    Attributes:
-        time_s: simulated time [s].
-        position_ned: (3,) position of the body origin CO [m], NED.
-        quaternion_wxyz: (4,) attitude, body FRD → NED.
-        euler_rad: (3,) roll, pitch, yaw [rad], ZYX.
-        nu: (6,) body velocity [u v w p q r] at CO [m/s, rad/s], FRD.
-        nu_dot: (6,) body acceleration of the last step's model (contacts not included)
-            [m/s², rad/s²], FRD.
-    """
-
-    time_s: float
-    position_ned: FloatArray
-    quaternion_wxyz: FloatArray
-    euler_rad: FloatArray
-    nu: FloatArray
-    nu_dot: FloatArray
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class OpenLoopResult:
-    """Samples of an open-loop run, one row per step including t = 0.
-
-    Attributes:
-        t: (N,) time [s].
-        position_ned: (N, 3) position of CO [m], NED.
-        euler_rad: (N, 3) roll, pitch, yaw [rad].
-        nu: (N, 6) body velocity [u v w p q r] [m/s, rad/s], FRD.
-    """
-
-    t: FloatArray
-    position_ned: FloatArray
-    euler_rad: FloatArray
-    nu: FloatArray
-
-
-def _frozen(values: Sequence[float] | FloatArray) -> FloatArray:
-    array = np.array(values, dtype=float)
-    array.setflags(write=False)
-    return array
 
 
 class Physics:
@@ -228,12 +121,8 @@ class Physics:
             in the arm's initial pose (as Angler's vehicle is ballasted for its arm); only with
             ``arm_coupling`` (uncoupled, the hull feels none of the arm's weight either).
 
-    Coupling. The arm's links are the hull's children in one pybullet multibody, so pybullet's
-    articulated dynamics carry the joint reactions. Each step measures the arm's reaction on the
-    hull over the last step from the hull's own motion, R = m·Δv/Δt − F_applied (and
-    I·Δω/Δt + ω×Iω − τ_applied), then solves Fossen's equation with τ + R (one step late:
-    the arm is ~10 % of the hull's mass and added mass, so the lag's recurrence factor is
-    ~0.1) and applies the force that gives that acceleration less R, which pybullet adds back.
+    Coupling: the arm's reaction on the hull, measured from the hull's motion, enters Fossen's
+    equation one step late (:mod:`.arm_coupling`).
 
     Use as a context manager or call :meth:`close`; the pybullet client is disconnected then.
     """
@@ -280,7 +169,7 @@ class Physics:
         self.arm_coupling = arm_coupling
         self.arm: ArmBody | None = None
         self._trim: tuple[float, Vec3] | None = None
-        self._coupling: list[_Coupling | None] = [None]  # the last step's (v, ω, R, F, τ), world
+        self._coupling: list[Coupling | None] = [None]  # the last step's (v, ω, R, F, τ), world
         self.arm_reaction_frd: Vec6 = (0.0,) * 6
         self._seed_reaction: Vec6 = (0.0,) * 6  # the resting arm's, for the first step
         """The arm's reaction on the hull measured at the last step [N, N·m], FRD, CoG."""
@@ -293,7 +182,7 @@ class Physics:
         self._advance = self._make_stepper()
         self.reset()
         if arm is not None and arm_trim and arm_coupling:
-            self._trim = self._arm_trim()
+            self._trim = trim_float(self._arm_static_reaction())
 
     # --- setup -----------------------------------------------------------------------------
 
@@ -306,60 +195,10 @@ class Physics:
             deterministicOverlappingPairs=1,
             physicsClientId=cid,
         )
-        half = [0.5 * s for s in self.model.hull_size_m]
-        # The hull box is centred on CO, which is at −r_g from the CoG (pybullet's body frame).
-        centre_flu = ned_to_pybullet([-c for c in self._cog])
-        shape = pybullet.createCollisionShape(
-            pybullet.GEOM_BOX,
-            halfExtents=half,
-            collisionFramePosition=centre_flu,
-            physicsClientId=cid,
-        )
-        links = (
-            {} if self.arm_model is None else arm_links(pybullet, cid, self.arm_model, self._cog)
-        )
-        body: int = pybullet.createMultiBody(
-            baseMass=self.model.mass_kg,
-            baseCollisionShapeIndex=shape,
-            basePosition=[0.0, 0.0, 0.0],
-            physicsClientId=cid,
-            **links,
-        )
-        pybullet.changeDynamics(
-            body,
-            -1,
-            linearDamping=0.0,
-            angularDamping=0.0,
-            localInertiaDiagonal=list(self.model.inertia_kg_m2),  # FRD and FLU share a diagonal
-            activationState=pybullet.ACTIVATION_STATE_DISABLE_SLEEPING,
-            physicsClientId=cid,
-        )
+        body = hull_body(pybullet, cid, self.model, self._cog, self.arm_model)
         if self.pool is not None:
-            self._build_pool(self.pool)
+            build_pool(pybullet, cid, self.pool)
         return body
-
-    def _build_pool(self, pool: PoolScene) -> None:
-        cid = self.client_id
-        t = pool.wall_thickness_m
-        half_l, half_w, depth = 0.5 * pool.length_m, 0.5 * pool.width_m, pool.depth_m
-        # (centre NED, half extents) of the floor and the four walls.
-        boxes = [
-            ((0.0, 0.0, depth + t / 2), (half_l + t, half_w + t, t / 2)),
-            ((half_l + t / 2, 0.0, depth / 2), (t / 2, half_w + t, depth / 2)),
-            ((-half_l - t / 2, 0.0, depth / 2), (t / 2, half_w + t, depth / 2)),
-            ((0.0, half_w + t / 2, depth / 2), (half_l + t, t / 2, depth / 2)),
-            ((0.0, -half_w - t / 2, depth / 2), (half_l + t, t / 2, depth / 2)),
-        ]
-        for centre, half in boxes:
-            shape = pybullet.createCollisionShape(
-                pybullet.GEOM_BOX, halfExtents=half, physicsClientId=cid
-            )
-            pybullet.createMultiBody(
-                baseMass=0.0,
-                baseCollisionShapeIndex=shape,
-                basePosition=ned_to_pybullet(centre),
-                physicsClientId=cid,
-            )
 
     # --- public API ------------------------------------------------------------------------
 
@@ -390,29 +229,10 @@ class Physics:
         The water current keeps its state; the held wrench is cleared (:attr:`held_wrench`).
         """
         self._check_open()
-        px, py, pz = position_ned if position_ned is not None else self._start_position
-        roll, pitch, yaw = euler_rad if euler_rad is not None else self._start_euler
-        u, v, w, p, q, r = nu if nu is not None else (0.0,) * 6
-        quat = quat_from_euler(roll, pitch, yaw)
-        rot = rotation_matrix(quat)
-        xg, yg, zg = self._cog
-        cog_offset = rotate(rot, (xg, yg, zg))
-        cog_ned = (px + cog_offset[0], py + cog_offset[1], pz + cog_offset[2])
-        # CoG velocity in the body: v_g = v_o + ω × r_g; then to NED.
-        vg_body = (u + q * zg - r * yg, v + r * xg - p * zg, w + p * yg - q * xg)
-        cid = self.client_id
-        pybullet.resetBasePositionAndOrientation(
-            self.body_id,
-            ned_to_pybullet(cog_ned),
-            quaternion_ned_to_pybullet(quat),
-            physicsClientId=cid,
-        )
-        pybullet.resetBaseVelocity(
-            self.body_id,
-            ned_to_pybullet(rotate(rot, vg_body)),
-            ned_to_pybullet(rotate(rot, (p, q, r))),
-            physicsClientId=cid,
-        )
+        position = position_ned if position_ned is not None else self._start_position
+        euler = euler_rad if euler_rad is not None else self._start_euler
+        velocity = nu if nu is not None else (0.0,) * 6
+        place_hull(pybullet, self.client_id, self.body_id, self._cog, position, euler, velocity)
         if self.arm is not None:
             self.arm.reset(self.arm_model.initial_q_rad if self.arm_model else ())
             self._coupling[0] = None
@@ -479,11 +299,11 @@ class Physics:
             t, position, quat, nu = self.state_floats()
             self._cached = BodyState(
                 time_s=t,
-                position_ned=_frozen(position),
-                quaternion_wxyz=_frozen(quat),
-                euler_rad=_frozen(euler_from_quat(quat)),
-                nu=_frozen(nu),
-                nu_dot=_frozen(self._loads[LOAD_NU_DOT : LOAD_NU_DOT + 6]),
+                position_ned=frozen(position),
+                quaternion_wxyz=frozen(quat),
+                euler_rad=frozen(euler_from_quat(quat)),
+                nu=frozen(nu),
+                nu_dot=frozen(self._loads[LOAD_NU_DOT : LOAD_NU_DOT + 6]),
             )
         return self._cached
 
@@ -508,40 +328,10 @@ class Physics:
 
     def add_scenery(self, scenery: Scenery) -> None:
         """Add the camera's scenery as static visual-only bodies (no collision, no mass: stepping
-        is unchanged); bodies already here (the hull, a pool's boxes) turn transparent."""
+        is unchanged); bodies already here (the hull, a pool's boxes) turn transparent
+        (:func:`~.scenery_render.add_scenery_bodies`)."""
         self._check_open()
-        pb = {"physicsClientId": self.client_id}
-        for index in range(pybullet.getNumBodies(**pb)):
-            body = pybullet.getBodyUniqueId(index, **pb)
-            pybullet.changeVisualShape(body, -1, rgbaColor=(0, 0, 0, 0), **pb)
-        with tempfile.TemporaryDirectory(prefix="testbed-") as folder:  # loadTexture needs a file
-            paths = scenery.write_textures(folder).items()
-            textures = {name: pybullet.loadTexture(path, **pb) for name, path in paths}
-        placed = []  # (visual shape, position NED, attitude wxyz, texture or None)
-        # quads: counter-clockwise seen from the normal's side; the texture's row 0 is v = 1
-        mesh = {"indices": [0, 2, 1, 0, 3, 2], "uvs": [(0, 1), (1, 1), (1, 0), (0, 0)], **pb}
-        for quad in scenery.quads:
-            vertices = [ned_to_pybullet(c) for c in quad.corners_ned_m]
-            normals = [ned_to_pybullet(quad.normal_ned)] * 4
-            shape = pybullet.createVisualShape(
-                pybullet.GEOM_MESH, vertices=vertices, normals=normals, **mesh
-            )
-            placed.append((shape, _ZERO3, (1.0, 0.0, 0.0, 0.0), textures[quad.texture]))
-        for solid in scenery.solids:
-            kind, size = getattr(pybullet, f"GEOM_{solid.kind.upper()}"), solid.size_m
-            half = [0.5 * s for s in size] if solid.kind == "box" else None
-            rgba = (*solid.rgb, 1.0)
-            shape = pybullet.createVisualShape(
-                kind, radius=size[0], length=size[-1], halfExtents=half, rgbaColor=rgba, **pb
-            )
-            placed.append((shape, solid.position_ned_m, solid.quaternion_wxyz, None))
-        sleep = pybullet.ACTIVATION_STATE_SLEEP  # a sleeping static rigid body costs no step time
-        for shape, position, attitude, texture in placed:
-            at = ned_to_pybullet(position), quaternion_ned_to_pybullet(attitude)
-            body = pybullet.createMultiBody(0.0, -1, shape, *at, useMaximalCoordinates=True, **pb)
-            pybullet.changeDynamics(body, -1, activationState=sleep, **pb)
-            if texture is not None:
-                pybullet.changeVisualShape(body, -1, textureUniqueId=texture, **pb)
+        add_scenery_bodies(pybullet, self.client_id, scenery)
 
     def render(
         self, pose: CameraPose, camera: CameraConfig
@@ -550,19 +340,11 @@ class Physics:
 
         Returns:
             ``(rgb, zbuffer)`` at ``camera.render_size_px``: (h, w, 3) uint8 colour, row 0 at the
-            top; (h, w) OpenGL depth buffer in [0, 1], 1 where nothing was hit.
+            top; (h, w) OpenGL depth buffer in [0, 1], 1 where nothing was hit
+            (:func:`~.scenery_render.render_scenery`).
         """
         self._check_open()
-        eye, (w, h) = pose.position_ned_m, camera.render_size_px
-        target = [e + f for e, f in zip(eye, pose.forward_ned, strict=True)]
-        view = pybullet.computeViewMatrix(*map(ned_to_pybullet, (eye, target, pose.up_ned)))
-        projection = camera.projection_matrix
-        light = ned_to_pybullet(LIGHT_TOWARDS_NED)
-        tiny = {"renderer": pybullet.ER_TINY_RENDERER, "flags": pybullet.ER_NO_SEGMENTATION_MASK}
-        options = {"lightDirection": light, "shadow": 0, "physicsClientId": self.client_id, **tiny}
-        _, _, rgba, zbuffer, _ = pybullet.getCameraImage(w, h, view, projection, **options)
-        rgb = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)[:, :, :3]
-        return rgb, np.asarray(zbuffer, dtype=np.float32).reshape(h, w)
+        return render_scenery(pybullet, self.client_id, pose, camera)
 
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""
@@ -580,7 +362,7 @@ class Physics:
         """One step: pybullet's reads, the compiled :func:`~.plant_kernels.pybullet_wrench`,
         force, torque and pybullet's step, the floor's five pybullet calls (attribute lookups
         bound once: this runs 240 times a simulated second); with an arm, the coupled step
-        (class docstring)."""
+        (:mod:`.arm_coupling`)."""
         get_pose = pybullet.getBasePositionAndOrientation
         get_velocity = pybullet.getBaseVelocity
         apply_force = pybullet.applyExternalForce
@@ -628,7 +410,7 @@ class Physics:
         if self.arm is None:
             return advance
         # With the arm: its measured reaction coupled into (or cancelled from) the hull's
-        # Fossen equation, the trim float's wrench, and the links' loads (class docstring).
+        # Fossen equation, the trim float's wrench, and the links' loads (:mod:`.arm_coupling`).
         arm = self.arm
         assert arm is not None
         m, dt, coupled = model.mass_kg, self.dt_s, self.arm_coupling
@@ -650,10 +432,10 @@ class Physics:
             if last is None:  # nothing measured yet: the resting arm's weight and buoyancy
                 reaction = self._seed_reaction
             else:
-                reaction = _measured_reaction(last, linear, angular, rotation, m, inertia, dt)
+                reaction = measured_reaction(last, linear, angular, rotation, m, inertia, dt)
             self.arm_reaction_frd = reaction
             held = loads[w : w + 6].tolist()
-            load = [a + t for a, t in zip(held, self._trim_wrench(rotation), strict=True)]
+            load = [a + t for a, t in zip(held, trim_wrench(self._trim, rotation), strict=True)]
             if coupled:
                 load = [a + r for a, r in zip(load, reaction, strict=True)]
             scratch[w : w + 6] = load
@@ -672,62 +454,18 @@ class Physics:
                 linear,
                 angular,
                 rotation,
-                _rotated(rotation, force),
-                _rotated(rotation, torque),
+                rotated(rotation, force),
+                rotated(rotation, torque),
             )
 
         return advance_arm
 
-    def _trim_wrench(self, rotation: Sequence[float]) -> Vec6:
-        """The trim float's wrench [N, N·m], body FRD about the CoG: its buoyancy (world up)
-        at its body-fixed point."""
-        if self._trim is None:
-            return (0.0,) * 6
-        lift, (px, py, pz) = self._trim
-        # world up in the body FLU: the last row of R (body FLU → world)
-        fx, fy, fz = lift * rotation[6], lift * rotation[7], lift * rotation[8]
-        mx, my, mz = py * fz - pz * fy, pz * fx - px * fz, px * fy - py * fx
-        return (fx, -fy, -fz, mx, -my, -mz)
-
     def _arm_static_reaction(self) -> Vec6:
         """The resting arm's wrench on the hull in its present pose [N, N·m], body FRD about
-        the CoG: each link's weight at its centre of mass and buoyancy at its centre of
-        volume, along the world vertical (what the measured reaction is before any motion)."""
+        the CoG (:func:`~.arm_coupling.arm_static_reaction`)."""
         arm = self.arm
         assert arm is not None
-        cid = self.client_id
-        base, orientation = pybullet.getBasePositionAndOrientation(self.body_id, cid)
-        rot = pybullet.getMatrixFromQuaternion(orientation)
-        ux, uy, uz = rot[6], rot[7], rot[8]  # world up in the body (FLU)
-        states = pybullet.getLinkStates(
-            self.body_id, arm.link_indices, computeForwardKinematics=1, physicsClientId=cid
-        )
-        force = [0.0, 0.0, 0.0]
-        moment = [0.0, 0.0, 0.0]
-        for link, state in zip(arm.links, states, strict=True):
-            com = _body_point(rot, base, state[0])
-            offset = _rotated(pybullet.getMatrixFromQuaternion(state[5]), link.cov_m)
-            cov = _body_point(rot, base, [p + o for p, o in zip(state[4], offset, strict=True)])
-            weight, lift = link.mass_kg * G_M_S2, RHO_KG_M3 * G_M_S2 * link.volume_m3
-            for point, size in ((com, -weight), (cov, lift)):
-                fx, fy, fz = size * ux, size * uy, size * uz
-                force[0], force[1], force[2] = force[0] + fx, force[1] + fy, force[2] + fz
-                moment[0] += point[1] * fz - point[2] * fy
-                moment[1] += point[2] * fx - point[0] * fz
-                moment[2] += point[0] * fy - point[1] * fx
-        return (force[0], -force[1], -force[2], moment[0], -moment[1], -moment[2])
-
-    def _arm_trim(self) -> tuple[float, Vec3]:
-        """The trim float for the arm's present (start) pose: its lift [N] (the arm's weight
-        less its buoyancy) and its point [m], body FLU from the CoG, under which the arm's
-        net weight acts, so that it cancels the force and the horizontal moment (the start
-        attitude taken as level: every packaged scenario starts level)."""
-        _, _, down, mx, my, _ = self._arm_static_reaction()  # FRD: down = the net pull
-        if abs(down) < 1e-9:
-            return (0.0, (0.0, 0.0, 0.0))
-        # FLU: the arm's moment is (mx, −my); a lift `down` at (px, py) gives (py, −px)·down,
-        # which cancels it at py = −mx/down, px = −my/down
-        return (down, (-my / down, -mx / down, 0.0))
+        return arm_static_reaction(pybullet, self.client_id, self.body_id, arm)
 
     def arm_state(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """The arm's joint angles [rad] and rates [rad/s] (model order); empty without an arm."""
@@ -757,100 +495,6 @@ class Physics:
         return (pos, orn, pybullet.getBaseVelocity(self.body_id, cid))
 
 
-def _rotated(rotation: Sequence[float], v: Sequence[float]) -> Vec3:
-    """R·v for pybullet's row-major 3×3 ``rotation``."""
-    r = rotation
-    return (
-        r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
-        r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
-        r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
-    )
-
-
-def _body_point(rotation: Sequence[float], base: Sequence[float], point: Sequence[float]) -> Vec3:
-    """A world point in the base's frame (FLU, from the CoG): Rᵀ(point − base)."""
-    d = [p - b for p, b in zip(point, base, strict=True)]
-    r = rotation
-    return (
-        r[0] * d[0] + r[3] * d[1] + r[6] * d[2],
-        r[1] * d[0] + r[4] * d[1] + r[7] * d[2],
-        r[2] * d[0] + r[5] * d[1] + r[8] * d[2],
-    )
-
-
-def _measured_reaction(
-    last: _Coupling,
-    linear: Sequence[float],
-    angular: Sequence[float],
-    rotation: Sequence[float],
-    mass: float,
-    inertia: Sequence[float],
-    dt: float,
-) -> Vec6:
-    """The arm's reaction on the hull over the last step [N, N·m], body FRD about the CoG.
-
-    From the hull's velocities before (``last``: linear, angular, rotation, and the force and
-    torque applied, all pybullet's world) and now: R = m·Δv/Δt − F and, in the body at the
-    step's start, I·Δω/Δt + ω×I·ω − τ (what the hull's own Newton–Euler equations leave
-    unexplained).
-    """
-    lin0, ang0, rot0, f0, t0 = last
-    fx = mass * (linear[0] - lin0[0]) / dt - f0[0]
-    fy = mass * (linear[1] - lin0[1]) / dt - f0[1]
-    fz = mass * (linear[2] - lin0[2]) / dt - f0[2]
-    r0 = rot0
-    w = _body_point(r0, (0.0, 0.0, 0.0), ang0)
-    dw = _body_point(r0, ang0, angular)
-    ix, iy, iz = inertia
-    hx, hy, hz = ix * w[0], iy * w[1], iz * w[2]
-    tau_body = (
-        ix * dw[0] / dt + w[1] * hz - w[2] * hy,
-        iy * dw[1] / dt + w[2] * hx - w[0] * hz,
-        iz * dw[2] / dt + w[0] * hy - w[1] * hx,
-    )
-    tx, ty, tz = (a - b for a, b in zip(_rotated(r0, tau_body), t0, strict=True))
-    bf = _body_point(rotation, (0.0, 0.0, 0.0), (fx, fy, fz))
-    bt = _body_point(rotation, (0.0, 0.0, 0.0), (tx, ty, tz))
-    return (bf[0], -bf[1], -bf[2], bt[0], -bt[1], -bt[2])
-
-
 def _disconnect(client_id: int) -> None:
     if pybullet.isConnected(client_id):
         pybullet.disconnect(client_id)
-
-
-def simulate_open_loop(
-    model: str,
-    wrench_body: Sequence[float],
-    duration_s: float,
-    dt_s: float = 1.0 / 240.0,
-    start_depth_m: float = 10.0,
-) -> OpenLoopResult:
-    """Apply a constant body wrench in open water (no thrusters, no controller) and record.
-
-    Args:
-        model: a packaged model name (see :func:`testbed.vehicle.hydrodynamics.known_models`).
-        wrench_body: (6,) body wrench [N, N·m], FRD, moments about the CoG.
-        duration_s: simulated time [s].
-        dt_s: physics step [s].
-        start_depth_m: initial depth of CO [m]; the vehicle starts level, at rest, heading north.
-
-    Returns:
-        One sample per step, t = 0 included.
-    """
-    wrench = tuple(float(c) for c in wrench_body)
-    if len(wrench) != 6:
-        raise ValueError(f"wrench_body must have 6 values, got {len(wrench)}")
-    n_steps = round(duration_s / dt_s)
-    samples = []
-    with Physics(load_model(model), dt_s=dt_s, start_position_ned=(0.0, 0.0, start_depth_m)) as sim:
-        samples.append(sim.state_floats())
-        for _ in range(n_steps):
-            sim.step(wrench)
-            samples.append(sim.state_floats())
-    return OpenLoopResult(
-        t=np.array([s[0] for s in samples]),
-        position_ned=np.array([s[1] for s in samples]),
-        euler_rad=np.array([euler_from_quat(s[2]) for s in samples]),
-        nu=np.array([s[3] for s in samples]),
-    )

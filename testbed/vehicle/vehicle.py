@@ -42,6 +42,7 @@ from testbed.vehicle.autonomy import (
     control_velocity,
     run_mission,
 )
+from testbed.vehicle.body_state import BodyState
 from testbed.vehicle.camera import CapturedImage, camera_pose, underwater_grey
 from testbed.vehicle.components import (
     ActiveMode,
@@ -75,7 +76,7 @@ from testbed.vehicle.localization import (
     estimate_navigation,
 )
 from testbed.vehicle.manipulation import Manipulator, build_manipulator, plan_arm
-from testbed.vehicle.physics import BodyState, Physics
+from testbed.vehicle.physics import Physics
 from testbed.vehicle.resources import (
     Actuation,
     Controllers,

@@ -36,8 +36,8 @@ from testbed.vehicle.localization import (
 from testbed.vehicle.manipulation import ArmConfig
 from testbed.vehicle.mission import BODY_FRAMES, MAX_POSITION_M
 from testbed.vehicle.nav_sensors import MotionCaptureConfig
-from testbed.vehicle.physics import PoolScene
 from testbed.vehicle.pilot import PilotGains
+from testbed.vehicle.pool_scene import PoolScene
 from testbed.vehicle.sensors import (
     DepthSensorConfig,
     ImuConfig,

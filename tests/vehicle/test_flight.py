@@ -37,7 +37,8 @@ from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.hydrodynamics import HydroModel, load_model
-from testbed.vehicle.physics import Physics, simulate_open_loop
+from testbed.vehicle.open_loop import simulate_open_loop
+from testbed.vehicle.physics import Physics
 from testbed.vehicle.pilot import MAX_HEADING_LEAD_RAD, PilotGains
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thruster_config import load_thruster_config

@@ -19,14 +19,14 @@ from scipy.spatial.transform import Rotation
 
 from testbed.common.geometry import quat_from_euler
 from testbed.vehicle.hydrodynamics import HydroModel, load_model, submerged_fraction
-from testbed.vehicle.physics import (
-    Physics,
-    PoolScene,
+from testbed.vehicle.open_loop import simulate_open_loop
+from testbed.vehicle.physics import Physics
+from testbed.vehicle.pool_scene import PoolScene
+from testbed.vehicle.pybullet_frames import (
     ned_to_pybullet,
     pybullet_to_ned,
     quaternion_ned_to_pybullet,
     quaternion_pybullet_to_ned,
-    simulate_open_loop,
 )
 from testbed.vehicle.water_current import WaterCurrent
 from tests.vehicle.fossen_matrices import body_acceleration
