@@ -70,6 +70,11 @@ PWM_SIGN, PWM_OFFSET, STUCK = 0, 1, 2
 """Rows of the allocator's ``thrusters`` array."""
 
 _MAX_ITERATIONS = 100
+_STALL = 1e-9
+"""A regula falsi step this close to an end of the bracket (its fraction of the bracket) is
+taken as a stall and replaced by a bisection: over a stretch of Σ I(α f) that is flat a hair
+above the budget (the T200 table has flat steps) the secant crept towards the root by a few ulp
+an iteration and ran out of iterations 0.07 A short of a 5-A budget."""
 
 
 @numba.njit(cache=True)
@@ -129,8 +134,9 @@ def current_scale(
 
     Σ I(α f) is piecewise linear and non-decreasing in α (the current envelope rises with |F|
     on both sides of 0 N) and 0 at α = 0. The first guess assumes I ∝ |F|^1.5 (momentum
-    theory: power ∝ thrust^1.5); Illinois regula falsi then refines inside the bracket. The
-    returned α always satisfies the budget (typically 2-4 evaluations).
+    theory: power ∝ thrust^1.5); Illinois regula falsi then refines inside the bracket, a step
+    that stalls at an end of it bisecting instead (:data:`_STALL`). The returned α always
+    satisfies the budget (typically 2-4 evaluations).
 
     Args:
         forces: (n,) forces [N] to scale.
@@ -165,6 +171,9 @@ def current_scale(
                 g_lo = cap_a - 0.5 * (cap_a - g_lo)
             side = 1
         a = a_lo + (cap_a - g_lo) * (a_hi - a_lo) / (g_hi - g_lo)
+        edge = _STALL * (a_hi - a_lo)
+        if a - a_lo < edge or a_hi - a < edge:  # stalled at an end: bisect instead
+            a = 0.5 * (a_lo + a_hi)
     return a_lo
 
 

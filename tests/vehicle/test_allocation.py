@@ -251,6 +251,21 @@ def test_current_limit(name: str, data: st.DataObject, budget: float, magnitude:
     assert cmd.achieved_wrench == pytest.approx(ratio * unlimited.achieved_wrench, abs=1e-9)
 
 
+def test_a_request_a_hair_over_the_budget_on_a_flat_step_is_scaled_to_the_budget() -> None:
+    """Hypothesis found it: ecs-6dof asked for 6 N on five thrusters draws 5 A + 1 ulp, and
+    Σ I(α f) is flat from α ≈ 0.9647 to 1 (a flat step of the T200 table). The regula falsi
+    crept along the flat stretch and ran out of iterations at 4.93 A of a 5-A budget; a
+    stalled step now bisects. Second method: bisection's largest admissible α."""
+    limited = allocator("ecs-6dof", current_limit_a=5.0)
+    free = allocator("ecs-6dof", current_limit_a=UNLIMITED_A)
+    m = limited.matrix @ (np.array([0.0, 1.0, 1.0, 1.0, 1.0, 1.0]) * 6.0)
+    cmd, unlimited = limited.allocate(m), free.allocate(m)
+    assert unlimited.total_current_a > 5.0  # by rounding alone: binding
+    assert 5.0 - CURRENT_TOLERANCE_A <= cmd.total_current_a <= 5.0
+    alpha = bisect_scale(unlimited.forces_n, 5.0)
+    assert cmd.scale / unlimited.scale <= alpha * (1.0 + 1e-9)
+
+
 def test_current_limit_default_is_the_config_budget() -> None:
     a = allocator("bluerov2")
     assert a.current_limit_a == 50.0
