@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from testbed.config import check
+from testbed.imaging import decode
 from testbed.imaging.header import BASE_SIZE as HEADER_BASE_BYTES
 from testbed.imaging.header import ROI_SIZE as HEADER_ROI_BYTES
 from testbed.operator.video import ImageConsole
@@ -57,6 +58,7 @@ __all__ = [
     "settings_schedule",
     "write_images_csv",
     "write_images_npz",
+    "write_progress_csv",
 ]
 
 
@@ -267,6 +269,7 @@ class CapturedImage:
         encoded_bytes: coded size within the budget [B] (without the 2-B image CRC).
         settings: the coder settings it was coded with (budget, region of interest, shift), or
             None when not recorded.
+        coded: the coded image (CRC excluded), or empty when not recorded.
     """
 
     number: int
@@ -274,6 +277,7 @@ class CapturedImage:
     pixels: np.ndarray
     encoded_bytes: int
     settings: ImageSettings | None = None
+    coded: bytes = b""
 
 
 @dataclass(frozen=True, slots=True)
@@ -301,6 +305,8 @@ class ImageLog:
         captured: image number → the captured image.
         reply_images: downlink frame id → number of the image whose chunk the reply carried.
         received: completed images in completion order.
+        progress: ``(t_s, number, bytes)`` each time the operator's picture grew: the coded
+            bytes of image ``number`` (−1 unknown) from its start it held at ``t_s`` [s].
         counters: transfer counters (``chunks_sent``, ``chunks_received``, ``crc_failures``,
             ``spoiled``, ``duplicates``, ``inconsistent``, ``settings_sent``,
             ``settings_acknowledged``).
@@ -309,6 +315,7 @@ class ImageLog:
     captured: dict[int, CapturedImage] = field(default_factory=dict)
     reply_images: dict[int, int] = field(default_factory=dict)
     received: list[ReceivedImage] = field(default_factory=list)
+    progress: list[tuple[float, int, int]] = field(default_factory=list)
     counters: dict[str, int] = field(default_factory=dict)
 
     def count(self, key: str, n: int = 1) -> None:
@@ -412,6 +419,38 @@ def write_images_csv(log: ImageLog, chunk_bytes: int, path: Path) -> None:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(IMAGE_COLUMNS)
         writer.writerows(image_rows(log, chunk_bytes))
+
+
+PROGRESS_COLUMNS = ("t_s", "number", "bytes", "age_s", "psnr_db")
+"""The columns of ``image_progress.csv`` (:func:`progress_rows`)."""
+
+
+def progress_rows(log: ImageLog) -> list[list[object]]:
+    """One row each time the operator's picture grew (the paper's progressive feedback: the
+    picture sharpens as chunks arrive), in time order: ``t_s`` [s], the image's ``number``,
+    the coded ``bytes`` from its start the operator held, ``age_s`` (how old the scene it
+    shows is: t − capture [s]) and ``psnr_db`` of those bytes decoded against the captured
+    picture (empty before the coder's header is in; 99 lossless, as in ``images.csv``)."""
+    rows: list[list[object]] = []
+    for t_s, number, size in log.progress:
+        source = log.captured.get(number)
+        if source is None or not source.coded:
+            rows.append([f"{t_s:.6f}", number, size, "", ""])
+            continue
+        height, width = source.pixels.shape[:2]
+        picture = decode(source.coded[:size], max_pixels=height * width)
+        psnr = psnr_db(source.pixels, picture)
+        shown = "" if math.isnan(psnr) else f"{min(99.0, psnr):.3f}"
+        rows.append([f"{t_s:.6f}", number, size, f"{t_s - source.t_s:.6f}", shown])
+    return rows
+
+
+def write_progress_csv(log: ImageLog, path: Path) -> None:
+    """Write ``image_progress.csv``: :func:`progress_rows` under :data:`PROGRESS_COLUMNS`."""
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(PROGRESS_COLUMNS)
+        writer.writerows(progress_rows(log))
 
 
 def write_images_npz(log: ImageLog, path: Path) -> None:

@@ -97,6 +97,8 @@ class Ingested:
             command or odometry), in order.
         commands: ``(seq, sampled_s)`` of the mirrored movement command, if the wire carries it.
         images: images the operator's console completed.
+        progress: ``(frame_id, bytes)`` for each reply that grew the image the console is
+            assembling: the coded bytes from its start it now holds (the picture it shows).
     """
 
     rejected: int = 0
@@ -104,6 +106,7 @@ class Ingested:
     sampled_s: list[float] = field(default_factory=list)
     commands: list[tuple[int, float]] = field(default_factory=list)
     images: list[CompletedImage] = field(default_factory=list)
+    progress: list[tuple[int, int]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -312,10 +315,13 @@ class TeleopOperatorLink:
             if console is None:
                 continue
             event = console.on_reply(message)
+            if event is AssemblyEvent.PROGRESS:
+                result.progress.append((frame_id, len(console.assembler.prefix())))
             if event is AssemblyEvent.COMPLETED and console.completed is not None:
                 view = console.completed_view
                 pixels = view if view is not None else np.zeros((0, 0), np.uint8)
                 result.images.append(CompletedImage(frame_id, pixels, len(console.completed)))
+                result.progress.append((frame_id, len(console.completed)))
         return result
 
 

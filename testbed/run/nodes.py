@@ -215,7 +215,12 @@ class VehicleNode:
         """Recording: the image source captured and coded a new image (stamped with the event
         clock, like every other record; the scene is the plant at its latest physics step)."""
         record = CapturedImage(
-            image.number, self.env.now, image.pixels, len(image.encoded), image.settings
+            image.number,
+            self.env.now,
+            image.pixels,
+            len(image.encoded),
+            image.settings,
+            bytes(image.encoded),
         )
         self.recorder.images.captured[image.number] = record
         self.recorder.event(self.env.now, "vehicle", "image_captured", str(image.number))
@@ -313,6 +318,8 @@ class OperatorNode:
         for sampled_s in result.sampled_s:
             self._held(now, sampled_s)
         log = self.recorder.images
+        for frame_id, size in result.progress:
+            log.progress.append((now, log.reply_images.get(frame_id, -1), size))
         for image in result.images:
             number = log.reply_images.get(image.frame_id, -1)
             log.received.append(ReceivedImage(number, now, image.pixels, image.size_bytes))

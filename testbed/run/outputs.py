@@ -2,7 +2,8 @@
 
 :func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and writable,
 not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
-``events.csv``, ``series.csv``, ``images.csv`` and ``images.npz`` (image scenarios), ``arm.csv`` (a
+``events.csv``, ``series.csv``, ``images.csv``, ``images.npz`` and ``image_progress.csv`` (image
+scenarios), ``arm.csv`` (a
 vehicle with an arm) and the plots, each under a temporary name renamed into place, and
 ``metrics.json`` **last**, carrying ``"complete"`` (true for a run that reached its end, false for
 one ended early by Ctrl-C or SIGTERM, or by an error, whose ``sim_s`` says how far it got; then
@@ -28,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
-from testbed.run.images import write_images_csv, write_images_npz
+from testbed.run.images import write_images_csv, write_images_npz, write_progress_csv
 from testbed.run.interrupts import deferred_interrupts
 from testbed.run.runner import RunResult
 
@@ -220,6 +221,8 @@ def write_run(
                     written.append(replace_atomically(write, out_dir / "images.csv"))
                     write = functools.partial(write_images_npz, log)
                     written.append(replace_atomically(write, out_dir / "images.npz"))
+                    write = functools.partial(write_progress_csv, log)
+                    written.append(replace_atomically(write, out_dir / "image_progress.csv"))
                 if recorder.arm is not None:
                     arm_csv = out_dir / "arm.csv"
                     written.append(replace_atomically(recorder.arm.write_csv, arm_csv))

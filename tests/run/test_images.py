@@ -269,6 +269,23 @@ def test_images_csv_lists_each_image_against_the_closed_form(
             np.testing.assert_array_equal(pixels, decode(encode(source, 600)))
         times = [float(r["completed_s"]) for r in completed]
         np.testing.assert_allclose(npz["completed_s"], times, atol=1e-6)
+    # image_progress.csv: on a clean link the picture grows one 40-B chunk a gap (the first
+    # byte held back until the last chunk, where the CRC may start), and its last row is the
+    # completed picture: its PSNR the one images.csv took from the operator's own decode
+    with (tmp_path / "image_progress.csv").open(newline="") as handle:
+        progress = list(csv.DictReader(handle))
+    for row in completed:
+        mine = [p for p in progress if p["number"] == row["number"]]
+        sizes = [int(p["bytes"]) for p in mine]
+        assert sizes == [CHUNK * k - 1 for k in range(1, 16)] + [int(row["encoded_bytes"])]
+        times = np.array([float(p["t_s"]) for p in mine])
+        # a gap apart, but for the first (the 16-B settings order of image 0 lands sooner)
+        # and the last (a shorter reply: the image's last bytes)
+        np.testing.assert_allclose(np.diff(times)[1:-1], GAP_S, atol=1e-6)
+        assert mine[-1]["t_s"] == row["completed_s"]
+        assert float(mine[-1]["psnr_db"]) == pytest.approx(float(row["psnr_db"]), abs=1e-3)
+        ages = times - float(row["captured_s"])
+        np.testing.assert_allclose([float(p["age_s"]) for p in mine], ages, atol=2e-6)
     # events.csv: a capture and a completion line per image, at the times the rows give
     with (tmp_path / "events.csv").open(newline="") as handle:
         events = [r for r in csv.DictReader(handle) if r["kind"].startswith("image_")]
