@@ -8,8 +8,10 @@ layouts and back:
 operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVehicleEnd.apply_order`)
     the latest :class:`MovementCommand` becomes a ``Move`` (x, y, z, yaw stick codes, int8, so
     sticks are quantised to 1/127), with the arm/disarm flags while an :class:`ArmRequest` is
-    not yet reflected in the vehicle's reported state (once per request: a later disarm by the
-    vehicle itself is not undone), and the requested mode; a changed :class:`AttitudeSetpoint`
+    neither reflected in the vehicle's reported state nor acknowledged in an order that carried
+    it (once per request: a later disarm by the vehicle itself is not undone; the vehicle arms
+    on the flag's rising edge only, so a new request after a flag still up drops it for one
+    order), and the requested mode; a changed :class:`AttitudeSetpoint`
     becomes a ``KeepHeading`` when its heading in whole degrees changed (only the heading
     travels, roll and pitch setpoints cannot); a changed :class:`PositionSetpoint` becomes a
     ``GoTo`` (1 cm; its heading, or the vehicle's reported one when the setpoint keeps the
@@ -183,6 +185,8 @@ class TeleopOperatorEnd:
         self._settled_arm: ArmRequest | None = None
         self._orders_encoded = 0
         self._arm_request: tuple[ArmRequest, int] | None = None  # the request, its first order
+        self._arm_flag_up = False  # the last order carried the arm flag
+        self._flag_bit: bool | None = None  # the sequence bit of the request's last flag order
         self._pending_goal: tuple[_GoalOrder, bool] | None = None  # the order and its seq bit
         self._sent_cancel: GoalCancel | None = None
         self._pending_cancel = False
@@ -208,14 +212,18 @@ class TeleopOperatorEnd:
             self._pending_goal = None  # the cancel supersedes a goal not yet acknowledged
         request = world.get(intents, ArmRequest)
         self._orders_encoded += 1  # this order's number
+        new_request = False
         if request is not None and (self._arm_request is None or self._arm_request[0] != request):
-            self._arm_request = (request, self._orders_encoded)
+            self._arm_request, self._flag_bit = (request, self._orders_encoded), None
+            new_request = True
         reported = world.get(self.vehicle, Armed)
         vehicle_armed = reported is not None and reported.armed
         arm = disarm = False
         if request is not None and request != self._settled_arm:
             arm = request.armed and not vehicle_armed
             disarm = not request.armed and vehicle_armed
+        if new_request and arm and self._arm_flag_up:  # the arm flag drops for one order:
+            arm = False  # the vehicle arms on its rising edge, a new press
         setpoint = world.get(intents, AttitudeSetpoint)
         order: Move | KeepHeading | _GoalOrder | ImageSettings | None = None
         resent_bit: bool | None = None  # a goal sent again keeps its sequence bit
@@ -247,6 +255,10 @@ class TeleopOperatorEnd:
             )
         seq_bit, cancel_image, first_missing = image_request
         order_bit = self.order_seq_bit if resent_bit is None else resent_bit
+        move = isinstance(order, Move)
+        self._arm_flag_up = move and arm
+        if move and (arm or disarm):
+            self._flag_bit = order_bit
         message = OperatorMessage(
             seq_bit, cancel_image, first_missing, order_bit, self._pending_cancel, order
         )
@@ -313,10 +325,16 @@ class TeleopOperatorEnd:
         # applied (one to that order may show the state an earlier order is about to change:
         # arm, then disarm before the arm's reply came, settled the disarm on the stale
         # 'disarmed' and the vehicle stayed armed).
+        # A request is also settled once a reply acknowledges an order that carried its flag
+        # (under token passing a reply answers the last order): the vehicle has it and acts on
+        # it at once, so a link lost just after need not leave the flag up, to arm the vehicle
+        # again when the link comes back after its own failsafe disarmed it.
         request = world.get(self._intents, ArmRequest)
         carried = self._arm_request
-        shown = carried is not None and carried[0] == request and self._orders_encoded > carried[1]
-        if request is not None and shown and request.armed == state.armed:
+        current = carried is not None and carried[0] == request
+        shown = current and carried is not None and self._orders_encoded > carried[1]
+        acked = current and self._flag_bit is not None and state.order_ack_bit == self._flag_bit
+        if request is not None and ((shown and request.armed == state.armed) or acked):
             self._settled_arm = request
         mode = mode_from_wire(state.mode)
         if mode is not None:
@@ -366,6 +384,7 @@ class TeleopVehicleEnd:
         self.order_ack_bit = False
         self._seq = 0
         self._arm_seq = 0
+        self._arm_held = False  # the last intact Move carried the arm flag
         self._cancel_seq = 0
         self._cancelling = False  # the last intact order carried the cancel bit
 
@@ -389,7 +408,12 @@ class TeleopVehicleEnd:
                 return False
             armed = world.get(self._vehicle, Armed)
             is_armed = armed is not None and armed.armed
-            if (order.arm and not is_armed) or (order.disarm and is_armed):
+            # the arm flag arms on its rising edge only (as ArduSub, a disarm by the vehicle
+            # itself stays until the operator asks again): a flag held over several orders is
+            # one request; it drops for an order between two
+            arm = order.arm and not is_armed and not self._arm_held
+            self._arm_held = order.arm
+            if arm or (order.disarm and is_armed):
                 self._arm_seq += 1
                 request = ArmRequest(order.arm, self._arm_seq)
                 world.set(intents, request, origin=Origin.REMOTE)

@@ -317,6 +317,45 @@ def test_arm_request_written_only_on_a_change_of_armed_state() -> None:
     assert world.origin_of(intents, ArmRequest) is Origin.REMOTE
 
 
+def test_the_vehicle_arms_on_the_flags_rising_edge_only() -> None:
+    """A flag held over several orders is one press (as ArduSub, a disarm by the vehicle
+    itself stays until the operator asks again): after the vehicle's own disarm, more flagged
+    orders do not arm it; an order without the flag, then one with it, do."""
+    op_world, op_intents, op_end = operator_end()
+    op_world.set(op_intents, ArmRequest(True, 1))
+    world, vehicle, intents, end = vehicle_end()
+    flagged = op_end.encode_order()
+    assert order_flags(flagged) == (True, False)
+    end.apply_order(flagged, 1.0)
+    assert world.get(intents, ArmRequest) == ArmRequest(True, 1)
+    world.set(vehicle, Armed(False))  # its failsafe disarmed it
+    world.advance()
+    tick = world.changed_tick(intents, ArmRequest)
+    end.apply_order(op_end.encode_order(), 2.0)  # still flagged: no reply settled it
+    assert world.changed_tick(intents, ArmRequest) == tick
+    op_world.set(op_intents, ArmRequest(True, 2))  # the operator asks again
+    dropped, again = op_end.encode_order(), op_end.encode_order()
+    assert (order_flags(dropped), order_flags(again)) == ((False, False), (True, False))
+    end.apply_order(dropped, 3.0)
+    end.apply_order(again, 3.5)
+    assert world.get(intents, ArmRequest) == ArmRequest(True, 2)
+
+
+def test_a_reply_acknowledging_the_flagged_order_settles_the_request() -> None:
+    """Under token passing a reply answers the last order: one that acknowledges the order
+    carrying the arm flag settles the request, though its state is from before the vehicle
+    applied it (disarmed), so a link lost right after leaves no flag up."""
+    op_world, op_intents, op_end = operator_end()
+    op_world.set(op_intents, ArmRequest(True, 1))
+    *_, end = vehicle_end()
+    flagged = op_end.encode_order()
+    end.acknowledge(decode_operator_message(flagged))  # type: ignore[arg-type]
+    reply = end.encode_reply()  # answers at once: the state before the order is applied
+    assert not decode_vehicle_message(reply).state.armed  # type: ignore[union-attr]
+    op_end.apply_reply(reply, 1.2)
+    assert order_flags(op_end.encode_order()) == (False, False)
+
+
 def test_each_move_is_a_new_command_with_a_new_seq() -> None:
     op_world, op_intents, op_end = operator_end()
     world, _, intents, end = vehicle_end()
