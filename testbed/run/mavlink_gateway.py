@@ -50,7 +50,7 @@ from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
 from testbed.run.images import image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
-from testbed.run.mavlink_run import EndpointPilot, endpoint_section
+from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
@@ -134,6 +134,7 @@ class GatewayNode:
         facts: the link facts the endpoint reports.
         stop: ends the process at its next wake-up once set (from any thread).
         boot_params: ArduSub parameters' values at boot (``--param``).
+        failsafe_notes: records ArduSub's failsafes as they act, or None.
     """
 
     def __init__(
@@ -144,8 +145,10 @@ class GatewayNode:
         facts: LinkFacts,
         stop: threading.Event | None = None,
         boot_params: Mapping[str, float] | None = None,
+        failsafe_notes: FailsafeNotes | None = None,
     ) -> None:
         self.env = env
+        self._failsafe_notes = failsafe_notes
         self.station = station
         self.endpoint = ShoreEndpoint(
             station.world,
@@ -188,6 +191,8 @@ class GatewayNode:
                     if command is not None:
                         self.read_ns[command.sampled_s] = received.read_ns
         endpoint.update(now_s)
+        if self._failsafe_notes is not None:
+            self._failsafe_notes(endpoint.failsafe.triggered, now_s)
         self.state_age_s.append(endpoint.state_age_s)
         for link, channel in zip(self.links, self.channels, strict=True):
             for packet in channel.take():
@@ -248,6 +253,7 @@ def _vehicle_node(
         EndpointPilot(gateway.endpoint),
         vehicle.reference_velocity,
         scenario.metrics.sample_rate_hz,
+        other_failsafe=lambda: gateway.endpoint.failsafe.active,  # acting through the link
     )
     vehicle.schedule.add(Phase.POST_UPDATE, observer, name="record_vehicle")
     probe = _ThrusterProbe(recorder, gateway)
@@ -314,7 +320,7 @@ def run_gateway(
     link = scenario.link
     station = GatewayStation()
     facts = gateway_link_facts(scenario, modem or None)
-    gateway = GatewayNode(env, station, links, facts, stop, boot_params)
+    gateway = GatewayNode(env, station, links, facts, stop, boot_params, FailsafeNotes(recorder))
     holder: dict[str, VehicleNode] = {}
     modems: dict[str, Any] = {}
     ledger = FrameLedger()

@@ -121,7 +121,7 @@ class MavlinkVehicleNode:
         self.env = env
         self._stop = stop
         self.recorder = recorder
-        self._failsafes_noted: Counter[str] = Counter()
+        self._failsafes = FailsafeNotes(recorder)
         config = mavlink_vehicle_config(scenario.vehicle)
         self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
         vehicle = self.vehicle
@@ -200,14 +200,30 @@ class MavlinkVehicleNode:
         self.compute_ns.append(done - self._ingest_ns)
         now = world.resource(SimClock).time_s
         self.endpoint.update(now)
-        triggered = self.endpoint.failsafe.triggered
-        if triggered != self._failsafes_noted:  # ArduSub's pilot-input or GCS failsafe acted
-            for kind in sorted(triggered - self._failsafes_noted):
-                self.recorder.event(now, "vehicle", "ardusub_failsafe", kind)
-            self._failsafes_noted = triggered.copy()
+        self._failsafes(self.endpoint.failsafe.triggered, now)
         for link, channel in zip(self.links, self.channels, strict=True):
             for packet in channel.take():
                 link.send(packet)
+
+
+class FailsafeNotes:
+    """Records ``vehicle,ardusub_failsafe,<kind>`` in ``events.csv`` each time ArduSub's
+    pilot-input or GCS failsafe acts (its trigger count for that kind went up).
+
+    Args:
+        recorder: where the events go.
+    """
+
+    def __init__(self, recorder: Recorder) -> None:
+        self._recorder = recorder
+        self._noted: Counter[str] = Counter()
+
+    def __call__(self, triggered: Counter[str], now_s: float) -> None:
+        """Note the kinds whose count rose since the last call, at ``now_s`` [s]."""
+        if triggered != self._noted:
+            for kind in sorted(triggered - self._noted):
+                self._recorder.event(now_s, "vehicle", "ardusub_failsafe", kind)
+            self._noted = triggered.copy()
 
 
 def run_mavlink(

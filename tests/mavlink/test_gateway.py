@@ -194,3 +194,37 @@ def test_over_the_tether_the_change_set_gateway_answers_within_a_few_frames() ->
     assert section["state_age_s"]["mean"] < 0.05 + late_s
     series = result.recorder.series()
     assert np.nanmax(series["u"]) > 0.2 and math.isfinite(section["state_age_s"]["mean"])
+
+
+def test_ardusubs_gcs_failsafe_through_the_link_is_in_the_runs_outputs(
+    session: GatewaySession,
+) -> None:
+    """A ground station that falls silent past FS_GCS_TIMEOUT (1 s here) with FS_GCS_ENABLE 2:
+    the shore's ArduSub failsafe disarms the vehicle through the link, and the run's outputs
+    say so as a direct MAVLink run's do — ``vehicle,ardusub_failsafe,gcs`` in events.csv, the
+    failsafe column 1 from then on (a MAVLink user's review: the gateway recorded neither)."""
+    gcs = session.gcs
+    assert gcs.wait_heartbeat(timeout=15.0) is not None
+    gcs.param_set_send("FS_GCS_TIMEOUT", 1.0)
+    session.until(
+        lambda: (
+            (p := session.latest.get("PARAM_VALUE")) is not None
+            and p.param_id == "FS_GCS_TIMEOUT"
+            and p.param_value == 1.0
+        )
+    )
+    gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+    assert session.ack(400) == mav.MAV_RESULT_ACCEPTED
+    session.heartbeat(lambda hb: hb.base_mode & 128)
+    lost = session.heartbeat(lambda hb: not hb.base_mode & 128, heartbeats=False, sticks=False)
+    assert lost.system_status == mav.MAV_STATE_CRITICAL
+    result = session.finish()
+    assert result.metrics["mavlink"]["failsafes"]["gcs"] == 1
+    events = [(e.kind, e.detail, e.t_s) for e in result.recorder.events if e.node == "vehicle"]
+    story = [(kind, detail) for kind, detail, _ in events]
+    assert story.index(("arm", "")) < story.index(("ardusub_failsafe", "gcs"))
+    assert ("disarm", "") in story[story.index(("ardusub_failsafe", "gcs")) :]
+    t_lost = next(t for kind, _, t in events if kind == "ardusub_failsafe")
+    series = result.recorder.series()
+    assert not series["failsafe"][series["t_s"] < t_lost].any()
+    assert series["failsafe"][-1] == 1.0
