@@ -172,6 +172,9 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
             parse_url(url)
         except ValueError as err:
             raise ConfigError(f"--gcs: {err}") from None
+    repeated = sorted({url for url in urls if urls.count(url) > 1})
+    if repeated:  # two links on one address: every packet handled twice
+        raise ConfigError(f"--gcs: {repeated[0]} is given more than once")
     check_seed(args.seed)
     boot_params = _boot_params(args.param)
     scenario = load_scenario(args.scenario, overrides)

@@ -57,6 +57,10 @@ def free_udp_port() -> int:
             "baud must be an integer in [50, 12000000], got '1000000000000'",
         ),
         (["--gcs", "bogus://x"], "--gcs: cannot open bogus://x: invalid URL"),  # a ValueError
+        (  # every packet was handled twice (a MAVLink user's review)
+            ["--gcs", "udpin:127.0.0.1:14599", "--gcs", "udpin:127.0.0.1:14599"],
+            "--gcs: udpin:127.0.0.1:14599 is given more than once",
+        ),
         ([*NO_GCS, "--param", "NO_SUCH=1"], "--param 'NO_SUCH=1': unknown ArduSub parameter"),
         ([*NO_GCS, "--param", "SYSID_THISMAV=0"], "SYSID_THISMAV = 0.0 refused (range [1, 255])"),
         ([*NO_GCS, "--param", "JS_GAIN_DEFAULT=nan"], "JS_GAIN_DEFAULT = nan refused"),
