@@ -63,6 +63,7 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
 )
 """AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do;
 PARAM_ENCODE_C_CAST is REFERENCE §4.4's, which marks it unverified: parameters are sent as
@@ -175,6 +176,11 @@ def _cmd_capabilities(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_
     return _send_by_id(e, c, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
 
 
+def _cmd_home(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del p, now_s
+    return _send_by_id(e, c, mav.MAVLINK_MSG_ID_HOME_POSITION)
+
+
 def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
     del now_s
     name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
@@ -197,6 +203,7 @@ COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float
     mav.MAV_CMD_DO_SET_MODE: _cmd_set_mode,
     mav.MAV_CMD_REQUEST_MESSAGE: _cmd_request_message,
     mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _cmd_capabilities,
+    mav.MAV_CMD_GET_HOME_POSITION: _cmd_home,
     mav.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_set_interval,
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
 }

@@ -323,6 +323,23 @@ def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
     )
 
 
+def _home_position(s: VehicleSnapshot) -> mav.MAVLink_message:
+    """The home: :data:`HOME_LAT_LON_DEG` at the surface (0 m), the local frame's origin."""
+    del s
+    lat0, lon0 = HOME_LAT_LON_DEG
+    identity = (1.0, 0.0, 0.0, 0.0)
+    return mav.MAVLink_home_position_message(
+        round(lat0 * 1e7), round(lon0 * 1e7), 0, 0.0, 0.0, 0.0, identity, 0.0, 0.0, 0.0
+    )
+
+
+def _gps_global_origin(s: VehicleSnapshot) -> mav.MAVLink_message:
+    """The local frame's origin on the globe (ArduSub 4.5's ORIGIN_LAT/LON/ALT): the home."""
+    del s
+    lat0, lon0 = HOME_LAT_LON_DEG
+    return mav.MAVLink_gps_global_origin_message(round(lat0 * 1e7), round(lon0 * 1e7), 0)
+
+
 def _local_position_ned(s: VehicleSnapshot) -> mav.MAVLink_message:
     x, y, z = s.position_ned_m
     vx, vy, vz = s.velocity_ned_m_s
@@ -402,6 +419,8 @@ BUILDERS: dict[str, Callable[[VehicleSnapshot], mav.MAVLink_message]] = {
     "VFR_HUD": _vfr_hud,
     "GLOBAL_POSITION_INT": _global_position_int,
     "LOCAL_POSITION_NED": _local_position_ned,
+    "HOME_POSITION": _home_position,
+    "GPS_GLOBAL_ORIGIN": _gps_global_origin,
     "SCALED_PRESSURE": _scaled_pressure,
     "SCALED_PRESSURE2": _scaled_pressure2,
     "RAW_IMU": _raw_imu,

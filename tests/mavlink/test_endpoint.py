@@ -3,7 +3,9 @@ simulated time: connect, version, parameters, modes, arming, sticks, gating, fai
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -51,6 +53,42 @@ def test_autopilot_version_on_request_message_and_on_capabilities_request(gcs: S
     assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     assert acks(gcs, mav.MAV_CMD_REQUEST_MESSAGE) == [ACCEPTED, mav.MAV_RESULT_UNSUPPORTED]
     assert acks(gcs, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES) == [ACCEPTED]
+
+
+def test_home_and_origin_are_where_the_global_position_puts_the_local_origin(
+    gcs: SimGcs,
+) -> None:
+    """HOME_POSITION on REQUEST_MESSAGE(242) and on GET_HOME_POSITION, GPS_GLOBAL_ORIGIN on
+    REQUEST_MESSAGE(49) (a MAVLink user's review: MAVProxy asked 26 times in 55 s, refused):
+    both at the point GLOBAL_POSITION_INT gives for the local frame's origin at the surface
+    (the second method: the vehicle's own global position, less its local offset)."""
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION))
+    gcs.send(gcs.command(mav.MAV_CMD_GET_HOME_POSITION))
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN))
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED))
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT))
+    gcs.step()
+    homes, origin = gcs.of("HOME_POSITION"), gcs.last("GPS_GLOBAL_ORIGIN")
+    local, where = gcs.last("LOCAL_POSITION_NED"), gcs.last("GLOBAL_POSITION_INT")
+    assert len(homes) == 2 and acks(gcs, mav.MAV_CMD_GET_HOME_POSITION) == [ACCEPTED]
+    earth_m = 6378137.0  # WGS-84 equatorial radius: the flat-earth offset's scale
+    lat = where.lat * 1e-7 - math.degrees(local.x / earth_m)
+    lon = where.lon * 1e-7 - math.degrees(
+        local.y / (earth_m * math.cos(math.radians(homes[0].latitude * 1e-7)))
+    )
+    for home in homes:
+        assert (home.x, home.y, home.z, home.altitude) == (0.0, 0.0, 0.0, 0)
+        assert home.latitude * 1e-7 == pytest.approx(lat, abs=2e-7)
+        assert home.longitude * 1e-7 == pytest.approx(lon, abs=2e-7)
+    assert (origin.latitude, origin.longitude) == (homes[0].latitude, homes[0].longitude)
+    version = autopilot_version_of(gcs)
+    assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+
+
+def autopilot_version_of(gcs: SimGcs) -> Any:
+    gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION))
+    gcs.step()
+    return gcs.last("AUTOPILOT_VERSION")
 
 
 def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None:
