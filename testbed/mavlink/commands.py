@@ -32,6 +32,7 @@ from testbed.mavlink.ardusub import (
     POSITION_MODES,
     SIMULATED_MODES,
 )
+from testbed.mavlink.params import ALIASES
 from testbed.mavlink.telemetry import MESSAGE_IDS
 
 if TYPE_CHECKING:
@@ -280,13 +281,18 @@ def on_set_mode(
 # --------------------------------------------------------------------------- parameters
 
 
-def _param_value(endpoint: VehicleEndpoint, index: int) -> mav.MAVLink_message | None:
+def _param_value(
+    endpoint: VehicleEndpoint, index: int, asked: str = ""
+) -> mav.MAVLink_message | None:
+    """PARAM_VALUE of parameter ``index``, named as ``asked`` when that is its alias (a ground
+    station that set or read it by the other release's name waits for that name)."""
     entry = endpoint.params.entry(index)
     if entry is None:
         return None
     param, value = entry
+    name = asked if ALIASES.get(asked) == param.name else param.name
     return mav.MAVLink_param_value_message(
-        param.name.encode(), value, param.mav_type, len(endpoint.params), index
+        name.encode(), value, param.mav_type, len(endpoint.params), index
     )
 
 
@@ -348,9 +354,11 @@ def on_param_request_read(
     if not endpoint.for_us(message.target_system, message.target_component):
         return
     index: int | None = int(message.param_index)
+    asked = ""
     if index is None or index < 0:
-        index = endpoint.params.index_of(_text(message.param_id))
-    reply = None if index is None else _param_value(endpoint, index)
+        asked = _text(message.param_id)
+        index = endpoint.params.index_of(asked)
+    reply = None if index is None else _param_value(endpoint, index, asked)
     if reply is None:
         endpoint.reject("unknown_param")
         return
@@ -375,12 +383,12 @@ def on_param_set(
     if index is None:
         endpoint.reject("param_refused")
         known = endpoint.params.index_of(name)
-        reply = None if known is None else _param_value(endpoint, known)
+        reply = None if known is None else _param_value(endpoint, known, name)
         if reply is not None:
             endpoint.queue(channel, reply)
         return
     endpoint.accepted += 1  # (SYSID_THISMAV and JS_GAIN_DEFAULT take effect at the next boot)
-    reply = _param_value(endpoint, index)
+    reply = _param_value(endpoint, index, name)
     if reply is not None:
         endpoint.broadcast(reply)
 

@@ -20,7 +20,7 @@ MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arm
 ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_LOCAL_NED's
 position; every other mode is refused with MAV_RESULT_FAILED — the simulator has no
 position-hold, auto or surface mode); MANUAL_CONTROL and
-RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on MAV_GCS_SYSID and SYSID_THISMAV (what
+RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS and SYSID_THISMAV (what
 fails the gate is dropped silently and counted); the pilot-input and GCS failsafes of the FS_*
 parameters (:mod:`testbed.mavlink.failsafe`).
 
@@ -192,8 +192,8 @@ class VehicleEndpoint:
 
     @property
     def gcs_system_id(self) -> int:
-        """MAV_GCS_SYSID: the only system whose pilot input is accepted."""
-        return int(self.params["MAV_GCS_SYSID"])
+        """SYSID_MYGCS: the only system whose pilot input is accepted."""
+        return int(self.params["SYSID_MYGCS"])
 
     def open_channel(self, name: str) -> Channel:
         """A new link, streaming at the SR0_* rates until the ground station asks otherwise."""

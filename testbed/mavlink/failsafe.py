@@ -7,7 +7,7 @@ go neutral (a neutral MovementCommand) and, with action 2, a disarm request. The
 pilot input clears it.
 
 GCS (FS_GCS_ENABLE 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface; FS_GCS_TIMEOUT [s]):
-only once a heartbeat or pilot input from MAV_GCS_SYSID has been seen; when none for the
+only once a heartbeat or pilot input from SYSID_MYGCS has been seen; when none for the
 timeout, STATUSTEXT "MYGCS: <id>, heartbeat lost" (again every 30 s while lost) and, if armed
 and not yet triggered, the action: disarm; ALT_HOLD; or "surface" — the simulator has no
 SURFACE mode, so depth hold with a 0 m depth target, which rises to the surface. The mode is

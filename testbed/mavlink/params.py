@@ -8,8 +8,8 @@ on write, non-finite values and values outside a row's range are refused. The en
 the parameters that take effect in the simulator (failsafes, joystick gain, system ids) from
 the table each time it needs them, so a PARAM_SET acts at once.
 
-Names are at most 16 characters (MAVLink's ``param_id``); older ArduSub's ``SYSID_MYGCS`` is
-accepted as an alias of ``MAV_GCS_SYSID``. Standard library only.
+Names are at most 16 characters (MAVLink's ``param_id``); ArduPilot 4.7's ``MAV_GCS_SYSID`` is
+accepted as an alias of ArduSub 4.5's ``SYSID_MYGCS``. Standard library only.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ __all__ = ["ALIASES", "PARAM_TYPES", "Param", "ParamTable", "load_params"]
 PARAM_TYPES = {"INT8": 2, "INT16": 4, "INT32": 6, "REAL32": 9}
 """Table type → ``MAV_PARAM_TYPE`` (INT8 2, INT16 4, INT32 6, REAL32 9)."""
 _INT_LIMITS = {"INT8": (-128, 127), "INT16": (-32768, 32767), "INT32": (-(2**31), 2**31 - 1)}
-ALIASES = {"SYSID_MYGCS": "MAV_GCS_SYSID"}
+ALIASES = {"MAV_GCS_SYSID": "SYSID_MYGCS"}
 """Older parameter names accepted on read and write → the table's name."""
 _RESOURCE = "ardusub_params.csv"
 

@@ -100,7 +100,7 @@ def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None
     assert sorted(v.param_index for v in values) == list(range(count))
     assert {v.param_count for v in values} == {count}
     by_name = {v.param_id: v.param_value for v in values}
-    assert by_name["SYSID_THISMAV"] == 1 and by_name["MAV_GCS_SYSID"] == 255
+    assert by_name["SYSID_THISMAV"] == 1 and by_name["SYSID_MYGCS"] == 255  # ArduSub 4.5's name
     assert by_name["FS_PILOT_TIMEOUT"] == 3.0 and by_name["JS_GAIN_DEFAULT"] == 0.5
     assert {"FRAME_CONFIG", "FS_GCS_ENABLE", "BARO_SPEC_GRAV", "SERVO1_FUNCTION"} <= set(by_name)
     assert any(m.text.startswith("ArduSub V4") for m in gcs.of("STATUSTEXT"))
@@ -108,7 +108,7 @@ def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None
     gcs.send(gcs.param_set("FS_GCS_ENABLE", 3))
     gcs.send(gcs.param_set("FS_PILOT_TIMEOUT", 9.0))  # beyond ArduSub's 0.1..3: refused
     gcs.send(gcs.param_set("NO_SUCH_PARAM", 1.0))
-    gcs.send(gcs.mav.param_request_read_encode(1, 1, b"SYSID_MYGCS", -1))  # the old name
+    gcs.send(gcs.mav.param_request_read_encode(1, 1, b"MAV_GCS_SYSID", -1))  # 4.7's name
     gcs.send(gcs.mav.param_request_read_encode(1, 1, b"", 0))
     gcs.step()
     echoed = [(v.param_id, v.param_value) for v in gcs.of("PARAM_VALUE")]
@@ -116,7 +116,7 @@ def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None
     assert echoed == [
         ("FS_GCS_ENABLE", 3.0),
         ("FS_PILOT_TIMEOUT", 3.0),
-        ("MAV_GCS_SYSID", 255.0),
+        ("MAV_GCS_SYSID", 255.0),  # answered by the name asked
         (first, 1.0),
     ]
     assert gcs.endpoint.params["FS_GCS_ENABLE"] == 3
@@ -317,14 +317,14 @@ def test_rc_channels_override_is_pilot_input_too(gcs: SimGcs) -> None:
 
 
 def test_the_gcs_id_takes_effect_at_once_this_vehicles_at_the_next_boot(gcs: SimGcs) -> None:
-    """MAV_GCS_SYSID is read live (ArduPilot's sysid_my_gcs()); SYSID_THISMAV once, at boot
+    """SYSID_MYGCS is read live (ArduPilot's sysid_my_gcs()); SYSID_THISMAV once, at boot
     (GCS::init): set during a session it is stored and echoed, and the vehicle stays system 1,
     so the ground station that set it does not lose the vehicle (a user review: it vanished)."""
-    gcs.send(gcs.param_set("MAV_GCS_SYSID", 200), gcs.param_set("SYSID_THISMAV", 7))
+    gcs.send(gcs.param_set("SYSID_MYGCS", 200), gcs.param_set("SYSID_THISMAV", 7))
     gcs.run(1.01)
     assert gcs.last("HEARTBEAT").get_srcSystem() == 1
     echoed = {m.param_id: m.param_value for m in gcs.of("PARAM_VALUE")}
-    assert echoed["SYSID_THISMAV"] == 7 and echoed["MAV_GCS_SYSID"] == 200
+    assert echoed["SYSID_THISMAV"] == 7 and echoed["SYSID_MYGCS"] == 200
     gcs.send(gcs.mav.manual_control_encode(1, 500, 0, 500, 0, 0))  # from 255: no longer the GCS
     other = SimGcs.make_sender(200)
     gcs.send(other.manual_control_encode(7, 500, 0, 500, 0, 0), sender=other)  # wrong target
