@@ -47,6 +47,7 @@ __all__ = [
     "on_command_int",
     "on_command_long",
     "on_mission_request_list",
+    "on_mission_upload",
     "on_param_request_list",
     "on_param_request_read",
     "on_param_set",
@@ -413,6 +414,31 @@ def on_mission_request_list(
         channel,
         mav.MAVLink_mission_count_message(
             message.get_srcSystem(), message.get_srcComponent(), 0, mission_type
+        ),
+    )
+
+
+def on_mission_upload(
+    endpoint: VehicleEndpoint,
+    channel: Channel,
+    message: mav.MAVLink_message,
+    now_s: float,
+    arrived_s: float,
+) -> None:
+    """MISSION_COUNT (an upload) is refused at once with MISSION_ACK MAV_MISSION_UNSUPPORTED
+    (the simulated vehicle flies no AUTO missions: a ground station's upload fails now rather
+    than timing out); MISSION_CLEAR_ALL is acknowledged MAV_MISSION_ACCEPTED (nothing held)."""
+    del now_s, arrived_s
+    if not endpoint.for_us(message.target_system, message.target_component):
+        return
+    endpoint.accepted += 1
+    mission_type = int(getattr(message, "mission_type", 0) or 0)
+    cleared = message.get_type() == "MISSION_CLEAR_ALL"
+    result = mav.MAV_MISSION_ACCEPTED if cleared else mav.MAV_MISSION_UNSUPPORTED
+    endpoint.queue(
+        channel,
+        mav.MAVLink_mission_ack_message(
+            message.get_srcSystem(), message.get_srcComponent(), result, mission_type
         ),
     )
 

@@ -176,6 +176,8 @@ class VehicleEndpoint:
             "PARAM_REQUEST_READ": commands.on_param_request_read,
             "PARAM_SET": commands.on_param_set,
             "MISSION_REQUEST_LIST": commands.on_mission_request_list,
+            "MISSION_COUNT": commands.on_mission_upload,
+            "MISSION_CLEAR_ALL": commands.on_mission_upload,
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
             "SET_POSITION_TARGET_LOCAL_NED": guided.on_set_position_target_local_ned,
@@ -296,7 +298,10 @@ class VehicleEndpoint:
         self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
     ) -> None:
         del channel
-        if not self._from_gcs(message) or not self.for_us(message.target):
+        if not self._from_gcs(message):
+            return
+        if message.target != self.system_id:  # ArduSub: this vehicle's id only, no broadcast
+            self.rejected["wrong_target"] += 1
             return
         axes = []
         for name, low in (("x", -1000), ("y", -1000), ("z", 0), ("r", -1000)):
@@ -304,8 +309,8 @@ class VehicleEndpoint:
             if value == _INT16_UNUSED:
                 value = 500 if name == "z" else 0
             elif not low <= value <= 1000:
-                self.rejected["clamped_axis"] += 1  # acted on, clamped
-                value = max(low, min(1000, value))
+                # acted on as ArduSub's joystick.cpp does: scaled, the pulse constrained
+                self.rejected["clamped_axis"] += 1
             axes.append(value)
         x, y, z, r = axes
         pwm = manual_control_pwm(

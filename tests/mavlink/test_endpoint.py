@@ -91,6 +91,16 @@ def autopilot_version_of(gcs: SimGcs) -> Any:
     return gcs.last("AUTOPILOT_VERSION")
 
 
+def test_a_mission_upload_is_refused_at_once_and_a_clear_acknowledged(gcs: SimGcs) -> None:
+    """MISSION_COUNT gets MISSION_ACK UNSUPPORTED (no AUTO missions here) instead of silence,
+    on which QGroundControl's upload times out; MISSION_CLEAR_ALL is ACCEPTED (nothing held)."""
+    gcs.send(gcs.mav.mission_count_encode(1, 1, 3, 0))
+    gcs.send(gcs.mav.mission_clear_all_encode(1, 1, 0))
+    gcs.step()
+    acks_seen = [(m.type, m.target_system) for m in gcs.of("MISSION_ACK")]
+    assert acks_seen == [(mav.MAV_MISSION_UNSUPPORTED, 255), (mav.MAV_MISSION_ACCEPTED, 255)]
+
+
 def test_full_parameter_download_then_set_read_and_refusals(gcs: SimGcs) -> None:
     gcs.send(gcs.mav.param_request_list_encode(1, 1))
     gcs.run(0.5)

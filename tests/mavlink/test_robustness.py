@@ -86,7 +86,11 @@ def test_out_of_range_fields_are_clamped_or_refused_and_counted() -> None:
     channel = ep.open_channel("range")
     ep.receive(channel, packet(GCS.manual_control_encode(1, 5000, -32000, 4000, 999, 0)), 0.0)
     command = ep.world.get(ep.intents, MovementCommand)
-    assert command is not None and command.sticks[0] == 0.5  # clamped to 1000, gain 0.5
+    # as ArduSub's joystick.cpp: the axis scaled (gain 0.5: 0.2 µs a unit), the pulse
+    # constrained to 1100..1900: x 5000 → 1900 µs, full stick (a clamp of the axis first gave
+    # 1700 µs, half; a MAVLink user's review)
+    assert command is not None and command.sticks[0] == 1.0
+    assert command.sticks[1] == -1.0 and command.sticks[2] == -1.0  # y −32000; z 4000: up
     assert ep.rejected["clamped_axis"] == 3  # x, y, z; r is in range
     nan = math.nan
     ep.receive(channel, packet(GCS.command_long_encode(1, 1, 400, 0, nan, 0, 0, 0, 0, 0, 0)), 0.0)
@@ -123,3 +127,16 @@ def test_a_flood_is_bounded_and_counted() -> None:
     unknown_kind = packet(GCS.vision_position_estimate_encode(0, 0, 0, 0, 0, 0, 0))
     ep.receive(channel, unknown_kind * 10, 0.0)
     assert ep.rejected["unhandled"] == 10
+
+
+def test_manual_control_to_the_broadcast_id_is_dropped_as_ardusub_drops_it() -> None:
+    """ArduSub's GCS_MAVLink_Sub: ``if (packet.target != sysid_this_mav) break;`` — a
+    MANUAL_CONTROL to system 0 moves nothing (it was taken as broadcast)."""
+    ep = endpoint()
+    channel = ep.open_channel("broadcast")
+    ep.receive(channel, packet(GCS.manual_control_encode(0, 800, 0, 500, 0, 0)), 0.0)
+    assert ep.world.get(ep.intents, MovementCommand) is None
+    assert ep.rejected["wrong_target"] == 1 and ep.pilot_inputs == 0
+    ep.receive(channel, packet(GCS.manual_control_encode(1, 800, 0, 500, 0, 0)), 0.0)
+    command = ep.world.get(ep.intents, MovementCommand)
+    assert command is not None and command.sticks[0] > 0.0
