@@ -1,15 +1,15 @@
 """GUIDED's position target: SET_POSITION_TARGET_LOCAL_NED → a PositionSetpoint.
 
-ArduSub's ``handle_set_position_target_local_ned``, for the position part: the message is acted
-on only while GUIDED is requested (else ignored, as ArduSub, and counted ``not_guided``); it
-must be a position target (x, y, z not ignored in ``type_mask``; velocity and acceleration
-targets are counted ``unsupported_target``) in MAV_FRAME_LOCAL_NED (absolute, the position
-fix's NED frame), LOCAL_OFFSET_NED (from the reported position) or BODY_OFFSET_NED (from the
-reported position, x ahead and y right of the reported heading); z is down, the depth target
-[m]; yaw [rad] when not ignored, else the present heading is kept. Non-finite or out-of-range
-fields are counted ``bad_field``, other frames ``unsupported_frame``. The target becomes a
-:class:`~testbed.common.components.PositionSetpoint` on the endpoint's intents entity; no
-reply (ArduSub sends none either).
+ArduSub's ``handle_set_position_target_local_ned``, for the position part: the message is acted on
+only while GUIDED is requested (else ignored, as ArduSub, and counted ``not_guided``); it must be a
+position target (x, y, z not ignored in ``type_mask``; velocity and acceleration targets are
+counted ``unsupported_target``) in MAV_FRAME_LOCAL_NED (absolute, the position fix's NED frame),
+LOCAL_OFFSET_NED (from the reported position) or BODY_OFFSET_NED, BODY_NED or BODY_FRD (from the
+reported position, x ahead and y right of the reported heading); z is down, the depth target [m];
+yaw [rad] when not ignored, else the present heading is kept. Non-finite or out-of-range fields are
+counted ``bad_field``, other frames ``unsupported_frame``. The target becomes a
+:class:`~testbed.common.components.PositionSetpoint` on the endpoint's intents entity; no reply
+(ArduSub sends none either).
 """
 
 from __future__ import annotations
@@ -29,6 +29,10 @@ __all__ = ["on_set_position_target_local_ned"]
 _POSITION_IGNORE = 0b111  # POSITION_TARGET_TYPEMASK_X/Y/Z_IGNORE
 _MOTION_IGNORE = 0b1_1111_1000  # VX..VZ, AX..AZ ignore bits
 _YAW_IGNORE = 1024
+_BODY_FRAMES = (mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_FRD)
+"""Frames whose target is an offset from the reported position along the reported heading
+(ArduSub takes BODY_NED, which MAVProxy's ``position`` sends, as BODY_OFFSET_NED; BODY_FRD is
+MAVLink's name for the same)."""
 _MAX_TARGET_M = 1.0e4
 """Largest accepted |coordinate| of a position target [m] (the vehicle's start range)."""
 
@@ -60,7 +64,7 @@ def on_set_position_target_local_ned(
     frame = int(message.coordinate_frame)
     if frame != mav.MAV_FRAME_LOCAL_NED:
         snapshot = endpoint.snapshot_now()
-        if frame == mav.MAV_FRAME_BODY_OFFSET_NED:
+        if frame in _BODY_FRAMES:
             heading = snapshot.euler_rad[2]
             c, s = math.cos(heading), math.sin(heading)
             x, y = c * x - s * y, s * x + c * y

@@ -91,8 +91,12 @@ def test_a_fix_older_than_the_timeout_is_no_position_estimate(gcs: SimGcs) -> No
     assert mode_acks(gcs) == [FAILED]
 
 
+@pytest.mark.parametrize(  # BODY_NED is what MAVProxy's `position` sends: ArduSub takes it
+    "frame",  # as BODY_OFFSET_NED (a MAVLink user's review: it was refused)
+    [mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_FRD],
+)
 def test_guided_is_accepted_with_a_fix_and_flies_to_a_target_ahead_and_aside(
-    gcs: SimGcs,
+    gcs: SimGcs, frame: int
 ) -> None:
     gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
     gcs.run(1.0, gcs.flying())
@@ -111,7 +115,7 @@ def test_guided_is_accepted_with_a_fix_and_flies_to_a_target_ahead_and_aside(
         start[0] + 3.0 * math.cos(heading) - 1.0 * math.sin(heading),
         start[1] + 3.0 * math.sin(heading) + 1.0 * math.cos(heading),
     )
-    gcs.send(target(gcs, mav.MAV_FRAME_BODY_OFFSET_NED, 3.0, 1.0, 0.0))
+    gcs.send(target(gcs, frame, 3.0, 1.0, 0.0))
     sent_s = gcs.now_s
     gains = PositionGains()
     leg = math.hypot(3.0, 1.0)
