@@ -188,7 +188,40 @@ def _closed_form_at_zero(ax: Axes, axis: LogAxis | None, value: float, colour: s
 
 
 def _title(fig: Figure, results: Results, what: str) -> None:
-    fig.suptitle(f"{what} — {sweep_label(results)} ({results.runs_label()})")
+    """The figure's title (the sweep, its runs, the failed ones' grid values) and, on every
+    panel, a red × at the foot of the axis at each BER where a run failed (no metric to draw
+    there, but not to be hidden)."""
+    failed = _failed_bers(results)
+    marks = " (×: a failed run)" if failed.size else ""
+    fig.suptitle(f"{what} — {sweep_label(results)} ({results.runs_label()}){marks}")
+    if not failed.size:
+        return
+    for ax in fig.axes:
+        ax.plot(
+            failed, np.zeros_like(failed), "x", color="tab:red", ms=8, mew=1.8,
+            transform=ax.get_xaxis_transform(), clip_on=False,
+        )  # fmt: skip
+
+
+def _failed_bers(results: Results) -> np.ndarray:
+    """Where on the BER axis runs failed: the failed rows' BER, placed as the plots place the
+    ok rows' (a BER of 0 one decade below the smallest on a log axis)."""
+    key = ber_key(results)
+    if key is None or not results.failed:
+        return np.zeros(0)
+    cells = [row.get(key, "") for row in results.failed]
+    values = np.array([float(c) for c in cells if _is_number(c)], dtype=float)
+    values = np.unique(values[np.isfinite(values)])
+    axis = LogAxis.fit(results.numbers(key))
+    return values if axis is None else axis.place(values)
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
 
 
 def _plot_lag(

@@ -535,6 +535,18 @@ def test_a_title_names_the_failed_runs_and_where_they_failed(tmp_path: Path) -> 
     results = read_results(path)
     assert len(results.rows) == 4 and len(results.failed) == 2
     assert results.runs_label() == "4 runs ok, 2 failed at link.ber 0.001"
+    # and every panel marks where: a red × at the foot of the axis at BER 0.001
+    from matplotlib.figure import Figure
+
+    from testbed.report.sweep_plots import _title
+
+    fig = Figure()
+    panels = fig.subplots(1, 2)
+    _title(fig, results, "BER vs something")
+    assert fig.get_suptitle().endswith("(4 runs ok, 2 failed at link.ber 0.001) (×: a failed run)")
+    for ax in panels:
+        (marks,) = [line for line in ax.lines if line.get_marker() == "x"]
+        assert list(marks.get_xdata()) == [0.001] and list(marks.get_ydata()) == [0.0]
 
 
 def test_no_closed_form_where_replies_outlast_the_gap_and_the_sweep_warns(
