@@ -4,8 +4,12 @@
   :class:`RawAdapter` (transparent cable/socket) and :class:`S100Adapter` (WFS Seatooth S100).
 * :mod:`~testbed.hil.evologics` — :class:`EvoLogicsAdapter` (S2C data mode, instant messages).
 * :mod:`~testbed.hil.m64` — :class:`M64Adapter` (Water Linked Modem-M64, 8-byte packets).
-* :mod:`~testbed.hil.transport` — :class:`SerialTransport` (any pyserial URL),
-  :class:`TcpTransport`, and :class:`LinkEndpoint` (transport + frame decoder, polled by nodes).
+* :mod:`~testbed.hil.transport` — :class:`Transport` (reader and writer threads, reopen with
+  backoff, counters), :class:`Received`, :class:`PortLike` and :func:`packet_gap_s`.
+* :mod:`~testbed.hil.serial_tcp` — :class:`SerialTransport` (any pyserial URL) and
+  :class:`TcpTransport`.
+* :mod:`~testbed.hil.link_endpoint` — :class:`LinkEndpoint` (transport + frame decoder, polled
+  by nodes).
 * :mod:`~testbed.hil.endpoint` — :class:`PortSettings`, :func:`open_endpoint` (the adapter a
   node's role needs, on its port) and :func:`endpoint_report` (counters, added latency).
 
@@ -40,17 +44,10 @@ from .endpoint import (
     open_endpoint,
 )
 from .evologics import SENDIM_MAX, EvoLogicsAdapter, parse_received_message
+from .link_endpoint import LinkEndpoint
 from .m64 import CRC8_CHECK_VALUE, M64_PACKET_SIZE, M64Adapter, crc8, m64_sentence
-from .transport import (
-    PORT_ERRORS,
-    LinkEndpoint,
-    PortLike,
-    Received,
-    SerialTransport,
-    TcpTransport,
-    Transport,
-    packet_gap_s,
-)
+from .serial_tcp import SerialTransport, TcpTransport
+from .transport import PORT_ERRORS, PortLike, Received, Transport, packet_gap_s
 
 __all__ = [
     "BAUD_RANGE",

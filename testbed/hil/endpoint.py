@@ -27,8 +27,10 @@ import numpy as np
 
 from .adapters import Adapter, RawAdapter, S100Adapter
 from .evologics import EvoLogicsAdapter
+from .link_endpoint import LinkEndpoint
 from .m64 import M64Adapter
-from .transport import LinkEndpoint, PortLike, SerialTransport
+from .serial_tcp import SerialTransport
+from .transport import PortLike
 
 __all__ = [
     "BAUD_RANGE",

@@ -1,4 +1,4 @@
-"""Transports: a link endpoint on a serial port (any pyserial URL) or a TCP socket.
+"""Transports: the threads between a link endpoint and its port (serial or TCP).
 
 A transport owns two threads and never blocks its caller:
 
@@ -19,10 +19,11 @@ timeout) closes the port and counts a port error; the reader reopens it with exp
 backoff while frames sent in the meantime are dropped and counted, as on a dead link. Garbage
 on the line is the adapter's and the frame decoder's business: counted, never fatal.
 
-:class:`LinkEndpoint` joins a transport and a :class:`~testbed.protocol.FrameDecoder`: the
-simpy side calls :meth:`LinkEndpoint.poll` (non-blocking) and gets frame events, or
-:meth:`LinkEndpoint.deliver` to have each frame handed to a callback as it is decoded, and the
-software's own latency (port read returned → frame handed over) is recorded per frame.
+This module holds the port-independent part: :class:`Transport` (threads, reopen with backoff,
+counters), :class:`Received`, :class:`PortLike`, :data:`PORT_ERRORS` and :func:`packet_gap_s`.
+The subclasses that open, read and write a real port are in :mod:`~testbed.hil.serial_tcp`
+(:class:`~testbed.hil.serial_tcp.SerialTransport`, :class:`~testbed.hil.serial_tcp.TcpTransport`);
+the frame decoding a node polls is :class:`~testbed.hil.link_endpoint.LinkEndpoint`.
 
 Packet boundaries: the stream decoder gives up a mis-framed candidate (a corrupted length byte
 claiming more bytes than came) at the end of each received packet, as the simulated modem's
@@ -39,16 +40,12 @@ for a stream of intact frames (the decoder holds nothing at a packet's end).
 
 The adapter's ``receive`` and ``idle`` run on the reader thread and ``writes`` on the writer
 thread only.
-
-Size: :class:`Transport` (threads, reopen with backoff, counters) is most of the module; the
-serial and TCP subclasses only open, read and write, so it stays whole, a little over 500 lines.
 """
 
 from __future__ import annotations
 
 import contextlib
 import queue
-import socket
 import threading
 import time
 from collections import deque
@@ -56,19 +53,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-import serial
-
-from testbed.protocol import Frame, FrameDecoder, FrameEvent
-
 from .adapters import Adapter
 
 __all__ = [
     "PORT_ERRORS",
-    "LinkEndpoint",
     "PortLike",
     "Received",
-    "SerialTransport",
-    "TcpTransport",
     "Transport",
     "packet_gap_s",
 ]
@@ -78,7 +68,6 @@ PORT_ERRORS: tuple[type[Exception], ...] = (OSError, AttributeError, TypeError, 
 blocked read can surface as AttributeError/TypeError/ValueError from its vanished socket or
 file descriptor."""
 
-_MAX_READ = 4096
 _LATENESS_SAMPLES = 200_000
 """Thread-lateness samples kept per thread (the newest)."""
 
@@ -463,259 +452,3 @@ class Transport:
                 next_ok = written_s + chunk.hold_s
             else:
                 self.frames_sent += 1
-
-
-class SerialTransport(Transport):
-    """A link endpoint on a serial port: any pyserial URL (``/dev/ttyUSB0``, ``loop://``,
-    ``socket://host:port``, ``rfc2217://host:port``).
-
-    Args:
-        url: port name or pyserial URL.
-        adapter: the modem adapter.
-        baudrate: port speed [bit/s].
-        on_bytes: see :class:`Transport`.
-        rtscts: RTS/CTS hardware flow control (pair it with ``S100Adapter(rtscts=True)``).
-        read_timeout_s: how long a read waits for a first byte [s]; None = the packet gap, so
-            an idle line ends a packet as soon as it has been idle that long. Bounds how fast
-            :meth:`close` returns and when an idle line is seen, not latency (a read returns on
-            its first byte).
-        write_timeout_s: two writes in a row blocked longer than this (flow control stuck)
-            count as a port error [s]; one alone is counted in ``write_timeouts``
-            (:meth:`_write`).
-        port_factory: opens the port (tests inject fakes); defaults to
-            :func:`serial.serial_for_url` with the settings above.
-        **kwargs: :class:`Transport` options (backoff, queue size, ``packet_gap_s``: default
-            :func:`packet_gap_s` at ``baudrate``).
-
-    Raises:
-        serial.SerialException: the port cannot be opened the first time.
-    """
-
-    def __init__(
-        self,
-        url: str,
-        adapter: Adapter,
-        *,
-        baudrate: int,
-        on_bytes: Callable[[], None] | None = None,
-        rtscts: bool = False,
-        read_timeout_s: float | None = None,
-        write_timeout_s: float = 2.0,
-        port_factory: Callable[[], PortLike] | None = None,
-        **kwargs: Any,
-    ) -> None:
-        kwargs.setdefault("packet_gap_s", packet_gap_s(baudrate))
-        super().__init__(adapter, on_bytes=on_bytes, **kwargs)
-        self.url = url
-        timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
-        self.read_wait_s = timeout_s
-        if port_factory is None:
-
-            def port_factory() -> PortLike:
-                port: PortLike = serial.serial_for_url(
-                    url,
-                    baudrate=baudrate,
-                    rtscts=rtscts,
-                    timeout=timeout_s,
-                    write_timeout=write_timeout_s,
-                )
-                return port
-
-        self._factory = port_factory
-        self._timeouts_in_row = 0
-        self._start(f"serial:{url}")
-
-    def _open(self) -> PortLike:
-        return self._factory()
-
-    def _read(self, port: PortLike) -> bytes:
-        data = port.read(1)
-        if data:
-            waiting = port.in_waiting
-            if waiting:
-                data += port.read(min(waiting, _MAX_READ))
-        return data
-
-    def _write(self, port: PortLike, data: bytes) -> None:
-        """Write ``data``; pyserial's write timeout is a port error only twice in a row.
-
-        pyserial also raises its ``SerialTimeoutException`` when the write went through but
-        the host held the thread past the timeout before it looked at the clock (it checks
-        after a complete ``os.write``): one timeout alone is counted (``write_timeouts``) and
-        the frame taken as sent; flow control that is really stuck times out the next write
-        too, and that one fails the port.
-        """
-        try:
-            port.write(data)
-        except serial.SerialTimeoutException:
-            self.write_timeouts += 1
-            self._timeouts_in_row += 1
-            if self._timeouts_in_row >= 2:
-                raise
-            return
-        self._timeouts_in_row = 0
-
-
-class TcpTransport(Transport):
-    """A link endpoint on a TCP connection (a modem's TCP port, e.g. EvoLogics 9200, or a
-    peer testbed). Reconnects with backoff when the connection drops.
-
-    Args:
-        host: address to connect to.
-        port: TCP port.
-        adapter: the modem adapter.
-        on_bytes: see :class:`Transport`.
-        read_timeout_s: how long a receive waits [s] (bounds :meth:`close` and when an idle
-            line is seen, not latency); None = the packet gap.
-        connect_timeout_s: connection attempt timeout [s].
-        **kwargs: :class:`Transport` options.
-
-    Raises:
-        OSError: the first connection fails.
-    """
-
-    def __init__(
-        self,
-        host: str,
-        port: int,
-        adapter: Adapter,
-        *,
-        on_bytes: Callable[[], None] | None = None,
-        read_timeout_s: float | None = None,
-        connect_timeout_s: float = 2.0,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(adapter, on_bytes=on_bytes, **kwargs)
-        self.address = (host, port)
-        self._read_timeout_s = self.packet_gap_s if read_timeout_s is None else read_timeout_s
-        self.read_wait_s = self._read_timeout_s
-        self._connect_timeout_s = connect_timeout_s
-        self._start(f"tcp:{host}:{port}")
-
-    def _open(self) -> socket.socket:
-        sock = socket.create_connection(self.address, timeout=self._connect_timeout_s)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.settimeout(self._read_timeout_s)
-        return sock
-
-    def _read(self, port: socket.socket) -> bytes:
-        try:
-            data = port.recv(_MAX_READ)
-        except TimeoutError:
-            return b""
-        if not data:
-            raise ConnectionError("connection closed by peer")
-        return data
-
-    def _write(self, port: socket.socket, data: bytes) -> None:
-        port.sendall(data)
-
-
-class LinkEndpoint:
-    """A transport plus a frame decoder: what a node polls for frames.
-
-    Args:
-        transport: where bytes come from and frames go.
-        decoder: the frame decoder (default: WAFrame settings).
-        max_latency_samples: latency samples kept (the newest) [frames].
-
-    The decoder gives up a candidate still incomplete at the end of each received packet
-    (:attr:`Received.end`; module docstring: packet boundaries).
-
-    Attributes:
-        latencies_ns: per delivered frame, port read returned → frame handed over [ns]
-            (for a frame freed by a packet's end, from when that end was seen).
-        frames_in: frames decoded [frames].
-        corrupt_frames: frame candidates the decoder rejected (bad CRC, oversize, truncated).
-    """
-
-    def __init__(
-        self,
-        transport: Transport,
-        decoder: FrameDecoder | None = None,
-        *,
-        max_latency_samples: int = 100_000,
-    ) -> None:
-        self.transport = transport
-        self.decoder = decoder if decoder is not None else FrameDecoder()
-        self.latencies_ns: deque[int] = deque(maxlen=max_latency_samples)
-        self.frames_in = 0
-        self.corrupt_frames = 0
-
-    def send(self, frame: bytes) -> bool:
-        """Queue one encoded frame for the port (non-blocking); False if it was dropped."""
-        return self.transport.send(frame)
-
-    def poll(self) -> list[FrameEvent]:
-        """Frame events from everything received so far; never blocks."""
-        events: list[FrameEvent] = []
-        while True:
-            try:
-                received = self.transport.inbox.get_nowait()
-            except queue.Empty:
-                return events
-            self._decode(received, events)
-
-    def wait(self, timeout_s: float) -> list[FrameEvent]:
-        """Block until at least one frame event is decoded or ``timeout_s`` passes.
-
-        For tests and command-line tools; nodes use :meth:`poll`.
-
-        Returns:
-            The events decoded (empty on timeout).
-        """
-        deadline = time.monotonic() + timeout_s
-        events: list[FrameEvent] = []
-        while not events:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
-            try:
-                received = self.transport.inbox.get(timeout=remaining)
-            except queue.Empty:
-                break
-            self._decode(received, events)
-        events.extend(self.poll())
-        return events
-
-    def deliver(self, handler: Callable[[Frame], None]) -> int:
-        """Decode everything received so far and hand each frame to ``handler`` at once; never
-        blocks. The latency is stamped just before each hand-over.
-
-        Returns:
-            The number of frames handed over.
-        """
-        inbox = self.transport.inbox
-        handed = 0
-        while True:
-            try:
-                received = inbox.get_nowait()
-            except queue.Empty:
-                return handed
-            for event in self._events(received):
-                if isinstance(event, Frame):
-                    self.frames_in += 1
-                    self.latencies_ns.append(time.perf_counter_ns() - received.read_ns)
-                    handed += 1
-                    handler(event)
-
-    def _events(self, received: Received) -> list[FrameEvent]:
-        """Feed one :class:`Received` to the decoder; at the end of a packet give up a candidate
-        still incomplete (module docstring: packet boundaries). Counts corrupt candidates."""
-        decoder = self.decoder
-        events = decoder.feed_packet(received.data, packet_end=received.end)
-        self.corrupt_frames += sum(not isinstance(event, Frame) for event in events)
-        return events
-
-    def _decode(self, received: Received, events: list[FrameEvent]) -> None:
-        new = self._events(received)
-        if new:
-            now_ns = time.perf_counter_ns()
-            frames = sum(isinstance(event, Frame) for event in new)
-            self.frames_in += frames
-            self.latencies_ns.extend(now_ns - received.read_ns for _ in range(frames))
-            events.extend(new)
-
-    def close(self) -> None:
-        """Close the transport."""
-        self.transport.close()
