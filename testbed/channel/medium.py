@@ -127,6 +127,9 @@ class ModemCounters:
     rx_delivered: int = 0
     rx_corrupted: int = 0
     rx_collided: int = 0
+    rx_deaf: int = 0
+    """Of ``rx_collided``: the copies lost only because this modem was transmitting (half
+    duplex), no other copy overlapping them."""
     rx_out_of_range: int = 0
     rx_outage: int = 0
     rx_bit_errors: int = 0
@@ -137,6 +140,7 @@ class _Reception:
 
     __slots__ = (
         "collided",
+        "deaf",
         "distance_m",
         "end_s",
         "entry",
@@ -163,7 +167,8 @@ class _Reception:
         self.start_s = start_s
         self.end_s = end_s
         self.p_independent = p_independent
-        self.collided = False
+        self.collided = False  # lost: it overlapped another copy, or the receiver transmitted
+        self.deaf = False  # lost only because the receiver transmitted (half duplex)
 
 
 _Queued = tuple[int, int, int, bytes]
@@ -452,8 +457,8 @@ class Modem:
             trace.record(end_s, EventKind.TX_END, self.name, BROADCAST, frame_id, part, size)
         if self._half_duplex:
             for r in self._receptions:  # cannot receive while transmitting
-                if r.start_s < end_s and r.end_s > now:
-                    r.collided = True
+                if r.start_s < end_s and r.end_s > now and not r.collided:
+                    r.collided = r.deaf = True
         self._medium._broadcast(self, entry, now, busy_s)
         if self._fifo:
             self._pump()
@@ -465,9 +470,10 @@ class Modem:
         end_s = rec.end_s
         for other in self._receptions:  # any overlap destroys both: no capture
             if other.start_s < end_s and other.end_s > start_s:
-                other.collided = True
+                other.collided, other.deaf = True, False
                 rec.collided = True
         if self._half_duplex and self._tx_start_s < end_s and self._tx_end_s > start_s:
+            rec.deaf = not rec.collided
             rec.collided = True
         self._receptions.append(rec)
 
@@ -487,6 +493,7 @@ class Modem:
             return
         if rec.collided:
             counters.rx_collided += 1
+            counters.rx_deaf += rec.deaf
             if trace is not None:
                 kind = EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))

@@ -3,8 +3,8 @@
 :class:`PortSettings` names one node's port: its pyserial URL, the modem behind it
 (:data:`MODEM_KINDS`), the node's role on the link and the serial options. :func:`make_adapter`
 builds the modem adapter that role needs (addresses, M64 role and channel), and
-:func:`open_endpoint` opens the :class:`~testbed.hil.transport.SerialTransport` and wraps it in
-a :class:`~testbed.hil.transport.LinkEndpoint`. :func:`endpoint_report` reduces an endpoint to
+:func:`open_endpoint` opens the :class:`~testbed.hil.serial_tcp.SerialTransport` and wraps it in
+a :class:`~testbed.hil.link_endpoint.LinkEndpoint`. :func:`endpoint_report` reduces an endpoint to
 JSON-ready numbers: bytes and frames each way, garbage, port faults and the software's own
 added latency (port read returned → frame handed to the node).
 
@@ -141,7 +141,7 @@ def open_endpoint(
     Args:
         settings: the port.
         port_factory: opens the port instead of pyserial (tests inject failing ports).
-        **transport_options: :class:`~testbed.hil.transport.SerialTransport` options
+        **transport_options: :class:`~testbed.hil.serial_tcp.SerialTransport` options
             (``backoff_initial_s``, ``backoff_max_s``, ``read_timeout_s``…).
 
     Raises:

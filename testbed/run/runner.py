@@ -325,6 +325,9 @@ def run_scenario(
         metrics = _run_metrics(
             scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, early
         )
+        for direction, receiver in (("uplink", vehicle_modem), ("downlink", operator_modem)):
+            # of the copies lost to collisions, those lost to the receiver's own transmission
+            metrics["link"][direction]["copies_lost_transmitting"] = receiver.counters.rx_deaf
         inputs = metrics["inputs"]
         if pilot is not None:  # the scenario's [pilot] did not fly: name what did
             inputs["pilot"] = {"object": model_name(pilot)}

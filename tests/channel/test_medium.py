@@ -200,6 +200,9 @@ def test_intrinsic_delay_counts_as_transmitting(duplex: str) -> None:
     env.run()
     lost = duplex == "half"
     assert (a.counters.rx_collided, b.counters.rx_collided) == ((1, 1) if lost else (0, 0))
+    # two nodes: a copy can only be lost to its receiver's own transmission (deaf), never to
+    # another copy, which needs a third sender
+    assert (a.counters.rx_deaf, b.counters.rx_deaf) == ((1, 1) if lost else (0, 0))
 
 
 def test_half_duplex_defers_a_send_while_receiving() -> None:
@@ -238,11 +241,24 @@ def test_overlapping_receptions_destroy_all(offset_airtimes: float, collide: boo
     at_c = c.drain()
     if collide:
         assert at_c == [] and c.counters.rx_collided == 2
+        assert c.counters.rx_deaf == 0  # lost to each other, c never transmitted
         assert {e.src for e in trace.of_kind(EventKind.COLLIDE)} == {"a", "b"}
     else:
         assert [d.src for d in at_c] == ["a", "b"]
     # a and b each hear the other alone (full duplex): never collided.
     assert len(a.drain()) == len(b.drain()) == 1
+
+
+def test_a_copy_overlapping_another_and_the_receivers_transmission_is_a_collision() -> None:
+    """Half duplex, three nodes: c starts sending while a's copy is arriving (deaf), then b's
+    copy overlaps a's: a's copy was lost to another copy as well, so it counts as a collision,
+    not deafness; b's, overlapping both, too."""
+    env, _, _, (a, b, c) = build(S100, names=("a", "b", "c"))
+    a.send(bytes(40))
+    send_at(env, c, I_S + 0.2 * airtime(40), bytes(13))  # c deaf to a's copy from here
+    send_at(env, b, 0.5 * airtime(40), bytes(40))  # and b's overlaps a's at c
+    env.run()
+    assert c.counters.rx_collided == 2 and c.counters.rx_deaf == 0
 
 
 def test_a_third_overlapping_frame_destroys_the_whole_chain() -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from testbed.channel import direction_counts
+from testbed.channel import EventKind, direction_counts
 from testbed.report.closed_forms import aoi_periodic_closed_form
 from testbed.run.metrics import (
     age_of_information,
@@ -168,3 +168,17 @@ def test_frame_outcomes_add_up_when_bit_errors_fall_in_packet_padding() -> None:
         assert outcomes == counts.frames_settled <= link["frames_sent"] - link["frames_dropped"]
         # the case happened: more frames had a corrupt packet than were lost to bit errors
         assert counts.frames_corrupted > link["frames_corrupted"] > 0
+
+
+def test_with_two_nodes_every_collision_is_the_receiver_transmitting() -> None:
+    """On s2c (acoustic, half duplex) s100-teleop's 0.594-s gap sends orders over the replies
+    still arriving: the operator loses them while it transmits. With two nodes no copy can meet
+    another at a receiver (that needs a second sender), so every collide event in the trace is
+    a copy lost to its receiver's own transmission: ``copies_lost_transmitting`` counts them."""
+    scenario = load_scenario("s100-teleop-v1", ["link.preset=s2c", "duration_s=60"])
+    result = run_scenario(scenario)
+    trace = result.recorder.trace
+    for key, receiver in (("uplink", "vehicle"), ("downlink", "operator")):
+        lost = [e for e in trace.of_kind(EventKind.COLLIDE) if e.dst == receiver]
+        assert result.metrics["link"][key]["copies_lost_transmitting"] == len(lost)
+    assert result.metrics["link"]["downlink"]["copies_lost_transmitting"] > 10
