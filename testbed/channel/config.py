@@ -124,11 +124,12 @@ class GilbertElliott:
                 "mean_bad_s" if self.mean_good_s else "mean_good_s",
                 "the chain in time needs both mean_good_s and mean_bad_s > 0",
             )
-            check(
-                self.p_good_to_bad == 0.0,
-                "p_good_to_bad",
-                "give per-bit probabilities or mean sojourns in seconds, not both",
-            )
+            for key, default in (("p_good_to_bad", 0.0), ("p_bad_to_good", 1.0)):
+                check(
+                    getattr(self, key) == default,
+                    key,
+                    "give per-bit probabilities or mean sojourns in seconds, not both",
+                )
 
     @property
     def timed(self) -> bool:

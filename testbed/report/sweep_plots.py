@@ -386,8 +386,8 @@ def _plot_images(
     rate_ax.legend(title="grid", fontsize="small")
     footnote(
         fig,
-        _BARS_NOTE + "; dashed: 60·q/(nT) with selective repeat, 60·q_o·q_r^n/(nT) without "
-        "(n chunks, gap T); none where a reply does not fit the gap (reply_fits_gap false)",
+        _BARS_NOTE + "; dashed: 60·q/(nT) selective repeat, 60·q_o·q_r^n/(nT) without (n "
+        "chunks, gap T), not where replies outlast the gap",
     )
     _title(fig, results, "BER vs image feedback")
     return save(fig, path)

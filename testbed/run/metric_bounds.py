@@ -22,6 +22,9 @@ NON_NEGATIVE_METRICS = (
     # counts: a number of things, never below 0
     "*.n",
     "link.*.frames_*",
+    "link.*.copies_lost_transmitting",
+    "arm.solves",
+    "arm.limit_activations",
     "frames_rejected.*",
     "events.*",
     "images.captured",

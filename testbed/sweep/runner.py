@@ -386,7 +386,7 @@ def format_summary(sweep: Sweep, summary: SweepSummary) -> str:
     """A few lines a person reads after a sweep, listing every failed run."""
     lines = [
         f"{sweep.id}: {summary.total} runs, {len(summary.failed)} failed; "
-        f"{summary.ran} run now in {summary.wall_s:.1f} s"
+        f"{summary.ran} ran now in {summary.wall_s:.1f} s"
     ]
     for point, seed, values, error in summary.failed:
         lines.append(f"  FAILED point {point} seed {seed} ({values}): {error}")

@@ -122,6 +122,6 @@ def test_a_killed_pool_worker_stops_the_sweep_with_one_line_and_it_resumes(
     before = read_journal(out / "runs.jsonl")
     resumed = subprocess.run([*argv, "--out", str(out), "--resume"], capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
-    assert f"{24 - len(before)} run now" in resumed.stdout
+    assert f"{24 - len(before)} ran now" in resumed.stdout
     keys = sorted((r["point"], r["seed"]) for r in read_journal(out / "runs.jsonl"))
     assert keys == [(p, s) for p in range(3) for s in range(8)]

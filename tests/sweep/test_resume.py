@@ -90,7 +90,7 @@ def test_resume_compares_values_not_text(
     path, out = done[0], _copy(done, tmp_path)
     same = ["--set", "metrics={settle_s = 1e0}", "--set", "duration_s=8.0", "--workers", "1"]
     assert main(["sweep", str(path), *same, "--out", str(out), "--resume"]) == 0
-    assert "0 run now" in capsys.readouterr().out
+    assert "0 ran now" in capsys.readouterr().out
     other = ["--set", "metrics.settle_s=2", "--set", "duration_s=8", "--workers", "1"]
     assert main(["sweep", str(path), *other, "--out", str(out), "--resume"]) == 2
     _one_line(capsys, "[set]/--set metrics.settle_s: 1.0 → 2.0")
@@ -103,7 +103,7 @@ def test_resume_grows_the_grid_running_only_the_new_points(
     out = _copy(done, tmp_path)
     grown = _sweep(tmp_path, "[0.0, 1e-4, 1e-3]")
     assert main(["sweep", str(grown), *SHORT, "--out", str(out), "--resume"]) == 0
-    assert "1 run now" in capsys.readouterr().out
+    assert "1 ran now" in capsys.readouterr().out
     fresh = tmp_path / "fresh"
     assert main(["sweep", str(grown), *SHORT, "--out", str(fresh)]) == 0
     for table in ("results.csv", "aggregate.csv"):
@@ -121,7 +121,7 @@ def test_resume_takes_the_grid_in_another_order_as_the_same_runs(
     out = _copy(done, tmp_path)
     swapped = _sweep(tmp_path, "[1e-3, 0.0]")
     assert main(["sweep", str(swapped), *SHORT, "--out", str(out), "--resume"]) == 0
-    assert "0 run now" in capsys.readouterr().out
+    assert "0 ran now" in capsys.readouterr().out
     fresh = tmp_path / "fresh"
     assert main(["sweep", str(swapped), *SHORT, "--out", str(fresh)]) == 0
     for table in ("results.csv", "aggregate.csv"):
@@ -165,7 +165,7 @@ def test_failed_runs_are_run_again_on_resume(
     assert "FAILED point 1 seed 0" in capsys.readouterr().out
     monkeypatch.setattr("testbed.run.runner.run_scenario", real)
     assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 0
-    assert "2 runs, 0 failed; 1 run now" in capsys.readouterr().out
+    assert "2 runs, 0 failed; 1 ran now" in capsys.readouterr().out
     statuses = [(r["point"], r["status"]) for r in read_journal(out / "runs.jsonl")]
     assert statuses == [(0, "ok"), (1, "failed"), (1, "ok")]  # the failure stays on record
     results = (out / "results.csv").read_text().splitlines()

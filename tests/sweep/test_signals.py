@@ -171,7 +171,7 @@ def _resume_completes_the_rest(sweep: Sweep, *extra: str) -> None:
         [*argv, "--out", str(sweep.out), "--resume"], capture_output=True, text=True, check=False
     )
     assert resumed.returncode == 0, resumed.stderr
-    assert f"{TOTAL - before} run now" in resumed.stdout
+    assert f"{TOTAL - before} ran now" in resumed.stdout
     keys = [(r["point"], r["seed"]) for r in read_journal(sweep.out / "runs.jsonl")]
     assert sorted(keys) == [(p, s) for p in range(3) for s in range(SEEDS)]  # each exactly once
 

@@ -299,7 +299,7 @@ def test_existing_results_need_resume_and_the_same_sweep(
     err = capsys.readouterr().err
     assert "holds a different sweep" in err and "duration_s: 8.0 → 9.0" in err
     assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 0
-    assert "0 run now" in capsys.readouterr().out  # everything was done already
+    assert "0 ran now" in capsys.readouterr().out  # everything was done already
 
 
 def test_a_torn_last_journal_line_is_cut_and_the_run_redone(
@@ -396,7 +396,7 @@ def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(tmp_path: Path) -
         [*argv, "--out", str(killed), "--resume"], capture_output=True, text=True, check=False
     )
     assert resumed.returncode == 0, resumed.stderr
-    assert f"{18 - len(before)} run now" in resumed.stdout
+    assert f"{18 - len(before)} ran now" in resumed.stdout
     keys = [(r["point"], r["seed"]) for r in read_journal(killed / "runs.jsonl")]
     assert sorted(keys) == [(p, s) for p in range(3) for s in range(6)]  # each exactly once
     assert main(["sweep", str(path), *SHORT, "--workers", "2", "--out", str(fresh)]) == 0
@@ -459,9 +459,9 @@ def test_seeds_option_runs_the_first_seeds_and_resume_adds_the_rest(
     assert rows == full
     capsys.readouterr()
     assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out), "--resume"]) == 0
-    assert "0 run now" in capsys.readouterr().out
+    assert "0 ran now" in capsys.readouterr().out
     assert main(["sweep", str(path), *SHORT, "--out", str(out), "--resume"]) == 0
-    assert "3 run now" in capsys.readouterr().out
+    assert "3 ran now" in capsys.readouterr().out
     for table in ("results.csv", "aggregate.csv"):
         assert (out / table).read_bytes() == (pool_out / table).read_bytes()
     assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out), "--resume"]) == 2
