@@ -339,7 +339,8 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
             f"{_goals(mission['goals_reached'], mission['goals'])}; estimate error mean "
             f"{_num(mission['estimate_error_m']['mean'])} m"
         )
-        if (heading := mission.get("yaw_error_deg")) is not None:
+        heading = mission.get("yaw_error_deg")
+        if heading is not None and not missing(heading["mean"]):  # none: an end effector flown
             lines.append(
                 f"  mission yaw error (|truth − target|) mean {_num(heading['mean'], digits=2)} "
                 f"deg, p95 {_num(heading['p95'], digits=2)} deg"

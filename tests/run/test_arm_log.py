@@ -138,3 +138,19 @@ def test_runs_without_an_arm_write_no_arm_file(tmp_path: Path) -> None:
     assert result.recorder.arm is None
     assert "arm" not in result.metrics
     assert not (tmp_path / "arm.csv").exists() and all(p.name != "arm.csv" for p in written)
+
+
+def test_the_summary_says_the_arm_line_and_no_empty_heading_line(
+    run: tuple[RunResult, Path],
+) -> None:
+    """An end-effector mission has no pose-target heading: the summary leaves out the mission
+    yaw line (it read "n/a deg, n/a deg"), and says the arm's line with its closest joint."""
+    from testbed.cli.run import format_summary
+
+    result, _ = run
+    text = format_summary(result.metrics, Path("out"))
+    assert "mission yaw error" not in text
+    (line,) = [row for row in text.splitlines() if row.startswith("  arm: ")]
+    solves = result.metrics["arm"]["solves"]
+    assert line.startswith(f"  arm: {solves} TPIK solves, ")
+    assert "closest to a limit: axis_e" in line
