@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from testbed.cli.options import (
     EXIT_OK,
@@ -13,7 +12,7 @@ from testbed.cli.options import (
     check_seed,
     link_config_option,
 )
-from testbed.config import ConfigError
+from testbed.config import ConfigError, parse_override
 
 __all__ = ["add_link_parser"]
 
@@ -79,7 +78,11 @@ def _run_link(args: argparse.Namespace) -> int:
     if args.model is not None:
         from testbed.run.plugins import make_link_model
 
-        model_args = _inline_table(args.model_args)
+        _, model_args = parse_override(f"model_args={args.model_args}")
+        if not isinstance(model_args, dict):
+            raise ConfigError(
+                f"--model-args: expected a TOML inline table {{...}}, got {args.model_args}"
+            )
         keys = ("--model", "--model-args")
         model = make_link_model(args.model, model_args, config, "testbed link", keys)
     elif args.model_args != "{}":
@@ -100,20 +103,3 @@ def _run_link(args: argparse.Namespace) -> int:
     else:
         print(format_report(result))
     return EXIT_OK
-
-
-def _inline_table(text: str) -> dict[str, Any]:
-    """``--model-args``: a TOML inline table as a dict.
-
-    Raises:
-        ConfigError: not TOML, or not a table.
-    """
-    import tomllib
-
-    try:
-        value = tomllib.loads(f"args = {text}")["args"]
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"--model-args: not a TOML inline table ({error}): {text}") from None
-    if not isinstance(value, dict):
-        raise ConfigError(f"--model-args: expected a TOML inline table {{...}}, got {text}")
-    return value

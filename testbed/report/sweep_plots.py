@@ -209,19 +209,10 @@ def _failed_bers(results: Results) -> np.ndarray:
     key = ber_key(results)
     if key is None or not results.failed:
         return np.zeros(0)
-    cells = [row.get(key, "") for row in results.failed]
-    values = np.array([float(c) for c in cells if _is_number(c)], dtype=float)
+    values = results.failed_numbers(key)
     values = np.unique(values[np.isfinite(values)])
     axis = LogAxis.fit(results.numbers(key))
     return values if axis is None else axis.place(values)
-
-
-def _is_number(cell: str) -> bool:
-    try:
-        float(cell)
-    except ValueError:
-        return False
-    return True
 
 
 def _plot_lag(

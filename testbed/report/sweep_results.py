@@ -69,6 +69,10 @@ class Results:
         """``column`` of every row as floats; NaN for an empty or non-numeric cell."""
         return np.array([_number(row.get(column, "")) for row in self.rows], dtype=float)
 
+    def failed_numbers(self, column: str) -> np.ndarray:
+        """:meth:`numbers` of the failed rows (their grid values: where runs failed)."""
+        return np.array([_number(row.get(column, "")) for row in self.failed], dtype=float)
+
     def metric(self, column: str, option: str) -> np.ndarray:
         """``column`` of every row as floats, NaN for an empty cell (a metric the run did not
         give); unlike :meth:`numbers`, any other cell must be a number.
