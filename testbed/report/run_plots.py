@@ -256,11 +256,11 @@ def plot_state(
         ax_depth.plot(t, target, color="k", ls="--", lw=1.0, label="depth target (hold)")
     ax_depth.invert_yaxis()
     handles = [*ax_depth.get_legend_handles_labels()[0], *flags, *marks]
-    ax_depth.legend(handles=handles, loc="lower right", fontsize=8)
+    ax_depth.legend(handles=handles, loc="best", fontsize=8)
     ax_depth.set_xlim(float(t[0]), float(t[-1]))
     ax_tilt.plot(t, series["roll_deg"], color="tab:blue", label="roll")
     ax_tilt.plot(t, series["pitch_deg"], color="tab:green", label="pitch")
-    ax_tilt.legend(loc="lower right", fontsize=8, ncols=2)
+    ax_tilt.legend(loc="best", fontsize=8, ncols=2)
     ax_yaw.plot(t, _wrap_breaks(np.asarray(series["yaw_deg"])), color="tab:orange")
     for ax in time_axes:
         ax.grid(alpha=0.3)
