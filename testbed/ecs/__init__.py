@@ -13,6 +13,7 @@ Standard library only (the layering test allows numpy); no I/O, no clock, no glo
 
 from __future__ import annotations
 
+from testbed.ecs.component import Entity, Origin, Removal, Replicate, check_component_type
 from testbed.ecs.registry import (
     Change,
     ChangeKind,
@@ -25,7 +26,7 @@ from testbed.ecs.registry import (
 )
 from testbed.ecs.schedule import Phase, Schedule, System
 from testbed.ecs.store import FrameStore
-from testbed.ecs.world import Entity, Origin, Removal, Replicate, World, check_component_type
+from testbed.ecs.world import World
 
 __all__ = [
     "Change",

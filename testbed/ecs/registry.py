@@ -22,8 +22,9 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from testbed.ecs.component import Entity, Origin, Replicate, check_component_type
 from testbed.ecs.storage import GONE
-from testbed.ecs.world import Entity, Origin, Replicate, World, check_component_type
+from testbed.ecs.world import World
 
 __all__ = [
     "Change",

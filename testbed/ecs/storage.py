@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from testbed.ecs.world import Entity, Origin
+    from testbed.ecs.component import Entity, Origin
 
 __all__ = ["GONE", "Column", "Slot", "iter_all", "iter_filtered", "scan_one"]
 

@@ -31,16 +31,16 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from testbed.ecs.component import Origin
 from testbed.ecs.storage import GONE, Column, Slot
 
 if TYPE_CHECKING:
-    from testbed.ecs.world import Entity, Origin
+    from testbed.ecs.component import Entity
 
 __all__ = ["FrameStore", "Layout", "RowView", "StoreColumn", "Table"]
 
@@ -253,12 +253,8 @@ class FrameStore:
         return iter(self._tables.items())
 
 
-@functools.cache
-def _origins() -> tuple[Origin, Origin]:
-    """(LOCAL, REMOTE), the origin codes 0 and 1 (imported late: the world imports this)."""
-    from testbed.ecs.world import Origin
-
-    return (Origin.LOCAL, Origin.REMOTE)
+_ORIGINS = (Origin.LOCAL, Origin.REMOTE)
+"""The origins by their codes in ``Table.origins``: 0 LOCAL, 1 REMOTE."""
 
 
 class StoreSlot(Slot):
@@ -309,11 +305,11 @@ class StoreSlot(Slot):
 
     @property
     def origin(self) -> Origin:
-        return _origins()[self._table.origins.item(self._row)]
+        return _ORIGINS[self._table.origins.item(self._row)]
 
     @origin.setter
     def origin(self, origin: Origin) -> None:
-        self._table.origins[self._row] = origin is not _origins()[0]  # 0 LOCAL, 1 REMOTE
+        self._table.origins[self._row] = origin is not Origin.LOCAL  # 0 LOCAL, 1 REMOTE
 
 
 class StoreColumn(Column):

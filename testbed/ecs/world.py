@@ -4,8 +4,9 @@ A :class:`World` holds entities (plain integers allocated in order from 1, never
 components (frozen dataclass instances, one per type per entity) and resources (singletons of
 any type: a physics handle, an allocator, an RNG). Change detection follows Bevy: every stored
 component carries the world tick at which it was added and last changed, and the
-:class:`Origin` of that write. :meth:`World.set` records a change only when the new value differs
-(``!=``) from the stored one, so systems may write every frame without waking their readers.
+:class:`~testbed.ecs.component.Origin` of that write. :meth:`World.set` records a change only
+when the new value differs (``!=``) from the stored one, so systems may write every frame
+without waking their readers.
 
 Ticks are plain integers that only grow. The world never advances its own tick; the
 :class:`~testbed.ecs.schedule.Schedule` advances it once after every system it runs (see that
@@ -16,38 +17,26 @@ previous run tick.
 The removal log grows with every removal; a node that removes components often should call
 :meth:`World.trim_removals` with the oldest tick any reader still needs.
 
-This module is the world's API; column storage and query scans live in
-:mod:`testbed.ecs.storage`, store-backed columns (float64 tables, numpy) in
-:mod:`testbed.ecs.store`. No scheduling, no replication wire format, no I/O, no randomness;
-otherwise the standard library only.
-
-Size: the :class:`World` class is the API and most of the module (storage and scans are already
-in :mod:`testbed.ecs.storage`), so it stays whole, a little over 500 lines.
+This module is the world's API. The value types it stores and records (entity ids, origins,
+removal log entries, the component-type check) live in :mod:`testbed.ecs.component`; the
+resources in :mod:`testbed.ecs.resources` (the world's base class); column storage and query
+scans in :mod:`testbed.ecs.storage`; store-backed columns (float64 tables, numpy) in
+:mod:`testbed.ecs.store`. No scheduling, no replication wire format, no I/O, no
+randomness; otherwise the standard library only.
 """
 
 from __future__ import annotations
 
 import bisect
-import dataclasses
-import enum
 from collections.abc import Iterator
-from dataclasses import dataclass
-from typing import Any, NewType, TypeVar, overload
+from typing import Any, TypeVar, overload
 
+from testbed.ecs.component import Entity, Origin, Removal, Replicate, check_component_type
+from testbed.ecs.resources import Resources
 from testbed.ecs.storage import Column, Slot, iter_all, iter_filtered, scan_one
 from testbed.ecs.store import FrameStore, RowView, StoreColumn
 
-__all__ = [
-    "Entity",
-    "Origin",
-    "Removal",
-    "Replicate",
-    "World",
-    "check_component_type",
-]
-
-Entity = NewType("Entity", int)
-"""An entity id: allocated in order from 1 within one world and never reused."""
+__all__ = ["World"]
 
 C = TypeVar("C")
 C1 = TypeVar("C1")
@@ -57,77 +46,11 @@ C4 = TypeVar("C4")
 D = TypeVar("D")
 
 
-class Origin(enum.Enum):
-    """Who made a write: this node (LOCAL) or the peer, through replication (REMOTE).
-
-    Replication applies inbound changes with ``Origin.REMOTE`` and sends only ``LOCAL`` ones, so a
-    change never echoes back to the node that made it.
-    """
-
-    LOCAL = enum.auto()
-    REMOTE = enum.auto()
-
-
-@dataclass(frozen=True, slots=True)
-class Replicate:
-    """Marker component: this entity's registered components are replicated to the peer.
-
-    Defined here because the world notes, in each :class:`Removal`, whether the entity carried
-    the marker; :mod:`testbed.ecs.registry` re-exports it.
-    """
-
-
-@dataclass(frozen=True, slots=True)
-class Removal:
-    """One entry of the removal log.
-
-    Attributes:
-        tick: world tick at which the removal happened.
-        entity: the entity the component was removed from (or that was despawned).
-        component: the removed component's type, or ``None`` for the despawn of the entity itself
-            (logged after the removals of all its components).
-        origin: who made the removal.
-        replicated: whether the entity carried :class:`Replicate` at the time (for a despawn or
-            the removal of ``Replicate`` itself: whether it carried it just before).
-    """
-
-    tick: int
-    entity: Entity
-    component: type[Any] | None
-    origin: Origin
-    replicated: bool
-
-    @property
-    def is_despawn(self) -> bool:
-        """Whether this entry is the despawn of the entity itself."""
-        return self.component is None
-
-
-_CHECKED_TYPES: set[type[Any]] = {Replicate}
-
-
-def check_component_type(cls: type[Any]) -> None:
-    """Check that ``cls`` may be used as a component type: a frozen dataclass.
-
-    Raises:
-        TypeError: ``cls`` is not a class, not a dataclass, or not frozen.
-    """
-    if cls in _CHECKED_TYPES:
-        return
-    if not isinstance(cls, type):
-        raise TypeError(f"component types must be classes, got {cls!r}")
-    if not dataclasses.is_dataclass(cls):
-        raise TypeError(f"component type {cls.__qualname__} must be a frozen dataclass")
-    params = getattr(cls, "__dataclass_params__", None)
-    if params is None or not params.frozen:
-        raise TypeError(
-            f"component type {cls.__qualname__} must be frozen: use @dataclass(frozen=True)"
-        )
-    _CHECKED_TYPES.add(cls)
-
-
-class World:
+class World(Resources):
     """Entities, components with change ticks, resources and a removal log.
+
+    The resource methods (``insert_resource``, ``resource``, ``has_resource``,
+    ``remove_resource``) come from its base class, :class:`~testbed.ecs.resources.Resources`.
 
     Attributes:
         last_run_tick: the default ``since`` of change-filtered queries. The schedule sets it to
@@ -140,19 +63,18 @@ class World:
         "_entities",
         "_next_id",
         "_removals",
-        "_resources",
         "_tick",
         "last_run_tick",
     )
 
     def __init__(self) -> None:
+        super().__init__()
         self._tick = 1
         self._next_id = 1
         # Alive entities (ascending by construction) → their component types in insertion order.
         self._entities: dict[Entity, dict[type[Any], None]] = {}
         self._columns: dict[type[Any], Column] = {}
         self._removals: list[Removal] = []
-        self._resources: dict[type[Any], object] = {}
         self.last_run_tick: int = 0
 
     # ---------------------------------------------------------------- ticks
@@ -491,34 +413,6 @@ class World:
             raise LookupError(f"single({cls.__name__}): expected exactly one entity, found {count}")
         ((entity, slot),) = column.slots.items()
         return entity, slot.value  # type: ignore[return-value]  # column of cls
-
-    # ------------------------------------------------------------ resources
-
-    def insert_resource(self, resource: object) -> None:
-        """Store ``resource`` under its type, replacing any previous one of that type."""
-        self._resources[type(resource)] = resource
-
-    def resource(self, cls: type[C]) -> C:
-        """The resource of type ``cls``.
-
-        Raises:
-            KeyError: no resource of that type was inserted.
-        """
-        try:
-            return self._resources[cls]  # type: ignore[return-value]  # keyed by its type
-        except KeyError:
-            raise KeyError(
-                f"no resource of type {cls.__qualname__} in this world; "
-                f"insert it with world.insert_resource(...)"
-            ) from None
-
-    def has_resource(self, cls: type[Any]) -> bool:
-        """Whether a resource of type ``cls`` was inserted."""
-        return cls in self._resources
-
-    def remove_resource(self, cls: type[Any]) -> bool:
-        """Remove the resource of type ``cls``; return whether there was one."""
-        return self._resources.pop(cls, None) is not None
 
     # -------------------------------------------------------------- helpers
 
