@@ -24,14 +24,15 @@ maxima (how far the vehicle can push along each axis, for pilot scaling) are rec
 
 The arithmetic of steps 1-4 is one compiled implementation (:mod:`.thrust_kernels`), called
 by :meth:`Allocator.step` (the per-frame path) and so by :meth:`Allocator.allocate`, and by the
-axis-maxima probe; this class holds the configuration, validation and the lsq solve.
+axis-maxima probe; this class holds the configuration, the failures, the limits and the
+validation. The linear algebra over the layout (T and T⁺ under the failures, computed once per
+configuration; the bounded least-squares solve; the axis maxima) is :mod:`.allocation_geometry`.
 
 This is the controller's model of the thrusters; ``thrusters.ThrusterDynamics`` is the plant.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -40,6 +41,7 @@ import numpy as np
 
 from testbed.common import jit
 from testbed.common.jit import CONST_TABLE, I64, MARK, MARKS, TABLE, VECTOR
+from testbed.vehicle.allocation_geometry import effective_layout, probe_axis_maxima, solve_bounded
 from testbed.vehicle.t200 import T200
 from testbed.vehicle.thrust_kernels import (
     FORCES,
@@ -49,7 +51,6 @@ from testbed.vehicle.thrust_kernels import (
     STUCK,
     allocate_pinv,
     allocate_rows,
-    current_scale,
     limit_forces,
     pinv_forces,
     put_output,
@@ -63,30 +64,14 @@ if TYPE_CHECKING:
     from testbed.ecs.store import RowView, Table
 
 __all__ = [
-    "AXIS_DIRECTION_TOLERANCE",
-    "AXIS_PROBE",
     "CURRENT_TOLERANCE_A",
-    "PINV_RTOL",
     "AllocationMethod",
     "Allocator",
     "ThrusterCommand",
-    "pseudoinverse",
 ]
-
-PINV_RTOL = 1e-5
-"""Singular values below this × the largest are treated as zero in T⁺ (mate-rov motor_math)."""
 
 CURRENT_TOLERANCE_A = 0.01
 """A binding current limit is met to within this [A], from below."""
-
-AXIS_PROBE = 15.0
-"""Probe magnitude [N or N·m] for the axis maxima (mate-rov 2025)."""
-
-AXIS_DIRECTION_TOLERANCE = 0.05
-"""mate-rov's ε for the axis probe: the axis counts if |√(15 · (T T⁺ m)_k) - 15| ≤ ε."""
-
-_LSQ_REGULARISATION = 1e-4
-"""Weight of ‖f‖ in the lsq objective, to pick the least-effort solution among equals."""
 
 AllocationMethod = Literal["pinv", "lsq"]
 
@@ -137,24 +122,6 @@ class ThrusterCommand:
     def total_current_a(self) -> float:
         """Σ currents [A]."""
         return float(self.currents_a.sum())
-
-
-def pseudoinverse(matrix: np.ndarray, rtol: float = PINV_RTOL) -> tuple[np.ndarray, int]:
-    """Moore-Penrose pseudoinverse by SVD, and the numerical rank.
-
-    Args:
-        matrix: (r, c) matrix.
-        rtol: singular values ≤ rtol × the largest count as zero.
-
-    Returns:
-        ((c, r) pseudoinverse, rank).
-    """
-    u, s, vt = np.linalg.svd(matrix, full_matrices=False)
-    if s.size == 0 or s[0] == 0.0:
-        return np.zeros(matrix.T.shape), 0
-    keep = s > rtol * s[0]
-    inverse = (vt[keep].T / s[keep]) @ u[:, keep].T
-    return inverse, int(keep.sum())
 
 
 class Allocator:
@@ -221,8 +188,8 @@ class Allocator:
         # rows, not inside a timed run (the frame's own, allocate_rows, is bound at import).
         allocate_pinv(
             np.zeros(6),
-            self._stuck_wrench,
-            self._pinv,
+            self._layout.stuck_wrench,
+            self._layout.pinv,
             self._f_lo,
             self._f_hi,
             -1.0,
@@ -254,17 +221,17 @@ class Allocator:
     @property
     def matrix(self) -> np.ndarray:
         """(6, n) effective T [N, N·m per N]: dead columns zero, degraded ones scaled (a copy)."""
-        return self._matrix_eff.copy()
+        return self._layout.matrix.copy()
 
     @property
     def pinv(self) -> np.ndarray:
         """(n, 6) T⁺ of the thrusters the allocator can command (a copy)."""
-        return self._pinv.copy()
+        return self._layout.pinv.copy()
 
     @property
     def rank(self) -> int:
         """Numerical rank of the commandable part of T (6 = every axis independent)."""
-        return self._rank
+        return self._layout.rank
 
     @property
     def failures(self) -> dict[int, ThrusterFault]:
@@ -333,7 +300,7 @@ class Allocator:
         rows = self._work[:3].copy()
         rows.setflags(write=False)  # and so are the row views below
         forces, pwm, currents = rows
-        achieved = self._matrix_eff @ forces
+        achieved = self._layout.matrix @ forces
         achieved.setflags(write=False)
         return ThrusterCommand(forces, pwm, currents, achieved, scale)
 
@@ -368,11 +335,12 @@ class Allocator:
         else:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
         work = self._work
+        layout = self._layout
         if self.method == "pinv":  # the common case, one compiled call
             scale = allocate_pinv(
                 m,
-                self._stuck_wrench,
-                self._pinv,
+                layout.stuck_wrench,
+                layout.pinv,
                 self._f_lo,
                 self._f_hi,
                 slew_step,
@@ -386,11 +354,13 @@ class Allocator:
             if scale != scale:
                 raise ValueError(f"wrench must be finite, got {m.tolist()}")
             return scale
-        worst = pinv_forces(m, self._stuck_wrench, self._pinv, self._f_lo, self._f_hi, work[FORCES])
+        worst = pinv_forces(
+            m, layout.stuck_wrench, layout.pinv, self._f_lo, self._f_hi, work[FORCES]
+        )
         if worst != worst:
             raise ValueError(f"wrench must be finite, got {m.tolist()}")
         if worst > 1.0:
-            work[FORCES] = self._solve_lsq(m - self._stuck_wrench)
+            work[FORCES] = solve_bounded(layout, m - layout.stuck_wrench, (self._f_lo, self._f_hi))
             worst = 1.0
         return limit_forces(
             work,
@@ -440,8 +410,8 @@ class Allocator:
                 intents.values,
                 intents.marks,
                 requested,
-                self._stuck_wrench,
-                self._pinv,
+                self._layout.stuck_wrench,
+                self._layout.pinv,
                 limits,
                 self._work,
                 self._thrusters,
@@ -469,48 +439,19 @@ class Allocator:
     def axis_maxima_signed(self) -> np.ndarray:
         """(2, 6) largest pure wrench along +e_k (row 0) and -e_k (row 1) [N, N·m], FRD.
 
-        Probe m = ±15 e_k (mate-rov's algorithm, REFERENCE §3.5): f = T⁺m; the axis counts only
-        if √(F·F_req) + √(τ·τ_req) = 15 within :data:`AXIS_DIRECTION_TOLERANCE` (for a one-axis
-        probe: √(15 · (T f)_k) within 0.05 of 15, i.e. its own component delivered to within
-        ≈ 0.1), else it reports 0; then f is scaled up until the first thruster limit or the
-        current budget binds, and the maximum is 15 α.
-
-        Like mate-rov, the test ignores cross-coupling into other axes: on the standard
-        BlueROV2 the laterals sit 7 cm below the CoM and the verticals 1 cm forward of it, and
-        pitch is not in T's range, so T⁺ delivers 14.93 N of a 15 N surge request with a
-        1.05 N·m parasitic pitch moment (heave: 15.00 N with -0.15 N·m), which the vehicle's
-        righting moment absorbs; both axes count. Where T has full rank, T T⁺ m = m exactly.
-        Stuck thrusters' currents come off the budget; their wrench is not counted.
-
-        With the 12 V table this reproduces REFERENCE §3.5's derived maxima (standard and 6-DOF
-        BlueROV2, 25 and 50 A) to within 0.06 N or N·m; tests/vehicle/test_allocation.py
-        lists the two figures that round differently and why.
+        mate-rov's probe (:func:`~testbed.vehicle.allocation_geometry.probe_axis_maxima`) of
+        the layout under the known failures, up to the first thruster limit or the current
+        budget (less the stuck thrusters' current); an axis T⁺ cannot deliver reports 0.
+        Computed once per configuration (read-only).
         """
         if self._axis_maxima is None:
-            maxima = np.zeros((2, 6))
-            no_offset = np.zeros(6)
-            f = np.zeros(self._n)
-            for row, sign in enumerate((1.0, -1.0)):
-                for k in range(6):
-                    probe = np.zeros(6)
-                    probe[k] = sign * AXIS_PROBE
-                    worst = pinv_forces(probe, no_offset, self._pinv, self._f_lo, self._f_hi, f)
-                    along = probe[k] * float(self._matrix_eff[k] @ f)  # F·F_req or τ·τ_req
-                    if along <= 0.0 or worst <= 0.0:
-                        continue
-                    if abs(math.sqrt(along) - AXIS_PROBE) > AXIS_DIRECTION_TOLERANCE:
-                        continue
-                    alpha = current_scale(
-                        f,
-                        self._current_table,
-                        self._cap_active,
-                        1.0 / worst,
-                        -1.0,
-                        CURRENT_TOLERANCE_A,
-                    )
-                    maxima[row, k] = AXIS_PROBE * alpha
-            maxima.setflags(write=False)
-            self._axis_maxima = maxima
+            self._axis_maxima = probe_axis_maxima(
+                self._layout,
+                (self._f_lo, self._f_hi),
+                self._current_table,
+                self._cap_active,
+                CURRENT_TOLERANCE_A,
+            )
         return self._axis_maxima
 
     def axis_maxima(self) -> np.ndarray:
@@ -532,47 +473,15 @@ class Allocator:
         return int(thruster)
 
     def _rebuild(self) -> None:
-        """Recompute T_eff, T⁺, the stuck offsets and the current budget after a change."""
-        gain = np.ones(self._n)
-        commandable = np.ones(self._n, dtype=bool)
-        stuck_forces = np.zeros(self._n)
-        for index, fault in self._failures.items():
-            if fault.mode == "degraded":
-                gain[index] = fault.value
-                commandable[index] = fault.value > 0.0
-            else:
-                commandable[index] = False
-                if fault.mode == "dead":
-                    gain[index] = 0.0
-                else:
-                    stuck_forces[index] = fault.value
-        self._matrix_eff = self._matrix * gain
-        solve = self._matrix_eff * commandable
-        pinv, self._rank = pseudoinverse(solve)
-        pinv[~commandable] = 0.0  # exact zeros, not SVD round-off
-        self._pinv = np.ascontiguousarray(pinv)
-        self._columns = np.flatnonzero(commandable)
-        self._lsq_matrix = np.vstack(
-            [solve[:, self._columns], _LSQ_REGULARISATION * np.eye(self._columns.size)]
-        )
-        self._stuck_wrench = self._matrix_eff @ stuck_forces
-        self._thrusters[STUCK] = stuck_forces
-        stuck_current = total_current(stuck_forces, 1.0, self._current_table)  # 0 A at 0 N
+        """Recompute the effective layout (T_eff, T⁺, the stuck offsets) and the current budget
+        left for the commandable thrusters after a change."""
+        layout = self._layout = effective_layout(self._matrix, self._failures)
+        self._thrusters[STUCK] = layout.stuck_forces
+        stuck_current = total_current(layout.stuck_forces, 1.0, self._current_table)  # 0 A at 0 N
         self._cap_active = self._current_limit_a - stuck_current
         self._limits[3] = self._cap_active
-        self._work[PREVIOUS] *= commandable
+        self._work[PREVIOUS] *= layout.commandable
         self._axis_maxima = None
-
-    def _solve_lsq(self, m: np.ndarray) -> np.ndarray:
-        """Bounded least squares: min ‖T f - m‖ (+ a 1e-4 ‖f‖ tie-break) on the force limits."""
-        from scipy.optimize import lsq_linear  # scipy only on this slow, opt-in path
-
-        target = np.concatenate([m, np.zeros(self._columns.size)])
-        bounds = (self._f_lo, self._f_hi)
-        result = lsq_linear(self._lsq_matrix, target, bounds=bounds, method="bvls")
-        f = np.zeros(self._n)
-        f[self._columns] = np.clip(result.x, self._f_lo, self._f_hi)
-        return f
 
 
 def _positive(value: float, name: str) -> float:

@@ -1,4 +1,5 @@
-"""testbed.vehicle.allocation: f = T⁺m with saturation, current and slew limits, and failures."""
+"""testbed.vehicle.allocation (and its linear algebra, .allocation_geometry): f = T⁺m with
+saturation, current and slew limits, failures, bounded least squares and the axis maxima."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from testbed.vehicle.allocation import CURRENT_TOLERANCE_A, Allocator, pseudoinverse
+from testbed.vehicle.allocation import CURRENT_TOLERANCE_A, Allocator
+from testbed.vehicle.allocation_geometry import pseudoinverse
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.thrusters import T200, ThrusterDynamics, load_thruster_config
 
