@@ -8,8 +8,10 @@ Three layers, none of which does I/O, reads a clock or draws random numbers:
 * :mod:`~testbed.protocol.orders` and :mod:`~testbed.protocol.messages` — the operator and
   vehicle payload layouts.
 
-On top of the messages, :mod:`~testbed.protocol.image_transfer` holds the image transfer state
-machines (:class:`ImageSender`, :class:`ImageAssembler`): chunking, image CRC, selective repeat.
+On top of the messages, the image transfer (chunking, image CRC, selective repeat): its rules and
+chunk layout in :mod:`~testbed.protocol.image_transfer`, its two state machines in
+:mod:`~testbed.protocol.image_sender` (:class:`ImageSender`, the vehicle's) and
+:mod:`~testbed.protocol.image_assembler` (:class:`ImageAssembler`, the operator's).
 
 Sending is ``encode_frame(message.encode())``; receiving is ``decoder.feed(data)`` followed by
 ``decode_vehicle_message(frame.payload)`` (or ``decode_operator_message``) for each
@@ -35,17 +37,9 @@ from .framing import (
     encode_frame,
     frame_overhead,
 )
-from .image_transfer import (
-    IMAGE_CRC_SIZE,
-    MAX_CHUNKS,
-    AssemblyCounters,
-    AssemblyEvent,
-    ImageAssembler,
-    ImageSender,
-    OutgoingChunk,
-    SenderCounters,
-    max_image_bytes,
-)
+from .image_assembler import AssemblyCounters, AssemblyEvent, ImageAssembler
+from .image_sender import ImageSender, OutgoingChunk, SenderCounters
+from .image_transfer import IMAGE_CRC_SIZE, MAX_CHUNKS, max_image_bytes
 from .messages import (
     DEFAULT_CHUNK_SIZE,
     MAX_CHUNK_INDEX,
