@@ -12,6 +12,6 @@ from testbed.common.changeset import ApplyStatus as ApplyStatus
 from testbed.common.changeset import ChangeSetCodec as ChangeSetCodec
 from testbed.common.changeset import ChangeSetReceiver as ChangeSetReceiver
 from testbed.common.changeset import ChangeSetSender as ChangeSetSender
+from testbed.common.field_layouts import FieldDecodeError as FieldDecodeError
 from testbed.common.fieldcodec import FieldCodec as FieldCodec
-from testbed.common.fieldcodec import FieldDecodeError as FieldDecodeError
 from testbed.common.fieldcodec import compile_codec as compile_codec

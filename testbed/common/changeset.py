@@ -65,7 +65,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from testbed.common.fieldcodec import FieldCodec, FieldDecodeError, compile_codec
+from testbed.common.field_layouts import FieldDecodeError
+from testbed.common.fieldcodec import FieldCodec, compile_codec
 from testbed.ecs import (
     Change,
     ChangeKind,

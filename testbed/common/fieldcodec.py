@@ -36,12 +36,16 @@ size (:attr:`FieldCodec.fixed_size`) and encodes with a single precompiled ``str
 variable layout is written field by field, consecutive fixed fields still packed together.
 
 Local misuse (a value of the wrong type, an int out of range, an over-long string) raises
-``ValueError`` naming the component type. Remote garbage raises :class:`FieldDecodeError` and
-nothing else (a ``ValueError``/``TypeError`` from a component's own ``__post_init__`` included);
-the change-set codec turns it into a value. Standard library only; no pickle, no eval.
+``ValueError`` naming the component type. Remote garbage raises
+:class:`~testbed.common.field_layouts.FieldDecodeError` and nothing else (a ``ValueError``/
+``TypeError`` from a component's own ``__post_init__`` included); the change-set codec turns it
+into a value. Standard library only; no pickle, no eval.
 
-Size: the layout nodes and their compiler are one concept (each node is the compiled form of one
-field annotation), kept together, over 500 lines, so that a field type is added in one place.
+Where things live: this module holds the table above, the compiler (annotation → layout node),
+the composite layout of fixed tuples and dataclasses (consecutive fixed fields packed with one
+``struct`` each way) and :class:`FieldCodec`; the node of each single field kind, and
+``FieldDecodeError``, live in :mod:`testbed.common.field_layouts`. A new field type is a node
+there, a branch of :func:`_compile` and a row of the table.
 """
 
 from __future__ import annotations
@@ -54,196 +58,29 @@ import typing
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["FieldCodec", "FieldDecodeError", "compile_codec"]
+from testbed.common.field_layouts import (
+    BoolLayout,
+    Buffer,
+    BytesLayout,
+    FieldDecodeError,
+    IntEnumLayout,
+    LayoutNode,
+    PlainLayout,
+    StrEnumLayout,
+    StrLayout,
+    VarTupleLayout,
+)
 
-U16_MAX = 0xFFFF
-_U16 = struct.Struct(">H")
-_BOOLS = (False, True)
+__all__ = ["FieldCodec", "compile_codec"]
+
 _I64_MIN = -(2**63)
 _I64_MAX = 2**63 - 1
 
-Buffer = bytes | bytearray | memoryview
+
+# ------------------------------------------------------------------------ composite layouts
 
 
-class FieldDecodeError(ValueError):
-    """Bytes that are not a valid encoding of the component type (remote data)."""
-
-
-# ------------------------------------------------------------------------------ layout nodes
-
-
-class _Node:
-    """One field type's layout. Fixed nodes also have struct formats and a flat form.
-
-    Attributes:
-        fixed: whether every value has the same size (then the struct attributes are set).
-        pack_fmt, unpack_fmt: struct format characters (no byte-order prefix); they differ only
-            for bools (packed with ``?``, which writes any truth value as 0/1, read as ``B``).
-        width: number of flat primitives a value becomes.
-        size: encoded size [B].
-        plain_out: the value is its own flat form (appended as is when flattening).
-        plain_in: the flat primitive is the value (no conversion when building).
-    """
-
-    __slots__ = ("fixed", "pack_fmt", "plain_in", "plain_out", "size", "unpack_fmt", "width")
-
-    def __init__(self, pack_fmt: str | None, unpack_fmt: str | None = None) -> None:
-        self.fixed = pack_fmt is not None
-        self.pack_fmt = pack_fmt or ""
-        self.unpack_fmt = unpack_fmt if unpack_fmt is not None else self.pack_fmt
-        self.width = len(self.pack_fmt)
-        self.size = struct.calcsize(">" + self.pack_fmt) if self.fixed else 0
-        self.plain_out = False
-        self.plain_in = False
-
-    # Fixed nodes: flat forms.
-    def flatten(self, value: Any, out: list[Any]) -> None:
-        """Append the flat primitives of ``value`` to ``out``."""
-        raise NotImplementedError
-
-    def build(self, values: Sequence[Any], i: int) -> Any:
-        """The value made of ``values[i : i + width]``."""
-        raise NotImplementedError
-
-    # Every node: streaming form.
-    def write(self, value: Any, out: bytearray) -> None:
-        """Append the encoding of ``value`` to ``out``."""
-        flat: list[Any] = []
-        self.flatten(value, flat)
-        out += struct.pack(">" + self.pack_fmt, *flat)
-
-    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
-        """The value encoded at ``buf[pos:]`` and the position after it."""
-        values = struct.unpack_from(">" + self.unpack_fmt, buf, pos)
-        return self.build(values, 0), pos + self.size
-
-
-class _Plain(_Node):
-    """int (``q``) or float (``d``): the Python value is the struct value."""
-
-    __slots__ = ()
-
-    def __init__(self, fmt: str) -> None:
-        super().__init__(fmt)
-        self.plain_out = self.plain_in = True
-
-    def flatten(self, value: Any, out: list[Any]) -> None:
-        out.append(value)
-
-    def build(self, values: Sequence[Any], i: int) -> Any:
-        return values[i]
-
-
-class _Bool(_Node):
-    """bool: packed by truth as 0/1, read back strictly (only 0 or 1)."""
-
-    __slots__ = ()
-
-    def __init__(self) -> None:
-        super().__init__("?", "B")
-        self.plain_out = True
-
-    def flatten(self, value: Any, out: list[Any]) -> None:
-        out.append(value)
-
-    def build(self, values: Sequence[Any], i: int) -> Any:
-        return _BOOLS[values[i]]  # IndexError on 2..255: malformed
-
-
-class _IntEnum(_Node):
-    """Enum with int values: its value as an i64."""
-
-    __slots__ = ("cls", "members", "values")
-
-    def __init__(self, cls: type[enum.Enum]) -> None:
-        super().__init__("q")
-        self.cls = cls
-        self.values = {member: member.value for member in cls}
-        self.members = {member.value: member for member in cls}
-
-    def flatten(self, value: Any, out: list[Any]) -> None:
-        try:
-            out.append(self.values[value])
-        except (KeyError, TypeError):
-            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}") from None
-
-    def build(self, values: Sequence[Any], i: int) -> Any:
-        member = self.members.get(values[i])
-        return self.cls(values[i]) if member is None else member  # flags: composite values
-
-
-class _Str(_Node):
-    """str: u16 byte count + UTF-8."""
-
-    __slots__ = ()
-
-    def __init__(self) -> None:
-        super().__init__(None)
-
-    def write(self, value: Any, out: bytearray) -> None:
-        if not isinstance(value, str):
-            raise TypeError(f"expected a str, got {value!r}")
-        data = value.encode("utf-8")
-        _write_counted(data, out)
-
-    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
-        data, pos = _read_counted(buf, pos)
-        return str(data, "utf-8"), pos
-
-
-class _Bytes(_Node):
-    """bytes: u16 byte count + the bytes."""
-
-    __slots__ = ()
-
-    def __init__(self) -> None:
-        super().__init__(None)
-
-    def write(self, value: Any, out: bytearray) -> None:
-        if not isinstance(value, bytes | bytearray):
-            raise TypeError(f"expected bytes, got {value!r}")
-        _write_counted(value, out)
-
-    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
-        return _read_counted(buf, pos)
-
-
-class _StrEnum(_Node):
-    """Enum with str values: its value as a str."""
-
-    __slots__ = ("cls",)
-
-    def __init__(self, cls: type[enum.Enum]) -> None:
-        super().__init__(None)
-        self.cls = cls
-
-    def write(self, value: Any, out: bytearray) -> None:
-        if not isinstance(value, self.cls):
-            raise TypeError(f"expected a {self.cls.__qualname__}, got {value!r}")
-        _write_counted(value.value.encode("utf-8"), out)
-
-    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
-        data, pos = _read_counted(buf, pos)
-        return self.cls(str(data, "utf-8")), pos
-
-
-def _write_counted(data: bytes | bytearray, out: bytearray) -> None:
-    if len(data) > U16_MAX:
-        raise ValueError(f"{len(data)} B is longer than the {U16_MAX} B a u16 count allows")
-    out += _U16.pack(len(data))
-    out += data
-
-
-def _read_counted(buf: Buffer, pos: int) -> tuple[bytes, int]:
-    (count,) = _U16.unpack_from(buf, pos)
-    start = pos + 2
-    end = start + count
-    if end > len(buf):
-        raise FieldDecodeError(f"{count} B announced, {len(buf) - start} B left")
-    return bytes(buf[start:end]), end
-
-
-class _Composite(_Node):
+class _Composite(LayoutNode):
     """A fixed tuple or a dataclass: its children in order.
 
     Attributes:
@@ -260,7 +97,7 @@ class _Composite(_Node):
 
     def __init__(
         self,
-        children: Sequence[_Node],
+        children: Sequence[LayoutNode],
         parts: Callable[[Any], Sequence[Any]],
         make: Callable[..., Any],
     ) -> None:
@@ -286,7 +123,7 @@ class _Composite(_Node):
 
     def write(self, value: Any, out: bytearray) -> None:
         if self.fixed:
-            _Node.write(self, value, out)
+            LayoutNode.write(self, value, out)
             return
         parts = self.parts(value)
         for start, stop, run in self.segments:
@@ -299,7 +136,7 @@ class _Composite(_Node):
 
     def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
         if self.fixed:
-            return _Node.read(self, buf, pos)
+            return LayoutNode.read(self, buf, pos)
         args: list[Any] = []
         for start, _, run in self.segments:
             if run is None:
@@ -321,7 +158,7 @@ _FlatOp = tuple[int, int, Callable[[Any, list[Any]], None]]
 _BuildOp = tuple[int, int, Callable[[Sequence[Any], int], Any]]
 
 
-def _flat_op(child: _Node) -> _FlatOp:
+def _flat_op(child: LayoutNode) -> _FlatOp:
     if child.plain_out:
         return (_APPEND, 1, child.flatten)
     if _plain_tuple(child, "plain_out"):
@@ -329,7 +166,7 @@ def _flat_op(child: _Node) -> _FlatOp:
     return (_CALL, child.width, child.flatten)
 
 
-def _build_op(child: _Node) -> _BuildOp:
+def _build_op(child: LayoutNode) -> _BuildOp:
     if child.plain_in:
         return (_APPEND, 1, child.build)
     if _plain_tuple(child, "plain_in"):
@@ -337,7 +174,7 @@ def _build_op(child: _Node) -> _BuildOp:
     return (_CALL, child.width, child.build)
 
 
-def _plain_tuple(child: _Node, plain: str) -> bool:
+def _plain_tuple(child: LayoutNode, plain: str) -> bool:
     """Whether ``child`` is a fixed tuple whose items are all plain (``plain_out``/``plain_in``)."""
     return (
         isinstance(child, _Composite)
@@ -411,85 +248,17 @@ def _segments(composite: _Composite) -> tuple[_Segment, ...]:
     return tuple(segments)
 
 
-class _VarTuple(_Node):
-    """``tuple[A, ...]``: u16 item count + the items (fixed items in one struct call)."""
-
-    __slots__ = ("item", "packers", "unpackers")
-
-    def __init__(self, item: _Node) -> None:
-        super().__init__(None)
-        self.item = item
-        # Structs per item count, for counts up to _CACHED_COUNT (bounded memory).
-        self.packers: dict[int, struct.Struct] = {}
-        self.unpackers: dict[int, struct.Struct] = {}
-
-    def write(self, value: Any, out: bytearray) -> None:
-        if not isinstance(value, tuple):
-            raise TypeError(f"expected a tuple, got {value!r}")
-        count = len(value)
-        if count > U16_MAX:
-            raise ValueError(f"{count} items; a u16 count allows at most {U16_MAX}")
-        item = self.item
-        if not item.fixed:
-            out += _U16.pack(count)
-            for part in value:
-                item.write(part, out)
-            return
-        flat: list[Any] | tuple[Any, ...] = value
-        if not item.plain_out:
-            flat = []
-            for part in value:
-                item.flatten(part, flat)
-        packer = self.packers.get(count) or _cached(self.packers, "H", item.pack_fmt, count)
-        out += packer.pack(count, *flat)
-
-    def read(self, buf: Buffer, pos: int) -> tuple[Any, int]:
-        (count,) = _U16.unpack_from(buf, pos)
-        pos += 2
-        item = self.item
-        if not item.fixed:
-            items = []
-            for _ in range(count):
-                part, pos = item.read(buf, pos)
-                items.append(part)
-            return tuple(items), pos
-        end = pos + count * item.size
-        if end > len(buf):
-            raise FieldDecodeError(f"{count} items announced, {len(buf) - pos} B left")
-        unpacker = self.unpackers.get(count) or _cached(self.unpackers, "", item.unpack_fmt, count)
-        values = unpacker.unpack_from(buf, pos)
-        if item.plain_in:
-            return values, end
-        width = item.width
-        return tuple(item.build(values, k * width) for k in range(count)), end
-
-
-_CACHED_COUNT = 256
-
-
-def _cached(cache: dict[int, struct.Struct], prefix: str, fmt: str, count: int) -> struct.Struct:
-    """The struct of ``prefix`` then ``count`` repetitions of ``fmt``, cached for small counts."""
-    packer = struct.Struct(">" + prefix + _repeat(fmt, count))
-    if count <= _CACHED_COUNT:
-        cache[count] = packer
-    return packer
-
-
-def _repeat(fmt: str, count: int) -> str:
-    return f"{count}{fmt}" if len(fmt) == 1 else fmt * count
-
-
 # ----------------------------------------------------------------------------- compilation
 
 
-_INT = _Plain("q")
-_FLOAT = _Plain("d")
-_BOOL = _Bool()
-_STR = _Str()
-_BYTES = _Bytes()
+_INT = PlainLayout("q")
+_FLOAT = PlainLayout("d")
+_BOOL = BoolLayout()
+_STR = StrLayout()
+_BYTES = BytesLayout()
 
 
-def _compile(annotation: Any, where: str) -> _Node:
+def _compile(annotation: Any, where: str) -> LayoutNode:
     """The layout of one (registry-checked) field type."""
     if annotation is bool:
         return _BOOL
@@ -511,20 +280,20 @@ def _compile(annotation: Any, where: str) -> _Node:
     if typing.get_origin(annotation) is tuple:
         args = typing.get_args(annotation)
         if len(args) == 2 and args[1] is Ellipsis:
-            return _VarTuple(_compile(args[0], f"{where}[]"))
+            return VarTupleLayout(_compile(args[0], f"{where}[]"))
         children = [_compile(arg, f"{where}[{k}]") for k, arg in enumerate(args)]
         return _Composite(children, _tuple_checker(len(children)), _make_tuple)
     raise TypeError(f"{where}: no codec for field type {annotation!r}")
 
 
-def _compile_enum(cls: type[enum.Enum], where: str) -> _Node:
+def _compile_enum(cls: type[enum.Enum], where: str) -> LayoutNode:
     values = [member.value for member in cls]
     if all(isinstance(v, int) for v in values):
         if not all(_I64_MIN <= v <= _I64_MAX for v in values):
             raise TypeError(f"{where}: enum {cls.__qualname__} has values outside i64")
-        return _IntEnum(cls)
+        return IntEnumLayout(cls)
     if all(isinstance(v, str) for v in values):
-        return _StrEnum(cls)
+        return StrEnumLayout(cls)
     raise TypeError(
         f"{where}: enum {cls.__qualname__} must have all-int or all-str values to be replicated"
     )

@@ -12,7 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from testbed.common.fieldcodec import FieldDecodeError, compile_codec
+from testbed.common.field_layouts import FieldDecodeError
+from testbed.common.fieldcodec import compile_codec
 
 I64_MIN = -(2**63)
 I64_MAX = 2**63 - 1
