@@ -29,7 +29,8 @@ from typing import Protocol
 
 import numpy as np
 
-from testbed.common.changeset import ChangeSetReceiver, ChangeSetSender
+from testbed.common.changeset_receiver import ChangeSetReceiver
+from testbed.common.changeset_sender import ChangeSetSender
 from testbed.common.components import MovementCommand, Odometry, register_components
 from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
 from testbed.ecs import ComponentRegistry, Origin, Side, World

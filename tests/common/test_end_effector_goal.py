@@ -14,7 +14,8 @@ import pytest
 
 import testbed.common.components as common_components
 import testbed.vehicle.components as vehicle_components
-from testbed.common.changeset import ApplyStatus, ChangeSetReceiver, ChangeSetSender
+from testbed.common.changeset_receiver import ApplyStatus, ChangeSetReceiver
+from testbed.common.changeset_sender import ChangeSetSender
 from testbed.common.components import (
     REPLICATED,
     ControlMode,

@@ -16,7 +16,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from testbed.common.changeset import ApplyStatus, ChangeSetCodec, ChangeSetReceiver
+from testbed.common.changeset import ChangeSetCodec
+from testbed.common.changeset_receiver import ApplyStatus, ChangeSetReceiver
 from testbed.common.components import (
     ArmRequest,
     AttitudeSetpoint,
