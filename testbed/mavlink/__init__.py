@@ -7,6 +7,8 @@
 * :mod:`~testbed.mavlink.telemetry` — the vehicle's components as ArduSub's telemetry.
 * :mod:`~testbed.mavlink.ardusub` — ArduSub's numbers: modes, heartbeat flags, stream groups,
   MANUAL_CONTROL scaling.
+* :mod:`~testbed.mavlink.motors` — ArduSub's motor numbering of a frame (``AP_Motors6DOF``),
+  the servo outputs and MOT_n_DIRECTION of a thruster layout.
 * :mod:`~testbed.mavlink.params` — the parameter table (``data/ardusub_params.csv``).
 * :mod:`~testbed.mavlink.wire` — pymavlink's ``ardupilotmega`` dialect as a bytes codec.
 * :mod:`~testbed.mavlink.links` — UDP, TCP and serial links with reader threads.
@@ -18,6 +20,7 @@ Imports: ``common``, ``ecs``, ``hil`` (serial transport), pymavlink and the stan
 from __future__ import annotations
 
 from .endpoint import OUTBOX_LIMIT, Channel, EndpointOptions, VehicleEndpoint
+from .motors import ServoOutputs, servo_outputs
 from .params import Param, ParamTable, load_params
 from .telemetry import HOME_LAT_LON_DEG, VehicleSnapshot
 from .wire import MavlinkWire
@@ -30,7 +33,9 @@ __all__ = [
     "MavlinkWire",
     "Param",
     "ParamTable",
+    "ServoOutputs",
     "VehicleEndpoint",
     "VehicleSnapshot",
     "load_params",
+    "servo_outputs",
 ]

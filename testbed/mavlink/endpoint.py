@@ -51,6 +51,7 @@ from testbed.ecs import Entity, Origin, World
 from testbed.mavlink import commands, guided
 from testbed.mavlink.ardusub import RcInput, boot_gain, manual_control_pwm, sticks_from_rc
 from testbed.mavlink.failsafe import FailsafeMonitor
+from testbed.mavlink.motors import ServoOutputs
 from testbed.mavlink.params import ParamTable
 from testbed.mavlink.streams import StreamSchedule
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
@@ -92,12 +93,15 @@ class EndpointOptions:
             intents arrive; LOCAL in a gateway's operator world).
         params_per_update: PARAM_VALUEs a channel sends per :meth:`VehicleEndpoint.update`
             during a parameter download (ArduPilot paces them by link bandwidth).
+        servos: which thruster's pulse each SERVO_OUTPUT_RAW channel carries (ArduSub's motor
+            numbering for an ArduSub frame; by default thruster k on servo k + 1).
     """
 
     battery_voltage_v: float = 14.8
     param_overrides: dict[str, float] = field(default_factory=dict)
     origin: Origin = Origin.REMOTE
     params_per_update: int = 20
+    servos: ServoOutputs = field(default_factory=ServoOutputs)
 
 
 class Channel:
@@ -438,6 +442,7 @@ class VehicleEndpoint:
             rc_channels=tuple(self.rc.channels),
             gain=self.gain,
             critical=self.failsafe.active,
+            servos=self.options.servos,
             clock_s=now_s,
         )
         if math.isnan(snapshot.current_a):  # no thruster currents (a shore gateway)

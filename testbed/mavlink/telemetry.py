@@ -37,6 +37,7 @@ from testbed.common.geometry import euler_from_quat, quat_conjugate, quat_multip
 from testbed.common.hydrostatics import ardusub_pressure_pa
 from testbed.ecs import Entity, World
 from testbed.mavlink.ardusub import base_mode
+from testbed.mavlink.motors import ServoOutputs
 
 __all__ = [
     "BUILDERS",
@@ -141,7 +142,9 @@ class VehicleSnapshot:
             reading: a shore gateway).
         position_ned_m: (3,) position [m], NED (x, y 0 without a position fix).
         velocity_ned_m_s: (3,) velocity [m/s], NED (estimated from the position).
-        pwm_us: per-thruster pulse widths [µs] (empty before the first allocation).
+        servo_us: (16,) SERVO1..16 pulse widths [µs] in ArduSub's motor numbering
+            (:class:`~testbed.mavlink.motors.ServoOutputs`), 0 = unused (also before the first
+            allocation).
         current_a: total thruster current [A]; NaN when unknown (a shore gateway).
         voltage_v: battery voltage [V].
         remaining_pct: battery remaining [%].
@@ -164,7 +167,7 @@ class VehicleSnapshot:
     pressure_pa: float
     position_ned_m: tuple[float, float, float]
     velocity_ned_m_s: tuple[float, float, float]
-    pwm_us: tuple[float, ...]
+    servo_us: tuple[int, ...]
     current_a: float
     voltage_v: float
     remaining_pct: int
@@ -205,11 +208,13 @@ def read_vehicle(
     rc_channels: tuple[int, ...],
     gain: float,
     critical: bool,
+    servos: ServoOutputs,
     clock_s: float = math.nan,
 ) -> VehicleSnapshot:
     """Snapshot the vehicle-owned components of ``vehicle``, a state of time ``time_s`` [s]
     read at the endpoint's ``clock_s`` [s] (NaN: the same); the rest is the endpoint's
-    (battery, RC inputs, gain, failsafe). ``velocity`` is folded the new position. Attitude:
+    (battery, RC inputs, gain, failsafe); ``servos`` puts the thrusters' pulses on ArduSub's
+    servo outputs. ``velocity`` is folded the new position. Attitude:
     the IMU's, else the odometry's (a mirrored copy on shore). ArduSub's throttle is read from
     RC channel 3 (1100..1900 µs → 0..1)."""
     imu = world.get(vehicle, ImuReading)
@@ -240,7 +245,7 @@ def read_vehicle(
         pressure_pa=ardusub_pressure_pa(position[2]) if depth is None else depth.pressure_pa,
         position_ned_m=position,
         velocity_ned_m_s=velocity.velocity_ned_m_s,
-        pwm_us=() if output is None else output.pwm_us,
+        servo_us=servos.pulses(() if output is None else output.pwm_us),
         current_a=math.nan if output is None else float(sum(output.currents_a)),
         voltage_v=voltage_v,
         remaining_pct=remaining_pct,
@@ -402,9 +407,7 @@ def _system_time(s: VehicleSnapshot) -> mav.MAVLink_message:
 
 
 def _servo_output_raw(s: VehicleSnapshot) -> mav.MAVLink_message:
-    pwm = [round(p) for p in s.pwm_us[:16]]
-    pwm += [0] * (16 - len(pwm))
-    return mav.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *pwm)
+    return mav.MAVLink_servo_output_raw_message(s.time_usec & 0xFFFFFFFF, 0, *s.servo_us)
 
 
 def _rc_channels(s: VehicleSnapshot) -> mav.MAVLink_message:

@@ -44,7 +44,7 @@ import simpy.rt
 from testbed.channel import Trace
 from testbed.ecs import Phase, World
 from testbed.hil import latency_summary_ms
-from testbed.mavlink import EndpointOptions, VehicleEndpoint
+from testbed.mavlink import EndpointOptions, ServoOutputs, VehicleEndpoint, servo_outputs
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
@@ -56,21 +56,21 @@ from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario import Scenario
 from testbed.vehicle.resources import SimClock
+from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.vehicle_config import VehicleConfig
 
 __all__ = [
-    "FRAME_CONFIGS",
     "EndpointPilot",
     "MavlinkVehicleNode",
+    "endpoint_options",
     "endpoint_section",
+    "layout_servos",
     "mavlink_metrics",
     "mavlink_vehicle_config",
     "run_mavlink",
 ]
 
-FRAME_CONFIGS = {"bluerov2": 1, "bluerov2-heavy": 2}
-"""Thruster layout → ArduSub FRAME_CONFIG (Vectored, Vectored_6DOF); others 7 (custom)."""
 _DAY_S = 86400.0
 _SAMPLES = 200_000
 
@@ -85,6 +85,43 @@ class EndpointPilot:
     def sample(self, t_s: float) -> PilotSample:
         del t_s
         return PilotSample(sticks_from_rc(self._endpoint.rc.channels))
+
+
+def layout_servos(layout: ThrusterConfig) -> ServoOutputs:
+    """The servo outputs of a thruster layout: ArduSub's motor numbering and MOT_n_DIRECTION
+    for a layout that declares its ArduSub frame (``[ardusub]``), else each thruster on its
+    ``pwm_channel`` (FRAME_CONFIG 7); :func:`~testbed.mavlink.motors.servo_outputs`.
+
+    Raises:
+        ConfigError: the layout's ArduSub numbering disagrees with ArduSub's factors.
+    """
+    frame = layout.ardusub
+    return servo_outputs(
+        None if frame is None else frame.frame_config,
+        layout.ardusub_motor_columns,
+        layout.matrix,
+        layout.ccw_mask.tolist(),
+        [t.pwm_channel for t in layout.thrusters],
+        source=layout.name,
+    )
+
+
+def endpoint_options(
+    config: VehicleConfig,
+    layout: ThrusterConfig,
+    boot_params: Mapping[str, float] | None = None,
+) -> EndpointOptions:
+    """How the endpoint presents a vehicle of ``config`` with thruster ``layout``: its supply
+    voltage, ArduSub's servo numbering of the layout, and the boot parameters FRAME_CONFIG and
+    MOT_n_DIRECTION (the layout's), BARO_SPEC_GRAV (the depth sensor's), then ``boot_params``
+    (``--param``) over them."""
+    servos = layout_servos(layout)
+    overrides = {
+        **servos.param_overrides(),
+        "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
+        **(boot_params or {}),
+    }
+    return EndpointOptions(config.supply_voltage_v, overrides, servos=servos)
 
 
 def mavlink_vehicle_config(config: VehicleConfig) -> VehicleConfig:
@@ -125,12 +162,7 @@ class MavlinkVehicleNode:
         config = mavlink_vehicle_config(scenario.vehicle)
         self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
         vehicle = self.vehicle
-        overrides = {
-            "FRAME_CONFIG": float(FRAME_CONFIGS.get(config.thrusters, 7)),
-            "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
-            **(boot_params or {}),
-        }
-        options = EndpointOptions(config.supply_voltage_v, overrides)
+        options = endpoint_options(config, vehicle.thruster_config, boot_params)
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, options
         )

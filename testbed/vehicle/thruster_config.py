@@ -11,6 +11,9 @@ The packaged layouts live in ``testbed/vehicle/data/thrusters/*.toml`` and are r
 :func:`mate_rov_to_frd` (x_frd = Y, y_frd = X, z_frd = -Z, a proper rotation, so moments map
 the same way). ``direction`` is the way the thruster pushes the vehicle for a *positive*
 force, i.e. the T200's stronger ("forward") thrust; handedness only changes the PWM mapping.
+A layout that is one of ArduSub's frames says so in an optional ``[ardusub]`` table
+(:class:`ArduSubFrame`: its FRAME_CONFIG and which thruster is ArduSub's motor 1, 2, …), so a
+MAVLink endpoint reports the thrusters in ArduSub's numbering.
 
 Pure geometry: no thruster curves (``thrusters.py``) and no allocation (``allocation.py``).
 """
@@ -37,6 +40,7 @@ from testbed.config import (
 )
 
 __all__ = [
+    "ArduSubFrame",
     "Handedness",
     "ThrusterConfig",
     "ThrusterSpec",
@@ -101,6 +105,31 @@ class ThrusterSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class ArduSubFrame:
+    """The ArduSub frame a layout is, and ArduSub's numbering of its thrusters.
+
+    Attributes:
+        frame_config: ArduSub's FRAME_CONFIG (``AP_Motors6DOF::sub_frame_t``: 1 Vectored,
+            2 Vectored_6DOF, …; 0–7).
+        motors: thruster names in ArduSub's motor order: entry k is motor k + 1 (SERVO k + 1),
+            as ``AP_Motors6DOF::setup_motors`` places that frame's motors.
+    """
+
+    frame_config: int
+    motors: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        check(
+            0 <= self.frame_config <= 7,
+            "frame_config",
+            f"must be an ArduSub FRAME_CONFIG 0..7, got {self.frame_config}",
+        )
+        repeated = sorted({m for m in self.motors if self.motors.count(m) > 1})
+        check(bool(self.motors), "motors", "must name at least one thruster")
+        check(not repeated, "motors", f"names a thruster twice: {repeated}")
+
+
+@dataclass(frozen=True, slots=True)
 class ThrusterConfig:
     """A vehicle's thruster layout, in body FRD.
 
@@ -111,6 +140,8 @@ class ThrusterConfig:
         current_budget_a: total thruster current the allocator may draw [A].
         slew_limit_n_per_s: per-thruster force rate limit [N/s].
         source: where the figures come from (free text).
+        ardusub: the ArduSub frame the layout is, with ArduSub's motor numbering (None: not
+            one of ArduSub's frames).
     """
 
     name: str
@@ -119,6 +150,7 @@ class ThrusterConfig:
     current_budget_a: float = 50.0
     slew_limit_n_per_s: float = 100.0
     source: str = ""
+    ardusub: ArduSubFrame | None = None
 
     def __post_init__(self) -> None:
         check(len(self.thrusters) > 0, "thrusters", "needs at least one thruster")
@@ -143,6 +175,13 @@ class ThrusterConfig:
             "slew_limit_n_per_s",
             f"must be > 0, got {self.slew_limit_n_per_s}",
         )
+        if self.ardusub is not None:
+            unknown = [m for m in self.ardusub.motors if m not in names]
+            check(
+                not unknown,
+                "ardusub.motors",
+                f"no thruster called {unknown} (thrusters: {', '.join(names)})",
+            )
 
     @property
     def n_thrusters(self) -> int:
@@ -170,6 +209,13 @@ class ThrusterConfig:
         arms = positions - np.asarray(self.center_of_mass_m, dtype=np.float64)
         return np.vstack([directions.T, np.cross(arms, directions).T])
 
+    @property
+    def ardusub_motor_columns(self) -> tuple[int, ...]:
+        """Column index of ArduSub's motor 1, 2, … (empty without an ``ardusub`` frame)."""
+        if self.ardusub is None:
+            return ()
+        return tuple(self.index_of(name) for name in self.ardusub.motors)
+
     def index_of(self, name: str) -> int:
         """Column index of the thruster called ``name``.
 
@@ -195,6 +241,7 @@ class _ThrusterFile:
     slew_limit_n_per_s: float
     thrusters: tuple[ThrusterSpec, ...]
     center_of_mass_m: Vector3 = (0.0, 0.0, 0.0)
+    ardusub: ArduSubFrame | None = None
 
     def __post_init__(self) -> None:
         check(  # in the file's own frame, as the user wrote it
@@ -240,8 +287,9 @@ def read_thruster_config(path: str | Path) -> ThrusterConfig:
     Args:
         path: the TOML file. Keys: ``name``, ``frame`` (``"frd"`` or
             ``"mate-rov"``), ``source``, ``current_budget_a``, ``slew_limit_n_per_s``,
-            optional ``center_of_mass_m``, and ``[[thrusters]]`` tables with ``name``,
-            ``position_m``, ``direction``, ``handedness``, ``pwm_channel``.
+            optional ``center_of_mass_m``, ``[[thrusters]]`` tables with ``name``,
+            ``position_m``, ``direction``, ``handedness``, ``pwm_channel``, and an optional
+            ``[ardusub]`` table (``frame_config``, ``motors``: :class:`ArduSubFrame`).
 
     Raises:
         ConfigError: unreadable file, unknown or missing key, bad value (names file and key).
@@ -272,6 +320,7 @@ def _read_layout(path: str | Path) -> ThrusterConfig:
             current_budget_a=raw.current_budget_a,
             slew_limit_n_per_s=raw.slew_limit_n_per_s,
             source=raw.source,
+            ardusub=raw.ardusub,
         )
     except FieldError as err:
         raise ConfigError(f"{source}: {err.key}: {err.message}") from None

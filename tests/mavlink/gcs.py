@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.mavlink import EndpointOptions, VehicleEndpoint
+from testbed.mavlink import VehicleEndpoint
+from testbed.run.mavlink_run import endpoint_options
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.vehicle import Vehicle
 
@@ -49,8 +50,9 @@ class SimGcs:
             config = dataclasses.replace(config, sensors=sensors)
         self.vehicle = Vehicle(config, np.random.default_rng(0))
         vehicle = self.vehicle
+        options = endpoint_options(config, vehicle.thruster_config)  # as a MAVLink run's
         self.endpoint = VehicleEndpoint(
-            vehicle.world, vehicle.entity, vehicle.operator_entity, EndpointOptions()
+            vehicle.world, vehicle.entity, vehicle.operator_entity, options
         )
         self.channel = self.endpoint.open_channel("test")
         self.mav = self.make_sender(sysid)

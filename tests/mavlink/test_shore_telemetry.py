@@ -12,6 +12,7 @@ import pytest
 from testbed.common.components import Odometry
 from testbed.common.geometry import quat_from_axis_angle, quat_from_euler, quat_multiply
 from testbed.ecs import World
+from testbed.mavlink.motors import ServoOutputs
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
 
 
@@ -26,6 +27,7 @@ def _snapshot(world: World, entity: int, t: float, velocity: VelocityEstimator) 
         rc_channels=(1500,) * 18,
         gain=0.5,
         critical=False,
+        servos=ServoOutputs(),
     )
 
 

@@ -245,3 +245,33 @@ def test_bad_files_name_file_and_key(tmp_path: Path) -> None:
     duplicate.write_text(text.replace("pwm_channel = 5", "pwm_channel = 4"))
     with pytest.raises(ConfigError, match=r"duplicate.toml: thrusters: duplicate pwm channels"):
         read_thruster_config(duplicate)
+
+
+def test_the_ardusub_table_names_the_layouts_thrusters(tmp_path: Path) -> None:
+    text = (
+        resources.files("testbed.vehicle")
+        .joinpath("data", "thrusters", "bluerov2.toml")
+        .read_text()
+    )
+    cfg = load_thruster_config("bluerov2")
+    assert cfg.ardusub is not None and cfg.ardusub.frame_config == 1
+    assert [cfg.names[c] for c in cfg.ardusub_motor_columns] == list(cfg.ardusub.motors)
+    assert load_thruster_config("ecs-4h").ardusub is None  # no ArduSub frame: ()
+    assert load_thruster_config("ecs-4h").ardusub_motor_columns == ()
+    last = '    "VerticalLeft",\n]'
+    cases = {
+        "unknown": (last, '    "VerticalLeft",\n    "Nowhere",\n]'),
+        "twice": (last, '    "VerticalRight",\n]'),
+        "frame": ("frame_config = 1", "frame_config = 9"),
+    }
+    messages = {
+        "unknown": r"unknown.toml: ardusub.motors: no thruster called \['Nowhere'\]",
+        "twice": r"twice.toml: ardusub.motors: names a thruster twice: \['VerticalRight'\]",
+        "frame": r"frame.toml: ardusub.frame_config: must be an ArduSub FRAME_CONFIG 0..7",
+    }
+    for name, (old, new) in cases.items():
+        assert old in text
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text.replace(old, new))
+        with pytest.raises(ConfigError, match=messages[name]):
+            read_thruster_config(path)
