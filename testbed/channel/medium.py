@@ -495,7 +495,7 @@ class Modem:
             counters.rx_collided += 1
             counters.rx_deaf += rec.deaf
             if trace is not None:
-                kind = EventKind.COLLIDE
+                kind = EventKind.DEAF if rec.deaf else EventKind.COLLIDE
                 trace.record(now, kind, rec.src, self.name, frame_id, part, len(data))
             return
         if self._corrupt_keys:

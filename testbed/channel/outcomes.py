@@ -48,7 +48,8 @@ class FrameOutcome(enum.StrEnum):
     CORRUPTED = "corrupted"
     """A packet arrived with flipped bits (the receiver's CRC rejects the frame)."""
     COLLIDED = "collided"
-    """A packet was destroyed by an overlapping transmission."""
+    """A packet was destroyed by an overlapping transmission: another copy at the receiver
+    (trace kind ``collide``) or, half duplex, the receiver's own (``deaf``)."""
     OUTAGE = "outage"
     """A packet overlapped a link outage window."""
     OUT_OF_RANGE = "out_of_range"
@@ -74,6 +75,7 @@ RECEPTION_OUTCOMES: dict[EventKind, FrameOutcome] = {
     EventKind.DELIVER: FrameOutcome.DELIVERED,
     EventKind.CORRUPT: FrameOutcome.CORRUPTED,
     EventKind.COLLIDE: FrameOutcome.COLLIDED,
+    EventKind.DEAF: FrameOutcome.COLLIDED,
     EventKind.OUTAGE: FrameOutcome.OUTAGE,
     EventKind.OUT_OF_RANGE: FrameOutcome.OUT_OF_RANGE,
 }

@@ -193,7 +193,7 @@ def run_probe(
         raise ValueError(f"seed must be ≥ 0, got {seed}")
 
     env = simpy.Environment()
-    losses = Trace(kinds=(EventKind.COLLIDE, EventKind.OUT_OF_RANGE))
+    losses = Trace(kinds=(EventKind.COLLIDE, EventKind.DEAF, EventKind.OUT_OF_RANGE))
     medium = Medium(env, config, np.random.default_rng(seed), trace=losses, model=link_model)
     sender = medium.attach("sender")
     far = (float(distance_m), 0.0, 0.0)
@@ -233,7 +233,8 @@ def run_probe(
 
     delivered = len(latencies_s)
     dropped = sender.counters.frames_dropped
-    collided = len({e.frame_id for e in losses.of_kind(EventKind.COLLIDE)})
+    lost = (*losses.of_kind(EventKind.COLLIDE), *losses.of_kind(EventKind.DEAF))
+    collided = len({e.frame_id for e in lost})
     out_of_range = len({e.frame_id for e in losses.of_kind(EventKind.OUT_OF_RANGE)})
     corrupted = frames - delivered - dropped - collided - out_of_range
     payload_bits = 8 * (frame_bytes - frame_overhead())

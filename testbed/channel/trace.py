@@ -7,7 +7,7 @@ are recorded when the medium decides them, so a ``TX_END`` is recorded at its tr
 with its future time: use :meth:`Trace.in_time_order` for a timeline.
 
 Every copy of a transmission that reaches a receiver ends in exactly one of ``DELIVER``,
-``CORRUPT``, ``COLLIDE``, ``OUTAGE`` or ``OUT_OF_RANGE``; every frame handed to a modem is
+``CORRUPT``, ``COLLIDE``, ``DEAF``, ``OUTAGE`` or ``OUT_OF_RANGE``; every frame handed to a modem is
 ``ENQUEUE``\\ d and then either ``DROP``\\ ped or sent as one ``TX_START``/``TX_END`` pair per
 packet.
 
@@ -57,12 +57,16 @@ class EventKind(enum.StrEnum):
     CORRUPT = "corrupt"
     """A copy with flipped bits was handed to the receiver (``bit_errors`` > 0)."""
     COLLIDE = "collide"
-    """A copy was destroyed by an overlapping reception or (half duplex) by transmitting."""
+    """A copy was destroyed by another copy overlapping it at the receiver."""
     OUT_OF_RANGE = "out_of_range"
     """The receiver was beyond ``max_range_m`` at transmit time: nothing arrives."""
     OUTAGE = "outage"
     """A copy overlapped a link outage window (:meth:`~testbed.channel.medium.Medium.add_outage`)
     and was lost."""
+    DEAF = "deaf"
+    """A copy lost only because its half-duplex receiver was transmitting (no other copy
+    overlapped it); the frame's outcome is ``collided``, the receiver's ``rx_deaf`` counts it.
+    Last in the enum so the older kinds keep their codes."""
 
 
 class LinkEvent(NamedTuple):

@@ -1,7 +1,8 @@
 """What the console shows, read from the running session (simulation thread only).
 
 :class:`LinkMonitor` follows the link trace incrementally (per direction: frames sent,
-delivered, corrupted, collided, lost to an outage, dropped, out of range; the packet timeline);
+delivered, corrupted, collided (or lost to the receiver transmitting), lost to an outage,
+dropped, out of range; the packet timeline);
 :func:`image_view` packs the operator's current picture for the browser; :func:`latency_ms`
 summarises latency samples. Everything returned is plain JSON-ready data (lists, floats,
 strings), built here and handed to the server thread as a finished value.
@@ -28,6 +29,7 @@ _DIRECTIONS = {"uplink": "operator", "downlink": "vehicle"}
 _LOST = {
     EventKind.CORRUPT: "corrupted",
     EventKind.COLLIDE: "collided",
+    EventKind.DEAF: "collided",  # lost to the receiver's own transmission: a collision too
     EventKind.OUTAGE: "outage",
     EventKind.OUT_OF_RANGE: "out_of_range",
     EventKind.DROP: "dropped",

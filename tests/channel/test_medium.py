@@ -194,7 +194,7 @@ def test_simultaneous_sends(duplex: str) -> None:
 @pytest.mark.parametrize("duplex", ["half", "full"])
 def test_intrinsic_delay_counts_as_transmitting(duplex: str) -> None:
     config = load_link_config("s100", ["ber=0", f"duplex={duplex}"])
-    env, _, _, (a, b) = build(config)
+    env, _, trace, (a, b) = build(config)
     b.send(bytes(20))  # on the air at a from I_S to I_S + airtime
     send_at(env, a, I_S / 2, bytes(20))  # a is still idle and not yet receiving: it starts
     env.run()
@@ -203,6 +203,8 @@ def test_intrinsic_delay_counts_as_transmitting(duplex: str) -> None:
     # two nodes: a copy can only be lost to its receiver's own transmission (deaf), never to
     # another copy, which needs a third sender
     assert (a.counters.rx_deaf, b.counters.rx_deaf) == ((1, 1) if lost else (0, 0))
+    assert len(trace.of_kind(EventKind.DEAF)) == (2 if lost else 0)
+    assert trace.of_kind(EventKind.COLLIDE) == []
 
 
 def test_half_duplex_defers_a_send_while_receiving() -> None:
@@ -253,12 +255,14 @@ def test_a_copy_overlapping_another_and_the_receivers_transmission_is_a_collisio
     """Half duplex, three nodes: c starts sending while a's copy is arriving (deaf), then b's
     copy overlaps a's: a's copy was lost to another copy as well, so it counts as a collision,
     not deafness; b's, overlapping both, too."""
-    env, _, _, (a, b, c) = build(S100, names=("a", "b", "c"))
+    env, _, trace, (a, b, c) = build(S100, names=("a", "b", "c"))
     a.send(bytes(40))
     send_at(env, c, I_S + 0.2 * airtime(40), bytes(13))  # c deaf to a's copy from here
     send_at(env, b, 0.5 * airtime(40), bytes(40))  # and b's overlaps a's at c
     env.run()
     assert c.counters.rx_collided == 2 and c.counters.rx_deaf == 0
+    at_c = [e.kind for e in trace.in_time_order() if e.dst == "c" and e.kind != EventKind.TX_END]
+    assert at_c == [EventKind.COLLIDE, EventKind.COLLIDE]
 
 
 def test_a_third_overlapping_frame_destroys_the_whole_chain() -> None:
@@ -354,15 +358,22 @@ def test_every_copy_ends_in_exactly_one_terminal_event() -> None:
     env.run()
     starts = trace.of_kind(EventKind.TX_START)
     terminal = trace.of_kind(
-        EventKind.DELIVER, EventKind.CORRUPT, EventKind.COLLIDE, EventKind.OUT_OF_RANGE
+        EventKind.DELIVER,
+        EventKind.CORRUPT,
+        EventKind.COLLIDE,
+        EventKind.DEAF,
+        EventKind.OUT_OF_RANGE,
     )
     assert len(terminal) == 2 * len(starts)  # one copy per other node
     assert {e.kind for e in terminal} == {
         EventKind.DELIVER,
         EventKind.CORRUPT,
         EventKind.COLLIDE,
+        EventKind.DEAF,
         EventKind.OUT_OF_RANGE,
     }
+    deaf = sum(m.counters.rx_deaf for m in modems)
+    assert len(trace.of_kind(EventKind.DEAF)) == deaf
     assert len(starts) + len(trace.of_kind(EventKind.DROP)) == 300
     counted = sum(
         m.counters.rx_delivered

@@ -219,3 +219,20 @@ def test_an_interrupt_anywhere_in_a_flush_loses_and_repeats_no_event() -> None:
             break
         k += 1
     assert k > 20  # the flush and what it calls ran that many lines, each interrupted once
+
+
+def test_a_copy_lost_to_a_deaf_receiver_is_a_collided_frame() -> None:
+    """``deaf`` (the half-duplex receiver was transmitting) loses the frame as a collision does:
+    ``collided`` in the outcomes and the counts, and it outranks a corrupted packet."""
+    events = [
+        *_frame(0.0, OP, 0, 1, ended=1),
+        LinkEvent(0.1, K.DEAF, OP, VEH, 0, 0, PACKET_BYTES),
+        *_frame(1.0, OP, 1, 2, ended=2),
+        LinkEvent(1.1, K.CORRUPT, OP, VEH, 1, 0, PACKET_BYTES, 2),
+        LinkEvent(1.2, K.DEAF, OP, VEH, 1, 1, PACKET_BYTES),
+        *_frame(2.0, OP, 2, 1, ended=1),
+        LinkEvent(2.1, K.DELIVER, OP, VEH, 2, 0, PACKET_BYTES),
+    ]
+    assert frame_outcomes(events) == {0: F.COLLIDED, 1: F.COLLIDED, 2: F.DELIVERED}
+    counts = direction_counts(events, OP, VEH)
+    assert (counts.frames_collided, counts.frames_corrupted, counts.frames_settled) == (2, 0, 3)

@@ -174,11 +174,13 @@ def test_with_two_nodes_every_collision_is_the_receiver_transmitting() -> None:
     """On s2c (acoustic, half duplex) s100-teleop's 0.594-s gap sends orders over the replies
     still arriving: the operator loses them while it transmits. With two nodes no copy can meet
     another at a receiver (that needs a second sender), so every collide event in the trace is
-    a copy lost to its receiver's own transmission: ``copies_lost_transmitting`` counts them."""
+    a copy lost to its receiver's own transmission, traced as ``deaf`` (never ``collide``), and
+    ``copies_lost_transmitting`` counts them."""
     scenario = load_scenario("s100-teleop-v1", ["link.preset=s2c", "duration_s=60"])
     result = run_scenario(scenario)
     trace = result.recorder.trace
     for key, receiver in (("uplink", "vehicle"), ("downlink", "operator")):
-        lost = [e for e in trace.of_kind(EventKind.COLLIDE) if e.dst == receiver]
+        assert [e for e in trace.of_kind(EventKind.COLLIDE) if e.dst == receiver] == []
+        lost = [e for e in trace.of_kind(EventKind.DEAF) if e.dst == receiver]
         assert result.metrics["link"][key]["copies_lost_transmitting"] == len(lost)
     assert result.metrics["link"]["downlink"]["copies_lost_transmitting"] > 10

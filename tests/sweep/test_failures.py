@@ -125,3 +125,46 @@ def test_a_killed_pool_worker_stops_the_sweep_with_one_line_and_it_resumes(
     assert f"{24 - len(before)} ran now" in resumed.stdout
     keys = sorted((r["point"], r["seed"]) for r in read_journal(out / "runs.jsonl"))
     assert keys == [(p, s) for p in range(3) for s in range(8)]
+
+
+def test_a_killed_dask_worker_is_replaced_and_no_run_is_lost(tmp_path: Path) -> None:
+    """SIGKILL to one ``--dask local`` worker mid-sweep: the nanny starts a new worker, the
+    scheduler runs the lost task again, and the sweep ends with every run, its results
+    byte-identical to an undisturbed process-pool sweep of the same points and seeds."""
+    path = _sweep(tmp_path, seeds=4)
+    longer = ["--set", "duration_s=30", "--set", "metrics.settle_s=1"]  # runs still going
+    argv = [sys.executable, "-m", "testbed", "sweep", str(path), *longer, "--workers", "2"]
+    out, reference = tmp_path / "dask", tmp_path / "pool"
+    process = subprocess.Popen(
+        [*argv, "--dask", "local", "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stderr is not None
+    line = process.stderr.readline()  # the first progress line: the workers are running
+    assert "/12 runs" in line and not line.startswith("fail-v1: 12/12"), line
+
+    def workers() -> set[int]:
+        return {
+            pid
+            for pid in _descendants(process.pid)
+            if "spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+        }
+
+    before = workers()
+    assert len(before) == 2, before
+    os.kill(min(before), signal.SIGKILL)
+    done_at_kill = len((out / "runs.jsonl").read_text(encoding="utf-8").splitlines())
+    assert done_at_kill < 12 and process.poll() is None  # the kill came mid-sweep
+    err = process.stderr.read()
+    process.stderr.close()
+    assert process.wait(timeout=120) == 0, err
+    assert "Traceback" not in err
+    journal = read_journal(out / "runs.jsonl")
+    keys = sorted((r["point"], r["seed"]) for r in journal)
+    assert keys == [(p, s) for p in range(3) for s in range(4)]
+    pool = subprocess.run([*argv, "--out", str(reference)], capture_output=True, text=True)
+    assert pool.returncode == 0, pool.stderr
+    for name in ("results.csv", "aggregate.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name

@@ -280,9 +280,9 @@ function drawDepth(truth) {
 
 // the packet timeline's colours, and its legend drawn from them (one place for both)
 const KIND_COLOUR = { tx_start: "#888", deliver: "#3c3", corrupt: "#f93", collide: "#f33",
-  outage: "#b5f", drop: "#fff", out_of_range: "#0cc" };
+  deaf: "#f6a", outage: "#b5f", drop: "#fff", out_of_range: "#0cc" };
 const KIND_LABEL = [["tx_start", "sent"], ["deliver", "delivered"], ["corrupt", "corrupted"],
-  ["collide", "collided"], ["outage", "outage"], ["drop", "dropped"], ["out_of_range", "out of range"]];
+  ["collide", "collided"], ["deaf", "lost transmitting"], ["outage", "outage"], ["drop", "dropped"], ["out_of_range", "out of range"]];
 $("legend").innerHTML = KIND_LABEL.map(([kind, label]) =>
   `<span style="color:${KIND_COLOUR[kind]}">■</span> ${label}`).join(" · ");
 function drawTimeline(s) {
