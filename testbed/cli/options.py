@@ -14,7 +14,7 @@ from testbed.config import ConfigError, FieldError, check_range
 if TYPE_CHECKING:
     from testbed.channel import LinkConfig
     from testbed.hil import LinkEndpoint, PortSettings
-    from testbed.run.scenario import Scenario
+    from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "EXIT_FAILED",

@@ -26,7 +26,7 @@ from testbed.run.failures import failed_trial, partial_run
 
 if TYPE_CHECKING:
     from testbed.run.runner import RunResult
-    from testbed.run.scenario import Scenario
+    from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "add_run_parser",
@@ -508,7 +508,8 @@ def _goals(reached: int | None, goals: int | None) -> str:
 
 def _list_scenarios(args: argparse.Namespace) -> int:
     """Handler of ``testbed scenarios``: one line per packaged scenario."""
-    from testbed.run.scenario import load_scenario, scenario_names
+    from testbed.run.scenario import load_scenario
+    from testbed.run.scenario_files import scenario_names
 
     del args
     for name in scenario_names():

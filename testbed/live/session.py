@@ -67,7 +67,7 @@ from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, poll_modems
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle
 

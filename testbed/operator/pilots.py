@@ -14,7 +14,7 @@ Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig.
 :class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints) and
 :class:`SupervisorPilot` (supervised control: a timed list of GoTo goals — of the vehicle or of
 its arm's end effector — and cancels for a vehicle that flies itself, the narrow-band paper's
-"high level commands"). A scenario configures them (:class:`~testbed.run.scenario.PilotSection`);
+"high level commands"). A scenario configures them (:class:`~testbed.run.sections.PilotSection`);
 it does not implement them.
 
 Imports: ``config`` and the standard library only.

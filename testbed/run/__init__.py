@@ -18,7 +18,8 @@ if TYPE_CHECKING:
     from testbed.operator.pilots import Pilot, PilotSample, Sticks
     from testbed.run.outputs import write_run
     from testbed.run.runner import RunResult, VehicleSetup, run_scenario
-    from testbed.run.scenario import Scenario, load_scenario
+    from testbed.run.scenario import load_scenario
+    from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "Pilot",
@@ -39,7 +40,7 @@ _HOMES = {
     "RunResult": "testbed.run.runner",
     "VehicleSetup": "testbed.run.runner",
     "run_scenario": "testbed.run.runner",
-    "Scenario": "testbed.run.scenario",
+    "Scenario": "testbed.run.scenario_config",
     "load_scenario": "testbed.run.scenario",
     "write_run": "testbed.run.outputs",
 }

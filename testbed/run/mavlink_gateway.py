@@ -59,7 +59,7 @@ from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [

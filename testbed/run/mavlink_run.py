@@ -54,7 +54,7 @@ from testbed.run.realtime import rt_lateness_ns
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.resources import SimClock
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle

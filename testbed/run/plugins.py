@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     from testbed.channel.config import LinkConfig
     from testbed.channel.model import LinkModel
     from testbed.operator.pilots import Pilot
-    from testbed.run.scenario import Scenario
+    from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "PYTHON_SUFFIX",

@@ -77,7 +77,7 @@ from testbed.run.runner import (
     run_pilots,
     tally_images,
 )
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.resources import Controllers
 
 __all__ = [

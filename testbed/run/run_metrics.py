@@ -36,7 +36,7 @@ from testbed.run.metrics import (
 )
 from testbed.run.nodes import FRAME_OVERHEAD
 from testbed.run.recorder import Recorder, failsafe_engagements
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.run.sections import LONGEST_ORDER_FRAME_BYTES, ORDER_FRAME_BYTES
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import KalmanLocalizer, Navigation
@@ -414,7 +414,7 @@ def stick_tracking(
         after: (n,) bool, the rows at or after ``metrics.settle_s``.
         under_autonomy: the vehicle has ``[vehicle.autonomy]``.
         max_lag_s: the upper end of the lag's search [s] (the link's
-            :attr:`~testbed.run.scenario.LinkSection.signal_lag_window_s`).
+            :attr:`~testbed.run.sections.LinkSection.signal_lag_window_s`).
 
     Returns:
         ``(signal_lag_s, velocity_tracking_rmse)``, each keyed ``x``, ``y``, ``z``, ``yaw``:

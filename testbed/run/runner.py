@@ -37,7 +37,7 @@ from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model, scenario_pilot
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics, plain_args
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.autonomy import Autonomy
 from testbed.vehicle.localization import Navigation
 from testbed.vehicle.resources import Controllers

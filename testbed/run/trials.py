@@ -32,7 +32,7 @@ from testbed.run.failures import keep_trial, partial_run
 from testbed.run.interrupts import interrupt_of
 from testbed.run.outputs import PlotWriter, remove_run_results, write_json_atomic, write_run
 from testbed.run.runner import RunResult, run_scenario
-from testbed.run.scenario import Scenario
+from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "HEADLINE",

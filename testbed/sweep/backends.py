@@ -37,7 +37,7 @@ from testbed.sweep.aggregate import flatten_metrics
 from testbed.sweep.spec import RunSpec
 
 if TYPE_CHECKING:
-    from testbed.run.scenario import Scenario
+    from testbed.run.scenario_config import Scenario
 
 __all__ = [
     "EXCLUDED_METRICS",

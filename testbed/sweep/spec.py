@@ -140,7 +140,7 @@ class _SweepFile:
     metrics: tuple[str, ...] = DEFAULT_METRICS
 
     def __post_init__(self) -> None:
-        from testbed.run.scenario import ID_PATTERN  # slow to import: loaded with the scenarios
+        from testbed.run.scenario_config import ID_PATTERN  # slow to import: loads the vehicle
 
         check(self.schema == SCHEMA_VERSION, "schema", f"unsupported version {self.schema}")
         check(  # it names the default results folder, sweeps/<id>/
@@ -352,7 +352,8 @@ def load_sweep(
             repeated grid value, more than :data:`MAX_RUNS` runs, or a grid point whose
             scenario does not load (named by its values).
     """
-    from testbed.run.scenario import FILE_KEY_NAMES, load_scenario, path_beside, scenario_digest
+    from testbed.run.scenario import load_scenario
+    from testbed.run.scenario_files import FILE_KEY_NAMES, path_beside, scenario_digest
 
     text = str(name_or_path)
     base_dir: Path | None = None
@@ -437,7 +438,7 @@ def _scenario_of(scenario: str, base_dir: Path | None, source: str) -> str:
         ConfigError: an unknown id, or a path that names no file (naming the sweep file and
             its ``scenario`` key).
     """
-    from testbed.run.scenario import scenario_names
+    from testbed.run.scenario_files import scenario_names
 
     if scenario.endswith(".toml") or "/" in scenario or "\\" in scenario:
         path = Path(scenario) if base_dir is None else (base_dir / scenario).resolve()

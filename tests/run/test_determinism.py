@@ -3,7 +3,7 @@
 Each scenario runs twice, shortened, in this process; ``write_run`` (no plots) writes
 ``metrics.json``, ``events.csv`` and ``series.csv`` for each run, and the two sets must be
 identical but for the wall-clock lines of ``metrics.json`` (``wall_s``, ``rtf``). The test is
-parametrized over :func:`~testbed.run.scenario.scenario_names`, so a new scenario is covered
+parametrized over :func:`~testbed.run.scenario_files.scenario_names`, so a new scenario is covered
 as soon as it is packaged. A scenario is shortened by :data:`DEFAULT_SHORTENING`; one whose
 events (faults, image changes) fall after that window gets its own entry in :data:`SHORTENING`
 that moves them inside it (a ConfigError from the loader says which key is out of range).
@@ -17,7 +17,8 @@ import pytest
 
 from testbed.run.outputs import write_run
 from testbed.run.runner import run_scenario
-from testbed.run.scenario import load_scenario, scenario_names
+from testbed.run.scenario import load_scenario
+from testbed.run.scenario_files import scenario_names
 
 WALL_CLOCK_KEYS = ("wall_s", "rtf")
 OUTPUTS = ("metrics.json", "events.csv", "series.csv")

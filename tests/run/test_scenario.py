@@ -18,14 +18,9 @@ from testbed.channel import TELEROBOTICS_2021, Fixed, load_link_config
 from testbed.config import ConfigError
 from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 from testbed.run.runner import run_scenario
-from testbed.run.scenario import (
-    LinkOutage,
-    PilotSection,
-    SineTerm,
-    ThrusterFault,
-    load_scenario,
-    scenario_names,
-)
+from testbed.run.scenario import load_scenario
+from testbed.run.scenario_files import scenario_names
+from testbed.run.sections import LinkOutage, PilotSection, SineTerm, ThrusterFault
 from testbed.vehicle.thruster_config import load_thruster_config
 from testbed.vehicle.vehicle_config import VehicleConfig
 from testbed.vehicle.water_current import WaterCurrent

@@ -17,7 +17,8 @@ from testbed.cli.main import main
 from testbed.run import trials as trials_module
 from testbed.run.outputs import prepare_out_dir
 from testbed.run.runner import RunResult, run_scenario
-from testbed.run.scenario import Scenario, load_scenario
+from testbed.run.scenario import load_scenario
+from testbed.run.scenario_config import Scenario
 from testbed.run.trials import HEADLINE, TRIALS_FILE, WALL_CLOCK_KEYS, run_trials
 
 SCENARIO = """\

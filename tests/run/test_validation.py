@@ -1,16 +1,16 @@
 """Every numeric scenario key has a domain: a bad value is a one-line error naming the key
 (exit 2), never a crash or a run that does not end.
 
-The keys are enumerated from the loaded :class:`~testbed.run.scenario.Scenario` dataclass tree
-(defaults included, so a new field is covered without touching this file), as the loader names
-them: ``vehicle.gains.roll.kp``, ``link.ber`` (the channel keys sit flat in ``[link]``),
+The keys are enumerated from the loaded :class:`~testbed.run.scenario_config.Scenario` dataclass
+tree (defaults included, so a new field is covered without touching this file), as the loader
+names them: ``vehicle.gains.roll.kp``, ``link.ber`` (the channel keys sit flat in ``[link]``),
 ``pilot.x[0].period_s``. Each is fed nan, ±inf, 0, −1 and ±1e308 through ``--set``; an integer
 key gets the floats (not integers) and 0, −1 and the largest TOML integers for ±1e308, and a
-tuple key gets one bad element at a time (``[inf, 0, 0]``) with the others kept. Either the
-load raises :class:`~testbed.config.ConfigError`, one line naming the key, or the value is
-legal and a short run of the scenario with it must finish. The legal values of one scenario
-that share a value (and tuple position) run together in one short run; a failing group is
-rerun one override at a time to name the culprit.
+tuple key gets one bad element at a time (``[inf, 0, 0]``) with the others kept. Either the load
+raises :class:`~testbed.config.ConfigError`, one line naming the key, or the value is legal and
+a short run of the scenario with it must finish. The legal values of one scenario that share a
+value (and tuple position) run together in one short run; a failing group is rerun one override
+at a time to name the culprit.
 
 The default run covers every key of s100-teleop-v1 (teleop codec, token passing),
 tether-teleop-v1 (change-set codec, free access) and s100-video-v1 (camera and images);
@@ -32,7 +32,10 @@ import pytest
 from testbed.cli.main import main
 from testbed.config import ConfigError
 from testbed.run.runner import run_scenario
-from testbed.run.scenario import LinkSection, Scenario, load_scenario, scenario_names
+from testbed.run.scenario import load_scenario
+from testbed.run.scenario_config import Scenario
+from testbed.run.scenario_files import scenario_names
+from testbed.run.sections import LinkSection
 
 BAD_FLOATS = (math.nan, math.inf, -math.inf, 0.0, -1.0, 1e308, -1e308)
 """The bad values every numeric key is fed."""

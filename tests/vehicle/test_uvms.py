@@ -18,7 +18,8 @@ from numpy.typing import NDArray
 
 from testbed.run.outputs import write_run
 from testbed.run.runner import run_scenario
-from testbed.run.scenario import Scenario, load_scenario
+from testbed.run.scenario import load_scenario
+from testbed.run.scenario_config import Scenario
 from testbed.vehicle.arm import load_arm_model
 from testbed.vehicle.arm_kinematics import end_effector_ned, link_centres_body
 from testbed.vehicle.camera import CameraConfig, camera_pose
