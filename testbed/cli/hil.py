@@ -14,7 +14,7 @@ m64`` only: an option that would be ignored is an error), ``--no-plots``. Output
 ``testbed run`` (``metrics.json``, ``events.csv``, ``series.csv``, plots), written as ``testbed
 run`` writes them (:func:`testbed.run.outputs.write_run`: ``metrics.json`` last, with
 ``"complete"`` and ``"files"``), plus the ``hil`` section of ``metrics.json`` (see
-:func:`testbed.run.realtime.hil_metrics`).
+:func:`testbed.run.hil_metrics.hil_metrics`).
 
 ``--out`` is checked before any port is opened (creatable, writable, empty unless
 ``--force``). Ctrl-C or SIGTERM ends a session at any time, even before ``metrics.settle_s``:

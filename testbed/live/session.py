@@ -8,7 +8,7 @@ simpy processes:
 
 * the poll (every ``poll_s``, 1 ms): drains the pilot's stick queue and the :class:`Hub`'s
   control messages and applies them (arm, mode, image settings, link changes, go-to), records
-  how late it runs (scheduler lateness, as :func:`~testbed.run.realtime.run_poll`);
+  how late it runs (scheduler lateness, as :func:`~testbed.run.hil_modem.run_poll`);
 * the publisher (``publish_hz``, fixed rate): builds the console's state (operator's view,
   truth, link) as a finished dict and hands it to the hub;
 * the run itself, until ``duration_s`` or Ctrl-C (a ``KeyboardInterrupt`` in this thread).
@@ -58,16 +58,18 @@ from testbed.live.monitor import LinkMonitor, latency_ms
 from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
+from testbed.run.hil_metrics import hil_metrics
+from testbed.run.hil_modem import FrameLedger, HilModem, poll_modems
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model
-from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, poll_modems, rt_lateness_ns
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
 from testbed.run.scenario_config import Scenario
+from testbed.run.wall_clock import rt_lateness_ns
 from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle
 
@@ -97,7 +99,7 @@ class LiveSession:
         seed: overrides the scenario's seed.
         pilot: the live pilot (a new one if None).
         endpoints: ``{"operator": …, "vehicle": …}``: run the link over these serial ports
-            (hardware in the loop, :mod:`testbed.run.realtime`'s modems) instead of the
+            (hardware in the loop, :mod:`testbed.run.hil_modem`'s modems) instead of the
             simulated medium; the live link controls are then refused. Closed at the end.
         modem: the modem kind on the ports, for the record.
     """

@@ -17,7 +17,7 @@ its packets to the links. Nothing calls into simpy from a reader thread.
 Measured (``metrics.json`` ``mavlink``): ``gcs_to_thruster_ms`` — from the reader thread's read
 of a datagram holding accepted stick input to the end of the vehicle frame that first applied
 the order carrying it (wall clock); ``scheduler_lateness_ms`` — how late the gateway process ran
-against its schedule (:func:`~testbed.run.realtime.rt_lateness_ns`); ``state_age_s`` — the
+against its schedule (:func:`~testbed.run.wall_clock.rt_lateness_ns`); ``state_age_s`` — the
 age of the state the endpoint reports (sampled every gateway period: its time average). The
 recorder's ``command_lag_s`` (stick arrival at the gateway → applying vehicle frame) and
 ``odometry_age_s`` (the true age of the state on shore) are the simulated run's, on the
@@ -48,6 +48,8 @@ from testbed.mavlink.shore import LinkFacts, ShoreEndpoint
 from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
+from testbed.run.hil_metrics import hil_metrics
+from testbed.run.hil_modem import FrameLedger, HilModem, run_poll
 from testbed.run.images import image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_section
@@ -55,11 +57,11 @@ from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_link_model
-from testbed.run.realtime import FrameLedger, HilModem, hil_metrics, rt_lateness_ns, run_poll
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
+from testbed.run.wall_clock import rt_lateness_ns
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [

@@ -20,7 +20,7 @@ vehicle instead (:mod:`testbed.mavlink.failsafe`).
 Measured (``metrics.json`` ``mavlink``): ``gcs_to_thruster_ms`` — from the reader thread's read
 of a datagram holding accepted pilot input to the end of the frame that commanded the thrusters
 from it; ``scheduler_lateness_ms`` — how late each frame ran against its real-time schedule
-(:func:`~testbed.run.realtime.rt_lateness_ns`); ``frame_compute_ms`` — each frame's own time
+(:func:`~testbed.run.wall_clock.rt_lateness_ns`); ``frame_compute_ms`` — each frame's own time
 (ingest to publish). A packet read just after a frame drained its queue waits for the next
 frame, so the latency's bound is two frame periods plus the frame's lateness and compute time,
 whatever the machine's load. The recorder's command lag is the same path on the simulated clock
@@ -50,11 +50,11 @@ from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.observer import VehicleObserver
-from testbed.run.realtime import rt_lateness_ns
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
+from testbed.run.wall_clock import rt_lateness_ns
 from testbed.vehicle.resources import SimClock
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle

@@ -2,7 +2,7 @@
 
 Each node owns an ECS world (the vehicle's inside :class:`~testbed.vehicle.vehicle.Vehicle`, the
 operator's inside :class:`~testbed.operator.station.OperatorStation`) and a modem: the
-simulated medium's, or a serial modem in real-time runs (:mod:`testbed.run.realtime`). Bytes
+simulated medium's, or a serial modem in real-time runs (:mod:`testbed.run.hil_modem`). Bytes
 are all that cross: a node hands frames to its modem and feeds what its modem delivers to its
 own :class:`~testbed.protocol.FrameDecoder`, exactly as it would with a serial modem. Frames
 that decode are queued and applied by the node's link system at the start of its next frame
@@ -49,7 +49,7 @@ FRAME_OVERHEAD = frame_overhead()
 
 class LinkModem(Protocol):
     """What a node needs of its modem: the simulated :class:`~testbed.channel.Modem`, or a
-    serial modem in real-time runs (:mod:`testbed.run.realtime`)."""
+    serial modem in real-time runs (:class:`~testbed.run.hil_modem.HilModem`)."""
 
     on_receive: Callable[[Delivery], None] | None
     last_frame_id: int

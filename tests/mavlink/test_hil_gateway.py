@@ -36,8 +36,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 import testbed
 from testbed.channel import load_link_config
+from testbed.run.hil_modem import POLL_S
 from testbed.run.mavlink_gateway import GATEWAY_PERIOD_S
-from testbed.run.realtime import POLL_S
 from tests.mavlink.rt_session import GatewaySession
 from tests.processes import default_sigint
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from testbed.channel import EventKind, Trace
-from testbed.run.realtime import _round_trips
+from testbed.run.hil_metrics import _round_trips
 
 GAP_S = 0.6  # orders' spacing
 LINK_S = 0.33  # a reply's delay after its order: both crossings
