@@ -40,6 +40,7 @@ from testbed.vehicle.components import (
 )
 from testbed.vehicle.control import AttitudeController, DepthController, FailsafeConfig
 from testbed.vehicle.control_kernels import put_attitude_target, put_depth_target, put_targets
+from testbed.vehicle.control_laws import AttitudeLaw, DepthLaw
 from testbed.vehicle.guidance import PositionController
 from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M, PilotGains, pilot_gains_array
 from testbed.vehicle.sensors import DepthSensor, Imu, PositionFix
@@ -180,6 +181,8 @@ class Controllers:
             mode (operator mode requests are not applied) and a link HOLD keeps GUIDED flying.
         velocity_control: in GUIDED the autonomy's velocity controller (the ISMC) flies all
             six axes; the depth, attitude and position loops stand down.
+        depth_law, attitude_law: a hold of the user's own that flies instead of ``depth`` or
+            ``attitude`` (:mod:`testbed.vehicle.control_laws`); None: the packaged PID.
     """
 
     vehicle: Entity
@@ -200,6 +203,8 @@ class Controllers:
     position: PositionController = field(default_factory=PositionController)
     autonomous: bool = False
     velocity_control: bool = False
+    depth_law: DepthLaw | None = None
+    attitude_law: AttitudeLaw | None = None
 
     def __post_init__(self) -> None:
         self.pilot_gains = pilot_gains_array(self.pilot)

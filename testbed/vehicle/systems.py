@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TypeVar
 
 import numpy as np
 
@@ -50,7 +51,7 @@ from testbed.common.geometry import (
     quat_from_euler,
 )
 from testbed.common.jit import BOOL, F64, I64, MARK, VECTOR, floats
-from testbed.ecs import Phase, Schedule, System, World
+from testbed.ecs import Entity, Phase, Schedule, System, World
 from testbed.ecs.store import Layout, RowView
 from testbed.vehicle.command_systems import ingest_commands, supervise_failsafe
 from testbed.vehicle.components import (
@@ -64,6 +65,7 @@ from testbed.vehicle.components import (
     ThrusterOutput,
 )
 from testbed.vehicle.control_kernels import pilot_rows, pilot_shape
+from testbed.vehicle.control_laws import checked_vector
 from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M, level_to_body
 from testbed.vehicle.resources import (
     LEVEL,
@@ -100,6 +102,7 @@ __all__ = [
     "wrench_of",
 ]
 
+_C = TypeVar("_C")
 _ODOMETRY = Layout(Odometry(0.0, (0.0, 0.0, 0.0), LEVEL))
 _UNUSED_TARGETS = RowView.detached(Layout(ControlTargets(0.0, LEVEL)).width)
 """The pilot kernel's targets row outside the hold modes (neither read nor written then)."""
@@ -265,34 +268,67 @@ def control_position(world: World) -> None:
 
 
 def control_depth(world: World) -> None:
-    """Depth hold → world-vertical force intent rotated into the body frame."""
+    """Depth hold → world-vertical force intent rotated into the body frame: the packaged PID,
+    or the user's :class:`~testbed.vehicle.control_laws.DepthLaw` (``Controllers.depth_law``)
+    given the targets and the readings."""
     ctl = world.resource(Controllers)
     flags = ctl.flags
     targets = vehicle_row(world, ctl, ControlTargets)
     reading = vehicle_row(world, ctl, DepthReading)
     imu = vehicle_row(world, ctl, ImuReading)
+    law = ctl.depth_law
     if not (flags.armed and flags.depth_hold) or None in (reading, imu, targets):
-        ctl.depth.reset()
+        (ctl.depth if law is None else law).reset()
         set_intent(world, ctl, "depth", ZERO6)
         return
     assert reading is not None and imu is not None and targets is not None
     dt = world.resource(SimClock).dt_s
-    ctl.depth.update_rows(targets, reading, imu, dt, ctl.intent_rows["depth"], world.tick)
+    if law is None:
+        ctl.depth.update_rows(targets, reading, imu, dt, ctl.intent_rows["depth"], world.tick)
+        return
+    vehicle = ctl.vehicle  # the law is handed the readings as components, never a row
+    force = law.update(
+        _get(world, vehicle, ControlTargets),
+        _get(world, vehicle, DepthReading),
+        _get(world, vehicle, ImuReading),
+        dt,
+    )
+    x, y, z = checked_vector(law, force, "depth law's body force [N]")
+    set_intent(world, ctl, "depth", (x, y, z, 0.0, 0.0, 0.0))
 
 
 def control_attitude(world: World) -> None:
-    """Attitude hold → body torque intent (axes the thrusters cannot torque stay off)."""
+    """Attitude hold → body torque intent (axes the thrusters cannot torque stay off): the
+    packaged PIDs, or the user's :class:`~testbed.vehicle.control_laws.AttitudeLaw`
+    (``Controllers.attitude_law``) given the targets and the IMU's reading."""
     ctl = world.resource(Controllers)
     flags = ctl.flags
     targets = vehicle_row(world, ctl, ControlTargets)
     imu = vehicle_row(world, ctl, ImuReading)
+    law = ctl.attitude_law
     if not (flags.armed and flags.attitude_hold) or imu is None or targets is None:
-        ctl.attitude.reset()
+        (ctl.attitude if law is None else law).reset()
         set_intent(world, ctl, "attitude", ZERO6)
         return
     dt = world.resource(SimClock).dt_s
-    intent = ctl.intent_rows["attitude"]
-    ctl.attitude.update_rows(targets, imu, dt, ctl.attitude_axes, intent, world.tick)
+    axes = ctl.attitude_axes
+    if law is None:
+        intent = ctl.intent_rows["attitude"]
+        ctl.attitude.update_rows(targets, imu, dt, axes, intent, world.tick)
+        return
+    vehicle = ctl.vehicle
+    target = _get(world, vehicle, ControlTargets)
+    torque = law.update(target, _get(world, vehicle, ImuReading), dt, axes)
+    k, m, n = checked_vector(law, torque, "attitude law's body torque [N·m]")
+    torque = (k if axes[0] else 0.0, m if axes[1] else 0.0, n if axes[2] else 0.0)
+    set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, *torque))
+
+
+def _get(world: World, vehicle: Entity, cls: type[_C]) -> _C:
+    """The vehicle's ``cls`` component, which the caller found it has (its row)."""
+    value = world.get(vehicle, cls)
+    assert value is not None
+    return value
 
 
 def allocate_thrust(world: World) -> None:
