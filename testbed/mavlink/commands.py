@@ -66,6 +66,7 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
 )
 """AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do;
 PARAM_ENCODE_C_CAST is REFERENCE §4.4's, which marks it unverified: parameters are sent as

@@ -18,8 +18,8 @@ REQUEST_AUTOPILOT_CAPABILITIES; the parameter protocol over :class:`~.params.Par
 MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arming
 (COMMAND_LONG 400), modes by SET_MODE or DO_SET_MODE with COMMAND_ACK (MANUAL, STABILIZE,
 ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_LOCAL_NED's
-position; every other mode is refused with MAV_RESULT_FAILED — the simulator has no
-position-hold, auto or surface mode); MANUAL_CONTROL and
+position or SET_ATTITUDE_TARGET's attitude and climb rate; every other mode is refused with
+MAV_RESULT_FAILED — the simulator has no position-hold, auto or surface mode); MANUAL_CONTROL and
 RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS and SYSID_THISMAV (what
 fails the gate is dropped silently and counted); the pilot-input and GCS failsafes of the FS_*
 parameters (:mod:`testbed.mavlink.failsafe`).
@@ -50,6 +50,11 @@ from testbed.common.components import (
 from testbed.ecs import Entity, Origin, World
 from testbed.mavlink import commands, guided
 from testbed.mavlink.ardusub import RcInput, boot_gain, manual_control_pwm, sticks_from_rc
+from testbed.mavlink.attitude_target import (
+    AttitudeTarget,
+    on_set_attitude_target,
+    update_attitude_target,
+)
 from testbed.mavlink.failsafe import FailsafeMonitor
 from testbed.mavlink.motors import ServoOutputs
 from testbed.mavlink.params import ParamTable
@@ -137,6 +142,8 @@ class VehicleEndpoint:
         rejected: what was dropped, by reason (wire errors, gating, bad fields, unhandled).
         sent: packets queued, by message type.
         pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted.
+        attitude_target: the attitude control a SET_ATTITUDE_TARGET started
+            (:mod:`~testbed.mavlink.attitude_target`), None when there is none.
     """
 
     def __init__(
@@ -168,6 +175,7 @@ class VehicleEndpoint:
         self._last_update_s: float | None = None
         self._next_heartbeat_s = 0.0
         self._snapshot: VehicleSnapshot | None = None
+        self.attitude_target: AttitudeTarget | None = None
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
@@ -185,6 +193,7 @@ class VehicleEndpoint:
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
             "SET_POSITION_TARGET_LOCAL_NED": guided.on_set_position_target_local_ned,
+            "SET_ATTITUDE_TARGET": on_set_attitude_target,
             "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
 
@@ -407,7 +416,9 @@ class VehicleEndpoint:
     def request_position(
         self, position_ned_m: tuple[float, float, float], yaw_rad: float | None
     ) -> None:
-        """Set GUIDED's target: NED position [m] and heading [rad] (None: keep the present)."""
+        """Set GUIDED's target: NED position [m] and heading [rad] (None: keep the present);
+        it ends an attitude target's control (ArduSub's position submode)."""
+        self.attitude_target = None
         self.write(
             PositionSetpoint(
                 position_ned_m, 0.0 if yaw_rad is None else yaw_rad, yaw_rad is not None
@@ -461,6 +472,7 @@ class VehicleEndpoint:
         if known and self._last_update_s is not None and now_s > self._last_update_s:
             self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
         self._last_update_s = now_s
+        update_attitude_target(self, now_s)
         self.failsafe.check(self, snapshot, now_s)
         if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared
             snapshot = dataclasses.replace(snapshot, critical=self.failsafe.active)
