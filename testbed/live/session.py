@@ -59,7 +59,7 @@ from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
 from testbed.run.hil_metrics import hil_metrics
-from testbed.run.hil_modem import FrameLedger, HilModem, poll_modems
+from testbed.run.hil_modem import POLL_S, FrameLedger, HilModem, poll_modems
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
@@ -69,14 +69,12 @@ from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
 from testbed.run.scenario_config import Scenario
-from testbed.run.wall_clock import rt_lateness_ns
+from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.resources import Controllers
 from testbed.vehicle.vehicle import Vehicle
 
-__all__ = ["GOTO_REFUSED", "POLL_S", "PUBLISH_HZ", "LiveSession", "run_live"]
+__all__ = ["GOTO_REFUSED", "PUBLISH_HZ", "LiveSession", "run_live"]
 
-POLL_S = 0.001
-"""Period of the input poll [s]."""
 PUBLISH_HZ = 10.0
 """Rate of the console's state [Hz]."""
 GOTO_REFUSED = "go-to refused: no vehicle state received yet (the depth to hold is unknown)"
@@ -146,7 +144,7 @@ class LiveSession:
         self.requests = LiveRequests(self.station.entity)
         self.station.add_system(Phase.UPDATE, self.requests)
         self.monitor = LinkMonitor(self.recorder.trace)
-        self.lateness_ns: deque[int] = deque(maxlen=200_000)
+        self.lateness_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
         self.link_changes: list[dict[str, Any]] = []
         self._coder: ImageSettings | None = None
         self._held = self.pilot.sticks

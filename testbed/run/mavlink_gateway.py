@@ -61,7 +61,7 @@ from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
-from testbed.run.wall_clock import rt_lateness_ns
+from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.vehicle import Vehicle
 
 __all__ = [
@@ -74,7 +74,6 @@ __all__ = [
 
 GATEWAY_PERIOD_S = 0.01
 """The gateway process's period [s] (the vehicle's frame period: telemetry up to 50 Hz)."""
-_SAMPLES = 200_000
 _ORDER_PAYLOAD_BYTES = 7
 """A ``Move`` order's payload [B]."""
 _STATE_REPLY_PAYLOAD_BYTES = 14
@@ -163,9 +162,9 @@ class GatewayNode:
         self.intakes = [Intake(link.inbox) for link in self.links]
         self.read_ns: dict[float, int] = {}
         """Sample time of each stick command the endpoint wrote → its datagram's read [ns]."""
-        self.lateness_ns: deque[int] = deque(maxlen=_SAMPLES)
-        self.compute_ns: deque[int] = deque(maxlen=_SAMPLES)
-        self.state_age_s: deque[float] = deque(maxlen=_SAMPLES)
+        self.lateness_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
+        self.compute_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
+        self.state_age_s: deque[float] = deque(maxlen=SAMPLES_KEPT)
         self._stop = stop
 
     def run(self, period_s: float = GATEWAY_PERIOD_S) -> Generator[simpy.Event, Any, None]:
@@ -210,7 +209,7 @@ class _ThrusterProbe:
         self._updates = recorder.command_updates
         self._gateway = gateway
         self._seen = 0
-        self.latency_ns: deque[int] = deque(maxlen=_SAMPLES)
+        self.latency_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
 
     def __call__(self, world: World) -> None:
         del world
@@ -326,7 +325,7 @@ def run_gateway(
     holder: dict[str, VehicleNode] = {}
     modems: dict[str, Any] = {}
     ledger = FrameLedger()
-    poll_lateness: deque[int] = deque(maxlen=_SAMPLES)
+    poll_lateness: deque[int] = deque(maxlen=SAMPLES_KEPT)
     if hil is None:
         medium = Medium(
             env,

@@ -54,7 +54,7 @@ from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
-from testbed.run.wall_clock import rt_lateness_ns
+from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.resources import SimClock
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle
@@ -72,7 +72,6 @@ __all__ = [
 ]
 
 _DAY_S = 86400.0
-_SAMPLES = 200_000
 
 
 class EndpointPilot:
@@ -186,9 +185,9 @@ class MavlinkVehicleNode:
                 )
 
             env.timeout(fault.t_s).callbacks.append(fail)
-        self.gcs_to_thruster_ns: deque[int] = deque(maxlen=_SAMPLES)
-        self.lateness_ns: deque[int] = deque(maxlen=_SAMPLES)
-        self.compute_ns: deque[int] = deque(maxlen=_SAMPLES)
+        self.gcs_to_thruster_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
+        self.lateness_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
+        self.compute_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
         self._frame_reads: list[int] = []
         self._ingest_ns = 0
 

@@ -53,11 +53,9 @@ from testbed.run.runner import (
     tally_images,
 )
 from testbed.run.scenario_config import Scenario
+from testbed.run.wall_clock import SAMPLES_KEPT
 
 __all__ = ["run_hil"]
-
-_LATENESS_SAMPLES = 200_000
-"""Scheduler lateness samples kept (the newest): 200 s of 1-ms polls."""
 
 
 def run_hil(
@@ -134,7 +132,7 @@ def run_hil(
     }
     vehicle_node: VehicleNode | None = None
     operator_node: OperatorNode | None = None
-    lateness_ns: deque[int] = deque(maxlen=_LATENESS_SAMPLES)
+    lateness_ns: deque[int] = deque(maxlen=SAMPLES_KEPT)
     stopped: KeyboardInterrupt | None = None
     failed: Exception | None = None
     start: float | None = None
