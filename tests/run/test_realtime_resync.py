@@ -29,11 +29,10 @@ from testbed.protocol import CorruptFrame, Frame, encode_frame
 from testbed.run.nodes import FRAME_OVERHEAD
 from testbed.run.scenario import load_scenario
 from tests.emulator.conftest import IDLE_S, Lateness, WakeProbe
+from tests.run.emulated_link import CRLF
 
 ORDER_PAYLOAD = 7
 """A move order's payload [B]: a 13-B frame."""
-CRLF = 2
-"""The S100 adapter's CR LF after each frame [B]."""
 BEFORE, AFTER = 2, 5
 """Intact orders sent before and after the corrupted one."""
 
