@@ -472,13 +472,19 @@ def never_ready(mission: dict[str, Any]) -> str | None:
 
 def loss_note(direction: dict[str, Any]) -> str:
     """``" (collided N, …)"``: how the frames in the PER were lost when not by bit errors
-    alone (collisions, out of range, outages), then ``", dropped N (P %)"``: frames the sender's
-    FIFO dropped (never on the air, so not in the PER); nothing for what did not happen."""
+    alone (collisions, out of range, outages; with the copies a half-duplex receiver lost to
+    its own transmission, ``copies_lost_transmitting``), then ``", dropped N (P %)"``: frames
+    the sender's FIFO dropped (never on the air, so not in the PER); nothing for what did not
+    happen."""
     causes = [
         f"{label} {direction[key]}"
         for key, label in _LOSS_CAUSES
         if direction.get(key)  # keys only ever added: an older metrics.json may lack one
     ]
+    deaf = direction.get("copies_lost_transmitting")
+    if deaf and direction.get("frames_collided"):
+        copies = "copy" if deaf == 1 else "copies"
+        causes[0] += f": {deaf} {copies} lost while the receiver transmitted"
     lost = f" ({', '.join(causes)})" if causes else ""
     dropped = direction["frames_dropped"]
     if not dropped:

@@ -187,14 +187,17 @@ def test_the_summary_says_how_many_frames_in_the_per_collided(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The acoustic s2c preset under the 2021 gap: the replies collide with the next orders,
-    and the downlink line says so beside the PER (it read "PER 100.00 %" as if bit errors)."""
+    and the downlink line says so beside the PER (it read "PER 100.00 %" as if bit errors),
+    and that the operator lost them while it transmitted (two nodes: no other cause)."""
     out = tmp_path / "r"
     argv = ["run", "s100-teleop-v1", "--set", "link.preset=s2c", "--set", "duration_s=20"]
     assert main([*argv, "--set", "metrics.settle_s=5", "--no-plots", "--out", str(out)]) == 0
     down = json.loads((out / "metrics.json").read_text())["link"]["downlink"]
     assert down["frames_collided"] > 0
     line = next(li for li in capsys.readouterr().out.splitlines() if "downlink" in li)
-    assert f"(collided {down['frames_collided']})" in line
+    deaf = down["copies_lost_transmitting"]
+    assert deaf == down["frames_collided"]  # one copy a frame at the one receiver
+    assert f"(collided {deaf}: {deaf} copies lost while the receiver transmitted)" in line
 
 
 def test_a_capsized_vehicle_is_said_in_the_summary(
