@@ -65,14 +65,15 @@ NON_NEGATIVE_METRICS = (
     "mission.estimate_error_m.*",
     "*.std",
     "attitude_error_deg.*.p95",
+    "depth_error_m.p95",
     "mission.yaw_error_deg.p95",
     "energy_wh",
     "max_tilt_deg.*",
 )
 """Flattened metrics (``fnmatch`` patterns) that cannot be negative by their meaning. Signed
 ones are left out on purpose: ``signal_lag_s.*`` (the received stick may lead by up to half a
-sample), the means of ``attitude_error_deg.*`` and ``mission.yaw_error_deg`` (signed errors),
-and anything not listed (no bound is assumed)."""
+sample), the means of ``attitude_error_deg.*``, ``depth_error_m`` and ``mission.yaw_error_deg``
+(signed errors), and anything not listed (no bound is assumed)."""
 
 
 def is_probability(name: str) -> bool:

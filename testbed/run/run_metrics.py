@@ -223,6 +223,7 @@ def compute_metrics(
     for axis in ("roll", "pitch", "yaw"):
         values = series[f"err_{axis}_deg"][after]
         attitude[axis] = distribution(values[~np.isnan(values)])
+    depth_error = series["down_m"][after] - series["depth_target_m"][after]
     if sim_s > settle:
         command_age = age_of_information(recorder.command_updates, settle, sim_s)
         odometry_age = age_of_information(recorder.odometry_updates, settle, sim_s)
@@ -271,6 +272,7 @@ def compute_metrics(
         "odometry_age_s": odometry_age,
         "velocity_tracking_rmse": rmse,
         "attitude_error_deg": attitude,
+        "depth_error_m": distribution(depth_error[~np.isnan(depth_error)]),
         "energy_wh": energy_wh,
         "max_tilt_deg": max_tilt(series),
         "frames_rejected": dict(recorder.frames_rejected),

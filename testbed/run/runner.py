@@ -249,8 +249,11 @@ def run_scenario(
             :class:`~testbed.vehicle.nav_sensors.NavSource` in its
             :class:`~testbed.vehicle.localization.Navigation` resource
             (``vehicle.world.resource(Navigation)``, present when the vehicle has a
-            navigation or an autonomy), add a system to ``vehicle.schedule`` (an observer of
-            its world, a disturbance), read ``vehicle.config``. It may not step the vehicle,
+            navigation or an autonomy), fly the depth or attitude hold with a law of the
+            user's (``vehicle.controllers.depth_law``/``attitude_law``,
+            :mod:`testbed.vehicle.control_laws`), add a system to ``vehicle.schedule`` (an
+            observer of its world, a disturbance: it runs last in its phase, in UPDATE after
+            the allocation), read ``vehicle.config``. It may not step the vehicle,
             replace its world or entity, or reach the link, the operator or the recorder. Keep
             runs repeatable: any randomness from generators you seed yourself (the run's own
             generators are not handed out), and no wall-clock time.

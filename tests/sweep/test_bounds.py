@@ -27,10 +27,17 @@ NON_NEGATIVE = [
     "mission.completion_s",
     "mission.position_error_m.final",
     "attitude_error_deg.roll.std",
+    "depth_error_m.p95",
     "energy_wh",
 ]
 PROBABILITIES = ["link.uplink.per", "link.downlink.drop_rate"]
-SIGNED = ["signal_lag_s.x", "attitude_error_deg.roll.mean", "mission.yaw_error_deg.mean", "m"]
+SIGNED = [
+    "signal_lag_s.x",
+    "attitude_error_deg.roll.mean",
+    "depth_error_m.mean",
+    "mission.yaw_error_deg.mean",
+    "m",
+]
 
 
 def _scipy_interval(values: list[float]) -> tuple[float, float]:
@@ -74,7 +81,8 @@ def test_aggregate_intervals_are_scipys_clipped_to_the_metric_bounds(
 
 def test_every_metric_of_a_real_run_is_classified_by_its_meaning() -> None:
     """The keys a real run writes: counts, rates, times and magnitudes are ≥ 0, PER and drop
-    rates in [0, 1]; the signed ones (signal lag, mean attitude errors) have no bound."""
+    rates in [0, 1]; the signed ones (signal lag, mean attitude and depth errors) have no
+    bound."""
     spec = RunSpec(0, 0, "s100-teleop-v1", ("duration_s=8.0", "metrics.settle_s=1.0"))
     outcome = execute_run(spec)
     assert outcome.metrics is not None, outcome.error
@@ -82,7 +90,7 @@ def test_every_metric_of_a_real_run_is_classified_by_its_meaning() -> None:
         bounds = metric_bounds(name)
         last = name.rsplit(".", 1)[-1]
         if name.startswith("signal_lag_s.") or (
-            name.startswith("attitude_error") and last == "mean"
+            name.startswith(("attitude_error", "depth_error")) and last == "mean"
         ):
             assert bounds is None, name
         elif last in ("per", "drop_rate") or isinstance(outcome.metrics[name], bool):
