@@ -1,6 +1,6 @@
 """SET_ATTITUDE_TARGET as ArduSub takes it: GUIDED's angle control and ALT_HOLD's attitude target.
 
-ArduSub 4.5 (``ArduSub/GCS_MAVLink_Sub.cpp``, ``handle_message``, SET_ATTITUDE_TARGET; the modes
+ArduSub 4.5 (``ArduSub/GCS_Mavlink.cpp``, ``handle_message``, SET_ATTITUDE_TARGET; the modes
 in ``mode_guided.cpp`` and ``mode_althold.cpp``) reads only the attitude quaternion and the
 thrust; the body-rate fields are never used. It checks no mode on receipt; what the message
 does depends on the mode and on two ``type_mask`` bits, 64 (throttle ignore) and 128 (attitude

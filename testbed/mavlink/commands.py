@@ -4,7 +4,9 @@ Each ``on_<message>(endpoint, channel, message, now_s, arrived_s)`` answers on t
 request came on (PARAM_VALUE after a PARAM_SET, like STATUSTEXT, goes to every channel).
 COMMAND_LONG and COMMAND_INT share one table (:data:`COMMANDS`): arm/disarm (400), DO_SET_MODE
 (176), SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510), REQUEST_MESSAGE (512),
-REQUEST_AUTOPILOT_CAPABILITIES (520); anything else is acknowledged UNSUPPORTED. Commands are
+REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410), and those carrying a location
+(:data:`LOCATION_COMMANDS`): DO_REPOSITION (192, :func:`~testbed.mavlink.guided.do_reposition`);
+anything else is acknowledged UNSUPPORTED. Commands are
 not gated on the sender's system id (ArduSub's are not), only on the target.
 
 Mode policy (ArduSub ``Sub::set_mode``): MANUAL 19, STABILIZE 0 and ALT_HOLD 2 are accepted
@@ -24,6 +26,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from testbed.mavlink import guided
 from testbed.mavlink.ardusub import (
     FIRMWARE_VERSION,
     FLIGHT_SW_VERSION,
@@ -43,6 +46,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CAPABILITIES",
     "COMMANDS",
+    "LOCATION_COMMANDS",
     "autopilot_version",
     "on_command_int",
     "on_command_long",
@@ -66,6 +70,7 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
     | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
 )
 """AUTOPILOT_VERSION.capabilities (ArduPilot's, less what the simulator cannot do;
@@ -211,6 +216,20 @@ COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
 }
 """MAV_CMD → handler returning the MAV_RESULT to acknowledge."""
+LOCATION_COMMANDS: dict[int, Callable[[VehicleEndpoint, int, tuple[float, ...], int, int], int]] = {
+    mav.MAV_CMD_DO_REPOSITION: guided.do_reposition,
+}
+"""MAV_CMD → handler of a command that carries a location (ArduPilot's
+``command_long_stores_location``), given its frame, params and latitude and longitude
+[1e-7 deg]; the MAV_RESULT to acknowledge."""
+
+
+def _e7(degrees: float) -> int:
+    """ArduPilot's ``convert_COMMAND_LONG_loc_param``: degrees → 1e-7 degrees (NaN → 0; beyond
+    int32, its bound)."""
+    if not math.isfinite(degrees):
+        return 0
+    return max(-(2**31), min(2**31 - 1, int(degrees * 1e7)))
 
 
 def _command(
@@ -219,10 +238,17 @@ def _command(
     message: mav.MAVLink_message,
     params: tuple[float, ...],
     now_s: float,
+    location: tuple[int, int, int],
 ) -> None:
+    """Act on a command and acknowledge it; ``location`` is its (frame, lat, lon [1e-7 deg])."""
     if not endpoint.for_us(message.target_system, message.target_component):
         return
     cmd = int(message.command)
+    located = LOCATION_COMMANDS.get(cmd)
+    if located is not None:
+        endpoint.accepted += 1
+        _ack(endpoint, channel, message, cmd, located(endpoint, location[0], params, *location[1:]))
+        return
     handler = COMMANDS.get(cmd)
     if handler is None:
         endpoint.reject("unsupported_command")
@@ -239,10 +265,13 @@ def on_command_long(
     now_s: float,
     arrived_s: float,
 ) -> None:
-    """COMMAND_LONG → :data:`COMMANDS`, acknowledged."""
+    """COMMAND_LONG → :data:`COMMANDS`, acknowledged; a location command's params 5, 6 are its
+    latitude and longitude [deg] in MAV_FRAME_GLOBAL, as ArduPilot converts it to a
+    COMMAND_INT (``convert_COMMAND_LONG_to_COMMAND_INT``)."""
     del arrived_s
     params = tuple(float(getattr(message, f"param{k}")) for k in range(1, 8))
-    _command(endpoint, channel, message, params, now_s)
+    location = (mav.MAV_FRAME_GLOBAL, _e7(params[4]), _e7(params[5]))
+    _command(endpoint, channel, message, params, now_s, location)
 
 
 def on_command_int(
@@ -252,11 +281,13 @@ def on_command_int(
     now_s: float,
     arrived_s: float,
 ) -> None:
-    """COMMAND_INT → :data:`COMMANDS` (param1–4; x, y, z as params 5–7), acknowledged."""
+    """COMMAND_INT → :data:`COMMANDS` (param1–4; x, y, z as params 5–7), acknowledged; a
+    location command's x, y are its latitude and longitude [1e-7 deg] in its ``frame``."""
     del arrived_s
     params = tuple(float(getattr(message, f"param{k}")) for k in range(1, 5))
     params += (float(message.x), float(message.y), float(message.z))
-    _command(endpoint, channel, message, params, now_s)
+    location = (int(message.frame), int(message.x), int(message.y))
+    _command(endpoint, channel, message, params, now_s, location)
 
 
 def on_set_mode(

@@ -193,6 +193,7 @@ class VehicleEndpoint:
             "REQUEST_DATA_STREAM": commands.on_request_data_stream,
             "TIMESYNC": commands.on_timesync,
             "SET_POSITION_TARGET_LOCAL_NED": guided.on_set_position_target_local_ned,
+            "SET_POSITION_TARGET_GLOBAL_INT": guided.on_set_position_target_global_int,
             "SET_ATTITUDE_TARGET": on_set_attitude_target,
             "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
@@ -374,7 +375,7 @@ class VehicleEndpoint:
             return
         for button, mode in _BUTTON_MODES.items():
             if pressed & (1 << button):
-                commands.set_mode(self, mode)
+                self.set_mode(mode)
         if pressed & (1 << 4):
             self.request_arm(False, now_s)
         if pressed & (1 << 6):
@@ -398,6 +399,11 @@ class VehicleEndpoint:
         self._arm_seq += 1
         self.write(ArmRequest(armed, self._arm_seq))
         del now_s  # ArduSub's pilot-input timer runs from the last input, not from arming
+
+    def set_mode(self, custom_mode: int) -> int:
+        """Ask for ArduSub mode ``custom_mode`` under ArduSub's policy
+        (:func:`~testbed.mavlink.commands.set_mode`); the MAV_RESULT."""
+        return commands.set_mode(self, custom_mode)
 
     def request_mode(self, mode: ControlMode) -> None:
         """Ask the vehicle for a simulated mode."""

@@ -46,6 +46,8 @@ __all__ = [
     "MESSAGE_IDS",
     "VehicleSnapshot",
     "VelocityEstimator",
+    "global_from_local",
+    "local_from_global",
     "read_vehicle",
 ]
 
@@ -309,11 +311,28 @@ def _vfr_hud(s: VehicleSnapshot) -> mav.MAVLink_message:
     )
 
 
-def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
+def global_from_local(north_m: float, east_m: float) -> tuple[float, float]:
+    """(latitude, longitude) [deg] of a local NED point (``north_m``, ``east_m``) [m]: the home
+    (:data:`HOME_LAT_LON_DEG`, the local origin) plus the offset, flat earth, WGS-84 radius,
+    the east scale the home's cos(latitude)."""
     lat0, lon0 = HOME_LAT_LON_DEG
+    lat = lat0 + math.degrees(north_m / EARTH_RADIUS_M)
+    lon = lon0 + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+    return lat, lon
+
+
+def local_from_global(lat_deg: float, lon_deg: float) -> tuple[float, float]:
+    """(north, east) [m] of a global point, the inverse of :func:`global_from_local` (a point
+    a ground station takes from GLOBAL_POSITION_INT comes back to the same local position)."""
+    lat0, lon0 = HOME_LAT_LON_DEG
+    north = math.radians(lat_deg - lat0) * EARTH_RADIUS_M
+    east = math.radians(lon_deg - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+    return north, east
+
+
+def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
     north, east, down = s.position_ned_m
-    lat = lat0 + math.degrees(north / EARTH_RADIUS_M)
-    lon = lon0 + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+    lat, lon = global_from_local(north, east)
     vn, ve, vd = s.velocity_ned_m_s
     return mav.MAVLink_global_position_int_message(
         s.time_boot_ms,
