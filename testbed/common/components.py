@@ -8,7 +8,10 @@ setpoints), the **vehicle** owns state (sensor readings, odometry, armed, mode, 
 failsafe, thruster outputs, command status). A side never writes what the other owns.
 
 Replicated fields cannot be ``None`` (the registry forbids unions), so "no setpoint yet" is
-expressed by the component's absence. No logic here; standard library and the ECS registry only.
+expressed by the component's absence. :class:`ThrusterTest` is an operator intent that does not
+replicate (not in :data:`REPLICATED`): only a pilot on the vehicle's own node writes it (the
+MAVLink endpoint of a direct run; no link carries a motor test). No logic here; standard library
+and the ECS registry only.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ __all__ = [
     "PositionReading",
     "PositionSetpoint",
     "ThrusterOutput",
+    "ThrusterTest",
     "register_components",
 ]
 
@@ -151,6 +155,21 @@ class EndEffectorSetpoint:
     position_ned_m: Vec3
     yaw_rad: float = 0.0
     use_yaw: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ThrusterTest:
+    """Thrusters driven at given pulses instead of the allocation's: ArduSub's motor test.
+
+    Acts only while armed; local to the vehicle's node (module docstring).
+
+    Attributes:
+        pwm_us: (n,) pulse per thruster, in the layout's (allocation) order [µs], as the ESC
+            gets it (a CCW propeller's mirror applies, 1500 stops); empty: no test, the
+            allocation runs.
+    """
+
+    pwm_us: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

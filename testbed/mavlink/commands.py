@@ -4,7 +4,8 @@ Each ``on_<message>(endpoint, channel, message, now_s, arrived_s)`` answers on t
 request came on (PARAM_VALUE after a PARAM_SET, like STATUSTEXT, goes to every channel).
 COMMAND_LONG and COMMAND_INT share one table (:data:`COMMANDS`): arm/disarm (400), DO_SET_MODE
 (176), SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510), REQUEST_MESSAGE (512),
-REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410), and those carrying a location
+REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410), DO_MOTOR_TEST (209,
+:mod:`~testbed.mavlink.motor_test`), and those carrying a location
 (:data:`LOCATION_COMMANDS`): DO_REPOSITION (192, :func:`~testbed.mavlink.guided.do_reposition`);
 anything else is acknowledged UNSUPPORTED. Commands are
 not gated on the sender's system id (ArduSub's are not), only on the target.
@@ -35,6 +36,7 @@ from testbed.mavlink.ardusub import (
     POSITION_MODES,
     SIMULATED_MODES,
 )
+from testbed.mavlink.motor_test import do_motor_test
 from testbed.mavlink.params import ALIASES
 from testbed.mavlink.telemetry import MESSAGE_IDS
 
@@ -189,6 +191,11 @@ def _cmd_home(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float
     return _send_by_id(e, c, mav.MAVLINK_MSG_ID_HOME_POSITION)
 
 
+def _cmd_motor_test(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    del c
+    return do_motor_test(e, p, now_s)
+
+
 def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
     del now_s
     name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
@@ -214,6 +221,7 @@ COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float
     mav.MAV_CMD_GET_HOME_POSITION: _cmd_home,
     mav.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_set_interval,
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
+    mav.MAV_CMD_DO_MOTOR_TEST: _cmd_motor_test,
 }
 """MAV_CMD → handler returning the MAV_RESULT to acknowledge."""
 LOCATION_COMMANDS: dict[int, Callable[[VehicleEndpoint, int, tuple[float, ...], int, int], int]] = {

@@ -56,6 +56,7 @@ from testbed.mavlink.attitude_target import (
     update_attitude_target,
 )
 from testbed.mavlink.failsafe import FailsafeMonitor
+from testbed.mavlink.motor_test import MotorTest, update_motor_test
 from testbed.mavlink.motors import ServoOutputs
 from testbed.mavlink.params import ParamTable
 from testbed.mavlink.streams import StreamSchedule
@@ -144,6 +145,7 @@ class VehicleEndpoint:
         pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted.
         attitude_target: the attitude control a SET_ATTITUDE_TARGET started
             (:mod:`~testbed.mavlink.attitude_target`), None when there is none.
+        motor_test: the DO_MOTOR_TEST state (:mod:`~testbed.mavlink.motor_test`).
     """
 
     def __init__(
@@ -176,6 +178,7 @@ class VehicleEndpoint:
         self._next_heartbeat_s = 0.0
         self._snapshot: VehicleSnapshot | None = None
         self.attitude_target: AttitudeTarget | None = None
+        self.motor_test = MotorTest()
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
@@ -205,6 +208,11 @@ class VehicleEndpoint:
         """SYSID_THISMAV at boot (a value set later takes effect at the next boot, as in
         ArduPilot, whose ``GCS::init`` reads it once)."""
         return self._system_id
+
+    @property
+    def can_test_motors(self) -> bool:
+        """Whether DO_MOTOR_TEST can reach the thrusters (here, on the vehicle's own node)."""
+        return True
 
     @property
     def gcs_system_id(self) -> int:
@@ -479,6 +487,7 @@ class VehicleEndpoint:
             self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
         self._last_update_s = now_s
         update_attitude_target(self, now_s)
+        update_motor_test(self, now_s)
         self.failsafe.check(self, snapshot, now_s)
         if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared
             snapshot = dataclasses.replace(snapshot, critical=self.failsafe.active)

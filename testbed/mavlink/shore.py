@@ -116,6 +116,11 @@ class ShoreEndpoint(VehicleEndpoint):
             return entity, odometry.sampled_s - self.link.arrival_correction_s
         return self.intents, 0.0  # nothing mirrored yet: no vehicle components on it
 
+    @property
+    def can_test_motors(self) -> bool:
+        """False: the thrusters are across the narrow link, which carries no motor test."""
+        return False
+
     def has_position_estimate(self) -> bool:
         """Whether the vehicle behind the link has a fix (:attr:`LinkFacts.position_fix`)."""
         return self.link.position_fix

@@ -33,6 +33,7 @@ from testbed.common.components import (
     PositionReading,
     PositionSetpoint,
     ThrusterOutput,
+    ThrusterTest,
     register_components,
 )
 
@@ -62,6 +63,7 @@ __all__ = [
     "PositionReading",
     "PositionSetpoint",
     "ThrusterOutput",
+    "ThrusterTest",
     "VehicleTag",
     "register_components",
 ]

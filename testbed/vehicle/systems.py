@@ -63,6 +63,7 @@ from testbed.vehicle.components import (
     PositionReading,
     PositionSetpoint,
     ThrusterOutput,
+    ThrusterTest,
 )
 from testbed.vehicle.control_kernels import pilot_rows, pilot_shape
 from testbed.vehicle.control_laws import checked_vector
@@ -93,6 +94,7 @@ __all__ = [
     "control_attitude",
     "control_depth",
     "control_position",
+    "drive_thrusters",
     "mean_force_weight",
     "meter_power",
     "publish_odometry",
@@ -332,7 +334,8 @@ def _get(world: World, vehicle: Entity, cls: type[_C]) -> _C:
 
 
 def allocate_thrust(world: World) -> None:
-    """Σ force intents → allocator → per-thruster commands (all off when disarmed).
+    """Σ force intents → allocator → per-thruster commands (all off when disarmed; while armed
+    an operator's :class:`ThrusterTest` drives the thrusters at its pulses instead).
 
     The intents are summed in the order of their rows in the store (the order their entities
     were spawned in); the allocation writes the vehicle's :class:`ThrusterOutput` row.
@@ -346,9 +349,33 @@ def allocate_thrust(world: World) -> None:
         act.commanded_forces_n[:] = 0.0
         world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
         return
+    test = next((t for _, t in world.query1(ThrusterTest) if t.pwm_us), None)
+    if test is not None and len(test.pwm_us) == act.matrix.shape[1]:
+        drive_thrusters(world, test.pwm_us)
+        return
     dt = world.resource(SimClock).dt_s
     commanded = act.commanded_forces_n
     act.allocator.step_rows(act.intents, dt, act.requested, act.output, world.tick, commanded)
+
+
+def drive_thrusters(world: World, pwm_us: Sequence[float]) -> None:
+    """Drive the thrusters at the pulses ``pwm_us`` [µs] (per thruster, the ESC's: a CCW
+    propeller's mirrored) instead of the allocation's, as an autopilot's motor test: the T200's
+    forces for them are commanded, the allocator forgets its last command (the slew limit starts
+    again from 0 N afterwards), and :class:`ThrusterOutput` reports the pulses, the forces and
+    their currents (scale 1)."""
+    act = world.resource(Actuation)
+    allocator = act.allocator
+    pwm = np.asarray(pwm_us, dtype=np.float64)
+    forces = allocator.t200.forces_for_pwms(pwm, allocator.config.ccw_mask)
+    allocator.reset()
+    act.requested[:] = 0.0
+    act.commanded_forces_n[:] = forces
+    currents = allocator.t200.currents_for_forces(forces)
+    output = ThrusterOutput(
+        tuple(forces.tolist()), tuple(pwm.tolist()), tuple(currents.tolist()), 1.0
+    )
+    world.set(world.resource(Controllers).vehicle, output)
 
 
 # ---------------------------------------------------------------------------- POST_UPDATE
