@@ -142,12 +142,9 @@ def _supervise(world: World, ctl: Controllers) -> None:
     if status.level is FailsafeLevel.SURFACE:
         level = FailsafeLevel.SURFACE
     if level is not status.level:
-        # from here: the loops' targets start from what the sensors read (also entering SURFACE
-        # under autonomy, whose mission flew on through the HOLD and left the targets behind)
         fresh = status.level is FailsafeLevel.NOMINAL or ctl.autonomous
         if level is not FailsafeLevel.NOMINAL and fresh:
-            measured = measured_targets(world, vehicle)
-            set_targets(world, ctl, measured.depth_m, measured.quaternion_wxyz)
+            _hold_targets(world, ctl)
         status = FailsafeStatus(level, now)
         world.set(vehicle, status)
     if level is FailsafeLevel.SURFACE:
@@ -156,4 +153,23 @@ def _supervise(world: World, ctl: Controllers) -> None:
         set_targets(world, ctl, depth, targets.quaternion_wxyz)
         reading = world.get(vehicle, DepthReading)
         if reading is not None and reading.depth_m <= ctl.failsafe.surfaced_depth_m:
-            world.set(vehicle, Armed(False))
+            world.set(vehicle, Armed(False))  # surfaced: disarmed, and the failsafe is over
+            world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
+
+
+def _hold_targets(world: World, ctl: Controllers) -> None:
+    """The targets the failsafe holds from this frame: a depth or attitude target the operator's
+    hold was already flying is kept (as ArduSub's failsafe switching to ALT_HOLD leaves a
+    vehicle already in it alone), the other axes start from what the sensors read (MANUAL's
+    depth, say). GUIDED's leg and the autonomy's mission (which flew on through a HOLD and
+    left the targets behind, when entering SURFACE) start from the sensors on both axes: the
+    vehicle stops where it is."""
+    vehicle = ctl.vehicle
+    measured = measured_targets(world, vehicle)
+    held = world.get(vehicle, ControlTargets)
+    flags = ctl.flags  # the modes that flew up to this frame
+    if held is None or ctl.autonomous or flags.guided:
+        held = measured
+    depth = held.depth_m if flags.depth_hold else measured.depth_m
+    attitude = held.quaternion_wxyz if flags.attitude_hold else measured.quaternion_wxyz
+    set_targets(world, ctl, depth, attitude)

@@ -46,3 +46,20 @@ def test_a_run_with_a_law_of_ones_own_is_the_same_for_the_same_seed() -> None:
     series = [run.recorder.series() for run in runs]
     for name in series[0]:
         np.testing.assert_array_equal(series[0][name], series[1][name], err_msg=name)
+
+
+def test_the_link_failsafe_holds_the_depth_target_the_operator_held() -> None:
+    """s100-outage-v1's 2-s outage at 60 s puts the vehicle in the failsafe's HOLD. In depth
+    hold that keeps the operator's depth target (ArduSub's ``set_mode`` leaves a vehicle already
+    in ALT_HOLD alone), so a P law riding B/kp above its target stays there through the HOLD;
+    it climbed another B/kp at each HOLD while the HOLD re-based the target on the measured
+    depth."""
+    scenario = load_scenario("s100-outage-v1", ["duration_s=75", "metrics.settle_s=40"])
+    series = run_scenario(scenario, pilot=StillPilot(), vehicle_setup=_with_p_law).recorder.series()
+    t, target, failsafe = series["t_s"], series["depth_target_m"], series["failsafe"]
+    assert np.any(failsafe[(t > 60.0) & (t < 64.0)] > 0)  # the outage did trigger the HOLD
+    held = target[(t > 50.0) & (t < 60.0)]
+    assert np.all(held == held[0]) and np.all(target[t >= 60.0] == held[0])
+    offset = -(MODEL.buoyancy_n - MODEL.weight_n) / KP_N_PER_M
+    error = series["down_m"] - target
+    assert np.mean(error[t > 70.0]) == pytest.approx(offset, abs=3e-3)
