@@ -185,7 +185,8 @@ def format_trial(trial: int, metrics: dict[str, Any]) -> str:
         line += (
             f"command lag mean {_num(h['command_lag_mean_s'], 1000.0, 0, ' ms')}, age mean "
             f"{_num(h['command_age_mean_s'], 1000.0, 0, ' ms')}; yaw error std "
-            f"{_num(h['yaw_error_std_deg'], digits=2, unit=' deg')}; energy "
+            f"{_num(h['yaw_error_std_deg'], digits=2, unit=' deg')}; depth error mean "
+            f"{_num(h['depth_error_mean_m'], 1000.0, 0, ' mm')}; energy "
             f"{_num(h['energy_wh'], unit=' Wh')}"
         )
         if "images" not in metrics:
@@ -230,7 +231,8 @@ def format_trials_summary(document: dict[str, Any], out: Path) -> str:
         return (
             f"{head}command lag mean {pm_unit('command_lag_mean_s', 'ms', 1000.0, 0)}, age "
             f"mean {pm_unit('command_age_mean_s', 'ms', 1000.0, 0)}; yaw error std "
-            f"{pm_unit('yaw_error_std_deg', 'deg', digits=2)}; energy "
+            f"{pm_unit('yaw_error_std_deg', 'deg', digits=2)}; depth error mean "
+            f"{pm_unit('depth_error_mean_m', 'mm', 1000.0, 0)}; energy "
             f"{pm_unit('energy_wh', 'Wh')}{images}\n  wrote {out}/"
         )
     return (

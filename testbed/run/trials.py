@@ -59,6 +59,7 @@ HEADLINE: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("command_lag_mean_s", ("command_lag_s", "mean")),
     ("command_age_mean_s", ("command_age_s", "mean")),
     ("yaw_error_std_deg", ("attitude_error_deg", "yaw", "std")),
+    ("depth_error_mean_m", ("depth_error_m", "mean")),
     ("energy_wh", ("energy_wh",)),
     ("images_per_minute", ("images", "per_minute")),
     ("image_latency_mean_s", ("images", "latency_s", "mean")),

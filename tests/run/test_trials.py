@@ -91,7 +91,8 @@ def test_trials_write_each_run_and_the_mean_over_them(scenario: Scenario, tmp_pa
     assert [row["dir"] for row in doc["trials"]] == ["trial-1", "trial-2", "trial-3"]
     for name, _ in HEADLINE:
         values = [row[name] for row in doc["trials"]]
-        if name == "yaw_error_std_deg" or name.startswith("image"):  # none under autonomy
+        # none under autonomy (the ISMC flies: no attitude or depth hold)
+        if name in ("yaw_error_std_deg", "depth_error_mean_m") or name.startswith("image"):
             assert values == [None] * 3 and doc["across_trials"][name]["n"] == 0
             continue
         assert all(v is not None for v in values), name
@@ -268,6 +269,7 @@ def test_trials_of_a_teleoperated_scenario_summarise_its_command_figures(
     runs = [json.loads((out / f"trial-{k}/metrics.json").read_text()) for k in (1, 2, 3)]
     lags = np.array([m["command_lag_s"]["mean"] for m in runs])
     yaw = np.array([m["attitude_error_deg"]["yaw"]["std"] for m in runs])
+    depth = np.array([m["depth_error_m"]["mean"] for m in runs])
     document = json.loads((out / TRIALS_FILE).read_text())
     across = document["across_trials"]
     assert document["mission"] is False
@@ -278,6 +280,9 @@ def test_trials_of_a_teleoperated_scenario_summarise_its_command_figures(
     assert "position error" not in summary and "n/a" not in summary
     assert (
         f"command lag mean {1000 * lags.mean():.0f} ± {1000 * lags.std(ddof=1):.0f} ms" in summary
+    )
+    assert f"depth error mean {1000 * depth.mean():.0f} ± {1000 * depth.std(ddof=1):.0f} mm" in (
+        summary
     )
 
 
