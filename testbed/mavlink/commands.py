@@ -1,7 +1,8 @@
-"""The endpoint's request handlers: commands, modes, parameters, mission, streams, time sync.
+"""The endpoint's request handlers: commands, modes, mission, streams, time sync, MAVFTP.
 
 Each ``on_<message>(endpoint, channel, message, now_s, arrived_s)`` answers on the channel the
-request came on (PARAM_VALUE after a PARAM_SET, like STATUSTEXT, goes to every channel).
+request came on (STATUSTEXT goes to every channel); the parameter protocol's handlers are
+:mod:`testbed.mavlink.param_protocol`'s.
 COMMAND_LONG and COMMAND_INT share one table (:data:`COMMANDS`): arm/disarm (400), DO_SET_MODE
 (176), SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510), REQUEST_MESSAGE (512),
 REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410), DO_MOTOR_TEST (209,
@@ -29,7 +30,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.mavlink import guided
 from testbed.mavlink.ardusub import (
-    FIRMWARE_VERSION,
     FLIGHT_SW_VERSION,
     GIT_HASH,
     MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
@@ -37,7 +37,6 @@ from testbed.mavlink.ardusub import (
     SIMULATED_MODES,
 )
 from testbed.mavlink.motor_test import do_motor_test
-from testbed.mavlink.params import ALIASES
 from testbed.mavlink.telemetry import MESSAGE_IDS
 
 if TYPE_CHECKING:
@@ -54,13 +53,9 @@ __all__ = [
     "on_command_long",
     "on_mission_request_list",
     "on_mission_upload",
-    "on_param_request_list",
-    "on_param_request_read",
-    "on_param_set",
     "on_request_data_stream",
     "on_set_mode",
     "on_timesync",
-    "send_params",
     "set_mode",
 ]
 
@@ -83,13 +78,6 @@ _ACCEPTED: int = mav.MAV_RESULT_ACCEPTED
 _FAILED: int = mav.MAV_RESULT_FAILED
 _UNSUPPORTED: int = mav.MAV_RESULT_UNSUPPORTED
 _DENIED: int = mav.MAV_RESULT_DENIED
-
-
-def _text(value: object) -> str:
-    """A char[] field as pymavlink gives it (str or bytes), NULs stripped."""
-    if isinstance(value, bytes):
-        value = value.decode("ascii", "replace")
-    return str(value).split("\x00", 1)[0]
 
 
 def autopilot_version(endpoint: VehicleEndpoint) -> mav.MAVLink_message:
@@ -317,121 +305,6 @@ def on_set_mode(
     else:
         result = set_mode(endpoint, int(message.custom_mode))
     _ack(endpoint, channel, message, mav.MAVLINK_MSG_ID_SET_MODE, result)
-
-
-# --------------------------------------------------------------------------- parameters
-
-
-def _param_value(
-    endpoint: VehicleEndpoint, index: int, asked: str = ""
-) -> mav.MAVLink_message | None:
-    """PARAM_VALUE of parameter ``index``, named as ``asked`` when that is its alias (a ground
-    station that set or read it by the other release's name waits for that name)."""
-    entry = endpoint.params.entry(index)
-    if entry is None:
-        return None
-    param, value = entry
-    name = asked if ALIASES.get(asked) == param.name else param.name
-    return mav.MAVLink_param_value_message(
-        name.encode(), value, param.mav_type, len(endpoint.params), index
-    )
-
-
-def on_param_request_list(
-    endpoint: VehicleEndpoint,
-    channel: Channel,
-    message: mav.MAVLink_message,
-    now_s: float,
-    arrived_s: float,
-) -> None:
-    """Start (or restart) the channel's parameter download; ArduPilot's banner first."""
-    del now_s, arrived_s
-    if not endpoint.for_us(message.target_system, message.target_component):
-        return
-    endpoint.accepted += 1
-    major, minor, patch = FIRMWARE_VERSION
-    endpoint.statustext(
-        mav.MAV_SEVERITY_INFO, f"ArduSub V{major}.{minor}.{patch} ({GIT_HASH.decode()})"
-    )
-    frame = int(endpoint.params["FRAME_CONFIG"])
-    endpoint.statustext(mav.MAV_SEVERITY_INFO, f"Frame: {_FRAMES.get(frame, 'CUSTOM')}")
-    channel.param_cursor = 0
-
-
-_FRAMES = {
-    0: "BLUEROV1",
-    1: "VECTORED",
-    2: "VECTORED_6DOF",
-    3: "VECTORED_6DOF_90",
-    4: "SIMPLEROV_3",
-    5: "SIMPLEROV_4",
-    6: "SIMPLEROV_5",
-    7: "CUSTOM",
-}
-
-
-def send_params(endpoint: VehicleEndpoint, channel: Channel) -> None:
-    """Queue the next PARAM_VALUEs of a download in progress (paced per update)."""
-    cursor = channel.param_cursor
-    if cursor is None:
-        return
-    end = min(len(endpoint.params), cursor + endpoint.options.params_per_update)
-    for index in range(cursor, end):
-        message = _param_value(endpoint, index)
-        if message is not None:
-            endpoint.queue(channel, message)
-    channel.param_cursor = None if end >= len(endpoint.params) else end
-
-
-def on_param_request_read(
-    endpoint: VehicleEndpoint,
-    channel: Channel,
-    message: mav.MAVLink_message,
-    now_s: float,
-    arrived_s: float,
-) -> None:
-    """PARAM_VALUE of one parameter, by index (≥ 0) or by name; unknown ones unanswered."""
-    del now_s, arrived_s
-    if not endpoint.for_us(message.target_system, message.target_component):
-        return
-    index: int | None = int(message.param_index)
-    asked = ""
-    if index is None or index < 0:
-        asked = _text(message.param_id)
-        index = endpoint.params.index_of(asked)
-    reply = None if index is None else _param_value(endpoint, index, asked)
-    if reply is None:
-        endpoint.reject("unknown_param")
-        return
-    endpoint.accepted += 1
-    endpoint.queue(channel, reply)
-
-
-def on_param_set(
-    endpoint: VehicleEndpoint,
-    channel: Channel,
-    message: mav.MAVLink_message,
-    now_s: float,
-    arrived_s: float,
-) -> None:
-    """Set a parameter; the new value goes to every channel. A refused value of a known
-    parameter is answered with the unchanged value; an unknown name is not answered."""
-    del now_s, arrived_s
-    if not endpoint.for_us(message.target_system, message.target_component):
-        return
-    name = _text(message.param_id)
-    index = endpoint.params.set(name, float(message.param_value))
-    if index is None:
-        endpoint.reject("param_refused")
-        known = endpoint.params.index_of(name)
-        reply = None if known is None else _param_value(endpoint, known, name)
-        if reply is not None:
-            endpoint.queue(channel, reply)
-        return
-    endpoint.accepted += 1  # (SYSID_THISMAV and JS_GAIN_DEFAULT take effect at the next boot)
-    reply = _param_value(endpoint, index, name)
-    if reply is not None:
-        endpoint.broadcast(reply)
 
 
 # ------------------------------------------------------------------- mission, streams, time

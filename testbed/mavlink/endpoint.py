@@ -48,7 +48,7 @@ from testbed.common.components import (
     PositionSetpoint,
 )
 from testbed.ecs import Entity, Origin, World
-from testbed.mavlink import commands, guided
+from testbed.mavlink import commands, guided, param_protocol
 from testbed.mavlink.ardusub import RcInput, boot_gain, manual_control_pwm, sticks_from_rc
 from testbed.mavlink.attitude_target import (
     AttitudeTarget,
@@ -187,9 +187,9 @@ class VehicleEndpoint:
             "COMMAND_LONG": commands.on_command_long,
             "COMMAND_INT": commands.on_command_int,
             "SET_MODE": commands.on_set_mode,
-            "PARAM_REQUEST_LIST": commands.on_param_request_list,
-            "PARAM_REQUEST_READ": commands.on_param_request_read,
-            "PARAM_SET": commands.on_param_set,
+            "PARAM_REQUEST_LIST": param_protocol.on_param_request_list,
+            "PARAM_REQUEST_READ": param_protocol.on_param_request_read,
+            "PARAM_SET": param_protocol.on_param_set,
             "MISSION_REQUEST_LIST": commands.on_mission_request_list,
             "MISSION_COUNT": commands.on_mission_upload,
             "MISSION_CLEAR_ALL": commands.on_mission_upload,
@@ -498,7 +498,7 @@ class VehicleEndpoint:
         for channel in self.channels:
             for name in channel.streams.due(now_s):
                 self.queue(channel, self.message(name, snapshot))
-            commands.send_params(self, channel)
+            param_protocol.send_params(self, channel)
 
     def message(self, name: str, snapshot: VehicleSnapshot | None = None) -> mav.MAVLink_message:
         """The telemetry message ``name`` (a :data:`~.telemetry.BUILDERS` key or
