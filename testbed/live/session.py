@@ -64,7 +64,7 @@ from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_link_model
+from testbed.run.plugins import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, tally_images
@@ -156,6 +156,7 @@ class LiveSession:
 
     def _vehicle_node(self, rng: np.random.Generator) -> VehicleNode:
         scenario, env, recorder = self.scenario, self.env, self.recorder
+        depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
         modem = self._modem("vehicle", lambda: self.vehicle.truth.position_ned_m)
         images = scenario.images
         node = VehicleNode(
@@ -170,6 +171,7 @@ class LiveSession:
             image_source=image_source_factory(images) if images.enabled else None,
         )
         vehicle = node.vehicle
+        vehicle.controllers.depth_law, vehicle.controllers.attitude_law = depth_law, attitude_law
         observer = VehicleObserver(
             recorder, self.pilot, vehicle.reference_velocity, scenario.metrics.sample_rate_hz
         )

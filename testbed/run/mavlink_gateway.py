@@ -56,7 +56,7 @@ from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_secti
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_link_model
+from testbed.run.plugins import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
@@ -235,6 +235,7 @@ def _vehicle_node(
 ) -> tuple[VehicleNode, _ThrusterProbe]:
     """The scenario's vehicle node (as :func:`~testbed.run.runner.make_vehicle_node` builds
     it), recorded against the sticks the ground station holds, with the latency probe."""
+    depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
     link = scenario.link
     images = image_source_factory(scenario.images) if scenario.images.enabled else None
     node = VehicleNode(
@@ -249,6 +250,7 @@ def _vehicle_node(
         image_source=images,
     )
     vehicle = node.vehicle
+    vehicle.controllers.depth_law, vehicle.controllers.attitude_law = depth_law, attitude_law
     observer = VehicleObserver(
         recorder,
         EndpointPilot(gateway.endpoint),

@@ -50,6 +50,7 @@ from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.observer import VehicleObserver
+from testbed.run.plugins import scenario_control_laws
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
@@ -159,8 +160,10 @@ class MavlinkVehicleNode:
         self.recorder = recorder
         self._failsafes = FailsafeNotes(recorder)
         config = mavlink_vehicle_config(scenario.vehicle)
+        depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
         self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
         vehicle = self.vehicle
+        vehicle.controllers.depth_law, vehicle.controllers.attitude_law = depth_law, attitude_law
         options = endpoint_options(config, vehicle.thruster_config, boot_params)
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, options

@@ -1,4 +1,4 @@
-"""Pilots and link models of the user's own, named in a scenario file.
+"""Pilots, link models and control laws of the user's own, named in a scenario file.
 
 A scenario names a callable of the user's as ``"FILE.py:NAME"`` (a Python file: relative to the
 scenario file's folder, or to the working directory in ``--set``, or absolute) or
@@ -14,13 +14,20 @@ scenario file's folder, or to the working directory in ``--set``, or absolute) o
     model = "my_links.py:halved_after"
     model_args = { at_s = 50.0 }
 
-Each run calls its factories afresh, so a pilot or model that keeps state starts clean in every
-run, trial and sweep point: a pilot factory as ``factory(**args)``, given ``rng=`` (a
+    [vehicle.control]
+    depth = "my_laws.py:PdDepth"
+    depth_args = { kp = 60.0 }
+
+Each run calls its factories afresh, so a pilot, model or law that keeps state starts clean in
+every run, trial and sweep point: a pilot factory as ``factory(**args)``, given ``rng=`` (a
 ``numpy.random.Generator`` of the run's seed, :func:`pilot_generator`) when it has a parameter
 named ``rng``; a link model factory as ``factory(config, **model_args)``, ``config`` the run's
-:class:`~testbed.channel.config.LinkConfig` (the preset with the ``[link]`` keys applied). The
+:class:`~testbed.channel.config.LinkConfig` (the preset with the ``[link]`` keys applied); a
+control law factory as ``factory(**depth_args)`` or ``factory(**attitude_args)``. The
 pilot must have ``sample(t_s) -> PilotSample`` (:class:`~testbed.operator.pilots.Pilot`), the
-model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkModel`).
+model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkModel`), a law
+``reset`` and ``update`` (:class:`~testbed.vehicle.control_laws.DepthLaw`,
+:class:`~testbed.vehicle.control_laws.AttitudeLaw`).
 
 Loading a scenario imports the target and binds the arguments to its signature, so a missing
 file, a name the module lacks or an argument the factory does not take is a one-line error
@@ -56,6 +63,7 @@ if TYPE_CHECKING:
     from testbed.channel.model import LinkModel
     from testbed.operator.pilots import Pilot
     from testbed.run.scenario_config import Scenario
+    from testbed.vehicle.control_laws import AttitudeLaw, DepthLaw
 
 __all__ = [
     "PYTHON_SUFFIX",
@@ -66,6 +74,7 @@ __all__ = [
     "load_factory",
     "make_link_model",
     "pilot_generator",
+    "scenario_control_laws",
     "scenario_link_model",
     "scenario_pilot",
     "takes_rng",
@@ -76,7 +85,9 @@ __all__ = [
 PYTHON_SUFFIX = ".py"
 """The suffix that makes a target's module part a file path rather than a module name."""
 
-TABLE_VALUE_KEYS = frozenset({"pilot.args", "link.model_args"})
+TABLE_VALUE_KEYS = frozenset(
+    {"pilot.args", "link.model_args", "vehicle.control.depth_args", "vehicle.control.attitude_args"}
+)
 """Scenario keys whose value is one table, a factory's keyword arguments: a sweep's ``[set]``
 sets such a table whole (``"link.model_args" = {}`` clears the scenario's), never merged key by
 key."""
@@ -348,3 +359,42 @@ def make_link_model(
             f"{' and '.join(missing)} (expected a testbed.channel.model.LinkModel)"
         )
     return cast("LinkModel", model)
+
+
+_LAW_CONTRACTS = {
+    "depth": "a DepthLaw: reset() and update(target, depth, imu, dt_s) -> (3,) body force [N]",
+    "attitude": (
+        "an AttitudeLaw: reset() and update(target, imu, dt_s, axes) -> (3,) body torque [N·m]"
+    ),
+}
+"""What a depth or attitude law must have (:mod:`testbed.vehicle.control_laws`), for messages."""
+
+
+def scenario_control_laws(scenario: Scenario) -> tuple[DepthLaw | None, AttitudeLaw | None]:
+    """``(depth law, attitude law)`` that ``[vehicle.control]`` names, made afresh for a run
+    (module docstring): each ``NAME(**<name>_args)``, or None for the packaged PID. Call it
+    before building the vehicle, and put them in its
+    :class:`~testbed.vehicle.resources.Controllers` (``depth_law``, ``attitude_law``) before
+    its first frame.
+
+    Raises:
+        ConfigError: a factory failed, or made something without ``reset`` and ``update``
+            (naming ``vehicle.control.depth`` or ``vehicle.control.attitude``).
+    """
+    section = scenario.control_laws
+    made: dict[str, Any] = {}
+    for name, target in section.targets().items():
+        key = f"vehicle.control.{name}"
+        factory = load_factory(target, scenario.source, key)
+        args = getattr(section, f"{name}_args")
+        law = call_factory(factory, (), args, scenario.source, key, f"{key}_args")
+        missing = [m for m in ("reset", "update") if not callable(getattr(law, m, None))]
+        if missing:
+            raise ConfigError(
+                f"{scenario.source}: {key}: {target} made a {type(law).__name__} without "
+                f"{' and '.join(missing)} (expected {_LAW_CONTRACTS[name]})"
+            )
+        made[name] = law
+    return cast("DepthLaw | None", made.get("depth")), cast(
+        "AttitudeLaw | None", made.get("attitude")
+    )

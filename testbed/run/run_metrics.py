@@ -121,6 +121,16 @@ def _own_pilot(scenario: Scenario) -> dict[str, Any]:
     return {"pilot": {"factory": pilot.factory, "args": plain_args(pilot.args)}}
 
 
+def _own_control_laws(scenario: Scenario) -> dict[str, Any]:
+    """``{"depth_law": {"factory", "args"}, "attitude_law": ...}`` for the holds of the
+    user's own that ``[vehicle.control]`` names (neither: nothing)."""
+    laws = scenario.control_laws
+    return {
+        f"{name}_law": {"factory": target, "args": plain_args(getattr(laws, f"{name}_args"))}
+        for name, target in laws.targets().items()
+    }
+
+
 def plain_args(args: dict[str, Any]) -> dict[str, Any]:
     """A factory's keyword arguments as JSON holds them (a TOML date as its text)."""
     plain: dict[str, Any] = json.loads(json.dumps(args, default=str))
@@ -237,6 +247,7 @@ def compute_metrics(
             "overrides": list(scenario.overrides),
             "files": dict(scenario.files),
             **_own_pilot(scenario),
+            **_own_control_laws(scenario),
         },
         "seed": seed,
         "sim_s": sim_s,

@@ -34,7 +34,7 @@ from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_link_model, scenario_pilot
+from testbed.run.plugins import scenario_control_laws, scenario_link_model, scenario_pilot
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics, plain_args
 from testbed.run.scenario_config import Scenario
@@ -97,7 +97,15 @@ def make_vehicle_node(
 ) -> VehicleNode:
     """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
     scheduled. ``rng`` feeds the vehicle's sensors and current; ``pilot`` is what the recorder
-    samples for the ``cmd_*`` columns (:func:`observed_pilot`'s second)."""
+    samples for the ``cmd_*`` columns (:func:`observed_pilot`'s second). The holds of the
+    user's own that ``[vehicle.control]`` names are made for it afresh
+    (:func:`~testbed.run.plugins.scenario_control_laws`: a factory that fails stops it before
+    the vehicle is built).
+
+    Raises:
+        ConfigError: a control law's factory failed or made no law.
+    """
+    depth_law, attitude_law = scenario_control_laws(scenario)
     link = scenario.link
     factory = partial(Vehicle, scenario.vehicle, rng)
     node = VehicleNode(
@@ -112,6 +120,7 @@ def make_vehicle_node(
         image_source=image_source_factory(scenario.images) if scenario.images.enabled else None,
     )
     vehicle = node.vehicle
+    vehicle.controllers.depth_law, vehicle.controllers.attitude_law = depth_law, attitude_law
     observer = VehicleObserver(
         recorder,
         pilot,
@@ -251,12 +260,13 @@ def run_scenario(
             (``vehicle.world.resource(Navigation)``, present when the vehicle has a
             navigation or an autonomy), fly the depth or attitude hold with a law of the
             user's (``vehicle.controllers.depth_law``/``attitude_law``,
-            :mod:`testbed.vehicle.control_laws`), add a system to ``vehicle.schedule`` (an
-            observer of its world, a disturbance: it runs last in its phase, in UPDATE after
-            the allocation), read ``vehicle.config``. It may not step the vehicle,
-            replace its world or entity, or reach the link, the operator or the recorder. Keep
-            runs repeatable: any randomness from generators you seed yourself (the run's own
-            generators are not handed out), and no wall-clock time.
+            :mod:`testbed.vehicle.control_laws`; it replaces one ``[vehicle.control]`` names,
+            and ``inputs.depth_law``/``attitude_law`` then name its class), add a system to
+            ``vehicle.schedule`` (an observer of its world, a disturbance: it runs last in its
+            phase, in UPDATE after the allocation), read ``vehicle.config``. It may not step
+            the vehicle, replace its world or entity, or reach the link, the operator or the
+            recorder. Keep runs repeatable: any randomness from generators you seed
+            yourself (the run's own generators are not handed out), and no wall-clock time.
         link_model: a link model of your own for the scenario's link
             (:class:`~testbed.channel.model.LinkModel`: the air time of a transmission and a
             receiver's bit errors; the scenario's ``[link]`` keeps the rest: MAC, delays,
@@ -287,6 +297,8 @@ def run_scenario(
         env, scenario, rng, vehicle_modem, recorder, pilot=recorded_pilot
     )
     holder["node"] = vehicle_node
+    controllers = vehicle_node.vehicle.controllers
+    scenario_laws = (controllers.depth_law, controllers.attitude_law)
     if vehicle_setup is not None:
         try:
             vehicle_setup(vehicle_node.vehicle)
@@ -334,6 +346,12 @@ def run_scenario(
         inputs = metrics["inputs"]
         if pilot is not None:  # the scenario's [pilot] did not fly: name what did
             inputs["pilot"] = {"object": model_name(pilot)}
+        flown = (controllers.depth_law, controllers.attitude_law)
+        for name, law, own in zip(("depth_law", "attitude_law"), flown, scenario_laws, strict=True):
+            if law is not own:  # vehicle_setup put a law of its own (or the packaged PID) in
+                inputs.pop(name, None)
+                if law is not None:
+                    inputs[name] = {"object": model_name(law)}
         if link_model is not None:
             inputs["link_model"] = model_name(link_model)
             # the closed form knows the preset's bit rate only, not the model's air time

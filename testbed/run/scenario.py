@@ -17,9 +17,13 @@ takes any key of :class:`~testbed.channel.LinkConfig` (``ber = 1e-4``,
 :func:`~testbed.channel.load_link_config` applies overrides, with nested tables merged key by
 key.
 
+``[vehicle.control]`` (:class:`~testbed.run.sections.ControlLawsSection`, the holds of the
+user's own) is built apart from the rest of ``[vehicle]``
+(:class:`~testbed.vehicle.vehicle_config.VehicleConfig`).
+
 The checks that need other files or sections' data while building (the thruster layout against
-the operator's mode and the thruster faults, a pilot's or link model's factory against its
-arguments) are here; the whole scenario's own cross-section checks are in
+the operator's mode and the thruster faults, a pilot's, link model's or control law's factory
+against its arguments) are here; the whole scenario's own cross-section checks are in
 :mod:`testbed.run.scenario_config`, each section's in :mod:`testbed.run.sections`.
 """
 
@@ -61,6 +65,7 @@ from testbed.run.scenario_files import (
     user_files,
 )
 from testbed.run.sections import (
+    ControlLawsSection,
     FaultsSection,
     LinkSection,
     MetricsSection,
@@ -95,6 +100,9 @@ class _ScenarioFile:
     images: dict[str, Any] = field(default_factory=dict)
 
 
+_CONTROL = "control"
+"""The ``[vehicle]`` key of :class:`~testbed.run.sections.ControlLawsSection`, built apart."""
+_VEHICLE_KEYS = tuple(f.name for f in dataclasses.fields(VehicleConfig))
 _LINK_OPTIONS = tuple(f.name for f in dataclasses.fields(LinkSection) if f.name != "channel")
 _CHANNEL_KEYS = tuple(f.name for f in dataclasses.fields(LinkConfig))
 
@@ -177,7 +185,12 @@ def _from_data(
         )
     top = build(_ScenarioFile, data, source=where)
     link = _build_link(top.link, where, given_link_keys)
-    vehicle = build(VehicleConfig, top.vehicle, source=where, prefix="vehicle.")
+    vehicle_table = {k: v for k, v in top.vehicle.items() if k != _CONTROL}
+    unknown = sorted(set(vehicle_table) - set(_VEHICLE_KEYS))
+    if unknown:
+        listed = ", ".join(sorted((*_VEHICLE_KEYS, _CONTROL)))
+        raise ConfigError(f"{where}: vehicle.{unknown[0]}: unknown key (known: {listed})")
+    vehicle = build(VehicleConfig, vehicle_table, source=where, prefix="vehicle.")
     _check_file(lambda _: vehicle.hydro_model(), vehicle.model, where, "vehicle.model")
     layout = _loaded(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
@@ -207,6 +220,7 @@ def _from_data(
         given = {**pilot.args, "rng": None} if takes_rng(factory) else pilot.args
         keys = ("pilot.factory", "pilot.args", "(**args)")
         check_arguments(factory, pilot.factory, (), given, where, keys)
+    control_laws = _build_control_laws(top.vehicle.get(_CONTROL, {}), where)
     faults = build(FaultsSection, top.faults, source=where, prefix="faults.")
     metrics = build(MetricsSection, top.metrics, source=where, prefix="metrics.")
     images = build(ImagesSection, top.images, source=where, prefix="images.")
@@ -235,6 +249,7 @@ def _from_data(
             vehicle=vehicle,
             operator=operator,
             pilot=pilot,
+            control_laws=control_laws,
             faults=faults,
             metrics=metrics,
             images=images,
@@ -276,6 +291,18 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
         if key in given and not section.rates_used:
             when = "link.mac = 'free' or link.codec = 'changeset'"
             raise ConfigError(f"{where}: link.{key}: only used when {when}")
+    return section
+
+
+def _build_control_laws(table: Any, where: str) -> ControlLawsSection:
+    """``[vehicle.control]``, each law's factory imported and bound to its arguments (keys
+    ``vehicle.control.*``)."""
+    prefix = f"vehicle.{_CONTROL}."
+    section = build(ControlLawsSection, table, source=where, prefix=prefix)
+    for name, target in section.targets().items():
+        factory = load_factory(target, where, f"{prefix}{name}")
+        keys = (f"{prefix}{name}", f"{prefix}{name}_args", f"(**{name}_args)")
+        check_arguments(factory, target, (), getattr(section, f"{name}_args"), where, keys)
     return section
 
 

@@ -24,6 +24,7 @@ from testbed.config import check, check_range
 from testbed.run.images import ImagesSection
 from testbed.run.sections import (
     MAX_DURATION_S,
+    ControlLawsSection,
     FaultsSection,
     LinkSection,
     MetricsSection,
@@ -80,6 +81,8 @@ class Scenario:
         trials: how many runs ``testbed run`` makes, with seeds ``seed, seed + 1, …``
             (:mod:`testbed.run.trials`), in [1, :data:`MAX_TRIALS`].
         link, vehicle, operator, pilot, faults, metrics, images: the sections.
+        control_laws: ``[vehicle.control]``, the depth and attitude holds of the user's own
+            (none: the packaged PIDs); not part of ``vehicle``, which loads no Python file.
         source: where it was loaded from (a path or ``package:<id>``), for messages; not a
             TOML key.
         overrides: the ``--set`` overrides applied on top of ``source``, in order.
@@ -98,6 +101,7 @@ class Scenario:
     vehicle: VehicleConfig
     operator: OperatorSection = field(default_factory=OperatorSection)
     pilot: PilotSection = field(default_factory=PilotSection)
+    control_laws: ControlLawsSection = field(default_factory=ControlLawsSection)
     faults: FaultsSection = field(default_factory=FaultsSection)
     metrics: MetricsSection = field(default_factory=MetricsSection)
     images: ImagesSection = field(default_factory=ImagesSection)

@@ -4,7 +4,8 @@ Packaged scenarios live in ``testbed/scenarios/*.toml`` (package data, each with
 what it reproduces and where its figures come from) and are named by versioned ids
 (``s100-teleop-v1``, :func:`scenario_names`). A scenario's file may name a user's own files by
 path (:data:`FILE_KEY_NAMES`: a link preset, a vehicle model, a thruster layout, a mission, an
-arm model, a TPIK configuration, or a Python file's factory): relative paths in a file are
+arm model, a TPIK configuration, or a Python file's factory: a pilot's, a link model's or a
+control law's): relative paths in a file are
 taken from that file's folder (:func:`paths_beside`), and each such file's SHA-256 is recorded
 with the run (:func:`user_files`, :func:`file_digests`, :func:`scenario_digest`).
 
@@ -61,8 +62,10 @@ _FILE_KEYS = (
     ("vehicle", "arm", "tpik"),
     ("pilot", "factory"),
     ("link", "model"),
+    ("vehicle", "control", "depth"),
+    ("vehicle", "control", "attitude"),
 )
-"""Keys that may name a user's file by path (the last two a Python file, ``FILE.py:NAME``)."""
+"""Keys that may name a user's file by path (the last four a Python file, ``FILE.py:NAME``)."""
 
 
 FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
@@ -118,7 +121,8 @@ def paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 def user_files(scenario: Scenario) -> list[str]:
     """The data files given by path (a link preset, a model, a thruster layout, a mission, an
-    arm model, a TPIK configuration), not packaged."""
+    arm model, a TPIK configuration), not packaged, and the Python files behind a pilot, link
+    model or control law of the user's (:func:`~testbed.run.plugins.target_files`)."""
     vehicle = scenario.vehicle
     named = [scenario.link.preset, vehicle.model, vehicle.thrusters]
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
@@ -126,7 +130,8 @@ def user_files(scenario: Scenario) -> list[str]:
     if vehicle.arm is not None:
         named += [vehicle.arm.model, vehicle.arm.tpik]
     files = [name for name in named if Path(name).suffix in (".toml", ".json")]
-    for target in (scenario.pilot.factory, scenario.link.model):
+    laws = scenario.control_laws.targets().values()
+    for target in (scenario.pilot.factory, scenario.link.model, *laws):
         if target:
             files += target_files(target)
     return files

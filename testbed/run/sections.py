@@ -1,6 +1,7 @@
 """The sections of a scenario file, each a frozen dataclass that checks its own values:
 ``[link]`` options (:class:`LinkSection`), ``[operator]``, ``[pilot]`` (the pilot's settings;
-the pilots themselves live in :mod:`testbed.operator.pilots`), ``[faults]`` and ``[metrics]``.
+the pilots themselves live in :mod:`testbed.operator.pilots`), ``[vehicle.control]`` (the holds
+of the user's own, :class:`ControlLawsSection`), ``[faults]`` and ``[metrics]``.
 A failed check raises :class:`~testbed.config.FieldError` naming the field; the loader
 (:mod:`testbed.run.scenario`) turns it into the one-line error naming the file and dotted key.
 ``[vehicle]`` is :class:`~testbed.vehicle.vehicle_config.VehicleConfig`, ``[images]``
@@ -45,6 +46,7 @@ LONGEST_ORDER_FRAME_BYTES = (
 
 __all__ = [
     "MAX_DURATION_S",
+    "ControlLawsSection",
     "FaultsSection",
     "LinkOutage",
     "LinkSection",
@@ -349,6 +351,45 @@ class PilotSection:
                 self.setpoint_rate_hz,
             )
         return ScriptedPilot(self.start_s, self.x, self.y, self.z, self.yaw)
+
+
+@dataclass(frozen=True, slots=True)
+class ControlLawsSection:
+    """``[vehicle.control]``: a depth or attitude hold of the user's own, flying instead of the
+    packaged PID (:mod:`testbed.vehicle.control_laws`), made for each run by the callable a
+    target names (:func:`testbed.run.plugins.scenario_control_laws`). Kept apart from
+    :class:`~testbed.vehicle.vehicle_config.VehicleConfig`: the vehicle does not load Python
+    files.
+
+    Attributes:
+        depth: ``"FILE.py:NAME"`` or ``"MODULE:NAME"``, the callable called as
+            ``NAME(**depth_args)`` for each run to make a
+            :class:`~testbed.vehicle.control_laws.DepthLaw` (a relative file is the scenario
+            file's folder's); "" = the packaged depth PID.
+        depth_args: its keyword arguments (only with ``depth``), any TOML values.
+        attitude: the same for an :class:`~testbed.vehicle.control_laws.AttitudeLaw`
+            (``NAME(**attitude_args)``); "" = the packaged attitude PIDs.
+        attitude_args: its keyword arguments (only with ``attitude``).
+    """
+
+    depth: str = ""
+    depth_args: dict[str, Any] = field(default_factory=dict)
+    attitude: str = ""
+    attitude_args: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("depth", "attitude"):
+            target: str = getattr(self, name)
+            if target:
+                problem = check_target(target)
+                check(problem is None, name, problem or "")
+            used = not getattr(self, f"{name}_args") or bool(target)
+            check(used, f"{name}_args", f"only used with vehicle.control.{name}")
+
+    def targets(self) -> dict[str, str]:
+        """``{"depth": target, "attitude": target}`` of the laws named (none: empty)."""
+        named = {"depth": self.depth, "attitude": self.attitude}
+        return {name: target for name, target in named.items() if target}
 
 
 @dataclass(frozen=True, slots=True)

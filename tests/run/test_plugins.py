@@ -335,7 +335,8 @@ def test_the_readmes_scenario_tables_run_with_the_docs_link_model(tmp_path: Path
     after 50 s each order's air time doubles (8·13/1900 s more on the way up)."""
     root = Path(__file__).resolve().parents[2]
     readme = (root / "README.md").read_text(encoding="utf-8")
-    section = readme.split("### Your own pilot or link model in a scenario file", 1)[1]
+    heading = "### Your own pilot, link model or control law in a scenario file"
+    section = readme.split(heading, 1)[1]
     tables = section.split("```toml\n", 1)[1].split("```", 1)[0]
     channel = (root / "docs" / "channel.md").read_text(encoding="utf-8")
     example = channel.split("### A link model of your own", 1)[1].split("```python\n", 1)[1]
