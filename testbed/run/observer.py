@@ -159,8 +159,12 @@ class VehicleObserver:
         if targets is None or not ctl.flags.armed:
             errors = (math.nan, math.nan, math.nan)
             depth_target = math.nan
-        else:
-            errors = attitude_error(targets.quaternion_wxyz, truth.quaternion_wxyz)
+        else:  # against the targets a hold flies (MANUAL's targets are flown by nothing)
+            errors = (
+                attitude_error(targets.quaternion_wxyz, truth.quaternion_wxyz)
+                if ctl.flags.attitude_hold
+                else (math.nan, math.nan, math.nan)
+            )
             depth_target = targets.depth_m if ctl.flags.depth_hold else math.nan
         row: tuple[float, ...] = (now, pilot[0], pilot[1], pilot[2], pilot[5])
         row += (sticks[0], sticks[1], sticks[2], sticks[5], *self._reference_velocity(sticks))

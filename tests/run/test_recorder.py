@@ -334,3 +334,29 @@ def test_events_csv_ends_at_the_run_end_with_a_transmission_still_on_the_air(
     assert max(float(row["t_s"]) for row in rows) <= 40.0
     written = sum(1 for row in rows if row["kind"] == "tx_end")
     assert written == sum(1 for t in ends if t <= 40.0)
+
+
+@pytest.mark.parametrize(
+    ("mode", "attitude_held", "depth_held"),
+    [("manual", False, False), ("stabilize", True, False), ("depth_hold", True, True)],
+)
+def test_the_error_columns_are_against_what_a_hold_flies(
+    mode: str, attitude_held: bool, depth_held: bool
+) -> None:
+    """Armed, the attitude error columns and the depth target are recorded only while the hold
+    of that axis flies (ArduSub's MANUAL flies no attitude target: an error against the
+    targets kept from arming measured nothing); ``attitude_error_deg`` and ``depth_error_m``
+    are then null, not a figure of a target nobody flew."""
+    scenario = load_scenario("s100-teleop-v1", ["duration_s=20", f"operator.mode={mode!r}"])
+    result = run_scenario(scenario)
+    series = result.recorder.series()
+    armed = series["armed"] == 1.0
+    assert armed.sum() > 0
+    for axis in ("roll", "pitch", "yaw"):
+        column = series[f"err_{axis}_deg"][armed]
+        assert np.isfinite(column).all() if attitude_held else np.isnan(column).all(), axis
+        std = result.metrics["attitude_error_deg"][axis]["std"]
+        assert math.isfinite(std) is attitude_held
+    depth = series["depth_target_m"][armed]
+    assert np.isfinite(depth).all() if depth_held else np.isnan(depth).all()
+    assert math.isfinite(result.metrics["depth_error_m"]["mean"]) is depth_held
