@@ -14,15 +14,20 @@ result in ``GCS_Mavlink.cpp``: ACCEPTED when the output was set, else FAILED):
   RC3_MAX, 1100..1900 µs, 50 % = 1500); PILOT (2) is refused ("bad throttle type"). param1 is
   the output channel from 0 (motor 1 on SERVO1), as QGroundControl sends it; a channel beyond 11
   or without a motor fails. The pulse is written to that motor and stays until another command
-  changes it; param4 (the timeout) is not used.
+  changes it; param4 (the timeout) is not used. The pulse is ``output_test_num``'s: param3
+  truncated to an int16_t and written by ``rc_write`` as a uint16_t, so a negative one reaches
+  the output as 65536 + it (SERVO_OUTPUT_RAW reports it so); and it is written only while
+  armed: disarmed, even during a test, the command fails.
 - The test lives while commands keep coming: 0.5 s after the last one ArduSub says "Motor test
   timed out!", stops the test, **disarms**, and a new test needs 10 s of cooldown.
 
 Here the pulses become the vehicle's :class:`~testbed.common.components.ThrusterTest` (per
 thruster, through the layout's servo map, :class:`~testbed.mavlink.motors.ServoOutputs`), which
 the vehicle's allocation flies instead of the mixer while armed: SERVO_OUTPUT_RAW shows them and
-the thrusters push with the T200's force for them. A disarm ends the thrust at once (the vehicle
-drives nothing disarmed); the test itself ends at the timeout, as ArduSub's. A shore gateway
+the thrusters push with the T200's force for them (beyond its table, the table's end). A disarm
+ends the thrust at once (the vehicle drives nothing disarmed) and puts every motor back at
+1500 µs, as ArduSub's arming does (``enable_motor_output``), so a re-armed vehicle drives
+nothing until the next command; the test itself ends at the timeout, as ArduSub's. A shore gateway
 cannot reach the thrusters: its commands fail. Malformed parameters (NaN, out of range) fail the
 command, counted ``bad_field``.
 """
@@ -96,13 +101,22 @@ def _start(endpoint: VehicleEndpoint, test: MotorTest, now_s: float) -> bool:
         return _warn(endpoint, mav.MAV_SEVERITY_CRITICAL, text)
     if not endpoint.can_test_motors:
         return _warn(endpoint, mav.MAV_SEVERITY_WARNING, "Motor test: thrusters beyond the link")
-    armed = endpoint.world.get(endpoint.vehicle, Armed)
-    if armed is None or not armed.armed:
+    if not _armed(endpoint):
         return _warn(endpoint, mav.MAV_SEVERITY_WARNING, "Arm motors before testing motors.")
-    servos = endpoint.options.servos
     test.active = True
-    test.pulses_us = {ch: 1500 for ch, t in enumerate(servos.thrusters[:MAX_MOTORS]) if t >= 0}
+    _neutral(endpoint, test)
     return True
+
+
+def _armed(endpoint: VehicleEndpoint) -> bool:
+    armed = endpoint.world.get(endpoint.vehicle, Armed)
+    return armed is not None and armed.armed
+
+
+def _neutral(endpoint: VehicleEndpoint, test: MotorTest) -> None:
+    """Every motor at 1500 µs (``enable_motor_output``: the test's start, and arming)."""
+    thrusters = endpoint.options.servos.thrusters[:MAX_MOTORS]
+    test.pulses_us = {channel: 1500 for channel, t in enumerate(thrusters) if t >= 0}
 
 
 def do_motor_test(endpoint: VehicleEndpoint, params: tuple[float, ...], now_s: float) -> int:
@@ -140,7 +154,9 @@ def do_motor_test(endpoint: VehicleEndpoint, params: tuple[float, ...], now_s: f
         return _FAILED
     if channel not in test.pulses_us:  # beyond AP_MOTORS_MAX_NUM_MOTORS, or no motor there
         return _FAILED
-    test.pulses_us[channel] = int(throttle)  # int16_t, truncated
+    if not _armed(endpoint):  # output_test_num: the motors armed
+        return _FAILED
+    test.pulses_us[channel] = int(throttle) & 0xFFFF  # int16_t, truncated; rc_write's uint16_t
     _write(endpoint, test)
     return _ACCEPTED
 
@@ -159,9 +175,15 @@ def _write(endpoint: VehicleEndpoint, test: MotorTest) -> None:
 
 def update_motor_test(endpoint: VehicleEndpoint, now_s: float) -> None:
     """``verify_motor_test``: a test without a command for :data:`KEEPALIVE_S` ends, and the
-    vehicle disarms."""
+    vehicle disarms; a test whose vehicle is disarmed has every motor back at 1500 µs (what
+    re-arming writes)."""
     test = endpoint.motor_test
-    if test.active and now_s > test.last_command_s + KEEPALIVE_S:
+    if not test.active:
+        return
+    if not _armed(endpoint) and any(p != 1500 for p in test.pulses_us.values()):
+        _neutral(endpoint, test)
+        _write(endpoint, test)
+    if now_s > test.last_command_s + KEEPALIVE_S:
         endpoint.statustext(mav.MAV_SEVERITY_INFO, "Motor test timed out!")
         test.active = False
         test.pulses_us = {}

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import ThrusterOutput
+from testbed.common.components import Armed, ThrusterOutput
 from testbed.ecs import Origin
 from testbed.mavlink import EndpointOptions
 from testbed.mavlink.shore import ShoreEndpoint
@@ -128,6 +128,8 @@ def test_the_test_times_out_half_a_second_after_the_last_command_and_disarms(
     # re-armed, a new test within 10 s of the timeout is refused; after them it runs
     gcs.clear()
     armed(gcs)
+    assert servos(gcs)[:6] == [1500] * 6  # the timed-out test left no thruster driven
+    assert not any(thrust(gcs).forces_n)
     gcs.send(motor_test(gcs, 0, 1600))
     gcs.run(0.1, gcs.flying())
     assert results(gcs) == [FAILED]
@@ -135,6 +137,49 @@ def test_the_test_times_out_half_a_second_after_the_last_command_and_disarms(
     gcs.run(9.0, gcs.flying())
     keep_testing(gcs, 0.5, motor_test(gcs, 0, 1600))
     assert results(gcs)[-1] == ACCEPTED and servos(gcs)[0] == 1600
+
+
+def test_disarmed_mid_test_commands_fail_and_a_rearmed_vehicle_drives_nothing_until_told(
+    gcs: SimGcs,
+) -> None:
+    """``output_test_num`` writes only while armed (FAILED otherwise), and arming puts every
+    motor at 1500 µs (``enable_motor_output``): the pulse given before the disarm is gone."""
+    armed(gcs)
+    keep_testing(gcs, 0.5, motor_test(gcs, 0, 1700))
+    assert servos(gcs)[0] == 1700
+    gcs.clear()
+    gcs.send(gcs.arm(False))
+    keep_testing(gcs, 0.3, motor_test(gcs, 0, 1700))  # QGroundControl's slider still held
+    vehicle_armed = gcs.vehicle.world.get(gcs.vehicle.entity, Armed)
+    assert vehicle_armed is not None and not vehicle_armed.armed
+    assert results(gcs)[-3:] == [FAILED] * 3
+    assert gcs.endpoint.motor_test.active  # the commands keep the test alive, as ArduSub's
+    gcs.clear()
+    gcs.send(gcs.arm())  # the slider released: no more commands
+    gcs.run(0.3, gcs.flying())  # under the 0.5-s keep-alive: the test still runs
+    assert gcs.endpoint.motor_test.active
+    assert thrust(gcs).pwm_us == (1500.0,) * 6 and not any(thrust(gcs).forces_n)
+    assert servos(gcs)[:6] == [1500] * 6
+
+
+def test_a_pulse_out_of_range_is_written_as_ardusubs_types_do_not_raised(gcs: SimGcs) -> None:
+    """param3 −5000 µs: int16_t −5000, written as the uint16_t 60536 (ArduSub's ``rc_write``);
+    SERVO_OUTPUT_RAW reports it and the thruster gets the T200 table's end, nothing raises."""
+    armed(gcs)
+    keep_testing(gcs, 0.6, motor_test(gcs, 0, -5000.7))
+    assert set(results(gcs)) == {ACCEPTED}
+    assert servos(gcs)[:6] == [65536 - 5000, 1500, 1500, 1500, 1500, 1500]
+    column = gcs.vehicle.thruster_config.ardusub_motor_columns[0]
+    assert thrust(gcs).pwm_us[column] == 60536.0
+    t200 = gcs.vehicle.actuation.allocator.t200
+    ends = {t200.force_for_pwm(1100.0), t200.force_for_pwm(1900.0)}
+    assert thrust(gcs).forces_n[column] in ends
+
+
+def thrust(gcs: SimGcs) -> ThrusterOutput:
+    output = gcs.vehicle.world.get(gcs.vehicle.entity, ThrusterOutput)
+    assert output is not None
+    return output
 
 
 def test_percent_as_qgroundcontrol_sends_it_and_each_pulse_stays_until_changed(
