@@ -150,9 +150,9 @@ def servo_outputs(
         The servo map, FRAME_CONFIG and MOT_n_DIRECTION values.
 
     Raises:
-        ConfigError: a frame whose factors are not tabled here, a motor count other than the
-            frame's, a channel beyond SERVO16, or a motor whose thruster pushes against its
-            factors (the layout's numbering is not ArduSub's).
+        ConfigError: a frame whose factors are not tabled here, a motor or thruster count
+            other than the frame's, a channel beyond SERVO16, or a motor whose thruster pushes
+            against its factors (the layout's numbering is not ArduSub's).
     """
     if frame_config is None:
         thrusters = [-1] * SERVO_CHANNELS
@@ -172,6 +172,12 @@ def servo_outputs(
         raise ConfigError(
             f"{source}: ardusub.motors: FRAME_CONFIG {frame_config} has {len(factors)} motors, "
             f"the layout names {len(motor_columns)}"
+        )
+    thrusters_n = np.asarray(matrix).shape[1]
+    if thrusters_n != len(factors):  # ArduSub would leave a thruster undriven
+        raise ConfigError(
+            f"{source}: ardusub.motors: FRAME_CONFIG {frame_config} drives {len(factors)} "
+            f"motors, the layout has {thrusters_n} thrusters (each must be one of its motors)"
         )
     directions = []
     for n, (column, row) in enumerate(zip(motor_columns, factors, strict=True), start=1):

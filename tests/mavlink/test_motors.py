@@ -77,6 +77,11 @@ def test_a_numbering_that_is_not_ardusubs_is_refused_in_one_line() -> None:
     short = dataclasses.replace(layout.ardusub, motors=m[:5])
     with pytest.raises(ConfigError, match="FRAME_CONFIG 1 has 6 motors"):
         layout_servos(dataclasses.replace(layout, ardusub=short))
+    # a thruster the frame's motors leave out: ArduSub would never drive it
+    extra = dataclasses.replace(layout.thrusters[0], name="Spare", pwm_channel=6)
+    seven = dataclasses.replace(layout, thrusters=(*layout.thrusters, extra))
+    with pytest.raises(ConfigError, match="drives 6 motors, the layout has 7 thrusters"):
+        layout_servos(seven)
     # a layout of its own reports its thrusters on their pwm_channel + 1
     six = layout_servos(load_thruster_config("ecs-6dof"))
     assert six.frame_config == 7 and six.directions == ()
