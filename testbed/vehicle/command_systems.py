@@ -153,8 +153,10 @@ def _supervise(world: World, ctl: Controllers) -> None:
         set_targets(world, ctl, depth, targets.quaternion_wxyz)
         reading = world.get(vehicle, DepthReading)
         if reading is not None and reading.depth_m <= ctl.failsafe.surfaced_depth_m:
-            world.set(vehicle, Armed(False))  # surfaced: disarmed, and the failsafe is over
-            world.set(vehicle, FailsafeStatus(FailsafeLevel.NOMINAL, now))
+            # surfaced: disarmed; the failsafe ends at the next frame (a disarmed vehicle's
+            # status is NOMINAL), so for this frame SURFACE and disarmed say who disarmed it
+            # (the autonomy's fallback latches on that)
+            world.set(vehicle, Armed(False))
 
 
 def _hold_targets(world: World, ctl: Controllers) -> None:

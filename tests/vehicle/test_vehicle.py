@@ -281,6 +281,7 @@ def test_failsafe_holds_then_surfaces_and_disarms() -> None:
         # disarmed once the sensor read the surfacing depth (its reading lags ≤ one frame)
         assert get(v, Armed) == Armed(False)
         assert v.state().position_ned[2] < failsafe.surfaced_depth_m + 0.03
+        v.advance(v.time_s + 0.01)  # the failsafe ends at the frame after the disarm
         assert get(v, FailsafeStatus).level is FailsafeLevel.NOMINAL  # type: ignore[union-attr]
         ascent_s = v.time_s - (last_command_s + 4.0)
         assert ascent_s == pytest.approx((depth_held - failsafe.surfaced_depth_m) / 0.3, abs=1.0)
