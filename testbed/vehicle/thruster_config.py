@@ -180,7 +180,8 @@ class ThrusterConfig:
             check(
                 not unknown,
                 "ardusub.motors",
-                f"no thruster called {unknown} (thrusters: {', '.join(names)})",
+                f"no thruster called {unknown} (thrusters: {', '.join(names)}; a layout that "
+                "is not ArduSub's frame has no [ardusub] table)",
             )
 
     @property

@@ -304,6 +304,10 @@ def test_a_layout_that_makes_no_yaw_is_refused_where_the_heading_is_held(tmp_pat
     assert kept
     path = tmp_path / "verticals.toml"
     path.write_text("[[thrusters]]".join([head, *kept]), encoding="utf-8")
+    # the copy kept the packaged file's ArduSub motor list, which names the removed thrusters
+    with pytest.raises(ConfigError, match=r"ardusub.motors: .* has no \[ardusub\] table"):
+        load_thruster_config(str(path))
+    path.write_text(path.read_text(encoding="utf-8").split("\n[ardusub]")[0], encoding="utf-8")
     layout = load_thruster_config(str(path))
     assert not layout.matrix[5].any()  # the file's own geometry: no yaw moment
     for mode in ("depth_hold", "stabilize"):
