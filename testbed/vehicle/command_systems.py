@@ -29,6 +29,7 @@ from testbed.vehicle.components import (
     ModeRequest,
     MovementCommand,
     PositionSetpoint,
+    ThrusterTest,
 )
 from testbed.vehicle.control import failsafe_level
 from testbed.vehicle.mission import MAX_POSITION_M
@@ -48,7 +49,14 @@ __all__ = ["MAX_SETPOINT_DEPTH_M", "ingest_commands", "supervise_failsafe"]
 MAX_SETPOINT_DEPTH_M = MAX_POSITION_M
 """Deepest depth setpoint the vehicle takes [m] (the world's extent, as for positions)."""
 _LEVELS = (FailsafeLevel.NOMINAL, FailsafeLevel.HOLD, FailsafeLevel.SURFACE)  # by value
-_INTENT_TYPES = (MovementCommand, ArmRequest, ModeRequest, DepthSetpoint, AttitudeSetpoint)
+_INTENT_TYPES = (
+    MovementCommand,
+    ArmRequest,
+    ModeRequest,
+    DepthSetpoint,
+    AttitudeSetpoint,
+    ThrusterTest,
+)
 """What :func:`ingest_commands` reacts to."""
 _GOAL_TYPES = (PositionSetpoint, EndEffectorSetpoint, GoalCancel)
 """Operator orders read by the position loop or the mission tree: contact too (a GoTo that
@@ -56,7 +64,8 @@ took a stick order's slot must not look like a silent link to the failsafe)."""
 
 
 def ingest_commands(world: World) -> None:
-    """Apply new operator intents: sticks (newer seq only), arm, mode and setpoints."""
+    """Apply new operator intents: sticks (newer seq only), arm, mode, setpoints and a motor
+    test's pulses (kept in ``Controllers.thruster_test`` for the allocation)."""
     if not world.changed_any(*_INTENT_TYPES, *_GOAL_TYPES):  # most frames: nothing new arrived
         return
     clock = world.resource(SimClock)
@@ -105,6 +114,8 @@ def ingest_commands(world: World) -> None:
             ctl.ignored_setpoints += 1  # a value from the link, not an error
             continue
         set_depth_target(world, ctl, depth_sp.depth_m)
+    for _, test in world.query1(ThrusterTest, changed=True):
+        ctl.thruster_test = test.pwm_us
     for _, att_sp in world.query1(AttitudeSetpoint, changed=True):
         ctl.last_contact_s = now
         try:

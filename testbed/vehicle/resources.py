@@ -183,6 +183,9 @@ class Controllers:
             six axes; the depth, attitude and position loops stand down.
         depth_law, attitude_law: a hold of the user's own that flies instead of ``depth`` or
             ``attitude`` (:mod:`testbed.vehicle.control_laws`); None: the packaged PID.
+        thruster_test: the pulses of the operator's last
+            :class:`~testbed.vehicle.components.ThrusterTest` [µs], per thruster (ingest keeps
+            it, so the allocation reads an attribute, not a query, every frame); empty: none.
     """
 
     vehicle: Entity
@@ -205,6 +208,7 @@ class Controllers:
     velocity_control: bool = False
     depth_law: DepthLaw | None = None
     attitude_law: AttitudeLaw | None = None
+    thruster_test: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         self.pilot_gains = pilot_gains_array(self.pilot)

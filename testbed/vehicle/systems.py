@@ -63,7 +63,6 @@ from testbed.vehicle.components import (
     PositionReading,
     PositionSetpoint,
     ThrusterOutput,
-    ThrusterTest,
 )
 from testbed.vehicle.control_kernels import pilot_rows, pilot_shape
 from testbed.vehicle.control_laws import checked_vector
@@ -349,9 +348,9 @@ def allocate_thrust(world: World) -> None:
         act.commanded_forces_n[:] = 0.0
         world.set(ctl.vehicle, ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0))
         return
-    test = next((t for _, t in world.query1(ThrusterTest) if t.pwm_us), None)
-    if test is not None and len(test.pwm_us) == act.matrix.shape[1]:
-        drive_thrusters(world, test.pwm_us)
+    test = ctl.thruster_test
+    if test and len(test) == act.matrix.shape[1]:
+        drive_thrusters(world, test)
         return
     dt = world.resource(SimClock).dt_s
     commanded = act.commanded_forces_n
