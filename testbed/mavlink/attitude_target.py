@@ -42,7 +42,6 @@ from testbed.common.components import (
     ControlMode,
     ControlTargets,
     DepthSetpoint,
-    ModeRequest,
     PositionSetpoint,
 )
 from testbed.common.geometry import euler_from_quat, quat_from_euler
@@ -128,8 +127,7 @@ def on_set_attitude_target(
     if mask & _ATTITUDE_IGNORE:
         endpoint.reject("unsupported_target")
         return
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    mode = None if request is None else request.mode
+    mode = endpoint.requested_mode
     guided = mode is ControlMode.GUIDED and not mask & _THROTTLE_IGNORE
     alt_hold = mode is ControlMode.DEPTH_HOLD and bool(mask & _THROTTLE_IGNORE)
     if not (guided or alt_hold):
@@ -179,8 +177,7 @@ def update_attitude_target(endpoint: VehicleEndpoint, now_s: float) -> None:
     target = endpoint.attitude_target
     if target is None:
         return
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    if request is None or request.mode is not target.mode:
+    if endpoint.requested_mode is not target.mode:
         endpoint.attitude_target = None
         return
     if target.mode is ControlMode.GUIDED:

@@ -417,6 +417,13 @@ class VehicleEndpoint:
         """Ask the vehicle for a simulated mode."""
         self.write(ModeRequest(mode))
 
+    @property
+    def requested_mode(self) -> ControlMode | None:
+        """The mode last asked for on the intents entity (None: none yet), the mode the
+        handlers act in (ArduSub's ``control_mode``)."""
+        request = self.world.get(self.intents, ModeRequest)
+        return None if request is None else request.mode
+
     def has_position_estimate(self) -> bool:
         """Whether the vehicle has a position estimate now (ArduSub's condition for GUIDED): a
         :class:`PositionReading` on the vehicle entity no older than

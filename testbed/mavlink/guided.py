@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import ControlMode, DepthSetpoint, ModeRequest
+from testbed.common.components import ControlMode, DepthSetpoint
 from testbed.mavlink.telemetry import local_from_global
 
 if TYPE_CHECKING:
@@ -95,13 +95,11 @@ def on_set_position_target_local_ned(
     del channel, now_s, arrived_s
     if not endpoint.for_us(message.target_system, message.target_component):
         return
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    if request is None or request.mode is not ControlMode.GUIDED:
+    if endpoint.requested_mode is not ControlMode.GUIDED:
         endpoint.reject("not_guided")
         return
     mask = int(message.type_mask)
-    if mask & _POSITION_IGNORE or (~mask) & _MOTION_IGNORE:
-        endpoint.reject("unsupported_target")
+    if not _position_only(endpoint, mask):
         return
     x, y, z, yaw = (float(message.x), float(message.y), float(message.z), float(message.yaw))
     use_yaw = not mask & _YAW_IGNORE
@@ -129,9 +127,13 @@ def on_set_position_target_local_ned(
     endpoint.request_position((x, y, z), math.remainder(yaw, math.tau) if use_yaw else None)
 
 
-def _guided(endpoint: VehicleEndpoint) -> bool:
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    return request is not None and request.mode is ControlMode.GUIDED
+def _position_only(endpoint: VehicleEndpoint, mask: int) -> bool:
+    """Whether ``type_mask`` asks for a position target only (x, y, z used; every velocity and
+    acceleration ignored); anything else is counted ``unsupported_target``."""
+    if mask & _POSITION_IGNORE or (~mask) & _MOTION_IGNORE:
+        endpoint.reject("unsupported_target")
+        return False
+    return True
 
 
 def _in_range(lat_e7: int, lon_e7: int) -> bool:
@@ -158,8 +160,7 @@ def on_set_position_target_global_int(
     del channel, now_s, arrived_s
     if not endpoint.for_us(message.target_system, message.target_component):
         return
-    request = endpoint.world.get(endpoint.intents, ModeRequest)
-    mode = None if request is None else request.mode
+    mode = endpoint.requested_mode
     mask = int(message.type_mask)
     alt = float(message.alt)
     if mode is ControlMode.DEPTH_HOLD and not mask & _Z_IGNORE:  # ArduSub: the depth only
@@ -172,8 +173,7 @@ def on_set_position_target_global_int(
     if mode is not ControlMode.GUIDED:
         endpoint.reject("not_guided")
         return
-    if mask & _POSITION_IGNORE or (~mask) & _MOTION_IGNORE:
-        endpoint.reject("unsupported_target")
+    if not _position_only(endpoint, mask):
         return
     lat_e7, lon_e7 = int(message.lat_int), int(message.lon_int)
     if not (_in_range(lat_e7, lon_e7) and math.isfinite(alt)):
@@ -205,7 +205,7 @@ def do_reposition(
     """
     flags, alt = params[1], params[6]
     change_mode = math.isfinite(flags) and int(flags) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
-    guided = _guided(endpoint)
+    guided = endpoint.requested_mode is ControlMode.GUIDED
     if not guided and not change_mode:
         return int(mav.MAV_RESULT_DENIED)
     alt_frame = GLOBAL_FRAMES.get(frame)
