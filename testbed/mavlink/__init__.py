@@ -3,7 +3,8 @@
 * :mod:`~testbed.mavlink.endpoint` — :class:`VehicleEndpoint`, the sans-IO ArduSub-compatible
   core (fed bytes and the time, returns packets per :class:`Channel`), a pilot of an ECS world;
   its request handlers in :mod:`~testbed.mavlink.commands` and
-  :mod:`~testbed.mavlink.param_protocol`, GUIDED's targets in :mod:`~testbed.mavlink.guided` and
+  :mod:`~testbed.mavlink.param_protocol`, the pilot's sticks in
+  :mod:`~testbed.mavlink.pilot_input`, GUIDED's targets in :mod:`~testbed.mavlink.guided` and
   :mod:`~testbed.mavlink.attitude_target`, the motor test in :mod:`~testbed.mavlink.motor_test`,
   its failsafes in :mod:`~testbed.mavlink.failsafe`, its stream rates in
   :mod:`~testbed.mavlink.streams`.

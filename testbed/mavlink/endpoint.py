@@ -21,8 +21,8 @@ ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_LOCA
 position or SET_ATTITUDE_TARGET's attitude and climb rate; every other mode is refused with
 MAV_RESULT_FAILED — the simulator has no position-hold, auto or surface mode); MANUAL_CONTROL and
 RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS and SYSID_THISMAV (what
-fails the gate is dropped silently and counted); the pilot-input and GCS failsafes of the FS_*
-parameters (:mod:`testbed.mavlink.failsafe`).
+fails the gate is dropped silently and counted; :mod:`testbed.mavlink.pilot_input`); the
+pilot-input and GCS failsafes of the FS_* parameters (:mod:`testbed.mavlink.failsafe`).
 
 Remote garbage is counted, never raised (:attr:`VehicleEndpoint.rejected` by reason); outboxes
 are bounded (:data:`OUTBOX_LIMIT`).
@@ -48,8 +48,8 @@ from testbed.common.components import (
     PositionSetpoint,
 )
 from testbed.ecs import Entity, Origin, World
-from testbed.mavlink import commands, guided, param_protocol
-from testbed.mavlink.ardusub import RcInput, boot_gain, manual_control_pwm, sticks_from_rc
+from testbed.mavlink import commands, guided, param_protocol, pilot_input
+from testbed.mavlink.ardusub import RcInput, boot_gain, sticks_from_rc
 from testbed.mavlink.attitude_target import (
     AttitudeTarget,
     on_set_attitude_target,
@@ -76,11 +76,6 @@ POSITION_FIX_TIMEOUT_S = 1.0
 """A position fix older than this [s] is no position estimate (GUIDED refused)."""
 OUTBOX_LIMIT = 1024
 """Packets a channel's outbox holds at most; more are dropped and counted (``outbox_full``)."""
-_INT16_UNUSED = 32767
-"""MANUAL_CONTROL's INT16_MAX: the axis is not sent."""
-_BUTTON_MODES = {1: 19, 2: 2, 3: 0}
-"""ArduSub's default buttons: 1 MANUAL, 2 DEPTH HOLD, 3 STABILIZE (4 disarm, 6 arm, 11/12
-gain − / +)."""
 
 
 Handler = Callable[["VehicleEndpoint", "Channel", mav.MAVLink_message, float, float], None]
@@ -142,7 +137,10 @@ class VehicleEndpoint:
         accepted: messages acted on.
         rejected: what was dropped, by reason (wire errors, gating, bad fields, unhandled).
         sent: packets queued, by message type.
-        pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted.
+        pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted
+            (:mod:`~testbed.mavlink.pilot_input`).
+        rc: the RC inputs the pilot's packets set; ``gain`` the joystick gain.
+        buttons_held: the buttons of the last MANUAL_CONTROL (a button acts when pressed).
         attitude_target: the attitude control a SET_ATTITUDE_TARGET started
             (:mod:`~testbed.mavlink.attitude_target`), None when there is none.
         motor_test: the DO_MOTOR_TEST state (:mod:`~testbed.mavlink.motor_test`).
@@ -172,7 +170,7 @@ class VehicleEndpoint:
         self._velocity = VelocityEstimator()
         self._seq = 0
         self._arm_seq = 0
-        self._buttons = 0
+        self.buttons_held = 0
         self._consumed_ah = 0.0
         self._last_update_s: float | None = None
         self._next_heartbeat_s = 0.0
@@ -182,8 +180,8 @@ class VehicleEndpoint:
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
-            "MANUAL_CONTROL": cls._on_manual_control,
-            "RC_CHANNELS_OVERRIDE": cls._on_rc_override,
+            "MANUAL_CONTROL": pilot_input.on_manual_control,
+            "RC_CHANNELS_OVERRIDE": pilot_input.on_rc_channels_override,
             "COMMAND_LONG": commands.on_command_long,
             "COMMAND_INT": commands.on_command_int,
             "SET_MODE": commands.on_set_mode,
@@ -298,109 +296,30 @@ class VehicleEndpoint:
             self.rejected["wrong_target"] += 1
         return ok
 
-    def _from_gcs(self, message: mav.MAVLink_message) -> bool:
-        if message.get_srcSystem() != self.gcs_system_id:
-            self.rejected["wrong_sysid"] += 1
-            return False
-        return True
-
     def _on_heartbeat(
         self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
     ) -> None:
         del channel, arrived_s
         self.accepted += 1
         if message.get_srcSystem() == self.gcs_system_id:
-            self._gcs_seen(now_s)
+            self.gcs_seen(now_s)
 
-    def _gcs_seen(self, now_s: float) -> None:
+    def gcs_seen(self, now_s: float) -> None:
+        """A heartbeat or pilot input from SYSID_MYGCS at ``now_s`` [s]: the GCS failsafe's
+        timer refreshed (and its clearing announced)."""
         if self.failsafe.gcs_seen(now_s):
             self.statustext(mav.MAV_SEVERITY_INFO, "GCS heartbeat regained")
-
-    def _on_manual_control(
-        self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
-    ) -> None:
-        del channel
-        if not self._from_gcs(message):
-            return
-        if message.target != self.system_id:  # ArduSub: this vehicle's id only, no broadcast
-            self.rejected["wrong_target"] += 1
-            return
-        axes = []
-        for name, low in (("x", -1000), ("y", -1000), ("z", 0), ("r", -1000)):
-            value = int(getattr(message, name))
-            if value == _INT16_UNUSED:
-                value = 500 if name == "z" else 0
-            elif not low <= value <= 1000:
-                # acted on as ArduSub's joystick.cpp does: scaled, the pulse constrained
-                self.rejected["clamped_axis"] += 1
-            axes.append(value)
-        x, y, z, r = axes
-        pwm = manual_control_pwm(
-            x, y, z, r, gain=self.gain, throttle_gain=self.params["JS_THR_GAIN"]
-        )
-        channels = self.rc.channels
-        for number, value in pwm.items():
-            channels[number - 1] = value
-        extensions = int(getattr(message, "enabled_extensions", 0) or 0)
-        channels[0] = _extension_pwm(message, "s") if extensions & 1 else 1500
-        channels[1] = _extension_pwm(message, "t") if extensions & 2 else 1500
-        self._on_buttons(int(message.buttons) & 0xFFFF, now_s)
-        self._pilot_input(now_s, arrived_s)
-
-    def _on_rc_override(
-        self, channel: Channel, message: mav.MAVLink_message, now_s: float, arrived_s: float
-    ) -> None:
-        del channel
-        if not self._from_gcs(message) or not self.for_us(
-            message.target_system, message.target_component
-        ):
-            return
-        channels = self.rc.channels
-        for number in range(1, 19):
-            value = int(getattr(message, f"chan{number}_raw", 65535))
-            if value in (65535, 65534) or (number > 8 and value == 0):
-                continue  # ignore this channel (MAVLink 2 semantics)
-            channels[number - 1] = 1500 if value == 0 and number <= 6 else value
-        self._pilot_input(now_s, arrived_s)
-
-    def _pilot_input(self, now_s: float, arrived_s: float) -> None:
-        """An accepted stick packet: a new MovementCommand, the timers refreshed."""
-        self.accepted += 1
-        self.pilot_inputs += 1
-        self._gcs_seen(now_s)
-        self.failsafe.pilot_seen(now_s)
-        self.write_sticks(arrived_s)
-
-    def write_sticks(self, sampled_s: float) -> None:
-        """Write the RC inputs as the next MovementCommand."""
-        self._seq += 1
-        self.write(MovementCommand(self._seq, sampled_s, sticks_from_rc(self.rc.channels)))
-
-    def _on_buttons(self, buttons: int, now_s: float) -> None:
-        pressed = buttons & ~self._buttons
-        self._buttons = buttons
-        if not pressed:
-            return
-        for button, mode in _BUTTON_MODES.items():
-            if pressed & (1 << button):
-                self.set_mode(mode)
-        if pressed & (1 << 4):
-            self.request_arm(False, now_s)
-        if pressed & (1 << 6):
-            self.request_arm(True, now_s)
-        steps = max(1, int(self.params["JS_GAIN_STEPS"]))
-        low, high = self.params["JS_GAIN_MIN"], self.params["JS_GAIN_MAX"]
-        step = (high - low) / max(1, steps - 1)
-        if pressed & (1 << 11):
-            self.gain = max(low, self.gain - step)
-        if pressed & (1 << 12):
-            self.gain = min(high, self.gain + step)
 
     # ----------------------------------------------------------------------- intents
 
     def write(self, component: object) -> None:
         """Write an operator-owned component on the intents entity."""
         self.world.set(self.intents, component, origin=self.options.origin)
+
+    def write_sticks(self, sampled_s: float) -> None:
+        """Write the RC inputs as the next MovementCommand, sampled at ``sampled_s`` [s]."""
+        self._seq += 1
+        self.write(MovementCommand(self._seq, sampled_s, sticks_from_rc(self.rc.channels)))
 
     def request_arm(self, armed: bool, now_s: float) -> None:
         """Ask the vehicle to arm or disarm (a new request each time)."""
@@ -531,11 +450,3 @@ class VehicleEndpoint:
             "bytes_in": sum(c.wire.bytes_in for c in self.channels),
             "bytes_out": sum(c.wire.bytes_out for c in self.channels),
         }
-
-
-def _extension_pwm(message: mav.MAVLink_message, name: str) -> int:
-    """Pitch (s) or roll (t) extension: value + 1500, unscaled, clamped to 1100..1900 [µs]."""
-    value = int(getattr(message, name, 0) or 0)
-    if value == _INT16_UNUSED:
-        return 1500
-    return max(1100, min(1900, 1500 + value))
