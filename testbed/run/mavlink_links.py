@@ -31,11 +31,12 @@ frames whose pilot input it accepted.
 from __future__ import annotations
 
 from testbed.common.components import ArmRequest, ModeRequest
-from testbed.mavlink import EndpointOptions, VehicleEndpoint
+from testbed.mavlink import VehicleEndpoint
 from testbed.mavlink.ground_station import QGC_STREAM_RATES_HZ, ScriptedGroundStation
 from testbed.operator.station import OperatorStation
 from testbed.operator.video import ImageConsole
 from testbed.run.links import Ingested, Outgoing
+from testbed.run.mavlink_run import endpoint_options
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import ImageSource
 
@@ -56,7 +57,10 @@ class RawMavlinkVehicleLink:
     reply_image: int | None = None
 
     def __init__(self, vehicle: Vehicle) -> None:
-        options = EndpointOptions(vehicle.config.supply_voltage_v, {"JS_GAIN_DEFAULT": _GAIN})
+        # ArduSub's frame as the direct endpoint presents it (servo numbering, FRAME_CONFIG,
+        # MOT_n_DIRECTION, BARO_SPEC_GRAV), the baseline's full joystick gain over them
+        boot = {"JS_GAIN_DEFAULT": _GAIN}
+        options = endpoint_options(vehicle.config, vehicle.thruster_config, boot)
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, options
         )

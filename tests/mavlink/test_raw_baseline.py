@@ -14,10 +14,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.channel import EventKind
+from testbed.run.mavlink_links import RawMavlinkVehicleLink
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
+from testbed.vehicle.vehicle import Vehicle
+from testbed.vehicle.vehicle_config import VehicleConfig
 
 RATE_HZ = 25.0
 FRAME_BYTES = 29  # MANUAL_CONTROL 23 B (REFERENCE §4.9) in a 6-B frame
@@ -94,3 +98,30 @@ def test_on_the_half_duplex_s100_both_saturated_ends_lose_everything() -> None:
         link = metrics["link"][direction]
         assert link["frames_delivered"] == 0 and link["frames_collided"] > 0
         assert link["frames_dropped"] > 0.5 * link["frames_sent"]
+
+
+def test_the_raw_links_vehicle_presents_ardusubs_frame_as_the_direct_endpoint_does() -> None:
+    """Over the narrow link the vehicle's endpoint is the same ArduSub vehicle as directly: the
+    BlueROV2's FRAME_CONFIG 1 (Vectored) with MOT_n_DIRECTION from its propellers (+1 for the
+    CCW M1, M2, M5 and -1 for the CW M3, M4, M6: bluerov2.toml's header, from ArduSub's
+    factors), read back with pymavlink from the link's own bytes (the baseline's endpoint kept
+    the table's defaults: every direction +1, servos in the layout's order)."""
+    vehicle = Vehicle(
+        VehicleConfig(model="bluerov2", thrusters="bluerov2"), np.random.default_rng(0)
+    )
+    try:
+        link = RawMavlinkVehicleLink(vehicle)
+        gcs = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        names = ["FRAME_CONFIG", *(f"MOT_{n}_DIRECTION" for n in range(1, 7))]
+        for frame_id, name in enumerate(names):
+            request = gcs.param_request_read_encode(1, 1, name.encode(), -1).pack(gcs)
+            link.ingest([(request, frame_id)], 0.0)
+        values = {
+            m.param_id: m.param_value
+            for data in link.outbound(0.0)
+            for m in gcs.parse_buffer(data) or []
+            if m.get_type() == "PARAM_VALUE"
+        }
+    finally:
+        vehicle.close()
+    assert [values[name] for name in names] == [1.0, 1.0, 1.0, -1.0, -1.0, 1.0, -1.0]
