@@ -129,12 +129,12 @@ def load_factory(target: str, where: str, key: str) -> Callable[..., Any]:
     if problem is not None:
         raise ConfigError(f"{where}: {key}: {problem}")
     module_part, _, name = target.rpartition(":")
-    try:
+    if target_file(target) and not Path(module_part).is_file():
+        raise ConfigError(f"{where}: {key}: no such file: {Path(module_part).resolve()}")
+    try:  # a FileNotFoundError from here on is the module's own (a data file it opens)
         module = _import_file(Path(module_part)) if target_file(target) else None
         if module is None:
             module = _import_module(module_part)
-    except FileNotFoundError:
-        raise ConfigError(f"{where}: {key}: no such file: {module_part}") from None
     except Exception as error:  # the user's module failed: its own error, in one line
         message = f"{type(error).__name__}: {error}"
         if isinstance(error, ModuleNotFoundError) and error.name == module_part:
@@ -160,8 +160,6 @@ def _import_file(path: Path) -> ModuleType:
     module = _MODULES.get(resolved)
     if module is not None:
         return module
-    if not resolved.is_file():
-        raise FileNotFoundError(resolved)
     digest = hashlib.sha256(str(resolved).encode()).hexdigest()[:8]
     stem = re.sub(r"\W", "_", resolved.stem)
     name = f"{USER_MODULE_PREFIX}{stem}_{digest}"

@@ -173,7 +173,7 @@ def test_trials_with_a_law_make_one_law_each_and_one_seed_one_result(
 @pytest.mark.parametrize(
     ("override", "message"),
     [
-        ("vehicle.control.depth=nofile.py:PDepth", "vehicle.control.depth: no such file: nofile"),
+        ("vehicle.control.depth=nofile.py:PDepth", "vehicle.control.depth: no such file: /"),
         (
             "vehicle.control.depth=laws.py:Missing",
             "vehicle.control.depth: laws.py has no 'Missing'",

@@ -250,7 +250,7 @@ def test_the_live_console_links_through_the_scenarios_model(study: Path) -> None
 
 
 CASES = {
-    "nofile.py:StepPilot": "pilot.factory: no such file: nofile.py",
+    "nofile.py:StepPilot": "pilot.factory: no such file: /",
     "broken.py:StepPilot": "pilot.factory: importing broken.py failed: SyntaxError",
     "my_pilots.py:Missing": "pilot.factory: my_pilots.py has no 'Missing'",
     "my_pilots.py:np": "pilot.factory: 'np' in my_pilots.py is not callable",
@@ -296,6 +296,29 @@ def test_a_wrong_name_or_argument_is_one_line_naming_the_key_and_exit_2(
     assert err.count("\n") == 1 and err.startswith("testbed: error: --set: ")
     assert message in err
     assert not (study / "out").exists()
+
+
+def test_a_missing_file_is_named_where_it_was_looked_for_and_a_modules_own_missing_file_is_its(
+    study: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A ``--set`` path is the working directory's, and the line names that resolved path (the
+    pilot beside the scenario is not found from elsewhere); a module that exists but opens a
+    missing data file as it is imported is its import failing, not a missing module file."""
+    (study / "calibrated.py").write_text('open("calibration.json")\n')
+    elsewhere = study.parent / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cases = {
+        "my_pilots.py:StepPilot": f"pilot.factory: no such file: {elsewhere / 'my_pilots.py'}\n",
+        f"{study / 'calibrated.py'}:StepPilot": (
+            f"pilot.factory: importing {study / 'calibrated.py'} failed: FileNotFoundError: "
+            "[Errno 2] No such file or directory: 'calibration.json'\n"
+        ),
+    }
+    for target, message in cases.items():
+        scenario = str(study / "step.toml")
+        code = main(["run", scenario, "--set", f"pilot.factory={target}", "--no-plots"])
+        assert (code, capsys.readouterr().err) == (2, f"testbed: error: --set: {message}")
 
 
 def test_what_the_factory_makes_is_checked_before_the_run_one_line_exit_2(
