@@ -303,6 +303,7 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
     up, down = metrics["link"]["uplink"], metrics["link"]["downlink"]
     lag, age = metrics["command_lag_s"], metrics["command_age_s"]
     yaw = metrics["attitude_error_deg"]["yaw"]
+    depth = metrics["depth_error_m"]["mean"]
     lines = [
         f"{metrics['scenario']} seed {metrics['seed']}: {metrics['sim_s']:.0f} s simulated in "
         f"{metrics['wall_s']:.1f} s ({metrics['rtf']:.0f}x real time)",
@@ -313,7 +314,7 @@ def format_summary(metrics: dict[str, Any], out: Path) -> str:
         f"  command lag mean {ms(lag['mean'])} p95 {ms(lag['p95'])}; command age mean "
         f"{ms(age['mean'])}; odometry age mean {ms(metrics['odometry_age_s']['mean'])}",
         f"  yaw error std {_num(yaw['std'], digits=2, unit=' deg')}; "
-        f"energy {metrics['energy_wh']:.3f} Wh",
+        f"depth error mean {_num(depth, 1000.0, 0, ' mm')}; energy {metrics['energy_wh']:.3f} Wh",
     ]
     if (failsafe := failsafe_note(metrics)) is not None:
         lines.append(f"  {failsafe}")

@@ -139,6 +139,21 @@ def test_the_summary_shows_n_a_where_metrics_json_has_null(
     assert "nan" not in text and "inf" not in text
 
 
+def test_the_summary_gives_the_depth_error_as_the_trial_lines_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A depth law is compared by its depth error: the run's summary gives metrics.json's
+    depth_error_m mean in mm (only the trials' lines had it), n/a where no depth hold flew."""
+    argv = ["run", "--set", "duration_s=15", "--no-plots", "--out"]
+    assert main([*argv, str(tmp_path / "held")]) == 0
+    depth = json.loads((tmp_path / "held" / "metrics.json").read_text())["depth_error_m"]
+    assert f"; depth error mean {1000 * depth['mean']:.0f} mm; energy " in capsys.readouterr().out
+    assert main([*argv, str(tmp_path / "manual"), "--set", "operator.mode=manual"]) == 0
+    manual = json.loads((tmp_path / "manual" / "metrics.json").read_text())["depth_error_m"]
+    assert manual["mean"] is None
+    assert "; depth error mean n/a; energy " in capsys.readouterr().out
+
+
 def test_a_mission_that_never_started_says_why(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
