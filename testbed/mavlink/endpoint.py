@@ -52,6 +52,7 @@ from testbed.mavlink import commands, guided, param_protocol, pilot_input
 from testbed.mavlink.ardusub import RcInput, boot_gain, sticks_from_rc
 from testbed.mavlink.attitude_target import (
     AttitudeTarget,
+    StoredAttitude,
     on_set_attitude_target,
     update_attitude_target,
 )
@@ -141,8 +142,10 @@ class VehicleEndpoint:
             (:mod:`~testbed.mavlink.pilot_input`).
         rc: the RC inputs the pilot's packets set; ``gain`` the joystick gain.
         buttons_held: the buttons of the last MANUAL_CONTROL (a button acts when pressed).
-        attitude_target: the attitude control a SET_ATTITUDE_TARGET started
+        attitude_target: GUIDED's angle control a SET_ATTITUDE_TARGET started
             (:mod:`~testbed.mavlink.attitude_target`), None when there is none.
+        stored_attitude: the last throttle-ignored SET_ATTITUDE_TARGET, which ALT_HOLD flies
+            while it is fresh (ArduSub's ``set_attitude_target_no_gps``), or None.
         motor_test: the DO_MOTOR_TEST state (:mod:`~testbed.mavlink.motor_test`).
     """
 
@@ -176,6 +179,7 @@ class VehicleEndpoint:
         self._next_heartbeat_s = 0.0
         self._snapshot: VehicleSnapshot | None = None
         self.attitude_target: AttitudeTarget | None = None
+        self.stored_attitude: StoredAttitude | None = None
         self.motor_test = MotorTest()
         cls = type(self)
         self._handlers: dict[str, Handler] = {

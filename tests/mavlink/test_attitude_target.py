@@ -2,7 +2,8 @@
 time, judged by the physics truth: GUIDED flies the attitude and the thrust's climb rate
 (ArduSub's ``guided_set_angle``: (thrust − 0.5) × 2 × WPNAV_SPEED_UP/DN, integrated into the
 depth target, level and no climb 1 s after the last message, roll and pitch within ANGLE_MAX);
-ALT_HOLD flies a throttle-ignored target for 5 s, then its old heading; other modes and masks
+ALT_HOLD flies a throttle-ignored target (ArduSub's ``set_attitude_target_no_gps``, stored in
+any mode, whatever the attitude-ignore bit) for 5 s, then its old heading; other modes and masks
 ignore it, malformed values are counted, never raised."""
 
 from __future__ import annotations
@@ -149,6 +150,57 @@ def test_alt_hold_flies_a_throttle_ignored_target_for_five_seconds(gcs: SimGcs) 
     assert abs(math.degrees(back)) < 3.0
 
 
+def test_a_target_stored_in_manual_is_flown_when_alt_hold_comes_within_five_seconds(
+    gcs: SimGcs,
+) -> None:
+    """ArduSub stores a throttle-ignored target in any mode; ALT_HOLD, entered while the last is
+    under 5 s old, flies it, and when it ages out holds the heading it was entered at."""
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(1.0, gcs.flying())
+    world, intents = gcs.vehicle.world, gcs.vehicle.operator_entity
+    heading = truth_euler_deg(gcs)[2]
+    target = attitude(gcs, yaw_deg=heading + 90.0, mask=THROTTLE_IGNORE)
+    stream(gcs, 2.0, target)  # MANUAL holds no attitude: stored, not flown
+    assert world.get(intents, AttitudeSetpoint) is None
+    assert gcs.endpoint.rejected.get("not_guided", 0) == 0
+    entry_heading = truth_euler_deg(gcs)[2]
+    gcs.send(gcs.set_mode(2))  # 0.25 s after the last message
+    gcs.run(4.5, gcs.flying())  # flown until 5 s after it
+    turned = truth_euler_deg(gcs)[2] - entry_heading
+    assert math.degrees(math.remainder(math.radians(turned), math.tau)) > 45.0
+    gcs.run(10.0, gcs.flying())  # aged out: the heading ALT_HOLD was entered at
+    back = math.remainder(math.radians(truth_euler_deg(gcs)[2] - entry_heading), math.tau)
+    assert abs(math.degrees(back)) < 3.0
+
+
+def test_a_stored_target_older_than_five_seconds_is_not_flown(gcs: SimGcs) -> None:
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(1.0, gcs.flying())
+    gcs.send(attitude(gcs, yaw_deg=truth_euler_deg(gcs)[2] + 90.0, mask=THROTTLE_IGNORE))
+    gcs.run(5.1, gcs.flying())
+    gcs.send(gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, AttitudeSetpoint) is None
+
+
+def test_alt_hold_flies_a_target_with_attitude_ignored_when_throttle_is_ignored_too(
+    gcs: SimGcs,
+) -> None:
+    """ArduSub stores the message on bit 64 before it looks at bit 128: ALT_HOLD flies its
+    quaternion; bit 128 alone is ignored."""
+    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    heading = truth_euler_deg(gcs)[2]
+    ignored = attitude(gcs, yaw_deg=heading - 90.0, mask=ATTITUDE_IGNORE)
+    stream(gcs, 2.0, ignored)
+    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, AttitudeSetpoint) is None
+    assert gcs.endpoint.rejected["unsupported_target"] == 8
+    both = attitude(gcs, yaw_deg=heading + 60.0, mask=THROTTLE_IGNORE | ATTITUDE_IGNORE)
+    stream(gcs, 8.0, both)
+    turned = truth_euler_deg(gcs)[2] - heading - 60.0
+    assert abs(math.degrees(math.remainder(math.radians(turned), math.tau))) < 3.0
+
+
 def test_other_modes_masks_and_malformed_values_are_counted_not_acted_on(gcs: SimGcs) -> None:
     gcs.send(gcs.heartbeat(), gcs.arm())
     gcs.run(0.5, gcs.flying())
@@ -158,7 +210,7 @@ def test_other_modes_masks_and_malformed_values_are_counted_not_acted_on(gcs: Si
     assert gcs.endpoint.rejected["not_guided"] == 1
     guided(gcs)
     gcs.send(
-        attitude(gcs, yaw_deg=90.0, mask=THROTTLE_IGNORE),  # GUIDED flies attitude + thrust only
+        attitude(gcs, yaw_deg=90.0, mask=THROTTLE_IGNORE),  # stored for ALT_HOLD, not flown
         attitude(gcs, yaw_deg=90.0, mask=ATTITUDE_IGNORE),
         attitude(gcs, q=(math.nan, 0.0, 0.0, 0.0)),
         attitude(gcs, q=(0.0, 0.0, 0.0, 0.0)),
@@ -168,12 +220,13 @@ def test_other_modes_masks_and_malformed_values_are_counted_not_acted_on(gcs: Si
     gcs.run(0.1, gcs.flying())
     rejected = gcs.endpoint.rejected
     assert (rejected["not_guided"], rejected["unsupported_target"], rejected["bad_field"]) == (
-        2,
+        1,
         1,
         4,
     )
-    assert world.get(intents, AttitudeSetpoint) is None
+    assert world.get(intents, AttitudeSetpoint) is None  # GUIDED does not fly a stored one
     assert gcs.endpoint.attitude_target is None
+    assert gcs.endpoint.stored_attitude is not None
     # an unnormalised quaternion is normalised, as the vehicle's attitude hold takes it
     gcs.send(attitude(gcs, q=tuple(2.0 * c for c in quat_from_euler(0.0, 0.0, 1.0))))
     gcs.run(0.1, gcs.flying())
