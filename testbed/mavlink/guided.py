@@ -3,16 +3,18 @@ DO_REPOSITION → a PositionSetpoint.
 
 **SET_POSITION_TARGET_LOCAL_NED** (ArduSub's ``handle_set_position_target_local_ned``, the
 position part): acted on only while GUIDED is requested (else ignored, as ArduSub, and counted
-``not_guided``); it must be a position target (x, y, z not ignored in ``type_mask``; velocity and
-acceleration targets are counted ``unsupported_target``) in MAV_FRAME_LOCAL_NED (absolute, the
-position fix's NED frame), LOCAL_OFFSET_NED (from the reported position) or BODY_OFFSET_NED,
-BODY_NED or BODY_FRD (from the reported position, x ahead and y right of the reported heading);
-z is down, the depth target [m]; yaw [rad] when not ignored, else the present heading is kept.
+``not_guided``); it must be a position target by ArduSub's ``type_mask`` test (no x, y, z bit
+set, and any one velocity bit and any one acceleration bit set: ArduSub's ``vel_ignore`` and
+``acc_ignore`` are each true for any of their three bits; other targets are counted
+``unsupported_target``) in MAV_FRAME_LOCAL_NED (absolute, the position fix's NED frame),
+LOCAL_OFFSET_NED (from the reported position) or BODY_OFFSET_NED, BODY_NED or BODY_FRD (from
+the reported position, x ahead and y right of the reported heading); z is down, the depth
+target [m]; yaw [rad] when not ignored, else the present heading is kept.
 
 **SET_POSITION_TARGET_GLOBAL_INT** (ArduSub 4.5 ``GCS_MAVLINK_Sub::handle_message``): in
 ALT_HOLD with z not ignored, only the depth: the target's ``alt`` [m, up] as the depth target,
 whatever the frame (``set_pos_desired_U_cm(alt × 100)``; above the surface, the surface). In
-GUIDED a position target (x, y, z used; acceleration ignored; a velocity counted
+GUIDED a position target by the same ``type_mask`` test (others counted
 ``unsupported_target``), lat/lon in range (else ``bad_field``), in MAV_FRAME_GLOBAL(_INT)
 (altitude above mean sea level) or GLOBAL_RELATIVE_ALT(_INT) (above home): both the same here,
 the home and origin at the surface, 0 m (GPS_GLOBAL_ORIGIN, HOME_POSITION); lat/lon to north and
@@ -59,7 +61,7 @@ __all__ = [
 ]
 
 _POSITION_IGNORE = 0b111  # POSITION_TARGET_TYPEMASK_X/Y/Z_IGNORE
-_MOTION_IGNORE = 0b1_1111_1000  # VX..VZ, AX..AZ ignore bits
+_VELOCITY_IGNORE = 0b11_1000  # POSITION_TARGET_TYPEMASK_VX/VY/VZ_IGNORE
 _YAW_IGNORE = 1024
 _BODY_FRAMES = (mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_FRD)
 """Frames whose target is an offset from the reported position along the reported heading
@@ -128,9 +130,11 @@ def on_set_position_target_local_ned(
 
 
 def _position_only(endpoint: VehicleEndpoint, mask: int) -> bool:
-    """Whether ``type_mask`` asks for a position target only (x, y, z used; every velocity and
-    acceleration ignored); anything else is counted ``unsupported_target``."""
-    if mask & _POSITION_IGNORE or (~mask) & _MOTION_IGNORE:
+    """Whether ``type_mask`` asks for a position target only, by ArduSub's test
+    (``!pos_ignore && vel_ignore && acc_ignore``, each true when any of its three bits is set):
+    no position bit set, at least one velocity bit and one acceleration bit set; anything else
+    is counted ``unsupported_target``."""
+    if mask & _POSITION_IGNORE or not mask & _VELOCITY_IGNORE or not mask & _ACCELERATION_IGNORE:
         endpoint.reject("unsupported_target")
         return False
     return True

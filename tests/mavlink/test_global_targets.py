@@ -146,6 +146,24 @@ def test_global_targets_ardusub_ignores_are_counted_not_flown(gcs: SimGcs) -> No
     assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
 
 
+def test_a_global_position_target_is_any_velocity_bit_and_any_acceleration_bit(
+    gcs: SimGcs,
+) -> None:
+    """ArduSub's position-only test, as SET_POSITION_TARGET_LOCAL_NED's: any velocity bit and
+    any acceleration bit set, no position bit."""
+    armed_in(gcs, 4)
+    lat, lon = offset_e7(gcs, 2.0, 0.0)
+    no_velocity_bit = 0b1101_1100_0000  # a position and velocity target (ArduSub's posvel)
+    gcs.send(global_target(gcs, 6, lat, lon, -1.0, mask=no_velocity_bit))
+    gcs.run(0.1, gcs.flying())
+    assert gcs.endpoint.rejected["unsupported_target"] == 1
+    gcs.send(global_target(gcs, 6, lat, lon, -1.0, mask=0b100_1000))  # VX, AX only
+    north, east, depth = fly_and_measure(gcs, 15.0)
+    assert math.hypot(north - 2.0, east) < TOLERANCE_M
+    assert depth == pytest.approx(1.0, abs=0.05)
+    assert gcs.endpoint.rejected["unsupported_target"] == 1
+
+
 def test_do_reposition_in_guided_is_accepted_and_flown(gcs: SimGcs) -> None:
     armed_in(gcs, 4)
     lat, lon = offset_e7(gcs, -2.0, 1.0)

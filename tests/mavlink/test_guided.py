@@ -173,6 +173,34 @@ def test_an_absolute_target_with_a_heading_turns_and_dives_to_it(gcs: SimGcs) ->
     assert not loop.flags.guided and loop.position.velocity_ne_m_s == (0.0, 0.0)
 
 
+def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardusub(
+    gcs: SimGcs,
+) -> None:
+    """ArduSub's ``vel_ignore`` and ``acc_ignore`` are each true for any one of their three
+    bits: x, y, z used with VX and AX ignored is a position target (the other fields unread);
+    no velocity bit (a position and velocity target) or no acceleration bit is not one."""
+    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
+    gcs.run(1.0, gcs.flying())
+    gcs.send(gcs.set_mode(4))
+    gcs.run(1.01, gcs.flying())
+    start = tuple(gcs.vehicle.truth.position_ned_m)
+
+    def offset(mask: int) -> object:
+        return gcs.mav.set_position_target_local_ned_encode(
+            0, 1, 1, mav.MAV_FRAME_LOCAL_OFFSET_NED, mask, 2.0, 0, 0, 0.3, 0.3, 0, 1, 1, 0, 0, 0
+        )
+
+    gcs.send(offset(0b1101_1100_0000), offset(0b1100_0011_1000))  # no VX..VZ / AX..AZ bit
+    gcs.run(0.1, gcs.flying())
+    assert gcs.endpoint.rejected["unsupported_target"] == 2
+    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    gcs.send(offset(YAW_IGNORE | 0b100_1000))  # VX and AX ignored only
+    gcs.run(15.0, gcs.flying())
+    p = gcs.vehicle.truth.position_ned_m
+    assert math.hypot(p[0] - start[0] - 2.0, p[1] - start[1]) < TOLERANCE_M
+    assert gcs.endpoint.rejected["unsupported_target"] == 2
+
+
 class _Gateway:
     """The gateway path in simulated time: pymavlink → :class:`ShoreEndpoint` on a gateway
     station → the teleop codec's orders, one per token gap, each crossing in ``up_s`` → the
