@@ -217,7 +217,8 @@ LOCATION_COMMANDS: dict[int, Callable[[VehicleEndpoint, int, tuple[float, ...], 
 }
 """MAV_CMD → handler of a command that carries a location (ArduPilot's
 ``command_long_stores_location``), given its frame, params and latitude and longitude
-[1e-7 deg]; the MAV_RESULT to acknowledge."""
+[1e-7 deg]; the MAV_RESULT to acknowledge. It counts itself: ``accepted`` only when it
+answers ACCEPTED, else the reason it refused."""
 
 
 def _e7(degrees: float) -> int:
@@ -241,8 +242,7 @@ def _command(
         return
     cmd = int(message.command)
     located = LOCATION_COMMANDS.get(cmd)
-    if located is not None:
-        endpoint.accepted += 1
+    if located is not None:  # it counts what it did
         _ack(endpoint, channel, message, cmd, located(endpoint, location[0], params, *location[1:]))
         return
     handler = COMMANDS.get(cmd)

@@ -27,11 +27,14 @@ data the simulator has not, and other frames are not global: ignored, counted
 **DO_REPOSITION** (COMMAND_INT; a COMMAND_LONG's params 5, 6 are latitude and longitude in
 degrees and its frame MAV_FRAME_GLOBAL, as ArduPilot converts it): the handler ArduSub gained
 after 4.5 (ArduPilot PR #27637, ``handle_command_int_do_reposition``, Copter's): DENIED outside
-GUIDED unless param2 has MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (1), DENIED for lat/lon out of
-range, a frame that is not global, lat = lon = 0 or a relative altitude of exactly 0
-(``Location::sanitize`` would have changed them), FAILED for a terrain frame (no terrain data)
-or when the change to GUIDED is refused (no position estimate); else ACCEPTED and flown as
-above (param1 speed and param4 yaw unused, as ArduSub).
+GUIDED unless param2 has MAV_DO_REPOSITION_FLAGS_CHANGE_MODE (1) (``not_guided``), DENIED for a
+frame that is not global (``unsupported_frame``), lat/lon out of range, a NaN altitude, lat =
+lon = 0 or a relative altitude of 0 cm (``bad_field``): ``location_from_command_t`` stores
+``int32_t(z * 100)``, float32 truncated toward zero, so under 1 cm is 0 and
+``Location::sanitize`` would have changed it; FAILED for a terrain frame (no terrain data,
+``unsupported_frame``) or when the change to GUIDED is refused (no position estimate,
+``mode_refused``); else ACCEPTED (``accepted``) and flown as above to the altitude in whole
+centimetres (param1 speed and param4 yaw unused, as ArduSub).
 
 Non-finite or out-of-range fields are counted ``bad_field``, and every target beyond
 :data:`MAX_TARGET_M` too. The target becomes a
@@ -44,6 +47,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import ControlMode, DepthSetpoint
@@ -198,7 +202,8 @@ def do_reposition(
     endpoint: VehicleEndpoint, frame: int, params: tuple[float, ...], lat_e7: int, lon_e7: int
 ) -> int:
     """MAV_CMD_DO_REPOSITION as ArduSub's ``handle_command_int_do_reposition`` (module
-    docstring): the MAV_RESULT.
+    docstring): the MAV_RESULT; counted ``accepted`` when ACCEPTED, else once under the reason
+    it was refused.
 
     Args:
         endpoint: the endpoint.
@@ -211,21 +216,28 @@ def do_reposition(
     change_mode = math.isfinite(flags) and int(flags) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
     guided = endpoint.requested_mode is ControlMode.GUIDED
     if not guided and not change_mode:
+        endpoint.reject("not_guided")
         return int(mav.MAV_RESULT_DENIED)
     alt_frame = GLOBAL_FRAMES.get(frame)
     if alt_frame is None:  # location_from_command_t: not a global frame
         endpoint.reject("unsupported_frame")
         return int(mav.MAV_RESULT_DENIED)
-    if (lat_e7, lon_e7) == (0, 0) or (alt == 0.0 and alt_frame != "absolute"):
-        return int(mav.MAV_RESULT_DENIED)  # Location::sanitize would have changed it
-    target = _local_target(lat_e7, lon_e7, alt) if math.isfinite(alt) else None
-    if not _in_range(lat_e7, lon_e7) or target is None:
+    if not (_in_range(lat_e7, lon_e7) and math.isfinite(alt) and abs(alt) <= MAX_TARGET_M):
+        endpoint.reject("bad_field")
+        return int(mav.MAV_RESULT_DENIED)
+    alt_cm = int(np.float32(alt) * np.float32(100.0))  # location_from_command_t: truncated
+    if (lat_e7, lon_e7) == (0, 0) or (alt_cm == 0 and alt_frame != "absolute"):
+        endpoint.reject("bad_field")  # Location::sanitize would have changed it
+        return int(mav.MAV_RESULT_DENIED)
+    target = _local_target(lat_e7, lon_e7, alt_cm / 100.0)
+    if target is None:
         endpoint.reject("bad_field")
         return int(mav.MAV_RESULT_DENIED)
     if alt_frame == "above_terrain":  # guided_set_destination: no terrain data
         endpoint.reject("unsupported_frame")
         return int(mav.MAV_RESULT_FAILED)
     if not guided and endpoint.set_mode(mav.SUB_MODE_GUIDED) != mav.MAV_RESULT_ACCEPTED:
-        return int(mav.MAV_RESULT_FAILED)
+        return int(mav.MAV_RESULT_FAILED)  # counted mode_refused
+    endpoint.accepted += 1
     endpoint.request_position(target, None)
     return int(mav.MAV_RESULT_ACCEPTED)

@@ -224,10 +224,67 @@ def test_do_reposition_answers_as_ardusub(gcs: SimGcs) -> None:
     assert reposition_acks(gcs) == [DENIED, DENIED, DENIED, DENIED, DENIED, FAILED]
     assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
     rejected = gcs.endpoint.rejected
-    assert (rejected["unsupported_frame"], rejected["bad_field"]) == (2, 2)
+    assert (rejected["unsupported_frame"], rejected["bad_field"]) == (2, 4)
     gcs.send(reposition_int(gcs, lat, lon, 0.0, frame=mav.MAV_FRAME_GLOBAL_INT))  # AMSL 0: fine
     gcs.run(0.1, gcs.flying())
     assert reposition_acks(gcs)[-1] == ACCEPTED
+
+
+def test_do_reposition_refuses_a_relative_altitude_under_a_centimetre(gcs: SimGcs) -> None:
+    """ArduPilot's location_from_command_t stores the altitude as int32_t(z * 100) in float32,
+    truncated toward zero: under 1 cm either way it is 0 cm, which Location::sanitize takes
+    as "the current altitude", so the command is DENIED."""
+    armed_in(gcs, 4)
+    lat, lon = offset_e7(gcs, 1.0, 0.0)
+    gcs.send(
+        reposition_int(gcs, lat, lon, 0.004),
+        reposition_int(gcs, lat, lon, -0.009),
+        reposition_int(gcs, lat, lon, 0.0099),
+    )
+    gcs.run(0.1, gcs.flying())
+    assert reposition_acks(gcs) == [DENIED, DENIED, DENIED]
+    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    gcs.send(reposition_int(gcs, lat, lon, -0.01))  # 1 cm below home
+    gcs.run(0.1, gcs.flying())
+    assert reposition_acks(gcs)[-1] == ACCEPTED
+
+
+def test_do_reposition_is_counted_accepted_only_when_accepted() -> None:
+    """The counters say what happened: a refused DO_REPOSITION is counted under its reason,
+    not ``accepted`` (as an unsupported command is)."""
+    gcs = SimGcs(position_fix=False)
+    try:
+        armed_in(gcs, 2)
+        lat, lon = 399_945_200, -686_000
+        counted = [gcs.endpoint.accepted]
+        for message in (
+            reposition_int(gcs, lat, lon, -1.0),  # ALT_HOLD, no CHANGE_MODE: DENIED
+            reposition_int(gcs, lat, lon, -1.0, flags=1),  # no fix for GUIDED: FAILED
+            reposition_int(gcs, lat, lon, 0.0, flags=1),  # 0 cm relative: DENIED
+        ):
+            gcs.send(message)
+            gcs.step()  # no sticks: only the command is counted
+            counted.append(gcs.endpoint.accepted)
+        assert reposition_acks(gcs) == [DENIED, FAILED, DENIED]
+        assert counted[1:] == [counted[0]] * 3
+        rejected = gcs.endpoint.rejected
+        assert (rejected["not_guided"], rejected["mode_refused"], rejected["bad_field"]) == (
+            1,
+            1,
+            1,
+        )
+    finally:
+        gcs.close()
+    gcs = SimGcs()
+    try:
+        armed_in(gcs, 4)
+        before = gcs.endpoint.accepted
+        gcs.send(reposition_int(gcs, *offset_e7(gcs, 1.0, 0.0), -1.0))
+        gcs.step()
+        assert reposition_acks(gcs) == [ACCEPTED]
+        assert gcs.endpoint.accepted == before + 1
+    finally:
+        gcs.close()
 
 
 def test_do_reposition_without_a_position_fix_fails_the_mode_change() -> None:
