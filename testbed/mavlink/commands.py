@@ -250,8 +250,20 @@ def _command(
         endpoint.reject("unsupported_command")
         _ack(endpoint, channel, message, cmd, _UNSUPPORTED)
         return
-    endpoint.accepted += 1
-    _ack(endpoint, channel, message, cmd, handler(endpoint, channel, params, now_s))
+    before = sum(endpoint.rejected.values())
+    result = handler(endpoint, channel, params, now_s)
+    _ack(endpoint, channel, message, cmd, _counted(endpoint, result, before))
+
+
+def _counted(endpoint: VehicleEndpoint, result: int, rejected_before: int) -> int:
+    """``result`` (a MAV_RESULT), counted once: ``accepted`` when ACCEPTED, else under the
+    reason its handler counted (``mode_refused``, ``bad_field``…) or, when it counted none,
+    ``command_refused``; ``rejected_before`` is the rejections' total before the handler ran."""
+    if result == _ACCEPTED:
+        endpoint.accepted += 1
+    elif sum(endpoint.rejected.values()) == rejected_before:
+        endpoint.reject("command_refused")
+    return result
 
 
 def on_command_long(
@@ -299,12 +311,14 @@ def on_set_mode(
     del now_s, arrived_s
     if not endpoint.for_us(message.target_system):
         return
-    endpoint.accepted += 1
+    before = sum(endpoint.rejected.values())
     if not int(message.base_mode) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
         result = _DENIED
     else:
         result = set_mode(endpoint, int(message.custom_mode))
-    _ack(endpoint, channel, message, mav.MAVLINK_MSG_ID_SET_MODE, result)
+    _ack(
+        endpoint, channel, message, mav.MAVLINK_MSG_ID_SET_MODE, _counted(endpoint, result, before)
+    )
 
 
 # ------------------------------------------------------------------- mission, streams, time

@@ -158,6 +158,29 @@ def test_modes_are_acknowledged_reflected_in_the_heartbeat_and_unsimulated_ones_
     assert any(m.text == "Flight mode change failed" for m in gcs.of("STATUSTEXT"))
 
 
+def test_every_command_is_counted_once_as_what_its_ack_said(gcs: SimGcs) -> None:
+    """``accepted`` counts the ACCEPTED commands only, a refusal is counted once under its
+    reason (``mode_refused``) or, with none, ``command_refused`` (a refused mode was counted
+    both accepted and mode_refused)."""
+    endpoint = gcs.endpoint
+    gcs.run(0.5)
+    accepted, rejected = endpoint.accepted, sum(endpoint.rejected.values())
+    gcs.clear()
+    gcs.send(gcs.set_mode(16))  # POSHOLD: FAILED, mode_refused
+    gcs.send(gcs.mav.set_mode_encode(1, 0, 19))  # no custom-mode flag: DENIED, no reason
+    gcs.send(gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 3))  # AUTO by COMMAND_LONG: FAILED
+    gcs.send(gcs.command(mav.MAV_CMD_DO_MOTOR_TEST, 1, 1, 1600, 1))  # disarmed: FAILED
+    gcs.send(gcs.set_mode(0))  # STABILIZE: ACCEPTED
+    gcs.step()
+    replies = acks(gcs, mav.MAVLINK_MSG_ID_SET_MODE) + acks(gcs, mav.MAV_CMD_DO_SET_MODE)
+    assert replies == [FAILED, mav.MAV_RESULT_DENIED, ACCEPTED, FAILED]
+    assert acks(gcs, mav.MAV_CMD_DO_MOTOR_TEST) == [FAILED]
+    assert endpoint.accepted == accepted + 1
+    assert endpoint.rejected["mode_refused"] == 2
+    assert endpoint.rejected["command_refused"] == 2
+    assert sum(endpoint.rejected.values()) == rejected + 4
+
+
 def test_arm_and_disarm_are_acknowledged_and_in_the_heartbeat(gcs: SimGcs) -> None:
     gcs.send(gcs.heartbeat(), gcs.arm())
     gcs.run(1.01, gcs.flying())
