@@ -53,6 +53,7 @@ from testbed.config import ConfigError
 
 if TYPE_CHECKING:
     from testbed.hil import LinkEndpoint
+    from testbed.run.scenario_config import Scenario
 
 __all__ = ["add_hil_arguments", "add_hil_parser", "format_hil_summary", "run_hil_command"]
 
@@ -151,6 +152,19 @@ def _words(words: list[str]) -> tuple[str, str]:
     return mode, words[0] if words else "s100-teleop-v1"
 
 
+def _warn_laws_not_here(scenario: Scenario) -> None:
+    """One ``testbed: warning:`` line on stderr when ``[vehicle.control]`` names a law of the
+    user's own and only the operator node runs here: the vehicle node, on the other computer,
+    flies the laws its own scenario names (``metrics.json``'s ``inputs`` still records them)."""
+    laws = [f"vehicle.control.{name}" for name in scenario.control_laws.targets()]
+    if laws:
+        print(
+            f"testbed: warning: {' and '.join(laws)}: not flown by `hil operator` (the vehicle "
+            "node flies the laws of its own scenario, on its computer)",
+            file=sys.stderr,
+        )
+
+
 def _ports(args: argparse.Namespace, mode: str) -> dict[str, tuple[str, str]]:
     """Role → (option name, URL), checked against the mode."""
     pair = {
@@ -212,6 +226,8 @@ def run_hil_command(args: argparse.Namespace) -> int:
     duration = scenario.duration_s if args.duration is None else args.duration
     settle = scenario.metrics.settle_s
     check_duration(duration, low_s=settle, low_note=" (above the scenario's metrics.settle_s)")
+    if mode == "operator":
+        _warn_laws_not_here(scenario)
     out = args.out
     if out is None:
         out = Path("runs") / f"hil-{scenario.id}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -223,3 +223,34 @@ def test_a_socket_url_without_its_port_or_with_an_unknown_option_is_named(
     'NoneType'" and "'debug|info|warning|error'" (a HIL review)."""
     assert exit_code(["hil", "--operator-port", url, "--vehicle-port", "loop://"]) == 2
     assert capsys.readouterr().err == f"testbed: error: --operator-port: {url}: {says}\n"
+
+
+LAW = """
+class Hold:
+    def reset(self):
+        pass
+
+    def update(self, target, depth, imu, dt_s):
+        return (0.0, 0.0, 0.0)
+"""
+
+
+@pytest.mark.parametrize("mode", ["operator", "vehicle"])
+def test_a_law_of_ones_own_that_only_operator_does_not_fly_is_one_warning_line(
+    mode: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`hil operator` builds no vehicle, so a law the scenario names is not flown here: one
+    warning line says so (it was silently unused). `hil vehicle` flies it: no warning."""
+    (tmp_path / "my_laws.py").write_text(LAW)
+    law = f"vehicle.control.depth={tmp_path / 'my_laws.py'}:Hold"
+    argv = ["hil", mode, "--port", "loop://", "--set", law, "--set", "metrics.settle_s=0.1"]
+    argv += ["--duration", "0.3", "--no-plots", "--out", str(tmp_path / "out")]
+    assert main(argv) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    if mode == "operator":
+        assert warnings == [
+            "testbed: warning: vehicle.control.depth: not flown by `hil operator` (the vehicle "
+            "node flies the laws of its own scenario, on its computer)"
+        ]
+    else:
+        assert not [line for line in warnings if "vehicle.control" in line]
