@@ -134,10 +134,11 @@ def add_mavlink_parser(sub: Subparsers) -> None:
 
 def run_mavlink_command(args: argparse.Namespace) -> int:
     """Handler of ``testbed mavlink``: check, open the links, run in real time, write."""
-    from testbed.cli.run import finish_run
+    from testbed.cli.run import finish_run, report_failed_run
     from testbed.mavlink.links import open_link, parse_url
+    from testbed.run.failures import partial_run
     from testbed.run.mavlink_run import run_mavlink
-    from testbed.run.outputs import claimed_out_dir
+    from testbed.run.outputs import claimed_out_dir, write_run
     from testbed.run.scenario import load_scenario
 
     ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
@@ -211,22 +212,28 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
             file=sys.stderr,
             flush=True,
         )
-        if gateway:
-            from testbed.run.mavlink_gateway import run_gateway
+        try:
+            if gateway:
+                from testbed.run.mavlink_gateway import run_gateway
 
-            result = run_gateway(
-                scenario,
-                links,
-                seed=args.seed,
-                duration_s=duration,
-                hil=endpoints or None,
-                modem=modem if hil else "",
-                boot_params=boot_params,
-            )
-        else:
-            result = run_mavlink(
-                scenario, links, seed=args.seed, duration_s=duration, boot_params=boot_params
-            )
+                result = run_gateway(
+                    scenario,
+                    links,
+                    seed=args.seed,
+                    duration_s=duration,
+                    hil=endpoints or None,
+                    modem=modem if hil else "",
+                    boot_params=boot_params,
+                )
+            else:
+                result = run_mavlink(
+                    scenario, links, seed=args.seed, duration_s=duration, boot_params=boot_params
+                )
+        except Exception as error:  # part way (a control law of the user's): keep what ran
+            if (partial := partial_run(error)) is None:
+                raise
+            write_run(partial, out)
+            return report_failed_run(error, out, duration)
         return finish_run(
             result, out, plots=not args.no_plots, planned_s=duration, summary=format_mavlink_summary
         )

@@ -48,10 +48,11 @@ from testbed.mavlink.shore import LinkFacts, ShoreEndpoint
 from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
+from testbed.run.failures import reduce_run
 from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import FrameLedger, HilModem, run_poll
 from testbed.run.images import image_source_factory
-from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.interrupts import interrupt_of
 from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -303,6 +304,8 @@ def run_gateway(
 
     Raises:
         ValueError: no link, a duration not > 0, or HIL endpoints not keyed by both roles.
+        Exception: an error that ended the run part way (a control law of the user's raising),
+            carrying what ran (:func:`~testbed.run.failures.partial_run`).
     """
     duration = scenario.duration_s if duration_s is None else duration_s
     problem = ""
@@ -353,6 +356,7 @@ def run_gateway(
     node: VehicleNode | None = None
     probe: _ThrusterProbe | None = None
     stopped: KeyboardInterrupt | None = None
+    failed: Exception | None = None
     start: float | None = None
     operator: OperatorNode | None = None
     try:
@@ -380,7 +384,9 @@ def run_gateway(
         env.run(until=simpy.AnyOf(env, [process, env.timeout(duration)]))
     except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
         if (stopped := interrupt_of(error)) is None:
-            raise
+            if start is None or not isinstance(error, Exception):  # nothing ran yet
+                raise
+            failed = error  # an error part way (a control law of the user's): keep what ran
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:
@@ -391,7 +397,11 @@ def run_gateway(
             endpoint.close()
     reached = min(float(env.now), duration)
     energy = math.nan if node is None else node.energy_wh
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+
+    def reduce(failure: str | None) -> RunResult:
+        """What ran, reduced; ``failure`` is the error's line when one ended it."""
+        if failure is not None:
+            recorder.event(reached, "testbed", "failed", failure)
         if hil is None:
             metrics = compute_metrics(
                 scenario,
@@ -421,7 +431,9 @@ def run_gateway(
                 lateness_ns=poll_lateness,
             )
         metrics["mavlink"] = gateway_metrics(gateway, probe, reached)
-    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+        return RunResult(scenario, seed, metrics, recorder, stopped, failure)
+
+    return reduce_run(reduce, failed, reached, stopped)  # reduced whole, even on Ctrl-C now
 
 
 def gateway_metrics(

@@ -48,7 +48,8 @@ from testbed.mavlink import EndpointOptions, ServoOutputs, VehicleEndpoint, serv
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
-from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.failures import reduce_run
+from testbed.run.interrupts import interrupt_of
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws
 from testbed.run.recorder import Recorder
@@ -280,6 +281,8 @@ def run_mavlink(
 
     Raises:
         ValueError: no link, or a duration not > 0.
+        Exception: an error that ended the run part way (a control law of the user's raising),
+            carrying what ran (:func:`~testbed.run.failures.partial_run`).
     """
     duration = scenario.duration_s if duration_s is None else duration_s
     if not links or not (math.isfinite(duration) and duration > 0.0):
@@ -292,6 +295,7 @@ def run_mavlink(
     recorder = Recorder(trace=Trace())
     node: MavlinkVehicleNode | None = None
     stopped: KeyboardInterrupt | None = None
+    failed: Exception | None = None
     start: float | None = None
     try:
         rng = np.random.default_rng(vehicle_seed)
@@ -302,7 +306,9 @@ def run_mavlink(
         env.run(until=process)  # the duration, or the stop event, whichever comes first
     except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
         if (stopped := interrupt_of(error)) is None:
-            raise
+            if start is None or not isinstance(error, Exception):  # nothing ran yet
+                raise
+            failed = error  # an error part way (a control law of the user's): keep what ran
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:
@@ -310,7 +316,11 @@ def run_mavlink(
         for link in links:
             link.close()
     reached = float(env.now)  # the duration, unless interrupted or stopped
-    with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+
+    def reduce(failure: str | None) -> RunResult:
+        """What ran, reduced; ``failure`` is the error's line when one ended it."""
+        if failure is not None:
+            recorder.event(reached, "testbed", "failed", failure)
         metrics = compute_metrics(
             scenario,
             seed,
@@ -322,7 +332,9 @@ def run_mavlink(
         )
         if node is not None:
             metrics["mavlink"] = mavlink_metrics(node, reached)
-    return RunResult(scenario, seed, metrics, recorder, stopped or (late[0] if late else None))
+        return RunResult(scenario, seed, metrics, recorder, stopped, failure)
+
+    return reduce_run(reduce, failed, reached, stopped)  # reduced whole, even on Ctrl-C now
 
 
 def mavlink_metrics(node: MavlinkVehicleNode, duration_s: float) -> dict[str, Any]:
