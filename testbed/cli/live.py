@@ -108,9 +108,11 @@ def _bind_option(err: OSError) -> str:
 
 def _run_live(args: argparse.Namespace) -> int:
     """Handler of ``testbed live``."""
+    from testbed.cli.run import report_failed_run
     from testbed.live.hub import Hub
     from testbed.live.server import ConsoleServer, bind
     from testbed.live.session import LiveSession
+    from testbed.run.failures import partial_run
     from testbed.run.interrupts import deferred_interrupts
     from testbed.run.outputs import claimed_out_dir, write_run
     from testbed.run.scenario import load_scenario
@@ -146,6 +148,11 @@ def _run_live(args: argparse.Namespace) -> int:
         print(f"testbed live: console on {server.url}", flush=True)
         try:
             result = session.run(args.duration)
+        except Exception as error:  # part way (a control law of the user's): keep what ran
+            if (partial := partial_run(error)) is None:
+                raise
+            write_run(partial, out)
+            return report_failed_run(error, out, args.duration)
         finally:
             with deferred_interrupts() as late:  # a second Ctrl-C: the session is ending
                 server.stop()

@@ -58,6 +58,7 @@ from testbed.live.monitor import LinkMonitor, latency_ms
 from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
+from testbed.run.failures import reduce_run
 from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import POLL_S, FrameLedger, HilModem, poll_modems
 from testbed.run.images import image_source_factory, settings_schedule
@@ -227,29 +228,43 @@ class LiveSession:
         self, duration_s: float, poll_s: float = POLL_S, publish_hz: float = PUBLISH_HZ
     ) -> RunResult:
         """Run until ``duration_s`` [s] or Ctrl-C; the result has ``stopped`` set if
-        interrupted (its metrics then cover the time reached)."""
+        interrupted (its metrics then cover the time reached).
+
+        Raises:
+            Exception: an error that ended the session part way (a control law of the user's
+                raising), carrying what ran (:func:`~testbed.run.failures.partial_run`).
+        """
         env = self.env
         env.process(self.vehicle_node.run())
         env.process(self.operator_node.run())
         env.process(self._poll(poll_s))
         env.process(self._publisher(1.0 / publish_hz))
         stopped: KeyboardInterrupt | None = None
+        failed: Exception | None = None
         env.sync()  # the clock starts now, after the physics has loaded
         start = time.perf_counter()
         try:
             env.run(until=duration_s)
         except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
             if (stopped := interrupt_of(error)) is None:
-                self.vehicle.close()
-                raise
-        with deferred_interrupts() as late:  # what ran is reduced whole, even on Ctrl-C now
+                if not isinstance(error, Exception):
+                    self.vehicle.close()
+                    raise
+                failed = error  # an error part way (a control law of the user's): keep what ran
+        with deferred_interrupts() as closing:  # a second Ctrl-C: the session is ending anyway
             wall_s = time.perf_counter() - start
             self.vehicle.close()
-            reached = duration_s if stopped is None else float(env.now)
+        stopped = stopped or (closing[0] if closing else None)
+        reached = duration_s if stopped is None and failed is None else float(env.now)
+
+        def reduce(failure: str | None) -> RunResult:
+            """What ran, reduced; ``failure`` is the error's line when one ended it."""
+            if failure is not None:
+                self.recorder.event(reached, "testbed", "failed", failure)
             metrics = self.metrics(reached, wall_s)
-        return RunResult(
-            self.scenario, self.seed, metrics, self.recorder, stopped or (late[0] if late else None)
-        )
+            return RunResult(self.scenario, self.seed, metrics, self.recorder, stopped, failure)
+
+        return reduce_run(reduce, failed, reached, stopped)  # reduced whole, even on Ctrl-C now
 
     def _poll(self, period_s: float) -> Generator[simpy.Event, Any, None]:
         env = self.env

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -21,6 +22,7 @@ from testbed.live.messages import (
     SetMode,
 )
 from testbed.live.session import GOTO_NO_FIX, GOTO_REFUSED, LiveSession
+from testbed.run.failures import partial_run
 from testbed.run.scenario import load_scenario
 
 
@@ -153,3 +155,27 @@ def test_a_vehicle_under_autonomy_gives_no_stick_to_vehicle_latency() -> None:
             assert len(session.stick_lags_s) == samples, name
         finally:
             session.vehicle.close()
+
+
+def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(tmp_path: Path) -> None:
+    """As ``testbed run`` and ``testbed hil``: the error is raised carrying the session up to it
+    (it raised with a traceback and nothing kept). The scenario arms in depth hold by itself, so
+    the law flies, and raises, without a console."""
+    (tmp_path / "my_laws.py").write_text(
+        "class Boom:\n"
+        "    def reset(self):\n"
+        "        pass\n\n"
+        "    def update(self, target, depth, imu, dt_s):\n"
+        "        raise RuntimeError('boom in the law')\n"
+    )
+    law = f"vehicle.control.depth={tmp_path / 'my_laws.py'}:Boom"
+    session = LiveSession(load_scenario("s100-teleop-v1", [law]), Hub(), pilot=None)
+    with pytest.raises(RuntimeError, match="boom in the law") as raised:
+        session.run(60.0)
+    partial = partial_run(raised.value)
+    assert partial is not None and partial.failure is not None
+    assert partial.failure.startswith("RuntimeError: boom in the law (at ")
+    assert 0.0 < partial.metrics["sim_s"] < 60.0
+    assert partial.metrics["inputs"]["depth_law"]["factory"].endswith("my_laws.py:Boom")
+    last = partial.recorder.events[-1]
+    assert (last.node, last.kind) == ("testbed", "failed")
