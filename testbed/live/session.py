@@ -68,7 +68,7 @@ from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
-from testbed.run.runner import RunResult, tally_images
+from testbed.run.runner import RunResult, note_copies_lost_transmitting, tally_images
 from testbed.run.scenario_config import Scenario
 from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.resources import Controllers
@@ -416,6 +416,9 @@ class LiveSession:
                 wall_s=wall_s,
                 energy_wh=self.vehicle_node.energy_wh,
                 payload_bytes=payload,
+            )
+            note_copies_lost_transmitting(
+                metrics, self.vehicle_node.port.modem, self.operator_node.port.modem
             )
         hub = self.hub
         metrics["live"] = {

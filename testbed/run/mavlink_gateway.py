@@ -60,7 +60,7 @@ from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
-from testbed.run.runner import RunResult
+from testbed.run.runner import RunResult, note_copies_lost_transmitting
 from testbed.run.scenario_config import Scenario
 from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.vehicle import Vehicle
@@ -415,6 +415,8 @@ def run_gateway(
                     "downlink": 0 if operator is None else operator.port.payload_bytes,
                 },
             )
+            if node is not None and operator is not None:
+                note_copies_lost_transmitting(metrics, node.port.modem, operator.port.modem)
         else:
             metrics = hil_metrics(
                 scenario,

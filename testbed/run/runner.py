@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import simpy
 
-from testbed.channel import Medium, Trace
+from testbed.channel import Medium, Modem, Trace
 from testbed.channel.model import LinkModel, model_name
 from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
@@ -48,6 +48,7 @@ __all__ = [
     "goals_acked",
     "make_operator_node",
     "make_vehicle_node",
+    "note_copies_lost_transmitting",
     "observed_pilot",
     "run_pilots",
     "run_scenario",
@@ -340,9 +341,7 @@ def run_scenario(
         metrics = _run_metrics(
             scenario, seed, recorder, vehicle_node, operator_node, wall_s, env.now, early
         )
-        for direction, receiver in (("uplink", vehicle_modem), ("downlink", operator_modem)):
-            # of the copies lost to collisions, those lost to the receiver's own transmission
-            metrics["link"][direction]["copies_lost_transmitting"] = receiver.counters.rx_deaf
+        note_copies_lost_transmitting(metrics, vehicle_modem, operator_modem)
         inputs = metrics["inputs"]
         if pilot is not None:  # the scenario's [pilot] did not fly: name what did
             inputs["pilot"] = {"object": model_name(pilot)}
@@ -408,6 +407,17 @@ def goals_acked(operator: OperatorNode) -> int | None:
     teleop = getattr(operator.link, "teleop", None)
     value = getattr(getattr(teleop, "counters", None), "goals_acked", None)
     return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def note_copies_lost_transmitting(
+    metrics: dict[str, Any], vehicle_modem: LinkModem, operator_modem: LinkModem
+) -> None:
+    """Add ``copies_lost_transmitting`` to ``metrics["link"]``'s directions: of the copies lost
+    to collisions, those lost to the half-duplex receiver's own transmission (``deaf`` in the
+    trace). Simulated modems only (:class:`~testbed.channel.Modem`; a serial one cannot tell)."""
+    for direction, receiver in (("uplink", vehicle_modem), ("downlink", operator_modem)):
+        if isinstance(receiver, Modem):
+            metrics["link"][direction]["copies_lost_transmitting"] = receiver.counters.rx_deaf
 
 
 def tally_images(

@@ -179,3 +179,26 @@ def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(tmp_path: Path) -
     assert partial.metrics["inputs"]["depth_law"]["factory"].endswith("my_laws.py:Boom")
     last = partial.recorder.events[-1]
     assert (last.node, last.kind) == ("testbed", "failed")
+
+
+def test_a_half_duplex_link_counts_its_deaf_losses_in_the_panel_and_the_metrics() -> None:
+    """On s2c the vehicle's replies outlast the token gap: each is lost to ``deaf`` (the
+    operator transmitting the next order). The panel counts them as collided, and metrics.json
+    has them as collided and as ``copies_lost_transmitting``, as ``testbed run`` writes it
+    (a live session lacked that key). Truth: the trace's ``deaf`` events."""
+    session = LiveSession(load_scenario("s100-teleop-v1", ["link.preset=s2c"]), Hub(), pilot=None)
+    result = session.run(3.0)
+    deaf = {
+        direction: sum(
+            1
+            for event in result.recorder.trace.events
+            if event.src == src and str(event.kind) == "deaf"
+        )
+        for direction, src in (("uplink", "operator"), ("downlink", "vehicle"))
+    }
+    assert deaf["downlink"] > 0
+    panel = session.state()["link"]["downlink"]
+    downlink = result.metrics["link"]["downlink"]
+    assert panel["collided"] == downlink["frames_collided"] == deaf["downlink"]
+    for direction, count in deaf.items():
+        assert result.metrics["link"][direction]["copies_lost_transmitting"] == count
