@@ -41,9 +41,9 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_sessionstart(session: object) -> None:
-    """Compile (or load from numba's disk cache) the vehicle's and the navigation filter's
-    kernels once, here, before any test. On a fresh checkout the first process to fly a vehicle
-    compiles them for a few seconds; otherwise that would be whichever child process a
+    """Compile (or load from numba's disk cache) the vehicle's, the navigation filter's and the
+    ISMC's kernels once, here, before any test. On a fresh checkout the first process to fly a
+    vehicle compiles them (≈ 35 s); otherwise that would be whichever child process a
     real-time or signal test started first, and its set-up would overrun the waits those tests
     derive from a warm start."""
     import numpy as np
@@ -63,3 +63,7 @@ def pytest_sessionstart(session: object) -> None:
     navigator = KalmanNavigator(FilterConfig())  # the navigation filter's kernels
     navigator.predict(0.01)
     navigator.update(Measurement("fix", "position_ned", 0.01, (0.0, 0.0, 0.0), (0.1,) * 3))
+    from testbed.vehicle.hydrodynamics import load_model
+    from testbed.vehicle.ismc import IsmcController, load_ismc_gains
+
+    IsmcController(load_model("bluerov2-heavy"), load_ismc_gains("bluerov2-heavy"))  # the ISMC's

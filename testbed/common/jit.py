@@ -26,6 +26,12 @@ Calling a kernel every frame:
   environment every entry also checks its array arguments against its declaration and raises
   :class:`TypeError` on a mismatch (the tests run the frame that way too).
 
+Compiling: an entry compiles its kernel, or loads it from numba's disk cache, when it is made.
+A fresh checkout has no cache, and its first run compiles for tens of seconds; the first entry
+made with nothing saved prints :data:`COLD_CACHE_NOTICE` on stderr, once a process, so the wait
+is explained. Kernels only some vehicles need (the navigation filter's, the ISMC's) make their
+entries when the first such object is built, not at import.
+
 numba and numpy only.
 """
 
@@ -33,6 +39,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import ModuleType
@@ -74,6 +81,13 @@ INTS = types.Array(types.int64, 1, "C")
 MARK = INTS
 """A store row's (tick, write count)."""
 MARKS = types.Array(types.int64, 2, "C")
+COLD_CACHE_NOTICE = (
+    "testbed: compiling the vehicle's kernels into numba's disk cache "
+    "(once per checkout: ≈ 10-25 s; later runs load them)"
+)
+"""What :func:`entry` prints to stderr, once a process, before compiling a kernel that has
+nothing saved yet: a fresh checkout's first run otherwise waits that long without a word."""
+_told_cold = False
 CHECKED = os.environ.get("TESTBED_CHECK_KERNELS", "") not in ("", "0")
 """Whether entries check their arguments (``TESTBED_CHECK_KERNELS``, read at import)."""
 
@@ -104,6 +118,7 @@ def entry(kernel: Kernel, *signature: types.Type) -> Kernel:
         first checks the arguments' types.
     """
     dispatcher: Any = kernel
+    _tell_if_cold(dispatcher)
     dispatcher.compile(signature)
     code: Callable[..., Any] = dispatcher.get_overload(signature)
     if not CHECKED:
@@ -161,8 +176,7 @@ def refresh_stale_caches(kernels: Iterable[Any], dependencies: Iterable[ModuleTy
     newest = max((Path(str(module.__file__)).stat().st_mtime for module in dependencies), default=0)
     emptied = 0
     for kernel in kernels:
-        cache = getattr(kernel, "_cache", None)
-        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+        cache, index = _disk_cache(kernel)
         if cache is None or index is None:
             raise RuntimeError(f"{kernel!r} has no numba disk cache to keep in step")
         try:
@@ -176,3 +190,22 @@ def refresh_stale_caches(kernels: Iterable[Any], dependencies: Iterable[ModuleTy
                 continue
             emptied += 1
     return emptied
+
+
+def _disk_cache(kernel: Any) -> tuple[Any, str | None]:
+    """A ``cache=True`` dispatcher's disk cache and the path of its saved index (numba's
+    internals; ``(None, None)`` without a cache)."""
+    cache = getattr(kernel, "_cache", None)
+    return cache, getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+
+
+def _tell_if_cold(kernel: Any) -> None:
+    """Print :data:`COLD_CACHE_NOTICE` the first time this process is about to compile a kernel
+    whose disk cache has no saved index (a fresh checkout)."""
+    global _told_cold
+    if _told_cold:
+        return
+    _, index = _disk_cache(kernel)
+    if index is not None and not os.path.exists(index):
+        _told_cold = True
+        print(COLD_CACHE_NOTICE, file=sys.stderr, flush=True)

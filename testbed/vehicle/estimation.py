@@ -52,9 +52,11 @@ here (that is :mod:`testbed.vehicle.localization`); no global RNG.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -108,13 +110,36 @@ _FIRST_ROWS = 64
 # three floats (a depth's padded), H the (dim, 6) arrays made here.
 _HISTORY = (TABLE, TABLE, TABLE, INTS)
 """steps, updates, cache, ledger (:mod:`.filter_history`)."""
-_PREDICT = jit.entry(replay.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64)
 _MEASUREMENT = (I64, TABLE, floats(3), floats(3))
 """Its kind's code, H, z and σ."""
-_APPLY = jit.entry(replay.apply_measurement, *_HISTORY, VECTOR, F64, *_MEASUREMENT, F64, F64)
-_STAGE = jit.entry(replay.stage_measurement, *_HISTORY, F64, VECTOR, F64)
-_COMMIT_RESET = jit.entry(replay.commit_reset, *_HISTORY, VECTOR, VECTOR, *_MEASUREMENT, TABLE, F64)
-_RESUME = jit.entry(replay.resume_replay, *_HISTORY, VECTOR, TABLE, F64)
+
+
+class _HistoryKernels(NamedTuple):
+    """The entries of :mod:`.filter_replay`'s kernels, each returning its status code."""
+
+    predict: Callable[..., int]
+    apply: Callable[..., int]
+    stage: Callable[..., int]
+    commit_reset: Callable[..., int]
+    resume: Callable[..., int]
+
+
+@functools.cache
+def _history_kernels() -> _HistoryKernels:
+    """The filter's entries, compiled (or loaded from numba's disk cache) when the first
+    filter is built, not when this module is imported: they take most of a cold cache's
+    compile time (≈ 20 s), and only vehicles that navigate with a filter need them."""
+    return _HistoryKernels(
+        predict=jit.entry(
+            replay.predict_step, *_HISTORY, VECTOR, F64, BOOL, BOOL, floats(3), F64, F64
+        ),
+        apply=jit.entry(replay.apply_measurement, *_HISTORY, VECTOR, F64, *_MEASUREMENT, F64, F64),
+        stage=jit.entry(replay.stage_measurement, *_HISTORY, F64, VECTOR, F64),
+        commit_reset=jit.entry(
+            replay.commit_reset, *_HISTORY, VECTOR, VECTOR, *_MEASUREMENT, TABLE, F64
+        ),
+        resume=jit.entry(replay.resume_replay, *_HISTORY, VECTOR, TABLE, F64),
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -228,6 +253,7 @@ class KalmanNavigator:
         "_arrays",
         "_by_source",
         "_gates",
+        "_kernels",
         "_ledger",
         "_newest",
         "_q",
@@ -259,6 +285,7 @@ class KalmanNavigator:
         cache = np.zeros((history.CACHE_SLOTS, history.CACHE_WIDTH))
         self._ledger = np.zeros(history.LEDGER_SIZE, dtype=np.int64)
         self._newest = np.zeros(history.NEWEST_WIDTH)
+        self._kernels = _history_kernels()
         self._arrays = (steps, updates, cache, self._ledger, self._newest)
         """The kernels' first five arguments (steps and updates are replaced as they grow)."""
         self._summary = self._newest[: history.NEWEST_P]
@@ -366,7 +393,7 @@ class KalmanNavigator:
         history_s = self.config.history_s
         while True:
             steps, updates, cache, ledger, newest = self._arrays  # (a star call costs 0.08 µs)
-            status = _PREDICT(
+            status = self._kernels.predict(
                 steps,
                 updates,
                 cache,
@@ -437,7 +464,7 @@ class KalmanNavigator:
         code = _KIND_CODES[kind]
         while True:
             steps, updates, cache, ledger, newest = self._arrays
-            status = _APPLY(
+            status = self._kernels.apply(
                 steps,
                 updates,
                 cache,
@@ -485,7 +512,7 @@ class KalmanNavigator:
         self._count(m.source, 0)
         q = self._q
         while True:
-            status = _STAGE(*self._arrays[:4], m.time_s, self._scratch, q)
+            status = self._kernels.stage(*self._arrays[:4], m.time_s, self._scratch, q)
             if status < NEEDS_ROWS:
                 break
             self._grow(status)
@@ -494,7 +521,8 @@ class KalmanNavigator:
         p = scratch[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
         z = np.array(m.value, dtype=np.float64)
         reset_p = self._reset_spread(p, m.kind, z - h @ x)  # the innovation does not depend on P
-        status = _COMMIT_RESET(*self._arrays, scratch, code, h, value, sigma, reset_p, q)
+        commit_reset = self._kernels.commit_reset
+        status = commit_reset(*self._arrays, scratch, code, h, value, sigma, reset_p, q)
         if status != APPLIED and status != NEEDS_RESET:
             return False  # singular: counted
         self._replay_resets(status)
@@ -514,7 +542,7 @@ class KalmanNavigator:
             p = step[history.STEP_P : history.STEP_P + 36].reshape(6, 6)
             kind = _KINDS[int(record[history.UPDATE_KIND])]
             reset_p = self._reset_spread(p, kind, z - h @ x)
-            status = _RESUME(*self._arrays, reset_p, self._q)
+            status = self._kernels.resume(*self._arrays, reset_p, self._q)
 
     def _reacquire(self, m: Measurement) -> bool:
         """Count a gate rejection of ``m``'s source; whether this one re-acquires instead."""

@@ -45,8 +45,9 @@ array (:mod:`testbed.vehicle.ismc_kernels`), called once a control period.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 
@@ -79,20 +80,28 @@ Vec6 = tuple[float, float, float, float, float, float]
 MAX_KP_1_S = 1000.0
 """Largest accepted Kp [1/s]: 100× the packaged gains."""
 
-_ISMC_STEP = jit.entry(
-    ismc_step,
-    CONST_VECTOR,
-    TABLE,
-    floats(3),
-    floats(6),
-    F64,
-    F64,
-    VECTOR,
-    floats(6),
-    floats(6),
-    floats(3),
-    F64,
-)
+
+@functools.cache
+def _ismc_step() -> Callable[..., Vec6]:
+    """:func:`~.ismc_kernels.ismc_step`'s entry, compiled (or loaded from numba's disk cache)
+    when the first controller is built, not when this module is imported: only vehicles with
+    an ISMC need it."""
+    return jit.entry(
+        ismc_step,
+        CONST_VECTOR,
+        TABLE,
+        floats(3),
+        floats(6),
+        F64,
+        F64,
+        VECTOR,
+        floats(6),
+        floats(6),
+        floats(3),
+        F64,
+    )
+
+
 """The law without numba's dispatcher (the model's read-only coefficients, its mass matrix
 and the controller's state are its own contiguous float64 arrays)."""
 
@@ -236,11 +245,12 @@ class IsmcController:
             ∫v_e, s, ρ·tanh(s/λ) and whether armed (:mod:`~testbed.vehicle.ismc_kernels`).
     """
 
-    __slots__ = ("_coefficients", "_cog", "_kp", "_mass", "gains", "model", "state")
+    __slots__ = ("_coefficients", "_cog", "_kp", "_mass", "_step", "gains", "model", "state")
 
     def __init__(self, model: HydroModel, gains: IsmcGains) -> None:
         self.model = model
         self.gains = gains
+        self._step = _ismc_step()
         self._coefficients = coefficients(model)
         self._mass = np.ascontiguousarray(model.mass_matrix, dtype=np.float64)
         x, y, z = model.cog_m
@@ -308,7 +318,7 @@ class IsmcController:
             raise ValueError(f"dt_s must be > 0 and finite, got {dt_s}")
         gx, gy, gz = down_body
         gains = self.gains
-        return _ISMC_STEP(
+        return self._step(
             self._coefficients,
             self._mass,
             self._cog,

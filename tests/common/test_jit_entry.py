@@ -160,3 +160,63 @@ def test_whole_numbers_in_configs_reach_the_kernels_as_floats() -> None:
 
     whole_pid, decimal_pid = PID(PidGains(kp=2, ki=1)), PID(PidGains(kp=2.0, ki=1.0))
     assert whole_pid.update(0.5, 0.01) == decimal_pid.update(0.5, 0.01) == pytest.approx(1.005)
+
+
+_KERNEL_MODULE = """
+import numba
+
+
+@numba.njit(cache=True)
+def twice(x):
+    return 2.0 * x
+"""
+
+_ENTER_KERNEL = """
+import sys
+sys.path.insert(0, sys.argv[1])
+import kernel_module
+from testbed.common import jit
+code = jit.entry(kernel_module.twice, jit.F64)
+print(code(2.5))
+"""
+
+
+def test_a_cold_cache_is_announced_once_before_compiling(tmp_path: Path) -> None:
+    """A fresh checkout's first run compiles for many seconds: the user is told why, once, on
+    stderr; a run that loads the saved kernels says nothing."""
+    (tmp_path / "kernel_module.py").write_text(_KERNEL_MODULE)
+
+    def run() -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-c", _ENTER_KERNEL, str(tmp_path)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=True,
+        )
+
+    cold = run()
+    assert cold.stdout.strip() == "5.0"
+    assert cold.stderr.splitlines() == [jit.COLD_CACHE_NOTICE]
+    assert list((tmp_path / "__pycache__").glob("kernel_module.twice-*.nbi"))  # saved
+    warm = run()
+    assert warm.stdout.strip() == "5.0"
+    assert warm.stderr == ""
+
+
+def test_loading_a_scenario_compiles_no_autonomy_kernels() -> None:
+    """The navigation filter's and the ISMC's kernels (most of a cold cache's compile time)
+    are compiled when a vehicle that uses them is built, not when the run's modules load: a
+    teleoperation run, or a bad scenario's one-line error, does not wait for them."""
+    script = textwrap.dedent(
+        """
+        from testbed.run.scenario import load_scenario
+        from testbed.vehicle import filter_replay, ismc_kernels
+        load_scenario("s100-teleop-v1")
+        print(len(filter_replay.apply_measurement.overloads), len(ismc_kernels.ismc_step.overloads))
+        """
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert result.stdout.split() == ["0", "0"]
