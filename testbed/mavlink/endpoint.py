@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import (
+    Armed,
     ArmRequest,
     ControlMode,
     DepthSetpoint,
@@ -173,6 +174,7 @@ class VehicleEndpoint:
         self._velocity = VelocityEstimator()
         self._seq = 0
         self._arm_seq = 0
+        self._arm_acknowledged: bool | None = None  # an arm/disarm not yet applied
         self.buttons_held = 0
         self._consumed_ah = 0.0
         self._last_update_s: float | None = None
@@ -326,10 +328,24 @@ class VehicleEndpoint:
         self.write(MovementCommand(self._seq, sampled_s, sticks_from_rc(self.rc.channels)))
 
     def request_arm(self, armed: bool, now_s: float) -> None:
-        """Ask the vehicle to arm or disarm (a new request each time)."""
+        """Ask the vehicle to arm or disarm (a new request each time); :attr:`armed` says so
+        at once."""
         self._arm_seq += 1
         self.write(ArmRequest(armed, self._arm_seq))
+        self._arm_acknowledged = armed
         del now_s  # ArduSub's pilot-input timer runs from the last input, not from arming
+
+    @property
+    def armed(self) -> bool:
+        """Armed as the next command finds it. ArduSub arms and disarms inside the command's
+        handler (``init_arm_motors``, ``motors.armed(true)``), so a command after an accepted
+        arm finds the motors armed; here the vehicle applies the request at its next frame,
+        so until the :meth:`update` after that frame this is the request's state, then the
+        vehicle's :class:`Armed` (on a shore gateway, the state mirrored from its replies)."""
+        if self._arm_acknowledged is not None:
+            return self._arm_acknowledged
+        armed = self.world.get(self.vehicle, Armed)
+        return armed is not None and armed.armed
 
     def set_mode(self, custom_mode: int) -> int:
         """Ask for ArduSub mode ``custom_mode`` under ArduSub's policy
@@ -410,7 +426,9 @@ class VehicleEndpoint:
         return self._snapshot or self.snapshot(self._last_update_s or 0.0)
 
     def update(self, now_s: float) -> None:
-        """Run the failsafes and queue what is due on every channel at ``now_s`` [s]."""
+        """Run the failsafes and queue what is due on every channel at ``now_s`` [s] (after
+        the vehicle's frame that applied this frame's intents: its own state holds from here)."""
+        self._arm_acknowledged = None
         snapshot = self.snapshot(now_s)
         known = not math.isnan(snapshot.current_a)
         if known and self._last_update_s is not None and now_s > self._last_update_s:

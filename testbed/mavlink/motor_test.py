@@ -5,10 +5,14 @@ ArduSub 4.5 (``ArduSub/motors.cpp``: ``handle_do_motor_test``, ``init_motor_test
 result in ``GCS_Mavlink.cpp``: ACCEPTED when the output was set, else FAILED):
 
 - The first command starts the test, which needs the vehicle **armed** ("Arm motors before
-  testing motors."), and no failed test in the last 10 s ("10 second cooldown required after
-  motor test"); a failed start says "motor test initialization failed!" and the next 2 s of
-  commands fail silently. Starting puts every motor at 1500 µs and stops the mixer: the pilot's
-  sticks and the holds no longer drive the thrusters.
+  testing motors."; armed as the last acknowledged arm or disarm left it, even before the
+  vehicle's next frame applies it: ArduSub arms inside the arm command's handler, so an ARM
+  and a DO_MOTOR_TEST read together start the test:
+  :attr:`~testbed.mavlink.endpoint.VehicleEndpoint.armed`), and no failed test in the last
+  10 s ("10 second cooldown required after motor test"); a failed start says "motor test
+  initialization failed!" and the next 2 s of commands fail silently. Starting puts every
+  motor at 1500 µs and stops the mixer: the pilot's sticks and the holds no longer drive the
+  thrusters.
 - Each command: param6 must be MOTOR_TEST_ORDER_BOARD (2, "bad test type"), param2 the throttle
   type, PWM (1: param3 µs, as is) or PERCENT (0: param3 constrained to 0..100 % of RC3_MIN..
   RC3_MAX, 1100..1900 µs, 50 % = 1500); PILOT (2) is refused ("bad throttle type"). param1 is
@@ -40,7 +44,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import Armed, ThrusterTest
+from testbed.common.components import ThrusterTest
 
 if TYPE_CHECKING:
     from testbed.mavlink.endpoint import VehicleEndpoint
@@ -101,16 +105,11 @@ def _start(endpoint: VehicleEndpoint, test: MotorTest, now_s: float) -> bool:
         return _warn(endpoint, mav.MAV_SEVERITY_CRITICAL, text)
     if not endpoint.can_test_motors:
         return _warn(endpoint, mav.MAV_SEVERITY_WARNING, "Motor test: thrusters beyond the link")
-    if not _armed(endpoint):
+    if not endpoint.armed:
         return _warn(endpoint, mav.MAV_SEVERITY_WARNING, "Arm motors before testing motors.")
     test.active = True
     _neutral(endpoint, test)
     return True
-
-
-def _armed(endpoint: VehicleEndpoint) -> bool:
-    armed = endpoint.world.get(endpoint.vehicle, Armed)
-    return armed is not None and armed.armed
 
 
 def _neutral(endpoint: VehicleEndpoint, test: MotorTest) -> None:
@@ -154,7 +153,7 @@ def do_motor_test(endpoint: VehicleEndpoint, params: tuple[float, ...], now_s: f
         return _FAILED
     if channel not in test.pulses_us:  # beyond AP_MOTORS_MAX_NUM_MOTORS, or no motor there
         return _FAILED
-    if not _armed(endpoint):  # output_test_num: the motors armed
+    if not endpoint.armed:  # output_test_num: the motors armed
         return _FAILED
     test.pulses_us[channel] = int(throttle) & 0xFFFF  # int16_t, truncated; rc_write's uint16_t
     _write(endpoint, test)
@@ -180,7 +179,7 @@ def update_motor_test(endpoint: VehicleEndpoint, now_s: float) -> None:
     test = endpoint.motor_test
     if not test.active:
         return
-    if not _armed(endpoint) and any(p != 1500 for p in test.pulses_us.values()):
+    if not endpoint.armed and any(p != 1500 for p in test.pulses_us.values()):
         _neutral(endpoint, test)
         _write(endpoint, test)
     if now_s > test.last_command_s + KEEPALIVE_S:

@@ -22,8 +22,10 @@ from testbed.ecs import Origin
 from testbed.mavlink import EndpointOptions
 from testbed.mavlink.shore import ShoreEndpoint
 from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts
+from testbed.run.mavlink_run import run_mavlink
 from testbed.run.scenario import load_scenario
 from tests.mavlink.gcs import NO_VEHICLE_FAILSAFE, SimGcs
+from tests.mavlink.rt_session import GatewaySession
 
 ACCEPTED, FAILED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_FAILED
 PWM, PERCENT, PILOT = 1, 0, 2  # MOTOR_TEST_THROTTLE_TYPE
@@ -87,6 +89,36 @@ def test_disarmed_the_test_is_refused_and_retried_only_after_two_seconds(gcs: Si
     gcs.run(0.1, gcs.flying())
     assert results(gcs) == [FAILED] * 3 and len(texts(gcs)) == 4
     assert servos(gcs)[:6] == [1500] * 6
+
+
+def test_an_arm_or_disarm_acknowledged_is_in_effect_for_the_next_command(gcs: SimGcs) -> None:
+    """ArduSub arms and disarms inside the command's handler (``init_arm_motors``): an ARM
+    followed by DO_MOTOR_TEST in the same frame starts the test, a DISARM followed by one
+    fails it, as a ground station that does not wait between them expects (a user's report:
+    the motor test after an ACCEPTED arm was refused until the vehicle's next frame). And the
+    usual order, the motor test sent once the arm's ACK arrived, is accepted."""
+    gcs.send(gcs.heartbeat())
+    gcs.run(0.5, gcs.flying())
+    gcs.send(gcs.arm(), motor_test(gcs, 0, 1700))  # one frame's input
+    gcs.step()
+    acks = [(m.command, m.result) for m in gcs.of("COMMAND_ACK")]
+    assert acks == [(mav.MAV_CMD_COMPONENT_ARM_DISARM, ACCEPTED), (209, ACCEPTED)]
+    keep_testing(gcs, 0.3, motor_test(gcs, 0, 1700))
+    column = gcs.vehicle.thruster_config.ardusub_motor_columns[0]
+    assert thrust(gcs).pwm_us[column] == 1700.0 and thrust(gcs).forces_n[column] != 0.0
+    gcs.clear()
+    gcs.send(gcs.arm(False), motor_test(gcs, 0, 1700))  # disarmed first: nothing written
+    gcs.step()
+    assert [m.result for m in gcs.of("COMMAND_ACK")] == [ACCEPTED, FAILED]
+    assert not any(thrust(gcs).forces_n)
+    gcs.run(11.0, gcs.flying())  # the test timed out: past its 10-s cooldown
+    gcs.clear()
+    gcs.send(gcs.arm())
+    while not gcs.of("COMMAND_ACK"):  # a script that waits for the arm's ACK
+        gcs.step()
+    gcs.send(motor_test(gcs, 0, 1600))
+    gcs.step()
+    assert [m.result for m in gcs.of("COMMAND_ACK")] == [ACCEPTED, ACCEPTED]
 
 
 def test_motor_one_spins_the_thruster_ardusub_calls_motor_one(gcs: SimGcs) -> None:
@@ -242,3 +274,43 @@ def test_through_the_gateway_the_thrusters_are_out_of_reach() -> None:
     assert "Motor test: thrusters beyond the link" in [
         m.text for m in replies if m.get_type() == "STATUSTEXT"
     ]
+
+
+def test_in_real_time_an_arm_and_a_motor_test_in_one_datagram_start_the_test() -> None:
+    """≈ 4 s real time, pymavlink's ``mavutil`` on 127.0.0.1 in front of ``run_mavlink``: ARM
+    and DO_MOTOR_TEST written as one datagram (so one vehicle frame reads both) are both
+    ACCEPTED and motor 1's servo shows the pulse; DISARM and DO_MOTOR_TEST in one datagram:
+    the test command FAILED (ArduSub disarmed inside the first)."""
+    scenario = load_scenario("s100-teleop-v1")
+    session = GatewaySession(
+        lambda links, stop: run_mavlink(scenario, links, duration_s=60.0, stop=stop)
+    )
+    try:
+        gcs = session.gcs
+        assert gcs.wait_heartbeat(timeout=session.wait_s) is not None
+        session.pump(0.3)
+
+        def command(cmd: int, *params: float) -> bytes:
+            p = [*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0][:7]
+            return bytes(gcs.mav.command_long_encode(1, 1, cmd, 0, *p).pack(gcs.mav))
+
+        def acks(n: int) -> list[tuple[int, int]]:
+            """The first ``n`` COMMAND_ACKs (command, result), once they arrived."""
+            session.until(lambda: len(session.seen.get("COMMAND_ACK", [])) >= n)
+            return [(m.command, m.result) for _, m in session.seen["COMMAND_ACK"][:n]]
+
+        test = command(mav.MAV_CMD_DO_MOTOR_TEST, 0, PWM, 1700, 0, 0, BOARD)
+        gcs.write(command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) + test)
+        assert acks(2) == [(400, ACCEPTED), (209, ACCEPTED)]
+        for _ in range(10):  # QGroundControl's keep-alive, 20 Hz for 0.5 s
+            gcs.write(test)
+            session.pump(0.05)
+        session.until(lambda: session.latest["SERVO_OUTPUT_RAW"].servo1_raw == 1700)
+        count = len(session.seen["COMMAND_ACK"])
+        gcs.write(command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 0) + test)
+        assert acks(count + 2)[-2:] == [(400, ACCEPTED), (209, FAILED)]
+        result = session.finish()
+    finally:
+        session.close()
+    section = result.metrics["mavlink"]
+    assert section["rejected"].get("command_refused", 0) == 1  # the one after the disarm
