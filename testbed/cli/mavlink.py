@@ -22,9 +22,10 @@ addresses are 127.0.0.1 unless given. Options: ``--set K=V`` (repeatable), ``--s
 Outputs are those of ``testbed run`` (``metrics.json`` last, ``events.csv``, ``series.csv``,
 plots), plus ``metrics.json``'s ``mavlink`` section
 (:func:`~testbed.run.mavlink_run.mavlink_metrics`).
-``--out`` is checked before any port is opened. A bad option or a link that cannot be opened
-prints one line and exits 2; Ctrl-C or SIGTERM ends the session with one line, keeping what ran
-(exit 130 / 143).
+``--out`` is checked before any port is opened. A bad option, a control law of one's own
+that does not build (``[vehicle.control]``, the line ``testbed run`` prints) or a link that
+cannot be opened prints one line and exits 2, before the session is announced; Ctrl-C or
+SIGTERM ends the session with one line, keeping what ran (exit 130 / 143).
 """
 
 from __future__ import annotations
@@ -139,6 +140,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     from testbed.run.failures import partial_run
     from testbed.run.mavlink_run import run_mavlink
     from testbed.run.outputs import claimed_out_dir, write_run
+    from testbed.run.plugins import scenario_control_laws
     from testbed.run.scenario import load_scenario
 
     ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}
@@ -186,6 +188,9 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     if out is None:
         out = Path("runs") / f"mavlink-{scenario.id}-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):
+        # a control law of one's own that does not build is bad input, one line as in
+        # `testbed run`, before a link opens or anything runs (the run makes its laws afresh)
+        scenario_control_laws(scenario)
         links: list[Any] = []
         try:
             for url in urls:

@@ -119,3 +119,32 @@ def test_boot_parameters_set_what_ardusub_reads_only_at_boot(tmp_path: Path) -> 
     assert heartbeats and {m.get_srcSystem() for m in heartbeats} == {2}
     gains = [m.value for m in messages if m.get_type() == "NAMED_VALUE_FLOAT"]
     assert gains and all(gain == pytest.approx(0.8) for gain in gains)
+
+
+@pytest.mark.parametrize(
+    ("law", "message"),
+    [
+        ("NoUpdate", "NoUpdate made a NoUpdate without update (expected a DepthLaw"),
+        ("broken", "vehicle.control.depth: RuntimeError: bad gains"),
+    ],
+)
+@pytest.mark.parametrize("link", [[], ["--link", "s100"]], ids=["direct", "gateway"])
+def test_a_control_law_that_does_not_build_is_one_line_before_anything_runs(
+    law: str, message: str, link: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As `testbed run` says it (one line, exit 2), before the "running" line and before any
+    results folder is left: it used to come after the session was announced as running."""
+    (tmp_path / "my_laws.py").write_text(
+        "class NoUpdate:\n    def reset(self):\n        pass\n\n\n"
+        "def broken():\n    raise RuntimeError('bad gains')\n"
+    )
+    url = f"udpout:127.0.0.1:{free_udp_port()}"
+    law_key = f"vehicle.control.depth={tmp_path / 'my_laws.py'}:{law}"
+    argv = ["mavlink", *link, "--gcs", url, "--set", law_key, "--duration", "2"]
+    code = main([*argv, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("testbed: error: ") and message in err[0], err
+    assert not (tmp_path / "out").exists()
+    expected = main(["run", "--set", law_key, "--out", str(tmp_path / "run"), "--no-plots"])
+    assert expected == 2 and capsys.readouterr().err.strip() == err[0]  # `testbed run`'s line
