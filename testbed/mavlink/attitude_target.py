@@ -201,6 +201,7 @@ def _set_angle(
     if target is None:
         depth = endpoint.snapshot_now().depth_m
         endpoint.attitude_target = AttitudeTarget(attitude, climb, now_s, depth, now_s)
+        endpoint.moving_target = None
         # guided_angle_control_start: the position target let go, the depth held
         origin = endpoint.options.origin
         endpoint.world.remove(endpoint.intents, PositionSetpoint, origin=origin)

@@ -17,12 +17,13 @@ What it speaks (ArduSub 4.5 as seen by QGroundControl and MAVProxy, REFERENCE.md
 REQUEST_AUTOPILOT_CAPABILITIES; the parameter protocol over :class:`~.params.ParamTable`;
 MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arming
 (COMMAND_LONG 400), modes by SET_MODE or DO_SET_MODE with COMMAND_ACK (MANUAL, STABILIZE,
-ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_LOCAL_NED's
-position or SET_ATTITUDE_TARGET's attitude and climb rate; every other mode is refused with
-MAV_RESULT_FAILED — the simulator has no position-hold, auto or surface mode); MANUAL_CONTROL and
-RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS and SYSID_THISMAV (what
-fails the gate is dropped silently and counted; :mod:`testbed.mavlink.pilot_input`); the
-pilot-input and GCS failsafes of the FS_* parameters (:mod:`testbed.mavlink.failsafe`).
+ALT_HOLD fly; GUIDED with a position estimate, flown to SET_POSITION_TARGET_*'s position,
+fixed or moving at its velocity, or SET_ATTITUDE_TARGET's attitude and climb rate; every other
+mode is refused with MAV_RESULT_FAILED — the simulator has no position-hold, auto or surface
+mode); MANUAL_CONTROL and RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS
+and SYSID_THISMAV (what fails the gate is dropped silently and counted;
+:mod:`testbed.mavlink.pilot_input`); the pilot-input and GCS failsafes of the FS_* parameters
+(:mod:`testbed.mavlink.failsafe`).
 
 Remote garbage is counted, never raised (:attr:`VehicleEndpoint.rejected` by reason); outboxes
 are bounded (:data:`OUTBOX_LIMIT`).
@@ -98,6 +99,9 @@ class EndpointOptions:
             during a parameter download (ArduPilot paces them by link bandwidth).
         servos: which thruster's pulse each SERVO_OUTPUT_RAW channel carries (ArduSub's motor
             numbering for an ArduSub frame; by default thruster k on servo k + 1).
+        guided_leash_m: how far a GUIDED target moving at a velocity may run ahead of the
+            reported position, horizontally [m]: the distance from which the vehicle's position
+            loop asks for its top speed (unlimited by default; :mod:`~testbed.mavlink.guided`).
     """
 
     battery_voltage_v: float = 14.8
@@ -105,6 +109,7 @@ class EndpointOptions:
     origin: Origin = Origin.REMOTE
     params_per_update: int = 20
     servos: ServoOutputs = field(default_factory=ServoOutputs)
+    guided_leash_m: float = math.inf
 
 
 class Channel:
@@ -148,6 +153,8 @@ class VehicleEndpoint:
         stored_attitude: the last throttle-ignored SET_ATTITUDE_TARGET, which ALT_HOLD flies
             while it is fresh (ArduSub's ``set_attitude_target_no_gps``), or None.
         motor_test: the DO_MOTOR_TEST state (:mod:`~testbed.mavlink.motor_test`).
+        moving_target: GUIDED's position target moving at a velocity
+            (:class:`~testbed.mavlink.guided.MovingTarget`), None when there is none.
     """
 
     def __init__(
@@ -183,6 +190,8 @@ class VehicleEndpoint:
         self.attitude_target: AttitudeTarget | None = None
         self.stored_attitude: StoredAttitude | None = None
         self.motor_test = MotorTest()
+        self.moving_target: guided.MovingTarget | None = None
+        self._texts_sent: set[str] = set()
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
@@ -219,6 +228,12 @@ class VehicleEndpoint:
         return True
 
     @property
+    def flies_moving_targets(self) -> bool:
+        """Whether GUIDED's velocity targets are flown (here: the target moves each update, on
+        the vehicle's own node)."""
+        return True
+
+    @property
     def gcs_system_id(self) -> int:
         """SYSID_MYGCS: the only system whose pilot input is accepted."""
         return int(self.params["SYSID_MYGCS"])
@@ -247,6 +262,12 @@ class VehicleEndpoint:
     def statustext(self, severity: int, text: str) -> None:
         """STATUSTEXT on every channel (≤ 50 characters)."""
         self.broadcast(mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
+
+    def statustext_once(self, severity: int, text: str) -> None:
+        """:meth:`statustext`, the first time ``text`` is said only."""
+        if text not in self._texts_sent:
+            self._texts_sent.add(text)
+            self.statustext(severity, text)
 
     # ------------------------------------------------------------------------ receive
 
@@ -377,8 +398,10 @@ class VehicleEndpoint:
         self, position_ned_m: tuple[float, float, float], yaw_rad: float | None
     ) -> None:
         """Set GUIDED's target: NED position [m] and heading [rad] (None: keep the present);
-        it ends an attitude target's control (ArduSub's position submode)."""
+        it ends an attitude target's control and a moving target (ArduSub's position
+        submode)."""
         self.attitude_target = None
+        self.moving_target = None
         self.write(
             PositionSetpoint(
                 position_ned_m, 0.0 if yaw_rad is None else yaw_rad, yaw_rad is not None
@@ -435,6 +458,7 @@ class VehicleEndpoint:
             self._consumed_ah += snapshot.current_a * (now_s - self._last_update_s) / 3600.0
         self._last_update_s = now_s
         update_attitude_target(self, now_s)
+        guided.update_moving_target(self, now_s)
         update_motor_test(self, now_s)
         self.failsafe.check(self, snapshot, now_s)
         if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared

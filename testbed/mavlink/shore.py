@@ -121,6 +121,12 @@ class ShoreEndpoint(VehicleEndpoint):
         """False: the thrusters are across the narrow link, which carries no motor test."""
         return False
 
+    @property
+    def flies_moving_targets(self) -> bool:
+        """False: a moving target would be a new ``GoTo`` in every token gap, leaving none for
+        a ``Move``, the only order that carries a disarm or a mode change."""
+        return False
+
     def has_position_estimate(self) -> bool:
         """Whether the vehicle behind the link has a fix (:attr:`LinkFacts.position_fix`)."""
         return self.link.position_fix

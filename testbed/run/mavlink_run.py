@@ -57,6 +57,7 @@ from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
 from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
+from testbed.vehicle.guidance import PositionGains
 from testbed.vehicle.resources import SimClock
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle
@@ -115,14 +116,16 @@ def endpoint_options(
     """How the endpoint presents a vehicle of ``config`` with thruster ``layout``: its supply
     voltage, ArduSub's servo numbering of the layout, and the boot parameters FRAME_CONFIG and
     MOT_n_DIRECTION (the layout's), BARO_SPEC_GRAV (the depth sensor's), then ``boot_params``
-    (``--param``) over them."""
+    (``--param``) over them; GUIDED's moving targets leashed to the position loop's reach."""
     servos = layout_servos(layout)
     overrides = {
         **servos.param_overrides(),
         "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
         **(boot_params or {}),
     }
-    return EndpointOptions(config.supply_voltage_v, overrides, servos=servos)
+    loop = PositionGains()  # the vehicle's GUIDED position loop: its top speed from here
+    leash = loop.max_speed_m_s / loop.kp_1_s
+    return EndpointOptions(config.supply_voltage_v, overrides, servos=servos, guided_leash_m=leash)
 
 
 def mavlink_vehicle_config(config: VehicleConfig) -> VehicleConfig:

@@ -152,8 +152,8 @@ def test_an_absolute_target_with_a_heading_turns_and_dives_to_it(gcs: SimGcs) ->
     gcs.send(gcs.command(mav.MAV_CMD_DO_SET_MODE, 1, 4))
     gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, -1.0, 1.5, 1.4, yaw=math.radians(90.0)))
     gcs.send(
-        gcs.mav.set_position_target_local_ned_encode(  # a velocity target: unsupported
-            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b1101_1100_0111, 0, 0, 0, 0.2, 0, 0, 0, 0, 0, 0, 0
+        gcs.mav.set_position_target_local_ned_encode(  # an acceleration target: unsupported
+            0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b1100_0000_0111, 0, 0, 0, 0.2, 0, 0, 1, 0, 0, 0, 0
         )
     )
     gcs.run(20.0, gcs.flying())
@@ -178,7 +178,8 @@ def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardus
 ) -> None:
     """ArduSub's ``vel_ignore`` and ``acc_ignore`` are each true for any one of their three
     bits: x, y, z used with VX and AX ignored is a position target (the other fields unread);
-    no velocity bit (a position and velocity target) or no acceleration bit is not one."""
+    no acceleration bit is no target ArduSub flies (no velocity bit is a position and
+    velocity target: tests/mavlink/test_velocity_targets.py)."""
     gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
     gcs.run(1.0, gcs.flying())
     gcs.send(gcs.set_mode(4))
@@ -190,7 +191,7 @@ def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardus
             0, 1, 1, mav.MAV_FRAME_LOCAL_OFFSET_NED, mask, 2.0, 0, 0, 0.3, 0.3, 0, 1, 1, 0, 0, 0
         )
 
-    gcs.send(offset(0b1101_1100_0000), offset(0b1100_0011_1000))  # no VX..VZ / AX..AZ bit
+    gcs.send(offset(0b1100_0011_1000), offset(0b1100_0000_0000))  # no AX..AZ bit
     gcs.run(0.1, gcs.flying())
     assert gcs.endpoint.rejected["unsupported_target"] == 2
     assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
