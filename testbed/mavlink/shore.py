@@ -18,7 +18,17 @@ What it adds is honesty about the link (:class:`LinkFacts`):
 - NAMED_VALUE_FLOAT ``LinkAge`` = the state's age [s], :data:`LINK_AGE_RATE_HZ` on every link;
 - STATUSTEXT: once per link on first contact, the link's name, bitrate and state period; a
   warning when the state is older than ``stale_after_s`` (repeated every
-  :data:`STALE_REPEAT_S`), and a notice when it is fresh again.
+  :data:`STALE_REPEAT_S`), and a notice when it is fresh again;
+- what the link's codec cannot carry is said, once a session, not dropped silently: over the
+  teleop codec (:attr:`LinkFacts.carries_setpoints` False) a depth target more than
+  :data:`DEPTH_KEPT_M` from the reported depth (SET_ATTITUDE_TARGET's thrust, integrated into
+  a depth target; SET_POSITION_TARGET_GLOBAL_INT's depth in ALT_HOLD; FS_GCS_ENABLE 4's
+  surface) and a roll or pitch target beyond :data:`LEVEL_DEG` stay on shore: the teleop
+  orders (the paper's layouts) have no depth order and no roll or pitch (a ``KeepHeading``
+  carries the heading only), a ``Move``'s heave stick is a rate the vehicle does not fly in
+  GUIDED, and a ``GoTo`` carrying the depth would also pin the horizontal position and, re-sent
+  as the depth moves, take every order slot. STATUSTEXT "Depth targets do not cross the link"
+  or "Roll, pitch targets do not cross the link"; ``metrics.json`` ``setpoints_not_sent``.
 
 Before the first state arrives the vehicle reads disarmed, MANUAL, at the origin, with the
 state time 0 (age = the gateway's uptime).
@@ -31,16 +41,29 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import Odometry
+from testbed.common.components import AttitudeSetpoint, DepthSetpoint, Odometry
+from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Entity, Origin, World
 from testbed.mavlink.endpoint import Channel, EndpointOptions, VehicleEndpoint
 
-__all__ = ["LINK_AGE_RATE_HZ", "STALE_REPEAT_S", "LinkFacts", "ShoreEndpoint"]
+__all__ = [
+    "DEPTH_KEPT_M",
+    "LEVEL_DEG",
+    "LINK_AGE_RATE_HZ",
+    "STALE_REPEAT_S",
+    "LinkFacts",
+    "ShoreEndpoint",
+]
 
 LINK_AGE_RATE_HZ = 2.0
 """NAMED_VALUE_FLOAT ``LinkAge`` rate [Hz]."""
 STALE_REPEAT_S = 10.0
 """A stale-state warning is repeated this often while the state stays stale [s]."""
+DEPTH_KEPT_M = 0.05
+"""A depth target this close to the reported depth [m] asks for nothing the vehicle's own hold
+does not do: over the teleop codec only one further away is said not to cross."""
+LEVEL_DEG = 0.5
+"""A roll or pitch target within this of level [deg] is the level attitude the vehicle holds."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +82,10 @@ class LinkFacts:
         position_fix: the vehicle has a position fix (its scenario's sensors): GUIDED is
             accepted on shore and its target sent as a ``GoTo`` (the teleop codec's state
             carries no sign of a fix, so the gateway knows it from the vehicle's configuration).
+        carries_setpoints: the link's codec carries every intent the endpoint writes (the
+            change-set codec replicates them all); False for the teleop codec, whose orders
+            carry sticks, arm and mode flags, a heading (``KeepHeading``) and a go-to, but no
+            depth target and no roll or pitch (module docstring).
     """
 
     name: str
@@ -67,6 +94,7 @@ class LinkFacts:
     arrival_correction_s: float
     stale_after_s: float
     position_fix: bool = False
+    carries_setpoints: bool = False
 
     @property
     def banner(self) -> str:
@@ -91,6 +119,8 @@ class ShoreEndpoint(VehicleEndpoint):
     Attributes:
         link: the link facts.
         stale_warnings: stale-state STATUSTEXT warnings sent.
+        setpoints_not_sent: the kinds of target ("depth", "roll_pitch") the ground station
+            asked for that the link's codec cannot carry (module docstring).
         state_age_s: the reported state's age at the last :meth:`update` [s] (inf before any
             state arrived; ``LinkAge`` then reports the uptime).
     """
@@ -101,6 +131,7 @@ class ShoreEndpoint(VehicleEndpoint):
         super().__init__(world, intents, intents, options)
         self.link = link
         self.stale_warnings = 0
+        self.setpoints_not_sent: set[str] = set()
         self.state_age_s = math.inf
         self._announced: set[int] = set()
         self._stale = False
@@ -115,6 +146,25 @@ class ShoreEndpoint(VehicleEndpoint):
             self._has_state = True
             return entity, odometry.sampled_s - self.link.arrival_correction_s
         return self.intents, 0.0  # nothing mirrored yet: no vehicle components on it
+
+    def write(self, component: object) -> None:
+        """The base class's write (an intent on the station's world, for the codec); a depth
+        or a roll and pitch target the codec cannot carry is said once and noted (module
+        docstring)."""
+        super().write(component)
+        if self.link.carries_setpoints:
+            return
+        if isinstance(component, DepthSetpoint):
+            if abs(component.depth_m - self.snapshot_now().depth_m) > DEPTH_KEPT_M:
+                self._not_sent("depth", "Depth targets do not cross the link")
+        elif isinstance(component, AttitudeSetpoint):
+            roll, pitch, _ = euler_from_quat(component.quaternion_wxyz)
+            if max(abs(roll), abs(pitch)) > math.radians(LEVEL_DEG):
+                self._not_sent("roll_pitch", "Roll, pitch targets do not cross the link")
+
+    def _not_sent(self, kind: str, text: str) -> None:
+        self.setpoints_not_sent.add(kind)
+        self.statustext_once(mav.MAV_SEVERITY_WARNING, text)
 
     @property
     def can_test_motors(self) -> bool:
@@ -165,6 +215,7 @@ class ShoreEndpoint(VehicleEndpoint):
         """The base counters, plus ``stale_warnings`` and ``link`` (the facts)."""
         out = super().counters()
         out["stale_warnings"] = self.stale_warnings
+        out["setpoints_not_sent"] = sorted(self.setpoints_not_sent)
         link = self.link
         out["link"] = {
             "name": link.name,
@@ -173,5 +224,6 @@ class ShoreEndpoint(VehicleEndpoint):
             "arrival_correction_s": link.arrival_correction_s,
             "stale_after_s": link.stale_after_s,
             "position_fix": link.position_fix,
+            "carries_setpoints": link.carries_setpoints,
         }
         return out

@@ -123,6 +123,7 @@ def gateway_link_facts(scenario: Scenario, name: str | None = None) -> LinkFacts
         arrival_correction_s=correction,
         stale_after_s=max(1.0, 3.0 * period) + correction,
         position_fix=scenario.vehicle.sensors.position is not None,
+        carries_setpoints=link.codec == "changeset",  # every intent replicated
     )
 
 

@@ -9,6 +9,7 @@ ignore it, malformed values are counted, never raised."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -17,7 +18,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import AttitudeSetpoint, ControlTargets, PositionSetpoint
 from testbed.common.geometry import euler_from_quat, quat_from_euler
-from tests.mavlink.gcs import SimGcs
+from testbed.run.mavlink_gateway import run_gateway
+from testbed.run.scenario import load_scenario
+from tests.mavlink.gcs import SimGateway, SimGcs
+from tests.mavlink.rt_session import GatewaySession
 
 THROTTLE_IGNORE = 64
 ATTITUDE_IGNORE = 128
@@ -241,3 +245,74 @@ def test_the_capability_is_advertised(gcs: SimGcs) -> None:
     gcs.step()
     version = gcs.last("AUTOPILOT_VERSION")
     assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+
+
+def test_through_the_teleop_gateway_the_heading_crosses_and_the_thrust_is_said_not_to() -> None:
+    """s100's teleop codec: the heading travels (a ``KeepHeading``, whole degrees), the
+    thrust's depth target and a roll cannot (no such order in the paper's layouts): the vehicle
+    turns, keeps its depth and attitude level, and the shore says so once each instead of
+    dropping them silently (they used to be)."""
+    gateway = SimGateway()
+    try:
+        gateway.send(gateway.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+        gateway.send(gateway.mav.set_mode_encode(1, 1, 2))
+        gateway.run(3.0)
+        gateway.send(gateway.mav.set_mode_encode(1, 1, 4))
+        gateway.run(3.0)
+        truth = gateway.vehicle.truth
+        depth = float(truth.position_ned_m[2])
+        heading = math.degrees(euler_from_quat(truth.quaternion_wxyz)[2])
+        q = quat_from_euler(math.radians(10.0), 0.0, math.radians(heading + 60.0))
+        for _ in range(8):  # 4 Hz for 2 s, thrust 0.3: 0.6 m/s down, 1.65 m on the shore
+            gateway.send(gateway.mav.set_attitude_target_encode(0, 1, 1, 7, list(q), 0, 0, 0, 0.3))
+            gateway.run(0.25)
+        gateway.run(10.0)
+        turned = math.degrees(euler_from_quat(truth.quaternion_wxyz)[2]) - heading - 60.0
+        assert abs((turned + 180.0) % 360.0 - 180.0) < 3.0  # KeepHeading: whole degrees
+        assert abs(float(truth.position_ned_m[2]) - depth) < 0.05
+        assert abs(math.degrees(euler_from_quat(truth.quaternion_wxyz)[0])) < 2.0
+        texts = [m.text for m in gateway.messages if m.get_type() == "STATUSTEXT"]
+        assert texts.count("Depth targets do not cross the link") == 1
+        assert texts.count("Roll, pitch targets do not cross the link") == 1
+        assert gateway.endpoint.counters()["setpoints_not_sent"] == ["depth", "roll_pitch"]
+    finally:
+        gateway.vehicle.close()
+
+
+def test_through_the_change_set_gateway_the_thrust_crosses() -> None:
+    """≈ 8 s real time: ``tether-teleop-v1 --link tether``'s change-set codec replicates the
+    shore's depth target, so GUIDED's thrust 0.3 (0.6 m/s down, ArduSub's climb rate) streamed
+    for 2 s takes the vehicle down by 0.6 m/s × (the messages' span + the 1-s timeout)."""
+    scenario = load_scenario("tether-teleop-v1", ["metrics.settle_s=1"])
+    session = GatewaySession(
+        lambda links, stop: run_gateway(scenario, links, duration_s=60.0, stop=stop)
+    )
+    try:
+        gcs = session.gcs
+        assert gcs.wait_heartbeat(timeout=session.wait_s) is not None
+        gcs.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+        session.heartbeat(lambda hb: hb.base_mode & 128)
+        gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 2)
+        session.heartbeat(lambda hb: hb.custom_mode == 2)
+        gcs.mav.set_mode_send(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+        session.heartbeat(lambda hb: hb.custom_mode == 4)
+        session.pump(1.0)
+        q = quat_from_euler(0.0, 0.0, session.latest["ATTITUDE"].yaw)
+        sent: list[float] = []
+        while not sent or sent[-1] - sent[0] < 2.0:
+            gcs.mav.set_attitude_target_send(0, 1, 1, RATES_IGNORED, list(q), 0, 0, 0, 0.3)
+            sent.append(time.monotonic())
+            session.pump(0.25)
+        session.pump(6.0)
+        result = session.finish()
+    finally:
+        session.close()
+    section = result.metrics["mavlink"]
+    assert section["setpoints_not_sent"] == [] and section["link"]["carries_setpoints"]
+    series = result.recorder.series()
+    guided = series["mode"] == 4.0
+    start, end = series["down_m"][guided][0], series["down_m"][-1]
+    late_s = section["scheduler_lateness_ms"]["max"] / 1000.0
+    descent = 0.4 * WPNAV_SPEED_DN_M_S * (sent[-1] - sent[0] + 1.0)
+    # the depth hold's 5 cm, and each end of the span read a gateway period (and late) off
+    assert end - start == pytest.approx(descent, abs=0.05 + 0.6 * 2 * (0.01 + late_s))

@@ -7,25 +7,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from typing import Any
 
-import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import ActiveMode, ControlMode, PositionSetpoint
 from testbed.common.geometry import euler_from_quat
-from testbed.common.teleop import TeleopOperatorEnd, TeleopVehicleEnd
-from testbed.ecs import Origin
-from testbed.mavlink import EndpointOptions
 from testbed.mavlink.endpoint import POSITION_FIX_TIMEOUT_S
-from testbed.mavlink.shore import ShoreEndpoint
-from testbed.protocol import GoTo, decode_operator_message
-from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts, run_gateway
+from testbed.protocol import GoTo
+from testbed.run.mavlink_gateway import run_gateway
 from testbed.run.scenario import load_scenario
 from testbed.vehicle.guidance import PositionGains
-from testbed.vehicle.vehicle import Vehicle
-from tests.mavlink.gcs import FRAME_S, NO_VEHICLE_FAILSAFE, SimGcs
+from tests.mavlink.gcs import SimGateway, SimGcs
 from tests.mavlink.rt_session import GatewaySession
 
 ACCEPTED = mav.MAV_RESULT_ACCEPTED
@@ -202,80 +195,8 @@ def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardus
     assert gcs.endpoint.rejected["unsupported_target"] == 2
 
 
-class _Gateway:
-    """The gateway path in simulated time: pymavlink → :class:`ShoreEndpoint` on a gateway
-    station → the teleop codec's orders, one per token gap, each crossing in ``up_s`` → the
-    vehicle's teleop end on a real vehicle; its reply crosses back in ``down_s``."""
-
-    GAP_S = 0.594  # s100's token gap
-    UP_S = 0.140  # a 13-B order's crossing
-    DOWN_S = 0.170  # a 20-B reply's crossing
-
-    def __init__(self) -> None:
-        scenario = load_scenario("s100-teleop-v1", list(NO_VEHICLE_FAILSAFE))
-        self.vehicle = Vehicle(scenario.vehicle, np.random.default_rng(0))
-        self.station = GatewayStation()
-        facts = gateway_link_facts(scenario)
-        self.endpoint = ShoreEndpoint(
-            self.station.world, self.station.entity, facts, EndpointOptions(origin=Origin.LOCAL)
-        )
-        self.channel = self.endpoint.open_channel("gcs")
-        self.shore = TeleopOperatorEnd(self.station.world, self.station.entity)
-        v = self.vehicle
-        self.far = TeleopVehicleEnd(v.world, v.entity, v.operator_entity)
-        self.mav = SimGcs.make_sender(255)
-        self._decoder = mav.MAVLink(None)
-        self.messages: list[Any] = []
-        self.orders: list[object] = []
-        self._pending = bytearray()
-        self._in_flight: list[tuple[float, str, bytes]] = []
-        self._next_order_s = 0.0
-        self._t = 0.0
-        self._k = 0
-
-    def send(self, *messages: Any) -> None:
-        for message in messages:
-            self._pending += message.pack(self.mav)
-
-    def run(self, seconds: float) -> None:
-        for _ in range(round(seconds / FRAME_S)):
-            t = self._t
-            if self._k % 4 == 0:  # sticks at 25 Hz, a heartbeat at 1 Hz
-                self.send(self.mav.manual_control_encode(1, 0, 0, 500, 0, 0))
-            if self._k % 100 == 0:
-                self.send(self.mav.heartbeat_encode(6, 8, 0, 0, 4))
-            self._k += 1
-            data, self._pending = bytes(self._pending), bytearray()
-            self.endpoint.receive(self.channel, data, t)
-            if t >= self._next_order_s:
-                self._next_order_s += self.GAP_S
-                payload = self.shore.encode_order()
-                self.orders.append(decode_operator_message(payload).order)  # type: ignore[union-attr]
-                self._in_flight.append((t + self.UP_S, "order", payload))
-            for item in [i for i in self._in_flight if i[0] <= t]:
-                self._in_flight.remove(item)
-                if item[1] == "order":
-                    self.far.apply_order(item[2], t)
-                    reply = self.far.encode_reply()
-                    self._in_flight.append((t + self.DOWN_S, "reply", reply))
-                else:
-                    self.shore.apply_reply(item[2], t)
-            self._t = t + FRAME_S
-            self.vehicle.advance(self._t)
-            self.endpoint.update(self._t)
-            for packet in self.channel.take():
-                self.messages.extend(
-                    m
-                    for m in self._decoder.parse_buffer(packet) or []
-                    if m.get_type() != "BAD_DATA"
-                )
-
-    def last(self, kind: str) -> Any:
-        return [m for m in self.messages if m.get_type() == kind][-1]
-
-
 def test_through_the_gateway_the_target_travels_as_one_goto_and_the_vehicle_flies_it() -> None:
-    gw = _Gateway()
+    gw = SimGateway()
     try:
         gw.send(gw.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
         gw.send(gw.mav.set_mode_encode(1, 1, 2))
