@@ -4,7 +4,10 @@ before ``metrics.settle_s``), a bad --out fails before any work, a bad port URL 
 Each session is a child process (``python -m testbed hil``) on the two ports of a
 ``testbed modem-emulator`` child, as tests/cli/test_signals.py does for ``testbed run``; signals
 are real. A session is signalled once it has said it is running (its stderr line) and run a
-little; waits are bounded by generous multiples of the work, polled, never slept blindly.
+little; waits are bounded by generous multiples of the work, polled, never slept blindly. The
+refusals (a bad --out, a port that cannot be opened) and --force involve no signal: they call
+the CLI's ``main`` in this process (a child costs ≈ 2 s of imports each), the refusals checked
+for the exit code, the one stderr line and no serial thread left running.
 """
 
 from __future__ import annotations
@@ -13,12 +16,14 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from testbed.cli.main import main
 from tests.processes import check_set, default_sigint
 
 WAIT_S = 120.0
@@ -87,23 +92,23 @@ def test_interrupt_before_settling_keeps_a_marked_partial_result(
         ("full", "is not empty (use --force"),
     ],
 )
-def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> None:
+def test_bad_out_fails_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], out: str, words: str
+) -> None:
     (tmp_path / "afile").write_text("x")
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "old.txt").write_text("x")
-    # ports that exist nowhere: the --out check comes first, before they are opened; a
-    # session of 86400 s would take a day: returning at all shows nothing ran
+    # ports that exist nowhere: the --out check comes first, before they are opened (the
+    # vehicle port's error would name --vehicle-port); a session of 86400 s would take a day:
+    # returning at all shows nothing ran
     args = ["hil", "--operator-port", "loop://", "--vehicle-port", "/dev/null/x", *LONG]
-    done = subprocess.run(
-        [sys.executable, "-m", "testbed", *args, "--out", str(tmp_path / out)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert done.returncode == 2
-    assert done.stderr.count("\n") == 1 and done.stderr.startswith("testbed: error: --out: ")
-    assert words in done.stderr
+    assert main([*args, "--out", str(tmp_path / out)]) == 2
+    stdout, stderr = capsys.readouterr()
+    assert stdout == ""
+    assert stderr.count("\n") == 1 and stderr.startswith("testbed: error: --out: ")
+    assert words in stderr
     assert (tmp_path / "full" / "old.txt").read_text() == "x"
+    assert _serial_threads() == []  # the loop:// port was never opened
 
 
 def test_force_replaces_a_previous_result(tmp_path: Path, ports: tuple[str, str]) -> None:
@@ -113,23 +118,24 @@ def test_force_replaces_a_previous_result(tmp_path: Path, ports: tuple[str, str]
     (out / "metrics.json").write_text(json.dumps({"complete": True, "files": {"old.csv": 1}}))
     args = ["hil", "--operator-port", ports[0], "--vehicle-port", ports[1], "--no-plots"]
     args += ["--duration", "1.5", "--set", "metrics.settle_s=1", "--force", "--out", str(out)]
-    done = subprocess.run(
-        [sys.executable, "-m", "testbed", *args], capture_output=True, text=True, timeout=WAIT_S
-    )
-    assert done.returncode == 0, done.stderr
+    assert main(args) == 0
     metrics = check_set(out)  # the previous run's file is gone with its metrics.json
     assert metrics["complete"] is True and metrics["sim_s"] == 1.5
 
 
 @pytest.mark.parametrize("url", ["bogus://x", "loop://?bad=1", "/dev/does-not-exist-testbed"])
-def test_a_port_that_cannot_be_opened_is_one_line(tmp_path: Path, url: str) -> None:
+def test_a_port_that_cannot_be_opened_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], url: str
+) -> None:
     args = ["hil", "--operator-port", url, "--vehicle-port", "loop://", *LONG]
-    done = subprocess.run(
-        [sys.executable, "-m", "testbed", *args, "--out", str(tmp_path / "hil")],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert done.returncode == 2, done.stderr
-    assert done.stderr.count("\n") == 1, done.stderr
-    assert done.stderr.startswith(f"testbed: error: --operator-port: cannot open {url}: ")
+    assert main([*args, "--out", str(tmp_path / "hil")]) == 2
+    stdout, stderr = capsys.readouterr()
+    assert stdout == ""
+    assert stderr.count("\n") == 1, stderr
+    assert stderr.startswith(f"testbed: error: --operator-port: cannot open {url}: ")
+    assert _serial_threads() == []  # nothing opened is left running
+
+
+def _serial_threads() -> list[str]:
+    """The names of this process's running serial reader and writer threads."""
+    return [t.name for t in threading.enumerate() if t.name.startswith("serial:")]

@@ -4,7 +4,8 @@ while writing never leaves a mixed or silently partial set, and a bad --out fail
 Each run is a child process of this test (``python -m testbed``); signals are real. A run is
 signalled once it has shown it is simulating (its results directory exists, made before the
 simulation starts); the waits are bounded by generous multiples of what the work needs, polled,
-never slept blindly.
+never slept blindly. What involves no signal (a bad --out, the complete runs before and after
+the killed one) calls the CLI's ``main`` in this process instead (a child costs ≈ 2 s of imports).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+from testbed.cli.main import main
 from tests.processes import check_set, default_sigint
 
 LONG = ["--set", "duration_s=86400"]  # a simulated day, minutes of wall time: a signal ends it
@@ -92,14 +94,7 @@ def test_kill_while_writing_never_leaves_a_mixed_set(tmp_path: Path) -> None:
     out = tmp_path / "run"
     # A first complete run, then a second into the same directory killed while it writes:
     # what is left is either no metrics.json (no result) or a set it describes exactly.
-    first = subprocess.run(
-        [sys.executable, "-m", "testbed", "run", "--no-plots", "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-        check=True,
-    )
-    assert first.returncode == 0
+    assert main(["run", "--no-plots", "--out", str(out)]) == 0
     assert check_set(out)["complete"] is True
     proc = start(["run", "--seed", "2", "--no-plots", "--force", "--out", str(out)])
     # the writer removes the old metrics.json first; kill as soon as it is gone
@@ -111,14 +106,7 @@ def test_kill_while_writing_never_leaves_a_mixed_set(tmp_path: Path) -> None:
     if (out / "metrics.json").exists():  # it finished before the kill: a whole new set
         assert check_set(out)["seed"] == 2
     # a third run with --force makes a complete set of its own whatever was left
-    args = ["run", "--seed", "3", "--no-plots", "--force", "--out", str(out)]
-    again = subprocess.run(
-        [sys.executable, "-m", "testbed", *args],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert again.returncode == 0, again.stderr
+    assert main(["run", "--seed", "3", "--no-plots", "--force", "--out", str(out)]) == 0
     metrics = check_set(out)
     assert metrics["complete"] is True and metrics["seed"] == 3
     assert not [p for p in out.iterdir() if p.name.startswith(".tmp-")]
@@ -133,20 +121,22 @@ def test_kill_while_writing_never_leaves_a_mixed_set(tmp_path: Path) -> None:
         ("/proc/testbed-out", "cannot write there"),
     ],
 )
-def test_bad_out_fails_before_any_work(tmp_path: Path, out: str, words: str) -> None:
+def test_bad_out_fails_before_any_work(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    out: str,
+    words: str,
+) -> None:
     (tmp_path / "afile").write_text("x")
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "old.txt").write_text("x")
-    # a simulated day takes many minutes: returning at once shows nothing was simulated
-    done = subprocess.run(
-        [sys.executable, "-m", "testbed", "run", *LONG, "--out", str(tmp_path / out)],
-        capture_output=True,
-        text=True,
-        timeout=WAIT_S,
-    )
-    assert done.returncode == 2
-    assert done.stderr.count("\n") == 1 and done.stderr.startswith("testbed: error: --out: ")
-    assert words in done.stderr
+    monkeypatch.setattr("testbed.run.runner.run_scenario", lambda *a, **k: pytest.fail("ran"))
+    assert main(["run", *LONG, "--out", str(tmp_path / out)]) == 2
+    stdout, stderr = capsys.readouterr()
+    assert stdout == ""
+    assert stderr.count("\n") == 1 and stderr.startswith("testbed: error: --out: ")
+    assert words in stderr
     assert (tmp_path / "full" / "old.txt").read_text() == "x"
 
 
