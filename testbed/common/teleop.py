@@ -30,7 +30,12 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     :class:`GoalCancel` drops the unacknowledged goal, whichever kind, and sets the header's
     "cancel last order" bit on every order until a reply says the last order was cancelled.
     The vehicle turns the bit's rising edge, and a ``DisableKeepHeading``, into a
-    :class:`GoalCancel` of its own intents (which cancels either goal).
+    :class:`GoalCancel` of its own intents (which cancels either goal). What a gap carries
+    when several wait: a ``Move`` that arms, disarms or leaves for a mode other than GUIDED
+    first (a heading or goal changing every gap, as a ground station streaming targets
+    through the gateway, would otherwise starve a disarm, or a pilot taking back the sticks);
+    then the coder's settings, a changed heading, a goal (a ``GoTo`` also carries a change to
+    GUIDED, which its vehicle flies it in), a goal not yet acknowledged, and the ``Move``.
 vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOperatorEnd.apply_reply`)
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
     1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame); a
@@ -181,6 +186,7 @@ class TeleopOperatorEnd:
         self.order_seq_bit = False
         self._sent_attitude: AttitudeSetpoint | None = None
         self._sent_heading: KeepHeading | None = None
+        self._sent_mode: ControlMode | None = None  # the mode the last Move carried
         self._sent_goals: dict[type[_GoalSetpoint], _GoalSetpoint] = {}
         self._settled_arm: ArmRequest | None = None
         self._orders_encoded = 0
@@ -201,8 +207,8 @@ class TeleopOperatorEnd:
         Args:
             image_request: the header's image fields: (expected image sequence bit, cancel the
                 image, index of the first missing chunk).
-            image_settings: send these coder settings as this gap's order (unless an arm or
-                disarm request is pending, which goes first).
+            image_settings: send these coder settings as this gap's order (unless a Move that
+                arms, disarms or changes the mode is due, which goes first: module docstring).
         """
         world = self._world
         intents = self._intents
@@ -224,32 +230,41 @@ class TeleopOperatorEnd:
             disarm = not request.armed and vehicle_armed
         if new_request and arm and self._arm_flag_up:  # the arm flag drops for one order:
             arm = False  # the vehicle arms on its rising edge, a new press
+        mode_request = world.get(intents, ModeRequest)
+        mode = ControlMode.MANUAL if mode_request is None else mode_request.mode
+        # A Move that arms, disarms or leaves for a mode other than GUIDED goes before any
+        # heading or goal (one changing every gap, as a ground station streaming targets, would
+        # starve it: a pilot taking back the sticks, a disarm). GUIDED is what a GoTo asks the
+        # vehicle for anyway, so a GoTo sent goes as that mode change.
+        leaves_mode = mode_request is not None and mode != self._sent_mode
+        move_first = arm or disarm or (leaves_mode and mode is not ControlMode.GUIDED)
         setpoint = world.get(intents, AttitudeSetpoint)
         order: Move | KeepHeading | _GoalOrder | ImageSettings | None = None
         resent_bit: bool | None = None  # a goal sent again keeps its sequence bit
-        if image_settings is not None and not (arm or disarm):
+        if image_settings is not None and not move_first:
             order = image_settings
-        elif setpoint is not None and setpoint != self._sent_attitude and not arm:
+        elif setpoint is not None and setpoint != self._sent_attitude and not move_first:
             self._sent_attitude = setpoint
             yaw_deg = math.degrees(euler_from_quat(setpoint.quaternion_wxyz)[2])
             heading = KeepHeading.from_degrees(yaw_deg)
             if heading != self._sent_heading:  # a roll/pitch-only change has nothing to send
                 self._sent_heading = order = heading
-        target = None if order is not None or arm else self._changed_goal()
+        target = None if order is not None or move_first else self._changed_goal()
         if target is not None:
             self._sent_goals[type(target)] = target
             order = self._goal_order(target)
+            if isinstance(order, GoTo):
+                self._sent_mode = ControlMode.GUIDED  # the vehicle flies a GoTo in GUIDED
             self._pending_goal = (order, not self.order_seq_bit)
             self._pending_cancel = False
-        elif order is None and self._pending_goal is not None and not (arm or disarm):
+        elif order is None and self._pending_goal is not None and not move_first:
             order, resent_bit = self._pending_goal  # again, until a reply acknowledges it
         if resent_bit is None:
             self.order_seq_bit = not self.order_seq_bit
         if order is None:
             command = world.get(intents, MovementCommand)
             sticks = (0.0,) * 6 if command is None else command.sticks
-            mode_request = world.get(intents, ModeRequest)
-            mode = ControlMode.MANUAL if mode_request is None else mode_request.mode
+            self._sent_mode = mode
             order = Move.from_axes(
                 sticks[0], sticks[1], sticks[2], sticks[5], arm, disarm, mode_to_wire(mode)
             )
