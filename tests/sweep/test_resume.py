@@ -1,8 +1,12 @@
 """``--resume`` and ``--out``: provenance in sweep.json, identity by value, growing a sweep,
 retrying failed runs, refusing a folder that is not empty, the lock, damaged manifests.
 
-Sweeps here are 2–3 BER points × 1 seed of ``s100-teleop-v1`` for 8 simulated seconds on one
-worker (≈ 0.15 s of CPU per run).
+Sweeps here are 2–3 BER points × 1 seed of ``s100-teleop-v1`` for 8 simulated seconds
+(≈ 0.15 s of CPU per run). The runs execute in this process (``execute_run``, the backends'
+worker function, unchanged): what is tested here is the sweep's bookkeeping, the same whichever
+backend ran the runs, and a process pool would start its worker (≈ 1.5 s of imports) for every
+sweep. The backends themselves, and resuming after a real kill or interrupt, are tested in
+test_sweep.py, test_signals.py and test_failures.py.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import fcntl
 import hashlib
 import json
 import shutil
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -39,6 +44,15 @@ def _one_line(capsys: pytest.CaptureFixture[str], fragment: str) -> str:
     err = capsys.readouterr().err
     assert fragment in err and err.count("\n") == 1 and "Traceback" not in err, err
     return err
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _runs_in_this_process() -> Iterator[None]:
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(
+            "testbed.sweep.runner.outcomes", lambda specs, *_: (execute_run(s) for s in specs)
+        )
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +161,7 @@ def test_a_key_given_twice_in_grid_or_set_is_one_line(
 def test_failed_runs_are_run_again_on_resume(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Runs at BER > 0 fail in the first invocation (the runner raises; runs in this process);
+    """Runs at BER > 0 fail in the first invocation (the runner raises);
     --resume runs exactly those again, and their rows then are the successful ones."""
     path, out = _sweep(tmp_path), tmp_path / "out"
     real = run_scenario
@@ -157,9 +171,6 @@ def test_failed_runs_are_run_again_on_resume(
             raise OSError("scenario file moved away")
         return real(scenario, seed=seed)
 
-    monkeypatch.setattr(
-        "testbed.sweep.runner.outcomes", lambda specs, *_: (execute_run(s) for s in specs)
-    )
     monkeypatch.setattr("testbed.run.runner.run_scenario", flaky)
     assert main(["sweep", str(path), *SHORT, "--out", str(out)]) == 1
     assert "FAILED point 1 seed 0" in capsys.readouterr().out

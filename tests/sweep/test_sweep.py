@@ -1,6 +1,10 @@
 """`testbed sweep`: grid expansion, pool and Dask give the same rows, kill -9 and resume, failures.
 
 Every sweep here runs ``s100-teleop-v1`` for 8 simulated seconds (≈ 0.15 s of CPU per run).
+Where the backend is not what a test is about (resuming, --seeds, a reference sweep to compare
+with), the runs execute in this process (``inline_runs``: ``execute_run``, the backends' worker
+function, unchanged) rather than in a process pool that starts its workers (≈ 1.5 s of imports
+each) for every sweep.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import shutil
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -235,6 +240,17 @@ def test_image_runs_record_their_chunk_size_and_mode_after_the_metrics() -> None
 # --- running -------------------------------------------------------------------------------------
 
 
+@pytest.fixture
+def inline_runs() -> Iterator[None]:
+    """The runs of every sweep started in this process execute here, one after another."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(
+            "testbed.sweep.runner.outcomes",
+            lambda specs, *_: (execute_run(spec) for spec in specs),
+        )
+        yield
+
+
 @pytest.fixture(scope="module")
 def pool_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The 3 BER × 2 seeds sweep through the local process pool: (sweep file, results dir)."""
@@ -303,7 +319,7 @@ def test_existing_results_need_resume_and_the_same_sweep(
 
 
 def test_a_torn_last_journal_line_is_cut_and_the_run_redone(
-    pool_sweep: tuple[Path, Path], tmp_path: Path
+    pool_sweep: tuple[Path, Path], tmp_path: Path, inline_runs: None
 ) -> None:
     path, pool_out = pool_sweep
     out = tmp_path / "torn"
@@ -372,7 +388,11 @@ def test_a_journal_that_is_a_directory_exits_2_naming_it(
     assert err == f"testbed: error: {out / 'runs.jsonl'}: cannot read the journal: Is a directory\n"
 
 
-def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(tmp_path: Path) -> None:
+def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], inline_runs: None
+) -> None:
+    """A real pool sweep killed with its workers (SIGKILL to its process group) after its first
+    run; the resume runs exactly the rest, and the tables equal an undisturbed sweep's."""
     path = _write_sweep(tmp_path, seeds=6)
     killed, fresh = tmp_path / "killed", tmp_path / "fresh"
     argv = [sys.executable, "-m", "testbed", "sweep", str(path), *SHORT, "--workers", "2"]
@@ -392,14 +412,11 @@ def test_sigkill_mid_sweep_then_resume_finishes_every_run_once(tmp_path: Path) -
     process.stderr.close()
     before = read_journal(killed / "runs.jsonl")
     assert 1 <= len(before) < 18
-    resumed = subprocess.run(
-        [*argv, "--out", str(killed), "--resume"], capture_output=True, text=True, check=False
-    )
-    assert resumed.returncode == 0, resumed.stderr
-    assert f"{18 - len(before)} ran now" in resumed.stdout
+    assert main(["sweep", str(path), *SHORT, "--out", str(killed), "--resume"]) == 0
+    assert f"{18 - len(before)} ran now" in capsys.readouterr().out
     keys = [(r["point"], r["seed"]) for r in read_journal(killed / "runs.jsonl")]
     assert sorted(keys) == [(p, s) for p in range(3) for s in range(6)]  # each exactly once
-    assert main(["sweep", str(path), *SHORT, "--workers", "2", "--out", str(fresh)]) == 0
+    assert main(["sweep", str(path), *SHORT, "--out", str(fresh)]) == 0
     assert (killed / "results.csv").read_bytes() == (fresh / "results.csv").read_bytes()
     assert (killed / "aggregate.csv").read_bytes() == (fresh / "aggregate.csv").read_bytes()
 
@@ -445,11 +462,14 @@ def test_a_failing_point_is_recorded_and_the_sweep_completes(
 
 
 def test_seeds_option_runs_the_first_seeds_and_resume_adds_the_rest(
-    pool_sweep: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    pool_sweep: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    inline_runs: None,
 ) -> None:
-    """--seeds 1 runs seed 0 at every point: the very rows the full sweep holds for seed 0
-    (a second run of the same runs); --resume without --seeds adds seed 1 (3 runs), and the
-    tables then equal the full sweep's."""
+    """--seeds 1 runs seed 0 at every point: the very rows the full (pool) sweep holds for
+    seed 0 (a second run of the same runs, here in this process); --resume without --seeds adds
+    seed 1 (3 runs), and the tables then equal the full sweep's."""
     path, pool_out = pool_sweep
     out = tmp_path / "one"
     assert main(["sweep", str(path), *SHORT, "--seeds", "1", "--out", str(out)]) == 0
