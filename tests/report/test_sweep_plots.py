@@ -349,8 +349,20 @@ def test_cli_plot_of_a_non_numeric_metric_cell_exits_2_naming_row_and_column(
 # --- end to end -----------------------------------------------------------------------------------
 
 
+@pytest.fixture
+def inline_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The sweeps' runs execute in this process (``execute_run``, the backends' worker function,
+    unchanged), not in a process pool that would import the testbed again first (≈ 1.5 s): the
+    tests here are about what the sweep writes and plots, whoever ran the runs."""
+    from testbed.sweep import execute_run
+
+    monkeypatch.setattr(
+        "testbed.sweep.runner.outcomes", lambda specs, *_: (execute_run(s) for s in specs)
+    )
+
+
 def test_a_tiny_real_ber_sweep_is_plotted_at_the_end(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], inline_runs: None
 ) -> None:
     path = tmp_path / "tiny.toml"
     path.write_text(
@@ -360,7 +372,7 @@ def test_a_tiny_real_ber_sweep_is_plotted_at_the_end(
     )
     out = tmp_path / "out"
     short = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
-    assert main(["sweep", str(path), *short, "--workers", "2", "--out", str(out)]) == 0
+    assert main(["sweep", str(path), *short, "--out", str(out)]) == 0
     assert "ber_vs_lag.png" in capsys.readouterr().out
     for name in ("ber_vs_lag.png", "ber_vs_per.png", "ber_vs_tracking.png"):
         assert (out / name).read_bytes()[:8] == PNG_MAGIC
@@ -550,7 +562,7 @@ def test_a_title_names_the_failed_runs_and_where_they_failed(tmp_path: Path) -> 
 
 
 def test_no_closed_form_where_replies_outlast_the_gap_and_the_sweep_warns(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], inline_runs: None
 ) -> None:
     """At S100's 0.594-s gap a reply of 20 + 68 B no longer fits (the run's closed form,
     tests/run/test_images.py): the images-per-minute closed form, which assumes each reply is
@@ -564,7 +576,7 @@ def test_no_closed_form_where_replies_outlast_the_gap_and_the_sweep_warns(
     )
     out = tmp_path / "out"
     short = ["--set", "duration_s=20", "--set", "images.changes=[]"]
-    assert main(["sweep", str(path), *short, "--workers", "1", "--out", str(out)]) == 0
+    assert main(["sweep", str(path), *short, "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert (
         "  warning: in 2 of 4 runs a reply does not fit the token gap (reply_fits_gap false: "
