@@ -25,7 +25,9 @@ false`` with the ``sim_s`` it reached, and the command ends with one line,
 ``testbed live: session ended at t = … s; results in DIR``, exit code 130 (SIGTERM: 143;
 ``--duration`` reached: 0), as every command that Ctrl-C ends.
 
-A user's mistake (bad option, a port that cannot be bound) is one line and exit code 2.
+A user's mistake (bad option, a port that cannot be bound, a control law of one's own in
+``[vehicle.control]`` that does not build: the line ``testbed run`` prints) is one line and exit
+code 2, before any port is opened or the console announced.
 """
 
 from __future__ import annotations
@@ -115,6 +117,7 @@ def _run_live(args: argparse.Namespace) -> int:
     from testbed.run.failures import partial_run
     from testbed.run.interrupts import deferred_interrupts
     from testbed.run.outputs import claimed_out_dir, write_run
+    from testbed.run.plugins import scenario_control_laws
     from testbed.run.scenario import load_scenario
 
     check_seed(args.seed)
@@ -127,6 +130,10 @@ def _run_live(args: argparse.Namespace) -> int:
     warn_token_cycle(scenario)
     out = args.out or Path("runs") / f"{scenario.id}-live-{time.strftime('%Y%m%d-%H%M%S')}"
     with claimed_out_dir(out, force=args.force):
+        # a control law of one's own that does not build is bad input, one line as in
+        # `testbed run`, before the console's port or a modem's is opened (the session makes
+        # its laws afresh)
+        scenario_control_laws(scenario)
         try:
             sock = bind(args.host, args.port)
         except OSError as err:
