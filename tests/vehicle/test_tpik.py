@@ -12,6 +12,7 @@ turns the arm about body down, joints 1 and 2 pitch two links, joint 3 rolls the
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 from pathlib import Path
@@ -168,6 +169,17 @@ def _arm(q: FloatArray) -> tuple[FloatArray, FloatArray]:
     return tip, tip_rot
 
 
+@functools.lru_cache(maxsize=64)
+def _arm_at(q: tuple[float, ...]) -> tuple[FloatArray, FloatArray]:
+    """:func:`_arm` of the joint angles ``q``, remembered: the model's central differences ask
+    for the same angles many times over (the vehicle's columns leave them unchanged), and the
+    same floats give the same arrays (read-only, as they are shared)."""
+    tip, tip_rot = _arm(np.array(q))
+    tip.setflags(write=False)
+    tip_rot.setflags(write=False)
+    return tip, tip_rot
+
+
 @dataclasses.dataclass
 class Uvms:
     position: FloatArray
@@ -186,17 +198,18 @@ class Uvms:
 
     def ee(self) -> tuple[FloatArray, FloatArray]:
         r = np.array(rotation_matrix(self.quat))
-        tip, tip_rot = _arm(self.q)
+        tip, tip_rot = _arm_at(tuple(self.q))
         return self.position + r @ tip, r @ tip_rot
 
     def jacobian(self, h: float = 1e-6) -> FloatArray:
         """ζ → (v_ned; ω_ned) of the tip by central differences of :meth:`step`."""
         jac = np.zeros((6, N))
+        ee_rot = self.ee()[1]
         for k in range(N):
             d = np.zeros(N)
             d[k] = 1.0
             (p1, r1), (p0, r0) = self.step(d, h).ee(), self.step(d, -h).ee()
-            skew = (r1 - r0) / (2.0 * h) @ self.ee()[1].T
+            skew = (r1 - r0) / (2.0 * h) @ ee_rot.T
             jac[:3, k] = (p1 - p0) / (2.0 * h)
             jac[3:, k] = (skew[2, 1], skew[0, 2], skew[1, 0])
         return jac
