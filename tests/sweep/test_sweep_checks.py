@@ -59,8 +59,16 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Refused before anything is written: a rerun without --dask is not "already holds a
-    sweep". No run may start either (the dry run of the metric check is made first)."""
+    sweep". No run may start either (the dry run of the metric check is made first). The
+    client is given 1 s to connect instead of the sweep's 10 s (nothing listens on port 9: it
+    retries the refused connection until its timeout, then fails the same way)."""
+    import distributed
+
     monkeypatch.setattr("testbed.sweep.runner.outcomes", lambda *args: pytest.fail("runs started"))
+    client = distributed.Client
+    monkeypatch.setattr(
+        distributed, "Client", lambda address, timeout: client(address, timeout=min(timeout, 1))
+    )
     argv = ["sweep", str(_sweep(tmp_path)), *SHORT, "--dask", "tcp://127.0.0.1:9"]
     assert main([*argv, "--out", str(tmp_path / "out")]) == 2
     _one_line(capsys, "--dask: cannot reach tcp://127.0.0.1:9")
