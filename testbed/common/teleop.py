@@ -30,7 +30,10 @@ operator → vehicle (:class:`TeleopOperatorEnd.encode_order`, :class:`TeleopVeh
     :class:`GoalCancel` drops the unacknowledged goal, whichever kind, and sets the header's
     "cancel last order" bit on every order until a reply says the last order was cancelled.
     The vehicle turns the bit's rising edge, and a ``DisableKeepHeading``, into a
-    :class:`GoalCancel` of its own intents (which cancels either goal). What a gap carries
+    :class:`GoalCancel` of its own intents (which cancels either goal) and removes the
+    :class:`PositionSetpoint` a ``GoTo`` left there (a vehicle without autonomy flies it in
+    GUIDED until then). A goal intent the operator removed is forgotten: written again, the
+    same goal is a new order. What a gap carries
     when several wait: a ``Move`` that arms, disarms or leaves for a mode other than GUIDED
     first (a heading or goal changing every gap, as a ground station streaming targets
     through the gateway, would otherwise starve a disarm, or a pilot taking back the sticks);
@@ -286,7 +289,10 @@ class TeleopOperatorEnd:
         pending = self._pending_goal
         for kind, order_type in _GOAL_ORDERS.items():
             target = self._world.get(self._intents, kind)
-            if target is None or target == self._sent_goals.get(kind):
+            if target is None:
+                self._sent_goals.pop(kind, None)  # removed: the same goal again is new
+                continue
+            if target == self._sent_goals.get(kind):
                 continue
             if pending is None or isinstance(pending[0], order_type):
                 return target
@@ -470,11 +476,13 @@ class TeleopVehicleEnd:
         return True
 
     def _cancel(self) -> None:
-        """Write a new :class:`GoalCancel` intent (the vehicle's autonomy drops its goal)."""
+        """Write a new :class:`GoalCancel` intent (the vehicle's autonomy drops its goal) and
+        remove the position goal (GUIDED's position loop lets go of it)."""
         self._cancel_seq += 1
         self.counters.cancels += 1
         world = self._world
         world.set(self._intents, GoalCancel(self._cancel_seq), origin=Origin.REMOTE)
+        world.remove(self._intents, PositionSetpoint, origin=Origin.REMOTE)
 
     def acknowledge(self, message: OperatorMessage) -> None:
         """Echo this intact order's sequence bit in the replies from now on.

@@ -22,8 +22,10 @@ ignore):
 - **128 set, 64 clear** (attitude ignored) → nothing.
 
 Here the first becomes the vehicle's targets while GUIDED is requested: the present
-:class:`~testbed.common.components.PositionSetpoint` is removed (the position loop lets go), the
-attitude is an ``AttitudeSetpoint`` and the integrated depth a ``DepthSetpoint`` each update
+:class:`~testbed.common.components.PositionSetpoint` is removed (the position loop lets go;
+through the teleop gateway the shore cancels the vehicle's ``GoTo`` for it:
+:meth:`~testbed.mavlink.shore.ShoreEndpoint.release_position`), the attitude is an
+``AttitudeSetpoint`` and the integrated depth a ``DepthSetpoint`` each update
 (:class:`AttitudeTarget`); the second is kept (:class:`StoredAttitude`) and is an
 ``AttitudeSetpoint`` while DEPTH_HOLD (ALT_HOLD) is requested and it is fresh, then the level
 attitude at the heading held when it began (the vehicle's ``ControlTargets``, or the present
@@ -48,7 +50,6 @@ from testbed.common.components import (
     ControlMode,
     ControlTargets,
     DepthSetpoint,
-    PositionSetpoint,
 )
 from testbed.common.geometry import euler_from_quat, quat_from_euler
 
@@ -201,10 +202,8 @@ def _set_angle(
     if target is None:
         depth = endpoint.snapshot_now().depth_m
         endpoint.attitude_target = AttitudeTarget(attitude, climb, now_s, depth, now_s)
-        endpoint.moving_target = None
         # guided_angle_control_start: the position target let go, the depth held
-        origin = endpoint.options.origin
-        endpoint.world.remove(endpoint.intents, PositionSetpoint, origin=origin)
+        endpoint.release_position()
         endpoint.write(DepthSetpoint(depth))
     else:
         _integrate_depth(endpoint, target, now_s)  # at the old climb rate up to now

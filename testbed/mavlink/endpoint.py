@@ -50,7 +50,7 @@ from testbed.common.components import (
     PositionSetpoint,
 )
 from testbed.ecs import Entity, Origin, World
-from testbed.mavlink import commands, guided, param_protocol, pilot_input
+from testbed.mavlink import commands, guided, guided_yaw, param_protocol, pilot_input
 from testbed.mavlink.ardusub import RcInput, boot_gain, sticks_from_rc
 from testbed.mavlink.attitude_target import (
     AttitudeTarget,
@@ -155,6 +155,8 @@ class VehicleEndpoint:
         motor_test: the DO_MOTOR_TEST state (:mod:`~testbed.mavlink.motor_test`).
         moving_target: GUIDED's position target moving at a velocity
             (:class:`~testbed.mavlink.guided.MovingTarget`), None when there is none.
+        auto_yaw: ArduSub's auto-yaw state, GUIDED's heading
+            (:class:`~testbed.mavlink.guided_yaw.AutoYaw`).
     """
 
     def __init__(
@@ -191,6 +193,7 @@ class VehicleEndpoint:
         self.stored_attitude: StoredAttitude | None = None
         self.motor_test = MotorTest()
         self.moving_target: guided.MovingTarget | None = None
+        self.auto_yaw = guided_yaw.AutoYaw()
         self._texts_sent: set[str] = set()
         cls = type(self)
         self._handlers: dict[str, Handler] = {
@@ -268,6 +271,11 @@ class VehicleEndpoint:
         if text not in self._texts_sent:
             self._texts_sent.add(text)
             self.statustext(severity, text)
+
+    def setpoint_not_sent(self, kind: str, text: str) -> None:
+        """A target of ``kind`` the vehicle is not given: ``text`` said once (a gateway also
+        notes the kind, :class:`~testbed.mavlink.shore.ShoreEndpoint`)."""
+        self.statustext_once(mav.MAV_SEVERITY_WARNING, text)
 
     # ------------------------------------------------------------------------ receive
 
@@ -394,19 +402,20 @@ class VehicleEndpoint:
         now = self._last_update_s
         return now is None or now - fix.time_s <= POSITION_FIX_TIMEOUT_S
 
-    def request_position(
-        self, position_ned_m: tuple[float, float, float], yaw_rad: float | None
-    ) -> None:
-        """Set GUIDED's target: NED position [m] and heading [rad] (None: keep the present);
-        it ends an attitude target's control and a moving target (ArduSub's position
-        submode)."""
+    def request_position(self, position_ned_m: tuple[float, float, float]) -> None:
+        """Set GUIDED's target, NED [m], at the heading of the auto-yaw state
+        (:func:`~testbed.mavlink.guided_yaw.setpoint_heading`); it ends an attitude target's
+        control and a moving target (ArduSub's position submode)."""
         self.attitude_target = None
         self.moving_target = None
-        self.write(
-            PositionSetpoint(
-                position_ned_m, 0.0 if yaw_rad is None else yaw_rad, yaw_rad is not None
-            )
-        )
+        yaw = guided_yaw.setpoint_heading(self)
+        self.write(PositionSetpoint(position_ned_m, 0.0 if yaw is None else yaw, yaw is not None))
+
+    def release_position(self) -> None:
+        """Let go of GUIDED's position target (SET_ATTITUDE_TARGET's angle control): the
+        vehicle's position loop stops, depth and heading held."""
+        self.moving_target = None
+        self.world.remove(self.intents, PositionSetpoint, origin=self.options.origin)
 
     def request_depth(self, depth_m: float) -> None:
         """Set the depth target [m, positive down]."""
@@ -459,6 +468,7 @@ class VehicleEndpoint:
         self._last_update_s = now_s
         update_attitude_target(self, now_s)
         guided.update_moving_target(self, now_s)
+        guided_yaw.update_auto_yaw(self, now_s)
         update_motor_test(self, now_s)
         self.failsafe.check(self, snapshot, now_s)
         if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared

@@ -12,8 +12,9 @@ acceleration used, or neither position nor velocity) is ignored by ArduSub and c
 ``unsupported_target`` here. Frames MAV_FRAME_LOCAL_NED (absolute, the position fix's NED
 frame), LOCAL_OFFSET_NED (a position from the reported position) or BODY_OFFSET_NED, BODY_NED
 or BODY_FRD (a position from the reported position, x ahead and y right of the reported
-heading, and a velocity along them); z is down, the depth target [m]; yaw [rad] when not
-ignored, else the present heading is kept; the yaw rate is not used.
+heading, and a velocity along them); z is down, the depth target [m]. The yaw and the yaw rate
+set ArduSub's auto-yaw state, which steers GUIDED's heading (:mod:`~testbed.mavlink.guided_yaw`:
+the yaw is a heading from north in every frame but BODY_OFFSET_NED, where it is relative).
 
 A velocity moves the target (:class:`MovingTarget`, ArduSub's ``Guided_PosVel``
 ``posvel_pos_target_cm += vel × dt`` each loop): the position target (the message's, or for a
@@ -40,7 +41,8 @@ needs lat/lon in range (else ``bad_field``), in MAV_FRAME_GLOBAL(_INT) (altitude
 sea level) or GLOBAL_RELATIVE_ALT(_INT) (above home): both the same here, the home and origin
 at the surface, 0 m (GPS_GLOBAL_ORIGIN, HOME_POSITION); lat/lon to north and east with
 :func:`~testbed.mavlink.telemetry.local_from_global` (the inverse of GLOBAL_POSITION_INT's),
-the depth −alt; the heading is kept (ArduSub's yaw fields are "for future use").
+the depth −alt; the heading the auto-yaw state's, untouched (ArduSub's yaw fields are "for
+future use").
 GLOBAL_TERRAIN_ALT(_INT) needs terrain data the simulator has not, and other frames are not
 global: a position in them is ignored, counted ``unsupported_frame``. Other modes: ignored,
 ``not_guided``.
@@ -57,10 +59,15 @@ lon = 0 or a relative altitude of 0 cm (``bad_field``): ``location_from_command_
 ``mode_refused``); else ACCEPTED (``accepted``) and flown as above to the altitude in whole
 centimetres (param1 speed and param4 yaw unused, as ArduSub).
 
+**Entering GUIDED** from another mode (:func:`hold_where_entered`, ArduSub's ``ModeGuided::init``
+→ ``guided_pos_control_start``: the stopping point) sets the target where the vehicle is, so no
+target from an earlier GUIDED is flown again; GUIDED asked for again changes nothing.
+
 Non-finite or out-of-range fields that are used are counted ``bad_field``, and every position
 target beyond :data:`MAX_TARGET_M` too. The target becomes a
-:class:`~testbed.common.components.PositionSetpoint` on the endpoint's intents entity; the
-messages get no reply (ArduSub sends none either). A shore gateway flies no moving target
+:class:`~testbed.common.components.PositionSetpoint` on the endpoint's intents entity, its
+heading the auto-yaw state's (:mod:`~testbed.mavlink.guided_yaw`); the messages get no reply
+(ArduSub sends none either). A shore gateway flies no moving target
 (:attr:`~testbed.mavlink.endpoint.VehicleEndpoint.flies_moving_targets`): its velocity and
 position-and-velocity targets are counted ``unsupported_target``.
 """
@@ -75,6 +82,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import ControlMode, DepthSetpoint, PositionSetpoint
+from testbed.mavlink import guided_yaw
 from testbed.mavlink.telemetry import local_from_global
 
 if TYPE_CHECKING:
@@ -86,6 +94,7 @@ __all__ = [
     "VELOCITY_TIMEOUT_S",
     "MovingTarget",
     "do_reposition",
+    "hold_where_entered",
     "on_set_position_target_global_int",
     "on_set_position_target_local_ned",
     "update_moving_target",
@@ -94,10 +103,11 @@ __all__ = [
 _POSITION_IGNORE = 0b111  # POSITION_TARGET_TYPEMASK_X/Y/Z_IGNORE
 _VELOCITY_IGNORE = 0b11_1000  # POSITION_TARGET_TYPEMASK_VX/VY/VZ_IGNORE
 _YAW_IGNORE = 1024
+_YAW_RATE_IGNORE = 2048
 _BODY_FRAMES = (mav.MAV_FRAME_BODY_OFFSET_NED, mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_FRD)
-"""Frames whose target is an offset from the reported position along the reported heading
-(ArduSub takes BODY_NED, which MAVProxy's ``position`` sends, as BODY_OFFSET_NED; BODY_FRD is
-MAVLink's name for the same)."""
+"""Frames whose position and velocity are an offset from the reported position and a velocity
+along the reported heading (ArduSub takes BODY_NED, which MAVProxy's ``position`` sends, and
+BODY_FRD as BODY_OFFSET_NED for those; not for the yaw, relative in BODY_OFFSET_NED only)."""
 MAX_TARGET_M = 1.0e4
 """Largest accepted |coordinate| of a position target [m] (the vehicle's start range)."""
 VELOCITY_TIMEOUT_S = 3.0
@@ -127,14 +137,12 @@ class MovingTarget:
     Attributes:
         position_ned_m: (3,) the target [m], NED (z the depth), as advanced to ``updated_s``.
         velocity_ned_m_s: (3,) its velocity [m/s], NED, the climb limited (module docstring).
-        yaw_rad: the heading target [rad], or None to keep the heading.
         received_s: when its last message arrived [s].
         updated_s: the time the target was advanced to [s].
     """
 
     position_ned_m: tuple[float, float, float]
     velocity_ned_m_s: tuple[float, float, float]
-    yaw_rad: float | None
     received_s: float
     updated_s: float
 
@@ -159,13 +167,17 @@ def on_set_position_target_local_ned(
         return
     x, y, z = (float(message.x), float(message.y), float(message.z))
     vx, vy, vz = (float(message.vx), float(message.vy), float(message.vz))
-    yaw = float(message.yaw)
-    use_yaw = not mask & _YAW_IGNORE
+    yaw = None if mask & _YAW_IGNORE else float(message.yaw)
+    yaw_rate = None if mask & _YAW_RATE_IGNORE else float(message.yaw_rate)
     used = ((x, y, z) if kind != "velocity" else ()) + ((vx, vy, vz) if kind != "position" else ())
-    if not all(math.isfinite(v) for v in (*used, yaw)):
+    used += () if yaw is None else (yaw,)
+    if not all(math.isfinite(v) for v in used) or not (
+        yaw_rate is None or guided_yaw.yaw_rate_fits(yaw_rate)
+    ):
         endpoint.reject("bad_field")
         return
     frame = int(message.coordinate_frame)
+    yaw_state = (yaw, yaw_rate, frame == mav.MAV_FRAME_BODY_OFFSET_NED)  # ArduSub's yaw_relative
     if frame != mav.MAV_FRAME_LOCAL_NED:
         snapshot = endpoint.snapshot_now()
         if frame in _BODY_FRAMES:
@@ -173,8 +185,6 @@ def on_set_position_target_local_ned(
             c, s = math.cos(heading), math.sin(heading)
             x, y = c * x - s * y, s * x + c * y
             vx, vy = c * vx - s * vy, s * vx + c * vy
-            if use_yaw:
-                yaw += heading
         elif frame != mav.MAV_FRAME_LOCAL_OFFSET_NED:
             endpoint.reject("unsupported_frame")
             return
@@ -183,13 +193,13 @@ def on_set_position_target_local_ned(
     if kind != "velocity" and max(abs(x), abs(y), abs(z)) > MAX_TARGET_M:
         endpoint.reject("bad_field")
         return
-    heading_target = math.remainder(yaw, math.tau) if use_yaw else None
     position = None if kind == "velocity" else (x, y, z)
     if kind == "position":
         endpoint.accepted += 1
-        endpoint.request_position((x, y, z), heading_target)
+        guided_yaw.set_yaw_state(endpoint, *yaw_state)
+        endpoint.request_position((x, y, z))
         return
-    _move(endpoint, position, (vx, vy, vz), heading_target, now_s)
+    _move(endpoint, position, (vx, vy, vz), now_s, yaw_state)
 
 
 def _submode(endpoint: VehicleEndpoint, mask: int) -> str | None:
@@ -210,17 +220,21 @@ def _move(
     endpoint: VehicleEndpoint,
     position_ned_m: tuple[float, float, float] | None,
     velocity_ned_m_s: tuple[float, float, float],
-    yaw_rad: float | None,
     now_s: float,
+    yaw_state: tuple[float | None, float | None, bool] | None = None,
 ) -> None:
     """A position target moving at a velocity (module docstring): from ``position_ned_m``, or
     for a velocity alone (None) from where the moving target is, else from the reported
-    position; counted ``accepted``, or ``unsupported_target`` by an endpoint that flies none."""
+    position; counted ``accepted``, or ``unsupported_target`` by an endpoint that flies none.
+    ``yaw_state``: the yaw, the yaw rate and whether the yaw is relative, for
+    :func:`~testbed.mavlink.guided_yaw.set_yaw_state` (None: a message without them)."""
     if not endpoint.flies_moving_targets:
         endpoint.reject("unsupported_target")
         endpoint.statustext_once(mav.MAV_SEVERITY_WARNING, "Velocity targets do not cross the link")
         return
     endpoint.accepted += 1
+    if yaw_state is not None:
+        guided_yaw.set_yaw_state(endpoint, *yaw_state)
     moving = endpoint.moving_target
     if position_ned_m is None:
         if moving is not None:
@@ -229,8 +243,8 @@ def _move(
         else:
             position_ned_m = endpoint.snapshot_now().position_ned_m
     velocity = _limited_climb(endpoint, velocity_ned_m_s)
-    endpoint.request_position(position_ned_m, yaw_rad)  # ends any other GUIDED target
-    endpoint.moving_target = MovingTarget(position_ned_m, velocity, yaw_rad, now_s, now_s)
+    endpoint.request_position(position_ned_m)  # ends any other GUIDED target
+    endpoint.moving_target = MovingTarget(position_ned_m, velocity, now_s, now_s)
 
 
 def _limited_climb(
@@ -261,7 +275,7 @@ def _advance(endpoint: VehicleEndpoint, moving: MovingTarget, now_s: float) -> N
         bound = MAX_TARGET_M
         n, e = max(-bound, min(bound, n)), max(-bound, min(bound, e))
         moving.position_ned_m = (n, e, max(0.0, min(bound, d0 + vd * dt)))
-        yaw = moving.yaw_rad
+        yaw = guided_yaw.setpoint_heading(endpoint)
         setpoint = PositionSetpoint(
             moving.position_ned_m, 0.0 if yaw is None else yaw, yaw is not None
         )
@@ -279,6 +293,14 @@ def update_moving_target(endpoint: VehicleEndpoint, now_s: float) -> None:
         endpoint.moving_target = None
         return
     _advance(endpoint, moving, now_s)
+
+
+def hold_where_entered(endpoint: VehicleEndpoint) -> None:
+    """GUIDED entered from another mode: its target is where the vehicle is (ArduSub's
+    ``ModeGuided::init`` → ``guided_pos_control_start``: the stopping point, the position
+    estimate for a vehicle at rest), not a target from an earlier GUIDED; the heading the
+    auto-yaw state's (:mod:`~testbed.mavlink.guided_yaw`)."""
+    endpoint.request_position(endpoint.snapshot_now().position_ned_m)
 
 
 def _in_range(lat_e7: int, lon_e7: int) -> bool:
@@ -326,7 +348,7 @@ def on_set_position_target_global_int(
         endpoint.reject("bad_field")
         return
     if kind == "velocity":  # no position: neither lat/lon nor the frame is read
-        _move(endpoint, None, velocity, None, now_s)
+        _move(endpoint, None, velocity, now_s)
         return
     lat_e7, lon_e7 = int(message.lat_int), int(message.lon_int)
     if not (_in_range(lat_e7, lon_e7) and math.isfinite(alt)):
@@ -340,10 +362,10 @@ def on_set_position_target_global_int(
         endpoint.reject("bad_field")
         return
     if kind == "posvel":
-        _move(endpoint, target, velocity, None, now_s)
+        _move(endpoint, target, velocity, now_s)
         return
     endpoint.accepted += 1
-    endpoint.request_position(target, None)
+    endpoint.request_position(target)
 
 
 def do_reposition(
@@ -387,5 +409,5 @@ def do_reposition(
     if not guided and endpoint.set_mode(mav.SUB_MODE_GUIDED) != mav.MAV_RESULT_ACCEPTED:
         return int(mav.MAV_RESULT_FAILED)  # counted mode_refused
     endpoint.accepted += 1
-    endpoint.request_position(target, None)
+    endpoint.request_position(target)
     return int(mav.MAV_RESULT_ACCEPTED)

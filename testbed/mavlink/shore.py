@@ -6,8 +6,12 @@ station's world: the intents it writes (``MovementCommand``, ``ArmRequest``, ``M
 into orders at the token rate (a GUIDED target as one ``GoTo``); the state it reports is the
 copy the codec mirrored from the vehicle's replies (``Odometry``, ``Armed``, ``ActiveMode``,
 origin REMOTE). Every MAVLink behaviour (parameters, modes, arming, sticks, failsafes, stream
-rates, GUIDED's position target) is the base class's; parameters and mission requests are
-answered from the local table, so a ground station's connection never waits on the link.
+rates, GUIDED's position target, the hold where GUIDED is entered) is the base class's;
+parameters and mission requests are answered from the local table, so a ground station's
+connection never waits on the link. When SET_ATTITUDE_TARGET lets go of GUIDED's position
+target, no teleop order removes the vehicle's, so the shore writes a ``GoalCancel`` (the order
+header's "cancel last order" bit), on which the vehicle drops it
+(:meth:`ShoreEndpoint.release_position`).
 
 What it adds is honesty about the link (:class:`LinkFacts`):
 
@@ -27,8 +31,10 @@ What it adds is honesty about the link (:class:`LinkFacts`):
   orders (the paper's layouts) have no depth order and no roll or pitch (a ``KeepHeading``
   carries the heading only), a ``Move``'s heave stick is a rate the vehicle does not fly in
   GUIDED, and a ``GoTo`` carrying the depth would also pin the horizontal position and, re-sent
-  as the depth moves, take every order slot. STATUSTEXT "Depth targets do not cross the link"
-  or "Roll, pitch targets do not cross the link"; ``metrics.json`` ``setpoints_not_sent``.
+  as the depth moves, take every order slot. Nor does a yaw rate (a ``GoTo`` carries the
+  heading it leads to, :mod:`~testbed.mavlink.guided_yaw`). STATUSTEXT "Depth targets do not
+  cross the link", "Roll, pitch targets do not cross the link" or "Yaw rates do not cross the
+  link"; ``metrics.json`` ``setpoints_not_sent``.
 
 Before the first state arrives the vehicle reads disarmed, MANUAL, at the origin, with the
 state time 0 (age = the gateway's uptime).
@@ -41,7 +47,13 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import AttitudeSetpoint, DepthSetpoint, Odometry
+from testbed.common.components import (
+    AttitudeSetpoint,
+    DepthSetpoint,
+    GoalCancel,
+    Odometry,
+    PositionSetpoint,
+)
 from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Entity, Origin, World
 from testbed.mavlink.endpoint import Channel, EndpointOptions, VehicleEndpoint
@@ -119,8 +131,8 @@ class ShoreEndpoint(VehicleEndpoint):
     Attributes:
         link: the link facts.
         stale_warnings: stale-state STATUSTEXT warnings sent.
-        setpoints_not_sent: the kinds of target ("depth", "roll_pitch") the ground station
-            asked for that the link's codec cannot carry (module docstring).
+        setpoints_not_sent: the kinds of target ("depth", "roll_pitch", "yaw_rate") the ground
+            station asked for that the link's codec cannot carry (module docstring).
         state_age_s: the reported state's age at the last :meth:`update` [s] (inf before any
             state arrived; ``LinkAge`` then reports the uptime).
     """
@@ -138,6 +150,7 @@ class ShoreEndpoint(VehicleEndpoint):
         self._next_stale_warning_s = 0.0
         self._next_age_s = 0.0
         self._has_state = False
+        self._cancels = 0
 
     def state_source(self, now_s: float) -> tuple[Entity, float]:
         """The mirrored vehicle entity and the estimated sample time of its state [s]."""
@@ -156,15 +169,27 @@ class ShoreEndpoint(VehicleEndpoint):
             return
         if isinstance(component, DepthSetpoint):
             if abs(component.depth_m - self.snapshot_now().depth_m) > DEPTH_KEPT_M:
-                self._not_sent("depth", "Depth targets do not cross the link")
+                self.setpoint_not_sent("depth", "Depth targets do not cross the link")
         elif isinstance(component, AttitudeSetpoint):
             roll, pitch, _ = euler_from_quat(component.quaternion_wxyz)
             if max(abs(roll), abs(pitch)) > math.radians(LEVEL_DEG):
-                self._not_sent("roll_pitch", "Roll, pitch targets do not cross the link")
+                self.setpoint_not_sent("roll_pitch", "Roll, pitch targets do not cross the link")
 
-    def _not_sent(self, kind: str, text: str) -> None:
+    def setpoint_not_sent(self, kind: str, text: str) -> None:
+        """Said once (the base class's), and ``kind`` noted in :attr:`setpoints_not_sent`."""
         self.setpoints_not_sent.add(kind)
-        self.statustext_once(mav.MAV_SEVERITY_WARNING, text)
+        super().setpoint_not_sent(kind, text)
+
+    def release_position(self) -> None:
+        """The base class's (the station's position target removed), and over the teleop codec a
+        :class:`~testbed.common.components.GoalCancel`: no order removes a target, so the order
+        header's "cancel last order" bit tells the vehicle to let go of the ``GoTo`` it flies
+        (the change-set codec replicates the removal itself)."""
+        had_target = self.world.has(self.intents, PositionSetpoint)
+        super().release_position()
+        if had_target and not self.link.carries_setpoints:
+            self._cancels += 1
+            self.write(GoalCancel(self._cancels))
 
     @property
     def can_test_motors(self) -> bool:

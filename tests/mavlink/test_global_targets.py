@@ -52,6 +52,12 @@ def armed_in(gcs: SimGcs, mode: int) -> None:
     assert gcs.last("HEARTBEAT").custom_mode == mode
 
 
+def target_position(gcs: SimGcs) -> tuple[float, float, float] | None:
+    """Where GUIDED's position setpoint is (None: none)."""
+    setpoint = gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint)
+    return None if setpoint is None else setpoint.position_ned_m
+
+
 def global_target(
     gcs: SimGcs, frame: int, lat_e7: int, lon_e7: int, alt_m: float, mask: int = POSITION_ONLY
 ) -> Any:
@@ -129,6 +135,8 @@ def test_global_targets_ardusub_ignores_are_counted_not_flown(gcs: SimGcs) -> No
     gcs.send(global_target(gcs, 6, lat, lon, -1.0))  # MANUAL: ignored
     gcs.run(0.05, gcs.flying())
     armed_in(gcs, 4)
+    entered = target_position(gcs)  # GUIDED's entry holds where the vehicle was
+    assert entered is not None
     gcs.send(
         global_target(gcs, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT, lat, lon, 1.0),  # no terrain
         global_target(gcs, mav.MAV_FRAME_LOCAL_NED, lat, lon, -1.0),  # not global
@@ -143,7 +151,7 @@ def test_global_targets_ardusub_ignores_are_counted_not_flown(gcs: SimGcs) -> No
     counts = [rejected[k] for k in ("not_guided", "unsupported_frame", "unsupported_target")]
     assert counts == [1, 2, 1]
     assert rejected["bad_field"] == 4
-    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    assert target_position(gcs) == entered
 
 
 def test_a_global_position_target_is_any_velocity_bit_and_any_acceleration_bit(
@@ -208,6 +216,7 @@ def test_do_reposition_as_command_long_is_in_degrees_above_mean_sea_level(gcs: S
 
 def test_do_reposition_answers_as_ardusub(gcs: SimGcs) -> None:
     armed_in(gcs, 4)
+    entered = target_position(gcs)
     lat, lon = offset_e7(gcs, 2.0, 0.0)
     gcs.send(
         reposition_int(gcs, lat, lon, -1.0, frame=mav.MAV_FRAME_LOCAL_NED),  # not global
@@ -221,7 +230,7 @@ def test_do_reposition_answers_as_ardusub(gcs: SimGcs) -> None:
     )
     gcs.run(0.1, gcs.flying())
     assert reposition_acks(gcs) == [DENIED, DENIED, DENIED, DENIED, DENIED, FAILED]
-    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    assert target_position(gcs) == entered
     rejected = gcs.endpoint.rejected
     assert (rejected["unsupported_frame"], rejected["bad_field"]) == (2, 4)
     gcs.send(reposition_int(gcs, lat, lon, 0.0, frame=mav.MAV_FRAME_GLOBAL_INT))  # AMSL 0: fine
@@ -234,6 +243,7 @@ def test_do_reposition_refuses_a_relative_altitude_under_a_centimetre(gcs: SimGc
     truncated toward zero: under 1 cm either way it is 0 cm, which Location::sanitize takes
     as "the current altitude", so the command is DENIED."""
     armed_in(gcs, 4)
+    entered = target_position(gcs)
     lat, lon = offset_e7(gcs, 1.0, 0.0)
     gcs.send(
         reposition_int(gcs, lat, lon, 0.004),
@@ -242,7 +252,7 @@ def test_do_reposition_refuses_a_relative_altitude_under_a_centimetre(gcs: SimGc
     )
     gcs.run(0.1, gcs.flying())
     assert reposition_acks(gcs) == [DENIED, DENIED, DENIED]
-    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    assert target_position(gcs) == entered
     gcs.send(reposition_int(gcs, lat, lon, -0.01))  # 1 cm below home
     gcs.run(0.1, gcs.flying())
     assert reposition_acks(gcs)[-1] == ACCEPTED

@@ -178,6 +178,8 @@ def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardus
     gcs.send(gcs.set_mode(4))
     gcs.run(1.01, gcs.flying())
     start = tuple(gcs.vehicle.truth.position_ned_m)
+    entered = gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint)
+    assert entered is not None  # GUIDED's entry holds where the vehicle was
 
     def offset(mask: int) -> object:
         return gcs.mav.set_position_target_local_ned_encode(
@@ -187,7 +189,8 @@ def test_a_position_target_is_any_velocity_bit_and_any_acceleration_bit_as_ardus
     gcs.send(offset(0b1100_0011_1000), offset(0b1100_0000_0000))  # no AX..AZ bit
     gcs.run(0.1, gcs.flying())
     assert gcs.endpoint.rejected["unsupported_target"] == 2
-    assert gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint) is None
+    setpoint = gcs.vehicle.world.get(gcs.vehicle.operator_entity, PositionSetpoint)
+    assert setpoint is not None and setpoint.position_ned_m == entered.position_ned_m
     gcs.send(offset(YAW_IGNORE | 0b100_1000))  # VX and AX ignored only
     gcs.run(15.0, gcs.flying())
     p = gcs.vehicle.truth.position_ned_m
@@ -236,7 +239,10 @@ def test_through_the_gateway_the_target_travels_as_one_goto_and_the_vehicle_flie
         )
         gw.run(22.0)
         gotos = [o for o in gw.orders if isinstance(o, GoTo)]
-        assert len(gotos) == 1  # the setpoint travels once
+        # each setpoint travels once: GUIDED's entry (hold where the vehicle is), the target
+        assert len(gotos) == 2
+        hold = gotos[0]
+        assert math.hypot(hold.x_cm / 100 - start[0], hold.y_cm / 100 - start[1]) < 0.03
         assert gw.far.counters.unsupported == 0
         p = truth.position_ned_m
         # the offset was taken from the reported state (1 cm, 1°, the fix's noise): + 3 cm

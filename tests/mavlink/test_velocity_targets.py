@@ -212,6 +212,8 @@ def test_masks_ardusub_ignores_are_counted_and_other_targets_end_the_motion(
     mode change or SET_ATTITUDE_TARGET's angle control ends a moving target."""
     guided(gcs)
     intents = gcs.vehicle.operator_entity
+    entered = gcs.vehicle.world.get(intents, PositionSetpoint)  # where GUIDED was entered
+    assert entered is not None
     accel = 0b1100_0000_0111  # velocity and acceleration used
     nothing = 0b1101_1111_1111  # every position and velocity bit set
     gcs.send(
@@ -222,7 +224,7 @@ def test_masks_ardusub_ignores_are_counted_and_other_targets_end_the_motion(
     gcs.run(0.1, gcs.flying())
     rejected = gcs.endpoint.rejected
     assert (rejected["unsupported_target"], rejected["bad_field"]) == (2, 1)
-    assert gcs.vehicle.world.get(intents, PositionSetpoint) is None
+    assert gcs.vehicle.world.get(intents, PositionSetpoint) == entered
     for end in (
         local(gcs, 0b1101_1111_1000, (0, 0, 0), reported(gcs)),  # a position target
         gcs.mav.set_attitude_target_encode(0, 1, 1, 7, [1, 0, 0, 0], 0, 0, 0, 0.5),
@@ -253,6 +255,7 @@ def test_through_the_gateway_a_velocity_target_is_refused_and_said_once() -> Non
     sender = SimGcs.make_sender(255)
     decoder = mav.MAVLink(None)
     shore.receive(channel, sender.set_mode_encode(1, 1, 4).pack(sender), 0.0)  # GUIDED
+    entered = station.world.get(station.entity, PositionSetpoint)  # the hold where entered
     for k in range(3):
         velocity = sender.set_position_target_local_ned_encode(
             0, 1, 1, mav.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY, 0, 0, 0, 0.2, 0, 0, 0, 0, 0, 0, 0
@@ -263,7 +266,7 @@ def test_through_the_gateway_a_velocity_target_is_refused_and_said_once() -> Non
     texts = [m.text for m in replies if m.get_type() == "STATUSTEXT"]
     assert texts.count("Velocity targets do not cross the link") == 1
     assert shore.rejected["unsupported_target"] == 3
-    assert station.world.get(station.entity, PositionSetpoint) is None
+    assert station.world.get(station.entity, PositionSetpoint) == entered is not None
     position = sender.set_position_target_local_ned_encode(
         0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b1101_1111_1000, 1, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0
     )

@@ -1,0 +1,232 @@
+"""GUIDED's heading as ArduSub 4.5 flies it: SET_POSITION_TARGET_LOCAL_NED's ``yaw`` and
+``yaw_rate``, and the auto-yaw state they leave behind.
+
+**The message** (ArduSub 4.5 ``GCS_MAVLINK_Sub::handle_message``): ``yaw`` [rad] is used unless
+``type_mask`` has bit 1024 (YAW_IGNORE), ``yaw_rate`` [rad/s] unless bit 2048
+(YAW_RATE_IGNORE). The yaw is relative (``yaw_relative``) in MAV_FRAME_BODY_OFFSET_NED only: in
+BODY_NED and BODY_FRD, whose position and velocity are along the heading, and in LOCAL_NED and
+LOCAL_OFFSET_NED, it is a heading from north. Then ``ModeGuided::guided_set_yaw_state``:
+
+- yaw used: ``ModeAuto::set_auto_yaw_look_at_heading``. The look-at heading
+  (``yaw_look_at_heading``, int32 centidegrees in [0, 36000)) is the yaw, or, relative, the
+  attitude target's yaw plus the yaw, or minus it when ArduSub's ``direction`` is negative.
+  That direction is the sign of ``wrap_PI(wrap_2PI(yaw in degrees) − heading)``: the yaw in
+  degrees wrapped as if it were radians (``euler_yaw_angle = wrap_2PI(yaw_cd * 0.01f)``), so it
+  is no turning direction, and a relative yaw turns one way or the other by the present
+  heading (:func:`ardusub_direction`; +0.5 rad turns +28.6° facing east, −28.6° facing
+  north). The slew (``yaw_look_at_heading_slew``, int16 °/s) is AUTO_YAW_SLEW_RATE (60°/s)
+  without a yaw rate (or a rate of 0), else min(rate, 60°/s) truncated toward 0. Not rate-only.
+- yaw rate alone: ``ModeAuto::set_yaw_rate``: slew = min(rate, 60°/s), truncated; rate-only.
+- neither: not rate-only (the look-at heading and the slew stay as they were).
+
+That state is ArduSub's (``Sub.h``): kept across messages and modes, from boot (look-at 0°,
+north; slew 0). GUIDED's other targets (SET_POSITION_TARGET_GLOBAL_INT, DO_REPOSITION, the hold
+on entering GUIDED) do not touch it.
+
+**Each loop** of GUIDED's position, velocity and position-velocity controllers, the pilot's yaw
+stick centred (the vehicle's GUIDED ignores the sticks), the attitude target's yaw:
+
+- rate-only (``AUTO_YAW_RATE``): turns at the slew, for ever (no timeout in 4.5);
+- else (``AUTO_YAW_LOOK_AT_HEADING``, ``AC_AttitudeControl_Sub::input_euler_angle_roll_pitch_
+  slew_yaw``): while the heading is more than MAX_YAW_ERROR (5°) from the look-at heading, turns
+  toward it the short way at the slew (a negative slew, from a negative ``yaw_rate``, turns
+  away from it: the long way round); within 5° it is the look-at heading. So a slew of 0 — no
+  yaw since boot, or a rate under 1°/s — keeps the heading, but takes the look-at heading
+  (north, at boot) when the vehicle is within 5° of it; and a later target that ignores the yaw
+  turns the vehicle back to the last look-at heading, at the last slew.
+
+Here: :class:`AutoYaw` holds that state on the endpoint. In GUIDED, not under a
+SET_ATTITUDE_TARGET's angle control, each update moves the heading of GUIDED's
+:class:`~testbed.common.components.PositionSetpoint` as ArduSub moves its attitude target (the
+vehicle's heading hold follows it; it turns at up to ≈ 100°/s, faster than the 60°/s slew).
+Through a gateway (no moving targets: a heading changing every update would be a ``GoTo``
+every token gap) a setpoint carries the heading the state settles at (:func:`settled_heading_rad`):
+the look-at heading, which the vehicle turns to at its own rate, or none (the heading kept);
+a yaw rate does not cross (STATUSTEXT once "Yaw rates do not cross the link", noted
+``yaw_rate``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from testbed.common.components import ControlMode, ControlTargets, PositionSetpoint
+from testbed.common.geometry import euler_from_quat
+
+if TYPE_CHECKING:
+    from testbed.mavlink.endpoint import VehicleEndpoint
+
+__all__ = [
+    "AUTO_YAW_SLEW_RATE_DEG_S",
+    "MAX_YAW_ERROR_RAD",
+    "AutoYaw",
+    "ardusub_direction",
+    "held_yaw_rad",
+    "set_yaw_state",
+    "setpoint_heading",
+    "settled_heading_rad",
+    "update_auto_yaw",
+    "yaw_rate_fits",
+]
+
+AUTO_YAW_SLEW_RATE_DEG_S = 60
+"""ArduSub's AUTO_YAW_SLEW_RATE (``config.h``): the default and greatest slew [°/s]."""
+MAX_YAW_ERROR_RAD = math.radians(5.0)
+"""``AC_AttitudeControl_Sub.h`` MAX_YAW_ERROR: within this of the look-at heading it is held
+rather than slewed to [rad]."""
+_INT16_MIN = -32768
+_FLT_EPSILON = 1.1920929e-07  # ArduPilot's is_zero: |x| < FLT_EPSILON
+
+
+@dataclass(slots=True)
+class AutoYaw:
+    """ArduSub's auto-yaw state, and the yaw target GUIDED flies from it (mutable: the
+    endpoint's state; module docstring).
+
+    Attributes:
+        look_at_cd: ``yaw_look_at_heading`` [centidegrees, 0..35999, from north].
+        slew_deg_s: ``yaw_look_at_heading_slew`` [°/s, int16].
+        rate_only: ``yaw_rate_only``: turn at the slew.
+        target_rad: the heading the endpoint has GUIDED fly [rad] (ArduSub's attitude target
+            yaw), None when GUIDED does not fly one (another mode, angle control).
+        updated_s: the time ``target_rad`` was advanced to [s] (None: not yet, it starts at
+            the next update).
+    """
+
+    look_at_cd: int = 0
+    slew_deg_s: int = 0
+    rate_only: bool = False
+    target_rad: float | None = None
+    updated_s: float | None = None
+
+    @property
+    def look_at_rad(self) -> float:
+        """The look-at heading [rad, in (−π, π]]."""
+        return math.remainder(math.radians(self.look_at_cd / 100.0), math.tau)
+
+
+def _wrap_2pi(angle: float) -> float:
+    return math.fmod(angle, math.tau) % math.tau
+
+
+def _wrap_pi(angle: float) -> float:
+    """ArduPilot's ``wrap_PI``: (−π, π]."""
+    wrapped = _wrap_2pi(angle)
+    return wrapped - math.tau if wrapped > math.pi else wrapped
+
+
+def ardusub_direction(yaw_deg: float, heading_rad: float) -> int:
+    """``guided_set_yaw_state``'s ``direction`` (module docstring): ±1 by the sign of
+    ``wrap_PI(wrap_2PI(yaw_deg) − wrap_2PI(heading_rad))``, the degrees wrapped as radians."""
+    return -1 if _wrap_pi(_wrap_2pi(yaw_deg) - _wrap_2pi(heading_rad)) < 0.0 else 1
+
+
+def held_yaw_rad(endpoint: VehicleEndpoint) -> float:
+    """The attitude target's yaw [rad]: the one GUIDED flies, else the vehicle's heading hold's
+    (its ``ControlTargets``), else the reported heading (a gateway sees no targets)."""
+    state = endpoint.auto_yaw
+    if state.target_rad is not None:
+        return state.target_rad
+    targets = endpoint.world.get(endpoint.vehicle, ControlTargets)
+    if targets is not None:
+        return euler_from_quat(targets.quaternion_wxyz)[2]
+    return endpoint.snapshot_now().euler_rad[2]
+
+
+def set_yaw_state(
+    endpoint: VehicleEndpoint,
+    yaw_rad: float | None,
+    yaw_rate_rad_s: float | None,
+    relative: bool,
+) -> None:
+    """ArduSub's ``guided_set_yaw_state`` for an accepted target (module docstring).
+
+    Args:
+        endpoint: the endpoint.
+        yaw_rad: the message's yaw [rad], None when masked.
+        yaw_rate_rad_s: its yaw rate [rad/s] (:func:`yaw_rate_fits`), None when masked.
+        relative: the frame makes the yaw relative (MAV_FRAME_BODY_OFFSET_NED).
+    """
+    state = endpoint.auto_yaw
+    rate_dps = None if yaw_rate_rad_s is None else math.degrees(yaw_rate_rad_s)
+    turning = rate_dps is not None and abs(rate_dps) >= _FLT_EPSILON  # ArduPilot's !is_zero
+    slew = 0 if rate_dps is None else int(min(rate_dps, AUTO_YAW_SLEW_RATE_DEG_S))
+    if yaw_rad is not None:
+        yaw_deg = math.degrees(yaw_rad)
+        if relative:
+            if ardusub_direction(yaw_deg, endpoint.snapshot_now().euler_rad[2]) < 0:
+                yaw_deg = -yaw_deg
+            yaw_deg += math.degrees(held_yaw_rad(endpoint))
+        state.look_at_cd = int(math.fmod(yaw_deg * 100.0, 36000.0) % 36000.0)
+        state.slew_deg_s = slew if turning else AUTO_YAW_SLEW_RATE_DEG_S
+        state.rate_only = False
+    elif rate_dps is not None:
+        state.slew_deg_s, state.rate_only = slew, True
+    else:
+        state.rate_only = False
+    if turning and not endpoint.flies_moving_targets:
+        endpoint.setpoint_not_sent("yaw_rate", "Yaw rates do not cross the link")
+
+
+def yaw_rate_fits(yaw_rate_rad_s: float) -> bool:
+    """Whether ArduSub's int16 °/s slew holds the yaw rate once limited to 60°/s (a finite
+    rate no lower than −32768°/s; below, its float conversion is undefined: counted
+    ``bad_field``)."""
+    return math.isfinite(yaw_rate_rad_s) and math.degrees(yaw_rate_rad_s) >= _INT16_MIN
+
+
+def settled_heading_rad(endpoint: VehicleEndpoint) -> float | None:
+    """Where the state leaves the heading [rad]: none while rate-only (it turns for ever) or
+    with a slew of 0 more than 5° from the look-at heading (it stays), else the look-at
+    heading."""
+    state = endpoint.auto_yaw
+    if state.rate_only:
+        return None
+    look = state.look_at_rad
+    error = _wrap_pi(look - endpoint.snapshot_now().euler_rad[2])
+    if state.slew_deg_s == 0 and abs(error) > MAX_YAW_ERROR_RAD:
+        return None
+    return look
+
+
+def setpoint_heading(endpoint: VehicleEndpoint) -> float | None:
+    """The heading [rad] GUIDED's position setpoint carries now (None: keep the present one):
+    the yaw target the endpoint moves (started at the attitude target's yaw), or through a
+    gateway the settled heading (module docstring)."""
+    if not endpoint.flies_moving_targets:
+        return settled_heading_rad(endpoint)
+    state = endpoint.auto_yaw
+    if state.target_rad is None:
+        state.target_rad, state.updated_s = held_yaw_rad(endpoint), None
+    return state.target_rad
+
+
+def update_auto_yaw(endpoint: VehicleEndpoint, now_s: float) -> None:
+    """Each update in GUIDED, not under angle control, on an endpoint that flies moving targets:
+    the yaw target advanced as ArduSub's loop advances its attitude target (module docstring)
+    and written as the position setpoint's heading; elsewhere none (the next GUIDED starts from
+    the attitude target's yaw)."""
+    state = endpoint.auto_yaw
+    guided = endpoint.requested_mode is ControlMode.GUIDED and endpoint.attitude_target is None
+    setpoint = endpoint.world.get(endpoint.intents, PositionSetpoint)
+    if not (guided and endpoint.flies_moving_targets and setpoint is not None):
+        state.target_rad = None
+        return
+    target = setpoint_heading(endpoint)
+    assert target is not None  # an endpoint that flies moving targets always has one
+    dt = 0.0 if state.updated_s is None else max(0.0, now_s - state.updated_s)
+    state.updated_s = now_s
+    slew_rad_s = math.radians(state.slew_deg_s)
+    if state.rate_only:
+        target += slew_rad_s * dt
+    else:
+        look = state.look_at_rad
+        error = _wrap_pi(look - endpoint.snapshot_now().euler_rad[2])
+        if abs(error) > MAX_YAW_ERROR_RAD:
+            target += slew_rad_s * dt * (-1.0 if error < 0.0 else 1.0)
+        else:
+            target = look
+    state.target_rad = math.remainder(target, math.tau)
+    endpoint.write(PositionSetpoint(setpoint.position_ned_m, state.target_rad, True))
