@@ -92,8 +92,9 @@ class LinkFacts:
             state with its arrival (teleop), 0 on one that carries the sample time (change-set).
         stale_after_s: state older than this [s] is reported stale (STATUSTEXT warning).
         position_fix: the vehicle has a position fix (its scenario's sensors): GUIDED is
-            accepted on shore and its target sent as a ``GoTo`` (the teleop codec's state
-            carries no sign of a fix, so the gateway knows it from the vehicle's configuration).
+            accepted on shore, once a state has arrived, and its target sent as a ``GoTo`` (the
+            teleop codec's state carries no sign of a fix, so the gateway knows it from the
+            vehicle's configuration).
         carries_setpoints: the link's codec carries every intent the endpoint writes (the
             change-set codec replicates them all); False for the teleop codec, whose orders
             carry sticks, arm and mode flags, a heading (``KeepHeading``) and a go-to, but no
@@ -203,8 +204,10 @@ class ShoreEndpoint(VehicleEndpoint):
         return False
 
     def has_position_estimate(self) -> bool:
-        """Whether the vehicle behind the link has a fix (:attr:`LinkFacts.position_fix`)."""
-        return self.link.position_fix
+        """Whether the vehicle behind the link has a fix (:attr:`LinkFacts.position_fix`) and
+        the last update saw its state: before the first state arrives there is no position
+        (GUIDED, entered, would hold the origin)."""
+        return self.link.position_fix and self._has_state
 
     def update(self, now_s: float) -> None:
         """The base class's update, then the link's age and warnings (module docstring)."""

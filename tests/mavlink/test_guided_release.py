@@ -16,12 +16,15 @@ from collections.abc import Iterator
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import PositionSetpoint
+from testbed.common.components import Odometry, PositionSetpoint
 from testbed.common.geometry import euler_from_quat, quat_from_euler
+from testbed.ecs import Origin
+from testbed.mavlink import EndpointOptions
+from testbed.mavlink.shore import ShoreEndpoint
 from testbed.protocol import GoTo
-from testbed.run.mavlink_gateway import run_gateway
+from testbed.run.mavlink_gateway import GatewayStation, gateway_link_facts, run_gateway
 from testbed.run.scenario import load_scenario
-from tests.mavlink.gcs import SimGateway, SimGcs
+from tests.mavlink.gcs import NO_VEHICLE_FAILSAFE, SimGateway, SimGcs
 from tests.mavlink.rt_session import GatewaySession
 
 AHEAD = 0b1101_1111_1000  # a position, yaw and yaw rate ignored (MAVProxy's `position`)
@@ -176,3 +179,30 @@ def test_through_the_real_time_s100_gateway_set_attitude_target_lets_go_of_the_g
     turned = math.remainder(series["yaw_deg"][-1] - start - 60.0, 360.0)
     assert abs(turned) < HEADING_TOLERANCE_DEG
     assert math.isnan(series["target_n"][-1])  # no go-to flown any more
+
+
+def test_through_the_gateway_guided_is_refused_before_the_vehicles_position_arrives() -> None:
+    """The shore's hold where GUIDED is entered needs the vehicle's position: before the first
+    reply brings it, GUIDED is refused as ArduSub refuses it without a position estimate
+    (FAILED, "Flight mode change failed"), not entered to hold the origin; once a state is
+    mirrored it is accepted and holds there."""
+    scenario = load_scenario("s100-teleop-v1", list(NO_VEHICLE_FAILSAFE))
+    station = GatewayStation()
+    options = EndpointOptions(origin=Origin.LOCAL)
+    shore = ShoreEndpoint(station.world, station.entity, gateway_link_facts(scenario), options)
+    channel = shore.open_channel("gcs")
+    sender = SimGcs.make_sender(255)
+    decoder = mav.MAVLink(None)
+    guided = sender.set_mode_encode(1, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+    shore.receive(channel, guided.pack(sender), 0.0)
+    shore.update(0.01)
+    mirrored = station.world.spawn()  # the first reply's state
+    odometry = Odometry(0.3, (4.0, -2.0, 1.5), (1.0, 0.0, 0.0, 0.0))
+    station.world.set(mirrored, odometry, origin=Origin.REMOTE)
+    shore.update(0.3)
+    shore.receive(channel, guided.pack(sender), 0.35)
+    replies = [m for p in channel.take() for m in decoder.parse_buffer(p) or []]
+    acks = [m.result for m in replies if m.get_type() == "COMMAND_ACK"]
+    assert acks == [mav.MAV_RESULT_FAILED, mav.MAV_RESULT_ACCEPTED]
+    setpoint = station.world.get(station.entity, PositionSetpoint)
+    assert setpoint is not None and setpoint.position_ned_m == odometry.position_ned_m

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from testbed.common.components import PositionSetpoint
+from testbed.common.components import Odometry, PositionSetpoint
 from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Origin
 from testbed.mavlink import EndpointOptions
@@ -254,22 +254,27 @@ def test_through_the_gateway_a_velocity_target_is_refused_and_said_once() -> Non
     channel = shore.open_channel("gcs")
     sender = SimGcs.make_sender(255)
     decoder = mav.MAVLink(None)
-    shore.receive(channel, sender.set_mode_encode(1, 1, 4).pack(sender), 0.0)  # GUIDED
+    mirrored = station.world.spawn()  # the vehicle's state, as the first reply leaves it
+    odometry = Odometry(1.0, (0.5, -0.5, 1.0), (1.0, 0.0, 0.0, 0.0))
+    station.world.set(mirrored, odometry, origin=Origin.REMOTE)
+    shore.update(1.0)
+    shore.receive(channel, sender.set_mode_encode(1, 1, 4).pack(sender), 1.0)  # GUIDED
     entered = station.world.get(station.entity, PositionSetpoint)  # the hold where entered
+    assert entered is not None and entered.position_ned_m == odometry.position_ned_m
     for k in range(3):
         velocity = sender.set_position_target_local_ned_encode(
             0, 1, 1, mav.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY, 0, 0, 0, 0.2, 0, 0, 0, 0, 0, 0, 0
         )
-        shore.receive(channel, velocity.pack(sender), 0.1 * (k + 1))
-        shore.update(0.1 * (k + 1))
+        shore.receive(channel, velocity.pack(sender), 1.0 + 0.1 * (k + 1))
+        shore.update(1.0 + 0.1 * (k + 1))
     replies = [m for p in channel.take() for m in decoder.parse_buffer(p) or []]
     texts = [m.text for m in replies if m.get_type() == "STATUSTEXT"]
     assert texts.count("Velocity targets do not cross the link") == 1
     assert shore.rejected["unsupported_target"] == 3
-    assert station.world.get(station.entity, PositionSetpoint) == entered is not None
+    assert station.world.get(station.entity, PositionSetpoint) == entered
     position = sender.set_position_target_local_ned_encode(
         0, 1, 1, mav.MAV_FRAME_LOCAL_NED, 0b1101_1111_1000, 1, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0
     )
-    shore.receive(channel, position.pack(sender), 0.5)
+    shore.receive(channel, position.pack(sender), 1.5)
     setpoint = station.world.get(station.entity, PositionSetpoint)
     assert setpoint is not None and setpoint.position_ned_m == (1.0, 2.0, 1.0)
