@@ -159,13 +159,14 @@ def _run_trials(scenario: Scenario, out: Path, *, seed: int | None, plots: bool)
     )
     document = trials.document
     if trials.stopped is not None:
-        k = document["interrupted_trial"]
+        k, finished = document["interrupted_trial"], document["trials_finished"]
         reached = trials.interrupted_sim_s
         at = "" if reached != reached else f" at t = {reached:.1f} s of {scenario.duration_s:g} s"
+        where = f"in trial {k} of {scenario.trials}{at}"
+        if k is None:  # while a finished trial's plots or the trials figure were drawn
+            where = f"while writing results, after trial {finished} of {scenario.trials}"
         print(
-            f"testbed: interrupted in trial {k} of {scenario.trials}{at}; "
-            f"{document['trials_finished']} finished, results in {out}",
-            file=sys.stderr,
+            f"testbed: interrupted {where}; {finished} finished, results in {out}", file=sys.stderr
         )
         return exit_code_of(trials.stopped)
     print(format_trials_summary(document, out))
@@ -263,6 +264,7 @@ def finish_run(
         summary: formats the summary (default :func:`format_summary`).
         extras: more data files to write (:func:`~testbed.run.outputs.write_run`).
     """
+    from testbed.run.interrupts import deferred_interrupts
     from testbed.run.outputs import write_run
     from testbed.run.trials import remove_trials
 
@@ -271,15 +273,20 @@ def finish_run(
         from testbed.report.run_plots import write_run_plots  # matplotlib only when plotting
 
         writer = write_run_plots
+    late: KeyboardInterrupt | None = None
     try:
         write_run(result, out, plots=writer, extras=extras)
+    except KeyboardInterrupt as interrupt:  # its data and metrics.json are written first
+        late = interrupt
+    with deferred_interrupts() as held:
         remove_trials(out)  # an earlier trials run's results (--force)
-    except KeyboardInterrupt as interrupt:  # the run finished; its results are written
+    late = late or (held[0] if held else None)
+    if late is not None and result.stopped is None:  # the run finished; it was plotting
         print(
             f"testbed: interrupted while plotting; results without plots in {out}", file=sys.stderr
         )
-        return exit_code_of(interrupt)
-    if result.stopped is not None:
+        return exit_code_of(late)
+    if result.stopped is not None:  # a second signal while its partial results were written too
         reached = result.metrics["sim_s"]
         print(
             f"testbed: interrupted at t = {reached:.1f} s of {planned_s:g} s; "

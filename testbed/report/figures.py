@@ -12,6 +12,8 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from testbed.run.atomic import replace_atomically
+
 __all__ = ["DPI", "footnote", "no_data", "note", "save"]
 
 DPI = 110
@@ -20,10 +22,14 @@ DPI = 110
 
 def save(fig: Figure, path: Path) -> Path:
     """Write ``fig`` as a PNG at :data:`DPI` (no software stamp, so equal figures give equal
-    bytes) and return ``path``."""
+    bytes) and return ``path``. The PNG is written whole or not at all (under a temporary
+    name, then renamed): a Ctrl-C while it is encoded leaves ``path`` as it was, never cut."""
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=DPI, metadata={"Software": None})
-    return path
+
+    def write(tmp: Path) -> None:
+        fig.savefig(tmp, format="png", dpi=DPI, metadata={"Software": None})
+
+    return replace_atomically(write, path)
 
 
 def note(ax: Axes, text: str) -> None:

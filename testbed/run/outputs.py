@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 from testbed.config import ConfigError
+from testbed.run.atomic import TMP_PREFIX as _TMP_PREFIX
+from testbed.run.atomic import replace_atomically
 from testbed.run.images import write_images_csv, write_images_npz, write_progress_csv
 from testbed.run.interrupts import deferred_interrupts
 from testbed.run.runner import RunResult
@@ -45,9 +47,6 @@ __all__ = [
 ]
 
 METRICS_FILE = "metrics.json"
-_TMP_PREFIX = ".tmp-"
-_UMASK = os.umask(0o022)
-os.umask(_UMASK)  # read once: the process's file-creation mask
 
 PlotWriter = Callable[[RunResult, Path], list[Path]]
 """Writes a run's plots into a directory, returns the files written."""
@@ -105,32 +104,6 @@ def json_ready(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
-
-
-def replace_atomically(write: Callable[[Path], object], path: Path) -> Path:
-    """Write through ``write(tmp)`` to a temporary name beside ``path``, then rename.
-
-    The temporary file is made new, under a name no one chose beforehand (``mkstemp``): a
-    link planted at a fixed name would have had the results written through it.
-
-    Raises:
-        OSError: the write failed (a full disk): its ``filename`` is ``path``.
-    """
-    tmp = path
-    try:
-        handle, name = tempfile.mkstemp(prefix=f"{_TMP_PREFIX}{path.name}.", dir=path.parent)
-        os.fchmod(handle, 0o666 & ~_UMASK)  # as open() would make it (mkstemp makes 0600)
-        os.close(handle)
-        tmp = Path(name)
-        write(tmp)
-        os.replace(tmp, path)
-    except OSError as err:  # name the file the user knows, not the temporary one
-        raise OSError(err.errno, err.strerror, str(path)) from err
-    finally:
-        if tmp != path:
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
-    return path
 
 
 def _remove_leftovers(out_dir: Path) -> None:
@@ -236,8 +209,9 @@ def write_run(
                 break
             written.clear()  # before them: write them now (nothing accepted is lost), then go on
     if plots is not None and interrupted is None:
-        staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
+        staging: Path | None = None
         try:
+            staging = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, dir=out_dir))
             for made in plots(result, staging):
                 target = out_dir / made.name
                 os.replace(made, target)
@@ -245,7 +219,8 @@ def write_run(
         except KeyboardInterrupt as interrupt:  # Ctrl-C while plotting: the results first
             interrupted = interrupt
         finally:
-            shutil.rmtree(staging, ignore_errors=True)
+            if staging is not None:
+                shutil.rmtree(staging, ignore_errors=True)
     with deferred_interrupts() as late:
         names = {path.name for path in written}
         for stale in previous:

@@ -9,6 +9,9 @@ the trials the mean and the sample standard deviation (``ddof = 1``) of each, ov
 where the value is finite (``n`` says how many). An interrupt (Ctrl-C, SIGTERM) during trial
 ``K`` keeps trials ``1 … K−1`` and ``K``'s partial outputs (no plots), and ``trials.json`` then
 covers the finished trials only, with ``"complete": false`` and the interrupted trial named.
+One that comes while a trial that ran to its end is written (its plots drawn) or while the
+trials figure is drawn ends no trial part way: that trial is finished (its data and
+``metrics.json`` are written whole first) and ``interrupted_trial`` is null.
 An error that ends trial ``K`` (a pilot of the user's that raises, say) keeps the same, with
 ``K``'s partial outputs carrying the error (``"failure"``) and ``"failed_trial": K``, and is
 then raised.
@@ -29,8 +32,14 @@ from typing import Any
 import numpy as np
 
 from testbed.run.failures import keep_trial, partial_run
-from testbed.run.interrupts import interrupt_of
-from testbed.run.outputs import PlotWriter, remove_run_results, write_json_atomic, write_run
+from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.outputs import (
+    METRICS_FILE,
+    PlotWriter,
+    remove_run_results,
+    write_json_atomic,
+    write_run,
+)
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario_config import Scenario
 
@@ -248,30 +257,47 @@ def run_trials(
                 stopped, interrupted, reached_s = result.stopped, k, result.metrics["sim_s"]
                 files += write_run(result, trial_dir(out, k))
                 break
-            files += write_run(result, trial_dir(out, k), plots=plots)
-        except BaseException as error:  # an interrupt between runs or while writing one
+        except BaseException as error:  # an interrupt between runs, or an error
             if (stopped := interrupt_of(error)) is None:  # an error ended trial k
                 _keep_failed(scenario, first, finished, out, k, partial_run(error))
                 keep_trial(error, k)
                 raise
             interrupted = k
             break
+        try:
+            files += write_run(result, trial_dir(out, k), plots=plots)
+        except KeyboardInterrupt as interrupt:  # trial k is whole: write_run wrote its data and
+            stopped = interrupt  # metrics.json before raising, only its plots are cut short
+            if not (trial_dir(out, k) / METRICS_FILE).exists():  # it came before writing began
+                files += _write_whole(result, trial_dir(out, k))
         finished.append(result)
         tracks.append(_track(k, result))
         if on_trial is not None:
             on_trial(k, result)
-    document = trials_document(scenario, first, finished, interrupted)
-    files.append(write_json_atomic(out / TRIALS_FILE, document))
-    written = len(finished) if interrupted is None else interrupted
-    remove_trials(out, keep=written, keep_summary=True)  # an earlier run's, under --force
-    remove_run_results(out)
+        if stopped is not None:
+            break
+    with deferred_interrupts() as late:  # the summary whole, even on a Ctrl-C now
+        document = trials_document(scenario, first, finished, interrupted)
+        files.append(write_json_atomic(out / TRIALS_FILE, document))
+        written = len(finished) if interrupted is None else interrupted
+        remove_trials(out, keep=written, keep_summary=True)  # an earlier run's, under --force
+        remove_run_results(out)
+    stopped = stopped or (late[0] if late else None)
     mission = scenario.vehicle.autonomy is not None  # the figure draws missions' tracks
+    (out / TRIALS_PLOT).unlink(missing_ok=True)  # an earlier run's figure of other trials
     if trials_plot is not None and stopped is None and tracks and mission:
         title = f"{scenario.id}: {len(tracks)} trials, seeds {first}…{first + len(tracks) - 1}"
-        files.append(trials_plot(tracks, out / TRIALS_PLOT, title))
-    else:
-        (out / TRIALS_PLOT).unlink(missing_ok=True)  # an earlier run's figure of other trials
+        try:
+            files.append(trials_plot(tracks, out / TRIALS_PLOT, title))
+        except KeyboardInterrupt as interrupt:  # the trials and trials.json are written
+            stopped = interrupt
     return TrialsResult(scenario, document, tracks, stopped, reached_s, files)
+
+
+def _write_whole(result: RunResult, out_dir: Path) -> list[Path]:
+    """Write a finished trial without plots, an interrupt during it honoured after it."""
+    with deferred_interrupts():  # the caller already stops for the interrupt that came first
+        return write_run(result, out_dir)
 
 
 def _keep_failed(
