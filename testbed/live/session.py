@@ -58,7 +58,7 @@ from testbed.live.monitor import LinkMonitor, latency_ms
 from testbed.operator.live_pilot import LivePilot
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import ImageSettings
-from testbed.run.failures import reduce_run
+from testbed.run.failures import reduce_run, run_error
 from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import POLL_S, FrameLedger, HilModem, poll_modems
 from testbed.run.images import image_source_factory, settings_schedule
@@ -246,11 +246,10 @@ class LiveSession:
         try:
             env.run(until=duration_s)
         except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
-            if (stopped := interrupt_of(error)) is None:
-                if not isinstance(error, Exception):
-                    self.vehicle.close()
-                    raise
-                failed = error  # an error part way (a control law of the user's): keep what ran
+            # an error part way (a control law of the user's) keeps what ran too
+            if (stopped := interrupt_of(error)) is None and (failed := run_error(error)) is None:
+                self.vehicle.close()
+                raise
         with deferred_interrupts() as closing:  # a second Ctrl-C: the session is ending anyway
             wall_s = time.perf_counter() - start
             self.vehicle.close()

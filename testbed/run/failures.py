@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from testbed.run.runner import RunResult
 
 __all__ = [
+    "RunExit",
     "describe",
     "failed_trial",
     "keep_partial",
@@ -32,10 +33,36 @@ __all__ = [
     "partial_run",
     "raised_in_user_code",
     "reduce_run",
+    "run_error",
 ]
 
 _PARTIAL = "testbed_partial_run"
 _TRIAL = "testbed_failed_trial"
+
+
+class RunExit(Exception):  # noqa: N818  # named for what it is, as SystemExit is
+    """``sys.exit()`` called inside a run (by a pilot, link model or control law of the
+    user's): the run's error like any other its code raises, not the program's exit. It has
+    the ``SystemExit``'s traceback and ``code`` and is caused by it (so :func:`describe` names
+    the user's line)."""
+
+    def __init__(self, code: object) -> None:
+        super().__init__(f"sys.exit({code!r}) called during the run")
+        self.code = code
+
+
+def run_error(error: BaseException) -> Exception | None:
+    """The error a run that ``error`` ended part way keeps what ran for: ``error`` itself, or
+    for a ``SystemExit`` a :class:`RunExit` caused by it (a sweep's process-pool worker then
+    records a failed run instead of the whole sweep exiting, and ``testbed run`` keeps what
+    ran); None for what ends no run (``GeneratorExit``, an interrupt: the caller's to take)."""
+    if isinstance(error, Exception):
+        return error
+    if isinstance(error, SystemExit):
+        exit_error = RunExit(error.code).with_traceback(error.__traceback__)
+        exit_error.__cause__ = error  # simpy raised a copy of the user's, caused by it
+        return exit_error
+    return None
 
 
 def describe(error: BaseException) -> str:

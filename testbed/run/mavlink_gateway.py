@@ -48,7 +48,7 @@ from testbed.mavlink.shore import LinkFacts, ShoreEndpoint
 from testbed.operator.pilots import PilotSample
 from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.protocol import encode_frame
-from testbed.run.failures import reduce_run
+from testbed.run.failures import reduce_run, run_error
 from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import FrameLedger, HilModem, run_poll
 from testbed.run.images import image_source_factory
@@ -384,10 +384,11 @@ def run_gateway(
         start = time.perf_counter()
         env.run(until=simpy.AnyOf(env, [process, env.timeout(duration)]))
     except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
-        if (stopped := interrupt_of(error)) is None:
-            if start is None or not isinstance(error, Exception):  # nothing ran yet
-                raise
-            failed = error  # an error part way (a control law of the user's): keep what ran
+        # an error part way (a control law of the user's) keeps what ran, unless nothing ran yet
+        if (stopped := interrupt_of(error)) is None and (
+            start is None or (failed := run_error(error)) is None
+        ):
+            raise
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:

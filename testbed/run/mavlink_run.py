@@ -48,7 +48,7 @@ from testbed.mavlink import EndpointOptions, ServoOutputs, VehicleEndpoint, serv
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
-from testbed.run.failures import reduce_run
+from testbed.run.failures import reduce_run, run_error
 from testbed.run.interrupts import interrupt_of
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws
@@ -308,10 +308,11 @@ def run_mavlink(
         start = time.perf_counter()
         env.run(until=process)  # the duration, or the stop event, whichever comes first
     except BaseException as error:  # Ctrl-C or SIGTERM (also wrapped): keep what ran
-        if (stopped := interrupt_of(error)) is None:
-            if start is None or not isinstance(error, Exception):  # nothing ran yet
-                raise
-            failed = error  # an error part way (a control law of the user's): keep what ran
+        # an error part way (a control law of the user's) keeps what ran, unless nothing ran yet
+        if (stopped := interrupt_of(error)) is None and (
+            start is None or (failed := run_error(error)) is None
+        ):
+            raise
     finally:
         wall_s = 0.0 if start is None else time.perf_counter() - start
         if node is not None:

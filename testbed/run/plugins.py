@@ -135,8 +135,8 @@ def load_factory(target: str, where: str, key: str) -> Callable[..., Any]:
         module = _import_file(Path(module_part)) if target_file(target) else None
         if module is None:
             module = _import_module(module_part)
-    except Exception as error:  # the user's module failed: its own error, in one line
-        message = f"{type(error).__name__}: {error}"
+    except (Exception, SystemExit) as error:  # the user's module failed (or called sys.exit at
+        message = f"{type(error).__name__}: {error}"  # import): its own error, in one line
         if isinstance(error, ModuleNotFoundError) and error.name == module_part:
             message += f" (a file is named as '{module_part}{PYTHON_SUFFIX}:{name}')"
         raise ConfigError(f"{where}: {key}: importing {module_part} failed: {message}") from None
@@ -278,7 +278,7 @@ def call_factory(
     arguments ``args_key`` with them (the scenario's, or a ``--set``'s)."""
     try:
         return factory(*positional, **kwargs)
-    except Exception as error:
+    except (Exception, SystemExit) as error:  # sys.exit in a factory: its error, not our exit
         given = {k: v for k, v in kwargs.items() if k != "rng"}
         called = f" (called with {args_key} = {shown(given)})" if given else ""
         raise ConfigError(f"{where}: {key}{called}: {type(error).__name__}: {error}") from None

@@ -39,7 +39,7 @@ import simpy.rt
 
 from testbed.channel import Trace
 from testbed.hil import LinkEndpoint
-from testbed.run.failures import reduce_run
+from testbed.run.failures import reduce_run, run_error
 from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import DIRECTIONS, POLL_S, FrameLedger, HilModem, run_poll
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
@@ -156,11 +156,12 @@ def run_hil(
             on_start()
         env.run(until=duration)
     except BaseException as error:  # Ctrl-C or SIGTERM: keep what ran, marked partial
-        if (stopped := interrupt_of(error)) is None:
-            if start is None or not isinstance(error, Exception):  # nothing ran yet
-                _close(vehicle_node, endpoints)
-                raise
-            failed = error  # an error part way (a pilot of the user's): keep what ran too
+        # an error part way (a pilot of the user's) keeps what ran too, unless nothing ran yet
+        if (stopped := interrupt_of(error)) is None and (
+            start is None or (failed := run_error(error)) is None
+        ):
+            _close(vehicle_node, endpoints)
+            raise
     with deferred_interrupts() as closing:  # a second Ctrl-C: the run is ending anyway
         wall_s = 0.0 if start is None else time.perf_counter() - start
         _close(vehicle_node, endpoints)

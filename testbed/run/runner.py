@@ -29,7 +29,7 @@ from testbed.common.components import ControlMode, MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.pilots import Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
-from testbed.run.failures import reduce_run
+from testbed.run.failures import reduce_run, run_error
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
@@ -326,11 +326,9 @@ def run_scenario(
         with long_lived_frozen():
             env.run(until=scenario.duration_s)
     except BaseException as error:  # keep what ran (the caller writes it, marked)
-        if (stopped := interrupt_of(error)) is None:
-            if not isinstance(error, Exception):  # SystemExit, GeneratorExit: not a run's
-                vehicle.close()
-                raise
-            failed = error
+        if (stopped := interrupt_of(error)) is None and (failed := run_error(error)) is None:
+            vehicle.close()  # GeneratorExit: not a run's
+            raise
     wall_s = time.perf_counter() - start
 
     def reduce(failure: str | None) -> RunResult:
