@@ -162,19 +162,32 @@ def to_float(value: Any, source: str, key: str) -> float:
         ) from None
 
 
+MAX_CONFIG_CHARS = 16 * 2**20
+"""The longest configuration file read [characters]: the largest packaged one is ≈ 7 kB. A path
+to a device that never ends (``/dev/zero``) was read until the process was killed for memory."""
+
+
 def read_text(path: str | Path) -> str:
-    """A configuration file's text (UTF-8).
+    """A configuration file's text (UTF-8), at most :data:`MAX_CONFIG_CHARS` characters.
 
     Raises:
-        ConfigError: the file is missing or unreadable (message names the file).
+        ConfigError: the file is missing, unreadable or longer than that (message names the
+            file).
     """
     path = Path(path)
     try:
-        return path.read_text(encoding="utf-8")
+        with path.open(encoding="utf-8") as handle:
+            text = handle.read(MAX_CONFIG_CHARS + 1)
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(f"{path}: cannot read: {err}") from None
+    if len(text) > MAX_CONFIG_CHARS:
+        raise ConfigError(
+            f"{path}: cannot read: longer than {MAX_CONFIG_CHARS} characters, "
+            "not a configuration file"
+        )
+    return text
 
 
 _PARSED: dict[str, dict[str, Any]] = {}

@@ -1,0 +1,40 @@
+"""A configuration path that never ends: ``testbed run /dev/zero``, ``testbed sweep /dev/zero``.
+
+Every configuration file (scenario, sweep, preset, model, layout, mission…) is read by
+``testbed.config.read_text``, which read the whole file: a device that never ends was read
+until the kernel killed the process for its memory (exit 137, not a line). It now reads at
+most ``MAX_CONFIG_CHARS`` and says so in one line, exit 2.
+
+The child runs under a 4-GiB address-space limit, so the unbounded read ends in a
+``MemoryError`` within seconds instead of exhausting the test machine's memory.
+"""
+
+from __future__ import annotations
+
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ADDRESS_SPACE_B = 4 * 2**30  # numba's and LLVM's mappings need ≈ 1–2 GiB; the read needs less
+
+
+def _limited() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE_B, ADDRESS_SPACE_B))
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_an_endless_configuration_file_is_one_line_exit_2(command: str, tmp_path: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "testbed", command, "/dev/zero", "--out", f"{tmp_path}/out"],
+        capture_output=True,
+        text=True,
+        timeout=300.0,
+        preexec_fn=_limited,
+    )
+    assert done.returncode == 2, done.stderr[-2000:]
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed: error: /dev/zero: cannot read: ")
+    assert lines[0].endswith(" characters, not a configuration file")
