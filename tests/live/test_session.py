@@ -1,5 +1,11 @@
 """LiveSession's hooks applied to a built (not running) session: the link model changes, the
-orders queue up, refusals are recorded, and the console's state is plain JSON."""
+orders queue up, refusals are recorded, and the console's state is plain JSON.
+
+The sessions these tests run (no console, no modem, no wall-clock figure asserted) run
+unpaced (the ``unpaced`` fixture): what they check happens in simulated time, the same whether
+the real-time clock waits for the wall clock or not (the session's clock is ``strict=False``,
+so running ahead of or behind it changes nothing but the waiting). The real-time sessions are
+test_browser.py's, test_console_page.py's and test_hil_live.py's."""
 
 from __future__ import annotations
 
@@ -9,6 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import simpy.rt
 
 from testbed.common.components import ControlMode, ModeRequest
 from testbed.live.console_state import console_state
@@ -24,6 +31,21 @@ from testbed.live.messages import (
 from testbed.live.session import GOTO_NO_FIX, GOTO_REFUSED, LiveSession
 from testbed.run.failures import partial_run
 from testbed.run.scenario import load_scenario
+
+
+class _Unpaced(simpy.rt.RealtimeEnvironment):
+    """simpy's real-time environment at factor 0: every event is due at the instant the clock
+    started, so it never sleeps; events run in the same order at the same simulated times."""
+
+    def __init__(self, initial_time: float = 0, factor: float = 1.0, strict: bool = True) -> None:
+        del factor
+        super().__init__(initial_time, factor=0.0, strict=strict)
+
+
+@pytest.fixture
+def unpaced(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Sessions built in the test run unpaced (:class:`_Unpaced`)."""
+    monkeypatch.setattr(simpy.rt, "RealtimeEnvironment", _Unpaced)
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +110,7 @@ def test_the_state_is_plain_json(session: LiveSession) -> None:
     ("name", "refused"), [("s100-thruster-failure-v1", True), ("s100-supervised-v1", False)]
 )
 def test_a_goto_to_a_vehicle_that_knows_no_position_is_refused_with_a_note(
-    name: str, refused: bool
+    name: str, refused: bool, unpaced: None
 ) -> None:
     """A review's click went out as a GoTo and left the vehicle in GUIDED holding still, with
     nothing said: a vehicle with no position fix and no navigation cannot fly to a point (its
@@ -109,7 +131,9 @@ def test_a_goto_to_a_vehicle_that_knows_no_position_is_refused_with_a_note(
         session.vehicle.close()
 
 
-def test_the_console_says_the_mode_asked_at_once_and_the_last_asked_is_the_one_sent() -> None:
+def test_the_console_says_the_mode_asked_at_once_and_the_last_asked_is_the_one_sent(
+    unpaced: None,
+) -> None:
     """The state's ``pilot.mode`` is the session plan's mode until the pilot asks, then the
     mode asked, from the moment the message is taken (the menu shows it, not a stale one until
     the next operator frame); a go-to asks GUIDED; asked in one frame, the later ask wins: a
@@ -157,7 +181,9 @@ def test_a_vehicle_under_autonomy_gives_no_stick_to_vehicle_latency() -> None:
             session.vehicle.close()
 
 
-def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(tmp_path: Path) -> None:
+def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(
+    tmp_path: Path, unpaced: None
+) -> None:
     """As ``testbed run`` and ``testbed hil``: the error is raised carrying the session up to it
     (it raised with a traceback and nothing kept). The scenario arms in depth hold by itself, so
     the law flies, and raises, without a console."""
@@ -181,12 +207,15 @@ def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(tmp_path: Path) -
     assert (last.node, last.kind) == ("testbed", "failed")
 
 
-def test_a_half_duplex_link_counts_its_deaf_losses_in_the_panel_and_the_metrics() -> None:
+def test_a_half_duplex_link_counts_its_deaf_losses_in_the_panel_and_the_metrics(
+    unpaced: None,
+) -> None:
     """On s2c the vehicle's replies outlast the token gap: each is lost to ``deaf`` (the
     operator transmitting the next order). The panel counts them as collided, and metrics.json
     has them as collided and as ``copies_lost_transmitting``, as ``testbed run`` writes it
     (a live session lacked that key). Truth: the trace's ``deaf`` events."""
-    session = LiveSession(load_scenario("s100-teleop-v1", ["link.preset=s2c"]), Hub(), pilot=None)
+    scenario = load_scenario("s100-teleop-v1", ["link.preset=s2c"])
+    session = LiveSession(scenario, Hub(), pilot=None)
     result = session.run(3.0)
     deaf = {
         direction: sum(
