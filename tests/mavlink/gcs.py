@@ -151,6 +151,15 @@ class SimGcs:
 
         return each
 
+    def enter_guided(self) -> None:
+        """Armed, depth held (ALT_HOLD, 2) for 1 s, then GUIDED (4) for 1 s (a heartbeat a
+        second; the scenario's vehicle has a position fix)."""
+        self.send(self.heartbeat(), self.arm(), self.set_mode(2))
+        self.run(1.0, self.flying())
+        self.send(self.set_mode(4))
+        self.run(1.01, self.flying())
+        assert self.last("HEARTBEAT").custom_mode == 4
+
     def truth_depth_m(self) -> float:
         return float(self.vehicle.truth.position_ned_m[2])
 

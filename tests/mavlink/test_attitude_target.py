@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -28,13 +27,6 @@ ATTITUDE_IGNORE = 128
 RATES_IGNORED = 7  # body roll, pitch, yaw rates ignored (ArduSub never reads them)
 WPNAV_SPEED_DN_M_S = 1.5  # the table's WPNAV_SPEED_DN 150 cm/s (ArduSub's default)
 WPNAV_SPEED_UP_M_S = 2.5  # WPNAV_SPEED_UP 250 cm/s
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def attitude(
@@ -56,15 +48,6 @@ def truth_euler_deg(gcs: SimGcs) -> tuple[float, float, float]:
     return math.degrees(roll), math.degrees(pitch), math.degrees(yaw)
 
 
-def guided(gcs: SimGcs) -> None:
-    """Armed, depth held, then GUIDED (the scenario's vehicle has a position fix)."""
-    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
-    gcs.run(1.0, gcs.flying())
-    gcs.send(gcs.set_mode(4))
-    gcs.run(1.01, gcs.flying())  # a heartbeat a second
-    assert gcs.last("HEARTBEAT").custom_mode == 4
-
-
 def stream(gcs: SimGcs, seconds: float, message: Any) -> None:
     """``message`` at 4 Hz for ``seconds`` (with the sticks at 25 Hz)."""
     sticks = gcs.flying()
@@ -76,7 +59,7 @@ def stream(gcs: SimGcs, seconds: float, message: Any) -> None:
 
 
 def test_guided_drops_its_position_target_and_turns_to_the_heading(gcs: SimGcs) -> None:
-    guided(gcs)
+    gcs.enter_guided()
     ahead = gcs.mav.set_position_target_local_ned_encode(
         0, 1, 1, mav.MAV_FRAME_BODY_OFFSET_NED, 0b1101_1111_1000, 4, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0
     )
@@ -102,7 +85,7 @@ def test_guided_drops_its_position_target_and_turns_to_the_heading(gcs: SimGcs) 
 def test_guided_thrust_is_a_climb_rate_until_a_second_after_the_last_message(
     gcs: SimGcs,
 ) -> None:
-    guided(gcs)
+    gcs.enter_guided()
     depth0 = gcs.endpoint.snapshot_now().depth_m  # the depth the target integrates from
     # thrust 0.3: (0.3 − 0.5) × 2 × 1.5 m/s = 0.6 m/s down, from the first message to 1 s after
     # the last (4 Hz for 2 s: the last at 1.75 s)
@@ -123,7 +106,7 @@ def test_guided_thrust_is_a_climb_rate_until_a_second_after_the_last_message(
 
 def test_guided_roll_is_limited_to_angle_max_and_levels_after_the_timeout(gcs: SimGcs) -> None:
     gcs.send(gcs.param_set("ANGLE_MAX", 1000))  # 10°
-    guided(gcs)
+    gcs.enter_guided()
     yaw = truth_euler_deg(gcs)[2]
     stream(gcs, 6.0, attitude(gcs, roll_deg=30.0, yaw_deg=yaw))
     setpoint = gcs.vehicle.world.get(gcs.vehicle.operator_entity, AttitudeSetpoint)
@@ -212,7 +195,7 @@ def test_other_modes_masks_and_malformed_values_are_counted_not_acted_on(gcs: Si
     gcs.send(attitude(gcs, yaw_deg=90.0))  # MANUAL: no mode flies it
     gcs.run(0.1, gcs.flying())
     assert gcs.endpoint.rejected["not_guided"] == 1
-    guided(gcs)
+    gcs.enter_guided()
     gcs.send(
         attitude(gcs, yaw_deg=90.0, mask=THROTTLE_IGNORE),  # stored for ALT_HOLD, not flown
         attitude(gcs, yaw_deg=90.0, mask=ATTITUDE_IGNORE),

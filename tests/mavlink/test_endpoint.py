@@ -4,7 +4,6 @@ simulated time: connect, version, parameters, modes, arming, sticks, gating, fai
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -16,13 +15,6 @@ from tests.mavlink.gcs import SimGcs
 
 ACCEPTED = mav.MAV_RESULT_ACCEPTED
 FAILED = mav.MAV_RESULT_FAILED
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def acks(gcs: SimGcs, cmd: int) -> list[int]:

@@ -10,7 +10,6 @@ by those metres (within the GUIDED loop's 5-cm arrival tolerance plus the 1e-7°
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -26,13 +25,6 @@ ACCELERATION = 0b1100_0011_1000  # x, y, z and the acceleration used
 Z_IGNORE = 0b100
 TOLERANCE_M = 0.05 + 0.02  # the GUIDED loop's arrival + 1e-7° of latitude (1.1 cm) twice
 ACCEPTED, DENIED, FAILED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_DENIED, mav.MAV_RESULT_FAILED
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def offset_e7(gcs: SimGcs, north_m: float, east_m: float) -> tuple[int, int]:

@@ -6,7 +6,6 @@ never reads."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -31,13 +30,6 @@ TOLERANCE_M = 0.05
 still water; its gain k_v·k_p = 24 N/m turns 5 mm of noise into 0.1 N) and 1.6 % of the 3.16-m
 leg; the approach's exponential tail (time constant 1/k_p = 1.25 s) crosses it ≈ 2.9 s after
 the speed limit lets go at 0.5/k_p = 0.63 m."""
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def mode_acks(gcs: SimGcs) -> list[int]:

@@ -11,7 +11,6 @@ GUIDED entered again flies no earlier target (the same mode requested again chan
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -34,13 +33,6 @@ STOPPED_M = 0.1
 settling on the reported position, the fix's 5-mm noise and the last of the coast (measured
 1.2 cm directly, 2.3 cm through the gateway, whose reported position is 0.5 s old); the old
 target was 1.6–2 m on."""
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def heading_deg(gateway: SimGateway) -> float:

@@ -16,7 +16,6 @@ targets and modes)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -32,22 +31,6 @@ RATE_ONLY = 0b0101_1111_1000  # a position, the yaw ignored, the yaw rate used
 NO_YAW = 0b1101_1111_1000  # a position only (MAVProxy's `position` sends 3576, the same + FORCE)
 SLEW_DEG_S = 60.0  # AUTO_YAW_SLEW_RATE
 HEADING_TOLERANCE_DEG = 3.0  # the heading hold's settling (test_guided.py, test_attitude_target)
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
-
-
-def guided(gcs: SimGcs) -> None:
-    """Armed, depth held, then GUIDED."""
-    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
-    gcs.run(1.0, gcs.flying())
-    gcs.send(gcs.set_mode(4))
-    gcs.run(1.01, gcs.flying())
-    assert gcs.last("HEARTBEAT").custom_mode == 4
 
 
 def target(
@@ -98,7 +81,7 @@ def ardusub_direction(yaw_deg: float, heading: float) -> int:
 def test_in_body_ned_and_body_frd_the_yaw_is_a_heading_from_north(gcs: SimGcs, frame: int) -> None:
     """ArduSub's ``yaw_relative`` is true in BODY_OFFSET_NED only: facing east, a BODY_NED or
     BODY_FRD target with yaw 0.5 rad turns the vehicle to 28.6° from north, not 90° + 28.6°."""
-    guided(gcs)
+    gcs.enter_guided()
     face(gcs, 90.0)
     gcs.send(target(gcs, frame, YAW, 0.5))
     gcs.run(6.0, gcs.flying())
@@ -112,7 +95,7 @@ def test_in_body_offset_ned_the_yaw_is_relative_turned_by_ardusubs_direction(
     """BODY_OFFSET_NED: the look-at heading is the held heading plus the yaw, or minus it when
     ArduSub's direction (the degrees wrapped as radians) is negative: +0.5 rad turns right
     facing east and left facing north."""
-    guided(gcs)
+    gcs.enter_guided()
     face(gcs, start)
     yaw_deg = math.degrees(0.5)
     direction = ardusub_direction(yaw_deg, start)
@@ -132,7 +115,7 @@ def turn_rate_deg_s(gcs: SimGcs, seconds: float) -> float:
 def test_a_yaw_is_slewed_to_at_sixty_degrees_a_second_or_at_the_yaw_rate(gcs: SimGcs) -> None:
     """Without a yaw rate the look-at heading is slewed to at AUTO_YAW_SLEW_RATE, 60°/s; with
     0.2 rad/s (11.46°/s) at the int16 it is stored in, 11°/s; either way it ends on the yaw."""
-    guided(gcs)
+    gcs.enter_guided()
     face(gcs, 0.0)
     gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, YAW, math.radians(90.0), 0.0, here(gcs)))
     gcs.run(0.5, gcs.flying())  # the heading hold's lag behind the slewing target settled
@@ -153,7 +136,7 @@ def test_a_negative_yaw_rate_turns_the_long_way(gcs: SimGcs) -> None:
     """The slew min(rate, 60°/s) keeps a negative rate's sign, and the slew is multiplied by
     the direction toward the look-at heading: 30° to the right at −0.2 rad/s turns left at
     11°/s, round to it."""
-    guided(gcs)
+    gcs.enter_guided()
     face(gcs, 0.0)
     gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, YAW_AND_RATE, math.radians(30.0), -0.2))
     gcs.run(1.0, gcs.flying())
@@ -166,7 +149,7 @@ def test_a_yaw_rate_alone_turns_for_ever_and_the_state_outlives_the_target(gcs: 
     global target, which sets no yaw state, leaves it turning; a local target that ignores
     both clears ``yaw_rate_only``, and the look-at heading it never set (north, from boot) is
     slewed back to at the last slew, 17°/s."""
-    guided(gcs)
+    gcs.enter_guided()
     gcs.send(target(gcs, mav.MAV_FRAME_LOCAL_NED, RATE_ONLY, 0.0, 0.3, here(gcs)))
     gcs.run(1.0, gcs.flying())
     assert turn_rate_deg_s(gcs, 8.0) == pytest.approx(17.0, abs=0.3)
@@ -189,7 +172,7 @@ def test_a_target_that_ignores_the_yaw_turns_back_to_the_last_yaw_asked(gcs: Sim
     SET_ATTITUDE_TARGET's angle control turns the vehicle to 0°; a position target that
     ignores the yaw then turns it back to 90° (ArduSub's loop picks AUTO_YAW_LOOK_AT_HEADING
     again), where it had been kept at 0° before."""
-    guided(gcs)
+    gcs.enter_guided()
     face(gcs, 90.0)
     q = quat_from_euler(0.0, 0.0, 0.0)
     for _ in range(8):
@@ -205,7 +188,7 @@ def test_a_target_that_ignores_the_yaw_turns_back_to_the_last_yaw_asked(gcs: Sim
 def test_a_yaw_or_yaw_rate_is_read_only_when_used(gcs: SimGcs) -> None:
     """A NaN in an ignored yaw or yaw rate is not read (it used to refuse the target); a NaN
     in a used one, or a rate below the int16 °/s ArduSub stores, is ``bad_field``."""
-    guided(gcs)
+    gcs.enter_guided()
     start = here(gcs)
     goal = (start[0] + 1.0, start[1], start[2])
     gcs.send(

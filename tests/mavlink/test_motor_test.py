@@ -10,7 +10,6 @@ above 1500 µs on motor 1 must yaw the physics truth right while it backs and sl
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -30,13 +29,6 @@ from tests.mavlink.rt_session import GatewaySession
 ACCEPTED, FAILED = mav.MAV_RESULT_ACCEPTED, mav.MAV_RESULT_FAILED
 PWM, PERCENT, PILOT = 1, 0, 2  # MOTOR_TEST_THROTTLE_TYPE
 BOARD = 2  # MOTOR_TEST_ORDER_BOARD
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def motor_test(

@@ -13,7 +13,7 @@ to the timeout; and while the target moves the truth's speed is the commanded on
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -36,22 +36,6 @@ TIMEOUT_S = 3.0  # GUIDED_POSVEL_TIMEOUT_MS
 WPNAV_SPEED_DN_M_S = 1.5  # the table's WPNAV_SPEED_DN 150 cm/s (ArduSub's default)
 TOLERANCE_M = 0.05  # the GUIDED loop's arrival tolerance (test_guided.py)
 RATE_HZ = 4.0  # the ground station's message rate
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
-
-
-def guided(gcs: SimGcs) -> None:
-    """Armed, depth held, then GUIDED (the scenario's vehicle has a position fix)."""
-    gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
-    gcs.run(1.0, gcs.flying())
-    gcs.send(gcs.set_mode(4))
-    gcs.run(1.01, gcs.flying())
-    assert gcs.last("HEARTBEAT").custom_mode == 4
 
 
 def local(
@@ -94,7 +78,7 @@ def reported(gcs: SimGcs) -> tuple[float, float, float]:
 def test_a_velocity_alone_moves_the_vehicle_at_it_until_three_seconds_after_the_last(
     gcs: SimGcs,
 ) -> None:
-    guided(gcs)
+    gcs.enter_guided()
     velocity = (0.2, -0.1, 0.05)  # north, east, down [m/s]
     start = reported(gcs)  # where ArduSub's velocity controller starts: the estimate
     sent = stream(gcs, 10.0, lambda t: local(gcs, VELOCITY_ONLY, velocity))
@@ -116,7 +100,7 @@ def test_a_velocity_alone_moves_the_vehicle_at_it_until_three_seconds_after_the_
 def test_mavproxys_velocity_command_is_along_the_heading_and_keeps_it(gcs: SimGcs) -> None:
     """MAVProxy's ``velocity 0.3 0 0``: once, in BODY_NED, yaw and its rate ignored: 0.3 m/s
     ahead for ArduSub's 3-s timeout, 0.9 m, the heading kept."""
-    guided(gcs)
+    gcs.enter_guided()
     heading = euler_from_quat(gcs.vehicle.truth.quaternion_wxyz)[2]
     start = reported(gcs)
     gcs.send(local(gcs, MAVPROXY_VELOCITY, (0.3, 0.0, 0.0), frame=mav.MAV_FRAME_BODY_NED))
@@ -134,7 +118,7 @@ def test_a_position_and_velocity_target_moves_from_the_position_given(gcs: SimGc
     trajectory streamed at 4 Hz (the position and its velocity at each instant, as a
     trajectory follower sends them): the vehicle rides it, and stops 3 s of velocity past
     its last point."""
-    guided(gcs)
+    gcs.enter_guided()
     here = reported(gcs)
     position = (here[0] + 1.0, here[1], here[2])
     velocity = (0.0, 0.1, 0.0)
@@ -166,7 +150,7 @@ def test_a_velocity_the_vehicle_cannot_fly_keeps_the_target_on_its_leash(gcs: Si
     controller leashes its target; so after ArduSub's 3 s the vehicle stops within the leash
     of where it was then, not the 6 m on that 2 m/s × 3 s would leave it. Down: the target
     descends at WPNAV_SPEED_DN, 1.5 m/s (ArduSub's posvel limit), 4.5 m."""
-    guided(gcs)
+    gcs.enter_guided()
     gains = PositionGains()
     leash = gains.max_speed_m_s / gains.kp_1_s
     start = reported(gcs)
@@ -188,7 +172,7 @@ def test_a_velocity_the_vehicle_cannot_fly_keeps_the_target_on_its_leash(gcs: Si
 
 
 def test_a_global_velocity_is_north_east_down_whatever_the_frame(gcs: SimGcs) -> None:
-    guided(gcs)
+    gcs.enter_guided()
     start = reported(gcs)
     velocity = (-0.1, 0.2, 0.0)
     terrain = mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT  # no position: the frame is not read
@@ -210,7 +194,7 @@ def test_masks_ardusub_ignores_are_counted_and_other_targets_end_the_motion(
     """An acceleration used, or neither a position nor a velocity: ArduSub flies nothing
     (counted ``unsupported_target``); a NaN velocity is ``bad_field``. A position target, a
     mode change or SET_ATTITUDE_TARGET's angle control ends a moving target."""
-    guided(gcs)
+    gcs.enter_guided()
     intents = gcs.vehicle.operator_entity
     entered = gcs.vehicle.world.get(intents, PositionSetpoint)  # where GUIDED was entered
     assert entered is not None
@@ -231,7 +215,7 @@ def test_masks_ardusub_ignores_are_counted_and_other_targets_end_the_motion(
         gcs.set_mode(2),
     ):
         if gcs.last("HEARTBEAT").custom_mode != 4:
-            guided(gcs)
+            gcs.enter_guided()
         gcs.send(local(gcs, VELOCITY_ONLY, (0.2, 0.0, 0.0)))
         gcs.run(0.5, gcs.flying())
         assert gcs.endpoint.moving_target is not None
