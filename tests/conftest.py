@@ -18,6 +18,7 @@ import each other, and fixtures cannot feed ``@given``.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 os.environ.setdefault("TESTBED_CHECK_KERNELS", "1")  # before testbed.common.jit is imported
 
@@ -38,6 +39,18 @@ def pytest_configure(config: pytest.Config) -> None:
         config.option.numprocesses = 0
         config.option.dist = "no"
         config.option.tx = []
+
+
+@pytest.fixture(scope="module")
+def no_sweep_plots() -> Iterator[None]:
+    """``testbed sweep`` run through ``main`` in this process draws no plots, as ``--no-plots``
+    does for ``testbed run`` (a sweep has no such option): for test modules whose subject is not
+    the plots (``pytestmark = pytest.mark.usefixtures("no_sweep_plots")``). Drawing the BER
+    plots costs about 1 s a sweep, most of a short sweep's time. The plots of real sweeps are
+    tested in tests/report/test_sweep_plots.py, and sweeps run as child processes draw them."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr("testbed.report.sweep_plots.plot_ber_sweep", lambda results, out: [])
+        yield
 
 
 def pytest_sessionstart(session: object) -> None:

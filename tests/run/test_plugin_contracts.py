@@ -23,6 +23,8 @@ from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from tests.run.test_plugins import _scenario_text, write_study
 
+pytestmark = pytest.mark.usefixtures("no_sweep_plots")  # conftest.py: not their subject
+
 BROKEN_LINKS = """
 from testbed.channel import StandardLink
 

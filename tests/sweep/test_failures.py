@@ -18,6 +18,8 @@ from testbed.cli.main import main
 from testbed.sweep import execute_run, read_journal
 from tests.sweep.test_signals import _descendants
 
+pytestmark = pytest.mark.usefixtures("no_sweep_plots")  # conftest.py: not their subject
+
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
 
 

@@ -27,6 +27,8 @@ from testbed.cli.main import main
 from testbed.run.runner import run_scenario
 from testbed.sweep import execute_run, read_journal
 
+pytestmark = pytest.mark.usefixtures("no_sweep_plots")  # conftest.py: not their subject
+
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1", "--workers", "1"]
 
 
@@ -56,7 +58,7 @@ def _runs_in_this_process() -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def done(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+def done(tmp_path_factory: pytest.TempPathFactory, no_sweep_plots: None) -> tuple[Path, Path]:
     """A finished 2-point sweep: (sweep file, results folder)."""
     folder = tmp_path_factory.mktemp("done")
     path, out = _sweep(folder), folder / "out"

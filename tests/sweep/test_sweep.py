@@ -43,6 +43,8 @@ from testbed.sweep import (
     toml_literal,
 )
 
+pytestmark = pytest.mark.usefixtures("no_sweep_plots")  # conftest.py: not their subject
+
 SHORT = ["--set", "duration_s=8", "--set", "metrics.settle_s=1"]
 BER_SWEEP = """\
 schema = 1
@@ -252,7 +254,7 @@ def inline_runs() -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def pool_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+def pool_sweep(tmp_path_factory: pytest.TempPathFactory, no_sweep_plots: None) -> tuple[Path, Path]:
     """The 3 BER × 2 seeds sweep through the local process pool: (sweep file, results dir)."""
     folder = tmp_path_factory.mktemp("pool")
     path = _write_sweep(folder, seeds=2)
