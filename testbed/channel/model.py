@@ -72,6 +72,14 @@ class LinkModelError(ConfigError):
             "bits that differ from the sent ones)"
         )
 
+    @classmethod
+    def state(cls, model: object, t_s: float, value: object, why: str) -> LinkModelError:
+        """The error for ``model.state(t_s)`` having returned ``value`` (``why``: what was
+        wrong with it)."""
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        return cls(f"link model {_described(model)}: state({t_s!r}) returned {shown}: {why}")
+
 
 def wanted_keywords(function: Callable[..., object], offered: tuple[str, ...]) -> tuple[str, ...]:
     """Which of the ``offered`` keyword arguments ``function`` takes (by name, or all of them
@@ -161,6 +169,10 @@ class LinkModel(Protocol):
     Context it may ask for by naming it (see :func:`wanted_keywords`): ``airtime_s`` a
     ``sender`` (the sending node's name: an uplink and a downlink of their own rates), and
     ``error_model`` a ``receiver`` (the receiving node's name).
+
+    A model may also define ``state(t_s) -> Mapping[str, float]``, the figures of its own to
+    record beside a run (``link_state.csv``: :mod:`testbed.run.link_log`); the medium never
+    calls it.
     """
 
     def airtime_s(self, size_bytes: int, t_s: float) -> float:

@@ -63,6 +63,7 @@ from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import POLL_S, FrameLedger, HilModem, poll_modems
 from testbed.run.images import image_source_factory, settings_schedule
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.link_log import LinkStateLog
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws, scenario_link_model
@@ -130,6 +131,7 @@ class LiveSession:
         if endpoints is None:
             rng = np.random.default_rng(link_seed)
             model = scenario_link_model(scenario)
+            self.recorder.link_state = LinkStateLog.of(model)
             self.medium = Medium(env, link.channel, rng, self.recorder.trace, model=model)
         else:
             for role, peer in (("vehicle", "operator"), ("operator", "vehicle")):

@@ -53,6 +53,7 @@ from testbed.run.hil_metrics import hil_metrics
 from testbed.run.hil_modem import FrameLedger, HilModem, run_poll
 from testbed.run.images import image_source_factory
 from testbed.run.interrupts import interrupt_of
+from testbed.run.link_log import LinkStateLog
 from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_section
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
@@ -333,12 +334,10 @@ def run_gateway(
     ledger = FrameLedger()
     poll_lateness: deque[int] = deque(maxlen=SAMPLES_KEPT)
     if hil is None:
+        model = scenario_link_model(scenario)
+        recorder.link_state = LinkStateLog.of(model)
         medium = Medium(
-            env,
-            link.channel,
-            np.random.default_rng(link_seed),
-            recorder.trace,
-            model=scenario_link_model(scenario),
+            env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=model
         )
         for outage in scenario.faults.link_outages:
             medium.add_outage(outage.start_s, outage.end_s)

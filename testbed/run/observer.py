@@ -108,6 +108,8 @@ class VehicleObserver:
         if isinstance(arm, Manipulator):
             assert self._recorder.arm is not None
             self._recorder.arm.record(now, arm)
+        if self._recorder.link_state is not None:
+            self._recorder.link_state.record(now)
         self._next_sample_s += self._sample_period_s
         failsafe = self._last_failsafe
         if self._other_failsafe is not None and self._other_failsafe():

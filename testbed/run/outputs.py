@@ -3,8 +3,8 @@
 :func:`prepare_out_dir` checks ``--out`` before any work starts: it must be creatable and writable,
 not a file, and empty unless the user said ``--force``. :func:`write_run` then writes
 ``events.csv``, ``series.csv``, ``images.csv``, ``images.npz`` and ``image_progress.csv`` (image
-scenarios), ``arm.csv`` (a
-vehicle with an arm) and the plots, each under a temporary name renamed into place, and
+scenarios), ``arm.csv`` (a vehicle with an arm), ``link_state.csv`` (a link model with
+``state``) and the plots, each under a temporary name renamed into place, and
 ``metrics.json`` **last**, carrying ``"complete"`` (true for a run that reached its end, false for
 one ended early by Ctrl-C or SIGTERM, or by an error, whose ``sim_s`` says how far it got; then
 ``"failure"`` is the error in one line) and ``"files"``, the sibling files of this run with their
@@ -199,6 +199,9 @@ def write_run(
                 if recorder.arm is not None:
                     arm_csv = out_dir / "arm.csv"
                     written.append(replace_atomically(recorder.arm.write_csv, arm_csv))
+                if recorder.link_state is not None:
+                    link_csv = out_dir / "link_state.csv"
+                    written.append(replace_atomically(recorder.link_state.write_csv, link_csv))
                 for name, writer in (extras or {}).items():
                     written.append(replace_atomically(writer, out_dir / name))
             interrupted = interrupted or (late[0] if late else None)

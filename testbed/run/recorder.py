@@ -34,6 +34,7 @@ from testbed.run.images import ImageLog
 
 if TYPE_CHECKING:
     from testbed.run.arm_log import ArmLog
+    from testbed.run.link_log import LinkStateLog
 
 __all__ = [
     "SERIES_COLUMNS",
@@ -240,6 +241,8 @@ class Recorder:
             row tuples.
         images: images captured, sent and received (image feedback runs).
         arm: the arm's joints and set tasks (a vehicle with an arm), else None.
+        link_state: a link model's own state, sampled with the series rows (a model with
+            ``state``: :mod:`testbed.run.link_log`), else None.
         stick_source: what the ``cmd_*`` columns hold: ``"pilot"`` (the pilot sampled at each
             row's instant, its continuous stick) or ``"operator samples"`` (a pilot that is not
             a pure function of time: the operator's own samples, held between its frames).
@@ -258,6 +261,7 @@ class Recorder:
     rows: SeriesRows | list[tuple[float, ...]] = field(default_factory=SeriesRows)
     images: ImageLog = field(default_factory=ImageLog)
     arm: ArmLog | None = None
+    link_state: LinkStateLog | None = None
     stick_source: str = "pilot"
 
     def event(self, t_s: float, node: str, kind: str, detail: str = "") -> None:

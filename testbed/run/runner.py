@@ -32,6 +32,7 @@ from testbed.operator.station import OperatorStation, SessionPlan
 from testbed.run.failures import reduce_run, run_error
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
+from testbed.run.link_log import LinkStateLog
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
 from testbed.run.plugins import scenario_control_laws, scenario_link_model, scenario_pilot
@@ -281,6 +282,7 @@ def run_scenario(
     recorder = Recorder(trace=Trace())
     operator_pilot, recorded_pilot = run_pilots(scenario, seed, recorder, pilot)
     model = scenario_link_model(scenario) if link_model is None else link_model
+    recorder.link_state = LinkStateLog.of(model)
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
     link = scenario.link
