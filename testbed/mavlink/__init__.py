@@ -1,7 +1,9 @@
 """MAVLink: the simulated vehicle speaks ArduSub, so a real ground station drives it.
 
 * :mod:`~testbed.mavlink.endpoint` — :class:`VehicleEndpoint`, the sans-IO ArduSub-compatible
-  core (fed bytes and the time, returns packets per :class:`Channel`), a pilot of an ECS world;
+  core (fed bytes and the time, returns packets per :class:`Channel`, one ground-station link:
+  :mod:`~testbed.mavlink.channel`), a pilot of an ECS world, told of the vehicle by its
+  :class:`EndpointOptions` (:mod:`~testbed.mavlink.options`);
   its request handlers in :mod:`~testbed.mavlink.commands` and
   :mod:`~testbed.mavlink.param_protocol`, the pilot's sticks in
   :mod:`~testbed.mavlink.pilot_input`, GUIDED's targets in :mod:`~testbed.mavlink.guided` and
@@ -23,8 +25,10 @@ Imports: ``common``, ``ecs``, ``hil`` (serial transport), pymavlink and the stan
 
 from __future__ import annotations
 
-from .endpoint import OUTBOX_LIMIT, Channel, EndpointOptions, VehicleEndpoint
+from .channel import OUTBOX_LIMIT, Channel
+from .endpoint import VehicleEndpoint
 from .motors import ServoOutputs, servo_outputs
+from .options import EndpointOptions
 from .params import Param, ParamTable, load_params
 from .telemetry import HOME_LAT_LON_DEG, VehicleSnapshot
 from .wire import MavlinkWire

@@ -54,7 +54,8 @@ from testbed.common.components import (
 from testbed.common.geometry import euler_from_quat, quat_from_euler
 
 if TYPE_CHECKING:
-    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+    from testbed.mavlink.channel import Channel
+    from testbed.mavlink.endpoint import VehicleEndpoint
 
 __all__ = [
     "ALT_HOLD_TIMEOUT_S",

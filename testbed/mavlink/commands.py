@@ -44,7 +44,8 @@ from testbed.mavlink.telemetry import MESSAGE_IDS
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+    from testbed.mavlink.channel import Channel
+    from testbed.mavlink.endpoint import VehicleEndpoint
 
 __all__ = [
     "CAPABILITIES",

@@ -1,9 +1,10 @@
 """The ArduSub-compatible vehicle endpoint: a sans-IO MAVLink core that pilots an ECS world.
 
 :class:`VehicleEndpoint` is fed bytes and the time (:meth:`~VehicleEndpoint.receive`) and asked
-for what is due (:meth:`~VehicleEndpoint.update`); each :class:`Channel` (one per ground-station
-link) holds its own parser, stream rates and outbox of encoded packets (:meth:`Channel.take`).
-It has no socket and no clock of its own.
+for what is due (:meth:`~VehicleEndpoint.update`); each
+:class:`~testbed.mavlink.channel.Channel` (one per ground-station link) holds its own parser,
+stream rates and outbox of encoded packets. It has no socket and no clock of its own; what it
+is told of the vehicle is its :class:`~testbed.mavlink.options.EndpointOptions`.
 
 It is a **pilot** of the world it is given, not a second control stack: it writes only the
 operator-owned components (:class:`~testbed.common.components.MovementCommand`,
@@ -26,7 +27,7 @@ and SYSID_THISMAV (what fails the gate is dropped silently and counted;
 (:mod:`testbed.mavlink.failsafe`).
 
 Remote garbage is counted, never raised (:attr:`VehicleEndpoint.rejected` by reason); outboxes
-are bounded (:data:`OUTBOX_LIMIT`).
+are bounded (:data:`~testbed.mavlink.channel.OUTBOX_LIMIT`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ import dataclasses
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -49,7 +49,7 @@ from testbed.common.components import (
     PositionReading,
     PositionSetpoint,
 )
-from testbed.ecs import Entity, Origin, World
+from testbed.ecs import Entity, World
 from testbed.mavlink import commands, guided, guided_yaw, param_protocol, pilot_input
 from testbed.mavlink.ardusub import RcInput, boot_gain, sticks_from_rc
 from testbed.mavlink.attitude_target import (
@@ -58,75 +58,23 @@ from testbed.mavlink.attitude_target import (
     on_set_attitude_target,
     update_attitude_target,
 )
+from testbed.mavlink.channel import OUTBOX_LIMIT, Channel
 from testbed.mavlink.failsafe import FailsafeMonitor
 from testbed.mavlink.motor_test import MotorTest, update_motor_test
-from testbed.mavlink.motors import ServoOutputs
+from testbed.mavlink.options import EndpointOptions
 from testbed.mavlink.params import ParamTable
 from testbed.mavlink.streams import StreamSchedule
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
 from testbed.mavlink.wire import MavlinkWire
 
-__all__ = [
-    "OUTBOX_LIMIT",
-    "POSITION_FIX_TIMEOUT_S",
-    "Channel",
-    "EndpointOptions",
-    "Handler",
-    "VehicleEndpoint",
-]
+__all__ = ["POSITION_FIX_TIMEOUT_S", "Handler", "VehicleEndpoint"]
 
 POSITION_FIX_TIMEOUT_S = 1.0
 """A position fix older than this [s] is no position estimate (GUIDED refused)."""
-OUTBOX_LIMIT = 1024
-"""Packets a channel's outbox holds at most; more are dropped and counted (``outbox_full``)."""
 
 
 Handler = Callable[["VehicleEndpoint", "Channel", mav.MAVLink_message, float, float], None]
 """A message handler: (endpoint, channel, message, now [s], arrival [s])."""
-
-
-@dataclass(frozen=True, slots=True)
-class EndpointOptions:
-    """How the endpoint presents the vehicle.
-
-    Attributes:
-        battery_voltage_v: battery voltage reported [V] (the thrusters' supply).
-        param_overrides: boot values replacing the table's (``FRAME_CONFIG`` of the layout,
-            ``BARO_SPEC_GRAV`` of the depth sensor…).
-        origin: the origin of the endpoint's writes (REMOTE on the vehicle, as a peer's
-            intents arrive; LOCAL in a gateway's operator world).
-        params_per_update: PARAM_VALUEs a channel sends per :meth:`VehicleEndpoint.update`
-            during a parameter download (ArduPilot paces them by link bandwidth).
-        servos: which thruster's pulse each SERVO_OUTPUT_RAW channel carries (ArduSub's motor
-            numbering for an ArduSub frame; by default thruster k on servo k + 1).
-        guided_leash_m: how far a GUIDED target moving at a velocity may run ahead of the
-            reported position, horizontally [m]: the distance from which the vehicle's position
-            loop asks for its top speed (unlimited by default; :mod:`~testbed.mavlink.guided`).
-    """
-
-    battery_voltage_v: float = 14.8
-    param_overrides: dict[str, float] = field(default_factory=dict)
-    origin: Origin = Origin.REMOTE
-    params_per_update: int = 20
-    servos: ServoOutputs = field(default_factory=ServoOutputs)
-    guided_leash_m: float = math.inf
-
-
-class Channel:
-    """One ground-station link: its codec, stream rates, outbox and pending parameter list."""
-
-    def __init__(self, name: str, wire: MavlinkWire, streams: StreamSchedule) -> None:
-        self.name = name
-        self.wire = wire
-        self.streams = streams
-        self.outbox: list[bytes] = []
-        self.param_cursor: int | None = None
-        self.dropped = 0
-
-    def take(self) -> list[bytes]:
-        """The encoded packets queued since the last call, in order."""
-        out, self.outbox = self.outbox, []
-        return out
 
 
 class VehicleEndpoint:

@@ -86,7 +86,8 @@ from testbed.mavlink import guided_yaw
 from testbed.mavlink.telemetry import local_from_global
 
 if TYPE_CHECKING:
-    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+    from testbed.mavlink.channel import Channel
+    from testbed.mavlink.endpoint import VehicleEndpoint
 
 __all__ = [
     "GLOBAL_FRAMES",

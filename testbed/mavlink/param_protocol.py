@@ -19,7 +19,8 @@ from testbed.mavlink.ardusub import FIRMWARE_VERSION, GIT_HASH
 from testbed.mavlink.params import ALIASES
 
 if TYPE_CHECKING:
-    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+    from testbed.mavlink.channel import Channel
+    from testbed.mavlink.endpoint import VehicleEndpoint
 
 __all__ = ["on_param_request_list", "on_param_request_read", "on_param_set", "send_params"]
 

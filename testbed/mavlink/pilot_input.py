@@ -24,7 +24,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from testbed.mavlink.ardusub import manual_control_pwm
 
 if TYPE_CHECKING:
-    from testbed.mavlink.endpoint import Channel, VehicleEndpoint
+    from testbed.mavlink.channel import Channel
+    from testbed.mavlink.endpoint import VehicleEndpoint
 
 __all__ = ["BUTTON_MODES", "on_manual_control", "on_rc_channels_override"]
 

@@ -56,7 +56,9 @@ from testbed.common.components import (
 )
 from testbed.common.geometry import euler_from_quat
 from testbed.ecs import Entity, Origin, World
-from testbed.mavlink.endpoint import Channel, EndpointOptions, VehicleEndpoint
+from testbed.mavlink.channel import Channel
+from testbed.mavlink.endpoint import VehicleEndpoint
+from testbed.mavlink.options import EndpointOptions
 
 __all__ = [
     "DEPTH_KEPT_M",

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from testbed.common.components import ActiveMode, Armed, ControlMode
 from testbed.ecs import World
 from testbed.mavlink import EndpointOptions, MavlinkWire, VehicleEndpoint
-from testbed.mavlink.endpoint import Channel
+from testbed.mavlink.channel import Channel
 from testbed.mavlink.links import Intake, Link, TcpServerLink, UdpLink
 
 WAIT_S = 10.0
