@@ -43,8 +43,12 @@ vehicle → operator (:class:`TeleopVehicleEnd.encode_reply`, :class:`TeleopOper
     :class:`Odometry`, :class:`Armed` and :class:`ActiveMode` become a ``VehicleState`` (1 cm,
     1° heading, 0.05° roll/pitch) in a reply without an image chunk (20-byte frame); a
     vehicle with autonomy sets the state's ready and last-order-cancelled flags from its
-    :class:`MissionStatus` (ready and not cancelled otherwise), which the operator's end keeps
-    as a :class:`MissionStatus` of its own.
+    :class:`MissionStatus`; one without is always ready, and says the last order was
+    cancelled once it has applied a cancel (the bit's rising edge or a ``DisableKeepHeading``:
+    dropping its position goal is all a cancel asks of it) until it takes the next goal order
+    (else the operator's cancel bit stayed up for the rest of the run, and a second cancel with
+    no goal between was no new edge). The operator's end keeps the flags as a
+    :class:`MissionStatus` of its own.
 
 What the wire does not carry is not invented: a ``Move`` has no sample time, so the vehicle
 stamps the :class:`MovementCommand` it writes with the arrival time, and the operator stamps the
@@ -408,6 +412,7 @@ class TeleopVehicleEnd:
         self._arm_held = False  # the last intact Move carried the arm flag
         self._cancel_seq = 0
         self._cancelling = False  # the last intact order carried the cancel bit
+        self._goal_cancelled = False  # (no MissionStatus) a cancel was applied since the last goal
 
     def apply_order(self, payload: bytes, now_s: float) -> bool:
         """Apply an order's intents; False (counted) if the payload is garbled or unsupported."""
@@ -448,6 +453,7 @@ class TeleopVehicleEnd:
                 self.counters.unsupported += 1
                 return False
             world.set(intents, _goal_setpoint(order), origin=Origin.REMOTE)
+            self._goal_cancelled = False  # a new goal: the last order is no longer cancelled
             if isinstance(order, GoTo):  # the vehicle flies its goal in GUIDED
                 world.set(intents, ModeRequest(ControlMode.GUIDED), origin=Origin.REMOTE)
         elif isinstance(order, KeepHeading):
@@ -480,6 +486,7 @@ class TeleopVehicleEnd:
         remove the position goal (GUIDED's position loop lets go of it)."""
         self._cancel_seq += 1
         self.counters.cancels += 1
+        self._goal_cancelled = True
         world = self._world
         world.set(self._intents, GoalCancel(self._cancel_seq), origin=Origin.REMOTE)
         world.remove(self._intents, PositionSetpoint, origin=Origin.REMOTE)
@@ -511,11 +518,14 @@ class TeleopVehicleEnd:
         else:
             position = odometry.position_ned_m
             roll, pitch, yaw = euler_from_quat(odometry.quaternion_wxyz)
+        # A vehicle with autonomy reports its mission's flags; one without has no goal in
+        # progress (ready) and has honoured a cancel once it applied it: dropping the position
+        # goal is all there is to do (until the next goal order it applies).
         mission = world.get(vehicle, MissionStatus)
         state = VehicleState(
             ready=mission is None or mission.ready,
             order_ack_bit=self.order_ack_bit,
-            last_order_cancelled=mission is not None and mission.cancelled,
+            last_order_cancelled=self._goal_cancelled if mission is None else mission.cancelled,
             keeping_heading=mode is not ControlMode.MANUAL,
             armed=armed is not None and armed.armed,
             mode=mode_to_wire(mode),
