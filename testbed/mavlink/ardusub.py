@@ -27,12 +27,14 @@ __all__ = [
     "MAV_MODE_FLAG_SAFETY_ARMED",
     "NEUTRAL_PWM",
     "POSITION_MODES",
+    "ROLL_PITCH_INPUT_MAX",
     "SIMULATED_MODES",
     "STREAM_GROUPS",
     "RcInput",
     "base_mode",
     "manual_control_from_sticks",
     "manual_control_pwm",
+    "rc_angle",
     "sticks_from_rc",
 ]
 
@@ -85,6 +87,9 @@ GIT_HASH = b"testbed0"
 """AUTOPILOT_VERSION.flight_custom_version: 8 characters (a real build's git hash)."""
 
 NEUTRAL_PWM = 1500
+ROLL_PITCH_INPUT_MAX = 4500
+"""ArduSub's ``config.h``: the range of an angle RC channel's ``control_in`` (±4500; the yaw
+channel's too, ``Sub::init_rc_in``)."""
 _PWM_HALF_RANGE = 400.0
 """AP_Motors6DOF reads a channel as (pwm − 1500) / 400 → ±1 (1100..1900 µs)."""
 
@@ -156,6 +161,43 @@ def manual_control_pwm(
         5: round(_clamp(NEUTRAL_PWM + x * rpy_scale, 1100.0, 1900.0)),
         6: round(_clamp(NEUTRAL_PWM + y * rpy_scale, 1100.0, 1900.0)),
     }
+
+
+def _c_div(numerator: int, denominator: int) -> int:
+    """C's integer division: the quotient truncated toward zero."""
+    quotient = abs(numerator) // abs(denominator)
+    return quotient if (numerator < 0) == (denominator < 0) else -quotient
+
+
+def rc_angle(
+    pwm: int, *, minimum: int, trim: int, maximum: int, dead_zone: int, reversed_: bool
+) -> int:
+    """An angle RC channel's ``control_in`` as ArduPilot's ``RC_Channel::pwm_to_angle_dz_trim``
+    computes it (ArduSub's yaw channel: ±:data:`ROLL_PITCH_INPUT_MAX`, RC4_DZ 40 µs by
+    ``set_default_dead_zone``): the pulse constrained to [minimum, maximum], 0 within the dead
+    zone around the trim, else scaled from the dead zone's edge to the end, in int32 arithmetic
+    (the quotient truncated toward zero).
+
+    Args:
+        pwm: the channel's pulse [µs].
+        minimum: RCn_MIN [µs].
+        trim: RCn_TRIM [µs].
+        maximum: RCn_MAX [µs].
+        dead_zone: RCn_DZ [µs].
+        reversed_: RCn_REVERSED.
+
+    Returns:
+        ``control_in`` (1600 µs → 750, 1900 µs → 4500 with the defaults).
+    """
+    high = trim + dead_zone
+    low = trim - dead_zone
+    sign = -1 if reversed_ else 1
+    r_in = minimum if pwm < minimum else maximum if pwm > maximum else pwm  # constrain_int16
+    if r_in > high and maximum != high:
+        return sign * _c_div(ROLL_PITCH_INPUT_MAX * (r_in - high), maximum - high)
+    if r_in < low and low != minimum:
+        return sign * _c_div(ROLL_PITCH_INPUT_MAX * (r_in - low), low - minimum)
+    return 0
 
 
 class RcInput:

@@ -17,15 +17,27 @@ LOCAL_OFFSET_NED, it is a heading from north. Then ``ModeGuided::guided_set_yaw_
   north). The slew (``yaw_look_at_heading_slew``, int16 °/s) is AUTO_YAW_SLEW_RATE (60°/s)
   without a yaw rate (or a rate of 0), else min(rate, 60°/s) truncated toward 0. Not rate-only.
 - yaw rate alone: ``ModeAuto::set_yaw_rate``: slew = min(rate, 60°/s), truncated; rate-only.
-- neither: not rate-only (the look-at heading and the slew stay as they were).
+- neither: not rate-only, auto-yaw HOLD (the look-at heading and the slew stay as they were;
+  the next loop leaves HOLD, below, unless the pilot-input failsafe is active).
 
 That state is ArduSub's (``Sub.h``): kept across messages and modes, from boot (look-at 0°,
 north; slew 0). GUIDED's other targets (SET_POSITION_TARGET_GLOBAL_INT, DO_REPOSITION, the hold
 on entering GUIDED) do not touch it.
 
-**Each loop** of GUIDED's position, velocity and position-velocity controllers, the pilot's yaw
-stick centred (the vehicle's GUIDED ignores the sticks), the attitude target's yaw:
+**Each loop** of GUIDED's position, velocity and position-velocity controllers
+(``mode_guided.cpp`` ``guided_pos_control_run``, ``guided_vel_control_run``,
+``guided_posvel_control_run``; not the angle controller's, which has no pilot yaw), unless the
+pilot-input failsafe is active, the pilot's yaw stick picks the auto-yaw mode first: its desired
+rate (``Sub::get_pilot_desired_yaw_rate``: RC channel 4's ``control_in`` ×
+ACRO_YAW_P [centidegrees/s], :func:`pilot_yaw_rate_rad_s`) not zero → ``AUTO_YAW_HOLD``, else
+``AUTO_YAW_RATE`` when rate-only, else ``AUTO_YAW_LOOK_AT_HEADING``. Under the pilot-input
+failsafe the mode stays as it was and the pilot's rate is 0. Then the attitude target's yaw:
 
+- HOLD (``input_euler_angle_roll_pitch_euler_rate_yaw``): turns at the pilot's rate. The
+  position target is flown meanwhile; the look-at heading and the slew are kept, so once the
+  stick is centred the next mode takes over from the heading the pilot left: the vehicle turns
+  back to the look-at heading at the slew (within 5°: at once), or, rate-only, turns at it
+  again;
 - rate-only (``AUTO_YAW_RATE``): turns at the slew, for ever (no timeout in 4.5);
 - else (``AUTO_YAW_LOOK_AT_HEADING``, ``AC_AttitudeControl_Sub::input_euler_angle_roll_pitch_
   slew_yaw``): while the heading is more than MAX_YAW_ERROR (5°) from the look-at heading, turns
@@ -35,15 +47,20 @@ stick centred (the vehicle's GUIDED ignores the sticks), the attitude target's y
   (north, at boot) when the vehicle is within 5° of it; and a later target that ignores the yaw
   turns the vehicle back to the last look-at heading, at the last slew.
 
-Here: :class:`AutoYaw` holds that state on the endpoint. In GUIDED, not under a
-SET_ATTITUDE_TARGET's angle control, each update moves the heading of GUIDED's
+Here: :class:`AutoYaw` holds that state on the endpoint, the pilot's stick read from the RC
+inputs each update (MANUAL_CONTROL's ``r`` as ``joystick.cpp`` scales it, or
+RC_CHANNELS_OVERRIDE's channel 4; RC4_MIN/TRIM/MAX/DZ/REVERSED as ``RC_Channel`` reads them). In
+GUIDED, not under a SET_ATTITUDE_TARGET's angle control, each update moves the heading of
+GUIDED's
 :class:`~testbed.common.components.PositionSetpoint` as ArduSub moves its attitude target (the
 vehicle's heading hold follows it; it turns at up to ≈ 100°/s, faster than the 60°/s slew).
 Through a gateway (no moving targets: a heading changing every update would be a ``GoTo``
 every token gap) a setpoint carries the heading the state settles at (:func:`settled_heading_rad`):
 the look-at heading, which the vehicle turns to at its own rate, or none (the heading kept);
 a yaw rate does not cross (STATUSTEXT once "Yaw rates do not cross the link", noted
-``yaw_rate``).
+``yaw_rate``), nor does the pilot's yaw stick in GUIDED (the vehicle's GUIDED ignores the
+sticks a ``Move`` carries; STATUSTEXT once "Pilot yaw in GUIDED does not cross the link", noted
+``pilot_yaw``).
 """
 
 from __future__ import annotations
@@ -54,6 +71,7 @@ from typing import TYPE_CHECKING
 
 from testbed.common.components import ControlMode, ControlTargets, PositionSetpoint
 from testbed.common.geometry import euler_from_quat
+from testbed.mavlink.ardusub import rc_angle
 
 if TYPE_CHECKING:
     from testbed.mavlink.endpoint import VehicleEndpoint
@@ -64,6 +82,7 @@ __all__ = [
     "AutoYaw",
     "ardusub_direction",
     "held_yaw_rad",
+    "pilot_yaw_rate_rad_s",
     "set_yaw_state",
     "setpoint_heading",
     "settled_heading_rad",
@@ -89,6 +108,8 @@ class AutoYaw:
         look_at_cd: ``yaw_look_at_heading`` [centidegrees, 0..35999, from north].
         slew_deg_s: ``yaw_look_at_heading_slew`` [°/s, int16].
         rate_only: ``yaw_rate_only``: turn at the slew.
+        pilot_hold: ``auto_yaw_mode`` is ``AUTO_YAW_HOLD``: the pilot's yaw stick turns the
+            heading (module docstring).
         target_rad: the heading the endpoint has GUIDED fly [rad] (ArduSub's attitude target
             yaw), None when GUIDED does not fly one (another mode, angle control).
         updated_s: the time ``target_rad`` was advanced to [s] (None: not yet, it starts at
@@ -98,6 +119,7 @@ class AutoYaw:
     look_at_cd: int = 0
     slew_deg_s: int = 0
     rate_only: bool = False
+    pilot_hold: bool = False
     target_rad: float | None = None
     updated_s: float | None = None
 
@@ -165,7 +187,7 @@ def set_yaw_state(
     elif rate_dps is not None:
         state.slew_deg_s, state.rate_only = slew, True
     else:
-        state.rate_only = False
+        state.rate_only, state.pilot_hold = False, True  # ArduSub: set_auto_yaw_mode(HOLD)
     if turning and not endpoint.flies_moving_targets:
         endpoint.setpoint_not_sent("yaw_rate", "Yaw rates do not cross the link")
 
@@ -175,6 +197,35 @@ def yaw_rate_fits(yaw_rate_rad_s: float) -> bool:
     rate no lower than −32768°/s; below, its float conversion is undefined: counted
     ``bad_field``)."""
     return math.isfinite(yaw_rate_rad_s) and math.degrees(yaw_rate_rad_s) >= _INT16_MIN
+
+
+def pilot_yaw_rate_rad_s(endpoint: VehicleEndpoint) -> float:
+    """The pilot's desired yaw rate [rad/s, clockwise from above] (ArduSub's
+    ``get_pilot_desired_yaw_rate(channel_yaw->get_control_in())``): RC channel 4's
+    ``control_in`` (:func:`~testbed.mavlink.ardusub.rc_angle` with RC4_MIN, RC4_TRIM, RC4_MAX,
+    RC4_DZ, RC4_REVERSED) × ACRO_YAW_P [centidegrees/s]. At the default gain 0.5 a MANUAL_CONTROL
+    ``r`` of 500 is 1600 µs, ``control_in`` 750, 750 × 3.375 = 25.3°/s."""
+    p = endpoint.params
+    control_in = rc_angle(
+        endpoint.rc.channels[3],
+        minimum=int(p["RC4_MIN"]),
+        trim=int(p["RC4_TRIM"]),
+        maximum=int(p["RC4_MAX"]),
+        dead_zone=int(p["RC4_DZ"]),
+        reversed_=bool(p["RC4_REVERSED"]),
+    )
+    return math.radians(control_in * p["ACRO_YAW_P"] / 100.0)
+
+
+def _pilot_turn(endpoint: VehicleEndpoint) -> float:
+    """Each GUIDED loop: the pilot's rate [rad/s] picks the auto-yaw mode (module docstring),
+    HOLD while it is not zero; 0 and the mode kept under the pilot-input failsafe."""
+    state = endpoint.auto_yaw
+    if endpoint.failsafe.pilot_input:
+        return 0.0
+    rate = pilot_yaw_rate_rad_s(endpoint)
+    state.pilot_hold = abs(rate) >= math.radians(_FLT_EPSILON / 100.0)  # !is_zero, in cd/s
+    return rate
 
 
 def settled_heading_rad(endpoint: VehicleEndpoint) -> float | None:
@@ -205,12 +256,14 @@ def setpoint_heading(endpoint: VehicleEndpoint) -> float | None:
 
 def update_auto_yaw(endpoint: VehicleEndpoint, now_s: float) -> None:
     """Each update in GUIDED, not under angle control, on an endpoint that flies moving targets:
-    the yaw target advanced as ArduSub's loop advances its attitude target (module docstring)
-    and written as the position setpoint's heading; elsewhere none (the next GUIDED starts from
-    the attitude target's yaw)."""
+    the pilot's stick picks the auto-yaw mode and the yaw target is advanced as ArduSub's loop
+    advances its attitude target (module docstring), written as the position setpoint's heading;
+    elsewhere none (the next GUIDED starts from the attitude target's yaw)."""
     state = endpoint.auto_yaw
     guided = endpoint.requested_mode is ControlMode.GUIDED and endpoint.attitude_target is None
     setpoint = endpoint.world.get(endpoint.intents, PositionSetpoint)
+    if guided and not endpoint.flies_moving_targets and pilot_yaw_rate_rad_s(endpoint) != 0.0:
+        endpoint.setpoint_not_sent("pilot_yaw", "Pilot yaw in GUIDED does not cross the link")
     if not (guided and endpoint.flies_moving_targets and setpoint is not None):
         state.target_rad = None
         return
@@ -218,8 +271,11 @@ def update_auto_yaw(endpoint: VehicleEndpoint, now_s: float) -> None:
     assert target is not None  # an endpoint that flies moving targets always has one
     dt = 0.0 if state.updated_s is None else max(0.0, now_s - state.updated_s)
     state.updated_s = now_s
+    pilot_rate = _pilot_turn(endpoint)
     slew_rad_s = math.radians(state.slew_deg_s)
-    if state.rate_only:
+    if state.pilot_hold:
+        target += pilot_rate * dt
+    elif state.rate_only:
         target += slew_rad_s * dt
     else:
         look = state.look_at_rad

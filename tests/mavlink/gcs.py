@@ -197,6 +197,7 @@ class SimGateway:
         self._next_order_s = 0.0
         self._t = 0.0
         self._k = 0
+        self.yaw_r = 0  # the sticks' yaw (MANUAL_CONTROL r)
 
     def send(self, *messages: Any) -> None:
         for message in messages:
@@ -206,7 +207,7 @@ class SimGateway:
         for _ in range(round(seconds / FRAME_S)):
             t = self._t
             if self._k % 4 == 0:  # sticks at 25 Hz, a heartbeat at 1 Hz
-                self.send(self.mav.manual_control_encode(1, 0, 0, 500, 0, 0))
+                self.send(self.mav.manual_control_encode(1, 0, 0, 500, self.yaw_r, 0))
             if self._k % 100 == 0:
                 self.send(self.mav.heartbeat_encode(6, 8, 0, 0, 4))
             self._k += 1
