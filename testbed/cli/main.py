@@ -167,6 +167,12 @@ _RESENT_WAIT_S = 0.5
 """How long a command that ended meanwhile waits for one to land [s] (it lands in ≈ 1 ms)."""
 
 
+_HELD_AT_ENTRY = frozenset({signal.SIGINT, signal.SIGTERM})
+"""The signals the process's entry (:func:`testbed.__main__.console_main`) blocks from its
+start until :func:`main` has its handlers in place: one sent while the command line is imported
+and its arguments parsed is handled as soon as they are, in :func:`main`'s own code."""
+
+
 _STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
 """What a disk says when results cannot be written: one line, not a traceback (exit 1)."""
 
@@ -191,14 +197,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     long, no permission; one line naming it), 130 Ctrl-C, 143 SIGTERM.
 
     SIGTERM is raised as :class:`~testbed.cli.options.Terminated` (a ``KeyboardInterrupt``), so
-    a command keeps what it finished the same way for both. A command that has something to
-    keep says so in its own one line; an interrupt it does not handle ends with
-    ``testbed: interrupted`` and nothing more.
+    a command keeps what it finished the same way for both. On the main thread the two are
+    unblocked once the handlers are in (the console script and ``python -m testbed`` block them
+    from the start: :mod:`testbed.__main__`). A command that has something to keep says so in
+    its own one line; an interrupt it does not handle ends with ``testbed: interrupted`` and
+    nothing more.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     previous: list[tuple[int, object]] = []
-    if threading.current_thread() is threading.main_thread():
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    if on_main_thread:
         del _SIGNALLED[:]
         del _RESENT[:]
         previous.append((signal.SIGTERM, signal.signal(signal.SIGTERM, _signalled)))
@@ -207,6 +216,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _PREVIOUS_UNRAISABLE_HOOK[0] = sys.unraisablehook
         sys.unraisablehook = _swallowed
     try:
+        if on_main_thread:  # what the process's entry held until now is handled here
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD_AT_ENTRY)
         code: int = args.handler(args)
         deadline = time.monotonic() + _RESENT_WAIT_S
         while _RESENT and time.monotonic() < deadline:  # one sent again lands here, handled
