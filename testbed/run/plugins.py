@@ -31,7 +31,11 @@ model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkMode
 
 Loading a scenario imports the target and binds the arguments to its signature, so a missing
 file, a name the module lacks or an argument the factory does not take is a one-line error
-naming the key before anything runs. A file is imported once per process, as a module named
+naming the key before anything runs. A factory that fails when a run calls it is one line too,
+naming the scenario's file, or ``--set`` and the overrides that changed the call
+(:func:`set_keys`: the target, its arguments, or for a link model the link's keys).
+
+A file is imported once per process, as a module named
 ``testbed_user_<stem>_<8 hex digits of its path>``, with its folder first on the import path
 while it runs (as ``python FILE.py`` has it), so its module-level imports find the modules
 beside it; their files are hashed with it (:func:`target_files`). Sweep workers import it
@@ -43,20 +47,21 @@ nothing received from a link, a socket or a browser is ever imported or evaluate
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
 import importlib.util
 import inspect
 import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from testbed.config import USER_MODULE_PREFIX, ConfigError, shown
+from testbed.config import USER_MODULE_PREFIX, ConfigError, parse_override, shown
 
 if TYPE_CHECKING:
     from testbed.channel.config import LinkConfig
@@ -77,6 +82,7 @@ __all__ = [
     "scenario_control_laws",
     "scenario_link_model",
     "scenario_pilot",
+    "set_keys",
     "takes_rng",
     "target_file",
     "target_files",
@@ -272,16 +278,47 @@ def call_factory(
     where: str,
     key: str,
     args_key: str,
+    named: Sequence[str] = (),
 ) -> Any:
     """``factory(*positional, **kwargs)``; an exception it raises becomes a one-line
-    :class:`ConfigError` naming ``key`` and, when it was given any, the key of its keyword
-    arguments ``args_key`` with them (the scenario's, or a ``--set``'s)."""
+    :class:`ConfigError` naming ``where``, then the ``--set`` keys that changed the call
+    (``named``, :func:`set_keys`) if any, and ``key`` and, when it was given any, the key of its
+    keyword arguments ``args_key`` with them."""
     try:
         return factory(*positional, **kwargs)
     except (Exception, SystemExit) as error:  # sys.exit in a factory: its error, not our exit
         given = {k: v for k, v in kwargs.items() if k != "rng"}
-        called = f" (called with {args_key} = {shown(given)})" if given else ""
-        raise ConfigError(f"{where}: {key}{called}: {type(error).__name__}: {error}") from None
+        with_args = f" with {args_key} = {shown(given)}" if given else ""
+        if named and key not in named:
+            head, called = ", ".join(named), f" (calling {key}{with_args})"
+        else:
+            head, called = ", ".join(named) or key, f" (called{with_args})" if given else ""
+        raise ConfigError(f"{where}: {head}{called}: {type(error).__name__}: {error}") from None
+
+
+def _within(key: str, table: str) -> bool:
+    """Whether the dotted ``key`` is ``table`` or inside it."""
+    return key == table or key.startswith(f"{table}.")
+
+
+def set_keys(scenario: Scenario, keys: Iterable[str]) -> list[str]:
+    """The dotted keys of ``scenario``'s ``--set`` overrides that are in force and set one of
+    ``keys``, a table holding one, or a key inside one (an override of a table replaces what
+    those before it set inside it), in order: what changed a factory's call from the file's."""
+    wanted = tuple(keys)
+    found: list[str] = []
+    for text in scenario.overrides:
+        dotted = ".".join(parse_override(text)[0])
+        found = [earlier for earlier in found if not _within(earlier, dotted)]
+        if any(_within(dotted, key) or _within(key, dotted) for key in wanted):
+            found.append(dotted)
+    return found
+
+
+def _where(scenario: Scenario, named: list[str]) -> str:
+    """What a message about a factory's call names as its source: ``--set`` when overrides
+    changed it (``named``), else the scenario's file (or ``package:<id>``)."""
+    return "--set" if named else scenario.source
 
 
 def pilot_generator(seed: int) -> np.random.Generator:
@@ -302,15 +339,17 @@ def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
     section = scenario.pilot
     if section.kind != "python":
         return section.pilot()
-    key = "pilot.factory"
-    factory = load_factory(section.factory, scenario.source, key)
+    key, args_key = "pilot.factory", "pilot.args"
+    named = set_keys(scenario, (key, args_key))
+    where = _where(scenario, named)
+    factory = load_factory(section.factory, _where(scenario, set_keys(scenario, (key,))), key)
     kwargs = dict(section.args)
     if takes_rng(factory):
         kwargs["rng"] = pilot_generator(seed)
-    pilot = call_factory(factory, (), kwargs, scenario.source, key, "pilot.args")
+    pilot = call_factory(factory, (), kwargs, where, key, args_key, named)
     if not callable(getattr(pilot, "sample", None)):
         raise ConfigError(
-            f"{scenario.source}: {key}: {section.factory} made a {type(pilot).__name__}, not a "
+            f"{where}: {key}: {section.factory} made a {type(pilot).__name__}, not a "
             "pilot (expected an object with sample(t_s) -> PilotSample)"
         )
     return cast("Pilot", pilot)
@@ -328,7 +367,10 @@ def scenario_link_model(scenario: Scenario) -> LinkModel | None:
     if not link.model:
         return None
     keys = ("link.model", "link.model_args")
-    return make_link_model(link.model, link.model_args, link.channel, scenario.source, keys)
+    config_keys = [f"link.{f.name}" for f in dataclasses.fields(link.channel)]
+    named = set_keys(scenario, (*keys, "link.preset", *config_keys))
+    where = _where(scenario, named)
+    return make_link_model(link.model, link.model_args, link.channel, where, keys, named)
 
 
 def make_link_model(
@@ -337,10 +379,12 @@ def make_link_model(
     channel: LinkConfig,
     where: str,
     keys: tuple[str, str],
+    named: Sequence[str] = (),
 ) -> LinkModel:
     """``NAME(channel, **args)`` of the callable ``target`` names (``"FILE.py:NAME"`` or
     ``"MODULE:NAME"``), checked to be a link model; messages name ``where`` and ``keys`` (the
-    target's key and its arguments').
+    target's key and its arguments'), and first the ``--set`` keys ``named`` that changed the
+    call (the model, its arguments or the config: :func:`call_factory`).
 
     Raises:
         ConfigError: the target does not load, the factory failed, or it made something without
@@ -348,7 +392,7 @@ def make_link_model(
     """
     key, args_key = keys
     factory = load_factory(target, where, key)
-    model = call_factory(factory, (channel,), args, where, key, args_key)
+    model = call_factory(factory, (channel,), args, where, key, args_key, named)
     laws = ("airtime_s", "error_model")
     missing = [name for name in laws if not callable(getattr(model, name, None))]
     if missing:
@@ -382,14 +426,16 @@ def scenario_control_laws(scenario: Scenario) -> tuple[DepthLaw | None, Attitude
     section = scenario.control_laws
     made: dict[str, Any] = {}
     for name, target in section.targets().items():
-        key = f"vehicle.control.{name}"
-        factory = load_factory(target, scenario.source, key)
+        key, args_key = f"vehicle.control.{name}", f"vehicle.control.{name}_args"
+        named = set_keys(scenario, (key, args_key))
+        where = _where(scenario, named)
+        factory = load_factory(target, _where(scenario, set_keys(scenario, (key,))), key)
         args = getattr(section, f"{name}_args")
-        law = call_factory(factory, (), args, scenario.source, key, f"{key}_args")
+        law = call_factory(factory, (), args, where, key, args_key, named)
         missing = [m for m in ("reset", "update") if not callable(getattr(law, m, None))]
         if missing:
             raise ConfigError(
-                f"{scenario.source}: {key}: {target} made a {type(law).__name__} without "
+                f"{where}: {key}: {target} made a {type(law).__name__} without "
                 f"{' and '.join(missing)} (expected {_LAW_CONTRACTS[name]})"
             )
         made[name] = law

@@ -229,22 +229,23 @@ def test_what_the_law_factory_makes_is_checked_before_the_run_one_line_exit_2(
     study: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A factory that raises, or makes no law (no ``reset``/``update``), stops the run before
-    its first frame with one line naming the scenario file and the key."""
+    its first frame with one line naming where the law came from (here ``--set``) and the
+    keys."""
     monkeypatch.chdir(study)
     cases = [
         (
             ["vehicle.control.depth=laws.py:failing", "vehicle.control.depth_args={kp=5.0}"],
-            "p.toml: vehicle.control.depth (called with vehicle.control.depth_args = "
-            "{'kp': 5.0}): RuntimeError: no law at 5.0",
+            "--set: vehicle.control.depth, vehicle.control.depth_args (called with "
+            "vehicle.control.depth_args = {'kp': 5.0}): RuntimeError: no law at 5.0",
         ),
         (
             ["vehicle.control.depth=laws.py:no_law", "vehicle.control.depth_args={}"],
-            "p.toml: vehicle.control.depth: laws.py:no_law made a int without reset and update "
+            "--set: vehicle.control.depth: laws.py:no_law made a int without reset and update "
             "(expected a DepthLaw: reset() and update(target, depth, imu, dt_s)",
         ),
         (
             ["vehicle.control.attitude=laws.py:UpdateOnly"],
-            "p.toml: vehicle.control.attitude: laws.py:UpdateOnly made a UpdateOnly without "
+            "--set: vehicle.control.attitude: laws.py:UpdateOnly made a UpdateOnly without "
             "reset (expected an AttitudeLaw",
         ),
     ]

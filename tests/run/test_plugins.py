@@ -417,7 +417,7 @@ def test_a_hil_run_flies_the_scenarios_pilot_and_a_failing_factory_closes_the_po
         failing = load_scenario(str(study / "step.toml"), [*short, factory])
         with pytest.raises(
             ConfigError,
-            match=r"step\.toml: pilot\.factory \(called with pilot\.args = .*\): RuntimeError",
+            match=r"--set: pilot\.args, pilot\.factory \(called with pilot\.args = .*\): Runtime",
         ):
             run_hil(failing, endpoints, duration_s=4.0, modem="evologics")
         alive = [t.name for t in threading.enumerate() if t.name.startswith("serial:")]
