@@ -28,7 +28,7 @@ from __future__ import annotations
 from .channel import OUTBOX_LIMIT, Channel
 from .endpoint import VehicleEndpoint
 from .motors import ServoOutputs, servo_outputs
-from .options import EndpointOptions
+from .options import EndpointOptions, PositionLoop
 from .params import Param, ParamTable, load_params
 from .telemetry import HOME_LAT_LON_DEG, VehicleSnapshot
 from .wire import MavlinkWire
@@ -41,6 +41,7 @@ __all__ = [
     "MavlinkWire",
     "Param",
     "ParamTable",
+    "PositionLoop",
     "ServoOutputs",
     "VehicleEndpoint",
     "VehicleSnapshot",

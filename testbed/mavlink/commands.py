@@ -14,11 +14,11 @@ not gated on the sender's system id (ArduSub's are not), only on the target.
 Mode policy (ArduSub ``Sub::set_mode``): MANUAL 19, STABILIZE 0 and ALT_HOLD 2 are accepted
 and requested of the vehicle; GUIDED 4 too when the vehicle has a position estimate
 (:meth:`~testbed.mavlink.endpoint.VehicleEndpoint.has_position_estimate`), whose entry holds
-where the vehicle is (:func:`~testbed.mavlink.guided.hold_where_entered`); every other number
-is refused with MAV_RESULT_FAILED and the warning "Flight mode change failed" — ArduSub's
-answer for AUTO, GUIDED, CIRCLE and POSHOLD without a position estimate and for unknown
-numbers. AUTO, CIRCLE, POSHOLD, ACRO, SURFACE, MOTOR_DETECT and SURFTRAK exist in ArduSub but
-not in the simulator, so a position fix does not change their answer. GUIDED's
+at ArduSub's stopping point (:func:`~testbed.mavlink.guided_entry.hold_where_entered`);
+every other number is refused with MAV_RESULT_FAILED and the warning "Flight mode change
+failed" — ArduSub's answer for AUTO, GUIDED, CIRCLE and POSHOLD without a position estimate and
+for unknown numbers. AUTO, CIRCLE, POSHOLD, ACRO, SURFACE, MOTOR_DETECT and SURFTRAK exist in
+ArduSub but not in the simulator, so a position fix does not change their answer. GUIDED's
 SET_POSITION_TARGET_LOCAL_NED is :mod:`testbed.mavlink.guided`'s.
 """
 
@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import ControlMode
-from testbed.mavlink import guided
+from testbed.mavlink import guided, guided_entry
 from testbed.mavlink.ardusub import (
     FLIGHT_SW_VERSION,
     GIT_HASH,
@@ -126,7 +126,7 @@ def set_mode(endpoint: VehicleEndpoint, custom_mode: int) -> int:
     entered = mode is not endpoint.requested_mode  # ArduSub's set_mode: the same mode, nothing
     endpoint.request_mode(mode)
     if entered and mode is ControlMode.GUIDED:
-        guided.hold_where_entered(endpoint)
+        guided_entry.hold_where_entered(endpoint)
     return _ACCEPTED
 
 

@@ -24,7 +24,7 @@ WPNAV_SPEED_UP and its descent to WPNAV_SPEED_DN (ArduSub's ``guided_posvel_cont
 :data:`VELOCITY_TIMEOUT_S` after the last such message the velocity is 0 and the target stays
 where it got (``GUIDED_POSVEL_TIMEOUT_MS``). Horizontally the target is leashed: it does not
 run further ahead of the reported position, along its velocity, than
-:attr:`~testbed.mavlink.endpoint.EndpointOptions.guided_leash_m` (the distance from which the
+:attr:`~testbed.mavlink.options.EndpointOptions.guided_leash_m` (the distance from which the
 vehicle's position loop already asks for its top speed), so a velocity the vehicle cannot fly
 stores no distance for it to run on after the timeout (ArduSub's vehicle, flying its velocity
 controller, stops where it is).
@@ -59,9 +59,9 @@ lon = 0 or a relative altitude of 0 cm (``bad_field``): ``location_from_command_
 ``mode_refused``); else ACCEPTED (``accepted``) and flown as above to the altitude in whole
 centimetres (param1 speed and param4 yaw unused, as ArduSub).
 
-**Entering GUIDED** from another mode (:func:`hold_where_entered`, ArduSub's ``ModeGuided::init``
-→ ``guided_pos_control_start``: the stopping point) sets the target where the vehicle is, so no
-target from an earlier GUIDED is flown again; GUIDED asked for again changes nothing.
+**Entering GUIDED** from another mode sets the target at ArduSub's stopping point
+(:mod:`~testbed.mavlink.guided_entry`), so no target from an earlier GUIDED is flown again;
+GUIDED asked for again changes nothing.
 
 Non-finite or out-of-range fields that are used are counted ``bad_field``, and every position
 target beyond :data:`MAX_TARGET_M` too. The target becomes a
@@ -95,7 +95,6 @@ __all__ = [
     "VELOCITY_TIMEOUT_S",
     "MovingTarget",
     "do_reposition",
-    "hold_where_entered",
     "on_set_position_target_global_int",
     "on_set_position_target_local_ned",
     "update_moving_target",
@@ -294,14 +293,6 @@ def update_moving_target(endpoint: VehicleEndpoint, now_s: float) -> None:
         endpoint.moving_target = None
         return
     _advance(endpoint, moving, now_s)
-
-
-def hold_where_entered(endpoint: VehicleEndpoint) -> None:
-    """GUIDED entered from another mode: its target is where the vehicle is (ArduSub's
-    ``ModeGuided::init`` → ``guided_pos_control_start``: the stopping point, the position
-    estimate for a vehicle at rest), not a target from an earlier GUIDED; the heading the
-    auto-yaw state's (:mod:`~testbed.mavlink.guided_yaw`)."""
-    endpoint.request_position(endpoint.snapshot_now().position_ned_m)
 
 
 def _in_range(lat_e7: int, lon_e7: int) -> bool:

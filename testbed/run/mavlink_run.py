@@ -44,7 +44,13 @@ import simpy.rt
 from testbed.channel import Trace
 from testbed.ecs import Phase, World
 from testbed.hil import latency_summary_ms
-from testbed.mavlink import EndpointOptions, ServoOutputs, VehicleEndpoint, servo_outputs
+from testbed.mavlink import (
+    EndpointOptions,
+    PositionLoop,
+    ServoOutputs,
+    VehicleEndpoint,
+    servo_outputs,
+)
 from testbed.mavlink.ardusub import sticks_from_rc
 from testbed.mavlink.links import Intake, Link
 from testbed.operator.pilots import PilotSample
@@ -116,16 +122,18 @@ def endpoint_options(
     """How the endpoint presents a vehicle of ``config`` with thruster ``layout``: its supply
     voltage, ArduSub's servo numbering of the layout, and the boot parameters FRAME_CONFIG and
     MOT_n_DIRECTION (the layout's), BARO_SPEC_GRAV (the depth sensor's), then ``boot_params``
-    (``--param``) over them; GUIDED's moving targets leashed to the position loop's reach."""
+    (``--param``) over them; GUIDED's loops (its stopping point on entry, the leash of a
+    moving target): the position loop's gain and top speed, the depth hold's kp/kd."""
     servos = layout_servos(layout)
     overrides = {
         **servos.param_overrides(),
         "BARO_SPEC_GRAV": config.sensors.depth.spec_grav,
         **(boot_params or {}),
     }
-    loop = PositionGains()  # the vehicle's GUIDED position loop: its top speed from here
-    leash = loop.max_speed_m_s / loop.kp_1_s
-    return EndpointOptions(config.supply_voltage_v, overrides, servos=servos, guided_leash_m=leash)
+    loop, depth = PositionGains(), config.gains.depth  # the vehicle's GUIDED loops
+    depth_gain = depth.kp / depth.kd if depth.kd > 0.0 else math.inf
+    guided = PositionLoop(loop.kp_1_s, loop.max_speed_m_s, depth_gain)
+    return EndpointOptions(config.supply_voltage_v, overrides, servos=servos, guided_loop=guided)
 
 
 def mavlink_vehicle_config(config: VehicleConfig) -> VehicleConfig:
