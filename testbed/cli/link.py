@@ -76,13 +76,15 @@ def _run_link(args: argparse.Namespace) -> int:
     config = link_config_option(args.preset, args.overrides)
     model = None
     if args.model is not None:
-        from testbed.run.plugins import make_link_model
+        from testbed.run.plugins import check_finite, make_link_model
 
         _, model_args = parse_override(f"model_args={args.model_args}")
         if not isinstance(model_args, dict):
             raise ConfigError(
                 f"--model-args: expected a TOML inline table {{...}}, got {args.model_args}"
             )
+        for name, value in model_args.items():
+            check_finite(value, "--model-args", name)
         keys = ("--model", "--model-args")
         model = make_link_model(args.model, model_args, config, "testbed link", keys)
     elif args.model_args != "{}":

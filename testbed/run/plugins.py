@@ -52,6 +52,7 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
+import math
 import re
 import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -75,6 +76,7 @@ __all__ = [
     "TABLE_VALUE_KEYS",
     "call_factory",
     "check_arguments",
+    "check_finite",
     "check_target",
     "load_factory",
     "make_link_model",
@@ -240,7 +242,8 @@ def check_arguments(
     where: str,
     keys: tuple[str, str, str],
 ) -> None:
-    """Bind ``positional`` and ``kwargs`` to ``factory``'s signature without calling it.
+    """Check ``kwargs``' numbers are finite (:func:`check_finite`), and bind ``positional`` and
+    ``kwargs`` to ``factory``'s signature without calling it.
 
     Args:
         factory: the callable ``target`` names.
@@ -252,11 +255,12 @@ def check_arguments(
             (``("link.model", "link.model_args", "(config, **model_args)")``).
 
     Raises:
-        ConfigError: ``"<where>: <key>: ..."`` naming what does not bind (the target's key when
-            it cannot take the positional arguments; the arguments' key for a keyword it does
-            not take, or one it needs that is missing).
+        ConfigError: ``"<where>: <key>: ..."`` naming a number that is not finite, or what does
+            not bind (the target's key when it cannot take the positional arguments; the
+            arguments' key for a keyword it does not take, or one it needs that is missing).
     """
     target_key, key, shape = keys
+    check_finite(kwargs, where, key)
     try:
         signature = inspect.signature(factory)
     except (TypeError, ValueError):
@@ -269,6 +273,29 @@ def check_arguments(
         signature.bind(*positional, **kwargs)
     except TypeError as error:
         raise ConfigError(f"{where}: {key}: {target}: {error}") from None
+
+
+def check_finite(value: Any, where: str, key: str) -> None:
+    """Refuse a NaN or an infinity anywhere in ``value``, a factory's arguments (``key``) as TOML
+    gives them: tables and arrays are looked into.
+
+    A scenario's numeric keys refuse NaN, and infinity unless they say it means "no limit"
+    (:func:`testbed.config.check_range`); what a factory's argument means is the factory's,
+    so the default holds. It also keeps the record true: ``metrics.json`` is strict JSON, where
+    a non-finite number can only be written as ``null``.
+
+    Raises:
+        ConfigError: ``"<where>: <key>.<name>: must be a finite number, got nan"`` (``[i]`` for
+            an array's element).
+    """
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(f"{where}: {key}: must be a finite number, got {value}")
+    if isinstance(value, Mapping):
+        for name, item in value.items():
+            check_finite(item, where, f"{key}.{name}")
+    elif isinstance(value, list | tuple):
+        for i, item in enumerate(value):
+            check_finite(item, where, f"{key}[{i}]")
 
 
 def call_factory(
