@@ -203,6 +203,12 @@ def _pool_outcomes(specs: Sequence[RunSpec], workers: int) -> Iterator[RunOutcom
         executor.shutdown(wait=True, cancel_futures=True)
 
 
+LOCAL_HTTP_ADDRESS = "127.0.0.1:0"
+"""Where a ``--dask local`` cluster's scheduler serves its HTTP endpoints (health, metrics; the
+dashboard is off): this host only, a port the system picks. distributed's default, 8787, when
+taken (a second sweep at once, tests in parallel) made it warn in the user's terminal."""
+
+
 _DASK_ADDRESS = re.compile(
     r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[\w.-]+):(?P<port>\d{1,5})$"
 )
@@ -299,7 +305,10 @@ def _dask_outcomes(
                     n_workers=workers,
                     threads_per_worker=1,
                     processes=True,
-                    dashboard_address=None,
+                    dashboard_address=None,  # no dashboard
+                    # and its HTTP endpoints, served anyway, on a free port (the default, 8787,
+                    # when taken, warned on stderr and moved)
+                    scheduler_kwargs={"dashboard_address": LOCAL_HTTP_ADDRESS},
                     silence_logs=logging.CRITICAL,
                     preload=["testbed.sweep.worker_setup"],
                 )
