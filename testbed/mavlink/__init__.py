@@ -9,12 +9,14 @@
   :mod:`~testbed.mavlink.pilot_input`, GUIDED's targets in :mod:`~testbed.mavlink.guided` and
   :mod:`~testbed.mavlink.attitude_target`, the motor test in :mod:`~testbed.mavlink.motor_test`,
   its failsafes in :mod:`~testbed.mavlink.failsafe`, its stream rates in
-  :mod:`~testbed.mavlink.streams`.
+  :mod:`~testbed.mavlink.streams`, MAVLink's high-latency mode (HIGH_LATENCY2,
+  MAV_CMD_CONTROL_HIGH_LATENCY) in :mod:`~testbed.mavlink.high_latency`.
 * :mod:`~testbed.mavlink.telemetry` — the vehicle's components as ArduSub's telemetry.
 * :mod:`~testbed.mavlink.ardusub` — ArduSub's numbers: modes, heartbeat flags, stream groups,
   MANUAL_CONTROL scaling.
 * :mod:`~testbed.mavlink.motors` — ArduSub's motor numbering of a frame (``AP_Motors6DOF``),
-  the servo outputs and MOT_n_DIRECTION of a thruster layout.
+  the servo outputs and MOT_n_DIRECTION of a thruster layout, and how a changed MOT_n_DIRECTION
+  changes a thruster's pulse.
 * :mod:`~testbed.mavlink.params` — the parameter table (``data/ardusub_params.csv``).
 * :mod:`~testbed.mavlink.wire` — pymavlink's ``ardupilotmega`` dialect as a bytes codec.
 * :mod:`~testbed.mavlink.links` — UDP, TCP and serial links with reader threads.

@@ -25,20 +25,29 @@ class Channel:
         name: the link's name (for logs and metrics).
         wire: its MAVLink codec (system and component of the vehicle).
         streams: its telemetry stream rates.
+        high_latency: a high-latency link (ArduPilot's SERIALn_PROTOCOL 43, MAVLinkHL:
+            :mod:`~testbed.mavlink.high_latency`): no HEARTBEAT, HIGH_LATENCY2 instead, and
+            nothing at all while the endpoint's high-latency links are disabled.
 
     Attributes:
         outbox: encoded packets queued and not yet taken, oldest first.
         param_cursor: the next parameter index of a download under way (None: none).
         dropped: packets dropped because the outbox was full.
+        held: packets not sent because this high-latency link was disabled (ArduPilot's
+            ``comm_send_buffer`` drops them).
     """
 
-    def __init__(self, name: str, wire: MavlinkWire, streams: StreamSchedule) -> None:
+    def __init__(
+        self, name: str, wire: MavlinkWire, streams: StreamSchedule, *, high_latency: bool = False
+    ) -> None:
         self.name = name
         self.wire = wire
         self.streams = streams
+        self.high_latency = high_latency
         self.outbox: list[bytes] = []
         self.param_cursor: int | None = None
         self.dropped = 0
+        self.held = 0
 
     def take(self) -> list[bytes]:
         """The encoded packets queued since the last call, in order."""

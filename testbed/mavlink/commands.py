@@ -6,7 +6,8 @@ request came on (STATUSTEXT goes to every channel); the parameter protocol's han
 COMMAND_LONG and COMMAND_INT share one table (:data:`COMMANDS`): arm/disarm (400), DO_SET_MODE
 (176), SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510), REQUEST_MESSAGE (512),
 REQUEST_AUTOPILOT_CAPABILITIES (520), GET_HOME_POSITION (410), DO_MOTOR_TEST (209,
-:mod:`~testbed.mavlink.motor_test`), and those carrying a location
+:mod:`~testbed.mavlink.motor_test`), CONTROL_HIGH_LATENCY (2600,
+:mod:`~testbed.mavlink.high_latency`), and those carrying a location
 (:data:`LOCATION_COMMANDS`): DO_REPOSITION (192, :func:`~testbed.mavlink.guided.do_reposition`);
 anything else is acknowledged UNSUPPORTED. Commands are
 not gated on the sender's system id (ArduSub's are not), only on the target.
@@ -30,7 +31,7 @@ from typing import TYPE_CHECKING
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import ControlMode
-from testbed.mavlink import guided, guided_entry
+from testbed.mavlink import guided, guided_entry, high_latency
 from testbed.mavlink.ardusub import (
     FLIGHT_SW_VERSION,
     GIT_HASH,
@@ -216,6 +217,7 @@ COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float
     mav.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_set_interval,
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
     mav.MAV_CMD_DO_MOTOR_TEST: _cmd_motor_test,
+    mav.MAV_CMD_CONTROL_HIGH_LATENCY: high_latency.control_high_latency,
 }
 """MAV_CMD → handler returning the MAV_RESULT to acknowledge."""
 LOCATION_COMMANDS: dict[int, Callable[[VehicleEndpoint, int, tuple[float, ...], int, int], int]] = {

@@ -24,7 +24,8 @@ mode is refused with MAV_RESULT_FAILED — the simulator has no position-hold, a
 mode); MANUAL_CONTROL and RC_CHANNELS_OVERRIDE with ArduSub's scaling, gated on SYSID_MYGCS
 and SYSID_THISMAV (what fails the gate is dropped silently and counted;
 :mod:`testbed.mavlink.pilot_input`); the pilot-input and GCS failsafes of the FS_* parameters
-(:mod:`testbed.mavlink.failsafe`).
+(:mod:`testbed.mavlink.failsafe`); HIGH_LATENCY2 on a high-latency link
+(:mod:`testbed.mavlink.high_latency`).
 
 Remote garbage is counted, never raised (:attr:`VehicleEndpoint.rejected` by reason); outboxes
 are bounded (:data:`~testbed.mavlink.channel.OUTBOX_LIMIT`).
@@ -50,7 +51,7 @@ from testbed.common.components import (
     PositionSetpoint,
 )
 from testbed.ecs import Entity, World
-from testbed.mavlink import commands, guided, guided_yaw, param_protocol, pilot_input
+from testbed.mavlink import commands, guided, guided_yaw, high_latency, param_protocol, pilot_input
 from testbed.mavlink.ardusub import RcInput, boot_gain, sticks_from_rc
 from testbed.mavlink.attitude_target import (
     AttitudeTarget,
@@ -105,6 +106,8 @@ class VehicleEndpoint:
             (:class:`~testbed.mavlink.guided.MovingTarget`), None when there is none.
         auto_yaw: ArduSub's auto-yaw state, GUIDED's heading
             (:class:`~testbed.mavlink.guided_yaw.AutoYaw`).
+        high_latency_enabled: the high-latency links send (MAV_CMD_CONTROL_HIGH_LATENCY;
+            off at boot: :mod:`~testbed.mavlink.high_latency`).
     """
 
     def __init__(
@@ -142,6 +145,7 @@ class VehicleEndpoint:
         self.motor_test = MotorTest()
         self.moving_target: guided.MovingTarget | None = None
         self.auto_yaw = guided_yaw.AutoYaw()
+        self.high_latency_enabled = False
         self._texts_sent: set[str] = set()
         cls = type(self)
         self._handlers: dict[str, Handler] = {
@@ -189,14 +193,38 @@ class VehicleEndpoint:
         """SYSID_MYGCS: the only system whose pilot input is accepted."""
         return int(self.params["SYSID_MYGCS"])
 
-    def open_channel(self, name: str) -> Channel:
-        """A new link, streaming at the SR0_* rates until the ground station asks otherwise."""
-        channel = Channel(name, MavlinkWire(self.system_id, 1), StreamSchedule.from_params(self))
+    def open_channel(
+        self,
+        name: str,
+        *,
+        high_latency: bool = False,
+        stream_rates_hz: dict[int, float] | None = None,
+    ) -> Channel:
+        """A new link, streaming at the SR0_* rates until the ground station asks otherwise.
+
+        Args:
+            name: the link's name.
+            high_latency: a high-latency link (SERIALn_PROTOCOL 43:
+                :mod:`~testbed.mavlink.high_latency`): HIGH_LATENCY2 every 5 s, no HEARTBEAT,
+                silent while the endpoint's high-latency links are disabled.
+            stream_rates_hz: its stream groups' rates [Hz] (group id → rate) instead of the
+                SR0_* parameters' (default for a high-latency link: all 0, its SRn_* set to 0).
+        """
+        if stream_rates_hz is None and not high_latency:
+            streams = StreamSchedule.from_params(self)
+        else:
+            streams = StreamSchedule(stream_rates_hz or {}, high_latency=high_latency)
+        wire = MavlinkWire(self.system_id, 1)
+        channel = Channel(name, wire, streams, high_latency=high_latency)
         self.channels.append(channel)
         return channel
 
     def queue(self, channel: Channel, message: mav.MAVLink_message) -> None:
-        """Encode ``message`` onto ``channel`` (dropped and counted if its outbox is full)."""
+        """Encode ``message`` onto ``channel`` (dropped and counted if its outbox is full; not
+        sent, counted ``held``, on a high-latency link while they are disabled)."""
+        if channel.high_latency and not self.high_latency_enabled:
+            channel.held += 1
+            return
         if len(channel.outbox) >= OUTBOX_LIMIT:
             channel.dropped += 1
             self.rejected["outbox_full"] += 1
@@ -424,18 +452,23 @@ class VehicleEndpoint:
             self._snapshot = snapshot
         if now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
-            self.broadcast(BUILDERS["HEARTBEAT"](snapshot))
+            heartbeat = BUILDERS["HEARTBEAT"](snapshot)
+            for channel in self.channels:
+                if not channel.high_latency:  # HIGH_LATENCY2 instead (its stream)
+                    self.queue(channel, heartbeat)
         for channel in self.channels:
             for name in channel.streams.due(now_s):
                 self.queue(channel, self.message(name, snapshot))
             param_protocol.send_params(self, channel)
 
     def message(self, name: str, snapshot: VehicleSnapshot | None = None) -> mav.MAVLink_message:
-        """The telemetry message ``name`` (a :data:`~.telemetry.BUILDERS` key or
-        ``NAMED_VALUE_FLOAT``) for ``snapshot`` (default: the last one)."""
+        """The telemetry message ``name`` (a :data:`~.telemetry.BUILDERS` key,
+        ``NAMED_VALUE_FLOAT`` or ``HIGH_LATENCY2``) for ``snapshot`` (default: the last one)."""
         s = snapshot or self._snapshot or self.snapshot(0.0)
         if name == "NAMED_VALUE_FLOAT":
             return mav.MAVLink_named_value_float_message(s.time_boot_ms, b"PilotGain", s.gain)
+        if name == "HIGH_LATENCY2":
+            return high_latency.high_latency2(self, s)
         return BUILDERS[name](s)
 
     def counters(self) -> dict[str, object]:
@@ -453,4 +486,9 @@ class VehicleEndpoint:
             "failsafes": dict(self.failsafe.triggered),
             "bytes_in": sum(c.wire.bytes_in for c in self.channels),
             "bytes_out": sum(c.wire.bytes_out for c in self.channels),
+            "high_latency": {
+                "enabled": self.high_latency_enabled,
+                "links": sum(c.high_latency for c in self.channels),
+                "held": sum(c.held for c in self.channels),
+            },
         }

@@ -8,6 +8,23 @@ SET_MODE, repeated every ``retry_s`` until the vehicle's heartbeat shows them (Q
 unanswered command). It decodes the vehicle's telemetry: the ``time_boot_ms`` of each ATTITUDE
 is the sample time [s] of the state it carries. Packets are pymavlink's ardupilotmega dialect,
 MAVLink 2, system 255 component 190 (QGC's).
+
+On a **high-latency link** (``high_latency=True``) it does what QGroundControl does there
+(``VehicleLinkManager``: MAV_CMD_CONTROL_HIGH_LATENCY 1 when the link becomes the vehicle's
+primary one; ``MultiVehicleManager::_sendGCSHeartbeat`` skips high-latency links; no stream
+requests): on its first slot COMMAND_LONG CONTROL_HIGH_LATENCY (param1 1), sent again every
+``retry_s`` until the vehicle ACKs it ACCEPTED; no HEARTBEAT, no REQUEST_DATA_STREAM. QGC waits
+:data:`QGC_HIGH_LATENCY_ACK_TIMEOUT_S` for a command's ACK on such a link before it sends the
+command again (``Vehicle``: ``_mavCommandAckTimeoutMSecsHighLatency``), the ``retry_s`` the
+``mavlink-hl`` codec gives it. The vehicle's state comes in HIGH_LATENCY2 (armed in
+``custom0``'s base_mode bit 128, the mode in ``custom_mode``, its sample time the
+``timestamp``). An arm or mode request goes again when a HIGH_LATENCY2 sampled after it was
+sent shows the vehicle otherwise (the operator, seeing it, asks again; QGC itself would wait its
+120 s), or after ``retry_s``; one ACKed ACCEPTED is not sent again (QGC's command protocol stops
+at the ACK) before such a HIGH_LATENCY2. Unlike QGC, whose ``sendJoystickDataThreadSafe`` sends
+no joystick on a high-latency link, it still sends the pilot's sticks as MANUAL_CONTROL each
+slot, so the same pilot flies over each link; the slot rate is the scenario's
+``link.uplink_rate_hz``.
 """
 
 from __future__ import annotations
@@ -16,10 +33,13 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.mavlink.ardusub import manual_control_from_sticks
 
-__all__ = ["QGC_STREAM_RATES_HZ", "ScriptedGroundStation"]
+__all__ = ["QGC_HIGH_LATENCY_ACK_TIMEOUT_S", "QGC_STREAM_RATES_HZ", "ScriptedGroundStation"]
 
 QGC_STREAM_RATES_HZ = {1: 2, 2: 2, 3: 2, 6: 3, 10: 20, 11: 10, 12: 3}
 """QGroundControl's REQUEST_DATA_STREAM rates on connect: stream id → Hz (REFERENCE §4.4)."""
+QGC_HIGH_LATENCY_ACK_TIMEOUT_S = 120.0
+"""How long QGroundControl waits for a command's ACK on a high-latency link before sending it
+again [s] (``_mavCommandAckTimeoutMSecsHighLatency``, 120 000 ms; 3 s on other links)."""
 
 
 class ScriptedGroundStation:
@@ -28,11 +48,23 @@ class ScriptedGroundStation:
     Args:
         gain: the joystick gain the sticks are encoded at (the vehicle's ``JS_GAIN_DEFAULT``).
         retry_s: how often an unanswered arm or mode request is sent again [s].
+        high_latency: the link is a high-latency one (module docstring).
     """
 
-    def __init__(self, gain: float = 1.0, retry_s: float = 1.0) -> None:
+    def __init__(
+        self, gain: float = 1.0, retry_s: float = 1.0, *, high_latency: bool = False
+    ) -> None:
         self._gain = gain
         self._retry_s = retry_s
+        self.high_latency = high_latency
+        self.high_latency_acked = False
+        """The vehicle ACKed MAV_CMD_CONTROL_HIGH_LATENCY ACCEPTED (high-latency link)."""
+        self._acked_arm: bool | None = None
+        self._acked_mode: int | None = None
+        self._last_arm: bool | None = None
+        self._last_mode: int | None = None
+        self._next_hl_s = 0.0
+        self._requested_s = -1.0
         self._mav = mav.MAVLink(None, srcSystem=255, srcComponent=190)
         self._decoder = mav.MAVLink(None)
         self._decoder.robust_parsing = True
@@ -69,13 +101,15 @@ class ScriptedGroundStation:
             them (−1 without sticks).
         """
         out: list[bytes] = []
-        if not self._connected:
+        if self.high_latency:
+            out.extend(self._high_latency_request(now_s))
+        elif not self._connected:
             self._connected = True
             for stream, rate in QGC_STREAM_RATES_HZ.items():
                 out.append(
                     self._encode(mav.MAVLink_request_data_stream_message(1, 1, stream, rate, 1))
                 )
-        if now_s >= self._next_heartbeat_s:
+        if not self.high_latency and now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
             out.append(
                 self._encode(
@@ -91,25 +125,38 @@ class ScriptedGroundStation:
         out.append(self._encode(mav.MAVLink_manual_control_message(1, x, y, z, r, 0)))
         return out, len(out) - 1
 
+    def _high_latency_request(self, now_s: float) -> list[bytes]:
+        """MAV_CMD_CONTROL_HIGH_LATENCY 1 until ACKed, every ``retry_s``."""
+        if self.high_latency_acked or now_s < self._next_hl_s:
+            return []
+        self._next_hl_s = now_s + self._retry_s
+        params = (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        command = mav.MAV_CMD_CONTROL_HIGH_LATENCY
+        return [self._encode(mav.MAVLink_command_long_message(1, 1, command, 0, *params))]
+
     def _requests(self, now_s: float, armed: bool | None, mode: int | None) -> list[bytes]:
-        """Arm and mode requests not yet shown by the vehicle's heartbeat, every ``retry_s``."""
+        """Arm and mode requests not yet shown by the vehicle's heartbeat (nor, on a
+        high-latency link, ACKed), every ``retry_s``."""
         out: list[bytes] = []
         if now_s < self._next_retry_s:
             return out
-        if mode is not None and mode != self.vehicle_mode:
+        if mode is not None and mode != self.vehicle_mode and mode != self._acked_mode:
             flag = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             out.append(self._encode(mav.MAVLink_set_mode_message(1, flag, mode)))
-        if armed is not None and armed != self.vehicle_armed:
+            self._last_mode = mode
+        if armed is not None and armed != self.vehicle_armed and armed != self._acked_arm:
             params = (1.0 if armed else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            self._last_arm = armed
             arm = mav.MAV_CMD_COMPONENT_ARM_DISARM
             out.append(self._encode(mav.MAVLink_command_long_message(1, 1, arm, 0, *params)))
         if out:
             self._next_retry_s = now_s + self._retry_s
+            self._requested_s = now_s
         return out
 
     def receive(self, payload: bytes) -> list[float]:
         """Decode what the vehicle sent (garbage is skipped); the sample times [s] of the
-        ATTITUDE messages in it."""
+        states in it (ATTITUDE's ``time_boot_ms``, HIGH_LATENCY2's ``timestamp``)."""
         sampled: list[float] = []
         for message in self._decoder.parse_buffer(payload) or []:
             kind = message.get_type()
@@ -121,4 +168,26 @@ class ScriptedGroundStation:
                 self.vehicle_mode = int(message.custom_mode)
             elif kind == "ATTITUDE":
                 sampled.append(message.time_boot_ms / 1000.0)
+            elif kind == "HIGH_LATENCY2" and message.get_srcSystem() == 1:
+                base_mode = int(message.custom0) & 0xFF  # ArduPilot's base_mode in an int8
+                self.vehicle_armed = bool(base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+                self.vehicle_mode = int(message.custom_mode)
+                sampled_s = message.timestamp / 1000.0
+                if sampled_s > self._requested_s:  # the state after the last request: it counts
+                    self._acked_arm = self._acked_mode = None
+                    self._next_retry_s = 0.0
+                sampled.append(sampled_s)
+            elif kind == "COMMAND_ACK" and self.high_latency:
+                self._on_ack(message)
         return sampled
+
+    def _on_ack(self, message: mav.MAVLink_message) -> None:
+        """A high-latency link's COMMAND_ACK: an accepted request is not sent again."""
+        if message.result != mav.MAV_RESULT_ACCEPTED:
+            return
+        if message.command == mav.MAV_CMD_CONTROL_HIGH_LATENCY:
+            self.high_latency_acked = True
+        elif message.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            self._acked_arm = self._last_arm
+        elif message.command == mav.MAVLINK_MSG_ID_SET_MODE:
+            self._acked_mode = self._last_mode

@@ -5,7 +5,15 @@ station that asks for nothing still gets telemetry); REQUEST_DATA_STREAM sets a 
 (:data:`~testbed.mavlink.ardusub.STREAM_GROUPS`; stream 0 = all), SET_MESSAGE_INTERVAL one
 message (−1 off, 0 back to its group's rate). Rates are capped at :data:`MAX_RATE_HZ` (the
 endpoint runs once per vehicle frame, 100 Hz). Due times advance by whole intervals and skip
-ahead after a stall, so a late run never sends a burst. No I/O, no clock.
+ahead after a stall, so a late run never sends a burst.
+
+HIGH_LATENCY2 is ArduPilot's one "deferred" message here (``GCS_MAVLINK::deferred_message``, not
+a stream group): every :data:`HIGH_LATENCY2_INTERVAL_S` on a high-latency link
+(``initialise_message_intervals_from_streamrates``: ``set_mavlink_message_id_interval(
+HIGH_LATENCY2, 5000)`` when ``is_high_latency_link``), off on the others, and 5 s again after a
+SET_MESSAGE_INTERVAL of 0 on any link (``get_default_interval_for_ap_message``). A deferred
+message is first due one interval after its schedule starts or is set (``set_ap_message_interval``
+stamps ``last_sent_ms`` now), not at once. No I/O, no clock.
 """
 
 from __future__ import annotations
@@ -15,7 +23,7 @@ from typing import Protocol
 
 from testbed.mavlink.ardusub import STREAM_GROUPS
 
-__all__ = ["GROUP_PARAMS", "MAX_RATE_HZ", "StreamSchedule"]
+__all__ = ["GROUP_PARAMS", "HIGH_LATENCY2_INTERVAL_S", "MAX_RATE_HZ", "StreamSchedule"]
 
 MAX_RATE_HZ = 50.0
 """Fastest telemetry rate served [Hz]."""
@@ -30,6 +38,10 @@ GROUP_PARAMS = {
 }
 """Stream group → the parameter holding its boot rate [Hz]."""
 _GROUP_OF = {name: group for group, names in STREAM_GROUPS.items() for name in names}
+HIGH_LATENCY2_INTERVAL_S = 5.0
+"""HIGH_LATENCY2's interval on a high-latency link, and its default on any [s] (ArduPilot 4.5
+``GCS_Common.cpp``: 5000 ms)."""
+_DEFERRED = ("HIGH_LATENCY2",)
 
 
 class _HasParams(Protocol):
@@ -46,13 +58,18 @@ class StreamSchedule:
 
     Args:
         group_rates_hz: boot rate of each stream group [Hz] (0 = off).
+        high_latency: a high-latency link's schedule (HIGH_LATENCY2 every
+            :data:`HIGH_LATENCY2_INTERVAL_S`; off otherwise).
     """
 
-    def __init__(self, group_rates_hz: dict[int, float]) -> None:
+    def __init__(self, group_rates_hz: dict[int, float], *, high_latency: bool = False) -> None:
         self._defaults = {
             name: _interval(group_rates_hz.get(group, 0.0)) for name, group in _GROUP_OF.items()
         }
         self.interval_s: dict[str, float] = dict(self._defaults)
+        for name in _DEFERRED:
+            self._defaults[name] = HIGH_LATENCY2_INTERVAL_S
+            self.interval_s[name] = HIGH_LATENCY2_INTERVAL_S if high_latency else 0.0
         self._next_s: dict[str, float] = {}
 
     @classmethod
@@ -107,6 +124,9 @@ class StreamSchedule:
             if interval <= 0:
                 continue
             next_s = self._next_s.get(name)
+            if next_s is None and name in _DEFERRED:  # first due one interval on
+                self._next_s[name] = now_s + interval
+                continue
             if next_s is not None and now_s < next_s - 1e-9:
                 continue
             out.append(name)

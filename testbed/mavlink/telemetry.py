@@ -44,10 +44,12 @@ __all__ = [
     "EARTH_RADIUS_M",
     "HOME_LAT_LON_DEG",
     "MESSAGE_IDS",
+    "SENSORS_HEALTHY",
     "VehicleSnapshot",
     "VelocityEstimator",
     "global_from_local",
     "local_from_global",
+    "position_e7",
     "read_vehicle",
 ]
 
@@ -67,11 +69,15 @@ _SENSORS = (
     | mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
     | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
     | mav.MAV_SYS_STATUS_SENSOR_BATTERY
+    | mav.MAV_SYS_STATUS_AHRS
 )
-"""SYS_STATUS sensor bits present, enabled and healthy (pressure = the depth sensor)."""
-_HEALTH = _SENSORS | mav.MAV_SYS_STATUS_GEOFENCE
+"""SYS_STATUS sensor bits present, enabled and healthy (pressure = the depth sensor; the AHRS,
+which ArduPilot's ``GCS::update_sensor_status_flags`` reports present, enabled and healthy
+while its estimate is)."""
+SENSORS_HEALTHY = _SENSORS | mav.MAV_SYS_STATUS_GEOFENCE
 """SYS_STATUS health bits: also the geofence's, which ArduPilot reports healthy while no fence
-is breached, present or not (MAVProxy's fence module announces "fence breach" without it)."""
+is breached, present or not (MAVProxy's fence module announces "fence breach" without it).
+HIGH_LATENCY2's failure flags are ArduPilot's reading of these (:mod:`.high_latency`)."""
 
 
 Vec3 = tuple[float, float, float]
@@ -330,14 +336,21 @@ def local_from_global(lat_deg: float, lon_deg: float) -> tuple[float, float]:
     return north, east
 
 
+def position_e7(s: VehicleSnapshot) -> tuple[int, int]:
+    """(latitude, longitude) [1e-7 deg] of the reported position (GLOBAL_POSITION_INT's and
+    HIGH_LATENCY2's)."""
+    lat, lon = global_from_local(s.position_ned_m[0], s.position_ned_m[1])
+    return round(lat * 1e7), round(lon * 1e7)
+
+
 def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
-    north, east, down = s.position_ned_m
-    lat, lon = global_from_local(north, east)
+    down = s.position_ned_m[2]
+    lat, lon = position_e7(s)
     vn, ve, vd = s.velocity_ned_m_s
     return mav.MAVLink_global_position_int_message(
         s.time_boot_ms,
-        round(lat * 1e7),
-        round(lon * 1e7),
+        lat,
+        lon,
         round(-down * 1000.0),
         round(-down * 1000.0),
         _i16(vn * 100.0),
@@ -391,7 +404,7 @@ def _sys_status(s: VehicleSnapshot) -> mav.MAVLink_message:
     return mav.MAVLink_sys_status_message(
         _SENSORS,
         _SENSORS,
-        _HEALTH,
+        SENSORS_HEALTHY,
         100,
         round(s.voltage_v * 1000.0),
         _centiamps(s.current_a),
@@ -455,6 +468,8 @@ BUILDERS: dict[str, Callable[[VehicleSnapshot], mav.MAVLink_message]] = {
 """Telemetry message name → builder. NAMED_VALUE_FLOAT, STATUSTEXT and the replies are the
 endpoint's (:mod:`testbed.mavlink.endpoint`)."""
 MESSAGE_IDS = {
-    name: getattr(mav, f"MAVLINK_MSG_ID_{name}") for name in (*BUILDERS, "NAMED_VALUE_FLOAT")
+    name: getattr(mav, f"MAVLINK_MSG_ID_{name}")
+    for name in (*BUILDERS, "NAMED_VALUE_FLOAT", "HIGH_LATENCY2")
 }
-"""Telemetry message name → MAVLink id (for SET_MESSAGE_INTERVAL)."""
+"""Telemetry message name → MAVLink id (for SET_MESSAGE_INTERVAL, REQUEST_MESSAGE; HIGH_LATENCY2
+is :mod:`.high_latency`'s, built by the endpoint)."""
