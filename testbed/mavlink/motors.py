@@ -18,13 +18,25 @@ output reaches the same force with MOT_n_DIRECTION = s for a CW propeller and �
 SERVO_OUTPUT_RAW then carries motor n's pulse width on servo n. A layout that is no ArduSub
 frame reports each thruster on its own ``pwm_channel`` + 1 (FRAME_CONFIG 7, custom).
 
+**MOT_n_DIRECTION acts** as ArduSub's ``_motor_reverse[n]`` does: the mixer's last step
+(``output_armed_stabilizing*``: ``_thrust_rpyt_out[i] = constrain(_motor_reverse[i] · (rpy +
+linear), −1, 1)``, read every loop, so a PARAM_SET acts at once) scales motor n's output by it.
+The simulated pulse is the one the layout's direction gives (``directions``); with the parameter
+at d instead, ArduSub's output is d / direction times that one, so motor n's ESC gets
+``1500 + constrain((d / direction) · (pulse − 1500), −400, 400)`` µs (d = −direction: the pulse
+mirrored about 1500, the thruster pushing the other way with the T200's force for the mirrored
+pulse; 0: stopped). :meth:`ServoOutputs.direction_factors` gives those ratios; the run layer
+applies them to the vehicle's thrusters after its allocation (``testbed.run.mavlink_run``). The
+motor test is not mixed: ``AP_MotorsMatrix::output_test_num`` writes its pulse as is, so
+MOT_n_DIRECTION does not change a DO_MOTOR_TEST's output.
+
 Axes: ArduSub's forward, lateral, throttle (up), roll, pitch, yaw are the body wrench's
 X, Y, −Z, K, M, N (FRD). numpy and the config error only.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,6 +129,23 @@ class ServoOutputs:
         out = {"FRAME_CONFIG": float(self.frame_config)}
         for n, direction in enumerate(self.directions, start=1):
             out[f"MOT_{n}_DIRECTION"] = float(direction)
+        return out
+
+    def direction_factors(self, direction: Callable[[int], float | None]) -> dict[int, float]:
+        """Thruster (layout column) → MOT_n_DIRECTION / the layout's direction of its motor n,
+        for the motors where that is not 1 (module docstring); ``direction(n)`` is the live
+        MOT_n_DIRECTION (None: no such parameter, the layout's). A custom layout's directions
+        are 1 (the table's default)."""
+        out: dict[int, float] = {}
+        for n, thruster in enumerate(self.thrusters, start=1):
+            if thruster < 0:
+                continue
+            value = direction(n)
+            if value is None:
+                continue
+            layout = self.directions[n - 1] if n <= len(self.directions) else 1
+            if value != layout:
+                out[thruster] = value / layout
         return out
 
     def pulses(self, pwm_us: Sequence[float]) -> tuple[int, ...]:

@@ -13,6 +13,10 @@ into the endpoint (which writes the operator-owned intents on the vehicle's oper
 POST_UPDATE, after the thrusters were commanded, runs the endpoint's failsafes and telemetry and
 hands its packets to the links. Nothing calls into simpy from a reader thread.
 
+ArduSub's MOT_n_DIRECTION acts on the vehicle's thrusters (:func:`install_motor_directions`,
+:mod:`testbed.mavlink.motors`): a system after the vehicle's allocation gives motor n's ESC the
+pulse ArduSub's mixer would with that direction.
+
 The vehicle's own stale-command failsafe (``vehicle.failsafe``) is switched off for the run
 (its timeouts set to a day): ArduSub's FS_PILOT_* and FS_GCS_* parameters govern a MAVLink
 vehicle instead (:mod:`testbed.mavlink.failsafe`).
@@ -42,6 +46,7 @@ import simpy
 import simpy.rt
 
 from testbed.channel import Trace
+from testbed.common.components import ThrusterOutput
 from testbed.ecs import Phase, World
 from testbed.hil import latency_summary_ms
 from testbed.mavlink import (
@@ -64,7 +69,7 @@ from testbed.run.runner import RunResult
 from testbed.run.scenario_config import Scenario
 from testbed.run.wall_clock import SAMPLES_KEPT, rt_lateness_ns
 from testbed.vehicle.guidance import PositionGains
-from testbed.vehicle.resources import SimClock
+from testbed.vehicle.resources import Actuation, Controllers, SimClock
 from testbed.vehicle.thruster_config import ThrusterConfig
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.vehicle_config import VehicleConfig
@@ -74,6 +79,7 @@ __all__ = [
     "MavlinkVehicleNode",
     "endpoint_options",
     "endpoint_section",
+    "install_motor_directions",
     "layout_servos",
     "mavlink_metrics",
     "mavlink_vehicle_config",
@@ -136,6 +142,55 @@ def endpoint_options(
     return EndpointOptions(config.supply_voltage_v, overrides, servos=servos, guided_loop=guided)
 
 
+def install_motor_directions(vehicle: Vehicle, endpoint: VehicleEndpoint) -> None:
+    """Make the endpoint's MOT_n_DIRECTION act on ``vehicle``'s thrusters: a system after the
+    allocation (UPDATE, before the plant is actuated) gives each thruster whose motor's
+    direction differs from the layout's the pulse ArduSub's mixer would
+    (``1500 + clamp(factor · (pulse − 1500), ±400)``,
+    :meth:`~testbed.mavlink.ServoOutputs.direction_factors`) and the T200's force and current for
+    it. Not while disarmed (every pulse 1500) nor during a motor test, whose pulses ArduSub
+    writes unmixed (``output_test_num``). With the layout's directions it changes nothing."""
+    servos = endpoint.options.servos
+    params = endpoint.params
+
+    def direction(n: int) -> float | None:
+        name = f"MOT_{n}_DIRECTION"
+        return None if params.index_of(name) is None else params[name]
+
+    def apply_motor_directions(world: World) -> None:
+        factors = servos.direction_factors(direction)
+        if not factors:
+            return
+        ctl = world.resource(Controllers)
+        act = world.resource(Actuation)
+        n = act.matrix.shape[1]
+        if not ctl.flags.armed or len(ctl.thruster_test) == n:
+            return
+        out = world.get(ctl.vehicle, ThrusterOutput)
+        if out is None:
+            return
+        pwm = np.asarray(out.pwm_us, dtype=np.float64)
+        for thruster, factor in factors.items():
+            if thruster < n:
+                pwm[thruster] = 1500.0 + min(400.0, max(-400.0, factor * (pwm[thruster] - 1500.0)))
+        t200 = act.allocator.t200
+        forces = np.asarray(out.forces_n, dtype=np.float64)
+        mixed = t200.forces_for_pwms(pwm, act.allocator.config.ccw_mask)
+        for thruster in factors:
+            if thruster < n:
+                forces[thruster] = mixed[thruster]
+        act.commanded_forces_n[:] = forces
+        currents = t200.currents_for_forces(forces)
+        world.set(
+            ctl.vehicle,
+            ThrusterOutput(
+                tuple(forces.tolist()), tuple(pwm.tolist()), tuple(currents.tolist()), out.scale
+            ),
+        )
+
+    vehicle.schedule.add(Phase.UPDATE, apply_motor_directions)
+
+
 def mavlink_vehicle_config(config: VehicleConfig) -> VehicleConfig:
     """``config`` with its stale-command failsafe off (module docstring)."""
     failsafe = dataclasses.replace(
@@ -180,6 +235,7 @@ class MavlinkVehicleNode:
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, options
         )
+        install_motor_directions(vehicle, self.endpoint)
         self.links = list(links)
         self.channels = [self.endpoint.open_channel(link.url) for link in self.links]
         self.intakes = [Intake(link.inbox) for link in self.links]
