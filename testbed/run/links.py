@@ -14,7 +14,8 @@ not carry.
   :mod:`testbed.common.changeset`, sent by each node at its own rate, with a full snapshot every
   ``snapshot_period_s`` so a peer that lost a payload resyncs.
 - ``mavlink-raw``: the ground station's MAVLink packets themselves, the baseline
-  (:mod:`testbed.run.mavlink_links`).
+  (:mod:`testbed.run.mavlink_links`); ``mavlink-hl`` the same on a MAVLink high-latency link
+  (HIGH_LATENCY2 every 5 s).
 
 :data:`VEHICLE_LINKS` and :data:`OPERATOR_LINKS` are the only places that name the codecs; a new
 codec (raw MAVLink bytes, say) is one class per side and one entry in each.
@@ -368,6 +369,18 @@ def _mavlink_raw_operator(station: OperatorStation, **_: object) -> OperatorLink
     return RawMavlinkOperatorLink(station)
 
 
+def _mavlink_hl_vehicle(vehicle: Vehicle, **_: object) -> VehicleLink:
+    from testbed.run.mavlink_links import HighLatencyVehicleLink
+
+    return HighLatencyVehicleLink(vehicle)
+
+
+def _mavlink_hl_operator(station: OperatorStation, **_: object) -> OperatorLink:
+    from testbed.run.mavlink_links import HighLatencyOperatorLink
+
+    return HighLatencyOperatorLink(station)
+
+
 VEHICLE_LINKS: dict[str, Callable[..., VehicleLink]] = {
     "teleop": lambda vehicle, *, images, downlink_rate_hz, snapshot_period_s: TeleopVehicleLink(
         vehicle, images
@@ -378,6 +391,7 @@ VEHICLE_LINKS: dict[str, Callable[..., VehicleLink]] = {
         )
     ),
     "mavlink-raw": _mavlink_raw_vehicle,
+    "mavlink-hl": _mavlink_hl_vehicle,
 }
 """Vehicle codec by scenario name (``link.codec``)."""
 
@@ -387,5 +401,6 @@ OPERATOR_LINKS: dict[str, Callable[..., OperatorLink]] = {
         station, snapshot_period_s=snapshot_period_s
     ),
     "mavlink-raw": _mavlink_raw_operator,
+    "mavlink-hl": _mavlink_hl_operator,
 }
 """Operator codec by scenario name (``link.codec``)."""

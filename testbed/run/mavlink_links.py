@@ -17,6 +17,17 @@ tail-drops, half duplex collides).
   (:class:`~testbed.mavlink.VehicleEndpoint`) on the vehicle's world; after each frame it
   writes what the endpoint queued (telemetry at the requested rates, replies).
 
+The ``mavlink-hl`` codec is the same with the link a **high-latency** one on both ends
+(scenario ``s100-mavlink-hl-v1``; :mod:`testbed.mavlink.high_latency`): the vehicle's endpoint
+opens it as ArduSub's SERIALn_PROTOCOL 43 port with its SRn_* streams at 0, so once the ground
+station's MAV_CMD_CONTROL_HIGH_LATENCY is ACCEPTED it sends HIGH_LATENCY2 every 5 s, the replies
+and STATUSTEXT, and nothing else (before, nothing at all); the ground station does what
+QGroundControl does on such a link (no heartbeat, no stream requests, a command sent again only
+after 120 s without its ACK) but keeps sending the
+pilot's MANUAL_CONTROL, one a slot, at ``link.uplink_rate_hz``
+(:class:`~testbed.mavlink.ground_station.ScriptedGroundStation`). The operator's state is
+HIGH_LATENCY2's, its sample time the ``timestamp``.
+
 Each MAVLink packet is one write to the modem (one frame, as a ground station sends one
 datagram per message); every packet fits a frame's 255-B payload. A byte-counted tail-drop
 buffer then starves the larger writes: once the stream of 29-B MANUAL_CONTROL frames keeps it
@@ -32,15 +43,25 @@ from __future__ import annotations
 
 from testbed.common.components import ArmRequest, ModeRequest
 from testbed.mavlink import VehicleEndpoint
-from testbed.mavlink.ground_station import QGC_STREAM_RATES_HZ, ScriptedGroundStation
+from testbed.mavlink.ground_station import (
+    QGC_HIGH_LATENCY_ACK_TIMEOUT_S,
+    QGC_STREAM_RATES_HZ,
+    ScriptedGroundStation,
+)
 from testbed.operator.station import OperatorStation
 from testbed.operator.video import ImageConsole
 from testbed.run.links import Ingested, Outgoing
-from testbed.run.mavlink_run import endpoint_options
+from testbed.run.mavlink_run import endpoint_options, install_motor_directions
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.video import ImageSource
 
-__all__ = ["QGC_STREAM_RATES_HZ", "RawMavlinkOperatorLink", "RawMavlinkVehicleLink"]
+__all__ = [
+    "QGC_STREAM_RATES_HZ",
+    "HighLatencyOperatorLink",
+    "HighLatencyVehicleLink",
+    "RawMavlinkOperatorLink",
+    "RawMavlinkVehicleLink",
+]
 
 _GAIN = 1.0
 _RETRY_S = 1.0
@@ -51,12 +72,13 @@ class RawMavlinkVehicleLink:
 
     Args:
         vehicle: the vehicle.
+        high_latency: the link is a high-latency one (module docstring).
     """
 
     images: ImageSource | None = None
     reply_image: int | None = None
 
-    def __init__(self, vehicle: Vehicle) -> None:
+    def __init__(self, vehicle: Vehicle, *, high_latency: bool = False) -> None:
         # ArduSub's frame as the direct endpoint presents it (servo numbering, FRAME_CONFIG,
         # MOT_n_DIRECTION, BARO_SPEC_GRAV), the baseline's full joystick gain over them
         boot = {"JS_GAIN_DEFAULT": _GAIN}
@@ -64,7 +86,8 @@ class RawMavlinkVehicleLink:
         self.endpoint = VehicleEndpoint(
             vehicle.world, vehicle.entity, vehicle.operator_entity, options
         )
-        self.channel = self.endpoint.open_channel("narrow-link")
+        install_motor_directions(vehicle, self.endpoint)
+        self.channel = self.endpoint.open_channel("narrow-link", high_latency=high_latency)
 
     def ingest(self, payloads: list[tuple[bytes, int]], now_s: float) -> Ingested:
         result = Ingested()
@@ -89,13 +112,15 @@ class RawMavlinkOperatorLink:
 
     Args:
         station: the operator's station (its pilot's sticks, its arm and mode requests).
+        high_latency: the link is a high-latency one (module docstring).
     """
 
     console: ImageConsole | None = None
 
-    def __init__(self, station: OperatorStation) -> None:
+    def __init__(self, station: OperatorStation, *, high_latency: bool = False) -> None:
         self._station = station
-        self.gcs = ScriptedGroundStation(gain=_GAIN, retry_s=_RETRY_S)
+        retry_s = QGC_HIGH_LATENCY_ACK_TIMEOUT_S if high_latency else _RETRY_S
+        self.gcs = ScriptedGroundStation(gain=_GAIN, retry_s=retry_s, high_latency=high_latency)
 
     @property
     def vehicle_armed(self) -> bool:
@@ -126,3 +151,19 @@ class RawMavlinkOperatorLink:
         for payload, _ in payloads:
             result.sampled_s.extend(self.gcs.receive(payload))
         return result
+
+
+class HighLatencyVehicleLink(RawMavlinkVehicleLink):
+    """The ``mavlink-hl`` codec's vehicle end: :class:`RawMavlinkVehicleLink` on a
+    high-latency link."""
+
+    def __init__(self, vehicle: Vehicle) -> None:
+        super().__init__(vehicle, high_latency=True)
+
+
+class HighLatencyOperatorLink(RawMavlinkOperatorLink):
+    """The ``mavlink-hl`` codec's operator end: :class:`RawMavlinkOperatorLink`'s ground
+    station on a high-latency link."""
+
+    def __init__(self, station: OperatorStation) -> None:
+        super().__init__(station, high_latency=True)

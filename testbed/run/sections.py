@@ -123,7 +123,8 @@ class LinkSection:
             ``.toml`` preset file of the user's.
         channel: the preset with every other key of the ``[link]`` table applied over it.
         codec: ``"teleop"`` (the paper's compact orders and replies), ``"changeset"`` (the ECS
-            paper's full change-set sync) or ``"mavlink-raw"`` (MAVLink itself, the baseline).
+            paper's full change-set sync), ``"mavlink-raw"`` (MAVLink itself, the baseline) or
+            ``"mavlink-hl"`` (MAVLink on a high-latency link: HIGH_LATENCY2).
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
             (each node sends at its own rate; refused with the teleop codec, whose vehicle only
             answers orders).
@@ -145,7 +146,7 @@ class LinkSection:
 
     preset: str = "s100"
     channel: LinkConfig
-    codec: Literal["teleop", "changeset", "mavlink-raw"] = "teleop"
+    codec: Literal["teleop", "changeset", "mavlink-raw", "mavlink-hl"] = "teleop"
     mac: Literal["token", "free"] = "token"
     ipg: Literal["fixed", "telerobotics-2018", "telerobotics-2019", "telerobotics-2021"] = (
         "telerobotics-2021"

@@ -179,7 +179,7 @@ def test_with_the_layouts_directions_a_flight_is_unchanged() -> None:
         acting.close()
 
 
-@pytest.mark.parametrize("where", ["mavlink"])
+@pytest.mark.parametrize("where", ["mavlink", "mavlink-raw"])
 def test_the_runs_vehicles_act_on_it(where: str) -> None:
     """The vehicles the runs build behind an endpoint (``testbed mavlink``'s node, the raw
     MAVLink link's vehicle) act on MOT_n_DIRECTION: set on the endpoint, motor 1's pulse is

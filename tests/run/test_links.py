@@ -60,7 +60,7 @@ def test_every_codec_a_scenario_accepts_has_both_ends() -> None:
         set(VEHICLE_LINKS)
         == set(OPERATOR_LINKS)
         == codecs
-        == {"teleop", "changeset", "mavlink-raw"}
+        == {"teleop", "changeset", "mavlink-raw", "mavlink-hl"}
     )
 
 

@@ -33,6 +33,7 @@ PACKAGED = [
     "heavy-station-keeping-v1",
     "heavy-waypoint-v1",
     "m64-teleop-v1",
+    "s100-mavlink-hl-v1",
     "s100-mavlink-raw-v1",
     "s100-outage-v1",
     "s100-supervised-v1",
