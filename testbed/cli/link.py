@@ -86,7 +86,9 @@ def _run_link(args: argparse.Namespace) -> int:
         for name, value in model_args.items():
             check_finite(value, "--model-args", name)
         keys = ("--model", "--model-args")
-        model = make_link_model(args.model, model_args, config, "testbed link", keys)
+        model = make_link_model(
+            args.model, model_args, config, "testbed link", keys, seed=args.seed
+        )
     elif args.model_args != "{}":
         raise ConfigError("--model-args: only used with --model")
     result = run_probe(

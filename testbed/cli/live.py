@@ -133,7 +133,7 @@ def _run_live(args: argparse.Namespace) -> int:
         # a control law of one's own that does not build is bad input, one line as in
         # `testbed run`, before the console's port or a modem's is opened (the session makes
         # its laws afresh)
-        scenario_control_laws(scenario)
+        scenario_control_laws(scenario, scenario.seed if args.seed is None else args.seed)
         try:
             sock = bind(args.host, args.port)
         except OSError as err:

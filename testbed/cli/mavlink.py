@@ -190,7 +190,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     with claimed_out_dir(out, force=args.force):
         # a control law of one's own that does not build is bad input, one line as in
         # `testbed run`, before a link opens or anything runs (the run makes its laws afresh)
-        scenario_control_laws(scenario)
+        scenario_control_laws(scenario, scenario.seed if args.seed is None else args.seed)
         links: list[Any] = []
         try:
             for url in urls:

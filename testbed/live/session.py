@@ -130,7 +130,7 @@ class LiveSession:
         self.modem_kind = modem
         if endpoints is None:
             rng = np.random.default_rng(link_seed)
-            model = scenario_link_model(scenario)
+            model = scenario_link_model(scenario, self.seed)
             self.recorder.link_state = LinkStateLog.of(model)
             self.medium = Medium(env, link.channel, rng, self.recorder.trace, model=model)
         else:
@@ -159,7 +159,7 @@ class LiveSession:
 
     def _vehicle_node(self, rng: np.random.Generator) -> VehicleNode:
         scenario, env, recorder = self.scenario, self.env, self.recorder
-        depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
+        depth_law, attitude_law = scenario_control_laws(scenario, self.seed)  # before the vehicle
         modem = self._modem("vehicle", lambda: self.vehicle.truth.position_ned_m)
         images = scenario.images
         node = VehicleNode(

@@ -235,10 +235,12 @@ def _vehicle_node(
     modem: Any,
     recorder: Recorder,
     gateway: GatewayNode,
+    seed: int,
 ) -> tuple[VehicleNode, _ThrusterProbe]:
     """The scenario's vehicle node (as :func:`~testbed.run.runner.make_vehicle_node` builds
-    it), recorded against the sticks the ground station holds, with the latency probe."""
-    depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
+    it, its laws for a run of seed ``seed``), recorded against the sticks the ground station
+    holds, with the latency probe."""
+    depth_law, attitude_law = scenario_control_laws(scenario, seed)  # before the vehicle is built
     link = scenario.link
     images = image_source_factory(scenario.images) if scenario.images.enabled else None
     node = VehicleNode(
@@ -334,7 +336,7 @@ def run_gateway(
     ledger = FrameLedger()
     poll_lateness: deque[int] = deque(maxlen=SAMPLES_KEPT)
     if hil is None:
-        model = scenario_link_model(scenario)
+        model = scenario_link_model(scenario, seed)
         recorder.link_state = LinkStateLog.of(model)
         medium = Medium(
             env, link.channel, np.random.default_rng(link_seed), recorder.trace, model=model
@@ -361,7 +363,7 @@ def run_gateway(
     operator: OperatorNode | None = None
     try:
         rng = np.random.default_rng(vehicle_seed)
-        node, probe = _vehicle_node(env, scenario, rng, modems["vehicle"], recorder, gateway)
+        node, probe = _vehicle_node(env, scenario, rng, modems["vehicle"], recorder, gateway, seed)
         holder["node"] = node
         operator = OperatorNode(
             env,

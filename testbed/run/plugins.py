@@ -19,11 +19,13 @@ scenario file's folder, or to the working directory in ``--set``, or absolute) o
     depth_args = { kp = 60.0 }
 
 Each run calls its factories afresh, so a pilot, model or law that keeps state starts clean in
-every run, trial and sweep point: a pilot factory as ``factory(**args)``, given ``rng=`` (a
-``numpy.random.Generator`` of the run's seed, :func:`pilot_generator`) when it has a parameter
-named ``rng``; a link model factory as ``factory(config, **model_args)``, ``config`` the run's
+every run, trial and sweep point: a pilot factory as ``factory(**args)``; a link model factory
+as ``factory(config, **model_args)``, ``config`` the run's
 :class:`~testbed.channel.config.LinkConfig` (the preset with the ``[link]`` keys applied); a
-control law factory as ``factory(**depth_args)`` or ``factory(**attitude_args)``. The
+control law factory as ``factory(**depth_args)`` or ``factory(**attitude_args)``. Each, when it
+has a parameter named ``rng``, is also given ``rng=``: a ``numpy.random.Generator`` of the run's
+seed of its own (:func:`factory_generator`, :data:`GENERATOR_CHILDREN`), so one seed makes one
+result and trials of consecutive seeds draw differently; its arguments may not hold ``rng``. The
 pilot must have ``sample(t_s) -> PilotSample`` (:class:`~testbed.operator.pilots.Pilot`), the
 model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkModel`), a law
 ``reset`` and ``update`` (:class:`~testbed.vehicle.control_laws.DepthLaw`,
@@ -72,12 +74,15 @@ if TYPE_CHECKING:
     from testbed.vehicle.control_laws import AttitudeLaw, DepthLaw
 
 __all__ = [
+    "GENERATOR_CHILDREN",
     "PYTHON_SUFFIX",
     "TABLE_VALUE_KEYS",
     "call_factory",
     "check_arguments",
     "check_finite",
+    "check_no_rng",
     "check_target",
+    "factory_generator",
     "load_factory",
     "make_link_model",
     "pilot_generator",
@@ -99,6 +104,21 @@ TABLE_VALUE_KEYS = frozenset(
 """Scenario keys whose value is one table, a factory's keyword arguments: a sweep's ``[set]``
 sets such a table whole (``"link.model_args" = {}`` clears the scenario's), never merged key by
 key."""
+
+GENERATOR_CHILDREN = {
+    "pilot.factory": 2,
+    "link.model": 3,
+    "vehicle.control.depth": 4,
+    "vehicle.control.attitude": 5,
+}
+"""The child of ``SeedSequence(seed)`` whose generator each factory that takes ``rng`` is given,
+by the key naming the factory. Children 0 and 1 are the link's and the vehicle's own
+(``SeedSequence(seed).spawn(2)`` in every run mode); ``spawn(n)``'s first ``k`` children are
+``spawn(k)``'s, so giving a factory its generator changes no other draw, and each factory's
+draws are the same whichever others the scenario names."""
+
+_RNG = "rng"
+"""The parameter a factory names to be given its generator; an arguments table may not hold it."""
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*")
 _MODULES: dict[Path, ModuleType] = {}
@@ -226,10 +246,10 @@ def target_files(target: str) -> list[str]:
 
 
 def takes_rng(factory: Callable[..., Any]) -> bool:
-    """Whether ``factory`` has a parameter named ``rng`` (it is then given the run's
-    generator)."""
+    """Whether ``factory`` has a parameter named ``rng`` (it is then given its generator of the
+    run's seed, :func:`factory_generator`)."""
     try:
-        return "rng" in inspect.signature(factory).parameters
+        return _RNG in inspect.signature(factory).parameters
     except (TypeError, ValueError):  # no signature to read (some builtins)
         return False
 
@@ -242,8 +262,9 @@ def check_arguments(
     where: str,
     keys: tuple[str, str, str],
 ) -> None:
-    """Check ``kwargs``' numbers are finite (:func:`check_finite`), and bind ``positional`` and
-    ``kwargs`` to ``factory``'s signature without calling it.
+    """Check ``kwargs``' numbers are finite (:func:`check_finite`) and hold no ``rng``
+    (:func:`check_no_rng`), and bind ``positional`` and ``kwargs`` to ``factory``'s signature
+    without calling it (with the ``rng`` the run gives when it has that parameter).
 
     Args:
         factory: the callable ``target`` names.
@@ -255,12 +276,16 @@ def check_arguments(
             (``("link.model", "link.model_args", "(config, **model_args)")``).
 
     Raises:
-        ConfigError: ``"<where>: <key>: ..."`` naming a number that is not finite, or what does
-            not bind (the target's key when it cannot take the positional arguments; the
-            arguments' key for a keyword it does not take, or one it needs that is missing).
+        ConfigError: ``"<where>: <key>: ..."`` naming a number that is not finite, an ``rng``
+            in the arguments, or what does not bind (the target's key when it cannot take the
+            positional arguments; the arguments' key for a keyword it does not take, or one it
+            needs that is missing).
     """
     target_key, key, shape = keys
     check_finite(kwargs, where, key)
+    check_no_rng(kwargs, where, key)
+    if takes_rng(factory):
+        kwargs = {**kwargs, _RNG: None}
     try:
         signature = inspect.signature(factory)
     except (TypeError, ValueError):
@@ -298,6 +323,17 @@ def check_finite(value: Any, where: str, key: str) -> None:
             check_finite(item, where, f"{key}[{i}]")
 
 
+def check_no_rng(kwargs: Mapping[str, Any], where: str, key: str) -> None:
+    """Refuse a factory's arguments (``key``) that hold ``rng``: the run gives it (its seed's
+    generator, :func:`factory_generator`), whether or not the factory takes it.
+
+    Raises:
+        ConfigError: ``"<where>: <key>.rng: the run gives rng (its seed's generator)"``.
+    """
+    if _RNG in kwargs:
+        raise ConfigError(f"{where}: {key}.{_RNG}: the run gives rng (its seed's generator)")
+
+
 def call_factory(
     factory: Callable[..., Any],
     positional: tuple[Any, ...],
@@ -314,7 +350,7 @@ def call_factory(
     try:
         return factory(*positional, **kwargs)
     except (Exception, SystemExit) as error:  # sys.exit in a factory: its error, not our exit
-        given = {k: v for k, v in kwargs.items() if k != "rng"}
+        given = {k: v for k, v in kwargs.items() if k != _RNG}
         with_args = f" with {args_key} = {shown(given)}" if given else ""
         if named and key not in named:
             head, called = ", ".join(named), f" (calling {key}{with_args})"
@@ -348,11 +384,30 @@ def _where(scenario: Scenario, named: list[str]) -> str:
     return "--set" if named else scenario.source
 
 
+def factory_generator(seed: int, key: str) -> np.random.Generator:
+    """The generator a run of seed ``seed`` gives the factory named at scenario key ``key``
+    (``"pilot.factory"``, ``"link.model"``, ``"vehicle.control.depth"`` or
+    ``"vehicle.control.attitude"``) when it takes ``rng``: child
+    ``GENERATOR_CHILDREN[key]`` of ``SeedSequence(seed)`` (:data:`GENERATOR_CHILDREN`)."""
+    child = GENERATOR_CHILDREN[key]
+    return np.random.default_rng(np.random.SeedSequence(seed).spawn(child + 1)[child])
+
+
 def pilot_generator(seed: int) -> np.random.Generator:
     """The generator a run of seed ``seed`` gives a pilot factory that takes ``rng``: the third
-    child of ``SeedSequence(seed)`` (the link's and the vehicle's are the first two, so adding it
-    changed no other draw)."""
-    return np.random.default_rng(np.random.SeedSequence(seed).spawn(3)[2])
+    child of ``SeedSequence(seed)`` (:func:`factory_generator`)."""
+    return factory_generator(seed, "pilot.factory")
+
+
+def _arguments(
+    factory: Callable[..., Any], args: Mapping[str, Any], seed: int, key: str
+) -> dict[str, Any]:
+    """``args``, with ``rng`` the generator of ``seed`` for the factory named at ``key`` when
+    it takes one (:func:`factory_generator`)."""
+    kwargs = dict(args)
+    if takes_rng(factory):
+        kwargs[_RNG] = factory_generator(seed, key)
+    return kwargs
 
 
 def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
@@ -370,9 +425,7 @@ def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
     named = set_keys(scenario, (key, args_key))
     where = _where(scenario, named)
     factory = load_factory(section.factory, _where(scenario, set_keys(scenario, (key,))), key)
-    kwargs = dict(section.args)
-    if takes_rng(factory):
-        kwargs["rng"] = pilot_generator(seed)
+    kwargs = _arguments(factory, section.args, seed, key)
     pilot = call_factory(factory, (), kwargs, where, key, args_key, named)
     if not callable(getattr(pilot, "sample", None)):
         raise ConfigError(
@@ -382,9 +435,9 @@ def scenario_pilot(scenario: Scenario, seed: int) -> Pilot:
     return cast("Pilot", pilot)
 
 
-def scenario_link_model(scenario: Scenario) -> LinkModel | None:
-    """The link model ``scenario`` names in ``link.model``, made afresh for a run (module
-    docstring), or None for the preset's own.
+def scenario_link_model(scenario: Scenario, seed: int) -> LinkModel | None:
+    """The link model ``scenario`` names in ``link.model``, made afresh for a run of seed
+    ``seed`` (module docstring), or None for the preset's own.
 
     Raises:
         ConfigError: the factory failed, or made something that is not a link model (naming
@@ -397,7 +450,7 @@ def scenario_link_model(scenario: Scenario) -> LinkModel | None:
     config_keys = [f"link.{f.name}" for f in dataclasses.fields(link.channel)]
     named = set_keys(scenario, (*keys, "link.preset", *config_keys))
     where = _where(scenario, named)
-    return make_link_model(link.model, link.model_args, link.channel, where, keys, named)
+    return make_link_model(link.model, link.model_args, link.channel, where, keys, named, seed=seed)
 
 
 def make_link_model(
@@ -407,19 +460,25 @@ def make_link_model(
     where: str,
     keys: tuple[str, str],
     named: Sequence[str] = (),
+    *,
+    seed: int,
 ) -> LinkModel:
     """``NAME(channel, **args)`` of the callable ``target`` names (``"FILE.py:NAME"`` or
-    ``"MODULE:NAME"``), checked to be a link model; messages name ``where`` and ``keys`` (the
-    target's key and its arguments'), and first the ``--set`` keys ``named`` that changed the
-    call (the model, its arguments or the config: :func:`call_factory`).
+    ``"MODULE:NAME"``), with ``rng=`` the generator of ``seed`` for ``link.model``
+    (:func:`factory_generator`) when it takes one, checked to be a link model; messages name
+    ``where`` and ``keys`` (the target's key and its arguments'), and first the ``--set`` keys
+    ``named`` that changed the call (the model, its arguments or the config:
+    :func:`call_factory`).
 
     Raises:
-        ConfigError: the target does not load, the factory failed, or it made something without
-            ``airtime_s`` and ``error_model``.
+        ConfigError: ``args`` hold ``rng``, the target does not load, the factory failed, or it
+            made something without ``airtime_s`` and ``error_model``.
     """
     key, args_key = keys
+    check_no_rng(args, where, args_key)
     factory = load_factory(target, where, key)
-    model = call_factory(factory, (channel,), args, where, key, args_key, named)
+    kwargs = _arguments(factory, args, seed, "link.model")
+    model = call_factory(factory, (channel,), kwargs, where, key, args_key, named)
     laws = ("airtime_s", "error_model")
     missing = [name for name in laws if not callable(getattr(model, name, None))]
     if missing:
@@ -439,9 +498,12 @@ _LAW_CONTRACTS = {
 """What a depth or attitude law must have (:mod:`testbed.vehicle.control_laws`), for messages."""
 
 
-def scenario_control_laws(scenario: Scenario) -> tuple[DepthLaw | None, AttitudeLaw | None]:
-    """``(depth law, attitude law)`` that ``[vehicle.control]`` names, made afresh for a run
-    (module docstring): each ``NAME(**<name>_args)``, or None for the packaged PID. Call it
+def scenario_control_laws(
+    scenario: Scenario, seed: int
+) -> tuple[DepthLaw | None, AttitudeLaw | None]:
+    """``(depth law, attitude law)`` that ``[vehicle.control]`` names, made afresh for a run of
+    seed ``seed`` (module docstring): each ``NAME(**<name>_args)`` (with ``rng=`` its generator,
+    :func:`factory_generator`, when it takes one), or None for the packaged PID. Call it
     before building the vehicle, and put them in its
     :class:`~testbed.vehicle.resources.Controllers` (``depth_law``, ``attitude_law``) before
     its first frame.
@@ -457,7 +519,7 @@ def scenario_control_laws(scenario: Scenario) -> tuple[DepthLaw | None, Attitude
         named = set_keys(scenario, (key, args_key))
         where = _where(scenario, named)
         factory = load_factory(target, _where(scenario, set_keys(scenario, (key,))), key)
-        args = getattr(section, f"{name}_args")
+        args = _arguments(factory, getattr(section, f"{name}_args"), seed, key)
         law = call_factory(factory, (), args, where, key, args_key, named)
         missing = [m for m in ("reset", "update") if not callable(getattr(law, m, None))]
         if missing:

@@ -140,7 +140,7 @@ def run_hil(
         if "vehicle" in modems:
             rng = np.random.default_rng(vehicle_seed)
             vehicle_node = make_vehicle_node(
-                env, scenario, rng, modems["vehicle"], recorder, pilot=recorded_pilot
+                env, scenario, rng, modems["vehicle"], recorder, pilot=recorded_pilot, seed=seed
             )
             env.process(vehicle_node.run())
         if "operator" in modems:

@@ -96,18 +96,19 @@ def make_vehicle_node(
     recorder: Recorder,
     *,
     pilot: Pilot,
+    seed: int,
 ) -> VehicleNode:
     """The scenario's vehicle node on ``modem`` (simulated or HIL), with its thruster faults
     scheduled. ``rng`` feeds the vehicle's sensors and current; ``pilot`` is what the recorder
     samples for the ``cmd_*`` columns (:func:`observed_pilot`'s second). The holds of the
-    user's own that ``[vehicle.control]`` names are made for it afresh
-    (:func:`~testbed.run.plugins.scenario_control_laws`: a factory that fails stops it before
-    the vehicle is built).
+    user's own that ``[vehicle.control]`` names are made for it afresh, for a run of seed
+    ``seed`` (:func:`~testbed.run.plugins.scenario_control_laws`: a factory that fails stops it
+    before the vehicle is built).
 
     Raises:
         ConfigError: a control law's factory failed or made no law.
     """
-    depth_law, attitude_law = scenario_control_laws(scenario)
+    depth_law, attitude_law = scenario_control_laws(scenario, seed)
     link = scenario.link
     factory = partial(Vehicle, scenario.vehicle, rng)
     node = VehicleNode(
@@ -281,7 +282,7 @@ def run_scenario(
     seed = scenario.seed if seed is None else seed
     recorder = Recorder(trace=Trace())
     operator_pilot, recorded_pilot = run_pilots(scenario, seed, recorder, pilot)
-    model = scenario_link_model(scenario) if link_model is None else link_model
+    model = scenario_link_model(scenario, seed) if link_model is None else link_model
     recorder.link_state = LinkStateLog.of(model)
     link_seed, vehicle_seed = np.random.SeedSequence(seed).spawn(2)
     env = simpy.Environment()
@@ -297,7 +298,7 @@ def run_scenario(
     vehicle_modem = medium.attach("vehicle", lambda: holder["node"].vehicle.truth.position_ned_m)
     rng = np.random.default_rng(vehicle_seed)
     vehicle_node = make_vehicle_node(
-        env, scenario, rng, vehicle_modem, recorder, pilot=recorded_pilot
+        env, scenario, rng, vehicle_modem, recorder, pilot=recorded_pilot, seed=seed
     )
     holder["node"] = vehicle_node
     controllers = vehicle_node.vehicle.controllers

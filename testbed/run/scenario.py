@@ -50,11 +50,7 @@ from testbed.config import (
     parse_override,
 )
 from testbed.run.images import ImagesSection
-from testbed.run.plugins import (
-    check_arguments,
-    load_factory,
-    takes_rng,
-)
+from testbed.run.plugins import check_arguments, load_factory
 from testbed.run.scenario_config import SCHEMA_VERSION, Scenario
 from testbed.run.scenario_files import (
     file_digests,
@@ -217,9 +213,8 @@ def _from_data(
         if "start_s" in top.pilot:  # a pilot of one's own starts when it says (its args)
             raise ConfigError(f"{where}: pilot.start_s: not used when kind = 'python'")
         factory = load_factory(pilot.factory, where, "pilot.factory")
-        given = {**pilot.args, "rng": None} if takes_rng(factory) else pilot.args
         keys = ("pilot.factory", "pilot.args", "(**args)")
-        check_arguments(factory, pilot.factory, (), given, where, keys)
+        check_arguments(factory, pilot.factory, (), pilot.args, where, keys)
     control_laws = _build_control_laws(top.vehicle.get(_CONTROL, {}), where)
     faults = build(FaultsSection, top.faults, source=where, prefix="faults.")
     metrics = build(MetricsSection, top.metrics, source=where, prefix="metrics.")
