@@ -210,6 +210,8 @@ class MavlinkVehicleNode:
         recorder: ground-truth sink.
         stop: ends the node's process at the next frame once set (from any thread).
         boot_params: ArduSub parameters' values at boot (``--param``), over the layout's.
+        seed: the run's seed, of the generators the scenario's control laws are given
+            (:func:`~testbed.run.plugins.scenario_control_laws`); None = the scenario's.
     """
 
     def __init__(
@@ -221,13 +223,15 @@ class MavlinkVehicleNode:
         recorder: Recorder,
         stop: threading.Event | None = None,
         boot_params: Mapping[str, float] | None = None,
+        seed: int | None = None,
     ) -> None:
         self.env = env
         self._stop = stop
         self.recorder = recorder
         self._failsafes = FailsafeNotes(recorder)
         config = mavlink_vehicle_config(scenario.vehicle)
-        depth_law, attitude_law = scenario_control_laws(scenario)  # before the vehicle is built
+        law_seed = scenario.seed if seed is None else seed
+        depth_law, attitude_law = scenario_control_laws(scenario, law_seed)  # before the vehicle
         self.vehicle = Vehicle(config, rng, inbound=(self._ingest,), outbound=(self._publish,))
         vehicle = self.vehicle
         vehicle.controllers.depth_law, vehicle.controllers.attitude_law = depth_law, attitude_law
@@ -366,7 +370,7 @@ def run_mavlink(
     start: float | None = None
     try:
         rng = np.random.default_rng(vehicle_seed)
-        node = MavlinkVehicleNode(env, scenario, rng, links, recorder, stop, boot_params)
+        node = MavlinkVehicleNode(env, scenario, rng, links, recorder, stop, boot_params, seed)
         process = env.process(node.run(duration))
         env.sync()  # start the clock now, after pybullet has loaded
         start = time.perf_counter()
