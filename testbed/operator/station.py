@@ -156,8 +156,11 @@ def sample_pilot(world: World) -> None:
         else:
             use_yaw = goal.yaw_deg is not None
             yaw = math.remainder(math.radians(goal.yaw_deg or 0.0), math.tau)
-            kind = EndEffectorSetpoint if goal.frame == "end_effector" else PositionSetpoint
-            world.set(session.entity, kind(goal.position_ned_m, yaw, use_yaw))
+            if goal.frame == "end_effector":
+                world.set(session.entity, EndEffectorSetpoint(goal.position_ned_m, yaw, use_yaw))
+            else:  # a GoTo is flown in GUIDED: the mode asked for from now on (as the console's)
+                world.set(session.entity, PositionSetpoint(goal.position_ned_m, yaw, use_yaw))
+                world.set(session.entity, ModeRequest(ControlMode.GUIDED, session.plan.precision))
     if sample.attitude_deg is not None:
         roll, pitch, yaw = (math.radians(a) for a in sample.attitude_deg)
         world.set(session.entity, AttitudeSetpoint(quat_from_euler(roll, pitch, yaw)))

@@ -262,6 +262,8 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
         listed = ", ".join(sorted(known))
         raise ConfigError(f"{where}: link.{unknown[0]}: unknown key (known: {listed})")
     options = {k: v for k, v in table.items() if k in _LINK_OPTIONS}
+    if "mac" not in options:  # the access the codec works with: token passing for the paper's
+        options["mac"] = "token" if options.get("codec", "teleop") == "teleop" else "free"
     preset = options.get("preset", "s100")
     base = dataclasses.asdict(_loaded(load_link_config, preset, where, "link.preset"))
     channel_data = _merge(base, {k: v for k, v in table.items() if k in _CHANNEL_KEYS})
@@ -271,6 +273,12 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
         raise ConfigError(
             f"{where}: link.mac: 'free' does not work with link.codec = 'teleop' (its vehicle only "
             "answers orders, on a token-passing link: use link.mac = 'token' or another codec)"
+        )
+    if section.codec != "teleop" and section.mac == "token":
+        raise ConfigError(
+            f"{where}: link.mac: 'token' does not work with link.codec = '{section.codec}' (its "
+            "vehicle sends on its own at link.downlink_rate_hz and answers no order: use "
+            "link.mac = 'free', the default for that codec)"
         )
     if section.model:
         factory = load_factory(section.model, where, "link.model")

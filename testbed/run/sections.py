@@ -126,8 +126,9 @@ class LinkSection:
             paper's full change-set sync), ``"mavlink-raw"`` (MAVLink itself, the baseline) or
             ``"mavlink-hl"`` (MAVLink on a high-latency link: HIGH_LATENCY2).
         mac: ``"token"`` (the operator is master, the vehicle answers each frame) or ``"free"``
-            (each node sends at its own rate; refused with the teleop codec, whose vehicle only
-            answers orders).
+            (each node sends at its own rate). A scenario's default follows the codec: token
+            passing for ``teleop``, whose vehicle only answers orders, free access for the
+            others, whose vehicles send on their own; the other pairings are refused.
         ipg: the token master's inter-packet-gap policy.
         ipg_s: the gap [s] when ``ipg == "fixed"``, in (0, 60].
         uplink_rate_hz: operator send rate [Hz] when ``mac == "free"`` or

@@ -155,7 +155,7 @@ def test_same_seed_same_images() -> None:
     ("override", "key"),
     [
         ("vehicle.camera.enabled=false", "images.enabled"),
-        ("link.codec=changeset", "images.enabled"),
+        ("link.codec=changeset;link.mac=free", "images.enabled"),
         ("images.budget_bytes=3000", "images.budget_bytes"),
         ("images.roi=[0, 0, 200, 10]", "images.roi"),
         ("images.chunk_bytes=151", "images.chunk_bytes"),
@@ -163,7 +163,7 @@ def test_same_seed_same_images() -> None:
 )
 def test_bad_image_settings_name_the_key(override: str, key: str) -> None:
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
-        load_scenario("s100-video-v1", [override])
+        load_scenario("s100-video-v1", override.split(";"))
 
 
 def test_run_summary_has_an_images_line(clean_run: RunResult) -> None:
