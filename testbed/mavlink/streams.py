@@ -3,7 +3,8 @@
 A channel starts at the SR0_* parameter rates (ArduPilot's per-link stream rates, so a ground
 station that asks for nothing still gets telemetry); REQUEST_DATA_STREAM sets a whole group
 (:data:`~testbed.mavlink.ardusub.STREAM_GROUPS`; stream 0 = all), SET_MESSAGE_INTERVAL one
-message (−1 off, 0 back to its group's rate). Rates are capped at :data:`MAX_RATE_HZ` (the
+message (−1 off, 0 back to its group's rate, intervals above :data:`MAX_INTERVAL_S` capped as
+ArduPilot caps them). Rates are capped at :data:`MAX_RATE_HZ` (the
 endpoint runs once per vehicle frame, 100 Hz). Due times advance by whole intervals and skip
 ahead after a stall, so a late run never sends a burst.
 
@@ -23,10 +24,20 @@ from typing import Protocol
 
 from testbed.mavlink.ardusub import STREAM_GROUPS
 
-__all__ = ["GROUP_PARAMS", "HIGH_LATENCY2_INTERVAL_S", "MAX_RATE_HZ", "StreamSchedule"]
+__all__ = [
+    "GROUP_PARAMS",
+    "HIGH_LATENCY2_INTERVAL_S",
+    "MAX_INTERVAL_S",
+    "MAX_RATE_HZ",
+    "StreamSchedule",
+]
 
 MAX_RATE_HZ = 50.0
 """Fastest telemetry rate served [Hz]."""
+MAX_INTERVAL_S = 60.0
+"""Longest interval SET_MESSAGE_INTERVAL sets [s]: ArduPilot's ``GCS_MAVLINK::
+set_message_interval`` caps ``interval_us`` above 60 000 000 at 60 000 ms (so the
+MESSAGE_INTERVAL answered fits its int32 field)."""
 GROUP_PARAMS = {
     1: "SR0_RAW_SENS",
     2: "SR0_EXT_STAT",
@@ -94,8 +105,8 @@ class StreamSchedule:
     def set_interval(self, name: str, interval_us: float) -> bool:
         """SET_MESSAGE_INTERVAL: −1 off, 0 the group's rate (its boot rate, or the one
         REQUEST_DATA_STREAM set since), else every ``interval_us``
-        [µs] (capped at :data:`MAX_RATE_HZ`). Returns False for a message not streamed or a
-        non-finite interval."""
+        [µs] (capped at :data:`MAX_RATE_HZ` and :data:`MAX_INTERVAL_S`). Returns False for a
+        message not streamed or a non-finite interval."""
         if name not in self._defaults or not math.isfinite(interval_us):
             return False
         if interval_us < 0:
@@ -103,7 +114,7 @@ class StreamSchedule:
         elif interval_us == 0:
             self._set(name, self._defaults[name])
         else:
-            self._set(name, max(interval_us * 1e-6, 1.0 / MAX_RATE_HZ))
+            self._set(name, min(max(interval_us * 1e-6, 1.0 / MAX_RATE_HZ), MAX_INTERVAL_S))
         return True
 
     def interval_us(self, name: str) -> int:
