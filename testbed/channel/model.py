@@ -138,7 +138,7 @@ def _described(model: object) -> str:
     cls = type(model)
     try:
         where = inspect.getsourcefile(cls)
-    except TypeError:  # a built-in class
+    except (TypeError, OSError):  # a built-in class, or one of a REPL's or ``python -c``'s
         where = None
     return cls.__qualname__ if where is None else f"{cls.__qualname__} ({where})"
 

@@ -7,7 +7,8 @@ in force, a fade's state, a rate adaptation's choice), by name. The run asks for
 series row (the first vehicle frame at or after each ``metrics.sample_rate_hz`` instant, the
 same ``t_s`` as ``series.csv``) and writes them to ``link_state.csv``: ``t_s`` and the names in
 the order of the first answer. A model without ``state`` is asked nothing and no file is
-written. The values are numbers (a ``bool`` is written 0/1; NaN is allowed, for "no value");
+written. The values are numbers, Python's or numpy's (a ``bool``, numpy's too, is written 0/1;
+NaN is allowed, for "no value");
 the names are the first answer's, at every sample. Anything else is a
 :class:`~testbed.channel.model.LinkModelError` naming the model's class and file (one line,
 exit 2 on the command line; the run's rows until then are kept). The model is asked at the
@@ -72,9 +73,12 @@ class LinkStateLog:
         row = [t_s]
         for name in names:
             value = answer[name]
-            if not isinstance(value, int | float | np.integer | np.floating):
+            if not isinstance(value, int | float | np.integer | np.floating | np.bool_):
                 raise self._broken(t_s, answer, f"{name!r} is not a number")
-            row.append(float(value))
+            try:
+                row.append(float(value))
+            except OverflowError:  # an int past a float's range (10**400)
+                raise self._broken(t_s, answer, f"{name!r} is too large for a float") from None
         self.rows.append(row)
 
     def _broken(self, t_s: float, answer: object, why: str) -> LinkModelError:
