@@ -14,6 +14,7 @@ import contextlib
 import csv
 import io
 import json
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,6 +27,7 @@ from testbed.sweep.spec import Sweep, toml_literal
 __all__ = [
     "append_rows",
     "csv_text",
+    "journal_text",
     "read_journal",
     "results_csv",
     "sorted_unique",
@@ -114,14 +116,34 @@ def _count(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
+def _settled(value: Any) -> Any:
+    """``value`` with each number that is not finite as its TOML spelling (``"inf"``): a grid
+    value such as ``link.max_range_m = inf``, kept in strict JSON as ``sweep.json`` keeps it
+    (:func:`~testbed.sweep.manifest.canonical`, which reads both forms as one; metrics are
+    ``None`` already)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return toml_literal(value)
+    if isinstance(value, Mapping):
+        return {k: _settled(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_settled(v) for v in value]
+    return value
+
+
+def journal_text(rows: Sequence[Mapping[str, Any]]) -> str:
+    """``rows`` as the journal's lines: one strict JSON object per row, each ending in a
+    newline."""
+    return "".join(json.dumps(_settled(row), allow_nan=False) + "\n" for row in rows)
+
+
 def append_rows(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """Append rows as JSON lines in one write, then fsync.
+    """Append rows as JSON lines (:func:`journal_text`) in one write, then fsync.
 
     Raises:
         OSError: the write failed (a full disk); its ``filename`` is ``path``, and the file is
             cut back to its length before the write, so no partial line stays in it.
     """
-    data = "".join(json.dumps(row, allow_nan=False) + "\n" for row in rows).encode()
+    data = journal_text(rows).encode()
     try:
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     except OSError as err:

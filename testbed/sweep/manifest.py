@@ -9,11 +9,19 @@ added: finished runs are kept), or refuse, naming each difference (``old → new
 
 Values are compared parsed, not as text: ``0``, ``0.0`` and ``0e0`` are one value, the order of
 independent overrides does not matter, and an inline table is the table it sets.
+
+The file is strict JSON. A setting that is not a finite number (``link.max_range_m = inf``,
+unlimited: the only kind a scenario key accepts) is written as its TOML spelling, the string
+``"inf"`` (``"-inf"``, ``"nan"``), as ``overrides`` has it: a setting has a value, unlike a
+metric with none (``null`` in ``metrics.json``), and the string keeps it for a reader and for
+``--resume``, which compares both files' values in that form (a file written before, with a
+bare ``Infinity``, resumes too).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -29,12 +37,13 @@ FORMAT = 2
 
 
 def canonical(value: Any) -> Any:
-    """``value`` in the form two equal settings share: numbers as floats (``30`` = ``30.0``),
-    tables with sorted keys, arrays as lists."""
+    """``value`` in the form two equal settings share, strict JSON's: numbers as floats (``30``
+    = ``30.0``), a number that is not finite as its TOML spelling (``inf`` → ``"inf"``), tables
+    with sorted keys, arrays as lists."""
     if isinstance(value, bool) or value is None or isinstance(value, str):
         return value
     if isinstance(value, int | float):
-        return float(value)
+        return float(value) if math.isfinite(value) else toml_literal(float(value))
     if isinstance(value, Mapping):
         return {str(k): canonical(value[k]) for k in sorted(value)}
     if isinstance(value, list | tuple):
@@ -63,8 +72,8 @@ def manifest(sweep: Sweep) -> dict[str, Any]:
 
 
 def manifest_text(sweep: Sweep) -> str:
-    """``sweep.json``'s text: :func:`manifest` as indented JSON with sorted keys."""
-    return json.dumps(manifest(sweep), indent=1, sort_keys=True) + "\n"
+    """``sweep.json``'s text: :func:`manifest` as indented strict JSON with sorted keys."""
+    return json.dumps(manifest(sweep), indent=1, sort_keys=True, allow_nan=False) + "\n"
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,9 +102,15 @@ def _leaves(table: Any, prefix: str = "") -> dict[str, Any]:
     return leaves
 
 
+_NOT_FINITE = frozenset({"inf", "-inf", "nan"})
+""":func:`canonical`'s spellings of the numbers that are not finite."""
+
+
 def _shown(value: Any) -> str:
     if value is _ABSENT:
         return "(none)"
+    if value in _NOT_FINITE:
+        return str(value)  # a number, as TOML spells it
     try:
         return toml_literal(value)
     except TypeError:
@@ -116,7 +131,7 @@ def compare(held: Mapping[str, Any], new: Mapping[str, Any]) -> Resumption:
     for name in ("id", "scenario", "testbed"):
         if held.get(name) != new[name]:
             out.append(f"{name}: {held.get(name)} → {new[name]}")
-    old_set, new_set = _leaves(held.get("set")), _leaves(new["set"])
+    old_set, new_set = _leaves(canonical(held.get("set"))), _leaves(new["set"])
     for key in sorted(set(old_set) | set(new_set)):
         before, after = old_set.get(key, _ABSENT), new_set.get(key, _ABSENT)
         if before != after:

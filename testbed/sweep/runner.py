@@ -37,6 +37,7 @@ from testbed.sweep.backends import RunOutcome, execute_run, outcomes, scheduler_
 from testbed.sweep.journal import (
     append_rows,
     csv_text,
+    journal_text,
     read_journal,
     results_csv,
     sorted_unique,
@@ -119,7 +120,7 @@ def run_sweep(
                 remove_sweep_files(out)
             journal = out / "runs.jsonl"
             if grown:  # the rows renumbered (and a torn tail cut)
-                write_atomic(journal, "".join(json.dumps(r, allow_nan=False) + "\n" for r in rows))
+                write_atomic(journal, journal_text(rows))
             elif resume:
                 read_journal(journal, sweep, repair=True)  # the same rows, a torn tail cut
             write_atomic(out / "sweep.json", manifest_text(sweep))
