@@ -76,7 +76,8 @@ def _run_link(args: argparse.Namespace) -> int:
     config = link_config_option(args.preset, args.overrides)
     model = None
     if args.model is not None:
-        from testbed.run.plugins import check_finite, make_link_model
+        from testbed.run.plugin_calls import make_link_model
+        from testbed.run.plugins import check_finite
 
         _, model_args = parse_override(f"model_args={args.model_args}")
         if not isinstance(model_args, dict):

@@ -117,7 +117,7 @@ def _run_live(args: argparse.Namespace) -> int:
     from testbed.run.failures import partial_run
     from testbed.run.interrupts import deferred_interrupts
     from testbed.run.outputs import claimed_out_dir, write_run
-    from testbed.run.plugins import scenario_control_laws
+    from testbed.run.plugin_calls import scenario_control_laws
     from testbed.run.scenario import load_scenario
 
     check_seed(args.seed)

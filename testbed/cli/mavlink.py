@@ -140,7 +140,7 @@ def run_mavlink_command(args: argparse.Namespace) -> int:
     from testbed.run.failures import partial_run
     from testbed.run.mavlink_run import run_mavlink
     from testbed.run.outputs import claimed_out_dir, write_run
-    from testbed.run.plugins import scenario_control_laws
+    from testbed.run.plugin_calls import scenario_control_laws
     from testbed.run.scenario import load_scenario
 
     ports = {"operator": args.operator_port, "vehicle": args.vehicle_port}

@@ -66,7 +66,7 @@ from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.link_log import LinkStateLog
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_control_laws, scenario_link_model
+from testbed.run.plugin_calls import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, note_copies_lost_transmitting, tally_images

@@ -58,7 +58,7 @@ from testbed.run.mavlink_run import EndpointPilot, FailsafeNotes, endpoint_secti
 from testbed.run.metrics import summary
 from testbed.run.nodes import OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_control_laws, scenario_link_model
+from testbed.run.plugin_calls import scenario_control_laws, scenario_link_model
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult, note_copies_lost_transmitting

@@ -62,7 +62,7 @@ from testbed.operator.pilots import PilotSample
 from testbed.run.failures import reduce_run, run_error
 from testbed.run.interrupts import interrupt_of
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_control_laws
+from testbed.run.plugin_calls import scenario_control_laws
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics
 from testbed.run.runner import RunResult
@@ -211,7 +211,7 @@ class MavlinkVehicleNode:
         stop: ends the node's process at the next frame once set (from any thread).
         boot_params: ArduSub parameters' values at boot (``--param``), over the layout's.
         seed: the run's seed, of the generators the scenario's control laws are given
-            (:func:`~testbed.run.plugins.scenario_control_laws`); None = the scenario's.
+            (:func:`~testbed.run.plugin_calls.scenario_control_laws`); None = the scenario's.
     """
 
     def __init__(

@@ -35,7 +35,7 @@ from testbed.run.interrupts import deferred_interrupts, interrupt_of
 from testbed.run.link_log import LinkStateLog
 from testbed.run.nodes import LinkModem, OperatorNode, VehicleNode
 from testbed.run.observer import VehicleObserver
-from testbed.run.plugins import scenario_control_laws, scenario_link_model, scenario_pilot
+from testbed.run.plugin_calls import scenario_control_laws, scenario_link_model, scenario_pilot
 from testbed.run.recorder import Recorder
 from testbed.run.run_metrics import compute_metrics, plain_args
 from testbed.run.scenario_config import Scenario
@@ -102,7 +102,7 @@ def make_vehicle_node(
     scheduled. ``rng`` feeds the vehicle's sensors and current; ``pilot`` is what the recorder
     samples for the ``cmd_*`` columns (:func:`observed_pilot`'s second). The holds of the
     user's own that ``[vehicle.control]`` names are made for it afresh, for a run of seed
-    ``seed`` (:func:`~testbed.run.plugins.scenario_control_laws`: a factory that fails stops it
+    ``seed`` (:func:`~testbed.run.plugin_calls.scenario_control_laws`: a factory that fails stops it
     before the vehicle is built).
 
     Raises:

@@ -336,9 +336,9 @@ class PilotSection:
 
     def pilot(self) -> Pilot:
         """The packaged pilot this section configures (:mod:`testbed.operator.pilots`); a
-        ``kind = "python"`` pilot is made by :func:`testbed.run.plugins.scenario_pilot`."""
+        ``kind = "python"`` pilot is made by :func:`testbed.run.plugin_calls.scenario_pilot`."""
         if self.kind == "python":
-            raise ValueError("a pilot of kind 'python' is made by plugins.scenario_pilot")
+            raise ValueError("a pilot of kind 'python' is made by plugin_calls.scenario_pilot")
         if self.kind == "supervisor":
             return SupervisorPilot(self.goals)
         if self.kind == "attitude":
@@ -359,7 +359,7 @@ class PilotSection:
 class ControlLawsSection:
     """``[vehicle.control]``: a depth or attitude hold of the user's own, flying instead of the
     packaged PID (:mod:`testbed.vehicle.control_laws`), made for each run by the callable a
-    target names (:func:`testbed.run.plugins.scenario_control_laws`). Kept apart from
+    target names (:func:`testbed.run.plugin_calls.scenario_control_laws`). Kept apart from
     :class:`~testbed.vehicle.vehicle_config.VehicleConfig`: the vehicle does not load Python
     files.
 

@@ -1,5 +1,5 @@
 """Depth and attitude holds of the user's own named in scenario files (``[vehicle.control]``,
-:func:`testbed.run.plugins.scenario_control_laws`): they reach sweeps and trials, which take no
+:func:`testbed.run.plugin_calls.scenario_control_laws`): they reach sweeps and trials, which take no
 ``vehicle_setup`` hook. Truths: a P depth law's closed-form offset −B/kp at each sweep point,
 the same run with the law put in through ``vehicle_setup`` (a second method), one seed making
 one result; and one line, exit 2, for every way the name, its arguments or its object can be

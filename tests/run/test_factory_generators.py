@@ -1,5 +1,5 @@
 """Generators of the run's seed for link models and control laws of the user's own
-(:func:`testbed.run.plugins.factory_generator`): a factory with a parameter named ``rng`` is
+(:func:`testbed.run.plugin_calls.factory_generator`): a factory with a parameter named ``rng`` is
 given the generator of a fixed child of ``SeedSequence(seed)`` (the docs' rule: 3 for
 ``link.model``, 4 for ``vehicle.control.depth``, 5 for ``vehicle.control.attitude``), the same
 in every run mode, so one seed makes one result and trials of consecutive seeds draw
