@@ -80,6 +80,7 @@ from typing import TYPE_CHECKING
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import DepthSetpoint, PositionSetpoint
+from testbed.common.velocity_demand import velocity_demand_ne
 from testbed.mavlink.ardusub import base_mode
 from testbed.mavlink.telemetry import SENSORS_HEALTHY, VehicleSnapshot, position_e7
 
@@ -173,11 +174,9 @@ def _desired_speed(
         return 0.0
     vn, ve, vd = feed_forward
     if horizontal is not None:
-        en, ee = horizontal[0] - s.position_ned_m[0], horizontal[1] - s.position_ned_m[1]
-        error = math.hypot(en, ee)
-        if error > 0.0:
-            demand = min(loop.gain_1_s * error, loop.max_speed_m_s)
-            vn, ve = vn + demand * en / error, ve + demand * ee / error
+        error = (horizontal[0] - s.position_ned_m[0], horizontal[1] - s.position_ned_m[1])
+        dn, de = velocity_demand_ne(error, loop.gain_1_s, loop.max_speed_m_s)
+        vn, ve = vn + dn, ve + de
     if depth_m is not None:
         ez = depth_m - s.position_ned_m[2]
         gain = loop.depth_gain_1_s

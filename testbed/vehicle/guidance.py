@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from testbed.common.velocity_demand import velocity_demand_ne
 from testbed.config import check_range
 
 __all__ = ["PositionController", "PositionGains"]
@@ -112,11 +113,8 @@ class PositionController:
         """
         g = self.gains
         self._observe(fix_time_s, fix_ne_m[0], fix_ne_m[1])
-        en, ee = target_ne_m[0] - fix_ne_m[0], target_ne_m[1] - fix_ne_m[1]
-        vdn, vde = g.kp_1_s * en, g.kp_1_s * ee
-        speed = math.hypot(vdn, vde)
-        if speed > g.max_speed_m_s:
-            vdn, vde = vdn * g.max_speed_m_s / speed, vde * g.max_speed_m_s / speed
+        error = (target_ne_m[0] - fix_ne_m[0], target_ne_m[1] - fix_ne_m[1])
+        vdn, vde = velocity_demand_ne(error, g.kp_1_s, g.max_speed_m_s)
         vn, ve = self.velocity_ne_m_s
         fn, fe = g.kv_n_s_m * (vdn - vn), g.kv_n_s_m * (vde - ve)
         c, s = math.cos(yaw_rad), math.sin(yaw_rad)
