@@ -277,8 +277,8 @@ def _build_link(table: Mapping[str, Any], where: str, given: set[str]) -> LinkSe
     if section.codec != "teleop" and section.mac == "token":
         raise ConfigError(
             f"{where}: link.mac: 'token' does not work with link.codec = '{section.codec}' (its "
-            "vehicle sends on its own at link.downlink_rate_hz and answers no order: use "
-            "link.mac = 'free', the default for that codec)"
+            "vehicle sends on its own and answers no order: use link.mac = 'free', the default "
+            "for that codec)"
         )
     if section.model:
         factory = load_factory(section.model, where, "link.model")
