@@ -266,6 +266,13 @@ def check_arguments(
         signature.bind_partial(*positional)
     except TypeError as error:
         raise ConfigError(f"{where}: {target_key}: {target} cannot take {shape}: {error}") from None
+    taken = [name for name, _ in zip(signature.parameters, positional, strict=False)]
+    twice = [name for name in taken if name in kwargs]
+    if twice:  # e.g. a link model factory without the config parameter it is called with first
+        raise ConfigError(
+            f"{where}: {target_key}: {target} cannot take {shape}: its parameter {twice[0]!r} "
+            f"is given the run's {shape[1:].split(',')[0]} first, and {key} names it too"
+        )
     try:
         signature.bind(*positional, **kwargs)
     except TypeError as error:
