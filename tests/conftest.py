@@ -70,7 +70,8 @@ def pytest_sessionstart(session: object) -> None:
         vehicle.set_mode(ControlMode.DEPTH_HOLD)  # and runs them
         vehicle.command((0.5, 0.0, 0.0, 0.0, 0.0, 0.1))
         vehicle.advance(0.1)
-    from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+    from testbed.vehicle.estimation import KalmanNavigator
+    from testbed.vehicle.filter_values import FilterConfig
     from testbed.vehicle.nav_sensors import Measurement
 
     navigator = KalmanNavigator(FilterConfig())  # the navigation filter's kernels

@@ -25,7 +25,7 @@ from testbed.vehicle.components import (
     PoseTarget,
     PositionSetpoint,
 )
-from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.filter_values import NavigationEstimate
 from testbed.vehicle.manipulation import EndEffectorTarget, Manipulator
 from testbed.vehicle.resources import Controllers, PlantTruth, PowerMeter, SimClock
 from testbed.vehicle.systems import applied_sticks

@@ -59,7 +59,7 @@ from testbed.vehicle.components import (
     PoseTarget,
     PositionSetpoint,
 )
-from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.filter_values import NavigationEstimate
 from testbed.vehicle.hydrodynamics import HydroModel
 from testbed.vehicle.ismc import (
     IsmcController,

@@ -29,7 +29,8 @@ from testbed.common.jit import F64, I64, MARK, VECTOR, floats
 from testbed.config import check_range
 from testbed.ecs import World
 from testbed.vehicle.components import DepthReading, ImuReading, PositionReading
-from testbed.vehicle.estimation import FilterConfig, KalmanNavigator, NavigationEstimate
+from testbed.vehicle.estimation import KalmanNavigator
+from testbed.vehicle.filter_values import FilterConfig, NavigationEstimate
 from testbed.vehicle.nav_sensors import (
     Accelerometer,
     AccelerometerConfig,

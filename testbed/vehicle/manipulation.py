@@ -31,7 +31,7 @@ from testbed.config import ConfigError, FieldError, check, check_ranges
 from testbed.ecs import World
 from testbed.vehicle.arm import ArmModel, load_arm_model
 from testbed.vehicle.arm_kinematics import end_effector_ned, uvms_kinematics
-from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.filter_values import NavigationEstimate
 from testbed.vehicle.resources import Controllers, SimClock
 from testbed.vehicle.tpik import TpikConfig, TpikInput, TpikOutput, load_tpik_config, solve_uvms
 

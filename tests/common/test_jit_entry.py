@@ -127,7 +127,8 @@ def test_whole_numbers_in_configs_reach_the_kernels_as_floats() -> None:
     arrays as one written with decimals (an int64 array at a float64 entry would be misread,
     its bits taken for tiny floats)."""
     from testbed.vehicle.control import PID, PidGains
-    from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+    from testbed.vehicle.estimation import KalmanNavigator
+    from testbed.vehicle.filter_values import FilterConfig
     from testbed.vehicle.nav_sensors import Measurement
     from testbed.vehicle.sensors import DepthSensor, DepthSensorConfig
 

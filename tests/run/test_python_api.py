@@ -16,7 +16,7 @@ from testbed.ecs import Phase, World
 from testbed.operator.pilots import PilotSample, SampleHold
 from testbed.run import RunResult, load_scenario, run_scenario
 from testbed.vehicle.components import ImuReading
-from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.filter_values import NavigationEstimate
 from testbed.vehicle.localization import Localizer, Navigation
 from testbed.vehicle.nav_sensors import Measurement
 from testbed.vehicle.resources import SimClock

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from testbed.config import build
-from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+from testbed.vehicle.estimation import KalmanNavigator
+from testbed.vehicle.filter_values import FilterConfig
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.vehicle_config import VehicleConfig
 

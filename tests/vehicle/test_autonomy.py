@@ -29,7 +29,7 @@ from testbed.vehicle.components import (
     PoseTarget,
     PositionSetpoint,
 )
-from testbed.vehicle.estimation import NavigationEstimate
+from testbed.vehicle.filter_values import NavigationEstimate
 from testbed.vehicle.vehicle import Vehicle
 from testbed.vehicle.vehicle_config import VehicleConfig
 

@@ -25,11 +25,8 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
 )
-from testbed.vehicle.estimation import (
-    FilterConfig,
-    KalmanNavigator,
-    NavigationEstimate,
-)
+from testbed.vehicle.estimation import KalmanNavigator
+from testbed.vehicle.filter_values import FilterConfig, NavigationEstimate
 from testbed.vehicle.localization import (
     KalmanLocalizer,
     Navigation,

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from testbed.vehicle import filter_history as history
-from testbed.vehicle.estimation import FilterConfig, KalmanNavigator
+from testbed.vehicle.estimation import KalmanNavigator
+from testbed.vehicle.filter_values import FilterConfig
 from testbed.vehicle.nav_sensors import Measurement
 
 

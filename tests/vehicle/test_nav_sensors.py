@@ -18,7 +18,7 @@ from testbed.vehicle.control import (
     FailsafeConfig,
     PidGains,
 )
-from testbed.vehicle.estimation import FilterConfig, NavigationEstimate
+from testbed.vehicle.filter_values import FilterConfig, NavigationEstimate
 from testbed.vehicle.localization import KalmanLocalizer, Navigation, estimate_navigation
 from testbed.vehicle.nav_sensors import (
     AcousticFix,
