@@ -16,7 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from testbed.report.figures import DPI
-from testbed.run.images import ImageLog, ReceivedImage, psnr_db
+from testbed.run.image_record import ImageLog, ReceivedImage, psnr_db
 
 __all__ = ["plot_image_strip", "strip_selection"]
 

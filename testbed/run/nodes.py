@@ -34,7 +34,7 @@ from testbed.ecs import Phase, World
 from testbed.operator.station import OperatorStation
 from testbed.operator.video import ImageConsole
 from testbed.protocol import Frame, FrameDecoder, encode_frame, frame_overhead
-from testbed.run.images import CapturedImage, ReceivedImage
+from testbed.run.image_record import CapturedImage, ReceivedImage
 from testbed.run.links import OPERATOR_LINKS, VEHICLE_LINKS, Ingested, Outgoing
 from testbed.run.recorder import Recorder
 from testbed.vehicle.resources import SimClock

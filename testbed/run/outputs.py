@@ -31,7 +31,7 @@ from typing import Any
 from testbed.config import ConfigError
 from testbed.run.atomic import TMP_PREFIX as _TMP_PREFIX
 from testbed.run.atomic import replace_atomically
-from testbed.run.images import write_images_csv, write_images_npz, write_progress_csv
+from testbed.run.image_record import write_images_csv, write_images_npz, write_progress_csv
 from testbed.run.interrupts import deferred_interrupts
 from testbed.run.runner import RunResult
 

@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from testbed.channel import Trace
 from testbed.channel.trace import ListEquality
-from testbed.run.images import ImageLog
+from testbed.run.image_record import ImageLog
 
 if TYPE_CHECKING:
     from testbed.run.arm_log import ArmLog

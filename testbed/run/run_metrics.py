@@ -21,7 +21,7 @@ import testbed
 from testbed.channel import Trace, direction_counts
 from testbed.common.components import MissionStatus
 from testbed.protocol import VEHICLE_HEADER_SIZE
-from testbed.run.images import image_metrics
+from testbed.run.image_record import image_metrics
 from testbed.run.metrics import (
     SIGNAL_LAG_WINDOW_S,
     age_of_information,

@@ -21,7 +21,7 @@ from testbed.channel import EventKind, load_link_config
 from testbed.config import ConfigError
 from testbed.imaging import decode, encode
 from testbed.report.run_plots import write_run_plots
-from testbed.run.images import image_rows
+from testbed.run.image_record import image_rows
 from testbed.run.outputs import write_run
 from testbed.run.runner import RunResult, run_scenario
 from testbed.run.scenario import load_scenario
@@ -194,7 +194,7 @@ def test_an_image_that_decodes_to_no_picture_is_counted_not_scored_lossless() ->
     """A budget too small for the coder's header completes an image whose bits decode to a
     (0, 0) picture: it is counted ``undecodable`` and left out of the PSNR (it used to score
     99 dB, "lossless", because min(99, NaN) is 99)."""
-    from testbed.run.images import CapturedImage, ImageLog, ReceivedImage, image_metrics
+    from testbed.run.image_record import CapturedImage, ImageLog, ReceivedImage, image_metrics
 
     rng = np.random.default_rng(1)
     frame = rng.integers(0, 256, (24, 32), dtype=np.uint8)
