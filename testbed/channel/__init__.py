@@ -22,6 +22,7 @@ Depends on :mod:`testbed.protocol`, :mod:`testbed.config`, simpy and numpy only.
 from __future__ import annotations
 
 from .config import GilbertElliott, LinkConfig, Propagation, load_link_config, preset_names
+from .delivery import Delivery, ModemCounters, decode_delivery
 from .mac import (
     TELEROBOTICS_2018,
     TELEROBOTICS_2019,
@@ -33,7 +34,7 @@ from .mac import (
     run_token_master,
     run_token_slave,
 )
-from .medium import Delivery, Medium, Modem, ModemCounters, Position, decode_delivery
+from .medium import Medium, Modem, Position
 from .model import ErrorModel, LinkModel, StandardLink
 from .outcomes import (
     RECEPTION_OUTCOMES,

@@ -4,7 +4,7 @@ A sender hands ``frames`` frames of ``frame_bytes`` bytes to its modem, one ever
 each frame is ``encode_frame`` of a payload starting with a 4-byte big-endian sequence number, so
 the receiver, which runs :class:`~testbed.protocol.FrameDecoder` on every delivered copy, can
 match what it decodes to what was sent. It decodes exactly as the run's nodes do
-(:func:`~testbed.channel.medium.decode_delivery`: the decoder is flushed at the end of each
+(:func:`~testbed.channel.delivery.decode_delivery`: the decoder is flushed at the end of each
 transmission), so a frame behind a corrupted length byte is not held for later frames. Latency
 is measured from handing the frame to the link to the decoder yielding it.
 
@@ -36,8 +36,9 @@ import numpy as np
 import simpy
 
 from testbed.channel.config import LinkConfig
+from testbed.channel.delivery import Delivery, decode_delivery
 from testbed.channel.mac import run_periodic_sender
-from testbed.channel.medium import Delivery, Medium, decode_delivery
+from testbed.channel.medium import Medium
 from testbed.channel.model import LinkModel, model_name
 from testbed.channel.trace import EventKind, Trace
 from testbed.protocol import MAX_PAYLOAD, Frame, FrameDecoder, encode_frame, frame_overhead

@@ -15,7 +15,8 @@ import pytest
 import simpy
 
 from testbed.channel.config import LinkConfig, Propagation, load_link_config
-from testbed.channel.medium import Delivery, Medium, Modem, Position
+from testbed.channel.delivery import Delivery
+from testbed.channel.medium import Medium, Modem, Position
 from testbed.channel.trace import EventKind, Trace
 from testbed.protocol import Frame, FrameDecoder, encode_frame
 

@@ -7,7 +7,8 @@ import pytest
 import simpy
 
 from testbed.channel.config import LinkConfig
-from testbed.channel.medium import Delivery, Medium
+from testbed.channel.delivery import Delivery
+from testbed.channel.medium import Medium
 
 
 def test_set_ber_applies_to_transmissions_started_after_it() -> None:
