@@ -48,7 +48,7 @@ from testbed.cli.options import (
     format_value,
     open_modem_ports,
 )
-from testbed.cli.run import loss_note
+from testbed.cli.run_summary import loss_note
 from testbed.config import ConfigError
 
 if TYPE_CHECKING:

@@ -36,7 +36,8 @@ from testbed.cli.options import (
     Terminated,
     exit_code_of,
 )
-from testbed.cli.run import add_run_parser, add_scenarios_parser, format_summary
+from testbed.cli.run import add_run_parser, add_scenarios_parser
+from testbed.cli.run_summary import format_summary
 from testbed.cli.sweep import add_plot_parser, add_sweep_parser
 from testbed.config import USER_MODULE_PREFIX, ConfigError
 

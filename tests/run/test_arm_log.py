@@ -145,7 +145,7 @@ def test_the_summary_says_the_arm_line_and_no_empty_heading_line(
 ) -> None:
     """An end-effector mission has no pose-target heading: the summary leaves out the mission
     yaw line (it read "n/a deg, n/a deg"), and says the arm's line with its closest joint."""
-    from testbed.cli.run import format_summary
+    from testbed.cli.run_summary import format_summary
 
     result, _ = run
     text = format_summary(result.metrics, Path("out"))

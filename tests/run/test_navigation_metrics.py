@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from testbed.cli.run import format_summary, format_trial, gate_rejections
+from testbed.cli.run_summary import format_summary, format_trial, gate_rejections
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
 from testbed.vehicle import localization

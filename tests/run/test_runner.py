@@ -249,7 +249,7 @@ def test_frames_the_sender_drops_are_not_in_the_per() -> None:
     the summary."""
     from pathlib import Path
 
-    from testbed.cli.run import format_summary
+    from testbed.cli.run_summary import format_summary
 
     result = run(
         "s100-teleop-v1",
