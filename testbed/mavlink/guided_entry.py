@@ -24,7 +24,8 @@ Here the vehicle's own loops stand for ArduSub's (:class:`~testbed.mavlink.optio
 force law, kp/kd = 100 / 40 = 2.5 /s as a speed demand per metre; a depth law of the user's
 own is not described by them: the packaged hold's gains stand in). Neither shapes acceleration
 (their demand is linear in the error: accel_max → ∞), so the stopping distance is the linear
-part's for every speed: horizontally ``min(|v|, max_speed) / gain`` (0.3 m/s → 0.375 m, at most
+part's for every speed (:mod:`testbed.common.velocity_demand`, which the vehicle's own hold
+without a goal uses too): horizontally ``min(|v|, max_speed) / gain`` (0.3 m/s → 0.375 m, at most
 0.5 / 0.8 = 0.625 m), vertically ``v_down / depth_gain`` (0.4 s of the vertical speed) within
 [−3 m, +2 m] and no shallower than the surface. At that point the loops' demand is the speed
 the vehicle has, so they do not brake it at the switch: it coasts on and is brought back to
@@ -37,8 +38,9 @@ The heading is the auto-yaw state's (:mod:`~testbed.mavlink.guided_yaw`), untouc
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
+
+from testbed.common.velocity_demand import stopping_distance_m, stopping_point_ne
 
 if TYPE_CHECKING:
     from testbed.mavlink.endpoint import VehicleEndpoint
@@ -57,12 +59,6 @@ climbing is at most this [m]."""
 STOPPING_DIST_DOWN_MAX_M = 2.0
 """ArduPilot's POSCONTROL_STOPPING_DIST_DOWN_MAX (200 cm): the vertical stopping distance while
 descending is at most this [m]."""
-
-
-def _linear_distance(speed: float, gain_1_s: float) -> float:
-    """The error at which a linear demand ``gain × error`` equals ``speed`` [m]; 0 for a gain
-    that is 0 (ArduSub: no distance for kP ≤ 0) or ∞."""
-    return speed / gain_1_s if 0.0 < gain_1_s < math.inf else 0.0
 
 
 def stopping_point(
@@ -84,11 +80,8 @@ def stopping_point(
     if loop is None:
         return (north, east, depth)
     vn, ve, vd = velocity_ned_m_s
-    speed = math.hypot(vn, ve)
-    if speed > 0.0:
-        along = _linear_distance(min(speed, loop.max_speed_m_s), loop.gain_1_s)
-        north, east = north + vn * along / speed, east + ve * along / speed
-    down = _linear_distance(vd, loop.depth_gain_1_s)
+    north, east = stopping_point_ne((north, east), (vn, ve), loop.gain_1_s, loop.max_speed_m_s)
+    down = stopping_distance_m(vd, loop.depth_gain_1_s)
     down = max(-STOPPING_DIST_UP_MAX_M, min(STOPPING_DIST_DOWN_MAX_M, down))
     return (north, east, max(0.0, depth + down))
 

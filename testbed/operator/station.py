@@ -153,6 +153,9 @@ def sample_pilot(world: World) -> None:
     if goal is not None:
         if goal.position_ned_m is None:
             world.set(session.entity, GoalCancel(goal.index + 1))
+            # the goal goes too, as the teleop vehicle end removes it on a cancel (the
+            # change-set codec replicates the removal: a vehicle without autonomy lets go)
+            world.remove(session.entity, PositionSetpoint)
         else:
             use_yaw = goal.yaw_deg is not None
             yaw = math.remainder(math.radians(goal.yaw_deg or 0.0), math.tau)

@@ -16,6 +16,12 @@ Together: ``F = k_v k_p e − k_v v`` while unsaturated, a PD law on the positio
 noise; a water current ``c`` leaves an offset ``drag(c) / (k_v k_p)``. Depth and heading are
 the depth and attitude holds' (the system in :mod:`testbed.vehicle.systems` sets their targets
 from the setpoint). Pure: no ECS, no randomness.
+
+GUIDED with no goal holds a point of its own (:attr:`PositionController.hold_ne_m`, chosen by
+:meth:`PositionController.latch_hold`): ArduSub's stopping point for this loop, the fix plus
+``min(|v|, max_speed_m_s) / k_p`` along the velocity estimate
+(:func:`~testbed.common.velocity_demand.stopping_point_ne`), where the demand equals the speed
+the vehicle has.
 """
 
 from __future__ import annotations
@@ -23,10 +29,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from testbed.common.velocity_demand import velocity_demand_ne
+from testbed.common.velocity_demand import stopping_point_ne, velocity_demand_ne
 from testbed.config import check_range
 
-__all__ = ["PositionController", "PositionGains"]
+__all__ = ["FORMED_START_WEIGHT", "PositionController", "PositionGains"]
+
+FORMED_START_WEIGHT = 0.05
+"""The velocity estimate counts as formed once its zero start weighs at most this in it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,16 +75,51 @@ class PositionController:
     Attributes:
         gains: the loop's gains.
         velocity_ne_m_s: (2,) filtered velocity estimate [m/s], north and east.
+        hold_ne_m: the point GUIDED holds with no goal, north and east [m] (world NED); None:
+            none chosen.
+        released: GUIDED's position is let go for an attitude target (ArduSub's angle
+            control), until the next goal or GUIDED is left: no hold point is chosen.
     """
 
     gains: PositionGains = field(default_factory=PositionGains)
     velocity_ne_m_s: tuple[float, float] = (0.0, 0.0)
+    hold_ne_m: tuple[float, float] | None = None
+    released: bool = False
     _last_fix: tuple[float, float, float] | None = None
+    _start_weight: float = 1.0
 
     def reset(self) -> None:
-        """Forget the last fix and the velocity estimate."""
+        """Forget the last fix, the velocity estimate and the hold point."""
         self._last_fix = None
+        self._start_weight = 1.0
         self.velocity_ne_m_s = (0.0, 0.0)
+        self.hold_ne_m = None
+
+    def latch_hold(self, fix_time_s: float, fix_ne_m: tuple[float, float]) -> bool:
+        """Take in the fix and, once the velocity estimate is formed, choose the hold point: the
+        stopping point of the fix and that estimate with the loop's gain and speed limit
+        (module docstring). A point already chosen stays.
+
+        The estimate starts at zero when the loop starts (GUIDED entered, a fix regained) and
+        is formed once that start weighs at most :data:`FORMED_START_WEIGHT` in it (the
+        product of the low-pass's ``1 − α`` since: 11 differences at 20 Hz and τ = 0.15 s, 0.55 s;
+        the second fix with τ = 0); until then the hold waits, its intent zero.
+
+        Args:
+            fix_time_s: the latest fix's time [s].
+            fix_ne_m: the latest fix's north, east [m].
+
+        Returns:
+            Whether :attr:`hold_ne_m` is set.
+        """
+        if self.hold_ne_m is None:
+            self._observe(fix_time_s, fix_ne_m[0], fix_ne_m[1])
+            if self._start_weight <= FORMED_START_WEIGHT:
+                g = self.gains
+                self.hold_ne_m = stopping_point_ne(
+                    fix_ne_m, self.velocity_ne_m_s, g.kp_1_s, g.max_speed_m_s
+                )
+        return self.hold_ne_m is not None
 
     def _observe(self, time_s: float, north_m: float, east_m: float) -> None:
         last = self._last_fix
@@ -88,6 +132,7 @@ class PositionController:
         raw_n, raw_e = (north_m - last[1]) / dt, (east_m - last[2]) / dt
         tau = self.gains.velocity_tau_s
         alpha = dt / (tau + dt)
+        self._start_weight *= 1.0 - alpha
         vn, ve = self.velocity_ne_m_s
         self.velocity_ne_m_s = (vn + alpha * (raw_n - vn), ve + alpha * (raw_e - ve))
 

@@ -55,6 +55,7 @@ from testbed.ecs import Entity, Phase, Schedule, System, World
 from testbed.ecs.store import Layout, RowView
 from testbed.vehicle.command_systems import ingest_commands, supervise_failsafe
 from testbed.vehicle.components import (
+    AttitudeSetpoint,
     ControlTargets,
     DepthReading,
     ImuReading,
@@ -217,15 +218,24 @@ def control_position(world: World) -> None:
     (and heading, when it sets one) as the depth and attitude holds' targets.
 
     The setpoint is the autonomy's :class:`PoseTarget` when it has one (its heading always
-    applies), else the operator's :class:`PositionSetpoint`. Acts only armed, in GUIDED, not
-    under the velocity controller, with a setpoint, an IMU reading and a fresh
-    :class:`PositionReading` (no older than the loop's ``fix_timeout_s``); otherwise its intent
+    applies), else the operator's :class:`PositionSetpoint`. With neither (the operator's
+    cancel removed it, or GUIDED was entered without one) a vehicle without autonomy holds the
+    stopping point of its own fix and the loop's velocity estimate
+    (:meth:`~testbed.vehicle.guidance.PositionController.latch_hold`, chosen once, from the
+    second fix the loop sees), its depth and heading targets as the holds have them, as
+    ArduSub's GUIDED always holds a position target; an :class:`AttitudeSetpoint` in GUIDED
+    with no goal is ArduSub's angle control, which lets position go until the next goal.
+    Acts only armed, in GUIDED, not under the velocity controller, with an IMU reading and a
+    fresh :class:`PositionReading` (no older than the loop's ``fix_timeout_s``; a lost fix
+    forgets the hold point, a new one is chosen when fixes come back); otherwise its intent
     is zero and the vehicle holds depth and attitude as in DEPTH_HOLD.
     """
     ctl = world.resource(Controllers)
     flags = ctl.flags
+    loop = ctl.position
     if not (flags.guided and flags.armed) or flags.velocity:
-        ctl.position.reset()
+        loop.reset()
+        loop.released = False
         set_intent(world, ctl, "position", ZERO6)
         return
     vehicle = ctl.vehicle
@@ -240,27 +250,39 @@ def control_position(world: World) -> None:
     else:
         setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
         setpoint = setpoints[-1] if setpoints else None
-    loop = ctl.position
-    if (
-        setpoint is None
-        or imu is None
-        or fix is None
-        or now - fix.time_s > loop.gains.fix_timeout_s
-    ):
+    if setpoint is not None:
+        loop.released = False
+    elif ctl.autonomous or world.changed_any(AttitudeSetpoint):
+        loop.released = True  # the autonomy's own (an end-effector reach), or angle control
+    if imu is None or fix is None or now - fix.time_s > loop.gains.fix_timeout_s:
         loop.reset()
         set_intent(world, ctl, "position", ZERO6)
         return
-    targets = world.get(vehicle, ControlTargets) or measured_targets(world, vehicle)
-    q = targets.quaternion_wxyz
-    if setpoint.use_yaw:
-        q = quat_from_euler(0.0, 0.0, setpoint.yaw_rad)
-    target = setpoint.position_ned_m
-    set_targets(world, ctl, max(SURFACE_HOLD_DEPTH_M, target[2]), q)
+    fix_ne = (fix.position_ned_m[0], fix.position_ned_m[1])
+    if setpoint is not None:
+        loop.hold_ne_m = None
+        targets = world.get(vehicle, ControlTargets) or measured_targets(world, vehicle)
+        q = targets.quaternion_wxyz
+        if setpoint.use_yaw:
+            q = quat_from_euler(0.0, 0.0, setpoint.yaw_rad)
+        target = setpoint.position_ned_m
+        set_targets(world, ctl, max(SURFACE_HOLD_DEPTH_M, target[2]), q)
+        target_ne = (target[0], target[1])
+    elif loop.released:
+        loop.reset()
+        set_intent(world, ctl, "position", ZERO6)
+        return
+    elif not loop.latch_hold(fix.time_s, fix_ne):  # the fix taken in, no velocity yet
+        set_intent(world, ctl, "position", ZERO6)
+        return
+    else:
+        assert loop.hold_ne_m is not None
+        target_ne = loop.hold_ne_m  # depth and heading: the holds' targets as they are
     m = ctl.axis_maxima
     fx, fy = loop.update(
-        (target[0], target[1]),
+        target_ne,
         fix.time_s,
-        (fix.position_ned_m[0], fix.position_ned_m[1]),
+        fix_ne,
         euler_from_quat(imu.quaternion_wxyz)[2],
         (m[0], m[1]),
     )
