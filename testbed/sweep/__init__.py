@@ -24,6 +24,7 @@ plots' closed forms need.
 One module per concept:
 
 - :mod:`~testbed.sweep.spec` — the sweep file, :class:`Sweep`, :class:`RunSpec`, :func:`expand`.
+- :mod:`~testbed.sweep.keys` — the file's tables as scenario keys, :func:`toml_literal`.
 - :mod:`~testbed.sweep.backends` — one run (:func:`execute_run`), process pool and Dask.
 - :mod:`~testbed.sweep.journal` — ``runs.jsonl``, atomic writes, ``results.csv``.
 - :mod:`~testbed.sweep.aggregate` — flattened metrics and ``aggregate.csv``'s statistics.
@@ -45,16 +46,9 @@ from testbed.sweep.backends import (
     execute_run,
 )
 from testbed.sweep.journal import read_journal, results_csv
+from testbed.sweep.keys import toml_literal
 from testbed.sweep.runner import SweepSummary, format_summary, run_sweep
-from testbed.sweep.spec import (
-    RangeSpec,
-    RunSpec,
-    Sweep,
-    expand,
-    load_sweep,
-    sweep_names,
-    toml_literal,
-)
+from testbed.sweep.spec import RangeSpec, RunSpec, Sweep, expand, load_sweep, sweep_names
 
 __all__ = [
     "EXCLUDED_METRICS",

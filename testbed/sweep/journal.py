@@ -22,7 +22,8 @@ from typing import Any
 
 from testbed.config import ConfigError
 from testbed.run.outputs import replace_atomically
-from testbed.sweep.spec import Sweep, toml_literal
+from testbed.sweep.keys import toml_literal
+from testbed.sweep.spec import Sweep
 
 __all__ = [
     "append_rows",

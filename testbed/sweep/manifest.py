@@ -28,7 +28,8 @@ from typing import Any
 
 import testbed
 from testbed.config import apply_overrides
-from testbed.sweep.spec import Sweep, toml_literal
+from testbed.sweep.keys import toml_literal
+from testbed.sweep.spec import Sweep
 
 __all__ = ["FORMAT", "Resumption", "canonical", "compare", "manifest", "manifest_text"]
 

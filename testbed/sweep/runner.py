@@ -43,9 +43,10 @@ from testbed.sweep.journal import (
     sorted_unique,
     write_atomic,
 )
+from testbed.sweep.keys import toml_literal
 from testbed.sweep.manifest import FORMAT, compare, manifest, manifest_text
 from testbed.sweep.progress import Progress
-from testbed.sweep.spec import RunSpec, Sweep, describe_point, expand, toml_literal
+from testbed.sweep.spec import RunSpec, Sweep, describe_point, expand
 
 __all__ = ["SweepSummary", "check_metrics", "format_summary", "run_sweep"]
 

@@ -3,17 +3,16 @@
 :func:`load_sweep` reads a packaged sweep (``testbed/scenarios/sweeps/*.toml``) or a file, checks
 that every grid point gives a scenario that loads, and :func:`expand` turns it into one
 :class:`RunSpec` per (point, seed): points are the Cartesian product of the axes in file order
-(last axis fastest). :func:`toml_literal` writes a value so that ``--set`` parsing reads it back
-exactly; grid values travel to the runs that way.
+(last axis fastest). The file's tables are read as scenario keys, and grid values written
+back as TOML for the runs, by :mod:`testbed.sweep.keys`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
-import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -21,8 +20,14 @@ from typing import Any, Literal, TextIO
 
 import numpy as np
 
-from testbed.config import ConfigError, build, check, load_toml, parse_override
-from testbed.run.plugins import TABLE_VALUE_KEYS
+from testbed.config import ConfigError, build, check, load_toml
+from testbed.sweep.keys import (
+    fixed_and_swept,
+    flatten_section,
+    override_keys,
+    repeated_value,
+    toml_literal,
+)
 
 __all__ = [
     "DEFAULT_METRICS",
@@ -225,113 +230,6 @@ def sweep_description(name: str) -> str:
         return str(load_toml(path).get("description", ""))
 
 
-def toml_literal(value: Any) -> str:
-    """``value`` as a TOML value, so it survives ``--set``-style parsing exactly."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)  # repr round-trips floats; TOML reads inf, nan, 1e-05
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(toml_literal(v) for v in value) + "]"
-    if isinstance(value, Mapping):
-        items = ", ".join(f"{json.dumps(str(k))} = {toml_literal(v)}" for k, v in value.items())
-        return "{" + items + "}"
-    raise TypeError(f"cannot write {value!r} as TOML")  # TOML data holds no other types
-
-
-def _flatten_table(
-    table: Mapping[str, Any], prefix: str = "", *, keep_empty: bool = False
-) -> dict[str, Any]:
-    """Nested tables → dotted keys; a table with a ``scale`` key is a range, not a level. An
-    empty table is dropped, or with ``keep_empty`` (the grid) kept as a value (the grid refuses
-    it), and so is a table :func:`_is_range` takes for a range without ``scale``. Outside the
-    grid a table at a :data:`~testbed.run.plugins.TABLE_VALUE_KEYS` key is one value (a
-    factory's arguments, set whole)."""
-    flat: dict[str, Any] = {}
-    for key, value in table.items():
-        dotted = f"{prefix}{key}"
-        whole = not keep_empty and dotted in TABLE_VALUE_KEYS
-        level = (
-            isinstance(value, Mapping)
-            and not whole
-            and not (_is_range(value) if keep_empty else "scale" in value)
-        )
-        inner = (
-            _flatten_table(value, f"{dotted}.", keep_empty=keep_empty)
-            if level and (value or not keep_empty)
-            else {dotted: value}
-        )
-        for name, leaf in inner.items():
-            if name in flat:  # "link.ber" = … and link.ber = …: two TOML keys, one sweep key
-                raise DuplicateKeyError(name)
-            flat[name] = leaf
-    return flat
-
-
-def _flat(
-    table: Mapping[str, Any], name: str, source: str, *, keep_empty: bool = False
-) -> dict[str, Any]:
-    """:func:`_flatten_table` of the sweep file's ``[name]``, a key given twice one line."""
-    try:
-        return _flatten_table(table, keep_empty=keep_empty)
-    except DuplicateKeyError as err:
-        raise ConfigError(
-            f"{source}: {name}.{err.key}: given twice (a quoted dotted key and a nested one "
-            "name the same setting)"
-        ) from None
-
-
-class DuplicateKeyError(ValueError):
-    """A sweep key given twice in one table (a quoted dotted key and a nested one): the
-    caller names the file and the table."""
-
-    def __init__(self, key: str) -> None:
-        super().__init__(key)
-        self.key = key
-
-
-def _is_range(table: Mapping[str, Any]) -> bool:
-    """A grid table that is a range, not a level of nested keys: it has ``scale``, or a value
-    that is neither a table nor an array (a level holds only those: ``start = 1.0`` is a
-    range's, one whose ``scale`` is missing)."""
-    return "scale" in table or any(not isinstance(v, Mapping | list) for v in table.values())
-
-
-def _fixed_and_swept(fixed: Iterable[str], swept: Sequence[str]) -> tuple[str, str] | None:
-    """The first ``(fixed key, swept key)`` pair that sets the same scenario value (the same
-    key, or one inside the other: ``link`` and ``link.ber``), or None. The grid point's
-    override comes last, so a fixed value there would be silently lost."""
-    for key in fixed:
-        for axis in swept:
-            if key == axis or key.startswith(f"{axis}.") or axis.startswith(f"{key}."):
-                return key, axis
-    return None
-
-
-def _override_keys(overrides: Sequence[str]) -> list[str]:
-    """The dotted scenario keys that ``KEY=VALUE`` overrides set (an inline table's leaves)."""
-    keys: list[str] = []
-    for text in overrides:
-        path, value = parse_override(text)
-        keys.extend(_flatten_table({".".join(path): value}))
-    return keys
-
-
-def _repeated_value(values: Sequence[Any]) -> Any | None:
-    """The first value of a grid list equal to an earlier one (numbers by value: ``0`` and
-    ``0.0`` are one point), or None."""
-    seen: set[Any] = set()
-    for value in values:
-        number = isinstance(value, int | float) and not isinstance(value, bool)
-        key = ("number", float(value)) if number else ("value", toml_literal(value))
-        if key in seen:
-            return value
-        seen.add(key)
-    return None
-
-
 def load_sweep(
     name_or_path: str, overrides: Sequence[str] = (), *, stream: TextIO | None = None
 ) -> Sweep:
@@ -378,21 +276,21 @@ def load_sweep(
             return value
         return path_beside(value, base_dir)
 
-    fixed_values = {k: beside(k, v) for k, v in _flat(top.set, "set", source).items()}
+    fixed_values = {k: beside(k, v) for k, v in flatten_section(top.set, "set", source).items()}
     fixed = [f"{k}={toml_literal(v)}" for k, v in fixed_values.items()]
     axes = []
-    for key, spec in _flat(top.grid, "grid", source, keep_empty=True).items():
+    for key, spec in flatten_section(top.grid, "grid", source, keep_empty=True).items():
         where = f"grid.{key}"
         if key in RESERVED_COLUMNS:
             raise ConfigError(f"{source}: {where}: {key!r} cannot be swept (use seeds)")
-        if _fixed_and_swept(fixed_values, [key]) is not None:
+        if fixed_and_swept(fixed_values, [key]) is not None:
             raise ConfigError(f"{source}: {where}: also fixed in [set]")
         values: tuple[Any, ...]
         if isinstance(spec, Mapping) and spec:
             values = build(RangeSpec, spec, source=source, prefix=f"{where}.").values()
         elif isinstance(spec, list) and spec:
             values = tuple(spec)
-            if (twice := _repeated_value(values)) is not None:
+            if (twice := repeated_value(values)) is not None:
                 raise ConfigError(
                     f"{source}: {where}: must not repeat a value, got {toml_literal(twice)} twice"
                 )
@@ -401,7 +299,7 @@ def load_sweep(
         axes.append((key, tuple(beside(key, value) for value in values)))
     if not axes:
         raise ConfigError(f"{source}: grid: must have at least one axis")
-    clash = _fixed_and_swept(_override_keys(overrides), [key for key, _ in axes])
+    clash = fixed_and_swept(override_keys(overrides), [key for key, _ in axes])
     if clash is not None:
         raise ConfigError(f"--set: {clash[0]}: also swept in [grid]")
     seed_count = top.seeds if isinstance(top.seeds, int) else len(top.seeds)
