@@ -111,15 +111,22 @@ class Says:
 """
 
 
-@pytest.fixture
-def study(tmp_path: Path) -> Path:
+def make_study(tmp_path: Path, links: str) -> Path:
+    """A folder holding ``saying_links.py`` (the source ``links``: a class ``Says(config,
+    answer)``), for :func:`link_scenario`."""
     folder = tmp_path / "study"
     folder.mkdir()
-    (folder / "saying_links.py").write_text(textwrap.dedent(LINKS))
+    (folder / "saying_links.py").write_text(textwrap.dedent(links))
     return folder
 
 
-def _scenario(study: Path, answer: str) -> Path:
+@pytest.fixture
+def study(tmp_path: Path) -> Path:
+    return make_study(tmp_path, LINKS)
+
+
+def link_scenario(study: Path, answer: str) -> Path:
+    """A scenario file in ``study`` flying ``Says`` with its ``answer``."""
     link = f'model = "saying_links.py:Says"\nmodel_args = {{ answer = "{answer}" }}'
     path = study / f"{answer}.toml"
     path.write_text(_scenario_text('kind = "scripted"', link))
@@ -128,7 +135,7 @@ def _scenario(study: Path, answer: str) -> Path:
 
 def test_a_model_named_in_a_scenario_file_has_its_state_written(study: Path) -> None:
     out = study / "out"
-    assert main(["run", str(_scenario(study, "fine")), "--out", str(out), "--no-plots"]) == 0
+    assert main(["run", str(link_scenario(study, "fine")), "--out", str(out), "--no-plots"]) == 0
     rows = _rows(out / "link_state.csv")
     assert rows and {float(row["bitrate_bps"]) for row in rows} == {S100_BPS}
 
@@ -146,7 +153,7 @@ def test_a_state_that_breaks_the_contract_is_one_line_naming_the_model_and_keeps
     study: Path, answer: str, why: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = study / "out"
-    assert main(["run", str(_scenario(study, answer)), "--out", str(out), "--no-plots"]) == 2
+    assert main(["run", str(link_scenario(study, answer)), "--out", str(out), "--no-plots"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert f"link model Says ({study / 'saying_links.py'}): state(" in err
@@ -158,4 +165,4 @@ def test_a_state_that_breaks_the_contract_is_one_line_naming_the_model_and_keeps
     else:  # broken at the first sample, t = 0: nothing ran to keep
         assert not (out / "metrics.json").exists()
     with pytest.raises(LinkModelError):
-        run_scenario(load_scenario(str(_scenario(study, answer))))
+        run_scenario(load_scenario(str(link_scenario(study, answer))))

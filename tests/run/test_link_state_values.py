@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import sys
-import textwrap
 import types
 from pathlib import Path
 
@@ -20,7 +19,7 @@ import pytest
 from testbed.channel.model import LinkModelError
 from testbed.cli.main import main
 from testbed.run.link_log import LinkStateLog
-from tests.run.test_plugins import _scenario_text
+from tests.run.test_link_state_log import link_scenario, make_study
 
 AT_S = 12.0
 LINKS = """
@@ -49,22 +48,12 @@ class Says:
 
 @pytest.fixture
 def study(tmp_path: Path) -> Path:
-    folder = tmp_path / "study"
-    folder.mkdir()
-    (folder / "saying_links.py").write_text(textwrap.dedent(LINKS))
-    return folder
-
-
-def _scenario(study: Path, answer: str) -> Path:
-    link = f'model = "saying_links.py:Says"\nmodel_args = {{ answer = "{answer}" }}'
-    path = study / f"{answer}.toml"
-    path.write_text(_scenario_text('kind = "scripted"', link))
-    return path
+    return make_study(tmp_path, LINKS)
 
 
 def test_numpy_numbers_and_bools_are_written_as_numbers(study: Path) -> None:
     out = study / "out"
-    code = main(["run", str(_scenario(study, "numpy")), "--out", str(out), "--no-plots"])
+    code = main(["run", str(link_scenario(study, "numpy")), "--out", str(out), "--no-plots"])
     assert code == 0
     with (out / "link_state.csv").open(encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
@@ -79,7 +68,7 @@ def test_a_number_no_float_holds_is_one_line_naming_the_model(
     study: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = study / "out"
-    assert main(["run", str(_scenario(study, "huge")), "--out", str(out), "--no-plots"]) == 2
+    assert main(["run", str(link_scenario(study, "huge")), "--out", str(out), "--no-plots"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert f"link model Says ({study / 'saying_links.py'}): state(" in err
