@@ -195,11 +195,17 @@ class VehicleObserver:
 def _guided_target(world: World, ctl: Controllers) -> tuple[float, ...]:
     """The ``target_*`` columns without an autonomy's pose target: in GUIDED, armed, the
     operator's go-to (:class:`PositionSetpoint`, its heading NaN when it sets none), the one
-    the position loop flies; else NaN."""
+    the position loop flies; with none, the point the loop holds once it has chosen one
+    (:meth:`~testbed.vehicle.guidance.PositionController.latch_hold`: its north and east, the
+    depth hold's target, heading NaN); else NaN."""
     if not (ctl.flags.guided and ctl.flags.armed):
         return _NO_TARGET
     setpoints = [sp for _, sp in world.query1(PositionSetpoint)]
     if not setpoints:
-        return _NO_TARGET
+        hold = ctl.position.hold_ne_m
+        if hold is None or ctl.position.released or ctl.autonomous:
+            return _NO_TARGET
+        targets = world.get(ctl.vehicle, ControlTargets)
+        return (*hold, math.nan if targets is None else targets.depth_m, math.nan)
     goal = setpoints[-1]  # as control_position takes it
     return (*goal.position_ned_m, goal.yaw_rad * _DEG if goal.use_yaw else math.nan)

@@ -129,10 +129,16 @@ def test_a_cancelled_goto_holds_the_stopping_point_against_the_current(
     series = result.recorder.series()
     t, mode, target = series["t_s"], series["mode"], series["target_n"]
     guided = mode == float(ControlMode.GUIDED.value)
-    # the frame the vehicle let go of its goal: the recorded target gone, in GUIDED
-    let_go = np.flatnonzero((t > CANCEL_S) & guided & np.isnan(target))
+    # the frame the vehicle let go of its goal: the recorded target no longer the goal's 2 m
+    let_go = np.flatnonzero((t > CANCEL_S) & guided & (target != 2.0))
     assert let_go.size, "the cancel never reached the vehicle"
     start = int(let_go[0])
+    # what the series records as the target from then on: the point the vehicle holds, the
+    # stopping point it chose from its own fix and velocity estimate, at the goal's depth
+    held = np.column_stack([target, series["target_e"], series["target_d"]])[t > t[start]]
+    expected = _stopping_point(t, series["north_m"], series["east_m"], start)
+    assert np.all(np.hypot(*(held[:, :2] - expected).T) < TOLERANCE_M), (held[0], expected)
+    assert np.all(held == held[0]) and held[0, 2] == 1.0, held[0]  # chosen once
     assert t[start] < CANCEL_S + 3.0, t[start]
     assert np.all(guided[t > t[start]]), "left GUIDED"
     point, miss = _held_from(series, start)
