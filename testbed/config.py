@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import inspect
 import math
 import reprlib
 import tomllib
@@ -53,6 +54,25 @@ def shown(value: Any) -> str:
     table belongs made a 21-MB "line"): at most six items of a list, four of a dict, two levels,
     60 characters of a string, with ``...`` where something was left out."""
     return _BRIEF.repr(value)
+
+
+def shown_line(value: object) -> str:
+    """``repr(value)`` cut to 80 characters (77 and ``...``), for a plug-in's return value in a
+    one-line message."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def described_class(obj: object) -> str:
+    """``QualifiedName (its source file)`` of ``obj``'s class (a user's pilot, link model or
+    law), or the name alone when it has no file (a built-in class, or one defined in a REPL or
+    ``python -c``)."""
+    cls = type(obj)
+    try:
+        where = inspect.getsourcefile(cls)
+    except (TypeError, OSError):
+        where = None
+    return cls.__qualname__ if where is None else f"{cls.__qualname__} ({where})"
 
 
 class ConfigError(ValueError):

@@ -29,7 +29,7 @@ from typing import Protocol
 
 import numpy as np
 
-from testbed.config import ConfigError
+from testbed.config import ConfigError, described_class, shown_line
 
 from .config import LinkConfig
 from .errors import BitErrors
@@ -56,7 +56,7 @@ class LinkModelError(ConfigError):
     def airtime(cls, model: object, size_bytes: int, t_s: float, value: object) -> LinkModelError:
         """The error for ``model.airtime_s(size_bytes, t_s)`` having returned ``value``."""
         return cls(
-            f"link model {_described(model)}: airtime_s({size_bytes}, {t_s!r}) returned "
+            f"link model {described_class(model)}: airtime_s({size_bytes}, {t_s!r}) returned "
             f"{value!r}: expected a finite time > 0 [s]"
         )
 
@@ -64,10 +64,9 @@ class LinkModelError(ConfigError):
     def received(cls, errors: object, size_bytes: int, t_s: float, value: object) -> LinkModelError:
         """The error for ``errors.corrupt(data, p, t_s)`` of ``size_bytes`` bytes having
         returned ``value``."""
-        shown = repr(value)
-        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        shown = shown_line(value)
         return cls(
-            f"link model's error model {_described(errors)}: corrupt(<{size_bytes} B>, p, "
+            f"link model's error model {described_class(errors)}: corrupt(<{size_bytes} B>, p, "
             f"{t_s!r}) returned {shown}: expected (bytes of the same length, the number of "
             "bits that differ from the sent ones)"
         )
@@ -76,9 +75,8 @@ class LinkModelError(ConfigError):
     def state(cls, model: object, t_s: float, value: object, why: str) -> LinkModelError:
         """The error for ``model.state(t_s)`` having returned ``value`` (``why``: what was
         wrong with it)."""
-        shown = repr(value)
-        shown = shown if len(shown) <= 80 else shown[:77] + "..."
-        return cls(f"link model {_described(model)}: state({t_s!r}) returned {shown}: {why}")
+        shown = shown_line(value)
+        return cls(f"link model {described_class(model)}: state({t_s!r}) returned {shown}: {why}")
 
 
 def wanted_keywords(function: Callable[..., object], offered: tuple[str, ...]) -> tuple[str, ...]:
@@ -131,16 +129,6 @@ def checked_corrupt(
             if isinstance(count, int | np.integer) and int(count) == flipped:
                 return received, flipped
     raise LinkModelError.received(errors, len(data), t_s, value)
-
-
-def _described(model: object) -> str:
-    """``QualifiedName (its source file)`` of a model's class, or the name alone."""
-    cls = type(model)
-    try:
-        where = inspect.getsourcefile(cls)
-    except (TypeError, OSError):  # a built-in class, or one of a REPL's or ``python -c``'s
-        where = None
-    return cls.__qualname__ if where is None else f"{cls.__qualname__} ({where})"
 
 
 class ErrorModel(Protocol):

@@ -17,13 +17,12 @@ What must not live here: the packaged laws (``control.py``), the systems that ca
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Sequence
 from typing import Protocol
 
 from testbed.common.components import ControlTargets, DepthReading, ImuReading
-from testbed.config import ConfigError
+from testbed.config import ConfigError, described_class, shown_line
 
 __all__ = ["AttitudeLaw", "ControlLawError", "DepthLaw", "checked_vector"]
 
@@ -123,20 +122,9 @@ def checked_vector(law: object, value: object, what: str) -> Vec3:
         else:
             finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
     if not finite:
-        shown = repr(value)
-        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        shown = shown_line(value)
         raise ControlLawError(
-            f"{_described(law)}: update returned {shown}: expected the {what} as three finite "
+            f"{described_class(law)}: update returned {shown}: expected the {what} as three finite "
             "numbers"
         )
     return (x, y, z)
-
-
-def _described(law: object) -> str:
-    """``QualifiedName (its source file)`` of a law's class, or the name alone."""
-    cls = type(law)
-    try:
-        where = inspect.getsourcefile(cls)
-    except TypeError:  # a built-in class
-        where = None
-    return cls.__qualname__ if where is None else f"{cls.__qualname__} ({where})"

@@ -135,3 +135,20 @@ def test_a_law_returning_no_three_finite_numbers_is_one_line_naming_its_class(
         vehicle.set_mode(ControlMode.DEPTH_HOLD)
         with pytest.raises(ControlLawError, match=r"^test_.*Broken \(.*test_control_laws\.py\)"):
             _fly(vehicle, 1.0)
+
+
+def test_a_law_of_a_class_without_a_source_file_is_named_by_its_class(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A law defined in a REPL or ``python -c`` (its module has no file): the broken answer's
+    message names the class; building it raised OSError from ``inspect.getsourcefile`` before
+    the law and link-model messages shared one describer (config.described_class)."""
+    import sys
+    import types
+
+    from testbed.vehicle.control_laws import ControlLawError, checked_vector
+
+    monkeypatch.setitem(sys.modules, "__main__", types.ModuleType("__main__"))
+    law = type("Typed", (), {"__module__": "__main__"})()
+    with pytest.raises(ControlLawError, match=r"^Typed: update returned \[1.0\]: expected"):
+        checked_vector(law, [1.0], "force")
