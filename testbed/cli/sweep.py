@@ -303,7 +303,7 @@ def _packaged_sweeps() -> str:
 
 
 def add_plot_parser(sub: Subparsers) -> None:
-    """``testbed plot``: any results.csv column against another (testbed.report.sweep_plots)."""
+    """``testbed plot``: any results.csv column against another (testbed.report.pair_plots)."""
     plot = sub.add_parser(
         "plot",
         help="plot one column of a sweep's results.csv against another",
@@ -351,7 +351,7 @@ def plot_out_path(out: Path, name: str) -> Path:
 
 def _run_plot(args: argparse.Namespace) -> int:
     """Handler of ``testbed plot``: check --out and the file, draw, print the path written."""
-    from testbed.report.sweep_plots import default_plot_name, plot_pair
+    from testbed.report.pair_plots import default_plot_name, plot_pair
     from testbed.report.sweep_results import check_results_file
 
     name = default_plot_name(args.x, args.y)

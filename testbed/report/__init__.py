@@ -7,6 +7,7 @@
 - :mod:`~testbed.report.images` — a run's image strip, ``images.png``.
 - :mod:`~testbed.report.sweep_results` — a sweep's ``results.csv`` as the plots read it.
 - :mod:`~testbed.report.sweep_axes` — per-x median lines, t intervals, the log BER axis.
-- :mod:`~testbed.report.sweep_plots` — a sweep's BER plots and ``testbed plot``.
+- :mod:`~testbed.report.sweep_plots` — a sweep's BER plots.
+- :mod:`~testbed.report.pair_plots` — any ``results.csv`` column against another, ``testbed plot``.
 - :mod:`~testbed.report.closed_forms` — PER, command age and image rate under bit errors.
 """

@@ -17,7 +17,10 @@ from matplotlib.axes import Axes
 
 from testbed.run.metrics import mean_ci95
 
-__all__ = ["Line", "LogAxis", "draw", "line"]
+__all__ = ["BARS_NOTE", "Line", "LogAxis", "draw", "line"]
+
+BARS_NOTE = "lines: medians over seeds; bars: 95 % t-interval of the mean"
+"""The footnote that says what :func:`draw` draws (every sweep plot carries it)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,10 +21,10 @@ lengths from ``link.*.mean_frame_bytes``, gap from ``ipg_s``, chunk size and tra
 ``testbed sweep`` records for every image run); the protocol's frame layouts fill in what a row
 lacks (an older ``results.csv``: the default 40-B chunk, selective repeat).
 
-:func:`plot_pair` draws any column against any other (``testbed plot``). Every line goes through
-the per-x medians over seeds; error bars are the 95 % Student-t interval of the mean (what
-``aggregate.csv`` holds); see :mod:`testbed.report.sweep_axes` for the lines and the log BER
-axis, on which BER 0 is drawn one decade below the smallest positive value.
+Every line goes through the per-x medians over seeds; error bars are the 95 % Student-t
+interval of the mean (what ``aggregate.csv`` holds); see :mod:`testbed.report.sweep_axes` for
+the lines and the log BER axis, on which BER 0 is drawn one decade below the smallest positive
+value. Any column against any other (``testbed plot``) is :mod:`testbed.report.pair_plots`.
 
 Only successful rows (``status = ok``) are plotted; empty cells (a metric that does not apply)
 are left out. A top-level module: only the CLI imports it; nothing here simulates.
@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,21 +52,17 @@ from testbed.report.closed_forms import (
     reply_frame_bytes,
 )
 from testbed.report.figures import footnote, note, save
-from testbed.report.sweep_axes import LogAxis, draw
+from testbed.report.sweep_axes import BARS_NOTE, LogAxis, draw
 from testbed.report.sweep_results import Results, read_results, short_key, sweep_label
-from testbed.run.metric_bounds import metric_bounds
 
 __all__ = [
     "ImageRateModel",
     "ber_key",
-    "default_plot_name",
     "image_rate_model",
     "plot_ber_sweep",
-    "plot_pair",
 ]
 
 _TRACKING_AXES = (("x", "m/s"), ("y", "m/s"), ("z", "m/s"), ("yaw", "rad/s"))
-_BARS_NOTE = "lines: medians over seeds; bars: 95 % t-interval of the mean"
 NON_NEGATIVE = (0.0, math.inf)
 """Bounds of the plotted quantities that cannot be negative (lags, ages, counts, rates, RMS
 errors; :func:`~testbed.run.metric_bounds.metric_bounds`): their error bars stop at 0."""
@@ -165,7 +160,7 @@ def _plot_mission(
         axis.apply(done_ax)
     if any(label for label, _ in groups):
         done_ax.legend(title="grid", fontsize="small")
-    footnote(fig, _BARS_NOTE + "; a lost GoTo or its reply costs one more inter-packet gap")
+    footnote(fig, BARS_NOTE + "; a lost GoTo or its reply costs one more inter-packet gap")
     _title(fig, results, "BER vs supervised control")
     return save(fig, path)
 
@@ -266,7 +261,7 @@ def _plot_lag(
         axis.apply(lag_ax)
     if any(label for label, _ in groups):
         age_ax.legend(title="grid", fontsize="small")
-    footnote(fig, _BARS_NOTE + "; D = lag at the lowest BER, T = inter-packet gap")
+    footnote(fig, BARS_NOTE + "; D = lag at the lowest BER, T = inter-packet gap")
     _title(fig, results, "BER vs command lag and age")
     return save(fig, path)
 
@@ -377,7 +372,7 @@ def _plot_images(
     rate_ax.legend(title="grid", fontsize="small")
     footnote(
         fig,
-        _BARS_NOTE + "; dashed: 60·q/(nT) selective repeat, 60·q_o·q_r^n/(nT) without (n "
+        BARS_NOTE + "; dashed: 60·q/(nT) selective repeat, 60·q_o·q_r^n/(nT) without (n "
         "chunks, gap T), not where replies outlast the gap",
     )
     _title(fig, results, "BER vs image feedback")
@@ -431,7 +426,7 @@ def _plot_per(
             ax.legend(fontsize="small")
     if axis is not None:
         axis.apply(axes[0])
-    footnote(fig, _BARS_NOTE + " (within 0–100 %); dashed: independent bit errors")
+    footnote(fig, BARS_NOTE + " (within 0–100 %); dashed: independent bit errors")
     _title(fig, results, "BER vs packet error rate")
     return save(fig, path)
 
@@ -461,69 +456,6 @@ def _plot_tracking(
         axis.apply(axes[0])
     if any(label for label, _ in groups):
         axes[0].legend(title="grid", fontsize="small")
-    footnote(fig, _BARS_NOTE)
+    footnote(fig, BARS_NOTE)
     _title(fig, results, "BER vs velocity tracking error")
     return save(fig, path)
-
-
-# --- any pair ---------------------------------------------------------------------------------
-
-
-def default_plot_name(x: str, y: str) -> str:
-    """``y_vs_x.png`` with anything but letters, digits, ``_ - .`` replaced by ``_``."""
-    return re.sub(r"[^\w.-]", "_", f"{y}_vs_{x}") + ".png"
-
-
-def plot_pair(
-    results_csv: Path | str, x: str, y: str, hue: str | None, out_path: Path | str
-) -> Path:
-    """Scatter ``y`` against ``x`` over every successful run, with a median line per x.
-
-    A numeric ``x`` whose positive values span two decades or more gets a log axis (0 drawn
-    one decade below the smallest positive value); a non-numeric ``x`` (a thruster layout) is
-    categorical, in first-seen order. With ``hue``, one colour and one median line per value.
-
-    Raises:
-        ConfigError: the file cannot be read, or ``x``, ``y`` or ``hue`` is not a column
-            (naming it and listing the known ones), or ``y`` has no numeric value, or a cell
-            of ``y`` is neither empty nor a number (naming its row).
-    """
-    results = read_results(results_csv)
-    for option, column in (("--x", x), ("--y", y), ("--hue", hue)):
-        if column is not None:
-            results.require(column, option)
-    values = results.metric(y, "--y")
-    if not np.isfinite(values).any():
-        raise ConfigError(f"{results.path}: --y: column {y!r} has no numeric value in ok rows")
-    raw_x = [row[x] for row in results.rows]
-    xs = results.numbers(x)
-    ticks: list[str] = []
-    if np.isnan(xs).any() and any(cell for cell in raw_x):
-        ticks = list(dict.fromkeys(raw_x))  # categorical
-        xs = np.array([ticks.index(cell) for cell in raw_x], dtype=float)
-    axis = None if ticks else LogAxis.fit(xs)
-    bounds = metric_bounds(y)  # intervals within the values y can take (≥ 0, [0, 1], …)
-    fig = Figure(figsize=(8.0, 5.0), layout="constrained")
-    ax = fig.subplots()
-    groups = results.groups([hue] if hue else [])
-    for index, (label, mask) in enumerate(groups):
-        colour = f"C{index % 10}"
-        placed = axis.place(xs[mask]) if axis is not None else xs[mask]
-        ax.scatter(placed, values[mask], s=12, alpha=0.35, color=colour)
-        draw(ax, axis, xs[mask], values[mask], color=colour, label=label or None, bounds=bounds)
-    if ticks:
-        ax.set_xticks(range(len(ticks)), ticks)
-    if axis is not None:
-        axis.apply(ax)
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
-    ax.grid(True, alpha=0.3)
-    if hue:
-        ax.legend(fontsize="small")
-    ax.set_title(f"{y} vs {x} — {sweep_label(results)} ({results.runs_label()})")
-    footnote(fig, "dots: runs; " + _BARS_NOTE)
-    out = Path(out_path)
-    if out.suffix == "":  # what matplotlib would write: the returned path is the real one
-        out = out.with_name(out.name + ".png")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return save(fig, out)

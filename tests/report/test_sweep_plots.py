@@ -22,8 +22,9 @@ from testbed.report.closed_forms import (
     closed_form_images_per_minute,
     closed_form_per,
 )
+from testbed.report.pair_plots import plot_pair
 from testbed.report.sweep_axes import LogAxis, draw, line
-from testbed.report.sweep_plots import image_rate_model, plot_ber_sweep, plot_pair
+from testbed.report.sweep_plots import image_rate_model, plot_ber_sweep
 from testbed.report.sweep_results import read_results
 from testbed.run.metrics import age_of_information
 
