@@ -16,24 +16,8 @@ import errno
 import socket
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-
-SWEEP = """\
-schema = 1
-id = "dashboard-v1"
-description = "2 BER values x 1 seed"
-scenario = "s100-teleop-v1"
-seeds = 1
-metrics = ["link.uplink.per"]
-
-[set]
-duration_s = 6.0
-"metrics.settle_s" = 1.0
-
-[grid]
-"link.ber" = [0.0, 1e-4]
-"""
 
 DASHBOARD_PORT = 8787
 """distributed's default port for the scheduler's HTTP server."""
@@ -54,10 +38,9 @@ def port_taken(port: int) -> Iterator[None]:
 
 
 def test_a_local_cluster_with_port_8787_taken_prints_only_the_sweeps_lines(
-    tmp_path: Path,
+    tmp_path: Path, two_point_sweep: Callable[[str], Path]
 ) -> None:
-    sweep_file = tmp_path / "dashboard.toml"
-    sweep_file.write_text(SWEEP, encoding="utf-8")
+    sweep_file = two_point_sweep("dashboard")  # conftest.py: id dashboard-v1, 2 runs
     out = tmp_path / "out"
     argv = ["sweep", str(sweep_file), "--dask", "local", "--workers", "1", "--out", str(out)]
     with port_taken(DASHBOARD_PORT):

@@ -15,25 +15,10 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from tests.processes import default_sigint
-
-SWEEP = """\
-schema = 1
-id = "teardown-v1"
-description = "2 BER values x 1 seed"
-scenario = "s100-teleop-v1"
-seeds = 1
-metrics = ["link.uplink.per"]
-
-[set]
-duration_s = 6.0
-"metrics.settle_s" = 1.0
-
-[grid]
-"link.ber" = [0.0, 1e-4]
-"""
 
 SIGNAL_IN_CLOSE = """
 import os, signal, sys
@@ -57,10 +42,9 @@ sys.exit(code)
 
 
 def test_ctrl_c_while_the_local_cluster_closes_lets_it_close_then_ends_with_one_line(
-    tmp_path: Path,
+    tmp_path: Path, two_point_sweep: Callable[[str], Path]
 ) -> None:
-    sweep_file = tmp_path / "teardown.toml"
-    sweep_file.write_text(SWEEP, encoding="utf-8")
+    sweep_file = two_point_sweep("teardown")  # conftest.py: id teardown-v1, 2 runs
     out = tmp_path / "out"
     argv = ["sweep", str(sweep_file), "--dask", "local", "--workers", "1", "--out", str(out)]
     done = subprocess.run(
