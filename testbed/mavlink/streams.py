@@ -3,10 +3,11 @@
 A channel starts at the SR0_* parameter rates (ArduPilot's per-link stream rates, so a ground
 station that asks for nothing still gets telemetry); REQUEST_DATA_STREAM sets a whole group
 (:data:`~testbed.mavlink.ardusub.STREAM_GROUPS`; stream 0 = all), SET_MESSAGE_INTERVAL one
-message (−1 off, 0 back to its group's rate, intervals above :data:`MAX_INTERVAL_S` capped as
-ArduPilot caps them). Rates are capped at :data:`MAX_RATE_HZ` (the
-endpoint runs once per vehicle frame, 100 Hz). Due times advance by whole intervals and skip
-ahead after a stall, so a late run never sends a burst.
+message as ArduPilot's ``GCS_MAVLINK::set_message_interval`` reads param2 (:func:`interval_ms`:
+−1 off, 0 back to its group's rate, any other interval below 1000 µs — negative ones too — 1 ms,
+above 60 s a minute). Rates are capped at :data:`MAX_RATE_HZ` (the endpoint runs once per
+vehicle frame, 100 Hz), so 1 ms is served, and answered, as :data:`MAX_RATE_HZ`. Due times
+advance by whole intervals and skip ahead after a stall, so a late run never sends a burst.
 
 HIGH_LATENCY2 is ArduPilot's one "deferred" message here (``GCS_MAVLINK::deferred_message``, not
 a stream group): every :data:`HIGH_LATENCY2_INTERVAL_S` on a high-latency link
@@ -30,6 +31,7 @@ __all__ = [
     "MAX_INTERVAL_S",
     "MAX_RATE_HZ",
     "StreamSchedule",
+    "interval_ms",
 ]
 
 MAX_RATE_HZ = 50.0
@@ -103,18 +105,19 @@ class StreamSchedule:
         return True
 
     def set_interval(self, name: str, interval_us: float) -> bool:
-        """SET_MESSAGE_INTERVAL: −1 off, 0 the group's rate (its boot rate, or the one
-        REQUEST_DATA_STREAM set since), else every ``interval_us``
-        [µs] (capped at :data:`MAX_RATE_HZ` and :data:`MAX_INTERVAL_S`). Returns False for a
-        message not streamed or a non-finite interval."""
-        if name not in self._defaults or not math.isfinite(interval_us):
+        """SET_MESSAGE_INTERVAL's param2 ``interval_us`` [µs] read as ArduPilot reads it
+        (:func:`interval_ms`): off, the group's rate (its boot rate, or the one
+        REQUEST_DATA_STREAM set since), or every so many whole milliseconds (at least
+        1 / :data:`MAX_RATE_HZ`). Returns False for a message not streamed or a NaN interval."""
+        if name not in self._defaults or math.isnan(interval_us):
             return False
-        if interval_us < 0:
-            self._set(name, 0.0)
-        elif interval_us == 0:
+        ms = interval_ms(interval_us)
+        if ms is None:
             self._set(name, self._defaults[name])
+        elif ms == 0:
+            self._set(name, 0.0)
         else:
-            self._set(name, min(max(interval_us * 1e-6, 1.0 / MAX_RATE_HZ), MAX_INTERVAL_S))
+            self._set(name, max(ms * 1e-3, 1.0 / MAX_RATE_HZ))
         return True
 
     def interval_us(self, name: str) -> int:
@@ -144,6 +147,32 @@ class StreamSchedule:
             nxt = now_s + interval if next_s is None else next_s + interval
             self._next_s[name] = nxt if nxt > now_s else now_s + interval
         return out
+
+
+_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+
+
+def interval_ms(interval_us: float) -> int | None:
+    """The interval [ms] ArduPilot's ``GCS_MAVLINK::set_message_interval`` (``GCS_Common.cpp``)
+    sets for SET_MESSAGE_INTERVAL's param2 ``interval_us`` [µs], a finite float or ±inf:
+    0 = off, None = the message's default.
+
+    ``handle_command_set_message_interval`` casts param2 to an int32 (C's conversion: toward
+    0, so −1.5 is −1 and 0.5 is 0; beyond the int32 range saturated, as ARM's VCVT does);
+    then 0 is "reset to default rate", −1 "stop sending", any other value below 1000 —
+    negative ones too — "don't squash sub-ms times to zero": 1 ms; above 60 000 000 µs
+    60 000 ms; else ``interval_us / 1000`` in integers (1999 µs → 1 ms).
+    """
+    us = math.trunc(max(_INT32_MIN, min(_INT32_MAX, interval_us)))
+    if us == 0:
+        return None
+    if us == -1:
+        return 0
+    if us < 1000:
+        return 1
+    if us > 60_000_000:
+        return round(MAX_INTERVAL_S * 1000)
+    return us // 1000
 
 
 def _interval(rate_hz: float) -> float:

@@ -1,11 +1,15 @@
-"""SET_MESSAGE_INTERVAL with an interval past the int32 of MESSAGE_INTERVAL, by pymavlink.
+"""SET_MESSAGE_INTERVAL's param2 read as ArduPilot reads it, by pymavlink.
 
-Independent truth: ArduPilot 4.5's ``GCS_MAVLINK::set_message_interval`` (``GCS_Common.cpp``)
-reads param2 as an int32 and sets ``interval_ms = 60000`` for any ``interval_us`` above
-60 000 000, so GET_MESSAGE_INTERVAL then answers 60 000 000 µs. A garbled or careless
-ground station's 3e9 µs or 1e30 µs must be ACCEPTED as that cap, and the answer to a later
-GET_MESSAGE_INTERVAL must be a MESSAGE_INTERVAL pymavlink decodes (its ``interval_us`` is an
-int32), not an exception out of the endpoint.
+Independent truth: ArduPilot 4.5's ``GCS_MAVLINK::handle_command_set_message_interval`` and
+``set_message_interval`` (``GCS_Common.cpp``), restated: param2 is cast to an int32 (toward 0);
+0 is "reset to default rate", −1 "stop sending", any other value below 1000 µs — a negative
+one too — 1 ms ("don't squash sub-ms times to zero"), above 60 000 000 µs 60 000 ms, else
+``interval_us / 1000`` in integer milliseconds; GET_MESSAGE_INTERVAL answers the interval
+set, ``interval_ms * 1000``. A garbled or careless ground station's 3e9 µs or 1e30 µs must be
+ACCEPTED as the minute's cap, and the answer to a later GET_MESSAGE_INTERVAL must be a
+MESSAGE_INTERVAL pymavlink decodes (its ``interval_us`` is an int32), not an exception out of
+the endpoint. The endpoint serves at most 50 Hz (docs/mavlink.md), so ArduPilot's 1 ms is
+sent, and answered, as 20 000 µs.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from tests.mavlink.gcs import SimGcs
 
 ARDUPILOT_CAP_US = 60_000_000  # interval_us > 60000000 → interval_ms = 60000
+FASTEST_SERVED_US = 20_000  # the endpoint's 50 Hz, where ArduPilot's 1 ms is served
+ATTITUDE = mav.MAVLINK_MSG_ID_ATTITUDE
 
 
 @pytest.fixture
@@ -49,3 +55,44 @@ def test_an_interval_within_the_minute_is_kept(gcs: SimGcs) -> None:
     gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, mav.MAVLINK_MSG_ID_ATTITUDE))
     gcs.run(0.05)
     assert gcs.last("MESSAGE_INTERVAL").interval_us == 59_000_000
+
+
+def _set_then_get(gcs: SimGcs, interval_us: float) -> tuple[int, int]:
+    """SET_MESSAGE_INTERVAL of ATTITUDE then GET_MESSAGE_INTERVAL: (the set's ACK result, the
+    interval answered [µs])."""
+    gcs.clear()
+    gcs.send(gcs.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, ATTITUDE, interval_us))
+    gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, ATTITUDE))
+    gcs.run(0.05)
+    acks = {m.command: m.result for m in gcs.of("COMMAND_ACK")}
+    return acks[mav.MAV_CMD_SET_MESSAGE_INTERVAL], gcs.last("MESSAGE_INTERVAL").interval_us
+
+
+@pytest.mark.parametrize("interval_us", [-2.0, -999.0, -1000.0, -5e6, -3e9])
+def test_a_negative_interval_other_than_minus_one_is_as_fast_as_served(
+    gcs: SimGcs, interval_us: float
+) -> None:
+    """ArduPilot: a negative interval other than −1 is below 1000, so 1 ms — the message as
+    fast as it goes, not off (it used to be switched off): ATTITUDE then arrives at the
+    endpoint's 50 Hz, and GET_MESSAGE_INTERVAL says so."""
+    assert _set_then_get(gcs, interval_us) == (mav.MAV_RESULT_ACCEPTED, FASTEST_SERVED_US)
+    gcs.clear()
+    gcs.run(1.0)
+    assert len(gcs.of("ATTITUDE")) == pytest.approx(1e6 / FASTEST_SERVED_US, abs=1)
+
+
+def test_param2_is_cast_to_an_int32_toward_zero_first(gcs: SimGcs) -> None:
+    """(int32_t)param2 before the rules: −1.5 is −1, off; ±0.5 is 0, the default (the boot
+    interval answered before anything was set); 25 999 µs is 25 ms (integer milliseconds)."""
+    gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, ATTITUDE))
+    gcs.run(0.05)
+    default_us = gcs.last("MESSAGE_INTERVAL").interval_us
+    assert default_us > FASTEST_SERVED_US  # SR0_EXTRA1's boot rate, slower than 50 Hz
+    accepted = mav.MAV_RESULT_ACCEPTED
+    assert _set_then_get(gcs, -1.5) == (accepted, -1)
+    gcs.clear()
+    gcs.run(0.5)
+    assert not gcs.of("ATTITUDE")
+    assert _set_then_get(gcs, 0.5) == (accepted, default_us)
+    assert _set_then_get(gcs, 25_999.0) == (accepted, 25_000)
+    assert _set_then_get(gcs, -0.5) == (accepted, default_us)
