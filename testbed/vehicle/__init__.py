@@ -13,10 +13,10 @@ stays cheap and never loads pybullet):
   (``PoolScene``) and ``scenery_render``; ``pybullet_frames`` converts NED ↔ pybullet's z-up
   frames, ``body_state`` holds its ``BodyState``, ``open_loop`` runs it open loop
   (``simulate_open_loop``).
-* ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle; the
-  per-frame arithmetic of the plant, the thrust chain, the closed loops and the navigation
-  filter is compiled by numba in ``plant_kernels``, ``thrust_kernels``, ``control_kernels`` and
-  ``filter_kernels``.
+* ``thrusters``, ``allocation``, ``control``, ``sensors`` and the assembled vehicle
+  (``vehicle``, built from its configuration by ``assembly``); the per-frame arithmetic of the
+  plant, the thrust chain, the closed loops and the navigation filter is compiled by numba in
+  ``plant_kernels``, ``thrust_kernels``, ``control_kernels`` and ``filter_kernels``.
 
 Rotations (quaternions, Euler angles, rotation matrices) are ``testbed.common.geometry``.
 """

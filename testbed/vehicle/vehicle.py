@@ -5,7 +5,10 @@ of :mod:`testbed.vehicle.systems`, the pybullet :class:`~testbed.vehicle.physics
 :class:`~testbed.vehicle.allocation.Allocator`, the plant-side
 :class:`~testbed.vehicle.thrusters.ThrusterDynamics`, the sensors and the RNGs they draw from.
 It is configured by a frozen :class:`~testbed.vehicle.vehicle_config.VehicleConfig` (the
-scenario's ``[vehicle]`` table, :mod:`testbed.vehicle.vehicle_config`).
+scenario's ``[vehicle]`` table, :mod:`testbed.vehicle.vehicle_config`); building and wiring
+those parts from it, in the order that fixes the random streams and entity ids, is
+:func:`~testbed.vehicle.assembly.assemble_vehicle`'s. This module runs them: time, the
+camera, operator intents written locally, thruster faults.
 
 Timing. :meth:`Vehicle.advance` steps the physics at ``physics_dt_s`` (1/240 s) and runs one
 ECS frame at ``control_rate_hz`` (100 Hz). 240 and 100 do not divide, so a frame runs at the
@@ -34,70 +37,20 @@ from collections.abc import Sequence
 import numpy as np
 
 from testbed.common.geometry import Quaternion, quat_rotate
-from testbed.ecs import Entity, Origin, Replicate, System, World
-from testbed.ecs.store import FrameStore
-from testbed.vehicle.allocation import Allocator
-from testbed.vehicle.autonomy import (
-    build_autonomy,
-    control_velocity,
-    run_mission,
-)
+from testbed.ecs import Origin, System
+from testbed.vehicle.assembly import assemble_vehicle
 from testbed.vehicle.body_state import BodyState
 from testbed.vehicle.camera import CapturedImage, camera_pose, underwater_grey
 from testbed.vehicle.components import (
-    ActiveMode,
-    AppliedWrench,
-    Armed,
     ArmRequest,
     AttitudeSetpoint,
     ControlMode,
-    ControlTargets,
-    DepthReading,
     DepthSetpoint,
-    FailsafeLevel,
-    FailsafeStatus,
-    ForceIntent,
-    ImuReading,
     ModeRequest,
     MovementCommand,
-    Odometry,
-    PositionReading,
-    ThrusterOutput,
-    VehicleTag,
 )
-from testbed.vehicle.control import (
-    AttitudeController,
-    AttitudeGains,
-    DepthController,
-)
-from testbed.vehicle.localization import (
-    FixSource,
-    build_navigation,
-    estimate_navigation,
-)
-from testbed.vehicle.manipulation import Manipulator, build_manipulator, plan_arm
-from testbed.vehicle.physics import Physics
-from testbed.vehicle.resources import (
-    Actuation,
-    Controllers,
-    PlantTruth,
-    PowerMeter,
-    SensorSuite,
-    SimClock,
-)
-from testbed.vehicle.scenery import pool_scenery
-from testbed.vehicle.sensors import (
-    DepthSensor,
-    Imu,
-    PositionFix,
-)
-from testbed.vehicle.systems import build_schedule, shaped_sticks, wrench_of
-from testbed.vehicle.thrusters import (
-    T200,
-    FaultMode,
-    ThrusterDynamics,
-    load_thruster_config,
-)
+from testbed.vehicle.systems import shaped_sticks, wrench_of
+from testbed.vehicle.thrusters import FaultMode
 from testbed.vehicle.vehicle_config import VehicleConfig
 
 __all__ = ["Vehicle", "euler_deg"]
@@ -125,151 +78,36 @@ class Vehicle:
         outbound: Sequence[System] = (),
     ) -> None:
         self.config = config
-        imu_rng, depth_rng, position_rng, current_rng = rng.spawn(4)
-        thruster_config = load_thruster_config(config.thrusters)
-        self.thruster_config = thruster_config
-        self.thruster_names: tuple[str, ...] = tuple(t.name for t in thruster_config.thrusters)
-        t200 = T200.from_table(config.supply_voltage_v)
-        self.t200 = t200
-        self.allocator = Allocator(
-            thruster_config,
-            t200,
-            method=config.allocation,
-            current_limit_a=config.current_limit_a,
-            slew_limit_n_per_s=config.slew_limit_n_per_s,
-        )
-        self._matrix = np.array(thruster_config.matrix, dtype=float)
-        n = self._matrix.shape[1]
-        self.dynamics = ThrusterDynamics(n, time_constant_s=config.thruster_time_constant_s)
-        self.model = config.hydro_model()
-        arm_model = None if config.arm is None else config.arm.arm_model()
-        pool = config.pool_in_use
-        self.physics = Physics(
-            self.model,
-            dt_s=config.physics_dt_s,
-            pool=pool,
-            start_position_ned=config.start_position_ned_m,
-            start_euler_rad=config.start_euler_rad,
-            current=config.current,
-            rng=current_rng,
-            arm=arm_model,
-            arm_coupling=config.arm is None or config.arm.coupling,
-            arm_trim=config.arm is None or config.arm.trim,
-        )
-        camera = config.camera
-        if camera.enabled and pool is not None:  # the camera's pool is the solid one
-            self.physics.add_scenery(pool_scenery(pool.length_m, pool.width_m, pool.depth_m))
-        # spawned only when drawn from, so runs without camera noise keep their streams
-        self._camera_rng = rng.spawn(1)[0] if camera.enabled and camera.noise_std_grey else None
+        parts = assemble_vehicle(config, rng, inbound=inbound, outbound=outbound)
+        self.thruster_config = parts.thruster_config
+        self.thruster_names = parts.thruster_names
+        self.t200 = parts.t200
+        self.allocator = parts.allocator
+        self.dynamics = parts.dynamics
+        self.model = parts.model
+        self.physics = parts.physics
+        self.sensors = parts.sensors
+        self.world = parts.world
+        self.store = parts.store
+        self.schedule = parts.schedule
+        self.entity = parts.entity
+        self.controllers = parts.controllers
+        self.actuation = parts.actuation
+        self.clock = parts.clock
+        self.truth = parts.truth
+        self.power = parts.power
+        self.operator_entity = parts.operator_entity
+        self.manipulator = parts.manipulator
+        self._camera_rng = parts.camera_rng
         self._last_capture_s: float | None = None
-        sensors = config.sensors
-        fix = None if sensors.position is None else PositionFix(sensors.position, position_rng)
-        navigation = config.navigation_in_use
-        autonomy = config.autonomy
-        self.sensors = SensorSuite(
-            Imu(sensors.imu, imu_rng),
-            DepthSensor(sensors.depth, depth_rng),
-            fix if navigation is None else None,  # else a navigation source (below)
-        )
-
-        self.world = World()
-        # the frame's components that compiled kernels write: kept in a frame store
-        zero6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        rest = ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0)  # disarmed
-        store = FrameStore()
-        store.add(ForceIntent("", zero6), capacity=16)  # five sources here, room for more
-        store.add(rest, capacity=1)
-        store.add(AppliedWrench(zero6, zero6), capacity=1)
-        for reading in (
-            ImuReading(0.0, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
-            DepthReading(0.0, 0.0, 0.0),
-            PositionReading(0.0, (0.0, 0.0, 0.0)),
-            ControlTargets(0.0, (1.0, 0.0, 0.0, 0.0)),
-            Odometry(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)),
-        ):
-            store.add(reading, capacity=1)
-        self.world.use_store(store)
-        self.store = store
-        self.schedule = build_schedule(
-            inbound,
-            outbound,
-            estimators=() if navigation is None else (estimate_navigation,),
-            planners=(
-                *(() if autonomy is None else (run_mission,)),
-                *(() if config.arm is None else (plan_arm,)),
-            ),
-            controllers=(control_velocity,) if autonomy and autonomy.controller == "ismc" else (),
-        )
-        world = self.world
-        start_mode = ControlMode.MANUAL if autonomy is None else ControlMode.GUIDED
-        self.entity: Entity = world.spawn(
-            VehicleTag(),
-            Replicate(),
-            Armed(False),
-            ActiveMode(start_mode),
-            FailsafeStatus(FailsafeLevel.NOMINAL, 0.0),
-            rest,
-            AppliedWrench(zero6, zero6),
-        )
-        gains = config.gains
-        self.controllers = Controllers(
-            vehicle=self.entity,
-            attitude=AttitudeController(AttitudeGains(gains.roll, gains.pitch, gains.yaw)),
-            depth=DepthController(gains.depth, gains.depth_feedforward_n),
-            pilot=config.pilot,
-            failsafe=config.failsafe,
-            axis_maxima=tuple(float(v) for v in self.allocator.axis_maxima()),
-            autonomous=autonomy is not None,
-            velocity_control=autonomy is not None and autonomy.controller == "ismc",
-        )
-        for source in ("pilot", "depth", "attitude"):
-            self._spawn_intent(source)
-        self.actuation = Actuation(
-            self.allocator,
-            self.dynamics,
-            self._matrix,
-            store.table(ForceIntent),
-            world.row_view(self.entity, ThrusterOutput),
-            world.row_view(self.entity, AppliedWrench),
-            plant_wrench=self.physics.held_wrench,
-        )
-        self.clock = SimClock(0.0, 1.0 / config.control_rate_hz)
-        self.truth = PlantTruth()
-        self.power = PowerMeter(config.supply_voltage_v, t200.total_current_a)
-        resources = (self.clock, self.truth, self.sensors, self.controllers, self.actuation)
-        for resource in (*resources, self.power):
-            world.insert_resource(resource)
-        # operator intents written locally (scripted runs) live on their own entity
-        self.operator_entity: Entity = world.spawn(Replicate(), origin=Origin.REMOTE)
-        # GUIDED's intent entity, spawned after the others so the entity ids (and the summing
-        # order) of the runs before GUIDED existed stay the same
-        self._spawn_intent("position")
-        # localization and autonomy, last: runs without them keep their entities and streams
-        if navigation is not None:
-            extra = () if fix is None else (FixSource(fix),)
-            world.insert_resource(build_navigation(navigation, rng.spawn(1)[0], extra))
-        if autonomy is not None:
-            world.insert_resource(build_autonomy(autonomy, self.model))
-            self._spawn_intent("velocity")
-        self.manipulator: Manipulator | None = None
-        if config.arm is not None:
-            self.manipulator = build_manipulator(config.arm, arm_model)
-            world.insert_resource(self.manipulator)
         self._seq = 0
         self._arm_seq = 0
         self._control_period_s = 1.0 / config.control_rate_hz
         self._next_control_s = 0.0
         self._last_frame_s: float | None = None
-        self._accelerometer = navigation is not None and navigation.accelerometer is not None
+        self._accelerometer = parts.accelerometer
         self._last_velocity_ned: tuple[float, float, float] | None = None
         self.frames = 0
-
-    def _spawn_intent(self, source: str) -> None:
-        """An entity with ``source``'s zero :class:`ForceIntent` (its row sums in spawn order)."""
-        world = self.world
-        entity = world.spawn(ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
-        self.controllers.intents[source] = entity
-        self.controllers.intent_rows[source] = world.row_view(entity, ForceIntent)
 
     # ------------------------------------------------------------------------- running
 
