@@ -147,6 +147,7 @@ class VehicleEndpoint:
         self.auto_yaw = guided_yaw.AutoYaw()
         self.high_latency_enabled = False
         self._texts_sent: set[str] = set()
+        self._statustexts: list[mav.MAVLink_message] = []
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
@@ -239,8 +240,13 @@ class VehicleEndpoint:
             self.queue(channel, message)
 
     def statustext(self, severity: int, text: str) -> None:
-        """STATUSTEXT on every channel (≤ 50 characters)."""
-        self.broadcast(mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
+        """STATUSTEXT for every channel (≤ 50 characters), sent at the end of the next
+        :meth:`update`, after what that update queues and after the replies to what has
+        arrived meanwhile: ArduPilot's ``GCS::send_textv`` only queues the text once the vehicle
+        is initialised, and ``GCS::update_send`` sends the queue (``service_statustext``) after
+        every link's messages, so a command's COMMAND_ACK, written as its handler returns
+        (``handle_command_long``), goes out before a text the handler said."""
+        self._statustexts.append(mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
 
     def statustext_once(self, severity: int, text: str) -> None:
         """:meth:`statustext`, the first time ``text`` is said only."""
@@ -435,7 +441,15 @@ class VehicleEndpoint:
 
     def update(self, now_s: float) -> None:
         """Run the failsafes and queue what is due on every channel at ``now_s`` [s] (after
-        the vehicle's frame that applied this frame's intents: its own state holds from here)."""
+        the vehicle's frame that applied this frame's intents: its own state holds from here),
+        then the STATUSTEXTs said since the last update (:meth:`statustext`)."""
+        self.queue_due(now_s)
+        texts, self._statustexts = self._statustexts, []
+        for text in texts:
+            self.broadcast(text)
+
+    def queue_due(self, now_s: float) -> None:
+        """:meth:`update`'s work before the STATUSTEXTs: the failsafes and what is due."""
         self._arm_acknowledged = None
         snapshot = self.snapshot(now_s)
         known = not math.isnan(snapshot.current_a)

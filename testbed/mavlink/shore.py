@@ -211,9 +211,9 @@ class ShoreEndpoint(VehicleEndpoint):
         (GUIDED, entered, would hold the origin)."""
         return self.link.position_fix and self._has_state
 
-    def update(self, now_s: float) -> None:
-        """The base class's update, then the link's age and warnings (module docstring)."""
-        super().update(now_s)
+    def queue_due(self, now_s: float) -> None:
+        """The base class's, then the link's age and warnings (module docstring)."""
+        super().queue_due(now_s)
         snapshot = self._snapshot
         state_s = 0.0 if snapshot is None else snapshot.time_s
         age = max(0.0, now_s - state_s)

@@ -138,6 +138,40 @@ def test_silent_until_enabled_then_high_latency2_alone_and_silent_again_once_dis
     }
 
 
+def test_the_text_follows_the_ack_as_ardupilots_queued_statustext(links: TwoLinks) -> None:
+    """ArduPilot's ``GCS_MAVLINK::handle_command_int``/``_long`` writes the COMMAND_ACK as
+    ``handle_control_high_latency`` returns, while the "High Latency enabled" / "disabled" its
+    ``GCS::enable_high_latency_connections`` says is only queued (``GCS::send_textv``) and sent
+    by ``GCS::update_send``'s ``service_statustext`` after the links' messages: on each link
+    the ACK comes first (it used to follow the text). Enabled from the high-latency link, both
+    go out there in that order; disabled from the normal link, only there."""
+    links.send_hl(links.command(CONTROL, 1))
+    links.step()
+    enabled = ("STATUSTEXT", "High Latency enabled")
+    assert _kinds(links.hl_messages) == [("COMMAND_ACK", ACCEPTED), enabled]
+    assert enabled in _kinds(links.messages)
+    links.clear()
+    links.send(links.command(CONTROL, 0))
+    links.step()
+    kinds = _kinds(links.messages)
+    assert kinds.index(("COMMAND_ACK", ACCEPTED)) < kinds.index(
+        ("STATUSTEXT", "High Latency disabled")
+    )
+    links.clear()
+    links.send(links.command(CONTROL, 1))
+    links.step()
+    kinds = _kinds(links.messages)
+    assert kinds.index(("COMMAND_ACK", ACCEPTED)) < kinds.index(enabled)
+
+
+def _kinds(messages: list[Any]) -> list[tuple[str, object]]:
+    """Each message's type with its ACK result or its text."""
+    return [
+        (m.get_type(), m.result if m.get_type() == "COMMAND_ACK" else getattr(m, "text", None))
+        for m in messages
+    ]
+
+
 @pytest.mark.parametrize(
     ("param1", "result", "enabled"),
     [

@@ -259,6 +259,7 @@ def test_through_the_gateway_the_thrusters_are_out_of_reach() -> None:
     sender = SimGcs.make_sender(255)
     packet = sender.command_long_encode(1, 1, mav.MAV_CMD_DO_MOTOR_TEST, 0, 0, 1, 1700, 0, 0, 2, 0)
     shore.receive(channel, packet.pack(sender), 1.0)
+    shore.update(1.0)  # STATUSTEXT goes out at the end of an update, as ArduPilot's
     decoder = mav.MAVLink(None)
     replies = [m for p in channel.take() for m in decoder.parse_buffer(p) or []]
     acks = [m.result for m in replies if m.get_type() == "COMMAND_ACK"]
