@@ -62,6 +62,7 @@ from testbed.vehicle.localization import (
 from testbed.vehicle.manipulation import Manipulator, build_manipulator, plan_arm
 from testbed.vehicle.physics import Physics
 from testbed.vehicle.resources import (
+    ZERO6,
     Actuation,
     Controllers,
     PlantTruth,
@@ -206,12 +207,11 @@ def assemble_vehicle(
 
     world = World()
     # the frame's components that compiled kernels write: kept in a frame store
-    zero6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     rest = ThrusterOutput((0.0,) * n, (1500.0,) * n, (0.0,) * n, 1.0)  # disarmed
     store = FrameStore()
-    store.add(ForceIntent("", zero6), capacity=16)  # five sources here, room for more
+    store.add(ForceIntent("", ZERO6), capacity=16)  # five sources here, room for more
     store.add(rest, capacity=1)
-    store.add(AppliedWrench(zero6, zero6), capacity=1)
+    store.add(AppliedWrench(ZERO6, ZERO6), capacity=1)
     for reading in (
         ImuReading(0.0, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
         DepthReading(0.0, 0.0, 0.0),
@@ -239,7 +239,7 @@ def assemble_vehicle(
         ActiveMode(start_mode),
         FailsafeStatus(FailsafeLevel.NOMINAL, 0.0),
         rest,
-        AppliedWrench(zero6, zero6),
+        AppliedWrench(ZERO6, ZERO6),
     )
     gains = config.gains
     controllers = Controllers(
@@ -312,6 +312,6 @@ def assemble_vehicle(
 
 def _spawn_intent(world: World, controllers: Controllers, source: str) -> None:
     """An entity with ``source``'s zero :class:`ForceIntent` (its row sums in spawn order)."""
-    entity = world.spawn(ForceIntent(source, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+    entity = world.spawn(ForceIntent(source, ZERO6))
     controllers.intents[source] = entity
     controllers.intent_rows[source] = world.row_view(entity, ForceIntent)
