@@ -63,6 +63,13 @@ def shown_line(value: object) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
+def shown_error(error: BaseException) -> str:
+    """``Type: message`` of an exception a user's plug-in raised, whitespace folded and cut to
+    300 characters (297 and ``...``), for a one-line message."""
+    text = " ".join(f"{type(error).__name__}: {error}".split())
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
 def described_class(obj: object) -> str:
     """``QualifiedName (its source file)`` of ``obj``'s class (a user's pilot, link model or
     law), or the name alone when it has no file (a built-in class, or one defined in a REPL or

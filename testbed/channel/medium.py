@@ -50,6 +50,7 @@ from testbed.channel.model import (
     StandardLink,
     checked_airtime_s,
     checked_corrupt,
+    made_error_model,
     wanted_keywords,
 )
 from testbed.channel.trace import BROADCAST, EventKind, Trace
@@ -258,10 +259,7 @@ class Modem:
         self._buffer_bytes = config.tx_buffer_bytes
         self._packet_bytes = config.packet_bytes
         model = medium.model
-        if wanted_keywords(model.error_model, ("receiver",)):
-            self._errors = model.error_model(rng, receiver=name)  # type: ignore[call-arg]
-        else:
-            self._errors = model.error_model(rng)
+        self._errors = made_error_model(model, rng, name)
         # the context a user's laws ask for (none for the preset's: its calls stay as they were)
         self._airtime_context = {key: name for key in wanted_keywords(model.airtime_s, ("sender",))}
         self._corrupt_keys = wanted_keywords(self._errors.corrupt, ("sender", "distance_m"))

@@ -29,7 +29,7 @@ from typing import Protocol
 
 import numpy as np
 
-from testbed.config import ConfigError, described_class, shown_line
+from testbed.config import ConfigError, described_class, shown_error, shown_line
 
 from .config import LinkConfig
 from .errors import BitErrors
@@ -41,16 +41,26 @@ __all__ = [
     "StandardLink",
     "checked_airtime_s",
     "checked_corrupt",
+    "made_error_model",
     "model_name",
     "wanted_keywords",
 ]
 
 
 class LinkModelError(ConfigError):
-    """A link model broke its contract (an air time that is not a finite number > 0, or
-    received bytes that are not the sent ones' length with the flipped bits counted): the
-    model's class and file named in one line (the command line's ``testbed: error: ...``,
-    exit 2)."""
+    """A link model broke its contract (one of its methods raised, an air time that is not a
+    finite number > 0, received bytes that are not the sent ones' length with the flipped bits
+    counted): the model's class and file, the method and what was wrong named in one line (the
+    command line's ``testbed: error: ...``, exit 2). One a method raised is caused by that
+    exception (its traceback, for the Python API)."""
+
+    @classmethod
+    def raised(
+        cls, model: object, call: str, error: BaseException, what: str = "link model"
+    ) -> LinkModelError:
+        """The error for ``model``'s ``call`` (e.g. ``"state(12.5)"``) having raised ``error``;
+        ``what`` names ``model``'s part (``"link model's error model"`` for a receiver's)."""
+        return cls(f"{what} {described_class(model)}: {call} raised {shown_error(error)}")
 
     @classmethod
     def airtime(cls, model: object, size_bytes: int, t_s: float, value: object) -> LinkModelError:
@@ -96,9 +106,12 @@ def checked_airtime_s(model: LinkModel, size_bytes: int, t_s: float, **context: 
     """``model.airtime_s(size_bytes, t_s, **context)`` [s], checked: a finite number > 0.
 
     Raises:
-        LinkModelError: anything else (NaN, a string, None, ≤ 0, infinite).
+        LinkModelError: anything else (NaN, a string, None, ≤ 0, infinite), or the call raised.
     """
-    value = model.airtime_s(size_bytes, t_s, **context)
+    try:
+        value = model.airtime_s(size_bytes, t_s, **context)
+    except Exception as error:
+        raise LinkModelError.raised(model, f"airtime_s({size_bytes}, {t_s!r})", error) from error
     try:
         fits = 0.0 < value < math.inf  # NaN too
     except TypeError:  # not a number at all
@@ -116,9 +129,13 @@ def checked_corrupt(
     held to the model's own count).
 
     Raises:
-        LinkModelError: anything else.
+        LinkModelError: anything else, or the call raised.
     """
-    value = errors.corrupt(data, p_independent, t_s, **context)
+    try:
+        value = errors.corrupt(data, p_independent, t_s, **context)
+    except Exception as error:
+        call = f"corrupt(<{len(data)} B>, p, {t_s!r})"
+        raise LinkModelError.raised(errors, call, error, "link model's error model") from error
     if type(value) is tuple and len(value) == 2:
         received, count = value
         if type(received) is bytes and len(received) == len(data):
@@ -129,6 +146,29 @@ def checked_corrupt(
             if isinstance(count, int | np.integer) and int(count) == flipped:
                 return received, flipped
     raise LinkModelError.received(errors, len(data), t_s, value)
+
+
+def made_error_model(model: LinkModel, rng: np.random.Generator, receiver: str) -> ErrorModel:
+    """``model.error_model(rng)`` for the receiving node ``receiver`` (given as
+    ``receiver=`` when the model asks for it, :func:`wanted_keywords`), checked to have a
+    ``corrupt`` method.
+
+    Raises:
+        LinkModelError: the call raised, or made something without ``corrupt``.
+    """
+    try:
+        if wanted_keywords(model.error_model, ("receiver",)):
+            errors = model.error_model(rng, receiver=receiver)  # type: ignore[call-arg]
+        else:
+            errors = model.error_model(rng)
+    except Exception as error:
+        raise LinkModelError.raised(model, f"error_model(rng) for the {receiver}", error) from error
+    if not callable(getattr(errors, "corrupt", None)):
+        raise LinkModelError(
+            f"link model {described_class(model)}: error_model(rng) for the {receiver} returned "
+            f"{shown_line(errors)}: expected an error model with corrupt(data, p, t_s)"
+        )
+    return errors
 
 
 class ErrorModel(Protocol):

@@ -9,9 +9,10 @@ same ``t_s`` as ``series.csv``) and writes them to ``link_state.csv``: ``t_s`` a
 the order of the first answer. A model without ``state`` is asked nothing and no file is
 written. The values are numbers, Python's or numpy's (a ``bool``, numpy's too, is written 0/1;
 NaN is allowed, for "no value");
-the names are the first answer's, at every sample. Anything else is a
-:class:`~testbed.channel.model.LinkModelError` naming the model's class and file (one line,
-exit 2 on the command line; the run's rows until then are kept). The model is asked at the
+the names are the first answer's, at every sample. Anything else, or a ``state`` that raises, is
+a :class:`~testbed.channel.model.LinkModelError` naming the model's class and file (one line,
+exit 2 on the command line; the run's rows until then are kept); a ``state`` that is not a
+method is refused before the run. The model is asked at the
 vehicle's frame, never by the medium, so asking changes nothing the link does, provided
 ``state`` draws no random numbers and changes nothing.
 """
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from testbed.channel.model import LinkModelError
+from testbed.config import described_class, shown_line
 from testbed.run.recorder import SeriesRows
 
 __all__ = ["LinkStateLog"]
@@ -48,17 +50,33 @@ class LinkStateLog:
 
     @classmethod
     def of(cls, model: object | None) -> LinkStateLog | None:
-        """The empty log of ``model``, or None when it has no callable ``state``."""
-        state = getattr(model, "state", None)
-        return cls(model, state) if callable(state) else None
+        """The empty log of ``model``, or None when it has no ``state``.
+
+        Raises:
+            LinkModelError: ``model`` has a ``state`` that is not callable (an attribute where
+                the method belongs: silently never recorded, before).
+        """
+        if model is None or not hasattr(model, "state"):
+            return None
+        state = model.state
+        if not callable(state):
+            raise LinkModelError(
+                f"link model {described_class(model)}: state is {shown_line(state)}, not a "
+                "method: expected state(t_s) -> Mapping[str, float], or no attribute 'state'"
+            )
+        return cls(model, state)
 
     def record(self, t_s: float) -> None:
         """Append the model's state at vehicle time ``t_s`` [s].
 
         Raises:
-            LinkModelError: the answer is not a mapping of the first answer's names to numbers.
+            LinkModelError: ``state`` raised, or its answer is not a mapping of the first
+                answer's names to numbers.
         """
-        answer = self._state(t_s)
+        try:
+            answer = self._state(t_s)
+        except Exception as error:
+            raise LinkModelError.raised(self._model, f"state({t_s!r})", error) from error
         if not isinstance(answer, Mapping):
             raise self._broken(t_s, answer, "expected a mapping of names to numbers")
         if self.rows is None:

@@ -303,14 +303,14 @@ def run_scenario(
     holder["node"] = vehicle_node
     controllers = vehicle_node.vehicle.controllers
     scenario_laws = (controllers.depth_law, controllers.attitude_law)
-    if vehicle_setup is not None:
-        try:
-            vehicle_setup(vehicle_node.vehicle)
-        except BaseException:
-            vehicle_node.vehicle.close()
-            raise
     position = link.operator_position_ned_m
-    operator_modem = medium.attach("operator", lambda: position)
+    try:
+        if vehicle_setup is not None:
+            vehicle_setup(vehicle_node.vehicle)
+        operator_modem = medium.attach("operator", lambda: position)  # the model's error_model
+    except BaseException:
+        vehicle_node.vehicle.close()
+        raise
     operator_node = make_operator_node(
         env,
         scenario,

@@ -22,9 +22,9 @@ from collections.abc import Sequence
 from typing import Protocol
 
 from testbed.common.components import ControlTargets, DepthReading, ImuReading
-from testbed.config import ConfigError, described_class, shown_line
+from testbed.config import ConfigError, described_class, shown_error, shown_line
 
-__all__ = ["AttitudeLaw", "ControlLawError", "DepthLaw", "checked_vector"]
+__all__ = ["AttitudeLaw", "ControlLawError", "DepthLaw", "call_law", "checked_vector"]
 
 Vec3 = tuple[float, float, float]
 
@@ -97,9 +97,31 @@ class AttitudeLaw(Protocol):
 
 
 class ControlLawError(ConfigError, ValueError):
-    """A law of the user's own returned what a hold cannot apply (not three finite numbers):
-    its bug, named with its class and file, in one line on the command line (``testbed:
-    error: ...``, exit 2). A ValueError."""
+    """A law of the user's own raised, or returned what a hold cannot apply (not three finite
+    numbers): its bug, named with its class and file, in one line on the command line
+    (``testbed: error: ...``, exit 2). A ValueError; one the law raised is caused by that
+    exception (its traceback, for the Python API)."""
+
+
+def call_law(law: object, role: str, method: str, *args: object) -> object:
+    """``law.<method>(*args)``: what the law returned.
+
+    Args:
+        law: a :class:`DepthLaw` or :class:`AttitudeLaw` of the user's.
+        role: ``"depth law"`` or ``"attitude law"``, for the message.
+        method: ``"reset"`` or ``"update"``.
+        args: the call's arguments.
+
+    Raises:
+        ControlLawError: the call raised an ``Exception`` (``Type: message``, naming the law's
+            role, class and file and the method); an interrupt or ``sys.exit`` passes unchanged.
+    """
+    try:
+        return getattr(law, method)(*args)
+    except Exception as error:
+        raise ControlLawError(
+            f"{role} {described_class(law)}: {method} raised {shown_error(error)}"
+        ) from error
 
 
 def checked_vector(law: object, value: object, what: str) -> Vec3:

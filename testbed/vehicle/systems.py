@@ -66,7 +66,7 @@ from testbed.vehicle.components import (
     ThrusterOutput,
 )
 from testbed.vehicle.control_kernels import pilot_rows, pilot_shape
-from testbed.vehicle.control_laws import checked_vector
+from testbed.vehicle.control_laws import call_law, checked_vector
 from testbed.vehicle.pilot import SURFACE_HOLD_DEPTH_M, level_to_body
 from testbed.vehicle.resources import (
     LEVEL,
@@ -301,7 +301,7 @@ def control_depth(world: World) -> None:
     imu = vehicle_row(world, ctl, ImuReading)
     law = ctl.depth_law
     if not (flags.armed and flags.depth_hold) or None in (reading, imu, targets):
-        (ctl.depth if law is None else law).reset()
+        ctl.depth.reset() if law is None else call_law(law, "depth law", "reset")
         set_intent(world, ctl, "depth", ZERO6)
         return
     assert reading is not None and imu is not None and targets is not None
@@ -310,7 +310,10 @@ def control_depth(world: World) -> None:
         ctl.depth.update_rows(targets, reading, imu, dt, ctl.intent_rows["depth"], world.tick)
         return
     vehicle = ctl.vehicle  # the law is handed the readings as components, never a row
-    force = law.update(
+    force = call_law(
+        law,
+        "depth law",
+        "update",
         _get(world, vehicle, ControlTargets),
         _get(world, vehicle, DepthReading),
         _get(world, vehicle, ImuReading),
@@ -330,7 +333,7 @@ def control_attitude(world: World) -> None:
     imu = vehicle_row(world, ctl, ImuReading)
     law = ctl.attitude_law
     if not (flags.armed and flags.attitude_hold) or imu is None or targets is None:
-        (ctl.attitude if law is None else law).reset()
+        ctl.attitude.reset() if law is None else call_law(law, "attitude law", "reset")
         set_intent(world, ctl, "attitude", ZERO6)
         return
     dt = world.resource(SimClock).dt_s
@@ -341,7 +344,9 @@ def control_attitude(world: World) -> None:
         return
     vehicle = ctl.vehicle
     target = _get(world, vehicle, ControlTargets)
-    torque = law.update(target, _get(world, vehicle, ImuReading), dt, axes)
+    torque = call_law(
+        law, "attitude law", "update", target, _get(world, vehicle, ImuReading), dt, axes
+    )
     k, m, n = checked_vector(law, torque, "attitude law's body torque [N·m]")
     torque = (k if axes[0] else 0.0, m if axes[1] else 0.0, n if axes[2] else 0.0)
     set_intent(world, ctl, "attitude", (0.0, 0.0, 0.0, *torque))

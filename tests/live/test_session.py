@@ -31,6 +31,7 @@ from testbed.live.messages import (
 from testbed.live.session import GOTO_NO_FIX, GOTO_REFUSED, LiveSession
 from testbed.run.failures import partial_run
 from testbed.run.scenario import load_scenario
+from testbed.vehicle.control_laws import ControlLawError
 
 
 class _Unpaced(simpy.rt.RealtimeEnvironment):
@@ -185,7 +186,8 @@ def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(
     tmp_path: Path, unpaced: None
 ) -> None:
     """As ``testbed run`` and ``testbed hil``: the error is raised carrying the session up to it
-    (it raised with a traceback and nothing kept). The scenario arms in depth hold by itself, so
+    (it raised with a traceback and nothing kept), as a ControlLawError naming the law, the
+    method and the law's own error (which causes it). The scenario arms in depth hold by itself, so
     the law flies, and raises, without a console."""
     (tmp_path / "my_laws.py").write_text(
         "class Boom:\n"
@@ -196,11 +198,19 @@ def test_a_law_of_ones_own_that_raises_part_way_keeps_what_ran(
     )
     law = f"vehicle.control.depth={tmp_path / 'my_laws.py'}:Boom"
     session = LiveSession(load_scenario("s100-teleop-v1", [law]), Hub(), pilot=None)
-    with pytest.raises(RuntimeError, match="boom in the law") as raised:
+    with pytest.raises(ControlLawError, match="boom in the law") as raised:
         session.run(60.0)
+    assert str(raised.value) == (
+        f"depth law Boom ({tmp_path / 'my_laws.py'}): update raised RuntimeError: boom in the law"
+    )
+    causes = [
+        raised.value.__cause__,
+        getattr(raised.value.__cause__, "__cause__", None),
+    ]  # simpy's copy
+    assert any(isinstance(c, RuntimeError) for c in causes)  # the law's own, traced
     partial = partial_run(raised.value)
     assert partial is not None and partial.failure is not None
-    assert partial.failure.startswith("RuntimeError: boom in the law (at ")
+    assert partial.failure.startswith(f"ControlLawError: {raised.value} (at ")
     assert 0.0 < partial.metrics["sim_s"] < 60.0
     assert partial.metrics["inputs"]["depth_law"]["factory"].endswith("my_laws.py:Boom")
     last = partial.recorder.events[-1]

@@ -19,6 +19,7 @@ from testbed.run.mavlink_gateway import run_gateway
 from testbed.run.mavlink_run import run_mavlink
 from testbed.run.runner import RunResult
 from testbed.run.scenario import load_scenario
+from testbed.vehicle.control_laws import ControlLawError
 from tests.mavlink.rt_session import GatewaySession
 
 LAW = """
@@ -54,11 +55,15 @@ def test_a_law_that_raises_part_way_keeps_what_ran(run: Runner, tmp_path: Path) 
     finally:
         session.close()
     error = session.error
-    assert isinstance(error, RuntimeError) and str(error) == "boom in the law"
+    assert isinstance(error, ControlLawError)  # one line naming the law, exit 2 on the CLI
+    laws = tmp_path / "my_laws.py"
+    assert str(error) == f"depth law Boom ({laws}): update raised RuntimeError: boom in the law"
+    causes = [error.__cause__, getattr(error.__cause__, "__cause__", None)]  # simpy's copy
+    assert any(isinstance(c, RuntimeError) for c in causes)  # the law's own, traced
     partial = partial_run(error)
     assert partial is not None
     assert partial.failure is not None
-    assert partial.failure.startswith("RuntimeError: boom in the law (at ")
+    assert partial.failure.startswith(f"ControlLawError: {error} (at ")
     assert (partial.recorder.events[-1].node, partial.recorder.events[-1].kind) == (
         "testbed",
         "failed",
