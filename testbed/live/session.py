@@ -196,7 +196,7 @@ class LiveSession:
         scenario = self.scenario
         link, images, camera = scenario.link, scenario.images, scenario.vehicle.camera
         plan = SessionPlan(
-            mode=MODES[scenario.operator.mode],
+            mode=scenario.operator.control_mode,
             arm_at_s=scenario.operator.arm_at_s,
             depth_m=scenario.operator.depth_m,
             precision=scenario.operator.precision,

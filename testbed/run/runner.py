@@ -25,7 +25,7 @@ import simpy
 
 from testbed.channel import Medium, Modem, Trace
 from testbed.channel.model import LinkModel, model_name
-from testbed.common.components import ControlMode, MissionStatus
+from testbed.common.components import MissionStatus
 from testbed.ecs import Phase
 from testbed.operator.pilots import Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
@@ -55,12 +55,6 @@ __all__ = [
     "run_scenario",
     "tally_images",
 ]
-
-_MODES = {
-    "manual": ControlMode.MANUAL,
-    "stabilize": ControlMode.STABILIZE,
-    "depth_hold": ControlMode.DEPTH_HOLD,
-}
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,7 +151,7 @@ def make_operator_node(
     link = scenario.link
     token = link.mac == "token"
     plan = SessionPlan(
-        mode=_MODES[scenario.operator.mode],
+        mode=scenario.operator.control_mode,
         arm_at_s=scenario.operator.arm_at_s,
         depth_m=scenario.operator.depth_m,
         precision=scenario.operator.precision,

@@ -36,6 +36,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from testbed.channel import (
     LinkConfig,
     load_link_config,
@@ -101,6 +103,28 @@ _CONTROL = "control"
 _VEHICLE_KEYS = tuple(f.name for f in dataclasses.fields(VehicleConfig))
 _LINK_OPTIONS = tuple(f.name for f in dataclasses.fields(LinkSection) if f.name != "channel")
 _CHANNEL_KEYS = tuple(f.name for f in dataclasses.fields(LinkConfig))
+
+
+def _check_guided(vehicle: VehicleConfig, matrix: np.ndarray, where: str) -> None:
+    """``operator.mode = 'guided'`` needs what GUIDED flies with: a position fix (the vehicle
+    refuses GUIDED without one, as ArduSub does) and a force along the body's x and y axes
+    (it holds a point).
+
+    Raises:
+        ConfigError: one line naming ``operator.mode``.
+    """
+    if vehicle.sensors.position is None and vehicle.navigation_in_use is None:
+        raise ConfigError(
+            f"{where}: operator.mode: 'guided' needs a position fix (vehicle.sensors.position "
+            "or vehicle.navigation), and the vehicle has none: add one, or use 'manual', "
+            "'stabilize' or 'depth_hold'"
+        )
+    if not (matrix[0].any() and matrix[1].any()):
+        raise ConfigError(
+            f"{where}: operator.mode: 'guided' holds a point, which needs thrust along the "
+            f"body's x and y axes, and the layout {vehicle.thrusters!r} lacks one: use "
+            "'manual', 'stabilize' or 'depth_hold'"
+        )
 
 
 def load_scenario(
@@ -190,13 +214,15 @@ def _from_data(
     _check_file(lambda _: vehicle.hydro_model(), vehicle.model, where, "vehicle.model")
     layout = _loaded(load_thruster_config, vehicle.thrusters, where, "vehicle.thrusters")
     operator = build(OperatorSection, top.operator, source=where, prefix="operator.")
-    if operator.mode == "depth_hold" and not layout.matrix[2].any():
+    if operator.mode in ("depth_hold", "guided") and not layout.matrix[2].any():
         raise ConfigError(
-            f"{where}: operator.mode: 'depth_hold' needs thrust along the body's z axis, and the "
-            f"layout {vehicle.thrusters!r} has none (no vertical thruster): use 'manual' or "
+            f"{where}: operator.mode: {operator.mode!r} needs thrust along the body's z axis, and "
+            f"the layout {vehicle.thrusters!r} has none (no vertical thruster): use 'manual' or "
             "'stabilize'"
         )
-    holds_heading = operator.mode in ("stabilize", "depth_hold")
+    if operator.mode == "guided":
+        _check_guided(vehicle, layout.matrix, where)
+    holds_heading = operator.mode in ("stabilize", "depth_hold", "guided")
     if holds_heading and not layout.matrix[5].any():
         raise ConfigError(
             f"{where}: operator.mode: {operator.mode!r} holds the heading, which needs a yaw "

@@ -22,6 +22,7 @@ from testbed.channel import (
     IpgPolicy,
     LinkConfig,
 )
+from testbed.common.components import ControlMode
 from testbed.config import check, check_range, check_ranges
 from testbed.operator.pilots import (
     PERIOD_RANGE_S,
@@ -226,12 +227,24 @@ class LinkSection:
         return self.mac == "free" or self.codec == "changeset"
 
 
+OPERATOR_MODES = {
+    "manual": ControlMode.MANUAL,
+    "stabilize": ControlMode.STABILIZE,
+    "depth_hold": ControlMode.DEPTH_HOLD,
+    "guided": ControlMode.GUIDED,
+}
+"""A scenario's ``operator.mode`` names → the control modes the operator asks for."""
+
+
 @dataclass(frozen=True, slots=True)
 class OperatorSection:
     """What the operator requests at start.
 
     Attributes:
-        mode: control mode requested at start.
+        mode: control mode requested at start (:data:`OPERATOR_MODES`). ``"guided"`` (ArduSub's
+            GUIDED) needs a position fix (``vehicle.sensors.position`` or a navigation): with
+            no goal the vehicle holds its stopping point until a goal arrives (a
+            ``supervisor`` pilot's); sticks are ignored.
         arm_at_s: when the operator requests arming [s], in [0, duration_s).
         depth_m: depth setpoint [m, positive down] sent at start (``depth_hold`` only, over the
             change-set codec: the teleop and MAVLink orders carry none), in [0, 1000]; None =
@@ -239,7 +252,7 @@ class OperatorSection:
         precision: precision (fine) stick mode.
     """
 
-    mode: Literal["manual", "stabilize", "depth_hold"] = "depth_hold"
+    mode: Literal["manual", "stabilize", "depth_hold", "guided"] = "depth_hold"
     arm_at_s: float = 0.0
     depth_m: float | None = None
     precision: bool = False
@@ -253,6 +266,11 @@ class OperatorSection:
                 "depth_m",
                 f"only used when mode = 'depth_hold', got mode {self.mode!r}",
             )
+
+    @property
+    def control_mode(self) -> ControlMode:
+        """The control mode :attr:`mode` names."""
+        return OPERATOR_MODES[self.mode]
 
 
 _STICK_AXES = ("x", "y", "z", "yaw")

@@ -23,16 +23,18 @@ a vehicle that holds only depth and attitude 3.4 m (0.11 m/s).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import textwrap
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from testbed.cli.main import main
 from testbed.common.components import ControlMode
-from testbed.run import load_scenario, run_scenario, runner
+from testbed.config import ConfigError
+from testbed.run import load_scenario, run_scenario
 
 GAIN_1_S, MAX_SPEED_M_S = 0.8, 0.5  # the packaged GUIDED loop (vehicle/guidance.py)
 FIX_NOISE_M, FIX_RATE_HZ, VELOCITY_TAU_S = 0.005, 20.0, 0.15
@@ -58,7 +60,7 @@ SETTLE_S = 5.0 / GAIN_1_S
 as the error does, time constant 1 / kp = 1.25 s; five of them leave < 1 % of the ≤ 0.625 m."""
 
 
-def _scenario(folder: Path, codec: str, goals: str) -> Path:
+def _scenario(folder: Path, codec: str, goals: str, mode: str = "depth_hold") -> Path:
     tether = 'preset = "tether"\ncodec = "changeset"\nmac = "free"'  # as tether-teleop-v1's
     link = 'preset = "s100"' if codec == "teleop" else tether
     path = folder / f"guided-hold-{codec}.toml"
@@ -80,6 +82,7 @@ def _scenario(folder: Path, codec: str, goals: str) -> Path:
             velocity_ned_mps = [{CURRENT[0]}, {CURRENT[1]}, {CURRENT[2]}]
             [operator]
             arm_at_s = 1.0
+            mode = "{mode}"
             [pilot]
             kind = "supervisor"
             goals = {goals}
@@ -151,15 +154,9 @@ def test_a_cancelled_goto_holds_the_stopping_point_against_the_current(
 
 
 @pytest.mark.parametrize("codec", ["teleop", "changeset"])
-def test_guided_entered_without_a_goal_holds_where_it_was(
-    tmp_path: Path, codec: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # GUIDED asked for at arming with no goal, as the live console's mode buttons can (a
-    # scenario's [operator] mode offers no GUIDED): the station's session plan asks for it
-    monkeypatch.setitem(runner._MODES, "guided", ControlMode.GUIDED)
-    scenario = load_scenario(str(_scenario(tmp_path, codec, "[]")))
-    operator = dataclasses.replace(scenario.operator, mode="guided")  # type: ignore[arg-type]
-    result = run_scenario(dataclasses.replace(scenario, operator=operator))
+def test_guided_entered_without_a_goal_holds_where_it_was(tmp_path: Path, codec: str) -> None:
+    # GUIDED asked for at arming with no goal: the scenario's operator.mode
+    result = run_scenario(load_scenario(str(_scenario(tmp_path, codec, "[]", mode="guided"))))
     series = result.recorder.series()
     t, mode = series["t_s"], series["mode"]
     guided = np.flatnonzero(mode == float(ControlMode.GUIDED.value))
@@ -175,3 +172,69 @@ def test_guided_entered_without_a_goal_holds_where_it_was(
     assert np.all(np.abs(yaw) < 2.0), (yaw.min(), yaw.max())
     point, miss = _held_from(series, start)
     assert miss.max() < TOLERANCE_M, (miss.max(), TOLERANCE_M, point)
+
+
+def test_guided_is_a_scenario_mode_listed_and_refused_without_a_position_fix(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``operator.mode = "guided"`` is offered (the list of valid modes names it) and needs a
+    position fix: without one the vehicle refuses GUIDED (ArduSub's needs a position estimate),
+    so the scenario is refused at load, one line naming the key, exit 2."""
+    path = _scenario(tmp_path, "teleop", "[]", mode="guided")
+    assert main(["run", str(path), "--set", "operator.mode=guidd", "--out", "out"]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "testbed: error: --set: operator.mode: expected one of 'manual', 'stabilize', "
+        "'depth_hold', 'guided', got 'guidd'\n"
+    )
+    no_fix = path.read_text().replace("[vehicle.sensors.position]", "[vehicle.sensors.depth]")
+    no_fix = no_fix.replace(f"noise_m = {FIX_NOISE_M}", "noise_pa = 1.0")
+    path.write_text(no_fix)
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"testbed: error: {path}: operator.mode: 'guided' needs a position fix "
+        "(vehicle.sensors.position or vehicle.navigation), and the vehicle has none: add one, "
+        "or use 'manual', 'stabilize' or 'depth_hold'\n"
+    )
+    assert not (tmp_path / "out").exists()
+    path.write_text(no_fix.replace('mode = "guided"', 'mode = "depth_hold"'))
+    load_scenario(str(path))  # the same vehicle in depth hold is fine
+
+
+def test_a_live_session_of_a_guided_scenario_asks_for_guided(tmp_path: Path) -> None:
+    """``testbed live`` maps the scenario's mode as ``testbed run`` does (it kept a table of
+    its own without GUIDED, so the session failed as it was built): 3 s in real time, armed
+    at 1 s, the vehicle is in GUIDED."""
+    from testbed.live.hub import Hub
+    from testbed.live.session import LiveSession
+
+    scenario = load_scenario(str(_scenario(tmp_path, "teleop", "[]", mode="guided")))
+    session = LiveSession(scenario, Hub(), pilot=None)
+    result = session.run(3.0)
+    mode = result.recorder.series()["mode"]
+    assert mode[-1] == float(ControlMode.GUIDED.value), np.unique(mode)
+
+
+def test_guided_is_refused_on_a_layout_that_cannot_push_sideways(tmp_path: Path) -> None:
+    """A layout of two forward thrusters either side of the centre (surge and yaw, no sway) and
+    two verticals cannot hold a point: one line naming operator.mode and the layout; the same
+    layout in depth hold is fine."""
+    text = Path(str(resources.files("testbed.vehicle") / "data/thrusters/ecs-2h.toml")).read_text()
+    text = text.replace('name = "ecs-2h"', 'name = "no-sway"')
+    text = text.replace("position_m = [-0.10, 0.14, -0.07]", "position_m = [-0.10, 0.0, -0.07]")
+    text = text.replace("position_m = [0.10, -0.14, -0.07]", "position_m = [0.10, 0.0, -0.07]")
+    text = text.replace("direction = [0.707, 0.707, 0.0]", "direction = [0.0, 1.0, 0.0]")
+    text = text.replace("direction = [-0.707, -0.707, 0.0]", "direction = [0.0, 1.0, 0.0]")
+    (tmp_path / "no-sway.toml").write_text(text)
+    path = _scenario(tmp_path, "teleop", "[]", mode="guided")
+    path.write_text(path.read_text().replace('model = "bluerov2"', 'thrusters = "no-sway.toml"'))
+    with pytest.raises(ConfigError) as refused:
+        load_scenario(str(path))
+    assert str(refused.value) == (
+        f"{path}: operator.mode: 'guided' holds a point, which needs thrust along the body's x "
+        f"and y axes, and the layout {str(tmp_path / 'no-sway.toml')!r} lacks one: use "
+        "'manual', 'stabilize' or 'depth_hold'"
+    )
+    path.write_text(path.read_text().replace('mode = "guided"', 'mode = "depth_hold"'))
+    load_scenario(str(path))
