@@ -82,7 +82,12 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from testbed.common.components import DepthSetpoint, PositionSetpoint
 from testbed.common.velocity_demand import velocity_demand_ne
 from testbed.mavlink.ardusub import base_mode
-from testbed.mavlink.telemetry import SENSORS_HEALTHY, VehicleSnapshot, position_e7
+from testbed.mavlink.telemetry import (
+    SENSORS_HEALTHY,
+    VFR_HUD_AIRSPEED_M_S,
+    VehicleSnapshot,
+    position_e7,
+)
 
 if TYPE_CHECKING:
     from testbed.mavlink.channel import Channel
@@ -218,7 +223,7 @@ def high_latency2(endpoint: VehicleEndpoint, s: VehicleSnapshot) -> mav.MAVLink_
         target_heading,
         target_distance,
         min(255, abs(math.trunc(s.throttle * 100.0))),
-        0,  # airspeed
+        min(255, math.trunc(VFR_HUD_AIRSPEED_M_S * 5.0)),
         speed_sp,
         groundspeed,
         0,  # windspeed

@@ -45,6 +45,7 @@ __all__ = [
     "HOME_LAT_LON_DEG",
     "MESSAGE_IDS",
     "SENSORS_HEALTHY",
+    "VFR_HUD_AIRSPEED_M_S",
     "VehicleSnapshot",
     "VelocityEstimator",
     "global_from_local",
@@ -74,6 +75,13 @@ _SENSORS = (
 """SYS_STATUS sensor bits present, enabled and healthy (pressure = the depth sensor; the AHRS,
 which ArduPilot's ``GCS::update_sensor_status_flags`` reports present, enabled and healthy
 while its estimate is)."""
+VFR_HUD_AIRSPEED_M_S = 0.0
+"""The airspeed ArduSub reports [m/s] (VFR_HUD's ``airspeed``, HIGH_LATENCY2's × 5):
+ArduPilot's ``GCS_MAVLINK::vfr_hud_airspeed`` (``GCS_Common.cpp``; ArduSub's
+``GCS_MAVLINK_Sub`` does not override it) is a healthy airspeed sensor's reading, else
+``AP::gps().ground_speed()``; this vehicle has neither an airspeed sensor nor a GPS (no
+DIFFERENTIAL_PRESSURE or GPS bit in :data:`SENSORS_HEALTHY`'s present set), so 0 — not the
+horizontal speed, which is VFR_HUD's ``groundspeed`` (``ahrs.groundspeed()``)."""
 SENSORS_HEALTHY = _SENSORS | mav.MAV_SYS_STATUS_GEOFENCE
 """SYS_STATUS health bits: also the geofence's, which ArduPilot reports healthy while no fence
 is breached, present or not (MAVProxy's fence module announces "fence breach" without it).
@@ -313,7 +321,7 @@ def _vfr_hud(s: VehicleSnapshot) -> mav.MAVLink_message:
     speed = math.hypot(vn, ve)
     throttle = round(100.0 * s.throttle)
     return mav.MAVLink_vfr_hud_message(
-        speed, speed, round(s.heading_deg) % 360, throttle, -s.depth_m, -vd
+        VFR_HUD_AIRSPEED_M_S, speed, round(s.heading_deg) % 360, throttle, -s.depth_m, -vd
     )
 
 

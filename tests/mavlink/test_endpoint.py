@@ -212,6 +212,21 @@ def test_forward_stick_drives_the_thrusters_and_the_vehicle(gcs: SimGcs) -> None
     assert gcs.last("PARAM_VALUE").param_value == 1.0  # stored and echoed for the next boot
 
 
+def test_vfr_hud_airspeed_is_ardupilots_fallback_not_the_ground_speed(gcs: SimGcs) -> None:
+    """ArduPilot's ``GCS_MAVLINK::vfr_hud_airspeed`` (``GCS_Common.cpp``; ArduSub does not
+    override it): a healthy airspeed sensor's reading, else the GPS's ground speed. This
+    vehicle's SYS_STATUS shows neither sensor present, so VFR_HUD's airspeed is 0 while it
+    moves (it used to repeat the horizontal speed), and ``groundspeed`` carries that speed."""
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(4.0, gcs.flying(x=1000))
+    present = gcs.last("SYS_STATUS").onboard_control_sensors_present
+    absent = mav.MAV_SYS_STATUS_SENSOR_GPS | mav.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE
+    assert present & absent == 0
+    hud = gcs.last("VFR_HUD")
+    assert gcs.truth_surge_m_s() > 0.2 and hud.groundspeed > 0.2
+    assert hud.airspeed == 0.0
+
+
 def test_alt_hold_holds_depth_where_manual_drifts(gcs: SimGcs) -> None:
     gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
     gcs.run(1.0, gcs.flying())
