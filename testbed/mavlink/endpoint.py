@@ -390,6 +390,7 @@ class VehicleEndpoint:
         control and a moving target (ArduSub's position submode)."""
         self.attitude_target = None
         self.moving_target = None
+        guided_yaw.new_destination(self, position_ned_m)
         yaw = guided_yaw.setpoint_heading(self)
         self.write(PositionSetpoint(position_ned_m, 0.0 if yaw is None else yaw, yaw is not None))
 

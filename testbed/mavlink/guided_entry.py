@@ -41,6 +41,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from testbed.common.velocity_demand import stopping_distance_m, stopping_point_ne
+from testbed.mavlink import guided_yaw
 
 if TYPE_CHECKING:
     from testbed.mavlink.endpoint import VehicleEndpoint
@@ -91,8 +92,8 @@ def hold_where_entered(endpoint: VehicleEndpoint) -> None:
     position and velocity (module docstring), not a target from an earlier GUIDED; the heading
     the auto-yaw state's."""
     snapshot = endpoint.snapshot_now()
-    endpoint.request_position(
-        stopping_point(
-            snapshot.position_ned_m, snapshot.velocity_ned_m_s, endpoint.options.guided_loop
-        )
+    hold = stopping_point(
+        snapshot.position_ned_m, snapshot.velocity_ned_m_s, endpoint.options.guided_loop
     )
+    guided_yaw.start_position_control(endpoint, hold)
+    endpoint.request_position(hold)

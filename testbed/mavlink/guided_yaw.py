@@ -24,6 +24,23 @@ That state is ArduSub's (``Sub.h``): kept across messages and modes, from boot (
 north; slew 0). GUIDED's other targets (SET_POSITION_TARGET_GLOBAL_INT, DO_REPOSITION, the hold
 on entering GUIDED) do not touch it.
 
+**Entering GUIDED** (``ModeGuided::init`` → ``guided_pos_control_start``) clears
+``yaw_rate_only`` and sets the auto-yaw mode WP_YAW_BEHAVIOR names
+(``get_default_auto_yaw_mode(false)``: 0 HOLD, 1 and 2 LOOK_AT_NEXT_WP, 3 LOOK_AHEAD, 4
+CORRECT_XTRACK — ArduSub's default, ``config.h`` WP_YAW_BEHAVIOR_DEFAULT). The first loop
+below replaces that mode, so it only steers while the pilot-input failsafe (FS_PILOT_INPUT 1,
+warn only) keeps the loop from choosing, and until a SET_POSITION_TARGET_LOCAL_NED sets the
+yaw state. Then CORRECT_XTRACK (``get_auto_heading``) points along the track from ``wp_nav``'s
+origin to its destination (``get_bearing_cd``; at entry both are the stopping point, a
+zero-length track whose bearing is 0°, north; a SET_POSITION_TARGET_GLOBAL_INT or DO_REPOSITION
+makes the old destination the origin, ``AC_WPNav::set_wp_destination``), turned toward the
+position controller's target velocity by at most XTRACK_ANG_LIM (45°) when that velocity is
+at least 10 % of the top speed (here the vehicle's loop's demand stands for it, as for
+HIGH_LATENCY2's ``airspeed_sp``); HOLD keeps the heading (the pilot's rate is 0). 1, 2 and 3
+keep the heading here too: ArduSub's ``wp_nav`` yaw (the attitude target's until its S-curve
+flies a leg of 2 m or more) and look-ahead follow its path planner's velocity, which this
+vehicle has none of (docs/mavlink.md, "Not yet").
+
 **Each loop** of GUIDED's position, velocity and position-velocity controllers
 (``mode_guided.cpp`` ``guided_pos_control_run``, ``guided_vel_control_run``,
 ``guided_posvel_control_run``; not the angle controller's, which has no pilot yaw), unless the
@@ -71,6 +88,7 @@ from typing import TYPE_CHECKING
 
 from testbed.common.components import ControlMode, ControlTargets, PositionSetpoint
 from testbed.common.geometry import euler_from_quat
+from testbed.common.velocity_demand import velocity_demand_ne
 from testbed.mavlink.ardusub import rc_angle
 
 if TYPE_CHECKING:
@@ -79,14 +97,19 @@ if TYPE_CHECKING:
 __all__ = [
     "AUTO_YAW_SLEW_RATE_DEG_S",
     "MAX_YAW_ERROR_RAD",
+    "WP_YAW_BEHAVIOR_CORRECT_XTRACK",
+    "WP_YAW_BEHAVIOR_NONE",
     "AutoYaw",
     "ardusub_direction",
     "held_yaw_rad",
+    "new_destination",
     "pilot_yaw_rate_rad_s",
     "set_yaw_state",
     "setpoint_heading",
     "settled_heading_rad",
+    "start_position_control",
     "update_auto_yaw",
+    "xtrack_heading_rad",
     "yaw_rate_fits",
 ]
 
@@ -95,6 +118,13 @@ AUTO_YAW_SLEW_RATE_DEG_S = 60
 MAX_YAW_ERROR_RAD = math.radians(5.0)
 """``AC_AttitudeControl_Sub.h`` MAX_YAW_ERROR: within this of the look-at heading it is held
 rather than slewed to [rad]."""
+WP_YAW_BEHAVIOR_NONE = 0
+"""WP_YAW_BEHAVIOR 0 (``defines.h``): GUIDED entered in auto-yaw HOLD."""
+WP_YAW_BEHAVIOR_CORRECT_XTRACK = 4
+"""WP_YAW_BEHAVIOR 4, ArduSub's default: GUIDED entered in auto-yaw CORRECT_XTRACK."""
+_XTRACK_MIN_SPEED_FRACTION = 0.1
+"""``get_auto_heading``: the target velocity turns the heading from the track only from this
+fraction of the top speed on."""
 _INT16_MIN = -32768
 _FLT_EPSILON = 1.1920929e-07  # ArduPilot's is_zero: |x| < FLT_EPSILON
 
@@ -114,6 +144,10 @@ class AutoYaw:
             yaw), None when GUIDED does not fly one (another mode, angle control).
         updated_s: the time ``target_rad`` was advanced to [s] (None: not yet, it starts at
             the next update).
+        xtrack: ``auto_yaw_mode`` is CORRECT_XTRACK, as entering GUIDED with WP_YAW_BEHAVIOR 4
+            left it and no loop or message has changed it since (module docstring).
+        track_ne: ``wp_nav``'s origin and destination, north and east [m] (None before any
+            GUIDED target).
     """
 
     look_at_cd: int = 0
@@ -122,6 +156,8 @@ class AutoYaw:
     pilot_hold: bool = False
     target_rad: float | None = None
     updated_s: float | None = None
+    xtrack: bool = False
+    track_ne: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     @property
     def look_at_rad(self) -> float:
@@ -172,6 +208,7 @@ def set_yaw_state(
         relative: the frame makes the yaw relative (MAV_FRAME_BODY_OFFSET_NED).
     """
     state = endpoint.auto_yaw
+    state.xtrack = False  # every branch sets a mode (look-at heading, rate, HOLD)
     rate_dps = None if yaw_rate_rad_s is None else math.degrees(yaw_rate_rad_s)
     turning = rate_dps is not None and abs(rate_dps) >= _FLT_EPSILON  # ArduPilot's !is_zero
     slew = 0 if rate_dps is None else int(min(rate_dps, AUTO_YAW_SLEW_RATE_DEG_S))
@@ -225,7 +262,52 @@ def _pilot_turn(endpoint: VehicleEndpoint) -> float:
         return 0.0
     rate = pilot_yaw_rate_rad_s(endpoint)
     state.pilot_hold = abs(rate) >= math.radians(_FLT_EPSILON / 100.0)  # !is_zero, in cd/s
+    state.xtrack = False  # the loop chose HOLD, RATE or LOOK_AT_HEADING
     return rate
+
+
+def start_position_control(
+    endpoint: VehicleEndpoint, hold_ned_m: tuple[float, float, float]
+) -> None:
+    """Entering GUIDED (``guided_pos_control_start``): not rate-only, the auto-yaw mode
+    WP_YAW_BEHAVIOR names, ``wp_nav``'s origin and destination both the hold point
+    ``hold_ned_m`` [m, NED] (module docstring)."""
+    state = endpoint.auto_yaw
+    behaviour = int(endpoint.params["WP_YAW_BEHAVIOR"])
+    state.rate_only = False
+    state.xtrack = behaviour == WP_YAW_BEHAVIOR_CORRECT_XTRACK
+    state.pilot_hold = not state.xtrack  # HOLD (0); 1, 2, 3 keep the heading too, here
+    state.track_ne = (hold_ned_m[0], hold_ned_m[1]), (hold_ned_m[0], hold_ned_m[1])
+
+
+def new_destination(endpoint: VehicleEndpoint, position_ned_m: tuple[float, float, float]) -> None:
+    """A GUIDED position target: ``wp_nav``'s previous destination becomes its origin
+    (``AC_WPNav::set_wp_destination``)."""
+    state = endpoint.auto_yaw
+    destination = (position_ned_m[0], position_ned_m[1])
+    origin = destination if state.track_ne is None else state.track_ne[1]
+    state.track_ne = origin, destination
+
+
+def xtrack_heading_rad(endpoint: VehicleEndpoint) -> float:
+    """CORRECT_XTRACK's heading [rad, from north] (``ModeGuided::get_auto_heading``): the
+    track's bearing (0 for a zero-length track), turned toward the target velocity's — here
+    the vehicle's loop's demand toward the destination — by at most XTRACK_ANG_LIM when that
+    speed is at least 10 % of the loop's top speed."""
+    state = endpoint.auto_yaw
+    if state.track_ne is None:
+        return held_yaw_rad(endpoint)
+    (on, oe), (dn, de) = state.track_ne
+    track = _wrap_2pi(math.atan2(de - oe, dn - on))  # get_bearing_rad: atan2(0, 0) = 0
+    error = 0.0
+    loop = endpoint.options.guided_loop
+    if loop is not None:
+        north, east, _ = endpoint.snapshot_now().position_ned_m
+        vn, ve = velocity_demand_ne((dn - north, de - east), loop.gain_1_s, loop.max_speed_m_s)
+        if math.hypot(vn, ve) >= _XTRACK_MIN_SPEED_FRACTION * loop.max_speed_m_s:
+            error = _wrap_pi(math.atan2(ve, vn) - track)
+    limit = math.radians(endpoint.params["XTRACK_ANG_LIM"])
+    return track + max(-limit, min(limit, error))
 
 
 def settled_heading_rad(endpoint: VehicleEndpoint) -> float | None:
@@ -273,7 +355,9 @@ def update_auto_yaw(endpoint: VehicleEndpoint, now_s: float) -> None:
     state.updated_s = now_s
     pilot_rate = _pilot_turn(endpoint)
     slew_rad_s = math.radians(state.slew_deg_s)
-    if state.pilot_hold:
+    if state.xtrack:  # under the pilot-input failsafe only (module docstring)
+        target = xtrack_heading_rad(endpoint)
+    elif state.pilot_hold:
         target += pilot_rate * dt
     elif state.rate_only:
         target += slew_rad_s * dt
