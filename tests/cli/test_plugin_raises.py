@@ -87,6 +87,20 @@ class Depth:
         if self.where == "update" and depth.time_s >= self.at_s:
             raise ZeroDivisionError(f"update broke at {depth.time_s:.2f}")
         return (0.0, 0.0, 40.0 * (target.depth_m - depth.depth_m))
+
+
+class Tired(Depth):
+    """The same hold, whose ``reset`` raises from its ``calls``-th call on (a disarmed vehicle
+    resets its hold every frame)."""
+
+    def __init__(self, calls=150):
+        super().__init__(where="none")
+        self.left = calls
+
+    def reset(self):
+        self.left -= 1
+        if self.left < 0:
+            raise KeyError("tired of resetting")
 '''
 
 
@@ -337,3 +351,39 @@ def test_the_real_time_modes_say_the_same_line_and_keep_what_ran(
     )
     metrics = json.loads((study / "out" / "metrics.json").read_text())
     assert metrics["complete"] is False and metrics["sim_s"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "banner", "laws", "call"),
+    [
+        (["live", "--port", "0"], (), law("update", at_s=1.0), "update raised ZeroDivisionError"),
+        (
+            ["mavlink", "--gcs", "udpout:127.0.0.1:9"],
+            ("testbed: mavlink: ArduSub vehicle (sysid 1)",),
+            ["--set", "vehicle.control.depth=plugins.py:Tired"],
+            "reset raised KeyError: 'tired of resetting'",
+        ),
+        (
+            ["mavlink", "--link", "s100", "--gcs", "udpout:127.0.0.1:9"],
+            ("testbed: mavlink: gateway to the vehicle through the s100 link",),
+            ["--set", "vehicle.control.depth=plugins.py:Tired"],
+            "reset raised KeyError: 'tired of resetting'",
+        ),
+    ],
+    ids=["live", "mavlink", "gateway"],
+)
+def test_a_control_law_that_raises_in_the_real_time_modes_is_the_same_line(
+    study: Path, argv: list[str], banner: tuple[str, ...], laws: list[str], call: str
+) -> None:
+    """A depth law raising about 1 s into a 4-s session of ``testbed live`` (armed in depth hold
+    by the scenario), ``testbed mavlink`` and the gateway (the vehicle waits disarmed for a
+    ground station that never comes, resetting its hold each frame): the same line, what ran
+    kept."""
+    command = [argv[0], "still.toml", *argv[1:], "--duration", "4", "--out", "out", "--no-plots"]
+    line = one_error_line(run_testbed([*command, *laws], study), *banner)
+    name = "Tired" if "Tired" in laws[-1] else "Depth"
+    assert line.startswith(f"testbed: error: depth law {name} ({study / 'plugins.py'}): {call}")
+    assert line.endswith(" s of 4 s, is in out)"), line
+    metrics = json.loads((study / "out" / "metrics.json").read_text())
+    assert metrics["complete"] is False and 0.9 < metrics["sim_s"] < 3.0
+    assert metrics["failure"].startswith(f"ControlLawError: depth law {name} (")
