@@ -16,8 +16,10 @@ options only with the ports (an option that would be ignored is an error). ``--d
 most a day (86400 s), as in ``testbed run``. ``--gcs`` (repeatable) names a link:
 ``udpout:HOST:PORT`` (default ``udpout:127.0.0.1:14550``, where QGroundControl and MAVProxy
 listen), ``udpin:HOST:PORT``, ``tcpin:HOST:PORT`` or ``serial:PORT[,BAUD]`` / a pyserial URL;
-addresses are 127.0.0.1 unless given. Options: ``--set K=V`` (repeatable), ``--seed``,
-``--force``, ``--no-plots``.
+addresses are 127.0.0.1 unless given; the n-th link (from 0) is ArduPilot's SERIALn, so
+``--param SERIAL1_PROTOCOL=43`` makes the second a MAVLink High Latency link (docs/mavlink.md).
+Options: ``--param NAME=VALUE`` (repeatable, boot values), ``--set K=V`` (repeatable),
+``--seed``, ``--force``, ``--no-plots``.
 
 Outputs are those of ``testbed run`` (``metrics.json`` last, ``events.csv``, ``series.csv``,
 plots), plus ``metrics.json``'s ``mavlink`` section
@@ -77,7 +79,8 @@ def add_mavlink_parser(sub: Subparsers) -> None:
         default=[],
         metavar="URL",
         help=f"ground-station link (repeatable; default {_DEFAULT_GCS}): udpout:HOST:PORT, "
-        "udpin:HOST:PORT, tcpin:HOST:PORT, serial:PORT[,BAUD]",
+        "udpin:HOST:PORT, tcpin:HOST:PORT, serial:PORT[,BAUD]; the n-th (from 0) is SERIALn: "
+        "--param SERIALn_PROTOCOL=43 makes it a high-latency link",
     )
     parser.add_argument(
         "--duration",

@@ -68,10 +68,21 @@ from testbed.mavlink.streams import StreamSchedule
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
 from testbed.mavlink.wire import MavlinkWire
 
-__all__ = ["POSITION_FIX_TIMEOUT_S", "Handler", "VehicleEndpoint"]
+__all__ = [
+    "MAVLINK_HL_PROTOCOL",
+    "POSITION_FIX_TIMEOUT_S",
+    "SERIAL_PORTS",
+    "Handler",
+    "VehicleEndpoint",
+]
 
 POSITION_FIX_TIMEOUT_S = 1.0
 """A position fix older than this [s] is no position estimate (GUIDED refused)."""
+MAVLINK_HL_PROTOCOL = 43
+"""SERIALn_PROTOCOL's MAVLink High Latency (``AP_SerialManager.h`` SerialProtocol_MAVLinkHL)."""
+SERIAL_PORTS = 3
+"""Serial ports whose SERIALn_PROTOCOL the table carries (SERIAL0–2, ArduPilot's MAVLink2 ports
+by default: console, TELEM1, TELEM2): the first three channels opened."""
 
 
 Handler = Callable[["VehicleEndpoint", "Channel", mav.MAVLink_message, float, float], None]
@@ -130,6 +141,7 @@ class VehicleEndpoint:
             p["JS_GAIN_DEFAULT"], p["JS_GAIN_MIN"], p["JS_GAIN_MAX"], int(p["JS_GAIN_STEPS"])
         )
         self._system_id = int(p["SYSID_THISMAV"])  # ArduPilot's GCS::init, at boot only
+        self._serial_protocols = [int(p[f"SERIAL{n}_PROTOCOL"]) for n in range(SERIAL_PORTS)]
         self.failsafe = FailsafeMonitor()
         self._velocity = VelocityEstimator()
         self._seq = 0
@@ -198,19 +210,27 @@ class VehicleEndpoint:
         self,
         name: str,
         *,
-        high_latency: bool = False,
+        high_latency: bool | None = None,
         stream_rates_hz: dict[int, float] | None = None,
     ) -> Channel:
         """A new link, streaming at the SR0_* rates until the ground station asks otherwise.
 
         Args:
             name: the link's name.
-            high_latency: a high-latency link (SERIALn_PROTOCOL 43:
-                :mod:`~testbed.mavlink.high_latency`): HIGH_LATENCY2 every 5 s, no HEARTBEAT,
-                silent while the endpoint's high-latency links are disabled.
+            high_latency: a high-latency link (:mod:`~testbed.mavlink.high_latency`):
+                HIGH_LATENCY2 every 5 s, no HEARTBEAT, silent while the endpoint's high-latency
+                links are disabled. None (the default): as its serial port's protocol was at
+                boot — the n-th channel opened (from 0) is SERIALn, as SITL's ``--serialN``, and
+                is a high-latency link when SERIALn_PROTOCOL is :data:`MAVLINK_HL_PROTOCOL`
+                (ArduPilot's ``GCS_MAVLINK::init``: ``is_high_latency_link`` for a
+                SerialProtocol_MAVLinkHL port); any other protocol, and channels past
+                :data:`SERIAL_PORTS`, are ordinary MAVLink links.
             stream_rates_hz: its stream groups' rates [Hz] (group id → rate) instead of the
                 SR0_* parameters' (default for a high-latency link: all 0, its SRn_* set to 0).
         """
+        if high_latency is None:
+            n = len(self.channels)
+            high_latency = n < SERIAL_PORTS and self._serial_protocols[n] == MAVLINK_HL_PROTOCOL
         if stream_rates_hz is None and not high_latency:
             streams = StreamSchedule.from_params(self)
         else:

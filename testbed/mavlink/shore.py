@@ -225,9 +225,12 @@ class ShoreEndpoint(VehicleEndpoint):
         if now_s >= self._next_age_s:
             self._next_age_s = max(self._next_age_s + 1.0 / LINK_AGE_RATE_HZ, now_s)
             name = b"LinkAge"
-            self.broadcast(
-                mav.MAVLink_named_value_float_message(int(now_s * 1000) & 0xFFFFFFFF, name, age)
+            link_age = mav.MAVLink_named_value_float_message(
+                int(now_s * 1000) & 0xFFFFFFFF, name, age
             )
+            for channel in self.channels:
+                if not channel.high_latency:  # a high-latency link sends HIGH_LATENCY2 alone
+                    self.queue(channel, link_age)
         stale = age > self.link.stale_after_s
         if stale and now_s >= self._next_stale_warning_s:
             self._next_stale_warning_s = now_s + STALE_REPEAT_S

@@ -176,14 +176,13 @@ class SimGateway:
     UP_S = 0.140  # a 13-B order's crossing
     DOWN_S = 0.170  # a 20-B reply's crossing
 
-    def __init__(self) -> None:
+    def __init__(self, boot_params: dict[str, float] | None = None) -> None:
         scenario = load_scenario("s100-teleop-v1", list(NO_VEHICLE_FAILSAFE))
         self.vehicle = Vehicle(scenario.vehicle, np.random.default_rng(0))
         self.station = GatewayStation()
         facts = gateway_link_facts(scenario)
-        self.endpoint = ShoreEndpoint(
-            self.station.world, self.station.entity, facts, EndpointOptions(origin=Origin.LOCAL)
-        )
+        options = EndpointOptions(origin=Origin.LOCAL, param_overrides=dict(boot_params or {}))
+        self.endpoint = ShoreEndpoint(self.station.world, self.station.entity, facts, options)
         self.channel = self.endpoint.open_channel("gcs")
         self.shore = TeleopOperatorEnd(self.station.world, self.station.entity)
         v = self.vehicle

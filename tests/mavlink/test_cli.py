@@ -148,3 +148,61 @@ def test_a_control_law_that_does_not_build_is_one_line_before_anything_runs(
     assert not (tmp_path / "out").exists()
     expected = main(["run", "--set", law_key, "--out", str(tmp_path / "run"), "--no-plots"])
     assert expected == 2 and capsys.readouterr().err.strip() == err[0]  # `testbed run`'s line
+
+
+def test_serial1_protocol_43_makes_the_second_link_a_high_latency_one(tmp_path: Path) -> None:
+    """``--gcs A --gcs B --param SERIAL1_PROTOCOL=43``: B is SERIAL1, a MAVLink High Latency
+    port (ArduPilot's ``GCS_MAVLINK::init``: ``is_high_latency_link`` for protocol 43, fixed at
+    boot; AP_SerialManager's SerialProtocol_MAVLinkHL). pymavlink on both: A gets the 1-Hz
+    heartbeat and never HIGH_LATENCY2; B is silent until MAV_CMD_CONTROL_HIGH_LATENCY 1 (sent on
+    A) enables it, then gets "High Latency enabled" and HIGH_LATENCY2 at 5 s — no heartbeat,
+    no stream."""
+    import threading
+
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+
+    received: dict[str, list[bytes]] = {"a": [], "b": []}
+    with (
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as a,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as b,
+    ):
+        for s in (a, b):
+            s.bind(("127.0.0.1", 0))
+        a.settimeout(5.0)
+        sender = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        enable = sender.command_long_encode(
+            1, 1, mav.MAV_CMD_CONTROL_HIGH_LATENCY, 0, 1, 0, 0, 0, 0, 0, 0
+        ).pack(sender)
+
+        def ground_station() -> None:  # answers A's first datagram with the enable
+            data, peer = a.recvfrom(65535)
+            received["a"].append(data)
+            a.sendto(enable, peer)
+
+        thread = threading.Thread(target=ground_station, daemon=True)
+        thread.start()
+        urls = [f"udpout:127.0.0.1:{s.getsockname()[1]}" for s in (a, b)]
+        argv = ["mavlink", "--gcs", urls[0], "--gcs", urls[1], "--param", "SERIAL1_PROTOCOL=43"]
+        try:
+            code = main([*argv, "--duration", "6", "--no-plots", "--out", str(tmp_path / "o")])
+        finally:
+            thread.join()
+        for key, s in (("a", a), ("b", b)):  # the rest waited in the sockets' buffers
+            s.setblocking(False)
+            while True:
+                try:
+                    received[key].append(s.recv(65535))
+                except BlockingIOError:
+                    break
+    assert code == 0
+
+    def decoded(key: str) -> list[str]:
+        parser = mav.MAVLink(None)
+        messages = [m for d in received[key] for m in parser.parse_buffer(d) or []]
+        return [m.get_type() for m in messages]
+
+    on_a, on_b = decoded("a"), decoded("b")
+    assert "COMMAND_ACK" in on_a and on_a.count("HEARTBEAT") >= 5
+    assert "HIGH_LATENCY2" not in on_a
+    assert on_b.count("HIGH_LATENCY2") == 1  # due 5 s after the link opened
+    assert set(on_b) == {"STATUSTEXT", "HIGH_LATENCY2"}  # the enable's text, then HL2 alone

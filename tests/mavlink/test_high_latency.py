@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.geometry import euler_from_quat
 from testbed.vehicle.guidance import PositionGains
-from tests.mavlink.gcs import SimGcs
+from tests.mavlink.gcs import SimGateway, SimGcs
 
 HL2_INTERVAL_S = 5.0  # ArduPilot: set_mavlink_message_id_interval(HIGH_LATENCY2, 5000)
 CONTROL = mav.MAV_CMD_CONTROL_HIGH_LATENCY
@@ -342,3 +342,27 @@ def test_outside_guided_the_target_fields_are_zero_and_the_mode_and_arming_are_r
     targets = (second.target_altitude, second.target_heading, second.target_distance)
     assert targets == (0, 0, 0) and second.airspeed_sp == 0
     assert second.groundspeed > 0  # surging
+
+
+def test_a_gateway_link_on_a_mavlinkhl_port_sends_high_latency2_alone() -> None:
+    """Through the s100 gateway, the second link with SERIAL1_PROTOCOL 43 at boot (ArduPilot's
+    ``GCS_MAVLINK::init``: a SerialProtocol_MAVLinkHL port is a high-latency link) is silent
+    until MAV_CMD_CONTROL_HIGH_LATENCY 1 (sent on the first link), then carries HIGH_LATENCY2
+    alone — not the gateway's 2-Hz NAMED_VALUE_FLOAT LinkAge, which it used to get — while
+    the first link keeps its heartbeat, LinkAge and no HIGH_LATENCY2."""
+    gateway = SimGateway({"SERIAL1_PROTOCOL": 43})
+    try:
+        hl = gateway.endpoint.open_channel("hl")
+        assert hl.high_latency and not gateway.channel.high_latency
+        gateway.run(1.0)
+        assert hl.take() == []
+        gateway.send(gateway.mav.command_long_encode(1, 1, CONTROL, 0, 1, 0, 0, 0, 0, 0, 0))
+        gateway.run(5.5)
+        decoder = mav.MAVLink(None)
+        on_hl = [m.get_type() for p in hl.take() for m in decoder.parse_buffer(p) or []]
+        assert on_hl.count("HIGH_LATENCY2") == 1  # due 5 s after the link opened
+        assert set(on_hl) == {"STATUSTEXT", "HIGH_LATENCY2"}  # "High Latency enabled", HL2
+        kinds = {m.get_type() for m in gateway.messages}
+        assert {"HEARTBEAT", "NAMED_VALUE_FLOAT"} <= kinds and "HIGH_LATENCY2" not in kinds
+    finally:
+        gateway.vehicle.close()
