@@ -2,7 +2,8 @@
 
 * :mod:`~testbed.mavlink.endpoint` — :class:`VehicleEndpoint`, the sans-IO ArduSub-compatible
   core (fed bytes and the time, returns packets per :class:`Channel`, one ground-station link:
-  :mod:`~testbed.mavlink.channel`), a pilot of an ECS world, told of the vehicle by its
+  :mod:`~testbed.mavlink.channel`; what it sends on which link, and its STATUSTEXT queue, in
+  :mod:`~testbed.mavlink.outbound`), a pilot of an ECS world, told of the vehicle by its
   :class:`EndpointOptions` (:mod:`~testbed.mavlink.options`);
   its request handlers in :mod:`~testbed.mavlink.commands` and
   :mod:`~testbed.mavlink.param_protocol`, the pilot's sticks in

@@ -3,7 +3,9 @@
 :class:`VehicleEndpoint` is fed bytes and the time (:meth:`~VehicleEndpoint.receive`) and asked
 for what is due (:meth:`~VehicleEndpoint.update`); each
 :class:`~testbed.mavlink.channel.Channel` (one per ground-station link) holds its own parser,
-stream rates and outbox of encoded packets. It has no socket and no clock of its own; what it
+stream rates and outbox of encoded packets. What it sends and on which link (opening the
+channels, queuing on them, the STATUSTEXTs held to the end of an update) is its base class,
+:class:`~testbed.mavlink.outbound.Outbound`. It has no socket and no clock of its own; what it
 is told of the vehicle is its :class:`~testbed.mavlink.options.EndpointOptions`.
 
 It is a **pilot** of the world it is given, not a second control stack: it writes only the
@@ -59,38 +61,28 @@ from testbed.mavlink.attitude_target import (
     on_set_attitude_target,
     update_attitude_target,
 )
-from testbed.mavlink.channel import OUTBOX_LIMIT, Channel
+from testbed.mavlink.channel import Channel
 from testbed.mavlink.failsafe import FailsafeMonitor
 from testbed.mavlink.motor_test import MotorTest, update_motor_test
 from testbed.mavlink.options import EndpointOptions
+from testbed.mavlink.outbound import Outbound
 from testbed.mavlink.params import ParamTable
-from testbed.mavlink.streams import StreamSchedule
 from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
-from testbed.mavlink.wire import MavlinkWire
 
-__all__ = [
-    "MAVLINK_HL_PROTOCOL",
-    "POSITION_FIX_TIMEOUT_S",
-    "SERIAL_PORTS",
-    "Handler",
-    "VehicleEndpoint",
-]
+__all__ = ["POSITION_FIX_TIMEOUT_S", "Handler", "VehicleEndpoint"]
 
 POSITION_FIX_TIMEOUT_S = 1.0
 """A position fix older than this [s] is no position estimate (GUIDED refused)."""
-MAVLINK_HL_PROTOCOL = 43
-"""SERIALn_PROTOCOL's MAVLink High Latency (``AP_SerialManager.h`` SerialProtocol_MAVLinkHL)."""
-SERIAL_PORTS = 3
-"""Serial ports whose SERIALn_PROTOCOL the table carries (SERIAL0–2, ArduPilot's MAVLink2 ports
-by default: console, TELEM1, TELEM2): the first three channels opened."""
 
 
 Handler = Callable[["VehicleEndpoint", "Channel", mav.MAVLink_message, float, float], None]
 """A message handler: (endpoint, channel, message, now [s], arrival [s])."""
 
 
-class VehicleEndpoint:
-    """The MAVLink face of one vehicle (module docstring).
+class VehicleEndpoint(Outbound):
+    """The MAVLink face of one vehicle (module docstring); what it sends, and on which link,
+    is its base class's (:class:`~testbed.mavlink.outbound.Outbound`: ``channels``,
+    ``queue``, ``statustext``, ``sent``, ``high_latency_enabled``).
 
     Args:
         world: the world it pilots.
@@ -102,8 +94,8 @@ class VehicleEndpoint:
         params: the live parameter table.
         received: parsed messages by type.
         accepted: messages acted on.
-        rejected: what was dropped, by reason (wire errors, gating, bad fields, unhandled).
-        sent: packets queued, by message type.
+        rejected: what was dropped, by reason (wire errors, gating, bad fields, unhandled, and
+            the base class's full outboxes).
         pilot_inputs: MANUAL_CONTROL / RC_CHANNELS_OVERRIDE packets accepted
             (:mod:`~testbed.mavlink.pilot_input`).
         rc: the RC inputs the pilot's packets set; ``gain`` the joystick gain.
@@ -117,8 +109,6 @@ class VehicleEndpoint:
             (:class:`~testbed.mavlink.guided.MovingTarget`), None when there is none.
         auto_yaw: ArduSub's auto-yaw state, GUIDED's heading
             (:class:`~testbed.mavlink.guided_yaw.AutoYaw`).
-        high_latency_enabled: the high-latency links send (MAV_CMD_CONTROL_HIGH_LATENCY;
-            off at boot: :mod:`~testbed.mavlink.high_latency`).
     """
 
     def __init__(
@@ -128,20 +118,15 @@ class VehicleEndpoint:
         self.vehicle = vehicle
         self.intents = intents
         self.options = options
-        self.params = ParamTable(overrides=options.param_overrides)
-        self.channels: list[Channel] = []
+        super().__init__(ParamTable(overrides=options.param_overrides))
         self.received: Counter[str] = Counter()
         self.accepted = 0
-        self.rejected: Counter[str] = Counter()
-        self.sent: Counter[str] = Counter()
         self.pilot_inputs = 0
         self.rc = RcInput()
         p = self.params
         self.gain = boot_gain(
             p["JS_GAIN_DEFAULT"], p["JS_GAIN_MIN"], p["JS_GAIN_MAX"], int(p["JS_GAIN_STEPS"])
         )
-        self._system_id = int(p["SYSID_THISMAV"])  # ArduPilot's GCS::init, at boot only
-        self._serial_protocols = [int(p[f"SERIAL{n}_PROTOCOL"]) for n in range(SERIAL_PORTS)]
         self.failsafe = FailsafeMonitor()
         self._velocity = VelocityEstimator()
         self._seq = 0
@@ -157,9 +142,6 @@ class VehicleEndpoint:
         self.motor_test = MotorTest()
         self.moving_target: guided.MovingTarget | None = None
         self.auto_yaw = guided_yaw.AutoYaw()
-        self.high_latency_enabled = False
-        self._texts_sent: set[str] = set()
-        self._statustexts: list[mav.MAVLink_message] = []
         cls = type(self)
         self._handlers: dict[str, Handler] = {
             "HEARTBEAT": cls._on_heartbeat,
@@ -182,13 +164,7 @@ class VehicleEndpoint:
             "FILE_TRANSFER_PROTOCOL": commands.on_file_transfer_protocol,
         }
 
-    # ----------------------------------------------------------------------- channels
-
-    @property
-    def system_id(self) -> int:
-        """SYSID_THISMAV at boot (a value set later takes effect at the next boot, as in
-        ArduPilot, whose ``GCS::init`` reads it once)."""
-        return self._system_id
+    # ------------------------------------------------------------------- capabilities
 
     @property
     def can_test_motors(self) -> bool:
@@ -205,74 +181,6 @@ class VehicleEndpoint:
     def gcs_system_id(self) -> int:
         """SYSID_MYGCS: the only system whose pilot input is accepted."""
         return int(self.params["SYSID_MYGCS"])
-
-    def open_channel(
-        self,
-        name: str,
-        *,
-        high_latency: bool | None = None,
-        stream_rates_hz: dict[int, float] | None = None,
-    ) -> Channel:
-        """A new link, streaming at the SR0_* rates until the ground station asks otherwise.
-
-        Args:
-            name: the link's name.
-            high_latency: a high-latency link (:mod:`~testbed.mavlink.high_latency`):
-                HIGH_LATENCY2 every 5 s, no HEARTBEAT, silent while the endpoint's high-latency
-                links are disabled. None (the default): as its serial port's protocol was at
-                boot — the n-th channel opened (from 0) is SERIALn, as SITL's ``--serialN``, and
-                is a high-latency link when SERIALn_PROTOCOL is :data:`MAVLINK_HL_PROTOCOL`
-                (ArduPilot's ``GCS_MAVLINK::init``: ``is_high_latency_link`` for a
-                SerialProtocol_MAVLinkHL port); any other protocol, and channels past
-                :data:`SERIAL_PORTS`, are ordinary MAVLink links.
-            stream_rates_hz: its stream groups' rates [Hz] (group id → rate) instead of the
-                SR0_* parameters' (default for a high-latency link: all 0, its SRn_* set to 0).
-        """
-        if high_latency is None:
-            n = len(self.channels)
-            high_latency = n < SERIAL_PORTS and self._serial_protocols[n] == MAVLINK_HL_PROTOCOL
-        if stream_rates_hz is None and not high_latency:
-            streams = StreamSchedule.from_params(self)
-        else:
-            streams = StreamSchedule(stream_rates_hz or {}, high_latency=high_latency)
-        wire = MavlinkWire(self.system_id, 1)
-        channel = Channel(name, wire, streams, high_latency=high_latency)
-        self.channels.append(channel)
-        return channel
-
-    def queue(self, channel: Channel, message: mav.MAVLink_message) -> None:
-        """Encode ``message`` onto ``channel`` (dropped and counted if its outbox is full; not
-        sent, counted ``held``, on a high-latency link while they are disabled)."""
-        if channel.high_latency and not self.high_latency_enabled:
-            channel.held += 1
-            return
-        if len(channel.outbox) >= OUTBOX_LIMIT:
-            channel.dropped += 1
-            self.rejected["outbox_full"] += 1
-            return
-        channel.wire.system_id = self.system_id
-        channel.outbox.append(channel.wire.encode(message))
-        self.sent[message.get_type()] += 1
-
-    def broadcast(self, message: mav.MAVLink_message) -> None:
-        """Queue ``message`` on every channel."""
-        for channel in self.channels:
-            self.queue(channel, message)
-
-    def statustext(self, severity: int, text: str) -> None:
-        """STATUSTEXT for every channel (≤ 50 characters), sent at the end of the next
-        :meth:`update`, after what that update queues and after the replies to what has
-        arrived meanwhile: ArduPilot's ``GCS::send_textv`` only queues the text once the vehicle
-        is initialised, and ``GCS::update_send`` sends the queue (``service_statustext``) after
-        every link's messages, so a command's COMMAND_ACK, written as its handler returns
-        (``handle_command_long``), goes out before a text the handler said."""
-        self._statustexts.append(mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
-
-    def statustext_once(self, severity: int, text: str) -> None:
-        """:meth:`statustext`, the first time ``text`` is said only."""
-        if text not in self._texts_sent:
-            self._texts_sent.add(text)
-            self.statustext(severity, text)
 
     def setpoint_not_sent(self, kind: str, text: str) -> None:
         """A target of ``kind`` the vehicle is not given: ``text`` said once (a gateway also
@@ -465,9 +373,7 @@ class VehicleEndpoint:
         the vehicle's frame that applied this frame's intents: its own state holds from here),
         then the STATUSTEXTs said since the last update (:meth:`statustext`)."""
         self.queue_due(now_s)
-        texts, self._statustexts = self._statustexts, []
-        for text in texts:
-            self.broadcast(text)
+        self.send_statustexts()
 
     def queue_due(self, now_s: float) -> None:
         """:meth:`update`'s work before the STATUSTEXTs: the failsafes and what is due."""

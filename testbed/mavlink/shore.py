@@ -59,6 +59,7 @@ from testbed.ecs import Entity, Origin, World
 from testbed.mavlink.channel import Channel
 from testbed.mavlink.endpoint import VehicleEndpoint
 from testbed.mavlink.options import EndpointOptions
+from testbed.mavlink.outbound import STATUSTEXT_LIMIT
 
 __all__ = [
     "DEPTH_KEPT_M",
@@ -242,7 +243,8 @@ class ShoreEndpoint(VehicleEndpoint):
         self._stale = stale
 
     def _text(self, channel: Channel, severity: int, text: str) -> None:
-        self.queue(channel, mav.MAVLink_statustext_message(severity, text.encode()[:50], 0, 0))
+        encoded = text.encode()[:STATUSTEXT_LIMIT]
+        self.queue(channel, mav.MAVLink_statustext_message(severity, encoded, 0, 0))
 
     def counters(self) -> dict[str, object]:
         """The base counters, plus ``stale_warnings`` and ``link`` (the facts)."""
