@@ -36,8 +36,6 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, TypeVar
 
-import numpy as np
-
 from testbed.channel import (
     LinkConfig,
     load_link_config,
@@ -70,8 +68,9 @@ from testbed.run.sections import (
     OperatorSection,
     PilotSection,
 )
+from testbed.vehicle.allocation import Allocator
 from testbed.vehicle.t200 import T200
-from testbed.vehicle.thruster_config import load_thruster_config
+from testbed.vehicle.thruster_config import ThrusterConfig, load_thruster_config
 from testbed.vehicle.vehicle_config import VehicleConfig
 
 __all__ = ["load_scenario"]
@@ -105,10 +104,15 @@ _LINK_OPTIONS = tuple(f.name for f in dataclasses.fields(LinkSection) if f.name 
 _CHANNEL_KEYS = tuple(f.name for f in dataclasses.fields(LinkConfig))
 
 
-def _check_guided(vehicle: VehicleConfig, matrix: np.ndarray, where: str) -> None:
+def _check_guided(vehicle: VehicleConfig, layout: ThrusterConfig, where: str) -> None:
     """``operator.mode = 'guided'`` needs what GUIDED flies with: a position fix (the vehicle
-    refuses GUIDED without one, as ArduSub does) and a force along the body's x and y axes
-    (it holds a point).
+    refuses GUIDED without one, as ArduSub does) and a pure force along each of the body's x
+    and y axes (it holds a point).
+
+    The force is judged as the allocator judges it (:meth:`Allocator.axis_maxima`, both
+    directions, healthy thrusters, the vehicle's supply and current budget): a layout whose
+    thrusters push along x and y only together (``ecs-2h``: its pair moves along a diagonal)
+    has none along either.
 
     Raises:
         ConfigError: one line naming ``operator.mode``.
@@ -119,11 +123,16 @@ def _check_guided(vehicle: VehicleConfig, matrix: np.ndarray, where: str) -> Non
             "or vehicle.navigation), and the vehicle has none: add one, or use 'manual', "
             "'stabilize' or 'depth_hold'"
         )
-    if not (matrix[0].any() and matrix[1].any()):
+    allocator = Allocator(
+        layout, T200.from_table(vehicle.supply_voltage_v), current_limit_a=vehicle.current_limit_a
+    )
+    surge_n, sway_n = (float(v) for v in allocator.axis_maxima()[:2])
+    if not (surge_n > 0.0 and sway_n > 0.0):
         raise ConfigError(
-            f"{where}: operator.mode: 'guided' holds a point, which needs thrust along the "
-            f"body's x and y axes, and the layout {vehicle.thrusters!r} lacks one: use "
-            "'manual', 'stabilize' or 'depth_hold'"
+            f"{where}: operator.mode: 'guided' holds a point, which needs a force along each of "
+            f"the body's x and y axes on its own, and the layout {vehicle.thrusters!r} cannot "
+            f"make one (its allocator's largest pure force: x {surge_n:.3g} N, y "
+            f"{sway_n:.3g} N): use 'manual', 'stabilize' or 'depth_hold'"
         )
 
 
@@ -221,7 +230,7 @@ def _from_data(
             "'stabilize'"
         )
     if operator.mode == "guided":
-        _check_guided(vehicle, layout.matrix, where)
+        _check_guided(vehicle, layout, where)
     holds_heading = operator.mode in ("stabilize", "depth_hold", "guided")
     if holds_heading and not layout.matrix[5].any():
         raise ConfigError(
