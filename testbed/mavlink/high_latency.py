@@ -87,6 +87,8 @@ from testbed.mavlink.telemetry import (
     VFR_HUD_AIRSPEED_M_S,
     VehicleSnapshot,
     position_e7,
+    vfr_hud_throttle,
+    yaw_sensor_cd,
 )
 
 if TYPE_CHECKING:
@@ -143,12 +145,9 @@ def _int8(value: int) -> int:
 
 
 def _heading_half_deg(yaw_rad: float) -> int:
-    """ArduPilot's ``(((uint16_t)ahrs.yaw_sensor / 100) % 360) / 2``: ``yaw_sensor`` is the yaw
-    in centidegrees truncated to an int32, + 36000 when negative."""
-    centideg = math.trunc(math.degrees(yaw_rad) * 100.0)
-    if centideg < 0:
-        centideg += 36000
-    return ((centideg // 100) % 360) // 2
+    """ArduPilot's ``(((uint16_t)ahrs.yaw_sensor / 100) % 360) / 2``
+    (:func:`~testbed.mavlink.telemetry.yaw_sensor_cd`)."""
+    return ((yaw_sensor_cd(yaw_rad) // 100) % 360) // 2
 
 
 def _target(
@@ -222,7 +221,7 @@ def high_latency2(endpoint: VehicleEndpoint, s: VehicleSnapshot) -> mav.MAVLink_
         _heading_half_deg(s.euler_rad[2]),
         target_heading,
         target_distance,
-        min(255, abs(math.trunc(s.throttle * 100.0))),
+        min(255, abs(vfr_hud_throttle(s.throttle))),
         min(255, math.trunc(VFR_HUD_AIRSPEED_M_S * 5.0)),
         speed_sp,
         groundspeed,

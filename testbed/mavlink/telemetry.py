@@ -22,6 +22,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.components import (
@@ -52,6 +53,8 @@ __all__ = [
     "local_from_global",
     "position_e7",
     "read_vehicle",
+    "vfr_hud_throttle",
+    "yaw_sensor_cd",
 ]
 
 HOME_LAT_LON_DEG = (39.9945, -0.0686)
@@ -316,12 +319,32 @@ def _attitude_quaternion(s: VehicleSnapshot) -> mav.MAVLink_message:
     )
 
 
+def yaw_sensor_cd(yaw_rad: float) -> int:
+    """ArduPilot's ``ahrs.yaw_sensor`` [cdeg] for a yaw [rad]: ``AP_AHRS::update_cd_values``
+    (``libraries/AP_AHRS``) sets ``yaw_sensor = degrees(yaw) * 100`` (an int32: the
+    centidegrees truncated toward 0) and adds 36000 when it is negative, so 0..35999."""
+    centideg = math.trunc(math.degrees(yaw_rad) * 100.0)
+    return centideg + 36000 if centideg < 0 else centideg
+
+
+def vfr_hud_throttle(throttle: float) -> int:
+    """ArduSub's throttle [%] for VFR_HUD and HIGH_LATENCY2: ``GCS_MAVLINK_Sub::vfr_hud_throttle``
+    (``ArduSub/GCS_MAVLink_Sub.cpp``) is ``(int16_t)(sub.motors.get_throttle() * 100)`` — the
+    float ``throttle`` (0..1) times 100 in single precision, converted toward 0 (57.9 → 57,
+    not rounded); the senders take its ``abs``."""
+    return int(np.float32(throttle) * np.float32(100.0))
+
+
 def _vfr_hud(s: VehicleSnapshot) -> mav.MAVLink_message:
+    """ArduPilot's ``GCS_MAVLINK::send_vfr_hud`` (``GCS_Common.cpp``): heading
+    ``(ahrs.yaw_sensor / 100) % 360`` in integers (whole degrees, truncated), throttle
+    ``abs(vfr_hud_throttle())`` (:func:`vfr_hud_throttle`)."""
     vn, ve, vd = s.velocity_ned_m_s
     speed = math.hypot(vn, ve)
-    throttle = round(100.0 * s.throttle)
+    heading = (yaw_sensor_cd(s.euler_rad[2]) // 100) % 360
+    throttle = abs(vfr_hud_throttle(s.throttle))
     return mav.MAVLink_vfr_hud_message(
-        VFR_HUD_AIRSPEED_M_S, speed, round(s.heading_deg) % 360, throttle, -s.depth_m, -vd
+        VFR_HUD_AIRSPEED_M_S, speed, heading, throttle, -s.depth_m, -vd
     )
 
 

@@ -227,6 +227,46 @@ def test_vfr_hud_airspeed_is_ardupilots_fallback_not_the_ground_speed(gcs: SimGc
     assert hud.airspeed == 0.0
 
 
+def test_vfr_hud_throttle_is_ardusubs_truncated_percentage(gcs: SimGcs) -> None:
+    """ArduSub's ``GCS_MAVLINK_Sub::vfr_hud_throttle`` (``ArduSub/GCS_MAVLink_Sub.cpp``) is
+    ``(int16_t)(motors.get_throttle() * 100)``: the percentage truncated, not rounded. RC 3 at
+    1561 µs is a throttle of (1561 − 1100) / 800 = 0.57625: 57 (it was rounded to 58); 1336 µs,
+    0.295: 29 (was 30); the ends 0 and 100."""
+    for pwm, percent in ((1561, 57), (1336, 29), (1100, 0), (1900, 100)):
+        override = gcs.mav.rc_channels_override_encode(1, 1, 0, 0, pwm, 0, 0, 0, 0, 0)
+        gcs.run(0.6, lambda k, o=override: [o] if k % 4 == 0 else [])  # RC_CHANNELS at 2 Hz
+        assert gcs.last("RC_CHANNELS").chan3_raw == pwm
+        assert gcs.last("VFR_HUD").throttle == percent
+
+
+def test_vfr_hud_heading_is_ardupilots_truncated_whole_degrees(gcs: SimGcs) -> None:
+    """ArduPilot's ``GCS_MAVLINK::send_vfr_hud`` (``GCS_Common.cpp``) sends
+    ``(ahrs.yaw_sensor / 100) % 360``, ``yaw_sensor`` the yaw in centidegrees truncated and
+    wrapped to 0..35999 (``AP_AHRS::update_cd_values``): the whole degrees of the heading, never
+    rounded up. Turning, each VFR_HUD's heading is the floor of the ATTITUDE yaw sent with it
+    (the same step, the same state), also where the fraction is ≥ 0.5 (it used to round)."""
+    gcs.send(gcs.heartbeat(), gcs.arm())
+    gcs.run(0.2, gcs.flying())
+    pairs = []
+    for k in range(round(6.0 / 0.01)):
+        gcs.send(*([gcs.sticks(r=400)] if k % 4 == 0 else []))
+        before = len(gcs.messages)
+        gcs.step()
+        new = gcs.messages[before:]
+        huds = [m for m in new if m.get_type() == "VFR_HUD"]
+        attitudes = [m for m in new if m.get_type() == "ATTITUDE"]
+        if huds and attitudes:
+            pairs.append((huds[-1].heading, math.degrees(attitudes[-1].yaw) % 360.0))
+    rounding_differs = 0
+    for heading, yaw_deg in pairs:
+        fraction = yaw_deg - math.floor(yaw_deg)
+        if 1e-3 < fraction < 1.0 - 1e-3:  # clear of float32's resolution at a whole degree
+            assert heading == math.floor(yaw_deg)
+            rounding_differs += fraction > 0.5
+    headings = {heading for heading, _ in pairs}
+    assert len(pairs) >= 50 and len(headings) >= 20 and rounding_differs >= 10
+
+
 def test_alt_hold_holds_depth_where_manual_drifts(gcs: SimGcs) -> None:
     gcs.send(gcs.heartbeat(), gcs.arm(), gcs.set_mode(2))
     gcs.run(1.0, gcs.flying())
