@@ -40,6 +40,7 @@ from testbed.mavlink.ardusub import (
     SIMULATED_MODES,
 )
 from testbed.mavlink.motor_test import do_motor_test
+from testbed.mavlink.streams import interval_ms
 from testbed.mavlink.telemetry import MESSAGE_IDS
 
 if TYPE_CHECKING:
@@ -191,21 +192,44 @@ def _cmd_motor_test(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s:
     return do_motor_test(e, p, now_s)
 
 
+def _message_id(param1: float) -> int | None:
+    """SET/GET_MESSAGE_INTERVAL's param1 as ArduPilot reads it, ``(uint32_t)packet.param1``
+    (toward 0); None where C leaves that conversion undefined (NaN, −1 and below, 2³² and up)."""
+    return math.trunc(param1) if -1.0 < param1 < 2.0**32 else None
+
+
 def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    """ArduPilot's ``GCS_MAVLINK::set_message_interval`` (``GCS_Common.cpp``) for an id with no
+    ``ap_message`` (here: one this endpoint does not send): param2 0 ("default") fails in
+    ``get_default_interval_for_mavlink_message_id``, silently; any other interval in
+    ``set_mavlink_message_id_interval``, which says "No ap_message for mavlink id (N)" (INFO,
+    to every link); both answer MAV_RESULT_FAILED. A message sent but not streamed
+    (HEARTBEAT, HOME_POSITION…: its rate is not settable here) is UNSUPPORTED, as is a NaN
+    interval (C leaves ``(int32_t)`` of it undefined)."""
     del now_s
-    name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
-    if name is None or not c.streams.set_interval(name, p[1]):
+    msg_id = _message_id(p[0])
+    name = None if msg_id is None else _NAMES_BY_ID.get(msg_id)
+    if name is None:
+        if msg_id is not None and not math.isnan(p[1]) and interval_ms(p[1]) is not None:
+            e.statustext(mav.MAV_SEVERITY_INFO, f"No ap_message for mavlink id ({msg_id})")
+        return _FAILED
+    if not c.streams.set_interval(name, p[1]):
         return _UNSUPPORTED
     return _ACCEPTED
 
 
 def _cmd_get_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
+    """ArduPilot's ``GCS_MAVLINK::handle_command_get_message_interval``: an id of 65536 or more,
+    or one with no ``ap_message`` (here: not sent), is answered MESSAGE_INTERVAL 0 ("not
+    available"; the id cut to the field's uint16) and MAV_RESULT_FAILED."""
     del now_s
-    name = _NAMES_BY_ID.get(int(p[0])) if math.isfinite(p[0]) else None
-    if name is None:
-        return _UNSUPPORTED
-    e.queue(c, mav.MAVLink_message_interval_message(int(p[0]), c.streams.interval_us(name)))
-    return _ACCEPTED
+    msg_id = _message_id(p[0])
+    if msg_id is None:
+        return _FAILED
+    name = _NAMES_BY_ID.get(msg_id) if msg_id < 2**16 else None
+    interval_us = 0 if name is None else c.streams.interval_us(name)
+    e.queue(c, mav.MAVLink_message_interval_message(msg_id & 0xFFFF, interval_us))
+    return _FAILED if name is None else _ACCEPTED
 
 
 COMMANDS: dict[int, Callable[[VehicleEndpoint, Channel, tuple[float, ...], float], int]] = {

@@ -96,3 +96,33 @@ def test_param2_is_cast_to_an_int32_toward_zero_first(gcs: SimGcs) -> None:
     assert _set_then_get(gcs, 0.5) == (accepted, default_us)
     assert _set_then_get(gcs, 25_999.0) == (accepted, 25_000)
     assert _set_then_get(gcs, -0.5) == (accepted, default_us)
+
+
+def _results(gcs: SimGcs, command: int) -> list[int]:
+    return [m.result for m in gcs.of("COMMAND_ACK") if m.command == command]
+
+
+def test_an_unknown_message_id_fails_as_in_ardupilot_and_is_said(gcs: SimGcs) -> None:
+    """ArduPilot's ``set_message_interval`` for an id with no ``ap_message`` (9999, or STATUSTEXT
+    253, which is never streamed): ``set_mavlink_message_id_interval`` says "No ap_message for
+    mavlink id (N)" and the command is MAV_RESULT_FAILED (it was UNSUPPORTED, unsaid); param2 0
+    (back to the default) fails in ``get_default_interval_for_mavlink_message_id`` without a
+    word. ``handle_command_get_message_interval`` answers such an id MESSAGE_INTERVAL 0 ("not
+    available") and FAILED (it was UNSUPPORTED with no MESSAGE_INTERVAL), an id past the uint16
+    field cut to it (70 000 → 4464)."""
+    set_interval, get_interval = mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL
+    gcs.send(gcs.command(set_interval, 9999, 100_000))
+    gcs.send(gcs.command(set_interval, mav.MAVLINK_MSG_ID_STATUSTEXT, 100_000))
+    gcs.send(gcs.command(set_interval, 9999, 0))
+    gcs.run(0.05)
+    assert _results(gcs, set_interval) == [mav.MAV_RESULT_FAILED] * 3
+    texts = [m.text for m in gcs.of("STATUSTEXT") if m.text.startswith("No ap_message")]
+    assert texts == ["No ap_message for mavlink id (9999)", "No ap_message for mavlink id (253)"]
+    assert {m.severity for m in gcs.of("STATUSTEXT")} == {mav.MAV_SEVERITY_INFO}
+    gcs.clear()
+    gcs.send(gcs.command(get_interval, 9999), gcs.command(get_interval, 70_000))
+    gcs.run(0.05)
+    assert _results(gcs, get_interval) == [mav.MAV_RESULT_FAILED] * 2
+    answers = [(m.message_id, m.interval_us) for m in gcs.of("MESSAGE_INTERVAL")]
+    assert answers == [(9999, 0), (70_000 & 0xFFFF, 0)]
+    assert _set_then_get(gcs, 100_000) == (mav.MAV_RESULT_ACCEPTED, 100_000)  # a known one still
