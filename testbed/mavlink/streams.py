@@ -5,9 +5,12 @@ station that asks for nothing still gets telemetry); REQUEST_DATA_STREAM sets a 
 (:data:`~testbed.mavlink.ardusub.STREAM_GROUPS`; stream 0 = all), SET_MESSAGE_INTERVAL one
 message as ArduPilot's ``GCS_MAVLINK::set_message_interval`` reads param2 (:func:`interval_ms`:
 −1 off, 0 back to its group's rate, any other interval below 1000 µs — negative ones too — 1 ms,
-above 60 s a minute). Rates are capped at :data:`MAX_RATE_HZ` (the endpoint runs once per
-vehicle frame, 100 Hz), so 1 ms is served, and answered, as :data:`MAX_RATE_HZ`. Due times
-advance by whole intervals and skip ahead after a stall, so a late run never sends a burst.
+above 60 s a minute), kept as ArduPilot keeps it (:func:`stored_interval_ms`: at least
+80 % of ArduSub's 400-Hz loop period, so 1–3 ms is 3 ms) and answered so by
+GET_MESSAGE_INTERVAL. Rates are served at most at :data:`MAX_RATE_HZ` (the endpoint runs once
+per vehicle frame, 100 Hz), so a message asked for every 3 ms is sent every 20 ms while
+GET_MESSAGE_INTERVAL says 3000 µs, as ArduPilot would. Due times advance by whole intervals and
+skip ahead after a stall, so a late run never sends a burst.
 
 HIGH_LATENCY2 is ArduPilot's one "deferred" message here (``GCS_MAVLINK::deferred_message``, not
 a stream group): every :data:`HIGH_LATENCY2_INTERVAL_S` on a high-latency link
@@ -26,16 +29,22 @@ from typing import Protocol
 from testbed.mavlink.ardusub import STREAM_GROUPS
 
 __all__ = [
+    "ARDUSUB_LOOP_PERIOD_US",
     "GROUP_PARAMS",
     "HIGH_LATENCY2_INTERVAL_S",
     "MAX_INTERVAL_S",
     "MAX_RATE_HZ",
     "StreamSchedule",
     "interval_ms",
+    "stored_interval_ms",
 ]
 
 MAX_RATE_HZ = 50.0
 """Fastest telemetry rate served [Hz]."""
+ARDUSUB_LOOP_PERIOD_US = 1_000_000 // 400
+"""ArduSub's main loop period [µs]: ``AP_Scheduler::init`` sets ``_loop_period_us = 1000000UL /
+_loop_rate_hz``, SCHED_LOOP_RATE's default for ArduSub 400 Hz (``AP_Scheduler.cpp``
+SCHEDULER_DEFAULT_LOOP_RATE)."""
 MAX_INTERVAL_S = 60.0
 """Longest interval SET_MESSAGE_INTERVAL sets [s]: ArduPilot's ``GCS_MAVLINK::
 set_message_interval`` caps ``interval_us`` above 60 000 000 at 60 000 ms (so the
@@ -80,6 +89,7 @@ class StreamSchedule:
             name: _interval(group_rates_hz.get(group, 0.0)) for name, group in _GROUP_OF.items()
         }
         self.interval_s: dict[str, float] = dict(self._defaults)
+        self._stored_ms: dict[str, int] = {}  # SET_MESSAGE_INTERVAL's, as ArduPilot keeps it
         for name in _DEFERRED:
             self._defaults[name] = HIGH_LATENCY2_INTERVAL_S
             self.interval_s[name] = HIGH_LATENCY2_INTERVAL_S if high_latency else 0.0
@@ -102,28 +112,37 @@ class StreamSchedule:
             for name in names:
                 self._defaults[name] = _interval(rate_hz)
                 self._set(name, self._defaults[name])
+                self._stored_ms.pop(name, None)
         return True
 
     def set_interval(self, name: str, interval_us: float) -> bool:
         """SET_MESSAGE_INTERVAL's param2 ``interval_us`` [µs] read as ArduPilot reads it
         (:func:`interval_ms`): off, the group's rate (its boot rate, or the one
-        REQUEST_DATA_STREAM set since), or every so many whole milliseconds (at least
-        1 / :data:`MAX_RATE_HZ`). Returns False for a message not streamed or a NaN interval."""
+        REQUEST_DATA_STREAM set since), or every so many whole milliseconds, kept as
+        :func:`stored_interval_ms` and served at least 1 / :data:`MAX_RATE_HZ` apart. Returns
+        False for a message not streamed or a NaN interval."""
         if name not in self._defaults or math.isnan(interval_us):
             return False
         ms = interval_ms(interval_us)
         if ms is None:
             self._set(name, self._defaults[name])
-        elif ms == 0:
-            self._set(name, 0.0)
-        else:
-            self._set(name, max(ms * 1e-3, 1.0 / MAX_RATE_HZ))
+            self._stored_ms.pop(name, None)
+            return True
+        stored = stored_interval_ms(ms)
+        self._stored_ms[name] = stored
+        self._set(name, 0.0 if stored == 0 else max(stored * 1e-3, 1.0 / MAX_RATE_HZ))
         return True
 
     def interval_us(self, name: str) -> int:
-        """GET_MESSAGE_INTERVAL's answer: the interval [µs], −1 when off, 0 if not streamed."""
+        """GET_MESSAGE_INTERVAL's answer [µs]: −1 when off, 0 if not streamed; the interval
+        SET_MESSAGE_INTERVAL set as ArduPilot keeps it (``handle_command_get_message_interval``
+        answers ``interval_ms * 1000`` of what ``set_ap_message_interval`` stored: 3000 after a
+        1-ms request, though it is served at :data:`MAX_RATE_HZ`), else the rate's interval."""
         if name not in self.interval_s:
             return 0
+        if name in self._stored_ms:
+            stored = self._stored_ms[name]
+            return -1 if stored == 0 else stored * 1000
         interval = self.interval_s[name]
         return -1 if interval == 0 else round(interval * 1e6)
 
@@ -173,6 +192,17 @@ def interval_ms(interval_us: float) -> int | None:
     if us > 60_000_000:
         return round(MAX_INTERVAL_S * 1000)
     return us // 1000
+
+
+def stored_interval_ms(ms: int) -> int:
+    """The interval [ms] ArduPilot's ``GCS_MAVLINK::set_ap_message_interval`` (``GCS_Common.cpp``)
+    keeps for a requested ``ms`` (0 = off): "send messages out at most 80% of main loop rate" —
+    when ``interval_ms * 800`` is below the loop period (:data:`ARDUSUB_LOOP_PERIOD_US`), it
+    becomes ``loop_period_us / 800.0f`` in its uint16, 2500 / 800 = 3.125 → 3 ms; so 1, 2 and
+    3 ms are 3 ms, 4 ms and up as asked."""
+    if ms != 0 and ms * 800 < ARDUSUB_LOOP_PERIOD_US:
+        return int(ARDUSUB_LOOP_PERIOD_US / 800.0)
+    return ms
 
 
 def _interval(rate_hz: float) -> float:

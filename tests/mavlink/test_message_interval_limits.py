@@ -4,12 +4,13 @@ Independent truth: ArduPilot 4.5's ``GCS_MAVLINK::handle_command_set_message_int
 ``set_message_interval`` (``GCS_Common.cpp``), restated: param2 is cast to an int32 (toward 0);
 0 is "reset to default rate", −1 "stop sending", any other value below 1000 µs — a negative
 one too — 1 ms ("don't squash sub-ms times to zero"), above 60 000 000 µs 60 000 ms, else
-``interval_us / 1000`` in integer milliseconds; GET_MESSAGE_INTERVAL answers the interval
-set, ``interval_ms * 1000``. A garbled or careless ground station's 3e9 µs or 1e30 µs must be
+``interval_us / 1000`` in integer milliseconds; ``set_ap_message_interval`` keeps at least 80 %
+of the 400-Hz loop period (1–3 ms → 3 ms); GET_MESSAGE_INTERVAL answers the interval kept,
+``interval_ms * 1000``. A garbled or careless ground station's 3e9 µs or 1e30 µs must be
 ACCEPTED as the minute's cap, and the answer to a later GET_MESSAGE_INTERVAL must be a
 MESSAGE_INTERVAL pymavlink decodes (its ``interval_us`` is an int32), not an exception out of
-the endpoint. The endpoint serves at most 50 Hz (docs/mavlink.md), so ArduPilot's 1 ms is
-sent, and answered, as 20 000 µs.
+the endpoint. The endpoint serves at most 50 Hz (docs/mavlink.md), so ArduPilot's 3 ms is sent
+every 20 ms, while GET_MESSAGE_INTERVAL answers 3000 µs as ArduPilot would.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from tests.mavlink.gcs import SimGcs
 
 ARDUPILOT_CAP_US = 60_000_000  # interval_us > 60000000 → interval_ms = 60000
 FASTEST_SERVED_US = 20_000  # the endpoint's 50 Hz, where ArduPilot's 1 ms is served
+ARDUPILOT_FLOOR_US = 3_000  # 2500 µs loop / 800, in a uint16: what ArduPilot keeps for 1 ms
 ATTITUDE = mav.MAVLINK_MSG_ID_ATTITUDE
 
 
@@ -74,11 +76,37 @@ def test_a_negative_interval_other_than_minus_one_is_as_fast_as_served(
 ) -> None:
     """ArduPilot: a negative interval other than −1 is below 1000, so 1 ms — the message as
     fast as it goes, not off (it used to be switched off): ATTITUDE then arrives at the
-    endpoint's 50 Hz, and GET_MESSAGE_INTERVAL says so."""
-    assert _set_then_get(gcs, interval_us) == (mav.MAV_RESULT_ACCEPTED, FASTEST_SERVED_US)
+    endpoint's 50 Hz, and GET_MESSAGE_INTERVAL answers the 3 ms ArduPilot keeps."""
+    assert _set_then_get(gcs, interval_us) == (mav.MAV_RESULT_ACCEPTED, ARDUPILOT_FLOOR_US)
     gcs.clear()
     gcs.run(1.0)
     assert len(gcs.of("ATTITUDE")) == pytest.approx(1e6 / FASTEST_SERVED_US, abs=1)
+
+
+@pytest.mark.parametrize(
+    ("interval_us", "kept_us"),
+    [(1_000, 3_000), (2_999, 3_000), (3_999, 3_000), (4_000, 4_000), (19_999, 19_000)],
+)
+def test_get_answers_the_interval_ardupilot_keeps_while_50_hz_is_served(
+    gcs: SimGcs, interval_us: float, kept_us: int
+) -> None:
+    """ArduPilot's ``set_ap_message_interval`` keeps what was asked (whole ms) unless it is
+    faster than 80 % of the loop rate: ``interval_ms * 800 < loop_period_us`` (2500 µs, ArduSub's
+    400 Hz: ``AP_Scheduler``) makes it ``2500 / 800.0f`` = 3.125 → 3 ms; its
+    ``handle_command_get_message_interval`` answers that × 1000. So 1–3 ms is answered 3000 µs
+    (it was the endpoint's 20 000 µs cap), 4–19 ms as asked, while ATTITUDE still arrives at
+    the endpoint's 50 Hz."""
+    assert _set_then_get(gcs, interval_us) == (mav.MAV_RESULT_ACCEPTED, kept_us)
+    gcs.clear()
+    gcs.run(1.0)
+    assert len(gcs.of("ATTITUDE")) == pytest.approx(1e6 / FASTEST_SERVED_US, abs=1)
+    gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, ATTITUDE))
+    gcs.run(0.05)
+    assert gcs.last("MESSAGE_INTERVAL").interval_us == kept_us  # still, while served at 50 Hz
+    gcs.send(gcs.mav.request_data_stream_encode(1, 1, mav.MAV_DATA_STREAM_EXTRA1, 4, 1))
+    gcs.send(gcs.command(mav.MAV_CMD_GET_MESSAGE_INTERVAL, ATTITUDE))
+    gcs.run(0.05)
+    assert gcs.last("MESSAGE_INTERVAL").interval_us == 250_000  # the group's rate replaces it
 
 
 def test_param2_is_cast_to_an_int32_toward_zero_first(gcs: SimGcs) -> None:
