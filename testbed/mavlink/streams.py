@@ -37,6 +37,7 @@ __all__ = [
     "StreamSchedule",
     "interval_ms",
     "stored_interval_ms",
+    "stream_interval_ms",
 ]
 
 MAX_RATE_HZ = 50.0
@@ -90,6 +91,10 @@ class StreamSchedule:
         }
         self.interval_s: dict[str, float] = dict(self._defaults)
         self._stored_ms: dict[str, int] = {}  # SET_MESSAGE_INTERVAL's, as ArduPilot keeps it
+        self._group_ms = {  # the group rate's interval as ArduPilot keeps it
+            name: stream_interval_ms(group_rates_hz.get(group, 0.0))
+            for name, group in _GROUP_OF.items()
+        }
         for name in _DEFERRED:
             self._defaults[name] = HIGH_LATENCY2_INTERVAL_S
             self.interval_s[name] = HIGH_LATENCY2_INTERVAL_S if high_latency else 0.0
@@ -113,6 +118,7 @@ class StreamSchedule:
                 self._defaults[name] = _interval(rate_hz)
                 self._set(name, self._defaults[name])
                 self._stored_ms.pop(name, None)
+                self._group_ms[name] = stream_interval_ms(rate_hz)
         return True
 
     def set_interval(self, name: str, interval_us: float) -> bool:
@@ -137,14 +143,18 @@ class StreamSchedule:
         """GET_MESSAGE_INTERVAL's answer [µs]: −1 when off, 0 if not streamed; the interval
         SET_MESSAGE_INTERVAL set as ArduPilot keeps it (``handle_command_get_message_interval``
         answers ``interval_ms * 1000`` of what ``set_ap_message_interval`` stored: 3000 after a
-        1-ms request, though it is served at :data:`MAX_RATE_HZ`), else the rate's interval."""
+        1-ms request, though it is served at :data:`MAX_RATE_HZ`), else its group rate's
+        (:func:`stream_interval_ms`: 333 000 at 3 Hz), else the interval served."""
         if name not in self.interval_s:
             return 0
         if name in self._stored_ms:
             stored = self._stored_ms[name]
             return -1 if stored == 0 else stored * 1000
         interval = self.interval_s[name]
-        return -1 if interval == 0 else round(interval * 1e6)
+        if interval == 0:
+            return -1
+        group_ms = self._group_ms.get(name)
+        return round(interval * 1e6) if group_ms is None else group_ms * 1000
 
     def _set(self, name: str, interval_s: float) -> None:
         self.interval_s[name] = interval_s
@@ -203,6 +213,21 @@ def stored_interval_ms(ms: int) -> int:
     if ms != 0 and ms * 800 < ARDUSUB_LOOP_PERIOD_US:
         return int(ARDUSUB_LOOP_PERIOD_US / 800.0)
     return ms
+
+
+def stream_interval_ms(rate_hz: float) -> int | None:
+    """The interval [ms] ArduPilot keeps for a message of a stream group at ``rate_hz`` (an
+    SRn_* parameter or REQUEST_DATA_STREAM's rate, an int16 there, so taken toward 0):
+    ``GCS_MAVLINK::get_interval_for_stream`` (``GCS_Common.cpp``) is ``1000 / rate`` in integers
+    (3 Hz → 333 ms; 0 Hz → 0, off), which ``initialise_message_intervals_for_stream`` passes to
+    ``set_ap_message_interval`` (:func:`stored_interval_ms`). None above 1000 Hz and for
+    negative or non-finite rates, which ArduPilot turns into an interval of 0 or a minute and
+    this endpoint serves at :data:`MAX_RATE_HZ` (not modelled), and for a rate below 1 Hz that
+    is not 0 (no int16 rate: a test's ``stream_rates_hz``)."""
+    rate = math.trunc(rate_hz) if math.isfinite(rate_hz) else -1
+    if not 0 <= rate <= 1000 or (rate == 0 and rate_hz != 0):  # a fraction of 1 Hz: ours
+        return None
+    return 0 if rate == 0 else stored_interval_ms(1000 // rate)
 
 
 def _interval(rate_hz: float) -> float:

@@ -154,3 +154,22 @@ def test_an_unknown_message_id_fails_as_in_ardupilot_and_is_said(gcs: SimGcs) ->
     answers = [(m.message_id, m.interval_us) for m in gcs.of("MESSAGE_INTERVAL")]
     assert answers == [(9999, 0), (70_000 & 0xFFFF, 0)]
     assert _set_then_get(gcs, 100_000) == (mav.MAV_RESULT_ACCEPTED, 100_000)  # a known one still
+
+
+def test_a_group_rate_is_answered_as_ardupilots_whole_milliseconds(gcs: SimGcs) -> None:
+    """A message streamed at its group's rate is answered as ArduPilot keeps it:
+    ``get_interval_for_stream`` is ``1000 / rate`` in integers, so GLOBAL_POSITION_INT at
+    SR0_POSITION's 3 Hz is 333 000 µs (it was 333 333), ATTITUDE after REQUEST_DATA_STREAM
+    EXTRA1 at 7 Hz 142 000 (was 142 857) and at 100 Hz 10 000 — while served at 50 Hz (it was
+    answered as the cap, 20 000)."""
+    get_interval = mav.MAV_CMD_GET_MESSAGE_INTERVAL
+    gcs.send(gcs.command(get_interval, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT))
+    gcs.run(0.05)
+    assert gcs.last("MESSAGE_INTERVAL").interval_us == 333_000
+    for rate_hz, answer_us in ((7, 142_000), (100, 10_000)):
+        gcs.clear()
+        gcs.send(gcs.mav.request_data_stream_encode(1, 1, mav.MAV_DATA_STREAM_EXTRA1, rate_hz, 1))
+        gcs.send(gcs.command(get_interval, ATTITUDE))
+        gcs.run(1.0)
+        assert gcs.last("MESSAGE_INTERVAL").interval_us == answer_us
+        assert len(gcs.of("ATTITUDE")) == pytest.approx(min(rate_hz, 50), abs=1)
