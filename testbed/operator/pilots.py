@@ -63,9 +63,12 @@ GOAL_FRAMES: tuple[GoalFrame, ...] = ("vehicle", "end_effector")
 
 
 class PilotError(ConfigError, TypeError):
-    """A pilot sampled what a pilot cannot give (not a :class:`PilotSample`, or sticks that are
-    not six finite positions in [−1, 1]): its bug, named with its type, in one line on the
-    command line (``testbed: error: ...``, exit 2). A ValueError and a TypeError."""
+    """A pilot raised, or sampled what a pilot cannot give (not a :class:`PilotSample`, sticks
+    that are not six finite positions in [−1, 1], an attitude or goal that is not finite): its
+    bug, named with its class (and for a pilot of the user's its file, the call and its time,
+    :class:`~testbed.operator.user_pilots.UserPilot`), in one line on the command line
+    (``testbed: error: ...``, exit 2). A ValueError and a TypeError; one the pilot raised is
+    caused by that exception (its traceback, for the Python API)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,7 +130,9 @@ class Pilot(Protocol):
 
     The station refuses a sample whose sticks are not six finite positions in [−1, 1]
     (:func:`~testbed.operator.station.check_sticks`: a ValueError naming the pilot's type and
-    the axis), whatever codec carries them.
+    the axis), whatever codec carries them. A run calls a pilot that is not a packaged one
+    through a :class:`~testbed.operator.user_pilots.UserPilot`: what its ``sample`` or ``see``
+    raises, or a malformed sample, is a :class:`PilotError` naming it, the call and the time.
     """
 
     def sample(self, t_s: float) -> PilotSample:

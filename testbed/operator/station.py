@@ -39,6 +39,7 @@ from testbed.common.components import (
 from testbed.common.geometry import quat_from_euler
 from testbed.ecs import Entity, Phase, Replicate, Schedule, World
 from testbed.operator.pilots import Pilot, PilotError, PilotSample, SampleHold
+from testbed.operator.user_pilots import STICK_AXES, stick_problem
 
 __all__ = [
     "STICK_AXES",
@@ -99,33 +100,22 @@ class _Session:
         self.seen: Odometry | None = None
 
 
-STICK_AXES = ("surge", "sway", "heave", "roll", "pitch", "yaw")
-"""The names of the six sticks, in :data:`~testbed.operator.pilots.Sticks` order."""
-
-
 def check_sticks(pilot: Pilot, sticks: tuple[float, ...]) -> None:
     """Refuse a stick sample that is not six finite positions in [−1, 1].
 
     A pilot is local code, so a bad sample is its bug, not a value to clamp: it is refused
     here, when the pilot is sampled, whatever codec carries the sticks (the teleop codec would
     otherwise refuse it while encoding and the change-set codec carry a NaN to the vehicle).
+    A pilot of the user's in a run is checked before this, as it is called
+    (:class:`~testbed.operator.user_pilots.UserPilot`, which also names its file and the time).
 
     Raises:
         PilotError: naming the pilot's type and the axis (a ValueError).
     """
-    inner = pilot.pilot if isinstance(pilot, SampleHold) else pilot  # the user's, not the hold
-    name = type(inner).__name__
-    if len(sticks) != len(STICK_AXES):
-        raise PilotError(f"pilot {name}: {len(sticks)} sticks sampled, expected 6")
-    for axis, value in zip(STICK_AXES, sticks, strict=True):
-        try:
-            ok = -1.0 <= float(value) <= 1.0  # a NaN fails the comparison
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise PilotError(
-                f"pilot {name}: {axis} stick must be a finite number in [-1, 1], got {value!r}"
-            )
+    problem = stick_problem(sticks)
+    if problem is not None:
+        inner = pilot.pilot if isinstance(pilot, SampleHold) else pilot  # the user's, not the hold
+        raise PilotError(f"pilot {type(inner).__name__}: {problem}")
 
 
 def sample_pilot(world: World) -> None:

@@ -29,7 +29,9 @@ result and trials of consecutive seeds draw differently; its arguments may not h
 pilot must have ``sample(t_s) -> PilotSample`` (:class:`~testbed.operator.pilots.Pilot`), the
 model ``airtime_s`` and ``error_model`` (:class:`~testbed.channel.model.LinkModel`), a law
 ``reset`` and ``update`` (:class:`~testbed.vehicle.control_laws.DepthLaw`,
-:class:`~testbed.vehicle.control_laws.AttitudeLaw`).
+:class:`~testbed.vehicle.control_laws.AttitudeLaw`). What a pilot, model or law raises during a
+run, or returns that a run cannot use, is a one-line error naming it, the call and the error
+(:class:`~testbed.operator.pilots.PilotError`, ``LinkModelError``, ``ControlLawError``).
 
 Loading a scenario imports the target and binds the arguments to its signature, so a missing
 file, a name the module lacks or an argument the factory does not take is a one-line error

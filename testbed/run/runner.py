@@ -27,8 +27,9 @@ from testbed.channel import Medium, Modem, Trace
 from testbed.channel.model import LinkModel, model_name
 from testbed.common.components import MissionStatus
 from testbed.ecs import Phase
-from testbed.operator.pilots import Pilot, SampleHold, is_pure
+from testbed.operator.pilots import PURE_PILOTS, Pilot, SampleHold, is_pure
 from testbed.operator.station import OperatorStation, SessionPlan
+from testbed.operator.user_pilots import UserPilot
 from testbed.run.failures import reduce_run, run_error
 from testbed.run.images import image_console, image_source_factory
 from testbed.run.interrupts import deferred_interrupts, interrupt_of
@@ -197,7 +198,10 @@ def observed_pilot(pilot: Pilot) -> tuple[Pilot, Pilot]:
     both times, as the recorder may sample it again; any other pilot through a
     :class:`~testbed.operator.pilots.SampleHold`, so that only the operator samples it (its
     state, if it keeps any, advances at the operator's frames alone) and the recorder sees the
-    operator's samples, held between frames.
+    operator's samples, held between frames. A pilot that is not a packaged one is called
+    through a :class:`~testbed.operator.user_pilots.UserPilot` both times: an exception it
+    raises, or a sample a run cannot fly, is a one-line
+    :class:`~testbed.operator.pilots.PilotError` naming it, the call and its time.
 
     Raises:
         TypeError: ``pilot`` has no ``sample`` method (it is refused before anything runs).
@@ -207,9 +211,12 @@ def observed_pilot(pilot: Pilot) -> tuple[Pilot, Pilot]:
             "pilot: expected an object with sample(t_s) -> PilotSample "
             f"(testbed.operator.pilots.Pilot), got {type(pilot).__name__}"
         )
-    if is_pure(pilot):
+    if type(pilot) in PURE_PILOTS:  # packaged: built from a checked scenario, not wrapped
         return pilot, pilot
-    hold = SampleHold(pilot)
+    checked = UserPilot(pilot)  # the user's: what it raises or returns is a PilotError
+    if is_pure(pilot):
+        return checked, checked
+    hold = SampleHold(checked)
     return hold, hold.held
 
 

@@ -1,7 +1,12 @@
 """A run that an error ends part way keeps what ran (testbed.run.failures): a pilot of the
 user's that raises 12 s into a run used to lose the whole recording. The partial series is held
 to a run of a pilot that commands the same and never raises (a second run, not the code's own
-bookkeeping), and each entry point says where what ran went."""
+bookkeeping), and each entry point says where what ran went.
+
+A pilot of the user's is the user's input, like a link model or a control law of theirs: what it
+raises is a PilotError (a ConfigError: one line, exit 2, no traceback) naming the pilot's class
+and file, the call and its time, and the error, caused by the pilot's own exception (it used to
+be the pilot's traceback and exit 1)."""
 
 from __future__ import annotations
 
@@ -13,6 +18,8 @@ from pathlib import Path
 import pytest
 
 from testbed.cli.main import main
+from testbed.config import ConfigError
+from testbed.operator.pilots import PilotError
 from testbed.run.failures import partial_run
 from testbed.run.runner import run_scenario
 from testbed.run.scenario import load_scenario
@@ -79,26 +86,37 @@ def _rows(path: Path) -> list[list[str]]:
         return list(csv.reader(handle))
 
 
-def test_a_pilot_that_raises_part_way_keeps_what_ran_and_shows_its_traceback(
+def _sleepy_line(study: Path, sim_s: float) -> str:
+    """What a Sleepy pilot's error says, the run having reached ``sim_s`` (the time of the
+    operator's sample that raised)."""
+    return (
+        f"pilot Sleepy ({study / 'sleepy.py'}): sample({round(sim_s, 6)!r}) raised ValueError: "
+        "pilot fell asleep at 12.2"
+    )
+
+
+def test_a_pilot_that_raises_part_way_is_one_line_exit_2_and_keeps_what_ran(
     study: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Exit 1, the traceback, then one line naming the time reached and the folder; the
-    series up to there is, row for row, the start of a run whose pilot commands the same and
-    never raises; metrics.json is marked incomplete with the error and the user's line."""
+    """Exit 2 and one line naming the pilot (class and file), the call and its time, the
+    error, and where what ran went; no traceback. The series up to there is, row for row, the
+    start of a run whose pilot commands the same and never raises; metrics.json is marked
+    incomplete with the error and the user's line."""
     run = ["run", str(study / "step.toml"), "--no-plots"]
     assert main([*run, "--out", str(study / "idle"), *_pilot(study, "Idle")]) == 0
     capsys.readouterr()
     out = study / "sleepy"
-    assert main([*run, "--out", str(out), *_pilot(study, "Sleepy")]) == 1
+    assert main([*run, "--out", str(out), *_pilot(study, "Sleepy")]) == 2
     err = capsys.readouterr().err
-    assert "Traceback" in err and "ValueError: pilot fell asleep at 12.2" in err
     metrics = json.loads((out / "metrics.json").read_text())
-    assert err.endswith(
-        f"testbed: the run failed; what ran to t = {metrics['sim_s']:.1f} s of 30 s, is in {out}\n"
+    assert "Traceback" not in err
+    assert err == (
+        f"testbed: error: {_sleepy_line(study, metrics['sim_s'])} (what ran to t = "
+        f"{metrics['sim_s']:.1f} s of 30 s, is in {out})\n"
     )
     assert metrics["complete"] is False
     where = f"(at {study / 'sleepy.py'}:{RAISE_LINE + 1})"
-    assert metrics["failure"] == f"ValueError: pilot fell asleep at 12.2 {where}"
+    assert metrics["failure"] == f"PilotError: {_sleepy_line(study, metrics['sim_s'])} {where}"
     assert 12.0 < metrics["sim_s"] < 12.6  # the operator's sample after 12 s (0.3-s frames)
     partial, whole = _rows(out / "series.csv"), _rows(study / "idle" / "series.csv")
     assert len(partial) > 200 and partial == whole[: len(partial)]
@@ -108,15 +126,23 @@ def test_a_pilot_that_raises_part_way_keeps_what_ran_and_shows_its_traceback(
     assert set(metrics["files"]) == {"events.csv", "series.csv"}
 
 
-def test_the_python_api_raises_the_pilots_own_error_carrying_what_ran(study: Path) -> None:
-    """run_scenario raises the same exception as before; partial_run gives what ran."""
+def test_the_python_api_raises_a_pilot_error_caused_by_the_pilots_own_carrying_what_ran(
+    study: Path,
+) -> None:
+    """run_scenario raises a PilotError caused by the pilot's own exception (its traceback);
+    partial_run gives what ran."""
     scenario = load_scenario(str(study / "step.toml"), _pilot(study, "Idle")[1::2])
     sleepy = load_scenario(str(study / "step.toml"), _pilot(study, "Sleepy")[1::2])
-    with pytest.raises(ValueError, match=r"pilot fell asleep at 12\.2") as caught:
+    with pytest.raises(
+        PilotError, match=r"raised ValueError: pilot fell asleep at 12\.2"
+    ) as caught:
         run_scenario(sleepy)
+    assert isinstance(caught.value, ConfigError)
+    cause = caught.value.__cause__
+    assert isinstance(cause, ValueError) and str(cause) == "pilot fell asleep at 12.2"
     partial = partial_run(caught.value)
     assert partial is not None and partial.stopped is None
-    assert partial.failure is not None and partial.failure.startswith("ValueError: pilot fell")
+    assert partial.failure is not None and partial.failure.startswith("PilotError: pilot Sleepy")
     assert 12.0 < partial.metrics["sim_s"] < 12.6
     assert partial_run(ValueError("not from a run")) is None
     assert run_scenario(scenario).failure is None
@@ -132,8 +158,9 @@ def test_a_bad_sample_part_way_is_one_line_exit_2_and_keeps_what_ran(
     err = capsys.readouterr().err
     metrics = json.loads((out / "metrics.json").read_text())
     assert err == (
-        "testbed: error: pilot Overdriven: surge stick must be a finite number in [-1, 1], "
-        f"got 2.0 (what ran to t = {metrics['sim_s']:.1f} s of 30 s, is in {out})\n"
+        f"testbed: error: pilot Overdriven ({study / 'sleepy.py'}): "
+        f"sample({round(metrics['sim_s'], 6)!r}): surge stick must be a finite number in "
+        f"[-1, 1], got 2.0 (what ran to t = {metrics['sim_s']:.1f} s of 30 s, is in {out})\n"
     )
     assert metrics["complete"] is False and metrics["failure"].startswith("PilotError: ")
 
@@ -145,8 +172,9 @@ def test_a_trial_that_fails_keeps_the_trials_before_it_and_its_own_start(
     trials.json names the failed trial."""
     out = study / "trials"
     argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out), "--set", "trials=3"]
-    assert main([*argv, *_pilot(study, "second_trial_sleeps")]) == 1
+    assert main([*argv, *_pilot(study, "second_trial_sleeps")]) == 2
     err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1
     document = json.loads((out / "trials.json").read_text())
     assert (document["complete"], document["failed_trial"], document["trials_finished"]) == (
         False,
@@ -156,17 +184,19 @@ def test_a_trial_that_fails_keeps_the_trials_before_it_and_its_own_start(
     first = json.loads((out / "trial-1" / "metrics.json").read_text())
     second = json.loads((out / "trial-2" / "metrics.json").read_text())
     assert first["complete"] is True and first["sim_s"] == 30.0
-    assert second["complete"] is False and "pilot fell asleep" in second["failure"]
+    assert second["complete"] is False
+    assert second["failure"].startswith("PilotError: pilot Sleepy (")
     assert not (out / "trial-3").exists()
     assert err.endswith(
-        f"what ran in trial 2 of 3, to t = {second['sim_s']:.1f} s of 30 s, "
-        f"is in {out / 'trial-2'}\n"
+        f"(what ran in trial 2 of 3, to t = {second['sim_s']:.1f} s of 30 s, "
+        f"is in {out / 'trial-2'})\n"
     )
 
 
 def test_a_hil_run_whose_pilot_raises_keeps_what_ran_and_closes_the_ports(study: Path) -> None:
     """run_hil over emulated EvoLogics modems: the pilot raising 2 s in ends the session with
-    its own error, what ran (to ≈ 2 s of real time) kept on it, both ports closed."""
+    a PilotError caused by its own, what ran (to ≈ 2 s of real time) kept on it, both ports
+    closed."""
     from testbed.channel import load_link_config
     from testbed.emulator.ptys import ModemEmulator
     from testbed.hil import PortSettings, open_endpoint
@@ -182,8 +212,9 @@ def test_a_hil_run_whose_pilot_raises_keeps_what_ran_and_closes_the_ports(study:
             "vehicle": open_endpoint(PortSettings(path_b, "evologics", "vehicle")),
         }
         scenario = load_scenario(str(study / "step.toml"), [*short, *sleepy])
-        with pytest.raises(ValueError, match="pilot fell asleep") as caught:
+        with pytest.raises(PilotError, match="raised ValueError: pilot fell asleep") as caught:
             run_hil(scenario, endpoints, duration_s=4.0, modem="evologics")
+        assert isinstance(caught.value.__cause__, ValueError)
         partial = partial_run(caught.value)
         assert partial is not None and partial.failure is not None
         assert 2.0 < partial.metrics["sim_s"] < 4.0
@@ -209,9 +240,12 @@ def test_a_trial_that_fails_as_it_begins_keeps_the_trials_before_it(
     assert (out / "trial-1" / "metrics.json").exists() and not (out / "trial-2").exists()
 
 
-def test_testbed_hil_writes_what_ran_when_the_pilot_raises(study: Path) -> None:
-    """The CLI over emulated EvoLogics modems (a code review drove it by hand): exit 1, the
-    partial session with its ports.csv and the ports it used, the failure naming the line."""
+def test_testbed_hil_writes_what_ran_when_the_pilot_raises(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The CLI over emulated EvoLogics modems (a code review drove it by hand): exit 2 and one
+    error line, the partial session with its ports.csv and the ports it used, the failure
+    naming the pilot and the line."""
     from testbed.channel import load_link_config
     from testbed.emulator.ptys import ModemEmulator
 
@@ -224,26 +258,30 @@ def test_testbed_hil_writes_what_ran_when_the_pilot_raises(study: Path) -> None:
         short += ["--set", "link.ipg_s=0.3", "--set", f"pilot.factory={study / 'sleepy.py'}:Sleepy"]
         argv = ["hil", str(study / "step.toml"), *ports, "--duration", "4", "--log-bytes"]
         argv += ["--out", str(out), "--no-plots", *short, "--set", "pilot.args={at_s=2.0}"]
-        assert main(argv) == 1
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert f"testbed: error: pilot Sleepy ({study / 'sleepy.py'}): sample(2." in err
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["complete"] is False and 2.0 < metrics["sim_s"] < 4.0
-    assert metrics["failure"].startswith("ValueError: pilot fell asleep at 2.")
+    assert metrics["failure"].startswith(f"PilotError: pilot Sleepy ({study / 'sleepy.py'}")
+    assert "raised ValueError: pilot fell asleep at 2." in metrics["failure"]
     assert f"(at {study / 'sleepy.py'}:{RAISE_LINE + 1})" in metrics["failure"]
     assert {"ports.csv", "series.csv", "events.csv"} <= set(metrics["files"])
     assert metrics["hil"]["ports"]["duration_s"] == 4.0
 
 
-def test_a_run_that_fails_as_it_begins_ends_its_traceback_with_the_closing_line(
-    study: Path,
+def test_a_pilot_that_raises_at_its_first_sample_is_one_line_and_writes_nothing(
+    study: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A pilot that raises at its first sample (t = 0): nothing ran, so nothing is written
-    and --out is removed again; the traceback (Python prints an error's notes after it) ends
-    in the line every failed run ends in, saying so (a link-model researcher's review: it
-    ended in the bare traceback)."""
+    and --out is removed again; the line names the pilot, sample(0.0) and the error."""
     out = study / "first"
     argv = ["run", str(study / "step.toml"), "--no-plots", "--out", str(out)]
     argv += [*_pilot(study, "Sleepy"), "--set", "pilot.args={at_s=-1.0}"]
-    with pytest.raises(ValueError, match=r"pilot fell asleep at 0\.0") as caught:
-        main(argv)
-    assert caught.value.__notes__ == ["testbed: the run failed as it began; nothing was written"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"testbed: error: pilot Sleepy ({study / 'sleepy.py'}): sample(0.0) raised ValueError: "
+        "pilot fell asleep at 0.0\n"
+    )
     assert not out.exists()

@@ -287,8 +287,8 @@ def test_a_sample_that_is_no_pilots_is_one_line_and_the_pilot_is_given_float_tim
     assert main([*argv, "--set", f"{odd}:TupleSample", "--set", "pilot.args={}"]) == 2
     err = capsys.readouterr().err
     assert err == (
-        "testbed: error: pilot TupleSample: sample() must return a PilotSample "
-        "(testbed.operator.pilots), got tuple\n"
+        f"testbed: error: pilot TupleSample ({study / 'odd_pilots.py'}): sample(0.0): got a "
+        "tuple, not a PilotSample (testbed.operator.pilots)\n"
     )
     keeper = load_scenario(str(study / "step.toml"), [f"{odd}:TimeKeeper", "pilot.args={}"])
     assert set(run_scenario(keeper).recorder.series()["cmd_x"]) <= {0.0, 0.5}
@@ -339,10 +339,12 @@ def test_metrics_name_the_version_and_the_pilot_and_a_failed_sweep_run_says_wher
         '            raise ValueError(f"pilot fell asleep at {t_s:.1f}")'
     )
     where = f"(at {study / 'odd_pilots.py'}:{line + 1})"
-    assert row["error"] == f"ValueError: pilot fell asleep at 12.2 {where}"
+    pilot = f"pilot Sleepy ({study / 'odd_pilots.py'})"
+    assert row["error"].startswith(f"PilotError: {pilot}: sample(12.")
+    assert row["error"].endswith(f") raised ValueError: pilot fell asleep at 12.2 {where}")
     command = summary.split("the first failed run alone: ", 1)[1].split("\n", 1)[0]
     words = shlex.split(command)  # the line as a shell would split it
     assert words[:2] == ["testbed", "run"]
     capsys.readouterr()
-    assert main([*words[1:], "--out", str(tmp_path / "alone"), "--no-plots"]) == 1
-    assert "ValueError: pilot fell asleep at 12.2\n" in capsys.readouterr().err
+    assert main([*words[1:], "--out", str(tmp_path / "alone"), "--no-plots"]) == 2
+    assert "raised ValueError: pilot fell asleep at 12.2 (what ran" in capsys.readouterr().err
