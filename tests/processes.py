@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -28,3 +30,28 @@ def check_set(out: Path) -> dict[str, Any]:
     on_disk = {p.name: p.stat().st_size for p in out.iterdir() if p.name != "metrics.json"}
     assert on_disk == files
     return metrics
+
+
+def run_testbed(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``python -m testbed ARGS`` run to its end in ``cwd``, output captured as text (a hung
+    child fails the test after 300 s)."""
+    return subprocess.run(
+        [sys.executable, "-m", "testbed", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300.0,
+    )
+
+
+def one_error_line(done: subprocess.CompletedProcess[str], *banner: str) -> str:
+    """The run's one error line: exit 2, no traceback, nothing else on stderr but ``banner``
+    (the lines a real-time mode prints as it starts)."""
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == len(banner) + 1, done.stderr
+    for line, start in zip(lines, banner, strict=False):
+        assert line.startswith(start), done.stderr
+    assert lines[-1].startswith("testbed: error: "), done.stderr
+    return lines[-1]

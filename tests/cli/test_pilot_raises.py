@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.processes import one_error_line, run_testbed
 
 PILOTS = '''
 import math
@@ -111,28 +111,8 @@ def study(tmp_path: Path) -> Path:
     return folder
 
 
-def run_testbed(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "testbed", *args],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300.0,
-    )
-
-
 def pilot(kind: str, name: str = "Bad") -> list[str]:
     return ["--set", f"pilot.factory=pilots.py:{name}", "--set", f'pilot.args={{kind="{kind}"}}']
-
-
-def one_error_line(done: subprocess.CompletedProcess[str]) -> str:
-    """The run's one error line: exit 2, no traceback, nothing else on stderr."""
-    assert done.returncode == 2, done.stderr
-    assert "Traceback" not in done.stderr
-    lines = done.stderr.splitlines()
-    assert len(lines) == 1, done.stderr
-    assert lines[0].startswith("testbed: error: "), done.stderr
-    return lines[0]
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

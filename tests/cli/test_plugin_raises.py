@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.processes import one_error_line, run_testbed
 
 PLUGINS = '''
 from testbed.channel import StandardLink
@@ -139,16 +139,6 @@ def study(tmp_path: Path) -> Path:
     return folder
 
 
-def run_testbed(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "testbed", *args],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300.0,
-    )
-
-
 def model(where: str, at_s: float = BREAK_S, name: str = "Faulty") -> list[str]:
     return [
         "--set",
@@ -165,19 +155,6 @@ def law(where: str, at_s: float = BREAK_S) -> list[str]:
         "--set",
         f'vehicle.control.depth_args={{where="{where}", at_s={at_s}}}',
     ]
-
-
-def one_error_line(done: subprocess.CompletedProcess[str], *banner: str) -> str:
-    """The run's one error line: exit 2, no traceback, nothing else on stderr but ``banner``
-    (the lines a real-time mode prints as it starts)."""
-    assert done.returncode == 2, done.stderr
-    assert "Traceback" not in done.stderr
-    lines = done.stderr.splitlines()
-    assert len(lines) == len(banner) + 1, done.stderr
-    for line, start in zip(lines, banner, strict=False):
-        assert line.startswith(start), done.stderr
-    assert lines[-1].startswith("testbed: error: "), done.stderr
-    return lines[-1]
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from testbed.cli.main import main
 from testbed.sweep import load_sweep, run_sweep
+from tests.processes import run_testbed
 from tests.run.test_plugins import write_study
 
 PILOTS = """
@@ -67,16 +66,6 @@ def study(tmp_path: Path) -> Path:
     (folder / "quitters.py").write_text(PILOTS)
     (folder / "script.py").write_text("import sys\n\nsys.exit(3)\n")
     return folder
-
-
-def run_testbed(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "testbed", *args],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300.0,
-    )
 
 
 @pytest.mark.parametrize(
