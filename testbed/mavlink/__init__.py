@@ -12,7 +12,9 @@
   its failsafes in :mod:`~testbed.mavlink.failsafe`, its stream rates in
   :mod:`~testbed.mavlink.streams`, MAVLink's high-latency mode (HIGH_LATENCY2,
   MAV_CMD_CONTROL_HIGH_LATENCY) in :mod:`~testbed.mavlink.high_latency`.
-* :mod:`~testbed.mavlink.telemetry` — the vehicle's components as ArduSub's telemetry.
+* :mod:`~testbed.mavlink.vehicle_snapshot` — the vehicle's components read at one instant
+  (:class:`VehicleSnapshot`); :mod:`~testbed.mavlink.telemetry` — a snapshot as ArduSub's
+  telemetry messages.
 * :mod:`~testbed.mavlink.ardusub` — ArduSub's numbers: modes, heartbeat flags, stream groups,
   MANUAL_CONTROL scaling.
 * :mod:`~testbed.mavlink.motors` — ArduSub's motor numbering of a frame (``AP_Motors6DOF``),
@@ -33,7 +35,8 @@ from .endpoint import VehicleEndpoint
 from .motors import ServoOutputs, servo_outputs
 from .options import EndpointOptions, PositionLoop
 from .params import Param, ParamTable, load_params
-from .telemetry import HOME_LAT_LON_DEG, VehicleSnapshot
+from .telemetry import HOME_LAT_LON_DEG
+from .vehicle_snapshot import VehicleSnapshot
 from .wire import MavlinkWire
 
 __all__ = [

@@ -67,7 +67,8 @@ from testbed.mavlink.motor_test import MotorTest, update_motor_test
 from testbed.mavlink.options import EndpointOptions
 from testbed.mavlink.outbound import Outbound
 from testbed.mavlink.params import ParamTable
-from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
+from testbed.mavlink.telemetry import BUILDERS
+from testbed.mavlink.vehicle_snapshot import VehicleSnapshot, VelocityEstimator, read_vehicle
 
 __all__ = ["POSITION_FIX_TIMEOUT_S", "Handler", "VehicleEndpoint"]
 

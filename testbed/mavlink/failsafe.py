@@ -27,7 +27,7 @@ from testbed.common.components import ControlMode
 
 if TYPE_CHECKING:
     from testbed.mavlink.endpoint import VehicleEndpoint
-    from testbed.mavlink.telemetry import VehicleSnapshot
+    from testbed.mavlink.vehicle_snapshot import VehicleSnapshot
 
 __all__ = ["GCS_WARNING_PERIOD_S", "FailsafeMonitor"]
 

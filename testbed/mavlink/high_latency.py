@@ -85,11 +85,11 @@ from testbed.mavlink.ardusub import base_mode
 from testbed.mavlink.telemetry import (
     SENSORS_HEALTHY,
     VFR_HUD_AIRSPEED_M_S,
-    VehicleSnapshot,
     position_e7,
     vfr_hud_throttle,
     yaw_sensor_cd,
 )
+from testbed.mavlink.vehicle_snapshot import VehicleSnapshot
 
 if TYPE_CHECKING:
     from testbed.mavlink.channel import Channel

@@ -13,7 +13,8 @@ from testbed.common.components import Odometry
 from testbed.common.geometry import quat_from_axis_angle, quat_from_euler, quat_multiply
 from testbed.ecs import World
 from testbed.mavlink.motors import ServoOutputs
-from testbed.mavlink.telemetry import BUILDERS, VehicleSnapshot, VelocityEstimator, read_vehicle
+from testbed.mavlink.telemetry import BUILDERS
+from testbed.mavlink.vehicle_snapshot import VehicleSnapshot, VelocityEstimator, read_vehicle
 
 
 def _snapshot(world: World, entity: int, t: float, velocity: VelocityEstimator) -> VehicleSnapshot:
