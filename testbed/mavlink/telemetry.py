@@ -171,6 +171,9 @@ def position_e7(s: VehicleSnapshot) -> tuple[int, int]:
 
 
 def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
+    """ArduPilot's ``GCS_MAVLINK::send_global_position_int`` (``GCS_Common.cpp``): ``hdg`` is
+    ``ahrs.yaw_sensor`` (:func:`yaw_sensor_cd`: truncated centidegrees, 0..35999), not the
+    nearest centidegree."""
     down = s.position_ned_m[2]
     lat, lon = position_e7(s)
     vn, ve, vd = s.velocity_ned_m_s
@@ -183,7 +186,7 @@ def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
         _i16(vn * 100.0),
         _i16(ve * 100.0),
         _i16(vd * 100.0),
-        round(s.heading_deg * 100.0) % 36000,
+        yaw_sensor_cd(s.euler_rad[2]),
     )
 
 

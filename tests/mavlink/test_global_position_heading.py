@@ -1,0 +1,73 @@
+"""GLOBAL_POSITION_INT's ``hdg`` as ArduPilot sends it, read by pymavlink.
+
+ArduPilot's ``GCS_MAVLINK::send_global_position_int`` (``libraries/GCS_MAVLink/GCS_Common.cpp``,
+the same in a 4.5 branch and in the newest stored master-era copy) sends ``ahrs.yaw_sensor`` as
+``hdg``; ``AP_AHRS::update_cd_values`` (``libraries/AP_AHRS/AP_AHRS.cpp``) sets that int32 to
+``degrees(yaw) * 100`` — the centidegrees truncated toward 0 — and adds 36000 when negative.
+So for a yaw east of north the heading's fraction of a centidegree is dropped (12.345° → 1234),
+west of north (yaw < 0) it is rounded up instead (−1.7 cd → 35999, not 35998): never the nearest
+centidegree, which the endpoint used to send.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from tests.mavlink.gcs import SimGcs
+
+
+@pytest.fixture
+def gcs() -> Iterator[SimGcs]:
+    station = SimGcs()
+    yield station
+    station.close()
+
+
+def _ardupilot_yaw_sensor(yaw_rad: float) -> int:
+    """``AP_AHRS::update_cd_values``: int32 ``degrees(yaw) * 100`` (toward 0), + 36000 if < 0."""
+    centideg = math.trunc(math.degrees(yaw_rad) * 100.0)
+    return centideg + 36000 if centideg < 0 else centideg
+
+
+def test_hdg_is_ardupilots_yaw_sensor_truncated_not_rounded(gcs: SimGcs) -> None:
+    """Turning to port, then to starboard through north, with GLOBAL_POSITION_INT and ATTITUDE
+    asked for every 50 ms together (SET_MESSAGE_INTERVAL in one step, so they share a
+    schedule): each hdg is the yaw_sensor of the ATTITUDE yaw sent in the same step (the same
+    state; ATTITUDE's float32 yaw resolves a centidegree to ~1e-3 cd, so fractions within
+    0.02 cd of a whole one are left out). Both signs of yaw occur, and in many pairs the
+    nearest centidegree differs."""
+    interval = mav.MAV_CMD_SET_MESSAGE_INTERVAL
+    gcs.send(
+        gcs.heartbeat(),
+        gcs.arm(),
+        gcs.command(interval, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000),
+        gcs.command(interval, mav.MAVLINK_MSG_ID_ATTITUDE, 50_000),
+    )
+    gcs.run(0.2, gcs.flying())
+    pairs: list[tuple[int, float]] = []
+    for k in range(round(12.0 / 0.01)):  # turning west of north, then back east of it
+        gcs.send(*([gcs.sticks(r=-500 if k < 500 else 500)] if k % 4 == 0 else []))
+        gcs.send(*([gcs.heartbeat()] if k % 100 == 0 else []))
+        before = len(gcs.messages)
+        gcs.step()
+        new = gcs.messages[before:]
+        fixes = [m for m in new if m.get_type() == "GLOBAL_POSITION_INT"]
+        attitudes = [m for m in new if m.get_type() == "ATTITUDE"]
+        if fixes and attitudes:
+            pairs.append((fixes[-1].hdg, attitudes[-1].yaw))
+    checked = negative = rounding_differs = 0
+    for hdg, yaw in pairs:
+        centideg = math.degrees(yaw) * 100.0
+        fraction = abs(centideg) - math.floor(abs(centideg))
+        if not 0.02 < fraction < 0.98:
+            continue
+        assert hdg == _ardupilot_yaw_sensor(yaw), (hdg, yaw)
+        checked += 1
+        negative += yaw < 0.0
+        rounding_differs += hdg != round(math.degrees(yaw) % 360.0 * 100.0) % 36000
+    assert checked >= 150 and negative >= 20 and checked - negative >= 20
+    assert rounding_differs >= 30
