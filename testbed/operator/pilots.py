@@ -14,10 +14,12 @@ Here: :class:`ScriptedPilot` (smooth stick signals, the narrow-band paper's Fig.
 :class:`AttitudePilot` (the ECS paper's oscillating roll, pitch and yaw setpoints) and
 :class:`SupervisorPilot` (supervised control: a timed list of GoTo goals — of the vehicle or of
 its arm's end effector — and cancels for a vehicle that flies itself, the narrow-band paper's
-"high level commands"). A scenario configures them (:class:`~testbed.run.sections.PilotSection`);
-it does not implement them.
+"high level commands"). :class:`~testbed.operator.recorded_pilot.RecordedPilot` (the sticks of
+a run's ``series.csv``, held) lives in its own module and is listed here among the pure ones. A
+scenario configures them (:class:`~testbed.run.sections.PilotSection`); it does not implement
+them.
 
-Imports: ``config`` and the standard library only.
+Imports: ``config``, ``operator.recorded_pilot`` and the standard library only.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 from testbed.config import ConfigError, check, check_range
+from testbed.operator.recorded_pilot import RecordedPilot
 
 __all__ = [
     "GOAL_FRAMES",
@@ -338,7 +341,7 @@ class SupervisorPilot:
         return PilotSample(_NO_STICKS, None, goal)
 
 
-PURE_PILOTS = (ScriptedPilot, AttitudePilot, SupervisorPilot)
+PURE_PILOTS = (ScriptedPilot, AttitudePilot, SupervisorPilot, RecordedPilot)
 """The pilots whose ``sample(t)`` is a pure function of ``t`` (observers may sample them again)."""
 
 

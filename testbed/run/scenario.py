@@ -244,6 +244,11 @@ def _from_data(
             "and MAVLink orders carry no depth setpoint: depth hold keeps the depth at arming)"
         )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
+    if pilot.kind == "recorded" and "start_s" in top.pilot:  # it plays at the file's times
+        raise ConfigError(
+            f"{where}: pilot.start_s: not used when kind = 'recorded' (pilot.shift_s moves the "
+            "recording in time)"
+        )
     if pilot.kind == "python":
         if "start_s" in top.pilot:  # a pilot of one's own starts when it says (its args)
             raise ConfigError(f"{where}: pilot.start_s: not used when kind = 'python'")

@@ -64,8 +64,14 @@ _FILE_KEYS = (
     ("link", "model"),
     ("vehicle", "control", "depth"),
     ("vehicle", "control", "attitude"),
+    ("pilot", "file"),
 )
-"""Keys that may name a user's file by path (the last four a Python file, ``FILE.py:NAME``)."""
+"""Keys that may name a user's file by path (``link.model``, ``pilot.factory`` and the
+``vehicle.control`` laws a Python file, ``FILE.py:NAME``; ``pilot.file`` a recorded pilot's
+``.csv``)."""
+
+_DATA_SUFFIXES = (".toml", ".json", ".csv")
+"""The endings of the data files a scenario names by path."""
 
 
 FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
@@ -74,7 +80,7 @@ FILE_KEY_NAMES = frozenset(".".join(key) for key in _FILE_KEYS)
 
 def path_beside(value: Any, folder: Path) -> Any:
     """``value`` of a file key (:data:`FILE_KEY_NAMES`) as written in a file kept in
-    ``folder``: a relative path of a user file (ending in ``.toml``/``.json``, or a
+    ``folder``: a relative path of a user file (ending in ``.toml``/``.json``/``.csv``, or a
     ``FILE.py:NAME`` target) taken from ``folder``; anything else (a packaged name, a module,
     an absolute path) as it is."""
     if isinstance(value, str):
@@ -82,22 +88,25 @@ def path_beside(value: Any, folder: Path) -> Any:
         if python is not None and not Path(python).is_absolute():
             return f"{folder / python}:{value.rpartition(':')[2]}"
         path = Path(value)
-        if not path.is_absolute() and path.suffix in (".toml", ".json"):
+        if not path.is_absolute() and path.suffix in _DATA_SUFFIXES:
             return str(folder / path)
     return value
 
 
 def named_file_texts(data: Mapping[str, Any]) -> Iterator[str]:
     """The text of each user file a scenario's ``data`` names by path (:data:`_FILE_KEYS`;
-    "" for one that cannot be read, which the build then names)."""
+    "" for one that cannot be read, which the build then names); for a ``.csv`` (a recorded
+    pilot's sticks, which may be tens of MB) its SHA-256 instead."""
     for key in _FILE_KEYS:
         value: Any = data
         for part in key:
             value = value.get(part) if isinstance(value, Mapping) else None
         if not isinstance(value, str):
             continue
-        path = target_file(value) or (value if Path(value).suffix in (".toml", ".json") else None)
-        if path is not None:
+        path = target_file(value) or (value if Path(value).suffix in _DATA_SUFFIXES else None)
+        if path is not None and Path(path).suffix == ".csv":
+            yield file_digests([path])[0][1]
+        elif path is not None:
             try:
                 yield Path(path).read_text(encoding="utf-8")
             except (OSError, UnicodeDecodeError):
@@ -121,8 +130,9 @@ def paths_beside(data: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 def user_files(scenario: Scenario) -> list[str]:
     """The data files given by path (a link preset, a model, a thruster layout, a mission, an
-    arm model, a TPIK configuration), not packaged, and the Python files behind a pilot, link
-    model or control law of the user's (:func:`~testbed.run.plugins.target_files`)."""
+    arm model, a TPIK configuration, a recorded pilot's sticks), not packaged, and the Python
+    files behind a pilot, link model or control law of the user's
+    (:func:`~testbed.run.plugins.target_files`)."""
     vehicle = scenario.vehicle
     named = [scenario.link.preset, vehicle.model, vehicle.thrusters]
     if vehicle.autonomy is not None and vehicle.autonomy.mission is not None:
@@ -130,6 +140,8 @@ def user_files(scenario: Scenario) -> list[str]:
     if vehicle.arm is not None:
         named += [vehicle.arm.model, vehicle.arm.tpik]
     files = [name for name in named if Path(name).suffix in (".toml", ".json")]
+    if scenario.pilot.kind == "recorded":
+        files.append(scenario.pilot.file)
     laws = scenario.control_laws.targets().values()
     for target in (scenario.pilot.factory, scenario.link.model, *laws):
         if target:

@@ -23,7 +23,7 @@ from testbed.channel import (
     LinkConfig,
 )
 from testbed.common.components import ControlMode
-from testbed.config import check, check_range, check_ranges
+from testbed.config import ConfigError, FieldError, check, check_range, check_ranges
 from testbed.operator.pilots import (
     PERIOD_RANGE_S,
     AttitudePilot,
@@ -33,6 +33,7 @@ from testbed.operator.pilots import (
     SineTerm,
     SupervisorPilot,
 )
+from testbed.operator.recorded_pilot import RecordedPilot, load_recorded_pilot
 from testbed.protocol import OPERATOR_HEADER_SIZE, ORDER_TYPES, Move, frame_overhead
 from testbed.run.metrics import SIGNAL_LAG_WINDOW_S
 from testbed.run.plugins import check_target
@@ -292,11 +293,16 @@ class PilotSection:
     sticks; ``goals`` is a timed list of GoTo goals and cancels
     (:class:`~testbed.operator.pilots.SupervisorPilot`). ``kind = "python"``: a pilot of the
     user's own, made for each run by the callable ``factory`` names with ``args``
-    (:mod:`testbed.run.plugins`). Each kind rejects the others' non-zero settings.
+    (:mod:`testbed.run.plugins`). ``kind = "recorded"``: the sticks of an earlier run played back
+    open loop (:class:`~testbed.operator.recorded_pilot.RecordedPilot`): the ``cmd_*`` columns of
+    its ``series.csv`` (``file``), each row held until the next, centred sticks before the first
+    row and after the last, ``shift_s`` later than recorded; the file is read and checked once,
+    here. Each kind rejects the others' non-zero settings.
 
     Attributes:
-        kind: ``"scripted"``, ``"attitude"``, ``"supervisor"`` or ``"python"``.
-        start_s: when the pilot starts [s], in [0, duration_s).
+        kind: ``"scripted"``, ``"attitude"``, ``"supervisor"``, ``"python"`` or ``"recorded"``.
+        start_s: when the pilot starts [s], in [0, duration_s) (not for ``"python"`` or
+            ``"recorded"``, which the loader refuses it with).
         x, y, z, yaw: surge, sway, heave (+ down) and yaw stick terms (amplitude in [−1, 1],
             period in [0.01, 1e6] s, phase in [−2π, 2π] rad).
         roll_amplitude_deg, pitch_amplitude_deg: setpoint amplitudes [deg], |A| ≤ 89.9.
@@ -310,9 +316,15 @@ class PilotSection:
             (``kind = "python"``; a relative file is the scenario file's folder's).
         args: the factory's keyword arguments (``kind = "python"``), any TOML values; ``rng``
             is the run's to give.
+        file: the ``series.csv`` whose sticks a ``"recorded"`` pilot replays (a relative path is
+            the scenario file's folder's, or the working directory's on the command line).
+        shift_s: a ``"recorded"`` pilot plays the file this much later [s], in [−86400, 86400]
+            (negative: its first ``−shift_s`` seconds are skipped).
+        recording: the sticks ``file`` holds, read and checked when the section is built
+            (``"recorded"``), else None.
     """
 
-    kind: Literal["scripted", "attitude", "supervisor", "python"] = "scripted"
+    kind: Literal["scripted", "attitude", "supervisor", "python", "recorded"] = "scripted"
     start_s: float = 5.0
     x: tuple[SineTerm, ...] = ()
     y: tuple[SineTerm, ...] = ()
@@ -328,9 +340,13 @@ class PilotSection:
     goals: tuple[GoalStep, ...] = ()
     factory: str = ""
     args: dict[str, Any] = field(default_factory=dict)
+    file: str = ""
+    shift_s: float = 0.0
+    recording: RecordedPilot | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_time(self.start_s, "start_s")
+        check_range(self.shift_s, "shift_s", -MAX_DURATION_S, MAX_DURATION_S, "s")
         for name, limit in zip(_ATTITUDE_AMPLITUDES, (89.9, 89.9, 180.0), strict=True):
             check_range(getattr(self, name), name, -limit, limit, "deg")
         for name in ("roll_period_s", "pitch_period_s", "yaw_period_s"):
@@ -341,6 +357,7 @@ class PilotSection:
             "attitude": _ATTITUDE_AMPLITUDES,
             "supervisor": ("goals",),
             "python": ("factory", "args"),
+            "recorded": ("file", "shift_s"),
         }
         for kind, names in owners.items():
             if kind != self.kind:
@@ -351,6 +368,13 @@ class PilotSection:
             problem = check_target(self.factory)
             check(problem is None, "factory", problem or "")
             check("rng" not in self.args, "args.rng", "the run gives rng (its seed's generator)")
+        if self.kind == "recorded":
+            check(bool(self.file), "file", "required when kind = 'recorded' (a run's series.csv)")
+            try:
+                recording = load_recorded_pilot(self.file, self.shift_s)
+            except ConfigError as err:  # the file's own line, under this key
+                raise FieldError("file", str(err)) from None
+            object.__setattr__(self, "recording", recording)
 
     def pilot(self) -> Pilot:
         """The packaged pilot this section configures (:mod:`testbed.operator.pilots`); a
@@ -359,6 +383,9 @@ class PilotSection:
             raise ValueError("a pilot of kind 'python' is made by plugin_calls.scenario_pilot")
         if self.kind == "supervisor":
             return SupervisorPilot(self.goals)
+        if self.kind == "recorded":
+            assert self.recording is not None  # built with the section
+            return self.recording
         if self.kind == "attitude":
             return AttitudePilot(
                 self.start_s,
