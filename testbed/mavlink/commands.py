@@ -203,9 +203,10 @@ def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_
     ``ap_message`` (here: one this endpoint does not send): param2 0 ("default") fails in
     ``get_default_interval_for_mavlink_message_id``, silently; any other interval in
     ``set_mavlink_message_id_interval``, which says "No ap_message for mavlink id (N)" (INFO,
-    to every link); both answer MAV_RESULT_FAILED. A message sent but not streamed
-    (HEARTBEAT, HOME_POSITION…: its rate is not settable here) is UNSUPPORTED, as is a NaN
-    interval (C leaves ``(int32_t)`` of it undefined)."""
+    to every link); both answer MAV_RESULT_FAILED. HEARTBEAT's rate is set on this link
+    (ArduPilot's MSG_HEARTBEAT, a deferred message: :meth:`.StreamSchedule.set_interval`). A
+    message sent but not streamed (HOME_POSITION, GPS_GLOBAL_ORIGIN…: its rate is not settable
+    here) is UNSUPPORTED, as is a NaN interval (C leaves ``(int32_t)`` of it undefined)."""
     del now_s
     msg_id = _message_id(p[0])
     name = None if msg_id is None else _NAMES_BY_ID.get(msg_id)

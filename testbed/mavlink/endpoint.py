@@ -16,7 +16,7 @@ those are the vehicle's own entities; a shore-side gateway gives it the operator
 (intents it owns, the vehicle state it mirrors) and the same handling serves the ground station.
 
 What it speaks (ArduSub 4.5 as seen by QGroundControl and MAVProxy, REFERENCE.md §4): system
-1 component 1, MAVLink 2; HEARTBEAT at 1 Hz; AUTOPILOT_VERSION on REQUEST_MESSAGE or
+1 component 1, MAVLink 2; HEARTBEAT at 1 Hz per link; AUTOPILOT_VERSION on REQUEST_MESSAGE or
 REQUEST_AUTOPILOT_CAPABILITIES; the parameter protocol over :class:`~.params.ParamTable`;
 MISSION_COUNT 0; REQUEST_DATA_STREAM and SET/GET_MESSAGE_INTERVAL; TIMESYNC; arming
 (COMMAND_LONG 400), modes by SET_MODE or DO_SET_MODE with COMMAND_ACK (MANUAL, STABILIZE,
@@ -136,7 +136,6 @@ class VehicleEndpoint(Outbound):
         self.buttons_held = 0
         self._consumed_ah = 0.0
         self._last_update_s: float | None = None
-        self._next_heartbeat_s = 0.0
         self._snapshot: VehicleSnapshot | None = None
         self.attitude_target: AttitudeTarget | None = None
         self.stored_attitude: StoredAttitude | None = None
@@ -392,12 +391,11 @@ class VehicleEndpoint(Outbound):
         if snapshot.critical is not self.failsafe.active:  # it just triggered or cleared
             snapshot = dataclasses.replace(snapshot, critical=self.failsafe.active)
             self._snapshot = snapshot
-        if now_s >= self._next_heartbeat_s:
-            self._next_heartbeat_s = max(self._next_heartbeat_s + 1.0, now_s)
-            heartbeat = BUILDERS["HEARTBEAT"](snapshot)
-            for channel in self.channels:
-                if not channel.high_latency:  # HIGH_LATENCY2 instead (its stream)
-                    self.queue(channel, heartbeat)
+        heartbeat = None
+        for channel in self.channels:  # each link's heartbeat (none on a high-latency one)
+            if channel.streams.heartbeat_due(now_s):
+                heartbeat = heartbeat or BUILDERS["HEARTBEAT"](snapshot)
+                self.queue(channel, heartbeat)
         for channel in self.channels:
             for name in channel.streams.due(now_s):
                 self.queue(channel, self.message(name, snapshot))

@@ -18,7 +18,15 @@ a stream group): every :data:`HIGH_LATENCY2_INTERVAL_S` on a high-latency link
 HIGH_LATENCY2, 5000)`` when ``is_high_latency_link``), off on the others, and 5 s again after a
 SET_MESSAGE_INTERVAL of 0 on any link (``get_default_interval_for_ap_message``). A deferred
 message is first due one interval after its schedule starts or is set (``set_ap_message_interval``
-stamps ``last_sent_ms`` now), not at once. No I/O, no clock.
+stamps ``last_sent_ms`` now), not at once.
+
+HEARTBEAT is the other (``deferred_message[]`` in ``GCS.h``: MSG_HEARTBEAT, MSG_NEXT_PARAM,
+MSG_HIGH_LATENCY2), per link as everything here: every :data:`HEARTBEAT_INTERVAL_S` from the
+channel's first update on an ordinary link (``initialise_message_intervals_from_streamrates``:
+``set_mavlink_message_id_interval(HEARTBEAT, 1000)`` unless ``is_high_latency_link``), none on
+a high-latency one; SET_MESSAGE_INTERVAL sets it as any message (0: back to 1 s on any link,
+``get_default_interval_for_ap_message``'s special case; −1: no heartbeat on that link) and
+GET_MESSAGE_INTERVAL reads it back (1 000 000 µs by default, −1 when off). No I/O, no clock.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ from testbed.mavlink.ardusub import STREAM_GROUPS
 __all__ = [
     "ARDUSUB_LOOP_PERIOD_US",
     "GROUP_PARAMS",
+    "HEARTBEAT_INTERVAL_S",
     "HIGH_LATENCY2_INTERVAL_S",
     "MAX_INTERVAL_S",
     "MAX_RATE_HZ",
@@ -65,6 +74,11 @@ HIGH_LATENCY2_INTERVAL_S = 5.0
 """HIGH_LATENCY2's interval on a high-latency link, and its default on any [s] (ArduPilot 4.5
 ``GCS_Common.cpp``: 5000 ms)."""
 _DEFERRED = ("HIGH_LATENCY2",)
+HEARTBEAT_INTERVAL_S = 1.0
+"""HEARTBEAT's interval on an ordinary link, and its default on any [s] (ArduPilot's
+``GCS_MAVLINK::get_default_interval_for_ap_message``: 1000 ms for MSG_HEARTBEAT, "because
+heartbeat is not streamed")."""
+_HEARTBEAT_MS = round(HEARTBEAT_INTERVAL_S * 1000)
 
 
 class _HasParams(Protocol):
@@ -99,6 +113,10 @@ class StreamSchedule:
             self._defaults[name] = HIGH_LATENCY2_INTERVAL_S
             self.interval_s[name] = HIGH_LATENCY2_INTERVAL_S if high_latency else 0.0
         self._next_s: dict[str, float] = {}
+        self._heartbeat_ms = 0 if high_latency else _HEARTBEAT_MS  # as ArduPilot keeps it
+        self.heartbeat_interval_s = 0.0 if high_latency else HEARTBEAT_INTERVAL_S
+        """HEARTBEAT's interval as served [s] (0 = none on this link)."""
+        self._next_heartbeat_s: float | None = 0.0  # None: set, first due one interval on
 
     @classmethod
     def from_params(cls, owner: _HasParams) -> StreamSchedule:
@@ -126,8 +144,19 @@ class StreamSchedule:
         (:func:`interval_ms`): off, the group's rate (its boot rate, or the one
         REQUEST_DATA_STREAM set since), or every so many whole milliseconds, kept as
         :func:`stored_interval_ms` and served at least 1 / :data:`MAX_RATE_HZ` apart. Returns
-        False for a message not streamed or a NaN interval."""
-        if name not in self._defaults or math.isnan(interval_us):
+        False for a message not streamed or a NaN interval. HEARTBEAT's default is
+        :data:`HEARTBEAT_INTERVAL_S`, its first one then one interval on (:meth:`heartbeat_due`).
+        """
+        if math.isnan(interval_us):
+            return False
+        if name == "HEARTBEAT":
+            ms = interval_ms(interval_us)
+            stored = stored_interval_ms(_HEARTBEAT_MS if ms is None else ms)
+            self._heartbeat_ms = stored
+            self.heartbeat_interval_s = _served_s(stored)
+            self._next_heartbeat_s = None
+            return True
+        if name not in self._defaults:
             return False
         ms = interval_ms(interval_us)
         if ms is None:
@@ -136,7 +165,7 @@ class StreamSchedule:
             return True
         stored = stored_interval_ms(ms)
         self._stored_ms[name] = stored
-        self._set(name, 0.0 if stored == 0 else max(stored * 1e-3, 1.0 / MAX_RATE_HZ))
+        self._set(name, _served_s(stored))
         return True
 
     def interval_us(self, name: str) -> int:
@@ -144,7 +173,11 @@ class StreamSchedule:
         SET_MESSAGE_INTERVAL set as ArduPilot keeps it (``handle_command_get_message_interval``
         answers ``interval_ms * 1000`` of what ``set_ap_message_interval`` stored: 3000 after a
         1-ms request, though it is served at :data:`MAX_RATE_HZ`), else its group rate's
-        (:func:`stream_interval_ms`: 333 000 at 3 Hz), else the interval served."""
+        (:func:`stream_interval_ms`: 333 000 at 3 Hz), else the interval served. HEARTBEAT:
+        1 000 000 by default, −1 on a high-latency link (``get_ap_message_interval`` reads the
+        deferred message's ``interval_ms``, 0 there)."""
+        if name == "HEARTBEAT":
+            return -1 if self._heartbeat_ms == 0 else self._heartbeat_ms * 1000
         if name not in self.interval_s:
             return 0
         if name in self._stored_ms:
@@ -159,6 +192,24 @@ class StreamSchedule:
     def _set(self, name: str, interval_s: float) -> None:
         self.interval_s[name] = interval_s
         self._next_s.pop(name, None)
+
+    def heartbeat_due(self, now_s: float) -> bool:
+        """Whether this link's HEARTBEAT is due at ``now_s`` [s] (then scheduled one interval
+        on; after a stall, one interval from now, as ArduPilot's ``update_send`` does for a
+        deferred message that fell behind). Due at the channel's first update; after
+        SET_MESSAGE_INTERVAL, first one interval on."""
+        interval = self.heartbeat_interval_s
+        if interval <= 0.0:
+            return False
+        next_s = self._next_heartbeat_s
+        if next_s is None:
+            self._next_heartbeat_s = now_s + interval
+            return False
+        if now_s < next_s:
+            return False
+        next_s += interval
+        self._next_heartbeat_s = next_s if next_s > now_s else now_s + interval
+        return True
 
     def due(self, now_s: float) -> list[str]:
         """The messages due at ``now_s`` [s] (each then scheduled one interval on)."""
@@ -228,6 +279,12 @@ def stream_interval_ms(rate_hz: float) -> int | None:
     if not 0 <= rate <= 1000 or (rate == 0 and rate_hz != 0):  # a fraction of 1 Hz: ours
         return None
     return 0 if rate == 0 else stored_interval_ms(1000 // rate)
+
+
+def _served_s(stored_ms: int) -> float:
+    """The interval [s] a message kept at ``stored_ms`` (0 = off) is served at: at most
+    :data:`MAX_RATE_HZ`."""
+    return 0.0 if stored_ms == 0 else max(stored_ms * 1e-3, 1.0 / MAX_RATE_HZ)
 
 
 def _interval(rate_hz: float) -> float:
