@@ -250,3 +250,7 @@ def test_a_ber_sweep_over_a_recorded_pilot_runs(tmp_path: Path) -> None:
         results = list(csv.DictReader(handle))
     assert [float(r["link.ber"]) for r in results] == [0.0, 1e-3]
     assert all(r["status"] == "ok" for r in results), results
+    with (tmp_path / "sticks.csv").open("a", encoding="utf-8") as handle:
+        handle.write("10,0,0,0,0,0\n")  # an edited recording is another input
+    again = one_error_line(run_testbed([*sweep, "--resume"], tmp_path))
+    assert f"input {tmp_path / 'sticks.csv'}: changed (SHA-256" in again
