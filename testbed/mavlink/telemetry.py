@@ -170,22 +170,32 @@ def position_e7(s: VehicleSnapshot) -> tuple[int, int]:
     return round(lat * 1e7), round(lon * 1e7)
 
 
+def _c_int(value: np.float32, bits: int) -> int:
+    """C's conversion of a float to a signed ``bits``-bit integer: toward 0 (beyond the range,
+    which C leaves undefined, saturated, as ARM's VCVT does)."""
+    limit = 1 << (bits - 1)
+    return max(-limit, min(limit - 1, math.trunc(float(value))))
+
+
 def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
     """ArduPilot's ``GCS_MAVLINK::send_global_position_int`` (``GCS_Common.cpp``): ``hdg`` is
     ``ahrs.yaw_sensor`` (:func:`yaw_sensor_cd`: truncated centidegrees, 0..35999), not the
-    nearest centidegree."""
+    nearest centidegree; ``vx, vy, vz`` are ``vel * 100`` in single precision passed to int16
+    fields and ``relative_alt`` is ``global_position_int_relative_alt``'s ``posD *= -1000.0f``
+    returned as an int32: all converted toward 0, not rounded."""
     down = s.position_ned_m[2]
     lat, lon = position_e7(s)
-    vn, ve, vd = s.velocity_ned_m_s
+    hundred = np.float32(100.0)
+    vn, ve, vd = (np.float32(v) * hundred for v in s.velocity_ned_m_s)
     return mav.MAVLink_global_position_int_message(
         s.time_boot_ms,
         lat,
         lon,
         round(-down * 1000.0),
-        round(-down * 1000.0),
-        _i16(vn * 100.0),
-        _i16(ve * 100.0),
-        _i16(vd * 100.0),
+        _c_int(np.float32(down) * np.float32(-1000.0), 32),
+        _c_int(vn, 16),
+        _c_int(ve, 16),
+        _c_int(vd, 16),
         yaw_sensor_cd(s.euler_rad[2]),
     )
 

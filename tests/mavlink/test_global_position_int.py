@@ -1,4 +1,4 @@
-"""GLOBAL_POSITION_INT's ``hdg`` as ArduPilot sends it, read by pymavlink.
+"""GLOBAL_POSITION_INT's integer fields as ArduPilot converts them, read by pymavlink.
 
 ArduPilot's ``GCS_MAVLINK::send_global_position_int`` (``libraries/GCS_MAVLink/GCS_Common.cpp``,
 the same in a 4.5 branch and in the newest stored master-era copy) sends ``ahrs.yaw_sensor`` as
@@ -6,7 +6,10 @@ the same in a 4.5 branch and in the newest stored master-era copy) sends ``ahrs.
 ``degrees(yaw) * 100`` — the centidegrees truncated toward 0 — and adds 36000 when negative.
 So for a yaw east of north the heading's fraction of a centidegree is dropped (12.345° → 1234),
 west of north (yaw < 0) it is rounded up instead (−1.7 cd → 35999, not 35998): never the nearest
-centidegree, which the endpoint used to send.
+centidegree, which the endpoint used to send. Its ``vx, vy, vz`` are ``vel.x * 100`` (a float)
+passed to int16 fields and ``relative_alt`` is ``global_position_int_relative_alt``'s
+``posD *= -1000.0f`` returned as an int32: C's conversions, toward 0; the endpoint used to
+round them too.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -71,3 +75,44 @@ def test_hdg_is_ardupilots_yaw_sensor_truncated_not_rounded(gcs: SimGcs) -> None
         rounding_differs += hdg != round(math.degrees(yaw) % 360.0 * 100.0) % 36000
     assert checked >= 150 and negative >= 20 and checked - negative >= 20
     assert rounding_differs >= 30
+
+
+def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> None:
+    """``vel.x * 100`` (float) into the int16 vx, vy, vz and ``posD * -1000.0f`` returned as
+    the int32 relative_alt are C's conversions, toward 0. LOCAL_POSITION_NED (the same group,
+    the same step, the same state) carries the same velocity and depth as float32, so each
+    GLOBAL_POSITION_INT field is that float32 times 100 (or −1000) in single precision,
+    truncated. Diving forward and turning, the nearest integer differs in many of them."""
+    interval = mav.MAV_CMD_SET_MESSAGE_INTERVAL
+    gcs.send(
+        gcs.heartbeat(),
+        gcs.arm(),
+        gcs.command(interval, mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 50_000),
+        gcs.command(interval, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000),
+    )
+    gcs.run(0.2, gcs.flying())
+    pairs: list[tuple[object, object]] = []
+    for k in range(round(8.0 / 0.01)):
+        gcs.send(*([gcs.sticks(x=600, z=200, r=300)] if k % 4 == 0 else []))
+        gcs.send(*([gcs.heartbeat()] if k % 100 == 0 else []))
+        before = len(gcs.messages)
+        gcs.step()
+        new = gcs.messages[before:]
+        fixes = [m for m in new if m.get_type() == "GLOBAL_POSITION_INT"]
+        locals_ = [m for m in new if m.get_type() == "LOCAL_POSITION_NED"]
+        if fixes and locals_:
+            pairs.append((fixes[-1], locals_[-1]))
+    hundred, minus_thousand = np.float32(100.0), np.float32(-1000.0)
+    checked = rounding_differs = 0
+    for fix, local in pairs:
+        expected = [
+            (fix.vx, np.float32(local.vx) * hundred),
+            (fix.vy, np.float32(local.vy) * hundred),
+            (fix.vz, np.float32(local.vz) * hundred),
+            (fix.relative_alt, np.float32(local.z) * minus_thousand),
+        ]
+        for sent, product in expected:
+            assert sent == math.trunc(float(product)), (sent, float(product))
+            checked += 1
+            rounding_differs += sent != round(float(product))
+    assert len(pairs) >= 100 and checked >= 400 and rounding_differs >= 100
