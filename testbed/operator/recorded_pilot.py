@@ -26,7 +26,7 @@ from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 from testbed.config import ConfigError
 
@@ -190,40 +190,57 @@ def _read(handle: TextIO, source: str, shift_s: float) -> RecordedPilot:
         header = next(reader, None)
         if header is None:
             raise ConfigError(f"{source}: empty file (expected a series.csv header line)")
-        columns = _columns(header, source)
+        at_t, at_x, at_y, at_z, at_yaw = _columns(header, source)
+        width = len(header)
         times, sticks = array("d"), array("d")
+        last_s = -math.inf
         for row in reader:
-            line = reader.line_num
-            if not row:
-                continue
-            if len(row) != len(header):
+            if len(row) != width:
+                if not row:  # a blank line
+                    continue
                 raise ConfigError(
-                    f"{source}: line {line}: {len(row)} fields, expected {len(header)} "
+                    f"{source}: line {reader.line_num}: {len(row)} fields, expected {width} "
                     "(as the header)"
                 )
+            try:  # the common case in one go; anything off is looked at field by field
+                t_s, x, y, z, yaw = (float(row[k]) for k in (at_t, at_x, at_y, at_z, at_yaw))
+                good = last_s < t_s < math.inf and all(-1.0 <= v <= 1.0 for v in (x, y, z, yaw))
+            except ValueError:
+                good = False
+            if not good:
+                _refuse(row, (at_t, at_x, at_y, at_z, at_yaw), last_s, source, reader.line_num)
             if len(times) >= MAX_ROWS:
                 raise ConfigError(f"{source}: more than {MAX_ROWS} rows")
-            t_s = _number(row[columns[0]], source, line, TIME_COLUMN)
-            if times and not t_s > times[-1]:
-                raise ConfigError(
-                    f"{source}: line {line}: {TIME_COLUMN}: times must increase, got {t_s:g} "
-                    f"after {times[-1]:g}"
-                )
-            values = []
-            for name, at in zip(STICK_COLUMNS, columns[1:], strict=True):
-                value = _number(row[at], source, line, name)
-                if not -1.0 <= value <= 1.0:
-                    raise ConfigError(
-                        f"{source}: line {line}: {name}: a stick must be in [-1, 1], got {value:g}"
-                    )
-                values.append(value)
             times.append(t_s)
-            sticks.extend(values)
+            sticks.extend((x, y, z, yaw))
+            last_s = t_s
     except csv.Error as err:
         raise ConfigError(f"{source}: line {reader.line_num}: malformed CSV: {err}") from None
     if not times:
         raise ConfigError(f"{source}: no data lines after the header")
     return RecordedPilot(source, times, sticks, shift_s)
+
+
+def _refuse(row: list[str], at: tuple[int, ...], last_s: float, source: str, line: int) -> NoReturn:
+    """Raise the first problem of a data row: a field that is not a finite number, a time not
+    greater than ``last_s`` [s], a stick outside [−1, 1].
+
+    Raises:
+        ConfigError: naming ``source``, ``line`` and the column.
+    """
+    t_s = _number(row[at[0]], source, line, TIME_COLUMN)
+    if not t_s > last_s:
+        raise ConfigError(
+            f"{source}: line {line}: {TIME_COLUMN}: times must increase, got {t_s:g} "
+            f"after {last_s:g}"
+        )
+    for name, k in zip(STICK_COLUMNS, at[1:], strict=True):
+        value = _number(row[k], source, line, name)
+        if not -1.0 <= value <= 1.0:
+            raise ConfigError(
+                f"{source}: line {line}: {name}: a stick must be in [-1, 1], got {value:g}"
+            )
+    raise AssertionError(f"{source}: line {line}: refused, but no problem found")  # unreachable
 
 
 def _columns(header: list[str], source: str) -> tuple[int, ...]:

@@ -61,7 +61,7 @@ def _series(path: Path) -> tuple[list[str], list[list[str]]]:
 def test_the_hold_gives_the_last_row_at_or_before_t_and_centred_sticks_outside(
     tmp_path: Path,
 ) -> None:
-    rows = "1,0.1,0.2,0.3,0.4,9\n2,-1,1,-0.5,0.25,9\n3,0.5,0,0,-1,nan\n"
+    rows = "1,0.1,0.2,0.3,0.4,9\n\n2,-1,1,-0.5,0.25,9\n3,0.5,0,0,-1,nan\n"  # a blank line
     pilot = load_recorded_pilot(_write(tmp_path / "s.csv", HEADER + rows))
     assert pilot.sample(0.999).sticks == (0.0,) * 6  # before the first row
     assert pilot.sample(1.0).sticks == (0.1, 0.2, 0.3, 0.0, 0.0, 0.4)
@@ -99,6 +99,7 @@ BAD_FILES = [
     (HEADER + "0,0,0,0,0,0\n1,0,zero,0,0,0\n", r"line 3: cmd_y: expected a number, got 'zero'"),
     (HEADER + "0,0,0,nan,0,0\n", r"line 2: cmd_z: must be finite, got nan"),
     (HEADER + "inf,0,0,0,0,0\n", r"line 2: t_s: must be finite, got inf"),
+    (HEADER + "0,0,0,0,0,0\n\n1,0,0,0,0,0\n-inf,0,0,0,0,0\n", r"line 5: t_s: must be finite"),
     (HEADER + "0,0,0,0,1.5,0\n", r"line 2: cmd_yaw: a stick must be in \[-1, 1\], got 1.5"),
     (HEADER + "0,-1.01,0,0,0,0\n", r"line 2: cmd_x: a stick must be in \[-1, 1\], got -1.01"),
     (HEADER + "1,0,0,0,0,0\n1,0,0,0,0,0\n", r"line 3: t_s: times must increase, got 1 after 1"),
