@@ -40,7 +40,6 @@ from testbed.mavlink.ardusub import (
     SIMULATED_MODES,
 )
 from testbed.mavlink.motor_test import do_motor_test
-from testbed.mavlink.streams import interval_ms
 from testbed.mavlink.telemetry import MESSAGE_IDS
 
 if TYPE_CHECKING:
@@ -199,11 +198,11 @@ def _message_id(param1: float) -> int | None:
 
 
 def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_s: float) -> int:
-    """ArduPilot's ``GCS_MAVLINK::set_message_interval`` (``GCS_Common.cpp``) for an id with no
-    ``ap_message`` (here: one this endpoint does not send): param2 0 ("default") fails in
-    ``get_default_interval_for_mavlink_message_id``, silently; any other interval in
-    ``set_mavlink_message_id_interval``, which says "No ap_message for mavlink id (N)" (INFO,
-    to every link); both answer MAV_RESULT_FAILED. HEARTBEAT's rate is set on this link
+    """ArduPilot 4.5's ``GCS_MAVLINK::set_message_interval`` (``GCS_Common.cpp``, the
+    ``mavlink_command_int_t`` handlers of 4.5) for an id with no ``ap_message`` (here: one this
+    endpoint does not send): it says "No ap_message for mavlink id (N)" (INFO, to every link)
+    before it reads the interval, and answers MAV_RESULT_DENIED, whatever param2 (0 too; the
+    4.4-era code answered FAILED, silently for 0). HEARTBEAT's rate is set on this link
     (ArduPilot's MSG_HEARTBEAT, a deferred message: :meth:`.StreamSchedule.set_interval`). A
     message sent but not streamed (HOME_POSITION, GPS_GLOBAL_ORIGIN…: its rate is not settable
     here) is UNSUPPORTED, as is a NaN interval (C leaves ``(int32_t)`` of it undefined)."""
@@ -211,9 +210,9 @@ def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_
     msg_id = _message_id(p[0])
     name = None if msg_id is None else _NAMES_BY_ID.get(msg_id)
     if name is None:
-        if msg_id is not None and not math.isnan(p[1]) and interval_ms(p[1]) is not None:
+        if msg_id is not None:
             e.statustext(mav.MAV_SEVERITY_INFO, f"No ap_message for mavlink id ({msg_id})")
-        return _FAILED
+        return _DENIED
     if not c.streams.set_interval(name, p[1]):
         return _UNSUPPORTED
     return _ACCEPTED

@@ -130,12 +130,12 @@ def _results(gcs: SimGcs, command: int) -> list[int]:
     return [m.result for m in gcs.of("COMMAND_ACK") if m.command == command]
 
 
-def test_an_unknown_message_id_fails_as_in_ardupilot_and_is_said(gcs: SimGcs) -> None:
-    """ArduPilot's ``set_message_interval`` for an id with no ``ap_message`` (9999, or STATUSTEXT
-    253, which is never streamed): ``set_mavlink_message_id_interval`` says "No ap_message for
-    mavlink id (N)" and the command is MAV_RESULT_FAILED (it was UNSUPPORTED, unsaid); param2 0
-    (back to the default) fails in ``get_default_interval_for_mavlink_message_id`` without a
-    word. ``handle_command_get_message_interval`` answers such an id MESSAGE_INTERVAL 0 ("not
+def test_an_unknown_message_id_is_denied_as_in_ardusub_4_5_and_is_said(gcs: SimGcs) -> None:
+    """ArduPilot 4.5's ``set_message_interval`` for an id with no ``ap_message`` (9999, or
+    STATUSTEXT 253, which is never streamed) says "No ap_message for mavlink id (N)" before it
+    reads the interval and answers MAV_RESULT_DENIED, param2 0 too (it was UNSUPPORTED, unsaid;
+    MAVSDK's integration logs against ArduPilot show the same "Command Denied" beside that text).
+    ``handle_command_get_message_interval`` answers such an id MESSAGE_INTERVAL 0 ("not
     available") and FAILED (it was UNSUPPORTED with no MESSAGE_INTERVAL), an id past the uint16
     field cut to it (70 000 → 4464)."""
     set_interval, get_interval = mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL
@@ -143,9 +143,9 @@ def test_an_unknown_message_id_fails_as_in_ardupilot_and_is_said(gcs: SimGcs) ->
     gcs.send(gcs.command(set_interval, mav.MAVLINK_MSG_ID_STATUSTEXT, 100_000))
     gcs.send(gcs.command(set_interval, 9999, 0))
     gcs.run(0.05)
-    assert _results(gcs, set_interval) == [mav.MAV_RESULT_FAILED] * 3
+    assert _results(gcs, set_interval) == [mav.MAV_RESULT_DENIED] * 3
     texts = [m.text for m in gcs.of("STATUSTEXT") if m.text.startswith("No ap_message")]
-    assert texts == ["No ap_message for mavlink id (9999)", "No ap_message for mavlink id (253)"]
+    assert texts == [f"No ap_message for mavlink id ({n})" for n in (9999, 253, 9999)]
     assert {m.severity for m in gcs.of("STATUSTEXT")} == {mav.MAV_SEVERITY_INFO}
     gcs.clear()
     gcs.send(gcs.command(get_interval, 9999), gcs.command(get_interval, 70_000))
