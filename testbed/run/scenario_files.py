@@ -96,7 +96,8 @@ def path_beside(value: Any, folder: Path) -> Any:
 def named_file_texts(data: Mapping[str, Any]) -> Iterator[str]:
     """The text of each user file a scenario's ``data`` names by path (:data:`_FILE_KEYS`;
     "" for one that cannot be read, which the build then names); for a ``.csv`` (a recorded
-    pilot's sticks, which may be tens of MB) its SHA-256 instead."""
+    pilot's sticks, which may be tens of MB) its SHA-256 instead, if it is a regular file (a
+    device that never ends is not read: the build names it)."""
     for key in _FILE_KEYS:
         value: Any = data
         for part in key:
@@ -104,8 +105,8 @@ def named_file_texts(data: Mapping[str, Any]) -> Iterator[str]:
         if not isinstance(value, str):
             continue
         path = target_file(value) or (value if Path(value).suffix in _DATA_SUFFIXES else None)
-        if path is not None and Path(path).suffix == ".csv":
-            yield file_digests([path])[0][1]
+        if path is not None and Path(path).suffix == ".csv":  # tens of MB: its digest
+            yield file_digests([path])[0][1] if Path(path).is_file() else ""  # not /dev/zero
         elif path is not None:
             try:
                 yield Path(path).read_text(encoding="utf-8")

@@ -183,6 +183,24 @@ def test_cli_refuses_a_missing_recording_in_one_line(tmp_path: Path) -> None:
     )
 
 
+def test_a_recording_that_never_ends_is_one_line(tmp_path: Path) -> None:
+    """A scenario naming a .csv that is /dev/zero: no line ends, never read whole."""
+    (tmp_path / "zero.csv").symlink_to("/dev/zero")
+    scenario = _replay_scenario(tmp_path, "zero.csv")
+    line = one_error_line(run_testbed(["run", str(scenario)], tmp_path))
+    assert line.endswith("zero.csv: line 1: longer than 65536 characters (not a series.csv)")
+
+
+def test_an_edited_recording_is_read_again(tmp_path: Path) -> None:
+    """A scenario is built once per text of its files in a process; the recording's edit
+    (same size, other sticks) is seen."""
+    sticks = _write(tmp_path / "s.csv", HEADER + "0,0.5,0,0,0,0\n1,0,0,0,0,0\n")
+    scenario = _replay_scenario(tmp_path, "s.csv")
+    assert load_scenario(str(scenario)).pilot.pilot().sample(0.5).sticks[0] == 0.5
+    _write(sticks, HEADER + "0,0.7,0,0,0,0\n1,0,0,0,0,0\n")
+    assert load_scenario(str(scenario)).pilot.pilot().sample(0.5).sticks[0] == 0.7
+
+
 # --- the replay -----------------------------------------------------------------------------
 
 STICKS = ("cmd_x", "cmd_y", "cmd_z", "cmd_yaw")
