@@ -183,6 +183,16 @@ def test_cli_refuses_a_missing_recording_in_one_line(tmp_path: Path) -> None:
     )
 
 
+def test_a_replay_shorter_than_the_scripted_start_runs(tmp_path: Path) -> None:
+    """pilot.start_s (5 s by default, refused with kind = "recorded") does not bound it."""
+    _write(tmp_path / "s.csv", HEADER + "0,0.5,0,0,0,0\n3,0,0,0,0,0\n")
+    scenario = _replay_scenario(tmp_path, "s.csv", duration_s=4.0)
+    text = scenario.read_text(encoding="utf-8")
+    _write(scenario, re.sub(r"settle_s = [0-9.]+", "settle_s = 0.0", text))
+    loaded = load_scenario(str(scenario))
+    assert loaded.duration_s == 4.0 and loaded.pilot.start_s == 5.0
+
+
 def test_a_recording_that_never_ends_is_one_line(tmp_path: Path) -> None:
     """A scenario naming a .csv that is /dev/zero: no line ends, never read whole."""
     (tmp_path / "zero.csv").symlink_to("/dev/zero")
