@@ -144,16 +144,18 @@ class CompiledType:
     Attributes:
         cls: the component type.
         owner: the side that may write it.
-        codec: its compiled field codec; ``encode`` and ``decode`` are its bound methods.
+        codec: its compiled field codec; ``encode``, ``encode_floats`` and ``decode`` are its
+            bound methods.
     """
 
-    __slots__ = ("cls", "codec", "decode", "encode", "owner")
+    __slots__ = ("cls", "codec", "decode", "encode", "encode_floats", "owner")
 
     def __init__(self, entry: Registration) -> None:
         self.cls = entry.cls
         self.owner = entry.owner
         self.codec = compile_codec(entry.cls, entry.fields)
         self.encode = self.codec.encode
+        self.encode_floats = self.codec.encode_floats
         self.decode = self.codec.decode
 
 
@@ -236,7 +238,9 @@ class ChangeSetCodec:
     ) -> list[bytes]:
         """:meth:`encode` of changes in :func:`~testbed.ecs.replicated_entries`' tuple form
         (the sender's hot path: no :class:`~testbed.ecs.Change` objects); the same payloads
-        and errors."""
+        and errors. A value given as a ``list`` is the component's flat floats (a store row,
+        for a type whose codec has :attr:`~testbed.common.fieldcodec.FieldCodec.float_widths`)
+        and is encoded from them."""
         side_code = _SIDE_CODES[side]
         limit = self.max_payload - HEADER_SIZE
         max_value = self.max_value_size
@@ -256,7 +260,7 @@ class ChangeSetCodec:
                 if kind is removed:
                     entry = pack_removed(ENTRY_REMOVED, entity, type_id)
                 else:
-                    data = info.encode(value)
+                    data = info.encode_floats(value) if type(value) is list else info.encode(value)
                     if len(data) > max_value:
                         raise ValueError(self._too_big(info.cls, len(data)))
                     code = ENTRY_ADDED if kind is added else ENTRY_CHANGED

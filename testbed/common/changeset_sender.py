@@ -18,6 +18,8 @@ Imports: ``ecs``, ``protocol``, the codec and the standard library. No I/O.
 
 from __future__ import annotations
 
+from typing import Any
+
 from testbed.common.changeset import SEQUENCE_MODULUS, ChangeSetCodec
 from testbed.ecs import ComponentRegistry, RawChange, Registration, Side, World, replicated_entries
 from testbed.protocol import MAX_PAYLOAD
@@ -42,6 +44,7 @@ class ChangeSetSender:
 
     __slots__ = (
         "_codec",
+        "_floats",
         "_owned",
         "_owned_of",
         "_registry",
@@ -73,6 +76,8 @@ class ChangeSetSender:
         self._snapshot_tick = 0
         self._sequence = 0
         self._owned: list[Registration] = []
+        # the owned types encoded from their flat floats (a store row is read as is)
+        self._floats: dict[type[Any], tuple[int, ...]] = {}
         self._owned_of = -1  # registry size the owned list was made at (-1: not yet)
 
     @property
@@ -97,7 +102,7 @@ class ChangeSetSender:
         """
         world = self._world
         now = world.tick
-        changes = replicated_entries(world, self._since, self._owned_types())
+        changes = replicated_entries(world, self._since, self._owned_types(), self._floats)
         payloads = self._emit(changes) if changes else []
         self._since = now
         world.advance()
@@ -113,7 +118,7 @@ class ChangeSetSender:
         snapshot periods remove (a peer churning mirrors grew it by two rows a cycle, forever).
         """
         world = self._world
-        payloads = self._emit(replicated_entries(world, 0, self._owned_types()))
+        payloads = self._emit(replicated_entries(world, 0, self._owned_types(), self._floats))
         world.trim_removals(min(self._snapshot_tick, self._since))
         self._snapshot_tick = world.tick
         return payloads
@@ -125,6 +130,12 @@ class ChangeSetSender:
         if len(registry) != self._owned_of:
             self._owned = [entry for entry in registry if entry.owner is self._side]
             self._owned_of = len(registry)
+            codec = self._codec
+            self._floats = {
+                entry.cls: widths
+                for entry in self._owned
+                if (widths := codec.field_codec(entry.type_id).float_widths) is not None
+            }
         return self._owned
 
     def _emit(self, changes: list[RawChange]) -> list[bytes]:

@@ -359,6 +359,7 @@ class FieldCodec:
         "_variable",
         "cls",
         "fixed_size",
+        "float_widths",
     )
 
     def __init__(self, cls: type[Any], fields: Sequence[tuple[str, Any]] | None = None) -> None:
@@ -386,6 +387,13 @@ class FieldCodec:
             self._flat_ops = None
         if root.fixed and all(c.plain_in for c in root.children):
             self._build_ops = None
+        self.float_widths: tuple[int, ...] | None = (
+            tuple(c.width for c in root.children)
+            if root.fixed and root.pack_fmt and set(root.pack_fmt) == {"d"}
+            else None
+        )
+        """The fields' flat widths, in order, when every field encodes as doubles only (floats,
+        fixed tuples of floats): then :meth:`encode_floats` encodes a value from its floats."""
 
     def encode(self, value: Any) -> bytes:
         """The bytes of ``value`` (an instance of :attr:`cls`).
@@ -405,6 +413,18 @@ class FieldCodec:
             flat: list[Any] = []
             _flatten_parts(ops, self._parts(value), flat)
             return self._pack(*flat)
+        except _ENCODE_ERRORS as err:
+            raise ValueError(f"cannot encode {self.cls.__qualname__}: {err}") from err
+
+    def encode_floats(self, floats: Sequence[float]) -> bytes:
+        """The bytes of the value whose flat form is ``floats`` (its fields' floats in order),
+        for a type with :attr:`float_widths`: what :meth:`encode` packs after flattening.
+
+        Raises:
+            ValueError: not as many floats as the layout has, or one that is not a number.
+        """
+        try:
+            return self._pack(*floats)
         except _ENCODE_ERRORS as err:
             raise ValueError(f"cannot encode {self.cls.__qualname__}: {err}") from err
 

@@ -18,12 +18,15 @@ import enum
 import operator
 import types
 import typing
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from testbed.ecs.component import Entity, Origin, Replicate, check_component_type
-from testbed.ecs.storage import GONE
+from testbed.ecs.storage import GONE, Column
+from testbed.ecs.store import StoreColumn
 from testbed.ecs.world import World
 
 __all__ = [
@@ -288,19 +291,32 @@ def replicated_changes(
 
 RawChange = tuple[Entity, int, ChangeKind, Registration | None, object, int]
 """One change as :func:`replicated_entries` lists it: entity, type id (0 for a despawn), kind,
-registration (None for a despawn), value (None unless added or changed), tick."""
+registration (None for a despawn), value (None unless added or changed; a store row's floats
+for a type the caller takes as floats), tick."""
 
 _RAW_ORDER = operator.itemgetter(0, 1)
 
 
 def replicated_entries(
-    world: World, since: int, entries: Sequence[Registration]
+    world: World,
+    since: int,
+    entries: Sequence[Registration],
+    floats: Mapping[type[Any], tuple[int, ...]] | None = None,
 ) -> list[RawChange]:
     """:func:`replicated_changes` of the types ``entries`` as plain tuples (:data:`RawChange`),
     in the same order: the one implementation of the rule, for senders that poll every frame.
 
     Columns whose newest change is not after ``since`` are skipped unread, and so is the removal
     log when nothing was removed after ``since``.
+
+    Args:
+        world: the sending node's world.
+        since: report what happened at ticks newer than this.
+        entries: the types to report, in type-id order.
+        floats: types the caller can take as their flat floats, with their fields' widths: a
+            store-backed type whose row holds exactly those fields
+            (:attr:`~testbed.ecs.store.Layout.float_widths` equal) is given as its row's floats
+            (a ``list``, field by field) instead of a component built from the row.
     """
     changes: list[RawChange] = []
     # Same package as the world: read its columns and slots directly (this runs every frame of
@@ -320,6 +336,7 @@ def replicated_entries(
         if column is None or (not fresh and column.changed_max <= since):
             continue
         type_id = entry.type_id
+        rows = _float_rows(column, floats, entry.cls)
         for entity, slot in column.pairs():
             if entity not in marked:
                 continue
@@ -332,15 +349,30 @@ def replicated_entries(
                 kind = added
             else:
                 kind = changed
-            value = slot.value
-            if value is not GONE:
-                changes.append((entity, type_id, kind, entry, value, tick))
+            if rows is not None:  # a live slot of a store column: its row is its value
+                value = rows[slot._row].tolist()  # type: ignore[attr-defined]  # a StoreSlot
+            else:
+                value = slot.value
+                if value is GONE:
+                    continue
+            changes.append((entity, type_id, kind, entry, value, tick))
     log = world._removals
     if log and log[-1].tick > since:
         _removed_entries(world, since, entries, changes)
     if len(changes) > 1:
         changes.sort(key=_RAW_ORDER)
     return changes
+
+
+def _float_rows(
+    column: Column, floats: Mapping[type[Any], tuple[int, ...]] | None, cls: type[Any]
+) -> np.ndarray | None:
+    """The values table of a store-backed column the caller takes as floats, else None."""
+    if floats is None or type(column) is not StoreColumn:
+        return None
+    table = column.table
+    widths = floats.get(cls)
+    return table.values if widths is not None and widths == table.layout.float_widths else None
 
 
 def _removed_entries(

@@ -56,7 +56,7 @@ class Layout:
         TypeError: a field of a kind a table cannot hold, or one not set by ``__init__``.
     """
 
-    __slots__ = ("cls", "fields", "n_texts", "width")
+    __slots__ = ("cls", "fields", "float_widths", "n_texts", "width")
 
     def __init__(self, prototype: object) -> None:
         cls = type(prototype)
@@ -93,6 +93,13 @@ class Layout:
         self.fields = tuple(fields)
         self.width = offset
         self.n_texts = n_texts
+        self.float_widths: tuple[int, ...] | None = (
+            tuple(1 if kind == _FLOAT else extra for _, kind, _, extra in fields)
+            if all(kind in (_FLOAT, _TUPLE) for _, kind, _, _ in fields)
+            else None
+        )
+        """The fields' widths in the row, in order, when every field is a float or a tuple of
+        floats (the row is then the value's floats, field by field); None otherwise."""
 
     def write(self, row: np.ndarray, value: object) -> tuple[str, ...]:
         """Put ``value``'s fields into ``row`` (a ``(width,)`` view); return its ``str`` fields

@@ -3,13 +3,16 @@ only the owning side sends, and periodic snapshots keep the removal log bounded.
 
 from __future__ import annotations
 
+import struct
+
 from testbed.common.changeset import ChangeSet, ChangeSetCodec
 from testbed.common.changeset_receiver import ChangeSetReceiver
 from testbed.common.changeset_sender import ChangeSetSender
-from testbed.ecs import ChangeKind, Replicate, World
+from testbed.ecs import ChangeKind, FrameStore, Replicate, World
 from tests.common.changeset_helpers import (
     OPERATOR,
     VEHICLE,
+    Forces,
     Local,
     Mode,
     ModeRequest,
@@ -105,3 +108,37 @@ def test_periodic_snapshots_keep_the_removal_log_bounded() -> None:
     repeated = [codec.decode(p) for p in sender.snapshot()]
     despawns = [e for s in repeated if isinstance(s, ChangeSet) for e in s.entries]
     assert any(e.kind is ChangeKind.DESPAWNED and e.entity == own for e in despawns)
+
+
+def test_a_row_written_in_the_store_goes_out_as_the_documented_wire_bytes() -> None:
+    """A store-backed all-float type is sent from its row (no component rebuilt): the payload
+    is the wire format of the changeset module's docstring, built here with struct, and a
+    store-backed type whose wire form is not its row (a variable tuple) arrives as written."""
+    registry = make_registry()
+    world = World()
+    store = FrameStore()
+    store.add(Pose((0.0, 0.0, 0.0), 0.0), capacity=2)
+    store.add(Forces((0.0, 0.0)), capacity=2)
+    world.use_store(store)
+    entity = world.spawn(Replicate(), Pose((1.0, 2.0, 3.0), 0.5), Forces((1.0, 2.0)))
+    sender = ChangeSetSender(world, registry, VEHICLE)
+    receiver_world = World()
+    receiver = ChangeSetReceiver(receiver_world, registry, OPERATOR)
+    deliver(sender.poll(), receiver)  # the full state, sequence 0
+    floats = (-0.0, 1e-300, 3.5, 2.0**0.5)
+    row = world.row_view(entity, Pose)  # written as a compiled frame does: fields, then mark
+    row.values[:] = floats
+    row.mark[0] = world.tick
+    row.mark[1] += 1
+    world.set(entity, Forces((-1.5, 0.25)))  # a variable tuple on the wire
+    payloads = sender.poll()
+    pose_entry = struct.pack(">BIHB", 2, entity, 10, 32) + struct.pack(">4d", *floats)
+    assert payloads[0][:5] == struct.pack(">BBHB", 1, 1, 1, 2)
+    assert payloads[0][5 : 5 + len(pose_entry)] == pose_entry
+    deliver(payloads, receiver)
+    mirror = receiver.local_entity(entity)
+    assert mirror is not None
+    pose = receiver_world.get(mirror, Pose)
+    assert pose is not None
+    assert struct.pack(">4d", *pose.position, pose.heading) == struct.pack(">4d", *floats)
+    assert receiver_world.get(mirror, Forces) == Forces((-1.5, 0.25))
