@@ -15,20 +15,11 @@ round them too.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
-import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from tests.mavlink.gcs import SimGcs
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def _ardupilot_yaw_sensor(yaw_rad: float) -> int:

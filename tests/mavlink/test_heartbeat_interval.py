@@ -14,23 +14,14 @@ endpoint used to answer SET UNSUPPORTED and GET 0.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from itertools import pairwise
 from typing import Any
 
-import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from tests.mavlink.gcs import FRAME_S, SimGcs
 
 HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 class _OtherLink:

@@ -15,8 +15,6 @@ every 20 ms, while GET_MESSAGE_INTERVAL answers 3000 µs as ArduPilot would.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -26,13 +24,6 @@ ARDUPILOT_CAP_US = 60_000_000  # interval_us > 60000000 → interval_ms = 60000
 FASTEST_SERVED_US = 20_000  # the endpoint's 50 Hz, where ArduPilot's 1 ms is served
 ARDUPILOT_FLOOR_US = 3_000  # 2500 µs loop / 800, in a uint16: what ArduPilot keeps for 1 ms
 ATTITUDE = mav.MAVLINK_MSG_ID_ATTITUDE
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 @pytest.mark.parametrize("message_id", [mav.MAVLINK_MSG_ID_ATTITUDE, 235])  # 235: HIGH_LATENCY2

@@ -17,10 +17,9 @@ the old one the origin).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
-import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from testbed.common.geometry import euler_from_quat
@@ -30,13 +29,6 @@ from tests.mavlink.gcs import SimGcs
 RATE_ONLY = 0b0101_1111_1000  # a position, the yaw ignored, the yaw rate used
 YAW = 0b1001_1111_1000  # a position, the yaw used, the yaw rate ignored
 HEADING_TOLERANCE_DEG = 3.0  # the heading hold's settling (test_guided_yaw.py)
-
-
-@pytest.fixture
-def gcs() -> Iterator[SimGcs]:
-    station = SimGcs()
-    yield station
-    station.close()
 
 
 def heading_deg(gcs: SimGcs) -> float:
