@@ -27,6 +27,8 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 __all__ = [
+    "CSV_NUMBER_FORMAT",
+    "CSV_SIGNIFICANT_DIGITS",
     "ConfigError",
     "FieldError",
     "apply_overrides",
@@ -54,6 +56,14 @@ def shown(value: Any) -> str:
     table belongs made a 21-MB "line"): at most six items of a list, four of a dict, two levels,
     60 characters of a string, with ``...`` where something was left out."""
     return _BRIEF.repr(value)
+
+
+CSV_SIGNIFICANT_DIGITS = 6
+"""Significant digits of the numbers a run writes to its CSV files (``series.csv``,
+``arm.csv``, ``link_state.csv``); a reader of them (the recorded pilot) takes a written time
+to stand for any instant that rounds to it at this many digits."""
+CSV_NUMBER_FORMAT = f".{CSV_SIGNIFICANT_DIGITS}g"
+"""The format spec of those numbers (``f"{value:{CSV_NUMBER_FORMAT}}"``)."""
 
 
 def shown_line(value: object) -> str:

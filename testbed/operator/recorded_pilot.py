@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
 
-from testbed.config import ConfigError
+from testbed.config import CSV_SIGNIFICANT_DIGITS, ConfigError
 
 if TYPE_CHECKING:
     from testbed.operator.pilots import PilotSample
@@ -51,18 +51,14 @@ MAX_LINE_CHARS = 65536
 (``/dev/zero``) is refused, not read into memory."""
 MAX_ROWS = 20_000_000
 """Most rows accepted: a simulated day (the longest run) at 200 Hz."""
-SIGNIFICANT_DIGITS = 6
-"""The significant digits ``series.csv`` writes its values with
-(:meth:`~testbed.run.recorder.Recorder.write_series_csv`): a row's time stands for any instant
-that rounds to it."""
 
 
 def _half_unit(written_s: float) -> float:
-    """Half a unit of the last of :data:`SIGNIFICANT_DIGITS` digits of ``written_s`` [s]: how far
-    the instant a time written that way stands for may lie from it."""
+    """Half a unit of the last of :data:`~testbed.config.CSV_SIGNIFICANT_DIGITS` digits of
+    ``written_s`` [s]: how far the instant a time written that way stands for may lie from it."""
     if written_s == 0.0:
         return 0.0
-    exponent = math.floor(math.log10(abs(written_s))) - (SIGNIFICANT_DIGITS - 1)
+    exponent = math.floor(math.log10(abs(written_s))) - (CSV_SIGNIFICANT_DIGITS - 1)
     return 0.5 * 10.0**exponent
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from testbed.config import CSV_NUMBER_FORMAT
 from testbed.run.recorder import SeriesRows
 from testbed.vehicle.manipulation import Manipulator
 from testbed.vehicle.tpik import JointLimitTask
@@ -117,7 +118,7 @@ class ArmLog:
         with path.open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(self.columns())
-            writer.writerows([f"{v:.6g}" for v in row] for row in self.rows)
+            writer.writerows([f"{v:{CSV_NUMBER_FORMAT}}" for v in row] for row in self.rows)
 
     def metrics(self) -> dict[str, Any]:
         """The ``"arm"`` key of ``metrics.json``: ``solves`` and ``limit_activations`` (TPIK

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from testbed.channel.model import LinkModelError
-from testbed.config import described_class, shown_line
+from testbed.config import CSV_NUMBER_FORMAT, described_class, shown_line
 from testbed.run.recorder import SeriesRows
 
 __all__ = ["LinkStateLog"]
@@ -117,4 +117,4 @@ class LinkStateLog:
             writer = csv.writer(handle, lineterminator="\n")
             writer.writerow(self.columns or ("t_s",))
             for row in self.rows or ():
-                writer.writerow([f"{v:.6g}" for v in row])
+                writer.writerow([f"{v:{CSV_NUMBER_FORMAT}}" for v in row])

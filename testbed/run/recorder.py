@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from testbed.channel import Trace
 from testbed.channel.trace import ListEquality
+from testbed.config import CSV_NUMBER_FORMAT
 from testbed.run.image_record import ImageLog
 
 if TYPE_CHECKING:
@@ -283,7 +284,7 @@ class Recorder:
         with path.open("w", encoding="utf-8") as handle:
             handle.write(",".join(SERIES_COLUMNS) + "\n")
             for row in self.rows:
-                handle.write(",".join(f"{v:.6g}" for v in row) + "\n")
+                handle.write(",".join(f"{v:{CSV_NUMBER_FORMAT}}" for v in row) + "\n")
 
     def write_events_csv(self, path: Path, until_s: float = math.inf) -> None:
         """Write every link and node event, in time order, as CSV.
