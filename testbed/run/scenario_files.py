@@ -20,6 +20,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from testbed.config import ConfigError, read_text
 from testbed.run.plugins import target_file, target_files
 from testbed.run.scenario_config import Scenario
 
@@ -106,11 +107,11 @@ def named_file_texts(data: Mapping[str, Any]) -> Iterator[str]:
             continue
         path = target_file(value) or (value if Path(value).suffix in _DATA_SUFFIXES else None)
         if path is not None and Path(path).suffix == ".csv":  # tens of MB: its digest
-            yield file_digests([path])[0][1] if Path(path).is_file() else ""  # not /dev/zero
+            yield file_digests([path])[0][1]
         elif path is not None:
             try:
-                yield Path(path).read_text(encoding="utf-8")
-            except (OSError, UnicodeDecodeError):
+                yield read_text(path)  # bounded: a device that never ends is named, not read
+            except ConfigError:
                 yield ""
 
 
@@ -162,11 +163,16 @@ def scenario_digest(name_or_path: str) -> tuple[str, str]:
 
 
 def file_digests(paths: Sequence[str]) -> tuple[tuple[str, str], ...]:
-    """``(path, SHA-256 hex)`` of each file, in order, once each (an unreadable one: "")."""
+    """``(path, SHA-256 hex)`` of each file, in order, once each (an unreadable one, or one
+    that is not a regular file — a device such as ``/dev/zero`` never ends —: "", and the
+    build, which reads it bounded, names it)."""
     digests: dict[str, str] = {}
     for path in paths:
-        try:
-            digests[path] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-        except OSError:
-            digests[path] = ""
+        digests[path] = ""
+        if Path(path).is_file():
+            try:
+                with Path(path).open("rb") as handle:
+                    digests[path] = hashlib.file_digest(handle, "sha256").hexdigest()
+            except OSError:
+                pass
     return tuple(digests.items())

@@ -38,3 +38,47 @@ def test_an_endless_configuration_file_is_one_line_exit_2(command: str, tmp_path
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("testbed: error: /dev/zero: cannot read: ")
     assert lines[0].endswith(" characters, not a configuration file")
+
+
+SCENARIO = """\
+schema = 1
+id = "endless-v1"
+description = "a scenario whose {key} is a link to a device that never ends"
+duration_s = 10.0
+[link]
+preset = "s100"
+{table}
+"""
+
+
+@pytest.mark.parametrize(
+    ("key", "table", "link"),
+    [
+        ("vehicle.model", '[vehicle]\nmodel = "model.toml"', "model.toml"),
+        ("link.preset", "", "preset.json"),
+        ("recorded pilot's file", '[pilot]\nkind = "recorded"\nfile = "sticks.csv"', "sticks.csv"),
+    ],
+)
+def test_a_scenarios_data_file_linked_to_an_endless_device_is_one_line_exit_2(
+    key: str, table: str, link: str, tmp_path: Path
+) -> None:
+    """The scenario's own file is finite; a file it names beside it is a link to /dev/zero.
+    Before, the scenario's check read that file whole (its text keys the parse cache, its
+    digest is recorded) before the build could name it: a ``MemoryError`` traceback, exit 1."""
+    (tmp_path / link).symlink_to("/dev/zero")
+    text = SCENARIO.format(key=key, table=table)
+    if link == "preset.json":
+        text = text.replace('preset = "s100"', 'preset = "preset.json"')
+    (tmp_path / "endless.toml").write_text(text)
+    done = subprocess.run(
+        [sys.executable, "-m", "testbed", "run", "endless.toml", "--out", "out", "--no-plots"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300.0,
+        preexec_fn=_limited,
+    )
+    assert done.returncode == 2, done.stderr[-2000:]
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("testbed: error: endless.toml: "), lines
+    assert link in lines[0]
