@@ -53,7 +53,7 @@ from testbed.vehicle.systems import shaped_sticks, wrench_of
 from testbed.vehicle.thrusters import FaultMode
 from testbed.vehicle.vehicle_config import VehicleConfig
 
-__all__ = ["Vehicle", "euler_deg"]
+__all__ = ["Vehicle"]
 
 
 class Vehicle:
@@ -363,9 +363,3 @@ class Vehicle:
 
     def _refresh_maxima(self) -> None:
         self.controllers.axis_maxima = tuple(float(v) for v in self.allocator.axis_maxima())
-
-
-def euler_deg(state: BodyState) -> tuple[float, float, float]:
-    """Roll, pitch, yaw of a physics state [deg] (a convenience for reports)."""
-    r, p, y = state.euler_rad.tolist()
-    return (math.degrees(r), math.degrees(p), math.degrees(y))
