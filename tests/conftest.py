@@ -18,12 +18,21 @@ import each other, and fixtures cannot feed ``@given``.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 
 os.environ.setdefault("TESTBED_CHECK_KERNELS", "1")  # before testbed.common.jit is imported
 
 import pytest
 from hypothesis import settings
+
+# Bytecode caches on, whatever the environment says: with PYTHONDONTWRITEBYTECODE=1 (set on the
+# development machines) pytest rewrote every test module's asserts again in each worker and each of the
+# few hundred child processes the tests start (`python -m testbed …`) compiled the package's
+# ≈ 140 modules from source, ≈ 0.4 s a child. The workers write the caches as they import;
+# the children read them. (`.gitignore` holds __pycache__/.)
+sys.dont_write_bytecode = False
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 if os.environ.get("CI"):
