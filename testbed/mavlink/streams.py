@@ -26,7 +26,12 @@ channel's first update on an ordinary link (``initialise_message_intervals_from_
 ``set_mavlink_message_id_interval(HEARTBEAT, 1000)`` unless ``is_high_latency_link``), none on
 a high-latency one; SET_MESSAGE_INTERVAL sets it as any message (0: back to 1 s on any link,
 ``get_default_interval_for_ap_message``'s special case; −1: no heartbeat on that link) and
-GET_MESSAGE_INTERVAL reads it back (1 000 000 µs by default, −1 when off). No I/O, no clock.
+GET_MESSAGE_INTERVAL reads it back (1 000 000 µs by default, −1 when off).
+
+:data:`ON_REQUEST` messages (HOME_POSITION, GPS_GLOBAL_ORIGIN) are in no stream group: off until
+SET_MESSAGE_INTERVAL streams them, as ArduPilot's ``set_ap_message_interval`` puts any
+``ap_message`` in a bucket (0 sets them off again: ``get_default_interval_for_ap_message`` finds
+no stream holding them). No I/O, no clock.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ __all__ = [
     "HIGH_LATENCY2_INTERVAL_S",
     "MAX_INTERVAL_S",
     "MAX_RATE_HZ",
+    "ON_REQUEST",
     "StreamSchedule",
     "interval_ms",
     "stored_interval_ms",
@@ -74,6 +80,10 @@ HIGH_LATENCY2_INTERVAL_S = 5.0
 """HIGH_LATENCY2's interval on a high-latency link, and its default on any [s] (ArduPilot 4.5
 ``GCS_Common.cpp``: 5000 ms)."""
 _DEFERRED = ("HIGH_LATENCY2",)
+ON_REQUEST = ("HOME_POSITION", "GPS_GLOBAL_ORIGIN")
+"""Messages sent on request (REQUEST_MESSAGE, GET_HOME_POSITION) that no stream group holds in
+ArduSub (its ``STREAM_*_msgs`` arrays, ``ArduSub/GCS_Mavlink.cpp``): not streamed until
+SET_MESSAGE_INTERVAL asks."""
 HEARTBEAT_INTERVAL_S = 1.0
 """HEARTBEAT's interval on an ordinary link, and its default on any [s] (ArduPilot's
 ``GCS_MAVLINK::get_default_interval_for_ap_message``: 1000 ms for MSG_HEARTBEAT, "because
@@ -112,6 +122,8 @@ class StreamSchedule:
         for name in _DEFERRED:
             self._defaults[name] = HIGH_LATENCY2_INTERVAL_S
             self.interval_s[name] = HIGH_LATENCY2_INTERVAL_S if high_latency else 0.0
+        for name in ON_REQUEST:
+            self._defaults[name] = self.interval_s[name] = 0.0
         self._next_s: dict[str, float] = {}
         self._heartbeat_ms = 0 if high_latency else _HEARTBEAT_MS  # as ArduPilot keeps it
         self.heartbeat_interval_s = 0.0 if high_latency else HEARTBEAT_INTERVAL_S
@@ -145,7 +157,8 @@ class StreamSchedule:
         REQUEST_DATA_STREAM set since), or every so many whole milliseconds, kept as
         :func:`stored_interval_ms` and served at least 1 / :data:`MAX_RATE_HZ` apart. Returns
         False for a message not streamed or a NaN interval. HEARTBEAT's default is
-        :data:`HEARTBEAT_INTERVAL_S`, its first one then one interval on (:meth:`heartbeat_due`).
+        :data:`HEARTBEAT_INTERVAL_S`, its first one then one interval on (:meth:`heartbeat_due`);
+        an :data:`ON_REQUEST` message's is off.
         """
         if math.isnan(interval_us):
             return False
@@ -169,7 +182,10 @@ class StreamSchedule:
         return True
 
     def interval_us(self, name: str) -> int:
-        """GET_MESSAGE_INTERVAL's answer [µs]: −1 when off, 0 if not streamed; the interval
+        """GET_MESSAGE_INTERVAL's answer [µs]: −1 when off or not streamed (an
+        :data:`ON_REQUEST` message until SET_MESSAGE_INTERVAL streams it:
+        ``handle_command_get_message_interval`` sends −1, "disabled", when
+        ``get_ap_message_interval`` finds it in no bucket, or at an interval of 0); the interval
         SET_MESSAGE_INTERVAL set as ArduPilot keeps it (``handle_command_get_message_interval``
         answers ``interval_ms * 1000`` of what ``set_ap_message_interval`` stored: 3000 after a
         1-ms request, though it is served at :data:`MAX_RATE_HZ`), else its group rate's
@@ -179,7 +195,7 @@ class StreamSchedule:
         if name == "HEARTBEAT":
             return -1 if self._heartbeat_ms == 0 else self._heartbeat_ms * 1000
         if name not in self.interval_s:
-            return 0
+            return -1
         if name in self._stored_ms:
             stored = self._stored_ms[name]
             return -1 if stored == 0 else stored * 1000
