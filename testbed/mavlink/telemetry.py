@@ -28,6 +28,7 @@ from testbed.mavlink.vehicle_snapshot import VehicleSnapshot
 __all__ = [
     "BUILDERS",
     "EARTH_RADIUS_M",
+    "GPS_UNKNOWN_DOP",
     "HOME_LAT_LON_DEG",
     "MESSAGE_IDS",
     "SENSORS_HEALTHY",
@@ -217,6 +218,42 @@ def _gps_global_origin(s: VehicleSnapshot) -> mav.MAVLink_message:
     return mav.MAVLink_gps_global_origin_message(round(lat0 * 1e7), round(lon0 * 1e7), 0)
 
 
+GPS_UNKNOWN_DOP = 65535
+"""AP_GPS's ``GPS_UNKNOWN_DOP`` (UINT16_MAX): the hdop and vdop ``AP_GPS::detect_instance`` sets
+while no receiver is found (``state[instance].hdop = GPS_UNKNOWN_DOP``)."""
+
+
+def _gps_raw_int(s: VehicleSnapshot) -> mav.MAVLink_message:
+    """GPS_RAW_INT of a vehicle with no GPS, as ArduPilot 4.5's ``AP_GPS::send_mavlink_gps_raw``
+    (``libraries/AP_GPS/AP_GPS.cpp``) sends it: ArduSub streams MSG_GPS_RAW in its
+    EXTENDED_STATUS group whether or not a receiver is found, and instance 0 then holds what
+    ``detect_instance`` left — ``status(0)`` NO_GPS (fix_type 0), ``last_fix_time_ms(0) * 1000``
+    0, the zero ``Location`` (lat, lon, alt 0), ``get_hdop/get_vdop`` :data:`GPS_UNKNOWN_DOP`,
+    ground speed and course 0, no satellites; the accuracies stay the 0.0f they start at
+    (``horizontal_accuracy`` etc. fail), the ellipsoid height 0 (no undulation) and
+    ``gps_yaw_cdeg(0)`` 0 (no GPS yaw configured). The simulated vehicle has no GPS (no GPS bit in
+    SYS_STATUS); its position, when it has one, is not a GPS fix."""
+    del s
+    return mav.MAVLink_gps_raw_int_message(
+        0,
+        mav.GPS_FIX_TYPE_NO_GPS,
+        0,
+        0,
+        0,
+        GPS_UNKNOWN_DOP,
+        GPS_UNKNOWN_DOP,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+    )
+
+
 def _local_position_ned(s: VehicleSnapshot) -> mav.MAVLink_message:
     x, y, z = s.position_ned_m
     vx, vy, vz = s.velocity_ned_m_s
@@ -296,6 +333,7 @@ BUILDERS: dict[str, Callable[[VehicleSnapshot], mav.MAVLink_message]] = {
     "LOCAL_POSITION_NED": _local_position_ned,
     "HOME_POSITION": _home_position,
     "GPS_GLOBAL_ORIGIN": _gps_global_origin,
+    "GPS_RAW_INT": _gps_raw_int,
     "SCALED_PRESSURE": _scaled_pressure,
     "SCALED_PRESSURE2": _scaled_pressure2,
     "RAW_IMU": _raw_imu,
