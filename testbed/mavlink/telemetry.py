@@ -182,18 +182,23 @@ def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
     """ArduPilot's ``GCS_MAVLINK::send_global_position_int`` (``GCS_Common.cpp``): ``hdg`` is
     ``ahrs.yaw_sensor`` (:func:`yaw_sensor_cd`: truncated centidegrees, 0..35999), not the
     nearest centidegree; ``vx, vy, vz`` are ``vel * 100`` in single precision passed to int16
-    fields and ``relative_alt`` is ``global_position_int_relative_alt``'s ``posD *= -1000.0f``
-    returned as an int32: all converted toward 0, not rounded."""
-    down = s.position_ned_m[2]
+    fields, all converted toward 0, not rounded. ``alt`` and ``relative_alt`` are ArduSub 4.5's
+    (``ArduSub/GCS_MAVLink_Sub.cpp``, PR #26649 backported to Sub-4.5 as #31564)
+    ``static_cast<int32_t>(sub.get_alt_msl() * 1000.0f)`` and ``…get_alt_rel() * 1000.0f``:
+    ``Sub::get_alt_msl`` is ``-(posD - origin.alt * 0.01f)``, ``get_alt_rel`` the same from the
+    home, both at 0 m here, so both are the float ``-posD`` times 1000 in single precision,
+    truncated — millimetres toward 0, the same integer (``relative_alt`` is also what the
+    base class's ``posD *= -1000.0f`` gave before the backport)."""
     lat, lon = position_e7(s)
     hundred = np.float32(100.0)
     vn, ve, vd = (np.float32(v) * hundred for v in s.velocity_ned_m_s)
+    up_mm = _c_int(-np.float32(s.position_ned_m[2]) * np.float32(1000.0), 32)
     return mav.MAVLink_global_position_int_message(
         s.time_boot_ms,
         lat,
         lon,
-        round(-down * 1000.0),
-        _c_int(np.float32(down) * np.float32(-1000.0), 32),
+        up_mm,
+        up_mm,
         _c_int(vn, 16),
         _c_int(ve, 16),
         _c_int(vd, 16),

@@ -15,6 +15,7 @@ round them too.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -68,12 +69,9 @@ def test_hdg_is_ardupilots_yaw_sensor_truncated_not_rounded(gcs: SimGcs) -> None
     assert rounding_differs >= 30
 
 
-def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> None:
-    """``vel.x * 100`` (float) into the int16 vx, vy, vz and ``posD * -1000.0f`` returned as
-    the int32 relative_alt are C's conversions, toward 0. LOCAL_POSITION_NED (the same group,
-    the same step, the same state) carries the same velocity and depth as float32, so each
-    GLOBAL_POSITION_INT field is that float32 times 100 (or −1000) in single precision,
-    truncated. Diving forward and turning, the nearest integer differs in many of them."""
+def _diving_pairs(gcs: SimGcs) -> list[tuple[Any, Any]]:
+    """(GLOBAL_POSITION_INT, LOCAL_POSITION_NED) sent in the same step, both at 20 Hz, for 8 s
+    of diving forward and turning."""
     interval = mav.MAV_CMD_SET_MESSAGE_INTERVAL
     gcs.send(
         gcs.heartbeat(),
@@ -82,7 +80,7 @@ def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> N
         gcs.command(interval, mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000),
     )
     gcs.run(0.2, gcs.flying())
-    pairs: list[tuple[object, object]] = []
+    pairs: list[tuple[Any, Any]] = []
     for k in range(round(8.0 / 0.01)):
         gcs.send(*([gcs.sticks(x=600, z=200, r=300)] if k % 4 == 0 else []))
         gcs.send(*([gcs.heartbeat()] if k % 100 == 0 else []))
@@ -93,6 +91,16 @@ def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> N
         locals_ = [m for m in new if m.get_type() == "LOCAL_POSITION_NED"]
         if fixes and locals_:
             pairs.append((fixes[-1], locals_[-1]))
+    return pairs
+
+
+def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> None:
+    """``vel.x * 100`` (float) into the int16 vx, vy, vz and ``posD * -1000.0f`` returned as
+    the int32 relative_alt are C's conversions, toward 0. LOCAL_POSITION_NED (the same group,
+    the same step, the same state) carries the same velocity and depth as float32, so each
+    GLOBAL_POSITION_INT field is that float32 times 100 (or −1000) in single precision,
+    truncated. Diving forward and turning, the nearest integer differs in many of them."""
+    pairs = _diving_pairs(gcs)
     hundred, minus_thousand = np.float32(100.0), np.float32(-1000.0)
     checked = rounding_differs = 0
     for fix, local in pairs:
@@ -107,3 +115,18 @@ def test_velocities_and_relative_alt_are_converted_toward_zero(gcs: SimGcs) -> N
             checked += 1
             rounding_differs += sent != round(float(product))
     assert len(pairs) >= 100 and checked >= 400 and rounding_differs >= 100
+
+
+def test_alt_is_ardusubs_millimetres_toward_zero(gcs: SimGcs) -> None:
+    """ArduSub 4.5 (``GCS_MAVLink_Sub.cpp``, #26649 backported to Sub-4.5 as #31564):
+    ``return static_cast<int32_t>(sub.get_alt_msl() * 1000.0f);`` with ``Sub::get_alt_msl``
+    ``posD -= static_cast<float>(origin.alt) * 0.01f; return -posD;`` — the origin at 0 m here,
+    so the float ``-z`` times 1000 in single precision, truncated, the same integer as
+    relative_alt. It was ``round(-depth * 1000)``: the nearest millimetre."""
+    pairs = _diving_pairs(gcs)
+    rounding_differs = 0
+    for fix, local in pairs:
+        product = -np.float32(local.z) * np.float32(1000.0)
+        assert fix.alt == math.trunc(float(product)) == fix.relative_alt, (fix.alt, product)
+        rounding_differs += fix.alt != round(float(product))
+    assert len(pairs) >= 100 and rounding_differs >= 25
