@@ -9,8 +9,11 @@ above 60 s a minute), kept as ArduPilot keeps it (:func:`stored_interval_ms`: at
 80 % of ArduSub's 400-Hz loop period, so 1–3 ms is 3 ms) and answered so by
 GET_MESSAGE_INTERVAL. Rates are served at most at :data:`MAX_RATE_HZ` (the endpoint runs once
 per vehicle frame, 100 Hz), so a message asked for every 3 ms is sent every 20 ms while
-GET_MESSAGE_INTERVAL says 3000 µs, as ArduPilot would. Due times advance by whole intervals and
-skip ahead after a stall, so a late run never sends a burst.
+GET_MESSAGE_INTERVAL says 3000 µs, as ArduPilot would. A group's messages are served every
+ArduPilot's whole milliseconds (3 Hz: 333 ms, so 3.003 a second, not 3). Due times advance by
+whole intervals and skip ahead after a stall (ArduPilot's ``update_send``: ``last_sent_ms +=
+interval_ms``, reset to now when that is more than an interval behind), so a late run never
+sends a burst.
 
 HIGH_LATENCY2 is ArduPilot's one "deferred" message here (``GCS_MAVLINK::deferred_message``, not
 a stream group): every :data:`HIGH_LATENCY2_INTERVAL_S` on a high-latency link
@@ -111,7 +114,8 @@ class StreamSchedule:
 
     def __init__(self, group_rates_hz: dict[int, float], *, high_latency: bool = False) -> None:
         self._defaults = {
-            name: _interval(group_rates_hz.get(group, 0.0)) for name, group in _GROUP_OF.items()
+            name: _group_interval_s(group_rates_hz.get(group, 0.0))
+            for name, group in _GROUP_OF.items()
         }
         self.interval_s: dict[str, float] = dict(self._defaults)
         self._stored_ms: dict[str, int] = {}  # SET_MESSAGE_INTERVAL's, as ArduPilot keeps it
@@ -145,7 +149,7 @@ class StreamSchedule:
         groups = STREAM_GROUPS if stream_id == 0 else {stream_id: STREAM_GROUPS[stream_id]}
         for names in groups.values():
             for name in names:
-                self._defaults[name] = _interval(rate_hz)
+                self._defaults[name] = _group_interval_s(rate_hz)
                 self._set(name, self._defaults[name])
                 self._stored_ms.pop(name, None)
                 self._group_ms[name] = stream_interval_ms(rate_hz)
@@ -301,6 +305,16 @@ def _served_s(stored_ms: int) -> float:
     """The interval [s] a message kept at ``stored_ms`` (0 = off) is served at: at most
     :data:`MAX_RATE_HZ`."""
     return 0.0 if stored_ms == 0 else max(stored_ms * 1e-3, 1.0 / MAX_RATE_HZ)
+
+
+def _group_interval_s(rate_hz: float) -> float:
+    """The interval [s] a stream group's message is served at for ``rate_hz``: ArduPilot's
+    whole milliseconds (:func:`stream_interval_ms`: ``1000 / rate`` in integers, so 3 Hz is every
+    333 ms, not 333.3; ``update_send`` reschedules a bucket by ``last_sent_ms +=
+    interval_ms``), at most :data:`MAX_RATE_HZ`; a rate ArduPilot cannot hold (below 1 Hz but not
+    0, negative, above 1000 Hz) every 1 / ``rate_hz`` (:func:`_interval`)."""
+    ms = stream_interval_ms(rate_hz)
+    return _interval(rate_hz) if ms is None else _served_s(ms)
 
 
 def _interval(rate_hz: float) -> float:
