@@ -98,14 +98,15 @@ STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     2: ("SYS_STATUS", "GPS_RAW_INT", "NAMED_VALUE_FLOAT"),
     3: ("RC_CHANNELS", "SERVO_OUTPUT_RAW"),
     6: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
-    10: ("ATTITUDE", "ATTITUDE_QUATERNION"),
+    10: ("ATTITUDE",),
     11: ("VFR_HUD",),
     12: ("SYSTEM_TIME", "BATTERY_STATUS"),
 }
 """MAV_DATA_STREAM id → the messages of that group the endpoint sends (RAW_SENSORS 1,
 EXTENDED_STATUS 2, RC_CHANNELS 3, POSITION 6, EXTRA1 10, EXTRA2 11, EXTRA3 12); ArduSub's
-groups hold more messages, which the simulator has no source for. ATTITUDE_QUATERNION rides
-with EXTRA1 here (ArduSub sends it only on SET_MESSAGE_INTERVAL)."""
+groups hold more messages, which the simulator has no source for. ATTITUDE_QUATERNION is in
+none: ArduSub's ``STREAM_EXTRA1_msgs`` holds ATTITUDE, SIMSTATE, AHRS2, AHRS3, PID_TUNING, so it is
+sent only on request (:data:`~testbed.mavlink.streams.ON_REQUEST`)."""
 
 
 def base_mode(custom_mode: int, armed: bool) -> int:

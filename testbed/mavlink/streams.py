@@ -31,10 +31,10 @@ a high-latency one; SET_MESSAGE_INTERVAL sets it as any message (0: back to 1 s 
 ``get_default_interval_for_ap_message``'s special case; −1: no heartbeat on that link) and
 GET_MESSAGE_INTERVAL reads it back (1 000 000 µs by default, −1 when off).
 
-:data:`ON_REQUEST` messages (HOME_POSITION, GPS_GLOBAL_ORIGIN) are in no stream group: off until
-SET_MESSAGE_INTERVAL streams them, as ArduPilot's ``set_ap_message_interval`` puts any
-``ap_message`` in a bucket (0 sets them off again: ``get_default_interval_for_ap_message`` finds
-no stream holding them). No I/O, no clock.
+:data:`ON_REQUEST` messages (HOME_POSITION, GPS_GLOBAL_ORIGIN, ATTITUDE_QUATERNION) are in no
+stream group: off until SET_MESSAGE_INTERVAL streams them, as ArduPilot's
+``set_ap_message_interval`` puts any ``ap_message`` in a bucket (0 sets them off again:
+``get_default_interval_for_ap_message`` finds no stream holding them). No I/O, no clock.
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ HIGH_LATENCY2_INTERVAL_S = 5.0
 """HIGH_LATENCY2's interval on a high-latency link, and its default on any [s] (ArduPilot 4.5
 ``GCS_Common.cpp``: 5000 ms)."""
 _DEFERRED = ("HIGH_LATENCY2",)
-ON_REQUEST = ("HOME_POSITION", "GPS_GLOBAL_ORIGIN")
+ON_REQUEST = ("HOME_POSITION", "GPS_GLOBAL_ORIGIN", "ATTITUDE_QUATERNION")
 """Messages sent on request (REQUEST_MESSAGE, GET_HOME_POSITION) that no stream group holds in
 ArduSub (its ``STREAM_*_msgs`` arrays, ``ArduSub/GCS_Mavlink.cpp``): not streamed until
 SET_MESSAGE_INTERVAL asks."""

@@ -1,8 +1,10 @@
 """GET/SET_MESSAGE_INTERVAL of a message sent on request but streamed in no group.
 
-Independent truth: ArduPilot 4.5's ``GCS_Common.cpp``. HOME_POSITION (242) and
-GPS_GLOBAL_ORIGIN (49) have an ``ap_message`` (MSG_HOME, MSG_ORIGIN) that no ArduSub stream
-group holds, so ``GCS_MAVLINK::handle_command_get_message_interval`` reaches::
+Independent truth: ArduPilot 4.5's ``GCS_Common.cpp``. HOME_POSITION (242),
+GPS_GLOBAL_ORIGIN (49) and ATTITUDE_QUATERNION (31) have an ``ap_message`` (MSG_HOME,
+MSG_ORIGIN, MSG_ATTITUDE_QUATERNION) that no ArduSub stream group holds (its
+``STREAM_EXTRA1_msgs``: MSG_ATTITUDE, MSG_SIMSTATE, MSG_AHRS2, MSG_AHRS3, MSG_PID_TUNING), so
+``GCS_MAVLINK::handle_command_get_message_interval`` reaches::
 
     uint16_t interval_ms = 0;
     if (!get_ap_message_interval(id, interval_ms)) {
@@ -13,7 +15,8 @@ group holds, so ``GCS_MAVLINK::handle_command_get_message_interval`` reaches::
 
 and ``GCS_MAVLINK::set_message_interval`` hands any such id to ``set_ap_message_interval``
 (a bucket: streamed, ``return MAV_RESULT_ACCEPTED;``), then answers ``interval_ms * 1000``.
-The endpoint used to answer GET with 0 ("not available") and SET with UNSUPPORTED.
+The endpoint used to answer GET with 0 ("not available") and SET with UNSUPPORTED, and streamed
+ATTITUDE_QUATERNION with EXTRA1.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ SET = mav.MAV_CMD_SET_MESSAGE_INTERVAL
 ON_REQUEST = {
     mav.MAVLINK_MSG_ID_HOME_POSITION: "HOME_POSITION",
     mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: "GPS_GLOBAL_ORIGIN",
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: "ATTITUDE_QUATERNION",
 }
 
 
@@ -85,3 +89,14 @@ def test_zero_restores_the_default_which_is_off(gcs: SimGcs) -> None:
     gcs.clear()
     gcs.run(1.0)
     assert not gcs.of("HOME_POSITION")
+
+
+def test_extra1_streams_attitude_without_its_quaternion(gcs: SimGcs) -> None:
+    """REQUEST_DATA_STREAM EXTRA1 at 10 Hz: ATTITUDE ten times a second, ATTITUDE_QUATERNION
+    never (ArduSub's ``STREAM_EXTRA1_msgs`` does not hold it)."""
+    gcs.send(gcs.mav.request_data_stream_encode(1, 1, mav.MAV_DATA_STREAM_EXTRA1, 10, 1))
+    gcs.run(0.05)
+    gcs.clear()
+    gcs.run(2.0)
+    assert len(gcs.of("ATTITUDE")) == pytest.approx(20, abs=1)
+    assert not gcs.of("ATTITUDE_QUATERNION")
