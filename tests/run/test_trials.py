@@ -257,12 +257,16 @@ def test_the_estimate_is_drawn_from_when_navigation_was_ready() -> None:
 
 
 def test_trials_of_a_teleoperated_scenario_summarise_its_command_figures(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Trials without autonomy summarise what a teleoperated run measures (command lag and
     age, yaw error, energy), each the mean and sample std of the trials' own metrics.json;
     no mission figure and no trials figure (it draws mission tracks) — it used to print
     n/a for every figure and draw an empty figure."""
+    # Each trial's own run plots (state, speeds, …: ≈ 5 s of the test's 7) are not the subject;
+    # without --no-plots the trials figure's drawer is still handed to run_trials, so its
+    # absence below is the subject's doing, not the option's.
+    monkeypatch.setattr("testbed.report.run_plots.write_run_plots", lambda result, out: [])
     out = tmp_path / "t"
     argv = ["run", "s100-teleop-v1", "--set", "trials=3", "--set", "duration_s=20"]
     assert main([*argv, "--out", str(out)]) == 0
