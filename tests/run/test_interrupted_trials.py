@@ -10,6 +10,9 @@ figure was drawn ended with a bare ``testbed: interrupted``.
 
 Each command is a child process; the signal is real, sent by the child to itself from inside
 the plot writer (a monkeypatched wrapper), so it lands exactly while that trial is written.
+The calls of the wrapped writer before the signalled one draw nothing, nor (with
+``quiet_runs``) do the trials' own run plots: those are finished trials' plots, not the
+subject here (tests/report draws them); the signalled call is the real writer's.
 """
 
 from __future__ import annotations
@@ -39,13 +42,18 @@ TELEOP_TRIALS = [
 
 SIGNAL_IN_PLOTS = """
 import os, signal, sys
+import testbed.report.run_plots as run_plots
 import testbed.report.{module} as plots
 
+if {quiet_runs}:
+    run_plots.write_run_plots = lambda result, out_dir: []
 drawn = []
 original = plots.{function}
 
 def {function}(*args, **kwargs):  # the signal lands as the {nth} call begins to draw
     drawn.append(1)
+    if len(drawn) < {nth}:
+        return []  # an earlier finished trial's plots: not the subject
     if len(drawn) == {nth}:
         os.kill(os.getpid(), signal.SIG{name})
     return original(*args, **kwargs)
@@ -57,9 +65,11 @@ sys.exit(main({argv!r}))
 
 
 def run_signalled(
-    argv: list[str], module: str, function: str, nth: int, name: str
+    argv: list[str], module: str, function: str, nth: int, name: str, *, quiet_runs: bool = False
 ) -> subprocess.CompletedProcess[str]:
-    script = SIGNAL_IN_PLOTS.format(module=module, function=function, nth=nth, name=name, argv=argv)
+    script = SIGNAL_IN_PLOTS.format(
+        module=module, function=function, nth=nth, name=name, argv=argv, quiet_runs=quiet_runs
+    )
     return subprocess.run(
         [sys.executable, "-c", script],
         capture_output=True,
@@ -152,7 +162,7 @@ def test_an_interrupt_while_the_trials_figure_is_drawn_says_where_the_trials_are
     scenario.write_text(MISSION_TRIALS, encoding="utf-8")
     out = tmp_path / "out"
     argv = ["run", str(scenario), "--out", str(out)]
-    done = run_signalled(argv, "mission_plots", "plot_trials", nth=1, name="INT")
+    done = run_signalled(argv, "mission_plots", "plot_trials", nth=1, name="INT", quiet_runs=True)
     assert done.returncode == 130, done.stderr
     assert done.stderr.splitlines() == [
         f"testbed: interrupted while writing results, after trial 2 of 2; 2 finished, "
