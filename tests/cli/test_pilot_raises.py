@@ -1,5 +1,10 @@
-"""A pilot of the user's that raises, or samples what a run cannot fly, driven through the real
-command line (a subprocess, as a user runs it).
+"""A pilot of the user's that raises, or samples what a run cannot fly, driven through the
+command line: :func:`testbed.cli.main.main` in this process, and for one case of each mode
+family through the real command line (a subprocess, as a user runs it): a stateful pilot
+raising in ``testbed run``, and ``testbed hil``. The subject here is the error line and what is
+kept, which ``main`` returns and writes the same in or out of a child; the children check that
+nothing between the console script and ``main`` changes them, and spare the others a child's
+start-up (≈ 1 s each).
 
 Before, a pilot whose ``sample`` (or ``see``) raised, or whose sample was malformed in a way the
 station's stick check did not catch (sticks that are no sequence, a NaN attitude or goal),
@@ -24,7 +29,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.processes import one_error_line, run_testbed
+from tests.processes import Runner, in_process, one_error_line, run_testbed
 
 PILOTS = '''
 import math
@@ -102,6 +107,12 @@ break, at most one frame later."""
 
 
 @pytest.fixture
+def testbed(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> Runner:
+    """``testbed ARGS`` run in this process (:func:`tests.processes.run_main`)."""
+    return in_process(monkeypatch, capsys)
+
+
+@pytest.fixture
 def study(tmp_path: Path) -> Path:
     folder = tmp_path / "study"
     folder.mkdir()
@@ -143,12 +154,13 @@ def _sample_time(line: str, name: str, study: Path) -> float:
 
 @pytest.mark.parametrize("name", ["Bad", "Pure"])
 def test_a_pilot_that_raises_part_way_is_one_line_exit_2_keeping_what_ran(
-    study: Path, name: str
+    study: Path, testbed: Runner, name: str
 ) -> None:
     """A stateful pilot (sampled by the operator alone) and a pure one (sampled by the
     recorder too): the same line, the time the first sample at or after the break."""
     argv = ["run", "pilot.toml", "--out", "out", "--no-plots", *pilot("raise", name)]
-    line = one_error_line(run_testbed(argv, study))
+    run = run_testbed if name == "Bad" else testbed  # one through a child, as a user runs it
+    line = one_error_line(run(argv, study))
     t_s = _sample_time(line, name, study)
     assert BREAK_S <= t_s < BREAK_S + FRAME_S + 1e-9
     assert f"): sample({t_s!r}) raised ValueError: sample broke at {t_s:.2f} (what ran" in line
@@ -168,19 +180,19 @@ def test_a_pilot_that_raises_part_way_is_one_line_exit_2_keeping_what_ran(
     ],
 )
 def test_a_malformed_sample_part_way_is_one_line_naming_the_pilot_call_and_problem(
-    study: Path, kind: str, problem: str
+    study: Path, testbed: Runner, kind: str, problem: str
 ) -> None:
     argv = ["run", "pilot.toml", "--out", "out", "--no-plots", *pilot(kind)]
-    line = one_error_line(run_testbed(argv, study))
+    line = one_error_line(testbed(argv, study))
     t_s = _sample_time(line, "Bad", study)
     assert BREAK_S <= t_s < BREAK_S + FRAME_S + 1e-9
     assert f"): sample({t_s!r}): {problem}" in line, line
     _check_kept(study / "out", f"PilotError: pilot Bad ({study / 'pilots.py'}): sample(")
 
 
-def test_a_pilots_see_that_raises_is_one_line_naming_see(study: Path) -> None:
+def test_a_pilots_see_that_raises_is_one_line_naming_see(study: Path, testbed: Runner) -> None:
     argv = ["run", "pilot.toml", "--out", "out", "--no-plots", *pilot("none", "Watching")]
-    line = one_error_line(run_testbed(argv, study))
+    line = one_error_line(testbed(argv, study))
     head = f"testbed: error: pilot Watching ({study / 'pilots.py'}): see(odometry of "
     assert line.startswith(head), line
     shown_s = float(line[len(head) :].split(" s)", 1)[0])
@@ -190,9 +202,9 @@ def test_a_pilots_see_that_raises_is_one_line_naming_see(study: Path) -> None:
     assert metrics["complete"] is False and metrics["failure"].startswith("PilotError: ")
 
 
-def test_trials_keep_the_failed_trials_part_and_name_it(study: Path) -> None:
+def test_trials_keep_the_failed_trials_part_and_name_it(study: Path, testbed: Runner) -> None:
     argv = ["run", "trials.toml", "--out", "out", "--no-plots", *pilot("raise")]
-    line = one_error_line(run_testbed(argv, study))
+    line = one_error_line(testbed(argv, study))
     assert "raised ValueError: sample broke at " in line
     assert line.endswith(f"is in {Path('out', 'trial-1')})")
     assert "(what ran in trial 1 of 2, to t = " in line
@@ -205,7 +217,9 @@ def test_trials_keep_the_failed_trials_part_and_name_it(study: Path) -> None:
     _check_kept(study / "out" / "trial-1", "PilotError: pilot Bad (")
 
 
-def test_a_sweep_records_the_failing_point_with_the_line_and_runs_the_rest(study: Path) -> None:
+def test_a_sweep_records_the_failing_point_with_the_line_and_runs_the_rest(
+    study: Path, testbed: Runner
+) -> None:
     (study / "broken-v1.toml").write_text(
         """\
 schema = 1
@@ -218,7 +232,7 @@ metrics = ["depth_error_m.mean"]
 "pilot.args" = [{ at_s = 5.0 }, { at_s = 100.0 }]
 """
     )
-    done = run_testbed(["sweep", "broken-v1.toml", "--out", "sweep", "--workers", "2"], study)
+    done = testbed(["sweep", "broken-v1.toml", "--out", "sweep", "--workers", "2"], study)
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr  # "some failed"
     runs = [json.loads(row) for row in (study / "sweep" / "runs.jsonl").read_text().splitlines()]
     status = {run["pilot.args"]["at_s"]: (run["status"], run["error"]) for run in runs}

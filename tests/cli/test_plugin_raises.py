@@ -1,5 +1,11 @@
-"""A link model or control law of the user's whose method raises, driven through the real
-command line (a subprocess, as a user runs it).
+"""A link model or control law of the user's whose method raises, driven through the command
+line: :func:`testbed.cli.main.main` in this process (``main``), and for one case of each mode
+family through the real command line (a subprocess, as a user runs it): a link model's
+``state`` raising in ``testbed run``, and a control law raising in the MAVLink gateway. The
+subject here is the error line and what is kept, which ``main`` returns and writes the same in
+or out of a child; the children check that nothing between the console script and ``main``
+(the signals it holds, a traceback at exit) changes them, and spare the others a child's
+start-up (≈ 1 s each).
 
 Before, a link model whose ``state``, ``airtime_s``, ``error_model`` or error model's
 ``corrupt`` raised, or a depth law whose ``update`` or ``reset`` raised, ended ``testbed run``
@@ -24,7 +30,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.processes import one_error_line, run_testbed
+from tests.processes import Runner, in_process, one_error_line, run_testbed
 
 PLUGINS = '''
 from testbed.channel import StandardLink
@@ -130,6 +136,12 @@ BREAK_S = 5.0
 
 
 @pytest.fixture
+def testbed(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> Runner:
+    """``testbed ARGS`` run in this process (:func:`tests.processes.run_main`)."""
+    return in_process(monkeypatch, capsys)
+
+
+@pytest.fixture
 def study(tmp_path: Path) -> Path:
     folder = tmp_path / "study"
     folder.mkdir()
@@ -183,9 +195,10 @@ def _check_kept(out: Path, failure_head: str, user_line: str) -> dict[str, objec
     [("state", "state(5.0)"), ("airtime_s", "airtime_s("), ("corrupt", "corrupt(<")],
 )
 def test_a_link_model_method_that_raises_part_way_is_one_line_exit_2_keeping_what_ran(
-    study: Path, where: str, call: str
+    study: Path, testbed: Runner, where: str, call: str
 ) -> None:
-    done = run_testbed(["run", "still.toml", "--out", "out", "--no-plots", *model(where)], study)
+    run = run_testbed if where == "state" else testbed  # one through a child, as a user runs it
+    done = run(["run", "still.toml", "--out", "out", "--no-plots", *model(where)], study)
     line = one_error_line(done)
     part = "link model's error model Errors" if where == "corrupt" else "link model Faulty"
     head = f"{part} ({study / 'plugins.py'}): {call}"
@@ -202,9 +215,9 @@ def test_a_link_model_method_that_raises_part_way_is_one_line_exit_2_keeping_wha
 
 
 def test_an_error_model_that_raises_as_it_is_made_is_one_line_and_writes_nothing(
-    study: Path,
+    study: Path, testbed: Runner
 ) -> None:
-    done = run_testbed(
+    done = testbed(
         ["run", "still.toml", "--out", "out", "--no-plots", *model("error_model", at_s=0.0)], study
     )
     line = one_error_line(done)
@@ -215,10 +228,12 @@ def test_an_error_model_that_raises_as_it_is_made_is_one_line_and_writes_nothing
     assert not (study / "out").exists()
 
 
-def test_a_state_that_is_not_a_method_is_refused_before_the_run(study: Path) -> None:
+def test_a_state_that_is_not_a_method_is_refused_before_the_run(
+    study: Path, testbed: Runner
+) -> None:
     """It used to be silently ignored: no link_state.csv, no word."""
     argv = ["run", "still.toml", "--out", "out", "--no-plots", *model("state", name="Stateful")]
-    line = one_error_line(run_testbed(argv, study))
+    line = one_error_line(testbed(argv, study))
     assert line == (
         f"testbed: error: link model Stateful ({study / 'plugins.py'}): state is 3.0, not a "
         "method: expected state(t_s) -> Mapping[str, float], or no attribute 'state'"
@@ -226,8 +241,10 @@ def test_a_state_that_is_not_a_method_is_refused_before_the_run(study: Path) -> 
     assert not (study / "out").exists()
 
 
-def test_a_link_model_factory_that_raises_is_one_line_naming_the_key(study: Path) -> None:
-    done = run_testbed(
+def test_a_link_model_factory_that_raises_is_one_line_naming_the_key(
+    study: Path, testbed: Runner
+) -> None:
+    done = testbed(
         ["run", "still.toml", "--out", "out", "--set", "link.model=plugins.py:no_model"], study
     )
     line = one_error_line(done)
@@ -235,9 +252,9 @@ def test_a_link_model_factory_that_raises_is_one_line_naming_the_key(study: Path
 
 
 def test_a_control_law_that_raises_part_way_is_one_line_exit_2_keeping_what_ran(
-    study: Path,
+    study: Path, testbed: Runner
 ) -> None:
-    done = run_testbed(["run", "still.toml", "--out", "out", "--no-plots", *law("update")], study)
+    done = testbed(["run", "still.toml", "--out", "out", "--no-plots", *law("update")], study)
     line = one_error_line(done)
     raised = "update raised ZeroDivisionError: update broke at "
     head = f"depth law Depth ({study / 'plugins.py'}): {raised}"
@@ -246,8 +263,10 @@ def test_a_control_law_that_raises_part_way_is_one_line_exit_2_keeping_what_ran(
     _check_kept(study / "out", f"ControlLawError: {head}", f"{study / 'plugins.py'}:{raising}")
 
 
-def test_a_control_laws_reset_that_raises_at_the_first_frame_is_one_line(study: Path) -> None:
-    done = run_testbed(["run", "still.toml", "--out", "out", "--no-plots", *law("reset")], study)
+def test_a_control_laws_reset_that_raises_at_the_first_frame_is_one_line(
+    study: Path, testbed: Runner
+) -> None:
+    done = testbed(["run", "still.toml", "--out", "out", "--no-plots", *law("reset")], study)
     line = one_error_line(done)
     assert line == (
         f"testbed: error: depth law Depth ({study / 'plugins.py'}): reset raised KeyError: "
@@ -256,8 +275,8 @@ def test_a_control_laws_reset_that_raises_at_the_first_frame_is_one_line(study: 
     assert not (study / "out").exists()  # nothing ran: the disarmed vehicle resets at t = 0
 
 
-def test_trials_keep_the_failed_trials_part_and_name_it(study: Path) -> None:
-    done = run_testbed(["run", "trials.toml", "--out", "out", "--no-plots", *model("state")], study)
+def test_trials_keep_the_failed_trials_part_and_name_it(study: Path, testbed: Runner) -> None:
+    done = testbed(["run", "trials.toml", "--out", "out", "--no-plots", *model("state")], study)
     line = one_error_line(done)
     assert line.endswith(
         f"(what ran in trial 1 of 2, to t = 5.0 s of 10 s, is in {Path('out', 'trial-1')})"
@@ -275,7 +294,9 @@ def test_trials_keep_the_failed_trials_part_and_name_it(study: Path) -> None:
     )
 
 
-def test_a_sweep_records_the_failing_point_with_the_line_and_runs_the_rest(study: Path) -> None:
+def test_a_sweep_records_the_failing_point_with_the_line_and_runs_the_rest(
+    study: Path, testbed: Runner
+) -> None:
     (study / "broken-v1.toml").write_text(
         """\
 schema = 1
@@ -290,7 +311,7 @@ metrics = ["depth_error_m.mean"]
 "link.model_args" = [{ at_s = 5.0 }, { at_s = 100.0 }]
 """
     )
-    done = run_testbed(["sweep", "broken-v1.toml", "--out", "sweep", "--workers", "2"], study)
+    done = testbed(["sweep", "broken-v1.toml", "--out", "sweep", "--workers", "2"], study)
     assert done.returncode == 1 and "Traceback" not in done.stderr, (
         done.stderr
     )  # a sweep's "some failed"
@@ -316,11 +337,11 @@ metrics = ["depth_error_m.mean"]
     ids=["live", "gateway"],
 )
 def test_the_real_time_modes_say_the_same_line_and_keep_what_ran(
-    study: Path, argv: list[str], banner: tuple[str, ...]
+    study: Path, testbed: Runner, argv: list[str], banner: tuple[str, ...]
 ) -> None:
     """``testbed live`` and the MAVLink gateway (real time, 1 s into a 4-s session)."""
     command = [argv[0], "still.toml", *argv[1:], "--duration", "4", "--out", "out", "--no-plots"]
-    done = run_testbed([*command, *model("state", at_s=1.0)], study)
+    done = testbed([*command, *model("state", at_s=1.0)], study)
     line = one_error_line(done, *banner)
     assert line == (
         f"testbed: error: link model Faulty ({study / 'plugins.py'}): state(1.0) raised "
@@ -350,14 +371,20 @@ def test_the_real_time_modes_say_the_same_line_and_keep_what_ran(
     ids=["live", "mavlink", "gateway"],
 )
 def test_a_control_law_that_raises_in_the_real_time_modes_is_the_same_line(
-    study: Path, argv: list[str], banner: tuple[str, ...], laws: list[str], call: str
+    study: Path,
+    testbed: Runner,
+    argv: list[str],
+    banner: tuple[str, ...],
+    laws: list[str],
+    call: str,
 ) -> None:
     """A depth law raising about 1 s into a 4-s session of ``testbed live`` (armed in depth hold
     by the scenario), ``testbed mavlink`` and the gateway (the vehicle waits disarmed for a
     ground station that never comes, resetting its hold each frame): the same line, what ran
     kept."""
     command = [argv[0], "still.toml", *argv[1:], "--duration", "4", "--out", "out", "--no-plots"]
-    line = one_error_line(run_testbed([*command, *laws], study), *banner)
+    run = run_testbed if "--link" in argv else testbed  # the gateway through a child
+    line = one_error_line(run([*command, *laws], study), *banner)
     name = "Tired" if "Tired" in laws[-1] else "Depth"
     assert line.startswith(f"testbed: error: depth law {name} ({study / 'plugins.py'}): {call}")
     assert line.endswith(" s of 4 s, is in out)"), line

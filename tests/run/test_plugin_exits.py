@@ -13,6 +13,11 @@
 Now it is the user's error like any other: one line, exit 2, when loading; during a run a
 :class:`~testbed.run.failures.RunExit` naming the user's line, with what ran kept; a sweep
 records the failed run and goes on.
+
+The loading cases run :func:`~testbed.cli.main.main` in this process (its exit code and
+stderr are the command's; a ``SystemExit`` it let out would end the test as a failure), and a
+module's ``sys.exit(3)`` at import also through the real command line (a subprocess), where it
+used to become the process's exit code.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ import pytest
 
 from testbed.cli.main import main
 from testbed.sweep import load_sweep, run_sweep
-from tests.processes import run_testbed
+from tests.processes import in_process, run_testbed
 from tests.run.test_plugins import write_study
 
 PILOTS = """
@@ -78,13 +83,20 @@ def study(tmp_path: Path) -> Path:
     ],
 )
 def test_sys_exit_while_a_plugin_loads_is_one_line_naming_the_key_exit_2(
-    study: Path, key: str, target: str, said: str
+    study: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    key: str,
+    target: str,
+    said: str,
 ) -> None:
     out = study / "out"
     sets = ["--set", f"{key}={target}"]
     if key == "pilot.factory":
         sets += ["--set", "pilot.args={}"]
-    done = run_testbed(["run", "step.toml", *sets, "--out", str(out), "--no-plots"], study)
+    child = (key, target) == ("pilot.factory", "script.py:Pilot")  # as a user runs it
+    run = run_testbed if child else in_process(monkeypatch, capsys)
+    done = run(["run", "step.toml", *sets, "--out", str(out), "--no-plots"], study)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("testbed: error: ")

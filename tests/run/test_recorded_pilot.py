@@ -5,7 +5,9 @@ Truth: (1) a scripted run's own ``series.csv`` — replayed over the same scenar
 applied differ by at most the int8 codes the hold's lag can move them, a bound from the scripted
 pilot's sine terms in closed form; the track departs by no more than twice what a pilot one
 full row late (the hold's largest lag) makes it depart. (2) Hand-written files for the hold's
-semantics and each load error, through the CLI as a subprocess. (3) A sweep over ``link.ber``.
+semantics and each load error, through the CLI: :func:`testbed.cli.main.main` in this process
+(the line and exit code it returns are the command's), and a missing recording through the real
+command line (a subprocess, as a user runs it). (3) A sweep over ``link.ber``, in this process.
 """
 
 from __future__ import annotations
@@ -28,9 +30,15 @@ from testbed.operator.recorded_pilot import RecordedPilot, load_recorded_pilot
 from testbed.protocol.orders import AXIS_SCALE
 from testbed.run.scenario import load_scenario
 from testbed.run.scenario_files import scenario_dir
-from tests.processes import one_error_line, run_testbed
+from tests.processes import Runner, in_process, one_error_line, run_testbed
 
 HEADER = "t_s,cmd_x,cmd_y,cmd_z,cmd_yaw,rx_x\n"
+
+
+@pytest.fixture
+def testbed(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> Runner:
+    """``testbed ARGS`` run in this process (:func:`tests.processes.run_main`)."""
+    return in_process(monkeypatch, capsys)
 
 
 def _write(path: Path, text: str) -> Path:
@@ -166,10 +174,12 @@ def test_the_modules_import_in_any_order(first: str) -> None:
 
 
 @pytest.mark.parametrize(("text", "problem"), [BAD_FILES[2], BAD_FILES[5], BAD_FILES[7]])
-def test_cli_refuses_a_bad_recording_in_one_line(tmp_path: Path, text: str, problem: str) -> None:
+def test_cli_refuses_a_bad_recording_in_one_line(
+    tmp_path: Path, testbed: Runner, text: str, problem: str
+) -> None:
     _write(tmp_path / "bad.csv", text)
     scenario = _replay_scenario(tmp_path, "bad.csv")
-    line = one_error_line(run_testbed(["run", str(scenario), "--out", "out"], tmp_path))
+    line = one_error_line(testbed(["run", str(scenario), "--out", "out"], tmp_path))
     assert line.startswith(f"testbed: error: {scenario}: pilot.file: {tmp_path / 'bad.csv'}: ")
     assert re.search(problem, line), line
     assert not (tmp_path / "out").exists()
@@ -193,11 +203,11 @@ def test_a_replay_shorter_than_the_scripted_start_runs(tmp_path: Path) -> None:
     assert loaded.duration_s == 4.0 and loaded.pilot.start_s == 5.0
 
 
-def test_a_recording_that_never_ends_is_one_line(tmp_path: Path) -> None:
+def test_a_recording_that_never_ends_is_one_line(tmp_path: Path, testbed: Runner) -> None:
     """A scenario naming a .csv that is /dev/zero: no line ends, never read whole."""
     (tmp_path / "zero.csv").symlink_to("/dev/zero")
     scenario = _replay_scenario(tmp_path, "zero.csv")
-    line = one_error_line(run_testbed(["run", str(scenario)], tmp_path))
+    line = one_error_line(testbed(["run", str(scenario)], tmp_path))
     assert line.endswith("zero.csv: line 1: longer than 65536 characters (not a series.csv)")
 
 
@@ -261,7 +271,7 @@ def test_a_scripted_run_replayed_gives_its_sticks_back(tmp_path: Path) -> None:
     assert str(tmp_path / "A" / "series.csv") in inputs["files"]
 
 
-def test_a_ber_sweep_over_a_recorded_pilot_runs(tmp_path: Path) -> None:
+def test_a_ber_sweep_over_a_recorded_pilot_runs(tmp_path: Path, testbed: Runner) -> None:
     rows = "".join(f"{k * 0.05:.6g},0.5,0,0,0.25,0\n" for k in range(200))  # 10 s
     _write(tmp_path / "sticks.csv", HEADER + rows)
     _replay_scenario(tmp_path, "sticks.csv", duration_s=12.0)
@@ -273,7 +283,7 @@ def test_a_ber_sweep_over_a_recorded_pilot_runs(tmp_path: Path) -> None:
     )
     out = tmp_path / "sweep-out"
     sweep = ["sweep", str(tmp_path / "sweep.toml"), "--workers", "1", "--out", str(out)]
-    done = run_testbed(sweep, tmp_path)
+    done = testbed(sweep, tmp_path)
     assert done.returncode == 0, done.stderr
     with (out / "results.csv").open(encoding="utf-8") as handle:
         results = list(csv.DictReader(handle))
@@ -281,5 +291,5 @@ def test_a_ber_sweep_over_a_recorded_pilot_runs(tmp_path: Path) -> None:
     assert all(r["status"] == "ok" for r in results), results
     with (tmp_path / "sticks.csv").open("a", encoding="utf-8") as handle:
         handle.write("10,0,0,0,0,0\n")  # an edited recording is another input
-    again = one_error_line(run_testbed([*sweep, "--resume"], tmp_path))
+    again = one_error_line(testbed([*sweep, "--resume"], tmp_path))
     assert f"input {tmp_path / 'sticks.csv'}: changed (SHA-256" in again
