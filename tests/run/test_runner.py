@@ -45,10 +45,17 @@ def test_same_seed_same_metrics_and_another_seed_other_link_outcomes() -> None:
     assert outcomes[0] != outcomes[1]
 
 
-def test_lag_without_bit_errors_is_latency_plus_at_most_one_tick() -> None:
+@pytest.fixture(scope="module")
+def clean_teleop() -> RunResult:
+    """s100-teleop-v1 for 180 s without bit errors (seed 11): one run for the tests that each
+    assert a different property of an error-free teleop link (lag, signal lag, command age)."""
+    return run("s100-teleop-v1", "duration_s=180", "link.ber=0", seed=11)
+
+
+def test_lag_without_bit_errors_is_latency_plus_at_most_one_tick(clean_teleop: RunResult) -> None:
     """No bit errors: each command reaches the vehicle after intrinsic delay + airtime of the
     13-B order + propagation, and is applied at the vehicle's next frame (≤ one tick later)."""
-    result = run("s100-teleop-v1", "duration_s=30", "link.ber=0")
+    result = clean_teleop
     s100 = load_link_config("s100")
     latency = s100.intrinsic_delay_s + 8 * ORDER_FRAME_BYTES / s100.bitrate_bps
     recorder = result.recorder
@@ -63,11 +70,16 @@ def test_lag_without_bit_errors_is_latency_plus_at_most_one_tick() -> None:
 
 
 @pytest.mark.parametrize("ber", [0.0, 1e-3, 3e-3])
-def test_command_age_follows_the_periodic_update_formula(ber: float) -> None:
+def test_command_age_follows_the_periodic_update_formula(
+    ber: float, request: pytest.FixtureRequest
+) -> None:
     """Orders every IPG T, each delivered with q = (1 − BER)^(8·13) and applied D after it was
     sampled: mean age = E[D] + T(2 − q)/(2q) (derived in testbed.run.metrics). E[D] is the measured
     mean command lag; q and T come from the configuration, not from the run."""
-    result = run("s100-teleop-v1", "duration_s=180", f"link.ber={ber}", seed=11)
+    if ber == 0.0:  # the same run as clean_teleop's: shared
+        result = request.getfixturevalue("clean_teleop")
+    else:
+        result = run("s100-teleop-v1", "duration_s=180", f"link.ber={ber}", seed=11)
     metrics = result.metrics
     q = (1.0 - ber) ** (8 * ORDER_FRAME_BYTES)
     expected = aoi_periodic_closed_form(metrics["ipg_s"], q, metrics["command_lag_s"]["mean"])
@@ -76,9 +88,9 @@ def test_command_age_follows_the_periodic_update_formula(ber: float) -> None:
     assert metrics["link"]["uplink"]["frames_collided"] == 0
 
 
-def test_signal_lag_is_delay_plus_half_the_gap() -> None:
+def test_signal_lag_is_delay_plus_half_the_gap(clean_teleop: RunResult) -> None:
     """A zero-order hold of samples taken every T and applied D later lags by ≈ D + T/2."""
-    metrics = run("s100-teleop-v1", "link.ber=0").metrics
+    metrics = clean_teleop.metrics
     expected = metrics["command_lag_s"]["mean"] + metrics["ipg_s"] / 2
     for axis in ("x", "y", "z", "yaw"):
         assert metrics["signal_lag_s"][axis] == pytest.approx(expected, abs=0.03)
