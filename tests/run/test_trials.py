@@ -218,8 +218,11 @@ def test_force_replaces_the_earlier_results_whatever_their_shape(tmp_path: Path)
     (out / "notes.txt").write_text("mine", encoding="utf-8")
 
     def run(trials: int) -> set[str]:
+        # 2 s, not 11: which files a run or a trial writes follows from the scenario's
+        # configuration (testbed.run.outputs.write_run), not from how long it flew
         scenario = str(write_scenario(tmp_path, trials))
-        code = main(["run", scenario, "--out", str(out), "--no-plots", "--force"])
+        argv = ["run", scenario, "--out", str(out), "--no-plots", "--force"]
+        code = main([*argv, "--set", "duration_s=2"])
         assert code == 0
         return _results(out)
 
