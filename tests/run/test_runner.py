@@ -48,7 +48,8 @@ def test_same_seed_same_metrics_and_another_seed_other_link_outcomes() -> None:
 @pytest.fixture(scope="module")
 def clean_teleop() -> RunResult:
     """s100-teleop-v1 for 180 s without bit errors (seed 11): one run for the tests that each
-    assert a different property of an error-free teleop link (lag, signal lag, command age)."""
+    assert a different property of an error-free teleop link (lag, signal lag, command age,
+    frame sizes)."""
     return run("s100-teleop-v1", "duration_s=180", "link.ber=0", seed=11)
 
 
@@ -110,7 +111,9 @@ def test_signal_lag_beyond_five_seconds_is_measured_on_the_m64() -> None:
         assert lag != pytest.approx(SIGNAL_LAG_WINDOW_S, abs=1e-6)
 
 
-def test_mean_frame_bytes_are_the_frames_own_and_on_air_adds_the_padding() -> None:
+def test_mean_frame_bytes_are_the_frames_own_and_on_air_adds_the_padding(
+    clean_teleop: RunResult,
+) -> None:
     """On the M64 a 13-B order goes out as two 8-B packets (16 B on the air) and a 20-B reply as
     three (24 B); bit errors act on the 13 and 20 B, so that is what a PER closed form takes."""
     metrics = run("m64-teleop-v1", "duration_s=30").metrics
@@ -119,7 +122,7 @@ def test_mean_frame_bytes_are_the_frames_own_and_on_air_adds_the_padding() -> No
         link = metrics["link"][direction]
         assert link["mean_frame_bytes"] == frame
         assert link["mean_on_air_bytes"] == 8 * math.ceil(frame / 8)
-    s100 = run("s100-teleop-v1", "duration_s=20").metrics["link"]["uplink"]  # sent whole
+    s100 = clean_teleop.metrics["link"]["uplink"]  # sent whole (bit errors change no size)
     assert s100["mean_frame_bytes"] == s100["mean_on_air_bytes"] == ORDER_FRAME_BYTES
 
 
