@@ -199,7 +199,8 @@ def short_run_overrides(scenario: Scenario) -> list[str]:
 
 
 def legal_groups(name: str) -> tuple[list[str], dict[str, list[str]]]:
-    """Check every case of scenario ``name``; the legal ones grouped by value and position.
+    """Check every case of scenario ``name``; the legal ones grouped by value and position, no
+    key set twice in a group.
 
     Returns:
         (the rejection problems found: crashes at load, errors not naming the key or not one
@@ -208,6 +209,7 @@ def legal_groups(name: str) -> tuple[list[str], dict[str, list[str]]]:
     base = load_scenario(name)
     problems: list[str] = []
     legal: dict[str, list[str]] = {}
+    sets: dict[tuple[str, str], int] = {}  # how often a group has set each key so far
     for case in cases(base):
         try:
             load_scenario(name, [case.override])
@@ -218,7 +220,11 @@ def legal_groups(name: str) -> tuple[list[str], dict[str, list[str]]]:
         except Exception as err:
             problems.append(f"{name} {case.override}: crashed at load: {err!r}")
         else:
-            legal.setdefault(case.label, []).append(case.override)
+            # a later --set of a key replaces an earlier one (a whole array of tables, e.g.
+            # pilot.goals, holds one bad field per case): one group per setting of a key
+            key = case.override.partition("=")[0]
+            nth = sets[case.label, key] = sets.get((case.label, key), -1) + 1
+            legal.setdefault(f"{case.label}#{nth}", []).append(case.override)
     return problems, legal
 
 
