@@ -27,10 +27,10 @@ import pytest
 from hypothesis import settings
 
 # Bytecode caches on, whatever the environment says: with PYTHONDONTWRITEBYTECODE=1 (set on the
-# development machines) pytest rewrote every test module's asserts again in each worker and each of the
-# few hundred child processes the tests start (`python -m testbed …`) compiled the package's
-# ≈ 140 modules from source, ≈ 0.4 s a child. The workers write the caches as they import;
-# the children read them. (`.gitignore` holds __pycache__/.)
+# development machines) pytest rewrote every test module's asserts again in each worker, and
+# each of the few hundred child processes the tests start (`python -m testbed …`) compiled the
+# package's ≈ 140 modules from source, ≈ 0.4 s a child. The workers write the caches as they
+# import; the children read them. (`.gitignore` holds __pycache__/.)
 sys.dont_write_bytecode = False
 os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
