@@ -207,20 +207,25 @@ def _global_position_int(s: VehicleSnapshot) -> mav.MAVLink_message:
 
 
 def _home_position(s: VehicleSnapshot) -> mav.MAVLink_message:
-    """The home: :data:`HOME_LAT_LON_DEG` at the surface (0 m), the local frame's origin."""
-    del s
+    """The home: :data:`HOME_LAT_LON_DEG` at the surface (0 m), the local frame's origin, as
+    ArduPilot's ``GCS_MAVLINK::send_home_position`` (``GCS_Common.cpp``) fills the rest:
+    ``q = {1.0f, 0.0f, 0.0f, 0.0f}``, x, y, z and the approach vector 0, ``time_usec`` the time
+    since boot (``AP_HAL::micros64()``)."""
     lat0, lon0 = HOME_LAT_LON_DEG
     identity = (1.0, 0.0, 0.0, 0.0)
     return mav.MAVLink_home_position_message(
-        round(lat0 * 1e7), round(lon0 * 1e7), 0, 0.0, 0.0, 0.0, identity, 0.0, 0.0, 0.0
+        round(lat0 * 1e7), round(lon0 * 1e7), 0, 0.0, 0.0, 0.0, identity, 0.0, 0.0, 0.0, s.time_usec
     )
 
 
 def _gps_global_origin(s: VehicleSnapshot) -> mav.MAVLink_message:
-    """The local frame's origin on the globe (ArduSub 4.5's ORIGIN_LAT/LON/ALT): the home."""
-    del s
+    """The local frame's origin on the globe (ArduSub 4.5's ORIGIN_LAT/LON/ALT): the home, with
+    ``time_usec`` the time since boot (``GCS_MAVLINK::send_gps_global_origin``'s
+    ``AP_HAL::micros64()``)."""
     lat0, lon0 = HOME_LAT_LON_DEG
-    return mav.MAVLink_gps_global_origin_message(round(lat0 * 1e7), round(lon0 * 1e7), 0)
+    return mav.MAVLink_gps_global_origin_message(
+        round(lat0 * 1e7), round(lon0 * 1e7), 0, s.time_usec
+    )
 
 
 GPS_UNKNOWN_DOP = 65535

@@ -77,6 +77,22 @@ def test_home_and_origin_are_where_the_global_position_puts_the_local_origin(
     assert version.capabilities & mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
 
 
+def test_home_and_origin_carry_the_time_since_boot(gcs: SimGcs) -> None:
+    """ArduPilot's ``GCS_MAVLINK::send_home_position`` and ``send_gps_global_origin``
+    (``GCS_Common.cpp``) end with ``AP_HAL::micros64()``, the time since boot [µs], in the
+    ``time_usec`` extension field, and HOME_POSITION's ``q`` is ``{1.0f, 0.0f, 0.0f, 0.0f}``:
+    the vehicle's time when the request arrives. Both used to leave ``time_usec`` 0."""
+    gcs.run(2.0)
+    for message_id in (mav.MAVLINK_MSG_ID_HOME_POSITION, mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN):
+        gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, message_id))
+    asked_s = gcs.now_s  # the step below hands the requests over at this vehicle time
+    gcs.step()
+    home, origin = gcs.last("HOME_POSITION"), gcs.last("GPS_GLOBAL_ORIGIN")
+    assert asked_s >= 2.0
+    assert home.time_usec == origin.time_usec == pytest.approx(asked_s * 1e6, abs=1.0)
+    assert list(home.q) == [1.0, 0.0, 0.0, 0.0]
+
+
 def autopilot_version_of(gcs: SimGcs) -> Any:
     gcs.send(gcs.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION))
     gcs.step()
