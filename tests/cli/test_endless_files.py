@@ -25,10 +25,12 @@ def _limited() -> None:
     resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE_B, ADDRESS_SPACE_B))
 
 
-@pytest.mark.parametrize("command", ["run", "sweep"])
-def test_an_endless_configuration_file_is_one_line_exit_2(command: str, tmp_path: Path) -> None:
+def _error_line(args: list[str], cwd: Path) -> str:
+    """``python -m testbed ARGS`` in ``cwd`` under the address-space limit: its one stderr line,
+    checked to be the only one and exit 2."""
     done = subprocess.run(
-        [sys.executable, "-m", "testbed", command, "/dev/zero", "--out", f"{tmp_path}/out"],
+        [sys.executable, "-m", "testbed", *args],
+        cwd=cwd,
         capture_output=True,
         text=True,
         timeout=300.0,
@@ -36,8 +38,15 @@ def test_an_endless_configuration_file_is_one_line_exit_2(command: str, tmp_path
     )
     assert done.returncode == 2, done.stderr[-2000:]
     lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("testbed: error: /dev/zero: cannot read: ")
-    assert lines[0].endswith(" characters, not a configuration file")
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_an_endless_configuration_file_is_one_line_exit_2(command: str, tmp_path: Path) -> None:
+    line = _error_line([command, "/dev/zero", "--out", f"{tmp_path}/out"], tmp_path)
+    assert line.startswith("testbed: error: /dev/zero: cannot read: ")
+    assert line.endswith(" characters, not a configuration file")
 
 
 SCENARIO = """\
@@ -70,15 +79,5 @@ def test_a_scenarios_data_file_linked_to_an_endless_device_is_one_line_exit_2(
     if link == "preset.json":
         text = text.replace('preset = "s100"', 'preset = "preset.json"')
     (tmp_path / "endless.toml").write_text(text)
-    done = subprocess.run(
-        [sys.executable, "-m", "testbed", "run", "endless.toml", "--out", "out", "--no-plots"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=300.0,
-        preexec_fn=_limited,
-    )
-    assert done.returncode == 2, done.stderr[-2000:]
-    lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("testbed: error: endless.toml: "), lines
-    assert link in lines[0]
+    line = _error_line(["run", "endless.toml", "--out", "out", "--no-plots"], tmp_path)
+    assert line.startswith("testbed: error: endless.toml: ") and link in line, line
