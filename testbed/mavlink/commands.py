@@ -204,10 +204,10 @@ def _cmd_set_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_
     before it reads the interval, and answers MAV_RESULT_DENIED, whatever param2 (0 too; the
     4.4-era code answered FAILED, silently for 0). HEARTBEAT's rate is set on this link
     (ArduPilot's MSG_HEARTBEAT, a deferred message: :meth:`.StreamSchedule.set_interval`). A
-    message sent on request but in no stream group (HOME_POSITION, GPS_GLOBAL_ORIGIN:
-    :data:`~.streams.ON_REQUEST`) is streamed as asked, ACCEPTED, as ``set_ap_message_interval``
-    buckets any ``ap_message``; a NaN interval is UNSUPPORTED (C leaves ``(int32_t)`` of it
-    undefined)."""
+    message sent on request but in no stream group (:data:`~.streams.ON_REQUEST`:
+    HOME_POSITION, GPS_GLOBAL_ORIGIN, ATTITUDE_QUATERNION) is streamed as asked, ACCEPTED, as
+    ``set_ap_message_interval`` buckets any ``ap_message``; a NaN interval is UNSUPPORTED (C
+    leaves ``(int32_t)`` of it undefined)."""
     del now_s
     msg_id = _message_id(p[0])
     name = None if msg_id is None else _NAMES_BY_ID.get(msg_id)
@@ -224,8 +224,8 @@ def _cmd_get_interval(e: VehicleEndpoint, c: Channel, p: tuple[float, ...], now_
     """ArduPilot 4.5's ``GCS_MAVLINK::handle_command_get_message_interval`` (``GCS_Common.cpp``):
     an id of 65536 or more, or one with no ``ap_message`` (here: not sent), is answered
     MESSAGE_INTERVAL 0 ("not available"; the id cut to the field's uint16) and
-    MAV_RESULT_FAILED; a message sent but not streamed now (HOME_POSITION, GPS_GLOBAL_ORIGIN
-    until SET_MESSAGE_INTERVAL streams them; one switched off) −1 ("disabled") and ACCEPTED —
+    MAV_RESULT_FAILED; a message sent but not streamed now (an :data:`~.streams.ON_REQUEST`
+    one until SET_MESSAGE_INTERVAL streams it; one switched off) −1 ("disabled") and ACCEPTED —
     ``get_ap_message_interval`` finds it in no bucket, or its interval is 0 — else the interval
     kept (:meth:`.StreamSchedule.interval_us`), ACCEPTED."""
     del now_s

@@ -163,9 +163,9 @@ def scenario_digest(name_or_path: str) -> tuple[str, str]:
 
 
 def file_digests(paths: Sequence[str]) -> tuple[tuple[str, str], ...]:
-    """``(path, SHA-256 hex)`` of each file, in order, once each (an unreadable one, or one
-    that is not a regular file — a device such as ``/dev/zero`` never ends —: "", and the
-    build, which reads it bounded, names it)."""
+    """``(path, SHA-256 hex)`` of each file, in order, once each; "" for one that cannot be
+    read or is not a regular file (a device such as ``/dev/zero`` never ends), which the build,
+    reading files bounded, then names."""
     digests: dict[str, str] = {}
     for path in paths:
         digests[path] = ""
