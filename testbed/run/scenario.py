@@ -244,14 +244,12 @@ def _from_data(
             "and MAVLink orders carry no depth setpoint: depth hold keeps the depth at arming)"
         )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
-    if pilot.kind == "recorded" and "start_s" in top.pilot:  # it plays at the file's times
-        raise ConfigError(
-            f"{where}: pilot.start_s: not used when kind = 'recorded' (pilot.shift_s moves the "
-            "recording in time)"
-        )
+    # a recording plays at the file's times, a pilot of one's own starts when it says (its
+    # args); start_s has a default, so only the loader knows it was given
+    if pilot.kind in ("recorded", "python") and "start_s" in top.pilot:
+        hint = " (pilot.shift_s moves the recording in time)" if pilot.kind == "recorded" else ""
+        raise ConfigError(f"{where}: pilot.start_s: not used when kind = {pilot.kind!r}{hint}")
     if pilot.kind == "python":
-        if "start_s" in top.pilot:  # a pilot of one's own starts when it says (its args)
-            raise ConfigError(f"{where}: pilot.start_s: not used when kind = 'python'")
         factory = load_factory(pilot.factory, where, "pilot.factory")
         keys = ("pilot.factory", "pilot.args", "(**args)")
         check_arguments(factory, pilot.factory, (), pilot.args, where, keys)
