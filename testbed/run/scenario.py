@@ -244,9 +244,7 @@ def _from_data(
             "and MAVLink orders carry no depth setpoint: depth hold keeps the depth at arming)"
         )
     pilot = build(PilotSection, top.pilot, source=where, prefix="pilot.")
-    # a recording plays at the file's times, a pilot of one's own starts when it says (its
-    # args); start_s has a default, so only the loader knows it was given
-    if pilot.kind in ("recorded", "python") and "start_s" in top.pilot:
+    if not pilot.timed and "start_s" in top.pilot:  # its default: only the loader sees it given
         hint = " (pilot.shift_s moves the recording in time)" if pilot.kind == "recorded" else ""
         raise ConfigError(f"{where}: pilot.start_s: not used when kind = {pilot.kind!r}{hint}")
     if pilot.kind == "python":

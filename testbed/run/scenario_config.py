@@ -138,11 +138,9 @@ class Scenario:
                 f"must be ≤ duration_s ({end}), got {outage.end_s}",
             )
         autonomy = self.vehicle.autonomy
-        # a python or recorded pilot has no start_s (the loader refuses one): its default is moot
-        timed_pilot = self.pilot.kind not in ("python", "recorded")
         for key, value in (
             ("operator.arm_at_s", self.operator.arm_at_s),
-            ("pilot.start_s", self.pilot.start_s if timed_pilot else 0.0),
+            ("pilot.start_s", self.pilot.start_s if self.pilot.timed else 0.0),  # else moot
             ("metrics.settle_s", self.metrics.settle_s),
             ("vehicle.autonomy.start_s", 0.0 if autonomy is None else autonomy.start_s),
         ):

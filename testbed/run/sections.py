@@ -376,6 +376,12 @@ class PilotSection:
                 raise FieldError("file", str(err)) from None
             object.__setattr__(self, "recording", recording)
 
+    @property
+    def timed(self) -> bool:
+        """Whether :attr:`start_s` applies: not to a ``"python"`` pilot (it starts when it says,
+        from its args) or a ``"recorded"`` one (it plays at the file's times)."""
+        return self.kind not in ("python", "recorded")
+
     def pilot(self) -> Pilot:
         """The packaged pilot this section configures (:mod:`testbed.operator.pilots`); a
         ``kind = "python"`` pilot is made by :func:`testbed.run.plugin_calls.scenario_pilot`."""
